@@ -1,0 +1,40 @@
+# Set-up and the two main jobs. Each target creates the virtual environment
+# when it is missing and installs the project into it.
+#
+#   make bench   quick benchmark matrix; tables under results/quick/
+#   make test    the test suite
+#
+# torch is installed first, pinned, so that pip does not pull a CUDA build:
+#   make test TORCH=torch==2.5.1
+#   make test TORCH_INDEX="--index-url https://download.pytorch.org/whl/cpu"
+
+PYTHON ?= python3
+VENV ?= .venv
+TORCH ?= torch==2.13.0
+TORCH_INDEX ?=
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: bench test benchmark paper clean-venv
+
+$(STAMP): pyproject.toml Makefile
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet $(TORCH_INDEX) "$(TORCH)"
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+bench: $(STAMP)
+	$(BIN)/python -m bench run --methods mlp,sysid --n-seeds 3 --budget 10 --out results/quick
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+benchmark: $(STAMP)
+	$(BIN)/python -m pytest tests/benchmarks -m benchmark --benchmark-only --benchmark-columns=min,mean,median,rounds
+
+# The published double pendulum tables: 10 seeds, 60 s per run.
+paper: $(STAMP)
+	$(BIN)/python -m bench run --methods mlp,sysid --n-seeds 10 --budget 60 --out results/double_pendulum_60s
+
+clean-venv:
+	rm -rf $(VENV)

@@ -1,0 +1,268 @@
+"""Command-line interface: ``python -m bench {list,run,table,data,fit}``.
+
+A thin layer over the library: every command calls functions that are also
+usable from Python (:mod:`bench.harness`, :mod:`bench.tables`,
+:mod:`bench.data`). Bad input ends with a one-line ``error:`` message on
+stderr and exit code 2; nothing is half-written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from bench import harness
+from bench.errors import UserError
+
+EXIT_USAGE = 2
+
+
+class UsageError(UserError):
+    """A bad command line; reported in one line with exit code 2."""
+
+
+def _csv_list(text: str) -> list[str]:
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError("expected a comma-separated list")
+    return items
+
+
+def _seed_list(text: str) -> list[int]:
+    out = []
+    for part in _csv_list(text):
+        if "-" in part[1:]:
+            lo, hi = part.split("-", 1)
+            out += list(range(int(lo), int(hi) + 1))
+        else:
+            out.append(int(part))
+    return out
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def _assignment(text: str) -> tuple[str, object]:
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    key, raw = text.split("=", 1)
+    import ast
+
+    try:
+        value = ast.literal_eval(raw)
+    except (ValueError, SyntaxError):
+        value = raw
+    return key.strip(), value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m bench",
+        description="Benchmark suite for learning Lagrangians of physical systems, symbolically and neurally.",
+    )
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    sub.add_parser("list", help="list systems and methods, with availability")
+
+    r = sub.add_parser("run", help="run a matrix of systems x methods x experiments x seeds and write tables")
+    r.add_argument("--systems", type=_csv_list, default=["double_pendulum"], help="comma-separated (default: double_pendulum)")
+    r.add_argument("--methods", type=_csv_list, default=None, help="comma-separated (default: all registered)")
+    r.add_argument("--experiments", type=_csv_list, default=["direct", "indirect"], help="direct,indirect (default: both)")
+    seeds = r.add_mutually_exclusive_group()
+    seeds.add_argument("--seeds", type=_seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
+    seeds.add_argument("--n-seeds", type=_positive_int, default=10, help="the first N of the ten fixed seeds (default 10)")
+    r.add_argument("--budget", type=_positive, default=60.0, help="wall-clock seconds per run (default 60)")
+    r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
+    r.add_argument("--workers", type=_positive_int, default=None, help="runs at a time (default: one per core)")
+    r.add_argument("--threads", type=_positive_int, default=1, help="torch/BLAS threads per run (default 1)")
+    r.add_argument("--smoke", action="store_true", help="use each method's tiny smoke configuration")
+    r.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
+                   help="hyperparameter override for every method in the run (repeatable)")
+    r.add_argument("--n-train", type=_positive_int, default=harness.N_TRAIN, help=f"training samples (default {harness.N_TRAIN})")
+    r.add_argument("--n-test", type=_positive_int, default=harness.N_TEST, help=f"test samples (default {harness.N_TEST})")
+    r.add_argument("--domain-half-width", type=_positive, default=None,
+                   help="sample q, qd, qdd from U(-w, w) (default: the system's own domain, pi/2 for the paper)")
+    r.add_argument("--plugin", action="append", default=[], help="a .py file or module registering extra methods/systems")
+    r.add_argument("--no-resume", action="store_true", help="rerun runs that already have a record")
+
+    t = sub.add_parser("table", help="write DIR/tables.md from DIR's records and print it")
+    t.add_argument("dir", type=Path)
+
+    d = sub.add_parser("data", help="generate data in the suite's CSV format")
+    d.add_argument("--system", required=True)
+    d.add_argument("--n", type=_positive_int, required=True, help="number of samples")
+    d.add_argument("--seed", type=int, required=True)
+    d.add_argument("--out", type=Path, required=True, help="CSV file to write")
+    d.add_argument("--domain-half-width", type=_positive, default=None)
+
+    f = sub.add_parser("fit", help="one run on your own CSV data or on generated data; prints a one-line summary")
+    f.add_argument("--system", required=True)
+    f.add_argument("--method", required=True)
+    f.add_argument("--experiment", required=True, choices=["direct", "indirect"])
+    f.add_argument("--train", type=Path, default=None, help="training CSV (default: generated)")
+    f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
+    f.add_argument("--seed", type=int, default=0)
+    f.add_argument("--budget", type=_positive, default=60.0)
+    f.add_argument("--json", type=Path, default=None, help="write the run's record here")
+    f.add_argument("--smoke", action="store_true")
+    f.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE")
+    f.add_argument("--n-train", type=_positive_int, default=harness.N_TRAIN)
+    f.add_argument("--n-test", type=_positive_int, default=harness.N_TEST)
+    f.add_argument("--domain-half-width", type=_positive, default=None)
+    f.add_argument("--plugin", action="append", default=[])
+    return p
+
+
+# -- commands ------------------------------------------------------------------------
+
+def cmd_list(args) -> int:
+    from methods import METHODS
+    from systems import SYSTEMS
+
+    print("Systems:")
+    for entry in SYSTEMS.entries():
+        sys_obj = entry.obj()
+        kind = "simulated" if sys_obj.simulated else "measured"
+        print(f"  {entry.name:<20} dof={sys_obj.dof}  {kind:<9}  coordinates={','.join(sys_obj.coordinates)}  tags={','.join(sorted(entry.tags))}")
+    print("Methods:")
+    for entry in METHODS.entries():
+        reason = entry.unavailable_reason()
+        state = "available" if reason is None else f"unavailable: {reason}"
+        exps = ",".join(entry.obj.experiments)
+        print(f"  {entry.name:<20} {state}  experiments={exps}  tags={','.join(sorted(entry.tags))}")
+    return 0
+
+
+def _check_names(systems=(), methods=(), experiments=()) -> None:
+    from bench.data import check_experiment
+    from methods import METHODS
+    from systems import SYSTEMS
+
+    for name in systems:
+        SYSTEMS.entry(name)
+    for name in methods:
+        METHODS.entry(name)
+    for name in experiments:
+        check_experiment(name)
+
+
+def cmd_run(args) -> int:
+    from bench.tables import write_tables
+    from methods import METHODS
+
+    harness.import_plugins(args.plugin)
+    methods = args.methods or METHODS.names()
+    _check_names(args.systems, methods, args.experiments)
+    seeds = args.seeds if args.seeds is not None else list(harness.SEEDS[: args.n_seeds])
+    specs = harness.build_specs(
+        args.systems, methods, args.experiments, seeds, args.budget,
+        profile="smoke" if args.smoke else "default",
+        hyperparameters=dict(args.overrides),
+        n_train=args.n_train, n_test=args.n_test,
+        domain_half_width=args.domain_half_width,
+        plugins=tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in args.plugin),
+        threads=args.threads,
+    )
+    for spec in specs:  # fail fast on a bad override, before any process starts
+        if spec.method in METHODS and METHODS.entry(spec.method).available:
+            METHODS[spec.method](**harness.method_config(spec))
+    harness.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume)
+    text = write_tables(args.out)
+    print(f"tables written to {args.out / 'tables.md'}")
+    print(text)
+    return 0
+
+
+def cmd_table(args) -> int:
+    from bench.tables import write_tables
+
+    try:
+        text = write_tables(args.dir)
+    except FileNotFoundError as exc:
+        raise UsageError(str(exc)) from None
+    print(text)
+    return 0
+
+
+def cmd_data(args) -> int:
+    from bench.data import generate, write_csv
+    from systems import SYSTEMS, Domain
+
+    cls = SYSTEMS[args.system]
+    domain = Domain.symmetric(args.domain_half_width) if args.domain_half_width else None
+    data = generate(cls(domain=domain), args.n, args.seed)
+    write_csv(data, args.out)
+    print(f"wrote {len(data)} samples of {args.system} (seed {args.seed}) to {args.out}")
+    return 0
+
+
+def cmd_fit(args) -> int:
+    from bench.data import check_experiment
+    from bench.fileio import write_json
+    from methods import METHODS
+
+    harness.import_plugins(args.plugin)
+    _check_names([args.system], [args.method], [args.experiment])
+    if args.test and not args.train:
+        raise UsageError("--test needs --train (generated training data comes with generated test data)")
+    spec = harness.RunSpec(
+        system=args.system, method=args.method, experiment=args.experiment, seed=args.seed,
+        budget_s=args.budget, profile="smoke" if args.smoke else "default",
+        hyperparameters=dict(args.overrides), n_train=args.n_train, n_test=args.n_test,
+        train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
+        domain_half_width=args.domain_half_width, plugins=tuple(args.plugin),
+    )
+    check_experiment(args.experiment)
+    if METHODS.entry(args.method).available:
+        METHODS[args.method](**harness.method_config(spec))  # bad hyperparameters: exit 2 now
+    system = harness.make_system(spec)
+    data = None
+    if harness.preflight(spec) is None:
+        data = harness.load_data(spec, system)  # DataError -> exit 2
+        for part in data:
+            if part is not None:
+                part.target(args.experiment)
+    record = harness.execute(spec, data=data)
+    if args.json:
+        write_json(args.json, record)
+    print(summary_line(record))
+    return 0 if record["status"] in ("ok", "unavailable", "not_applicable") else 1
+
+
+def summary_line(record: dict) -> str:
+    head = f"{record['system']} {record['method']} {record['experiment']} seed={record['seed']}: {record['status']}"
+    if record["status"] != "ok":
+        return f"{head} ({record['error']})"
+    test = record["test_mse"]
+    return (
+        f"{head} | train MSE {record['train_mse']:.4g} | test MSE {'n/a (no test data)' if test is None else f'{test:.4g}'}"
+        f" | {record['steps']} steps in {record['fit_seconds']:.1f} s ({record['stop_reason']})"
+    )
+
+
+COMMANDS = {"list": cmd_list, "run": cmd_run, "table": cmd_table, "data": cmd_data, "fit": cmd_fit}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return COMMANDS[args.command](args)
+    except (UserError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("interrupted; finished runs keep their records, rerun the same command to resume", file=sys.stderr)
+        return 130

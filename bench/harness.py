@@ -1,0 +1,447 @@
+"""The harness: systems x methods x experiments x seeds under a wall-clock budget.
+
+* :func:`execute` runs one :class:`RunSpec` in the current process and
+  returns its record; it never raises for a failing method.
+* :func:`run_isolated` runs one spec in its own process, with torch and BLAS
+  threads pinned, and kills it at 1.5 x its budget (status ``timeout``). A
+  crash or a non-finite result gives status ``failed`` with the reason.
+* :func:`run_matrix` runs many specs on a pool of worker processes, writes
+  one record per run atomically, and skips runs that already have a record,
+  so a killed matrix loses no finished run and re-running it resumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import importlib.util
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+import traceback
+import zlib
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+from bench import records as rec
+from bench.errors import ConfigError, UserError
+from bench.fileio import write_json
+
+#: The ten seeds of every table, written once.
+SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9)
+#: Test data for seed ``s`` is generated with seed ``s + TEST_SEED_OFFSET``.
+TEST_SEED_OFFSET = 1000
+#: The paper's data sizes.
+N_TRAIN, N_TEST = 32000, 10000
+#: A run is killed at this multiple of its budget.
+KILL_FACTOR = 1.5
+#: Seconds a worker may take to import and load data before its fit starts.
+STARTUP_TIMEOUT_S = 300.0
+#: Seconds a worker may take, after its fit, to evaluate the model on the full data.
+EVALUATION_TIMEOUT_S = 900.0
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything that defines one run.
+
+    Attributes
+    ----------
+    profile
+        ``"default"`` (the method's real configuration) or ``"smoke"`` (its
+        tiny CI configuration).
+    hyperparameters
+        Overrides on top of the profile.
+    train_path, test_path
+        CSV files in the suite's format; when ``train_path`` is ``None`` the
+        data is generated with ``n_train`` samples from ``seed`` and
+        ``n_test`` samples from ``seed + TEST_SEED_OFFSET``.
+    domain_half_width
+        Sample q, qd, qdd from U(-w, w) instead of the system's default.
+    plugins
+        Python files or modules to import before resolving names, for methods
+        and systems registered outside the suite.
+    """
+
+    system: str
+    method: str
+    experiment: str
+    seed: int
+    budget_s: float
+    profile: str = "default"
+    hyperparameters: dict = field(default_factory=dict)
+    n_train: int = N_TRAIN
+    n_test: int = N_TEST
+    train_path: str | None = None
+    test_path: str | None = None
+    domain_half_width: float | None = None
+    plugins: tuple[str, ...] = ()
+    threads: int = 1
+
+    @property
+    def run_id(self) -> str:
+        return rec.run_id(self.system, self.method, self.experiment, self.seed)
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["plugins"] = list(self.plugins)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RunSpec":
+        d = dict(d)
+        d["plugins"] = tuple(d.get("plugins", ()))
+        return cls(**d)
+
+
+def import_plugins(plugins: Iterable[str]) -> None:
+    """Import each plugin once: a ``.py`` path or a module name."""
+    for plugin in plugins:
+        try:
+            _import_plugin(plugin)
+        except UserError:
+            raise
+        except Exception as exc:
+            raise UserError(f"plugin {plugin}: {type(exc).__name__}: {exc}") from exc
+
+
+def _import_plugin(plugin: str) -> None:
+    if not plugin.endswith(".py"):
+        importlib.import_module(plugin)
+        return
+    path = Path(plugin).resolve()
+    if not path.is_file():
+        raise UserError(f"plugin {plugin}: no such file")
+    if any(getattr(m, "__file__", None) and Path(m.__file__).resolve() == path for m in list(sys.modules.values())):
+        return  # already imported (for instance by a test runner): do not register twice
+    name = f"_bench_plugin_{path.stem}_{zlib.crc32(str(path).encode()):08x}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise UserError(f"plugin {plugin}: not an importable Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
+
+
+def method_config(spec: RunSpec) -> dict:
+    from methods import METHODS
+
+    cls = METHODS[spec.method]
+    config = cls.smoke_config() if spec.profile == "smoke" else {}
+    if spec.profile not in ("default", "smoke"):
+        raise ConfigError(f"unknown profile {spec.profile!r}; choose default or smoke")
+    config.update(spec.hyperparameters)
+    return config
+
+
+def load_data(spec: RunSpec, system):
+    """Train and test data for ``spec`` (test is ``None`` when unavailable)."""
+    from bench.data import generate, read_csv
+
+    if spec.train_path:
+        train = read_csv(spec.train_path, dof=system.dof, system=system.name)
+        test = read_csv(spec.test_path, dof=system.dof, system=system.name) if spec.test_path else None
+        return train, test
+    train = generate(system, spec.n_train, spec.seed)
+    test = generate(system, spec.n_test, spec.seed + TEST_SEED_OFFSET)
+    return train, test
+
+
+def make_system(spec: RunSpec):
+    from systems import SYSTEMS, Domain
+
+    cls = SYSTEMS[spec.system]
+    domain = Domain.symmetric(spec.domain_half_width) if spec.domain_half_width else None
+    return cls(domain=domain)
+
+
+def preflight(spec: RunSpec) -> dict | None:
+    """A record for a run that cannot start (unavailable or not applicable), else ``None``."""
+    from methods import METHODS
+
+    d = spec.to_dict()
+    entry = METHODS.entry(spec.method)
+    reason = entry.unavailable_reason()
+    if reason:
+        return rec.new_record(d, "unavailable", error=reason)
+    reason = entry.obj.not_applicable_reason(spec.experiment)
+    if reason:
+        return rec.new_record(d, "not_applicable", error=reason)
+    return None
+
+
+def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: tuple | None = None) -> dict:
+    """Run ``spec`` in this process and return its record (never raises for the method's faults).
+
+    ``on_phase`` is called with ``"fit"`` when the fit starts and with
+    ``"evaluate"`` when it has ended (the budget covers the fit only).
+    ``data`` is an already loaded ``(train, test)`` pair, else it is loaded
+    from the spec.
+    """
+    from bench.data import mse
+
+    d = spec.to_dict()
+    try:
+        import_plugins(spec.plugins)
+        early = preflight(spec)
+        if early:
+            return early
+        from methods import METHODS
+
+        system = make_system(spec)
+        train, test = data if data is not None else load_data(spec, system)
+        method = METHODS[spec.method](**method_config(spec))
+        if on_phase:
+            on_phase("fit")
+        method.fit(train, spec.experiment, spec.seed, spec.budget_s)
+        if on_phase:
+            on_phase("evaluate")
+        train_mse = mse(method.predict(train), train.target(spec.experiment))
+        test_mse = mse(method.predict(test), test.target(spec.experiment)) if test is not None else None
+        expr = method.expression()
+        info = method.fit_info
+        fields = dict(
+            train_mse=train_mse,
+            test_mse=test_mse,
+            steps=info.get("steps"),
+            fit_seconds=info.get("fit_seconds"),
+            stop_reason=info.get("stop_reason"),
+            curve=_thin(info.get("curve", [])),
+            expression=None if expr is None else str(expr),
+            hyperparameters=method.hyperparameters(),
+            details={
+                "train_source": train.source,
+                "test_source": None if test is None else test.source,
+                "n_train": len(train),
+                "n_test": None if test is None else len(test),
+                "domain": dataclasses.asdict(system.domain),
+                **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason")},
+                **getattr(method, "record_details", lambda: {})(),
+            },
+        )
+        bad = [k for k in ("train_mse", "test_mse") if fields[k] is not None and not math.isfinite(fields[k])]
+        if bad:
+            return rec.new_record(d, "failed", error=f"non-finite {' and '.join(bad)} (the model produced NaN or inf)", **fields)
+        return rec.new_record(d, "ok", **fields)
+    except Exception as exc:
+        tb = traceback.format_exc(limit=-6)
+        return rec.new_record(d, "failed", error=f"{type(exc).__name__}: {exc}", details={"traceback": tb})
+
+
+def _thin(curve: list, keep: int = 300) -> list:
+    """Keep at most ``keep`` curve points, always the first and last."""
+    if len(curve) <= keep:
+        return [list(p) for p in curve]
+    step = (len(curve) - 1) / (keep - 1)
+    return [list(curve[round(i * step)]) for i in range(keep)]
+
+
+# -- process isolation ---------------------------------------------------------------
+
+def thread_env(threads: int) -> dict:
+    env = dict(os.environ)
+    for var in THREAD_VARS:
+        env[var] = str(threads)
+    root = str(rec.PROJECT_ROOT)
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return env
+
+
+def run_isolated(spec: RunSpec, out_dir: str | os.PathLike, *, poll_s: float = 0.05) -> dict:
+    """Run ``spec`` in a fresh process; write and return its record.
+
+    The child reports its phases in a small file. From the start of its fit
+    it has ``KILL_FACTOR * budget_s`` seconds to finish the fit before it is
+    killed and recorded as ``timeout``; evaluation on the full data after the
+    fit is not part of the budget and has ``EVALUATION_TIMEOUT_S``. A child
+    that dies without writing a record is recorded as ``failed`` with the tail
+    of its log.
+    """
+    out_dir = Path(out_dir)
+    path = rec.record_path(out_dir, spec.run_id)
+    logs = out_dir / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
+    spec_file, phase_file, log_file = (logs / f"{spec.run_id}{s}" for s in (".spec.json", ".phase", ".log"))
+    for f in (phase_file, path):
+        f.unlink(missing_ok=True)
+    write_json(spec_file, spec.to_dict())
+    d = spec.to_dict()
+    with open(log_file, "wb") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "bench.worker", str(spec_file), str(path), str(phase_file)],
+            env=thread_env(spec.threads), stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+        )
+        launched = time.monotonic()
+        kill_at = launched + STARTUP_TIMEOUT_S
+        phase = "startup"
+        record = None
+        while True:
+            try:
+                proc.wait(timeout=poll_s)
+                break
+            except subprocess.TimeoutExpired:
+                pass
+            now = time.monotonic()
+            new_phase = _read_phase(phase_file) or phase
+            if new_phase != phase:
+                phase = new_phase
+                kill_at = now + (KILL_FACTOR * spec.budget_s if phase == "fit" else EVALUATION_TIMEOUT_S)
+            if now >= kill_at:
+                _kill(proc)
+                if phase == "fit":
+                    error = f"fit still running at {KILL_FACTOR} x its {spec.budget_s:g} s budget; killed"
+                    record = rec.new_record(d, "timeout", error=error)
+                elif phase == "startup":
+                    record = rec.new_record(d, "failed", error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
+                else:
+                    record = rec.new_record(d, "failed", error=f"evaluation after the fit took over {EVALUATION_TIMEOUT_S:g} s; killed")
+                break
+    if record is None:
+        if path.exists():
+            with open(path) as f:
+                return json.load(f)
+        tail = _tail(log_file)
+        record = rec.new_record(d, "failed", error=f"worker exited with code {proc.returncode} and wrote no record: {tail}")
+    rec.write_record(path, record)
+    return record
+
+
+def _read_phase(path: Path) -> str | None:
+    try:
+        lines = path.read_text().split()
+    except OSError:
+        return None
+    return lines[-1] if lines else None
+
+
+def _kill(proc: subprocess.Popen) -> None:
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        proc.kill()
+    proc.wait()
+
+
+def _tail(path: Path, lines: int = 3) -> str:
+    try:
+        text = path.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return "(no log)"
+    return " | ".join(text[-lines:]) or "(empty log)"
+
+
+# -- the matrix ------------------------------------------------------------------------
+
+def build_specs(
+    systems: Iterable[str],
+    methods: Iterable[str],
+    experiments: Iterable[str],
+    seeds: Iterable[int],
+    budget_s: float,
+    **common,
+) -> list[RunSpec]:
+    return [
+        RunSpec(system=s, method=m, experiment=e, seed=k, budget_s=budget_s, **common)
+        for s in systems for m in methods for e in experiments for k in seeds
+    ]
+
+
+def default_workers() -> int:
+    return max(1, os.cpu_count() or 1)
+
+
+def run_matrix(
+    specs: list[RunSpec],
+    out_dir: str | os.PathLike,
+    *,
+    workers: int | None = None,
+    resume: bool = True,
+    report: Callable[[str], None] | None = print,
+) -> list[dict]:
+    """Run every spec, ``workers`` at a time, each in its own process.
+
+    Runs that already have a record in ``out_dir`` are skipped (``resume``).
+    Unavailable and not-applicable runs are recorded without starting a process.
+    Returns the records in the order of ``specs``.
+    """
+    import_plugins({p for s in specs for p in s.plugins})
+    workers = workers or default_workers()
+    out_dir = Path(out_dir)
+    results: dict[str, dict] = {}
+    todo: list[RunSpec] = []
+    for spec in specs:
+        path = rec.record_path(out_dir, spec.run_id)
+        if resume and path.exists():
+            with open(path) as f:
+                results[spec.run_id] = json.load(f)
+            continue
+        early = preflight(spec)
+        if early:
+            rec.write_record(path, early)
+            results[spec.run_id] = early
+            continue
+        todo.append(spec)
+    skipped = len(specs) - len(todo)
+    tracker = _MatrixProgress(len(todo), skipped, workers, report)
+    if todo:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for record in pool.map(lambda s: tracker.done(run_isolated(s, out_dir)), todo):
+                results[record["run_id"]] = record
+    tracker.summary()
+    return [results[s.run_id] for s in specs]
+
+
+class _MatrixProgress:
+    """One line per finished run with counts and an estimate of the time left."""
+
+    def __init__(self, total: int, skipped: int, workers: int, report):
+        self.total, self.skipped, self.workers, self.report = total, skipped, workers, report
+        self.finished = self.failed = 0
+        self.start = time.monotonic()
+        if report and skipped:
+            report(f"resuming: {skipped} run(s) already have records")
+        if report:
+            report(f"{total} run(s) to do on {workers} worker(s)")
+
+    def done(self, record: dict) -> dict:
+        self.finished += 1
+        self.failed += record["status"] != "ok"
+        if self.report:
+            elapsed = time.monotonic() - self.start
+            left = self.total - self.finished
+            eta = elapsed / self.finished * left
+            mse = ""
+            if record["status"] == "ok":
+                test = record["test_mse"]
+                mse = f" train {record['train_mse']:.3g} test {'-' if test is None else f'{test:.3g}'}"
+            else:
+                mse = f" ({record['error']})"
+            self.report(
+                f"[{self.finished}/{self.total} done, {self.failed} not ok, {left} left, ~{_fmt_time(eta)} to go] "
+                f"{record['system']} {record['method']} {record['experiment']} seed={record['seed']}: {record['status']}{mse}"
+            )
+        return record
+
+    def summary(self) -> None:
+        if self.report and self.total:
+            self.report(f"matrix done in {_fmt_time(time.monotonic() - self.start)}: {self.finished - self.failed} ok, {self.failed} not ok")
+
+
+def _fmt_time(seconds: float) -> str:
+    seconds = int(round(seconds))
+    if seconds < 60:
+        return f"{seconds}s"
+    if seconds < 3600:
+        return f"{seconds // 60}m{seconds % 60:02d}s"
+    return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"

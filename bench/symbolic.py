@@ -1,0 +1,92 @@
+"""Sympy helpers shared by systems and symbolic methods.
+
+Every Lagrangian in the suite is written in the same symbols, named like the
+columns of the data format: ``q_1 .. q_n`` and ``qd_1 .. qd_n``. This module
+builds those symbols and compiles sympy expressions into batched torch
+functions ``f(q, qd, *extra) -> (batch,)``.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import sympy
+import torch
+
+
+def coordinate_symbols(dof: int) -> tuple[tuple[sympy.Symbol, ...], tuple[sympy.Symbol, ...]]:
+    """Return ``(q, qd)`` symbol tuples for ``dof`` degrees of freedom."""
+    q = sympy.symbols(f"q_1:{dof + 1}", real=True)
+    qd = sympy.symbols(f"qd_1:{dof + 1}", real=True)
+    return tuple(q), tuple(qd)
+
+
+def acceleration_symbols(dof: int) -> tuple[sympy.Symbol, ...]:
+    return tuple(sympy.symbols(f"qdd_1:{dof + 1}", real=True))
+
+
+TorchLagrangian = Callable[..., torch.Tensor]
+
+
+def to_torch(
+    expr: sympy.Expr,
+    dof: int,
+    extra: Sequence[sympy.Symbol] = (),
+) -> TorchLagrangian:
+    """Compile ``expr(q, qd, extra)`` into a batched torch function.
+
+    Parameters
+    ----------
+    expr
+        A sympy expression in the symbols of :func:`coordinate_symbols` and,
+        optionally, the symbols in ``extra``.
+    dof
+        Number of degrees of freedom.
+    extra
+        Further symbols, given to the compiled function as one tensor of shape
+        ``(len(extra),)`` (for example the unknown parameters of a parametric
+        Lagrangian) or ``(batch, len(extra))``.
+
+    Returns
+    -------
+    callable
+        ``f(q, qd)`` or ``f(q, qd, theta)`` with ``q, qd`` of shape
+        ``(batch, dof)``, returning a tensor of shape ``(batch,)`` in the dtype
+        of ``q``.
+    """
+    q, qd = coordinate_symbols(dof)
+    args = list(q) + list(qd) + list(extra)
+    unknown = expr.free_symbols - set(args)
+    if unknown:
+        names = ", ".join(sorted(map(str, unknown)))
+        raise ValueError(f"expression has symbols outside q, qd and the parameters: {names}")
+    raw = sympy.lambdify(args, expr, modules="torch", cse=True)
+    n_extra = len(extra)
+
+    def f(q_t: torch.Tensor, qd_t: torch.Tensor, theta: torch.Tensor | None = None) -> torch.Tensor:
+        cols = list(q_t.unbind(-1)) + list(qd_t.unbind(-1))
+        if n_extra:
+            if theta is None:
+                raise TypeError(f"this Lagrangian needs {n_extra} parameters")
+            cols += list(theta.unbind(-1))
+        out = raw(*cols)
+        # a term-free (constant) expression comes back as a Python number
+        zero = q_t[..., 0] * 0
+        return zero + out
+
+    f.expr = expr  # type: ignore[attr-defined]
+    return f
+
+
+def to_numpy(expr: sympy.Expr, dof: int) -> Callable:
+    """Compile ``expr(q, qd)`` into a numpy function of ``(batch, dof)`` arrays."""
+    import numpy as np
+
+    q, qd = coordinate_symbols(dof)
+    raw = sympy.lambdify(list(q) + list(qd), expr, modules="numpy", cse=True)
+
+    def f(q_a, qd_a):
+        out = raw(*q_a.T, *qd_a.T)
+        return np.zeros(q_a.shape[0]) + out
+
+    return f

@@ -1,0 +1,482 @@
+"""The method contract, owned by the base class.
+
+A method learns a Lagrangian from a :class:`~bench.data.Dataset`, directly
+(from samples of ``L``) or indirectly (from torques only, through the suite's
+Euler–Lagrange transform). The base class owns the protocol:
+
+* hyperparameters are typed keywords, validated at construction against the
+  method's ``Config`` dataclass ("did you mean" for unknown names); what the
+  user passed is never mutated;
+* :meth:`Method.fit` checks the data, seeds ``random``, numpy and torch,
+  starts the wall-clock deadline, evaluates the training MSE on a schedule,
+  keeps the best state seen, and restores it at the end;
+* a method writes only its learning loop, :meth:`Method._fit`, calling
+  ``progress.step()`` once per optimisation step or generation::
+
+      def _fit(self, train, experiment, progress):
+          while progress.step():
+              ...one step...
+
+Each method declares a tiny ``smoke`` configuration next to its real one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import random
+import time
+import types
+import typing
+from dataclasses import dataclass
+from typing import Any, Callable, ClassVar
+
+import numpy as np
+import sympy
+import torch
+
+from bench.data import EXPERIMENTS, Dataset, check_experiment, mse
+from bench.errors import ConfigError, DataError
+from bench.registry import Registry
+
+
+# -- hyperparameters --------------------------------------------------------------
+
+@dataclass(frozen=True)
+class MethodConfig:
+    """Hyperparameters every method has.
+
+    Attributes
+    ----------
+    max_steps
+        Stop after this many optimisation steps (or generations), even with
+        budget left. ``None``: only the budget stops the run. Smoke
+        configurations set it, so that a run is deterministic for its seed.
+    eval_samples
+        Size of the fixed random subset of the training data on which the
+        training MSE is measured during the fit, to pick the best state.
+    """
+
+    max_steps: int | None = None
+    eval_samples: int = 2048
+
+
+def _check_value(owner: str, name: str, value: Any, hint: Any) -> Any:
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        inner = [a for a in args if a is not type(None)]
+        if len(inner) == 1:
+            return _check_value(owner, name, value, inner[0])
+        return value
+    if origin is typing.Literal:
+        if value not in args:
+            raise ConfigError(f"{owner}: {name} must be one of {', '.join(map(repr, args))}, got {value!r}")
+        return value
+    if origin is tuple or hint is tuple:
+        if not isinstance(value, (tuple, list)):
+            raise ConfigError(f"{owner}: {name} must be a tuple, got {type(value).__name__}")
+        if args and args[-1] is not Ellipsis and len(args) != len(value):
+            raise ConfigError(f"{owner}: {name} must have {len(args)} items, got {len(value)}")
+        return tuple(value)
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{owner}: {name} must be true or false, got {value!r}")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise ConfigError(f"{owner}: {name} must be an integer, got {value!r}")
+        return int(value)
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+            raise ConfigError(f"{owner}: {name} must be a number, got {value!r}")
+        return float(value)
+    if hint is str and not isinstance(value, str):
+        raise ConfigError(f"{owner}: {name} must be a string, got {value!r}")
+    return value
+
+
+def build_config(config_cls: type, overrides: dict, owner: str):
+    """Validate ``overrides`` against ``config_cls`` and return a new config.
+
+    Unknown names get a "did you mean"; values are type-checked against the
+    dataclass annotations. ``overrides`` itself is not modified.
+    """
+    fields = {f.name: f for f in dataclasses.fields(config_cls)}
+    hints = typing.get_type_hints(config_cls)
+    clean = {}
+    for key, value in overrides.items():
+        if key not in fields:
+            close = difflib.get_close_matches(key, list(fields), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise ConfigError(f"{owner}: unknown hyperparameter {key!r}{hint} (known: {', '.join(sorted(fields))})")
+        clean[key] = _check_value(owner, key, value, hints[key])
+    config = config_cls(**clean)
+    if hasattr(config, "validate"):
+        config.validate()
+    return config
+
+
+# -- progress, deadline and best state -------------------------------------------------
+
+class Progress:
+    """Deadline, step counting, scheduled evaluation and best-state tracking.
+
+    The training MSE is evaluated at wall-clock times spaced so that
+    evaluation takes at most ``overhead`` of the run (at least
+    ``1/overhead`` times its own cost apart) and roughly geometrically
+    (at least 10 % of the elapsed time apart), which gives an even curve on
+    log-time axes. The state with the lowest evaluated MSE is kept.
+
+    Parameters
+    ----------
+    budget_s
+        Wall-clock budget, counted from construction.
+    evaluate
+        Returns the current training MSE (on the evaluation subset).
+    snapshot
+        Returns a copy of the current state, to be restored later.
+    max_steps
+        Optional step limit.
+    tolerance
+        Stop once the best MSE falls to or below this value.
+    """
+
+    def __init__(
+        self,
+        budget_s: float,
+        evaluate: Callable[[], float],
+        snapshot: Callable[[], Any],
+        *,
+        max_steps: int | None = None,
+        tolerance: float = 0.0,
+        overhead: float = 0.1,
+    ):
+        self.start = time.perf_counter()
+        self.deadline = self.start + float(budget_s)
+        self._evaluate = evaluate
+        self._snapshot = snapshot
+        self.max_steps = max_steps
+        self.tolerance = tolerance
+        self.overhead = overhead
+        self.steps = 0
+        self._calls = 0
+        self.best_mse = math.inf
+        self.best_state: Any = None
+        self.best_step = -1
+        self.curve: list[tuple[float, float]] = []
+        self.evaluations = 0
+        self.eval_seconds = 0.0
+        self._last_eval_cost = 0.0
+        self._next_eval = self.start
+        self._evaluated_at = -1
+        self.stop_reason: str | None = None
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.start
+
+    def remaining(self) -> float:
+        return self.deadline - time.perf_counter()
+
+    def evaluate_now(self) -> float:
+        t0 = time.perf_counter()
+        value = float(self._evaluate())
+        cost = time.perf_counter() - t0
+        self._last_eval_cost = cost
+        self.eval_seconds += cost
+        self.evaluations += 1
+        self._evaluated_at = self.steps
+        if math.isfinite(value) and value < self.best_mse:
+            self.best_mse = value
+            self.best_state = self._snapshot()
+            self.best_step = self.steps
+        if math.isfinite(self.best_mse):
+            self.curve.append((time.perf_counter() - self.start, self.best_mse))
+        now = time.perf_counter()
+        gap = max(cost / self.overhead, 0.1 * (now - self.start), 1e-3)
+        self._next_eval = now + gap
+        if not math.isfinite(value):
+            self.stop_reason = "non-finite training loss"
+        return value
+
+    def step(self) -> bool:
+        """Count one finished step; ``True`` while the loop may do another."""
+        if self._calls:
+            self.steps += 1
+        self._calls += 1
+        if self.stop_reason:
+            return False
+        now = time.perf_counter()
+        if self._calls == 1 or now >= self._next_eval:
+            self.evaluate_now()
+            now = time.perf_counter()
+            if self.stop_reason:
+                return False
+        if self.best_mse <= self.tolerance:
+            self.stop_reason = "converged"
+        elif self.max_steps is not None and self.steps >= self.max_steps:
+            self.stop_reason = "max_steps"
+        elif now + self._last_eval_cost >= self.deadline:
+            self.stop_reason = "budget"
+        return self.stop_reason is None
+
+    def stop(self, reason: str) -> None:
+        """Ask the loop to end (a method that knows it is done)."""
+        self.stop_reason = self.stop_reason or reason
+
+    def finish(self) -> None:
+        """Evaluate the final state unless it was just evaluated."""
+        if self._evaluated_at != self.steps and self.stop_reason != "non-finite training loss":
+            self.evaluate_now()
+
+
+# -- the method base class ------------------------------------------------------------
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+class Method:
+    """Base class of every learning method. See the module docstring."""
+
+    name: ClassVar[str] = "unnamed"
+    tags: ClassVar[frozenset[str]] = frozenset()
+    Config: ClassVar[type] = MethodConfig
+    #: overrides of ``Config`` for a tiny CI run; each method declares its own
+    smoke: ClassVar[dict] = {"max_steps": 5}
+    #: the experiments the method applies to
+    experiments: ClassVar[tuple[str, ...]] = EXPERIMENTS
+
+    def __init__(self, **hyperparameters):
+        self.config = build_config(self.Config, dict(hyperparameters), self.name)
+        self.experiment: str | None = None
+        self.seed: int | None = None
+        self.dof: int | None = None
+        self.system = None
+        self.fit_info: dict = {}
+
+    # -- class-level facts ---------------------------------------------------
+    @classmethod
+    def unavailable_reason(cls) -> str | None:
+        """``None`` when the method can run here; otherwise why it cannot."""
+        return None
+
+    @classmethod
+    def not_applicable_reason(cls, experiment: str) -> str | None:
+        if experiment not in cls.experiments:
+            return f"{cls.name} does not apply to the {experiment} experiment"
+        return None
+
+    @classmethod
+    def smoke_config(cls) -> dict:
+        return dict(cls.smoke)
+
+    def hyperparameters(self) -> dict:
+        return dataclasses.asdict(self.config)
+
+    # -- the protocol ----------------------------------------------------------
+    def fit(self, train: Dataset, experiment: str, seed: int, budget_s: float) -> "Method":
+        """Learn from ``train`` within ``budget_s`` seconds of wall-clock time.
+
+        Keeps and restores the state with the lowest training MSE seen.
+        Fills :attr:`fit_info` with the steps done, the best-so-far curve of
+        training MSE over wall-clock time, and why the loop stopped.
+        """
+        t0 = time.perf_counter()
+        check_experiment(experiment)
+        reason = self.not_applicable_reason(experiment)
+        if reason:
+            raise ConfigError(reason)
+        if len(train) == 0:
+            raise DataError(f"{train.source}: no samples to fit")
+        train.target(experiment)  # raises a DataError naming what is missing
+        if not (budget_s > 0):
+            raise ConfigError(f"budget_s must be positive, got {budget_s}")
+        self.experiment, self.seed, self.dof = experiment, int(seed), train.dof
+        self.system = self._resolve_system(train)
+        seed_everything(self.seed)
+
+        rng = np.random.default_rng(self.seed)
+        n_eval = min(len(train), self.config.eval_samples)
+        eval_set = train.subset(np.sort(rng.choice(len(train), n_eval, replace=False)))
+        eval_target = eval_set.target(experiment)
+        progress = Progress(
+            budget_s - (time.perf_counter() - t0),
+            evaluate=lambda: mse(self.predict(eval_set, experiment), eval_target),
+            snapshot=self._get_state,
+            max_steps=self.config.max_steps,
+        )
+        self._fit(train, experiment, progress)
+        progress.finish()
+        if progress.best_state is not None:
+            self._set_state(progress.best_state)
+        self.fit_info = {
+            "steps": progress.steps,
+            "best_step": progress.best_step,
+            "stop_reason": progress.stop_reason or "loop ended",
+            "fit_seconds": time.perf_counter() - t0,
+            "evaluations": progress.evaluations,
+            "eval_seconds": progress.eval_seconds,
+            "eval_samples": n_eval,
+            "curve": progress.curve,
+        }
+        return self
+
+    def _resolve_system(self, train: Dataset):
+        if train.system is None:
+            return None
+        from systems import SYSTEMS
+
+        if train.system not in SYSTEMS:
+            return None
+        return SYSTEMS[train.system]()
+
+    # -- hooks a method writes ------------------------------------------------
+    def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
+        raise NotImplementedError
+
+    def _get_state(self) -> Any:
+        raise NotImplementedError
+
+    def _set_state(self, state: Any) -> None:
+        raise NotImplementedError
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        """``L`` at the states of ``data``, shape ``(n,)``."""
+        raise NotImplementedError
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        """``tau = g(L)`` at the states of ``data``, shape ``(n, dof)``."""
+        raise NotImplementedError
+
+    def expression(self) -> sympy.Expr | None:
+        """The learned Lagrangian in ``q_i, qd_i``, for symbolic methods."""
+        return None
+
+    # -- derived -----------------------------------------------------------------
+    def predict(self, data: Dataset, experiment: str | None = None) -> np.ndarray:
+        """The prediction in the experiment's own target (L or tau)."""
+        experiment = experiment or self.experiment
+        check_experiment(experiment)
+        return self.predict_lagrangian(data) if experiment == "direct" else self.predict_torque(data)
+
+
+# -- torch methods that learn L(q, qd) by mini-batch gradient descent ------------------
+
+@dataclass(frozen=True)
+class TorchConfig(MethodConfig):
+    """Hyperparameters shared by mini-batch torch methods.
+
+    Attributes
+    ----------
+    lr
+        Adam learning rate.
+    betas
+        Adam's moment coefficients.
+    batch_size
+        Mini-batch size; batches are drawn without replacement, reshuffled
+        every epoch.
+    dtype
+        ``"float64"`` or ``"float32"``.
+    """
+
+    lr: float = 1e-3
+    betas: tuple[float, float] = (0.9, 0.999)
+    batch_size: int = 32
+    dtype: typing.Literal["float64", "float32"] = "float64"
+
+
+class TorchLagrangianMethod(Method):
+    """A method whose model is a ``torch.nn.Module`` mapping ``(q, qd) -> L``.
+
+    The loop is mini-batch Adam on the direct loss ``MSE(L_hat, L)`` or the
+    indirect loss ``MSE(g(L_hat), tau)``; subclasses write :meth:`build_model`
+    and optionally :meth:`make_scheduler` and :meth:`extra_loss`.
+    """
+
+    Config: ClassVar[type] = TorchConfig
+    model: torch.nn.Module
+
+    def build_model(self, train: Dataset) -> torch.nn.Module:
+        raise NotImplementedError
+
+    def make_scheduler(self, optimizer: torch.optim.Optimizer):
+        """Return an object with ``step(loss: float)``, or ``None``."""
+        return None
+
+    def extra_loss(self) -> torch.Tensor | float:
+        return 0.0
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return getattr(torch, self.config.dtype)
+
+    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return self.model(q, qd)
+
+    def batch_loss(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
+        if experiment == "direct":
+            pred, target = self.lagrangian(batch["q"], batch["qd"]), batch["L"]
+        else:
+            from bench.dynamics import euler_lagrange
+
+            pred = euler_lagrange(self.lagrangian, batch["q"], batch["qd"], batch["qdd"], create_graph=True)
+            target = batch["tau"]
+        return torch.mean((pred - target) ** 2) + self.extra_loss()
+
+    def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
+        self.model = self.build_model(train).to(self.dtype)
+        tensors = train.tensors(self.dtype)
+        optimizer = torch.optim.Adam(
+            self.model.parameters(), lr=self.config.lr, betas=self.config.betas,
+            **({"fused": True} if _fused_adam_ok(self.dtype) else {}),
+        )
+        scheduler = self.make_scheduler(optimizer)
+        generator = torch.Generator().manual_seed(self.seed)
+        n, bs = len(train), min(self.config.batch_size, len(train))
+        order, cursor = torch.randperm(n, generator=generator), 0
+        while progress.step():
+            if cursor + bs > n:
+                order, cursor = torch.randperm(n, generator=generator), 0
+            idx = order[cursor:cursor + bs]
+            cursor += bs
+            batch = {k: v[idx] for k, v in tensors.items()}
+            loss = self.batch_loss(batch, experiment)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            if scheduler is not None:
+                scheduler.step(loss.item())
+
+    def _get_state(self):
+        return {k: v.detach().clone() for k, v in self.model.state_dict().items()}
+
+    def _set_state(self, state) -> None:
+        self.model.load_state_dict(state)
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        t = data.tensors(self.dtype)
+        with torch.no_grad():
+            out = torch.cat([self.lagrangian(q, qd) for q, qd in zip(t["q"].split(8192), t["qd"].split(8192))])
+        return out.double().numpy()
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        from bench.dynamics import euler_lagrange_chunked
+
+        t = data.tensors(self.dtype)
+        tau, _ = euler_lagrange_chunked(self.lagrangian, t["q"], t["qd"], t["qdd"])
+        return tau.double().numpy()
+
+
+def _fused_adam_ok(dtype: torch.dtype) -> bool:
+    # fused Adam on CPU exists from torch 2.4 and is ~3x faster for a 5x300 MLP
+    major, minor = (int(x) for x in torch.__version__.split(".")[:2])
+    return (major, minor) >= (2, 4) and dtype in (torch.float32, torch.float64)
+
+
+METHODS: Registry[type[Method]] = Registry("method")

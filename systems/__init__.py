@@ -1,0 +1,11 @@
+"""Registry of physical systems.
+
+Each module below registers its systems with ``@SYSTEMS.add(name, *tags)``.
+Adding a system: write one module and add it to the import line.
+"""
+
+from systems.base import SYSTEMS, Domain, ParametricForm, System, get_system
+
+from systems import double_pendulum  # noqa: E402,F401  (registers)
+
+__all__ = ["SYSTEMS", "Domain", "ParametricForm", "System", "get_system"]

@@ -1,0 +1,21 @@
+"""Print, after the benchmark table, each benchmark's mean time as a ratio to the suite's own."""
+
+from __future__ import annotations
+
+
+def pytest_terminal_summary(terminalreporter, config):
+    session = getattr(config, "_benchmarksession", None)
+    if session is None or not session.benchmarks:
+        return
+    groups: dict[str, dict[str, float]] = {}
+    for bench in session.benchmarks:
+        if bench.stats is None:
+            continue
+        groups.setdefault(bench.group or "", {})[bench.name] = bench.stats.mean
+    for group, means in sorted(groups.items()):
+        ours = [v for k, v in means.items() if "[ours" in k or k.endswith("ours")]
+        if not ours:
+            continue
+        terminalreporter.write_sep("-", f"{group}: mean time relative to ours")
+        for name, mean in sorted(means.items(), key=lambda kv: kv[1]):
+            terminalreporter.write_line(f"{name:<70} {mean * 1e3:9.2f} ms   {mean / ours[0]:6.2f}x ours")

@@ -1,0 +1,84 @@
+"""The checks every registered method and system must pass.
+
+Used by the parametrised tests over the registries and by the extension test
+for methods and systems registered outside the suite.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import sympy
+import torch
+
+from bench import symbolic
+from bench.data import Dataset, generate
+from systems import Domain
+
+
+def suite_entries(registry, package: str) -> list[str]:
+    """Names registered by the suite's own modules (not by tests or plugins)."""
+    return [e.name for e in registry.entries() if e.obj.__module__.startswith(package + ".")]
+
+
+def check_system(system) -> None:
+    assert system.dof == len(system.coordinates) >= 1
+    assert dataclasses.is_dataclass(system.params)
+    assert isinstance(system.domain, Domain)
+    q, qd = system.symbols
+    expr = system.lagrangian_sympy
+    assert expr.free_symbols <= set(q) | set(qd)
+    assert expr.free_symbols & set(qd), "a Lagrangian without velocities has no dynamics"
+
+    rng = np.random.default_rng(0)
+    Q, QD = rng.uniform(-1.5, 1.5, (64, system.dof)), rng.uniform(-1.5, 1.5, (64, system.dof))
+    truth = symbolic.to_numpy(expr, system.dof)(Q, QD)
+    got = system.lagrangian(torch.from_numpy(Q), torch.from_numpy(QD)).numpy()
+    np.testing.assert_allclose(got, truth, rtol=1e-12, atol=1e-12)
+
+    form = system.parametric_form()
+    assert len(form.unknowns) == len(set(form.unknowns)) >= 1
+    at_truth = symbolic.to_numpy(form.substitute(form.true_values), system.dof)(Q, QD)
+    np.testing.assert_allclose(at_truth, truth, rtol=1e-12, atol=1e-12)
+    theta = torch.tensor(form.true_values, dtype=torch.float64)
+    via_torch = form.torch_fn(torch.from_numpy(Q), torch.from_numpy(QD), theta).numpy()
+    np.testing.assert_allclose(via_torch, truth, rtol=1e-12, atol=1e-12)
+
+    if system.simulated:
+        a, b = generate(system, 200, 11, cache=False), generate(system, 200, 11, cache=False)
+        c = generate(system, 200, 12, cache=False)
+        for k in ("q", "qd", "qdd", "tau"):
+            arr = getattr(a, k)
+            assert arr.shape == (200, system.dof) and np.isfinite(arr).all()
+            if k != "tau":
+                lo, hi = getattr(system.domain, k)
+                assert (arr >= lo).all() and (arr <= hi).all()
+            assert np.array_equal(arr, getattr(b, k))
+        assert not np.array_equal(a.q, c.q)
+        assert a.L.shape == (200,) and np.isfinite(a.L).all()
+
+
+def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
+    smoke = cls.smoke_config()
+    assert smoke, f"{cls.name} declares no smoke configuration"
+    assert smoke.get("max_steps"), "a smoke configuration must bound its steps, so that a seed is reproducible"
+
+    def run(seed):
+        return cls(**smoke).fit(train, experiment, seed=seed, budget_s=60.0)
+
+    m = run(0)
+    L, tau = m.predict_lagrangian(test), m.predict_torque(test)
+    assert L.shape == (len(test),) and tau.shape == (len(test), train.dof)
+    assert np.isfinite(L).all() and np.isfinite(tau).all()
+    info = m.fit_info
+    assert 0 < info["steps"] <= smoke["max_steps"]
+    assert info["curve"] and all(b <= a for (_, a), (_, b) in zip(info["curve"], info["curve"][1:]))
+    np.testing.assert_array_equal(run(0).predict(test), m.predict(test))  # same seed, same result
+    expr = m.expression()
+    if "symbolic" in cls.tags:
+        assert isinstance(expr, sympy.Expr)
+        f = symbolic.to_numpy(expr, train.dof)
+        np.testing.assert_allclose(f(test.q, test.qd), L, rtol=1e-9, atol=1e-9)
+    else:
+        assert expr is None

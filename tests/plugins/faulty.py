@@ -1,0 +1,87 @@
+"""Toy methods that misbehave in every way the harness must survive.
+
+Imported as a plugin by the harness tests (``--plugin tests/plugins/faulty.py``).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from methods import METHODS, Method, MethodConfig
+
+
+class _Constant(Method):
+    """Predicts the training mean of the target; one 'step'."""
+
+    Config = MethodConfig
+    smoke = {"max_steps": 1}
+
+    def _fit(self, train, experiment, progress):
+        self.L0 = float(np.mean(train.L)) if train.L is not None else 0.0
+        self.tau0 = train.tau.mean(axis=0)
+        while progress.step():
+            pass
+
+    def _get_state(self):
+        return (self.L0, self.tau0)
+
+    def _set_state(self, state):
+        self.L0, self.tau0 = state
+
+    def predict_lagrangian(self, data):
+        return np.full(len(data), self.L0)
+
+    def predict_torque(self, data):
+        return np.tile(self.tau0, (len(data), 1))
+
+
+@METHODS.add("toy_constant", "toy")
+class ToyConstant(_Constant):
+    pass
+
+
+@METHODS.add("toy_sleeper", "toy")
+class ToySleeper(_Constant):
+    """Ignores its deadline."""
+
+    def _fit(self, train, experiment, progress):
+        super()._fit(train, experiment, progress)
+        time.sleep(3600)
+
+
+@METHODS.add("toy_crasher", "toy")
+class ToyCrasher(_Constant):
+    def _fit(self, train, experiment, progress):
+        raise RuntimeError("the toy fell over")
+
+
+@METHODS.add("toy_exit", "toy")
+class ToyExit(_Constant):
+    """Dies without a trace, like a segfault."""
+
+    def _fit(self, train, experiment, progress):
+        print("about to vanish", flush=True)
+        os._exit(3)
+
+
+@METHODS.add("toy_nan", "toy")
+class ToyNaN(_Constant):
+    def predict_torque(self, data):
+        return np.full((len(data), data.dof), np.nan)
+
+    predict_lagrangian = lambda self, data: np.full(len(data), np.nan)  # noqa: E731
+
+
+@METHODS.add("toy_unavailable", "toy")
+class ToyUnavailable(_Constant):
+    @classmethod
+    def unavailable_reason(cls):
+        return "needs a runtime this machine lacks"
+
+
+@METHODS.add("toy_direct_only", "toy")
+class ToyDirectOnly(_Constant):
+    experiments = ("direct",)

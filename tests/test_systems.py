@@ -1,0 +1,64 @@
+"""One conformance test over every registered system."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy
+import torch
+
+from bench import symbolic
+from bench.data import generate
+from systems import SYSTEMS, Domain
+from tests.contract import check_system, suite_entries
+
+SUITE_SYSTEMS = suite_entries(SYSTEMS, "systems")
+
+
+@pytest.mark.parametrize("name", SUITE_SYSTEMS)
+def test_conformance(name):
+    check_system(SYSTEMS[name]())
+
+
+def test_domain_is_configurable_and_checked():
+    import math
+
+    wide = SYSTEMS["double_pendulum"](domain=Domain.symmetric(math.pi))
+    data = generate(wide, 2000, 0, cache=False)
+    assert np.abs(data.q).max() > math.pi / 2
+    with pytest.raises(ValueError, match="low < high"):
+        Domain(q=(1.0, -1.0))
+
+
+def test_nonconservative_hook_adds_to_the_torque():
+    from systems.double_pendulum import DoublePendulum
+
+    class Damped(DoublePendulum):
+        def nonconservative_torque(self, q, qd, qdd):
+            return 0.5 * qd
+
+    plain = generate(DoublePendulum(), 50, 3, cache=False)
+    damped = generate(Damped(), 50, 3, cache=False)
+    np.testing.assert_allclose(damped.tau - plain.tau, 0.5 * plain.qd, atol=1e-12)
+
+
+def test_double_pendulum_is_the_papers():
+    from systems.double_pendulum import DoublePendulumParams
+
+    p = DoublePendulumParams()
+    assert (p.m1, p.l1, p.m2, p.l2, p.g) == (3.0, 2.67, 1.0, 1.67, 9.81)
+    dp = SYSTEMS["double_pendulum"]()
+    (q1, q2), (qd1, qd2) = dp.symbols
+    m1, l1, m2, l2, g = 3.0, 2.67, 1.0, 1.67, 9.81
+    paper = (
+        sympy.Rational(1, 2) * (m1 / 3 + m2) * l1**2 * qd1**2
+        + sympy.Rational(1, 2) * (m2 / 3) * l2**2 * qd2**2
+        + sympy.Rational(1, 2) * m2 * l1 * l2 * qd1 * qd2 * sympy.cos(q1 - q2)
+        + (m1 / 2 + m2) * g * l1 * sympy.cos(q1)
+        + (m2 / 2) * g * l2 * sympy.cos(q2)
+    )
+    rng = np.random.default_rng(1)
+    Q, QD = rng.uniform(-2, 2, (50, 2)), rng.uniform(-2, 2, (50, 2))
+    f = symbolic.to_numpy(paper, 2)
+    np.testing.assert_allclose(dp.lagrangian(torch.from_numpy(Q), torch.from_numpy(QD)).numpy(), f(Q, QD), rtol=1e-13)
+    assert dp.domain == Domain()  # U(-pi/2, pi/2), the paper's range
