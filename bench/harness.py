@@ -184,13 +184,14 @@ def preflight(spec: RunSpec) -> dict | None:
 def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: tuple | None = None) -> dict:
     """Run ``spec`` in this process and return its record (never raises for the method's faults).
 
+    Variants a method derives from its fit (:meth:`methods.base.Method.variants`)
+    are scored on the same data and stored under ``details["variants"]``.
+
     ``on_phase`` is called with ``"fit"`` when the fit starts and with
     ``"evaluate"`` when it has ended (the budget covers the fit only).
     ``data`` is an already loaded ``(train, test)`` pair, else it is loaded
     from the spec.
     """
-    from bench.data import mse
-
     d = spec.to_dict()
     try:
         import_plugins(spec.plugins)
@@ -207,18 +208,15 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         method.fit(train, spec.experiment, spec.seed, spec.budget_s)
         if on_phase:
             on_phase("evaluate")
-        train_mse = mse(method.predict(train), train.target(spec.experiment))
-        test_mse = mse(method.predict(test), test.target(spec.experiment)) if test is not None else None
-        expr = method.expression()
+        scores = _scores(method, spec.experiment, train, test)
         info = method.fit_info
+        variants = {name: _scores(model, spec.experiment, train, test) for name, model in method.variants().items()}
         fields = dict(
-            train_mse=train_mse,
-            test_mse=test_mse,
+            **scores,
             steps=info.get("steps"),
             fit_seconds=info.get("fit_seconds"),
             stop_reason=info.get("stop_reason"),
             curve=_thin(info.get("curve", [])),
-            expression=None if expr is None else str(expr),
             hyperparameters=method.hyperparameters(),
             details={
                 "train_source": train.source,
@@ -227,7 +225,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
                 "n_test": None if test is None else len(test),
                 "domain": dataclasses.asdict(system.domain),
                 **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason")},
-                **getattr(method, "record_details", lambda: {})(),
+                **method.record_details(),
+                "variants": variants,
             },
         )
         bad = [k for k in ("train_mse", "test_mse") if fields[k] is not None and not math.isfinite(fields[k])]
@@ -237,6 +236,18 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     except Exception as exc:
         tb = traceback.format_exc(limit=-6)
         return rec.new_record(d, "failed", error=f"{type(exc).__name__}: {exc}", details={"traceback": tb})
+
+
+def _scores(model, experiment: str, train, test) -> dict:
+    """Train and test MSE in the experiment's target, and the readable expression."""
+    from bench.data import mse
+
+    expr = model.readable_expression()
+    return {
+        "train_mse": mse(model.predict(train, experiment), train.target(experiment)),
+        "test_mse": mse(model.predict(test, experiment), test.target(experiment)) if test is not None else None,
+        "expression": None if expr is None else str(expr),
+    }
 
 
 def _thin(curve: list, keep: int = 300) -> list:
@@ -367,7 +378,7 @@ def run_matrix(
     *,
     workers: int | None = None,
     resume: bool = True,
-    report: Callable[[str], None] | None = print,
+    report: Callable[[str], None] | None = None,
 ) -> list[dict]:
     """Run every spec, ``workers`` at a time, each in its own process.
 
@@ -376,6 +387,7 @@ def run_matrix(
     Returns the records in the order of ``specs``.
     """
     import_plugins({p for s in specs for p in s.plugins})
+    report = report if report is not None else _print_now
     workers = workers or default_workers()
     out_dir = Path(out_dir)
     results: dict[str, dict] = {}
@@ -400,6 +412,14 @@ def run_matrix(
                 results[record["run_id"]] = record
     tracker.summary()
     return [results[s.run_id] for s in specs]
+
+
+def _print_now(line: str) -> None:
+    print(line, flush=True)
+
+
+def quiet(line: str) -> None:
+    """A ``report`` for :func:`run_matrix` that prints nothing."""
 
 
 class _MatrixProgress:

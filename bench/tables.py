@@ -127,10 +127,26 @@ def build_table(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def build_tables(records: list[dict]) -> str:
-    """All tables, one section per (system, experiment), as one markdown document."""
-    groups = defaultdict(list)
+def expand_variants(records: list[dict]) -> list[dict]:
+    """Add one pseudo-record ``<method>+<variant>`` per variant a run reported."""
+    out = []
     for r in records:
+        out.append(r)
+        for name, scores in (r.get("details") or {}).get("variants", {}).items():
+            v = dict(r, method=f"{r['method']}+{name}", **scores)
+            v["details"] = {}
+            out.append(v)
+    return out
+
+
+def build_tables(records: list[dict]) -> str:
+    """All tables, one section per (system, experiment), as one markdown document.
+
+    A method's variants (such as a refined equation) get columns of their own,
+    named ``<method>+<variant>``.
+    """
+    groups = defaultdict(list)
+    for r in expand_variants(records):
         groups[(r["system"], r["experiment"])].append(r)
     order = {"direct": 0, "indirect": 1}
     parts = ["# Results", "", _DEFINITIONS, ""]

@@ -315,6 +315,7 @@ class Method:
         progress.finish()
         if progress.best_state is not None:
             self._set_state(progress.best_state)
+        self._post_fit(train, experiment, budget_s - (time.perf_counter() - t0))
         self.fit_info = {
             "steps": progress.steps,
             "best_step": progress.best_step,
@@ -354,9 +355,25 @@ class Method:
         """``tau = g(L)`` at the states of ``data``, shape ``(n, dof)``."""
         raise NotImplementedError
 
+    def _post_fit(self, train: Dataset, experiment: str, seconds_left: float) -> None:
+        """Work after the best state is restored, within what is left of the budget."""
+
     def expression(self) -> sympy.Expr | None:
         """The learned Lagrangian in ``q_i, qd_i``, for symbolic methods."""
         return None
+
+    def readable_expression(self) -> sympy.Expr | None:
+        """The expression a person should read (what records store); by default :meth:`expression`."""
+        return self.expression()
+
+    def variants(self) -> dict[str, "Method"]:
+        """Further fitted models derived from this one (for example a refined
+        equation), each reported by the harness as ``<method>+<variant>``."""
+        return {}
+
+    def record_details(self) -> dict:
+        """Method-specific facts for the run's record (JSON-serialisable)."""
+        return {}
 
     # -- derived -----------------------------------------------------------------
     def predict(self, data: Dataset, experiment: str | None = None) -> np.ndarray:
@@ -480,3 +497,39 @@ def _fused_adam_ok(dtype: torch.dtype) -> bool:
 
 
 METHODS: Registry[type[Method]] = Registry("method")
+
+
+class ExpressionModel:
+    """A fitted model given by a sympy Lagrangian in ``q_i, qd_i``.
+
+    Predicts ``L`` by evaluating the expression and ``tau`` through the suite's
+    Euler–Lagrange transform. Used for variants such as refined equations.
+    """
+
+    def __init__(self, expr: sympy.Expr, dof: int):
+        from bench import symbolic
+
+        self.expr, self.dof = expr, dof
+        self._fn = symbolic.to_torch(expr, dof)
+
+    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return self._fn(q, qd)
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        t = data.tensors()
+        return self._fn(t["q"], t["qd"]).numpy()
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        from bench.dynamics import euler_lagrange_chunked
+
+        t = data.tensors()
+        return euler_lagrange_chunked(self._fn, t["q"], t["qd"], t["qdd"])[0].numpy()
+
+    def predict(self, data: Dataset, experiment: str) -> np.ndarray:
+        check_experiment(experiment)
+        return self.predict_lagrangian(data) if experiment == "direct" else self.predict_torque(data)
+
+    def expression(self) -> sympy.Expr:
+        return self.expr
+
+    readable_expression = expression

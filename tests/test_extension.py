@@ -111,7 +111,7 @@ def test_toy_runs_through_the_harness_and_the_tables(tmp_path):
         ["toy_mass_spring", "double_pendulum"], ["toy_quadratic", "sysid"], ["direct", "indirect"], [0, 1], 2.0,
         profile="smoke", n_train=128, n_test=64, plugins=(str(Path(__file__).resolve()),),
     )
-    records = harness.run_matrix(specs, tmp_path, workers=2, report=None)
+    records = harness.run_matrix(specs, tmp_path, workers=2, report=harness.quiet)
     assert all(r["status"] == "ok" for r in records), [r["error"] for r in records if r["status"] != "ok"]
     exact = [r for r in records if r["system"] == "toy_mass_spring" and r["method"] == "toy_quadratic"]
     assert len(exact) == 4 and all(r["test_mse"] < 1e-20 for r in exact)

@@ -23,7 +23,7 @@ def specs(methods, experiments=("indirect",), seeds=(0,), budget=1.0, **kw):
 def test_statuses_for_every_way_a_run_can_end(tmp_path):
     todo = specs(["toy_constant", "toy_sleeper", "toy_crasher", "toy_exit", "toy_nan", "toy_unavailable", "toy_direct_only"])
     t0 = time.monotonic()
-    records = {r["method"]: r for r in harness.run_matrix(todo, tmp_path, workers=2, report=None)}
+    records = {r["method"]: r for r in harness.run_matrix(todo, tmp_path, workers=2, report=harness.quiet)}
     assert time.monotonic() - t0 < 60
     assert records["toy_constant"]["status"] == "ok"
     assert records["toy_constant"]["train_mse"] > 0 and records["toy_constant"]["test_mse"] > 0
@@ -43,7 +43,7 @@ def test_statuses_for_every_way_a_run_can_end(tmp_path):
 
 
 def test_record_holds_configuration_results_and_provenance(tmp_path):
-    (r,) = harness.run_matrix(specs(["sysid"], experiments=("direct",), profile="smoke"), tmp_path, workers=1, report=None)
+    (r,) = harness.run_matrix(specs(["sysid"], experiments=("direct",), profile="smoke"), tmp_path, workers=1, report=harness.quiet)
     assert r["status"] == "ok", r["error"]
     assert r["target"] == "L" and r["budget_s"] == 1.0 and r["seed"] == 0
     assert r["hyperparameters"]["max_steps"] == 20 and r["hyperparameters"]["lr"] == 1e-3
@@ -57,7 +57,7 @@ def test_record_holds_configuration_results_and_provenance(tmp_path):
 
 def test_resume_skips_finished_runs(tmp_path):
     todo = specs(["toy_constant"], seeds=(0, 1))
-    harness.run_matrix(todo, tmp_path, workers=1, report=None)
+    harness.run_matrix(todo, tmp_path, workers=1, report=harness.quiet)
     paths = sorted((tmp_path / "records").glob("*.json"))
     stamps = [p.stat().st_mtime_ns for p in paths]
     lines = []

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from bench.records import new_record
-from bench.tables import build_table, build_tables, group_stats, write_tables
+from bench.tables import build_table, build_tables, expand_variants, group_stats, write_tables
 from bench.records import write_record, record_path
 
 
@@ -76,3 +76,11 @@ def test_document_has_one_section_per_system_and_experiment_with_header(tmp_path
 def test_no_records_is_an_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="no records found"):
         write_tables(tmp_path)
+
+
+def test_variants_get_columns_of_their_own():
+    base = rec("syrenets", 0, 1.0, 2.0)
+    base["details"] = {"variants": {"refined": {"train_mse": 1e-20, "test_mse": 2e-20, "expression": "x"}}}
+    table = build_table(expand_variants([base]))
+    assert "| Group | Split | syrenets | syrenets+refined |" in table
+    assert "| Best | train | 1.00e+00 | **1.00e-20** |" in table

@@ -1,0 +1,95 @@
+"""Linear least squares over a basis of symbolic Lagrangian terms.
+
+The Euler–Lagrange transform ``g`` is linear in ``L``, so a Lagrangian
+``L = sum_k c_k f_k(q, qd)`` has torques ``tau = sum_k c_k g(f_k)``. Fitting
+the coefficients is therefore linear in both experiments:
+
+* direct: columns ``f_k`` evaluated on the data, target ``L``;
+* indirect: columns ``g(f_k)`` (one row per sample and joint), target ``tau``.
+
+Used wherever a method refits the coefficients of a symbolic structure.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import sympy
+
+from bench import symbolic
+from bench.data import Dataset, check_experiment
+from bench.dynamics import euler_lagrange_chunked
+
+
+def design_matrix(basis: Sequence[sympy.Expr], data: Dataset, experiment: str) -> np.ndarray:
+    """Columns of the basis in the experiment's target space.
+
+    Shape ``(n, K)`` for direct, ``(n * dof, K)`` for indirect (rows ordered
+    sample-major, like ``tau.ravel()``).
+    """
+    check_experiment(experiment)
+    t = data.tensors()
+    cols = []
+    for f in basis:
+        fn = symbolic.to_torch(sympy.sympify(f), data.dof)
+        if experiment == "direct":
+            cols.append(fn(t["q"], t["qd"]).numpy())
+        else:
+            cols.append(euler_lagrange_chunked(fn, t["q"], t["qd"], t["qdd"])[0].numpy().ravel())
+    return np.stack(cols, axis=1) if cols else np.zeros((len(data) * (1 if experiment == "direct" else data.dof), 0))
+
+
+def target_vector(data: Dataset, experiment: str) -> np.ndarray:
+    return data.target(experiment).ravel()
+
+
+def least_squares(F: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Minimum-norm least squares with column scaling for conditioning."""
+    if F.shape[1] == 0:
+        return np.zeros(0)
+    scale = np.sqrt(np.mean(F * F, axis=0))
+    scale[scale == 0] = 1.0
+    coef, *_ = np.linalg.lstsq(F / scale, y, rcond=None)
+    return coef / scale
+
+
+def thresholded_least_squares(
+    F: np.ndarray, y: np.ndarray, threshold: float = 1e-6, max_iter: int = 10
+) -> np.ndarray:
+    """Sequentially thresholded least squares (as in SINDy).
+
+    Repeatedly refit, dropping columns whose contribution ``|c_k| rms(F_k)``
+    falls below ``threshold * rms(y)``. Columns that are zero on the data (an
+    empty Euler–Lagrange image, for instance a constant) are dropped first.
+    """
+    K = F.shape[1]
+    rms_f = np.sqrt(np.mean(F * F, axis=0)) if K else np.zeros(0)
+    rms_y = float(np.sqrt(np.mean(y * y))) or 1.0
+    active = rms_f > 1e-12 * max(rms_f.max(initial=0.0), 1e-300)
+    coef = np.zeros(K)
+    for _ in range(max_iter):
+        coef = np.zeros(K)
+        coef[active] = least_squares(F[:, active], y)
+        keep = active & (np.abs(coef) * rms_f >= threshold * rms_y)
+        if np.array_equal(keep, active):
+            break
+        active = keep
+    coef[~active] = 0.0
+    return coef
+
+
+def combine(basis: Sequence[sympy.Expr], coef: np.ndarray) -> sympy.Expr:
+    """``sum_k c_k f_k`` over the nonzero coefficients."""
+    return sympy.Add(*[sympy.Float(float(c)) * f for c, f in zip(coef, basis) if c != 0.0])
+
+
+def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, threshold: float = 1e-6):
+    """Fit coefficients of ``basis`` on ``data``; returns ``(expression, coef)``."""
+    basis = list(basis)
+    if experiment == "direct" and not any(f.is_number for f in basis):
+        basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
+    F = design_matrix(basis, data, experiment)
+    coef = thresholded_least_squares(F, target_vector(data, experiment), threshold)
+    return combine(basis, coef), coef
+
