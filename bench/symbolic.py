@@ -28,6 +28,11 @@ def acceleration_symbols(dof: int) -> tuple[sympy.Symbol, ...]:
 TorchLagrangian = Callable[..., torch.Tensor]
 
 
+def numeric_subexpressions_to_floats(expr: sympy.Expr) -> sympy.Expr:
+    """Evaluate function calls on numbers (``sin(1/2)``), which torch cannot take."""
+    return expr.replace(lambda e: isinstance(e, sympy.Function) and e.is_number, lambda e: sympy.Float(e.evalf()))
+
+
 def to_torch(
     expr: sympy.Expr,
     dof: int,
@@ -56,6 +61,7 @@ def to_torch(
     """
     q, qd = coordinate_symbols(dof)
     args = list(q) + list(qd) + list(extra)
+    expr = numeric_subexpressions_to_floats(sympy.sympify(expr))
     unknown = expr.free_symbols - set(args)
     if unknown:
         names = ", ".join(sorted(map(str, unknown)))
@@ -83,6 +89,7 @@ def to_numpy(expr: sympy.Expr, dof: int) -> Callable:
     import numpy as np
 
     q, qd = coordinate_symbols(dof)
+    expr = numeric_subexpressions_to_floats(sympy.sympify(expr))
     raw = sympy.lambdify(list(q) + list(qd), expr, modules="numpy", cse=True)
 
     def f(q_a, qd_a):

@@ -173,6 +173,8 @@ class Progress:
         self._last_eval_cost = 0.0
         self._next_eval = self.start
         self._evaluated_at = -1
+        self._last_call = None
+        self._step_time = 0.0
         self.stop_reason: str | None = None
 
     def elapsed(self) -> float:
@@ -203,13 +205,19 @@ class Progress:
         return value
 
     def step(self) -> bool:
-        """Count one finished step; ``True`` while the loop may do another."""
+        """Count one finished step; ``True`` while the loop may do another.
+
+        The loop is stopped early enough that one more step and the final
+        evaluation still fit in the budget.
+        """
+        now = time.perf_counter()
         if self._calls:
             self.steps += 1
+            took = now - self._last_call
+            self._step_time = took if self.steps == 1 else max(took, 0.9 * self._step_time + 0.1 * took)
         self._calls += 1
         if self.stop_reason:
             return False
-        now = time.perf_counter()
         if self._calls == 1 or now >= self._next_eval:
             self.evaluate_now()
             now = time.perf_counter()
@@ -219,9 +227,14 @@ class Progress:
             self.stop_reason = "converged"
         elif self.max_steps is not None and self.steps >= self.max_steps:
             self.stop_reason = "max_steps"
-        elif now + self._last_eval_cost >= self.deadline:
+        elif now + self._step_time + self._last_eval_cost >= self.deadline:
             self.stop_reason = "budget"
+        self._last_call = time.perf_counter()
         return self.stop_reason is None
+
+    def reserve(self, seconds: float) -> None:
+        """Take ``seconds`` off the end of the budget (for work after the loop)."""
+        self.deadline -= seconds
 
     def stop(self, reason: str) -> None:
         """Ask the loop to end (a method that knows it is done)."""

@@ -135,3 +135,10 @@ def test_shape_errors_are_clear(double_pendulum):
         euler_lagrange(double_pendulum.lagrangian, q, qd[:3], qdd)
     with pytest.raises(ValueError, match="returned shape"):
         euler_lagrange(lambda a, b: (a * b).sum(), q, qd, qdd)
+
+
+def test_numeric_function_calls_compile():
+    (q1, _), (qd1, _) = symbolic.coordinate_symbols(2)
+    f = symbolic.to_torch(qd1**2 * sympy.sin(sympy.Rational(1, 2)) + sympy.cos(2) * q1, 2)
+    x = torch.ones(3, 2, dtype=torch.float64)
+    torch.testing.assert_close(f(x, x), torch.full((3,), np.sin(0.5) + np.cos(2.0), dtype=torch.float64))

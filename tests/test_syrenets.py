@@ -49,7 +49,7 @@ def test_selection_distributions_gates_and_scales():
     assert P.shape == (5, net.C) and phi.shape == (5,) and W.shape == (5, net.C)
     torch.testing.assert_close(P.sum(-1), torch.ones(5, dtype=torch.float64))
     assert ((phi > 0) & (phi < 1)).all()
-    assert net.S.shape == (3, 5, net.C)
+    assert len(net.S) == 3 and net.S[1].shape == (5, net.C)
     torch.testing.assert_close(W, phi[:, None] * P * net.S[1])
 
 
@@ -135,3 +135,22 @@ def test_six_input_variant_runs_and_is_flagged(data):
     m = METHODS["syrenets"](**SMALL, inputs="q_qd_qdd", max_steps=3, eval_samples=64).fit(data[0], "indirect", 0, 60)
     assert np.isfinite(m.predict_torque(data[1])).all()
     assert "refinement needs inputs='q_qd'" in m.record_details()["refined"]
+
+
+def test_hutchinson_contractive_estimate_is_unbiased():
+    net = _net()
+    v = torch.randn(6, net.C, dtype=torch.float64)
+    _, a1, a2 = net.encode(v)
+    exact = net.contractive(a1, a2).item()
+    torch.manual_seed(1)
+    estimate = np.mean([net.contractive(a1, a2, probes=8).item() for _ in range(400)])
+    assert estimate == pytest.approx(exact, rel=0.03)
+
+
+def test_diversity_loss_matches_its_definition():
+    net = _net(heads=4)
+    p = torch.softmax(torch.randn(4, net.C, dtype=torch.float64), -1) * torch.rand(4, 1, dtype=torch.float64)
+    ce = lambda a, b: -(a * torch.log(b + 1e-5)).sum()  # noqa: E731
+    entropy = sum(ce(p[j], p[j]) for j in range(4)) / 4
+    cross = sum(ce(p[i], p[j]) for i in range(4) for j in range(4) if i != j) / 12
+    torch.testing.assert_close(net._diversity(p), 1e-3 * entropy - 1.0 * cross)

@@ -12,6 +12,13 @@ def pytest_terminal_summary(terminalreporter, config):
         if bench.stats is None:
             continue
         groups.setdefault(bench.group or "", {})[bench.name] = bench.stats.mean
+    extra = [b for b in session.benchmarks if b.extra_info.get("steps_per_s")]
+    if extra:
+        terminalreporter.write_sep("-", "training steps per second")
+        for bench in extra:
+            info = bench.extra_info
+            ratio = f"   {info['x_public']:5.1f}x the public implementation" if "x_public" in info else ""
+            terminalreporter.write_line(f"{bench.name:<70} {info['steps_per_s']:7.1f} steps/s{ratio}")
     for group, means in sorted(groups.items()):
         ours = [v for k, v in means.items() if "[ours" in k or k.endswith("ours")]
         if not ours:

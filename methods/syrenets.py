@@ -1,0 +1,696 @@
+"""SyReNets: Symbolic Residual Neural Networks (Valle & Haddadin, 2021).
+
+A stack of symbolic layers. Layer ``l`` sees the system inputs ``x`` and the
+outputs of the previous layer's heads, builds every candidate term from them,
+and each of its selection heads outputs a weighted sum of the candidates; the
+last layer's heads are summed into the Lagrangian.
+
+Architecture (the paper's, with the public code's facts where the paper is open)
+---------------------------------------------------------------------------------
+* **Inputs** ``x = (q, qd)`` by default. ``inputs="q_qd_qdd"`` feeds ``qdd``
+  too, as the public code did. That variant is *physically inconsistent*: a
+  Lagrangian depends on ``(q, qd)`` only, and with ``qdd`` as an input the
+  Euler–Lagrange transform would need third derivatives, which it (like the
+  public code) silently drops by treating ``qdd`` as a constant.
+* **Candidates** of a layer with inputs ``u_1..u_n``, in this order: the
+  pairwise sums over the upper triangle (row-major; the diagonal stands for
+  ``u_i`` itself), the pairwise products over the upper triangle (squares
+  included), ``sin(u_i)``, ``cos(u_i)``. For n inputs, n(n+1)/2 + n(n+1)/2 + n
+  + n candidates: 378 for 6 + 12 inputs, 304 for 4 + 12. Further operators
+  (``diff`` = u_i - u_j for i < j, ``exp``) can be enabled with ``operators``.
+* **Shared representation block**: layer normalisation of the candidates of
+  each sample; a contractive auto-encoder shared by all layers (encoder
+  C -> 128 -> 128 -> 16, softplus, linear latent; mirrored decoder; biases
+  only here); the cosine-similarity Gram matrix of the 16 latent dimensions
+  over the batch; per layer, a bias-free linear map applied to each row.
+* **Selection head** (all heads of a layer are computed as one batched tensor
+  operation): a bias-free weighted sum d x d -> d; a hidden layer of 64
+  softplus units with layer normalisation before the activation; an output
+  over the candidates with layer normalisation and softmax, giving the
+  selection distribution ``P`` shared by the batch; a per-candidate scale
+  ``S``; an on-off gate ``phi = sigmoid(w1 . P_j + w2 . prod_j' p_j'(previous
+  layer))``; the head outputs ``h_j = phi_j sum_b S_jb v_b P_jb`` over the raw
+  candidates ``v``.
+* **Losses**: ``L_b + L_ae + L_c``. ``L_ae`` = reconstruction MSE +
+  ``lambda1 * ||J_encoder||^2``. ``L_c`` = per layer
+  ``lambda2 * H(p_j) - lambda3 * sum_{j' != j} H(p_j', p_j)`` with
+  ``p_j = phi_j P_j``, lambda2 = 0.001, lambda3 = 1.
+* **Training**: Adam, lr 1e-3 divided by 10 after every 1000 steps without
+  improvement of the mini-batch loss, down to 1e-5 (the paper's schedule; the
+  public code waited 2000 steps); mini-batches of 32; float64; best state kept.
+  ``replay=16`` re-feeds the 16 worst-fitted samples of the previous batch at
+  every step, as the public code did.
+* **Evaluation**: a fixed function; each layer's weights are frozen at the
+  head outputs' ``phi * S * P`` of the most recent training batch (as in the
+  public code).
+
+Choices and deviations, each deliberate
+---------------------------------------
+* *Means, not sums*, in ``L_c`` and in the contractive penalty, as in the
+  public code: ``L_c`` uses the mean entropy over heads and the mean
+  cross-entropy over the ``H(H-1)`` ordered pairs of distinct heads; the
+  contractive term is the mean squared entry of the encoder Jacobian
+  (``||J||_F^2 / (16 C)`` per sample, averaged over the batch). Entropies use
+  ``log(p + 1e-5)`` like the public code.
+* The contractive penalty is computed in closed form for the softplus
+  encoder, ``J = W3 diag(s'(a2)) W2 diag(s'(a1)) W1``, with
+  ``||J||_F^2 = tr(M K M^T)``, ``M = W3 diag(s'(a2)) W2 diag(s'(a1))`` and
+  ``K = W1 W1^T``, instead of an autograd Jacobian. Even so, the exact value
+  costs two (16 B x 128) x (128 x 128) products per layer and their
+  backward, more than the rest of a step together. By default it is
+  therefore *estimated* without bias by Hutchinson's trace estimator,
+  ``E_e ||e^T J||^2`` with one Rademacher vector ``e`` per step (the same
+  closed form applied to ``e^T J``), which is 16 times cheaper;
+  ``contractive_probes=0`` computes it exactly.
+* The scale ``S`` comes, in the public code, from a bias-free ``C x C``
+  linear layer applied to a vector of ``C`` ones. Every weight of a row then
+  receives the same gradient, so under Adam the row sum moves ``C`` times
+  the step of one weight. ``S`` is therefore stored directly, initialised as
+  the sum of ``C`` draws of the layer's default uniform initialisation, and
+  trained with ``C`` times the learning rate: the same dynamics (up to Adam's
+  epsilon) with ``C`` times fewer parameters.
+* The gate of the first layer sees the product of uniform distributions
+  ``(1/H)^H`` in place of a previous layer, as in the public code.
+* Layer normalisations have no affine parameters and the per-layer linear map
+  has no bias ("biases only in the auto-encoder"); the public code had both.
+* The cosine similarity is the standard one, ``<z_i, z_j> / (|z_i| |z_j|)``.
+* In the indirect experiment, the selection (``P``, ``phi``, ``S``) is
+  computed from the batch with the inputs detached, and the torques are those
+  of the resulting fixed function of ``(q, qd)``. The public code
+  differentiated through the batch statistics as well, which makes each
+  sample's torque depend on the other samples of its batch.
+* The kept state is the one with the lowest training MSE on a fixed subset
+  of the training data (see :class:`methods.base.Progress`), not the lowest
+  mini-batch MSE, and the test set is not evaluated during training.
+"""
+
+from __future__ import annotations
+
+import math
+import typing
+from dataclasses import dataclass
+
+import numpy as np
+import sympy
+import torch
+import torch.nn.functional as F
+
+from bench import symbolic
+from bench.dynamics import euler_lagrange, euler_lagrange_chunked
+from bench.errors import ConfigError
+from methods.base import METHODS, TorchConfig, TorchLagrangianMethod
+
+BINARY = ("sum", "prod", "diff")
+UNARY = ("sin", "cos", "exp")
+EPS_LOG = 1e-5
+
+
+@dataclass(frozen=True)
+class SyReNetsConfig(TorchConfig):
+    """Hyperparameters; the defaults are the paper's.
+
+    Attributes
+    ----------
+    layers, heads
+        Symbolic layers and selection heads per layer.
+    inputs
+        ``"q_qd"`` (default, consistent) or ``"q_qd_qdd"`` (the public code's).
+    operators
+        Candidate operators, a subset of ``sum, prod, diff, sin, cos, exp``.
+    latent, ae_hidden, head_hidden
+        Auto-encoder latent (d) and hidden widths; head hidden units.
+    lambda_contractive, lambda_entropy, lambda_diversity
+        lambda1, lambda2, lambda3.
+    contractive_probes
+        0: the exact closed-form contractive penalty; k > 0: Hutchinson's
+        unbiased estimate with k Rademacher probes (cheaper, stochastic).
+    lr_patience, lr_factor, lr_min
+        Plateau schedule of the learning rate.
+    replay
+        Worst-fitted samples of the previous batch replayed each step
+        (public code: 16; paper: 0).
+    refine
+        Run the exact-recovery refinement at the end (a separate variant).
+    post_fraction
+        Share of the budget reserved for pruning and refinement after training.
+    """
+
+    layers: int = 3
+    heads: int = 12
+    inputs: typing.Literal["q_qd", "q_qd_qdd"] = "q_qd"
+    operators: tuple[str, ...] = ("sum", "prod", "sin", "cos")
+    latent: int = 16
+    ae_hidden: int = 128
+    head_hidden: int = 64
+    lambda_contractive: float = 1.0
+    lambda_entropy: float = 1e-3
+    lambda_diversity: float = 1.0
+    contractive_probes: int = 1
+    lr_patience: int = 1000
+    lr_factor: float = 0.1
+    lr_min: float = 1e-5
+    replay: int = 0
+    refine: bool = True
+    post_fraction: float = 0.1
+
+    def validate(self) -> None:
+        bad = [op for op in self.operators if op not in BINARY + UNARY]
+        if bad or not self.operators:
+            raise ConfigError(f"syrenets: unknown operator(s) {bad}; choose from {', '.join(BINARY + UNARY)}")
+        if len(set(self.operators)) != len(self.operators):
+            raise ConfigError("syrenets: operators must not repeat")
+        if self.layers < 1 or self.heads < 1:
+            raise ConfigError("syrenets: layers and heads must be at least 1")
+        if not 0.0 <= self.post_fraction < 1.0:
+            raise ConfigError("syrenets: post_fraction must be in [0, 1)")
+
+
+# -- candidates ------------------------------------------------------------------------
+
+class CandidateSpec:
+    """The candidate terms of a layer with ``n`` inputs, in order.
+
+    ``names(symbols)`` returns them as sympy expressions; :meth:`__call__`
+    evaluates them on a batch.
+    """
+
+    def __init__(self, n: int, operators: tuple[str, ...]):
+        self.n, self.operators = n, tuple(operators)
+        i, j = np.triu_indices(n)
+        self.I, self.J = torch.as_tensor(i), torch.as_tensor(j)
+        self.offdiag = torch.as_tensor(i != j)
+        ui, uj = np.triu_indices(n, k=1)
+        self.Ui, self.Uj = torch.as_tensor(ui), torch.as_tensor(uj)
+        sizes = {"sum": len(i), "prod": len(i), "diff": len(ui), "sin": n, "cos": n, "exp": n}
+        self.size = sum(sizes[op] for op in self.operators)
+        # linear operators as constant matrices: one matrix product instead of two
+        # gathers (whose backward is a slower scatter)
+        self._linear = {}
+        for op in ("sum", "diff"):
+            if op in self.operators:
+                rows, cols = (i, j) if op == "sum" else (ui, uj)
+                A = np.zeros((n, len(rows)))
+                A[rows, np.arange(len(rows))] = 1.0
+                off = rows != cols
+                A[cols[off], np.arange(len(rows))[off]] += 1.0 if op == "sum" else -1.0
+                self._linear[op] = torch.as_tensor(A)
+        self._flat_triu = torch.as_tensor(i * n + j)
+        self._cache: dict = {}
+
+    def _matrix(self, op: str, like: torch.Tensor) -> torch.Tensor:
+        key = (op, like.dtype, like.device)
+        if key not in self._cache:
+            self._cache[key] = self._linear[op].to(dtype=like.dtype, device=like.device)
+        return self._cache[key]
+
+    def __call__(self, u: torch.Tensor) -> torch.Tensor:
+        parts = []
+        for op in self.operators:
+            if op in ("sum", "diff"):
+                parts.append(u @ self._matrix(op, u))
+            elif op == "prod":
+                outer = (u.unsqueeze(2) * u.unsqueeze(1)).reshape(u.shape[0], -1)
+                parts.append(outer[:, self._flat_triu])
+            elif op == "sin":
+                parts.append(torch.sin(u))
+            elif op == "cos":
+                parts.append(torch.cos(u))
+            elif op == "exp":
+                parts.append(torch.exp(u))
+        return torch.cat(parts, dim=1)
+
+    def symbolic(self, u: list) -> list:
+        out = []
+        I, J = self.I.tolist(), self.J.tolist()
+        for op in self.operators:
+            if op == "sum":
+                out += [u[a] if a == b else u[a] + u[b] for a, b in zip(I, J)]
+            elif op == "prod":
+                out += [u[a] * u[b] for a, b in zip(I, J)]
+            elif op == "diff":
+                out += [u[a] - u[b] for a, b in zip(self.Ui.tolist(), self.Uj.tolist())]
+            elif op in ("sin", "cos", "exp"):
+                f = getattr(sympy, op)
+                out += [f(v) for v in u]
+        return out
+
+
+def _uniform(shape, bound, generator=None, dtype=torch.float64):
+    return (torch.rand(shape, generator=generator, dtype=dtype) * 2 - 1) * bound
+
+
+def _layer_norm(x: torch.Tensor) -> torch.Tensor:
+    return F.layer_norm(x, x.shape[-1:])
+
+
+class SyReNet(torch.nn.Module):
+    """The network; :meth:`select` is the training pass, :meth:`evaluate` the frozen function."""
+
+    def __init__(self, n_x: int, cfg: SyReNetsConfig):
+        super().__init__()
+        self.n_x, self.cfg = n_x, cfg
+        H, d, L = cfg.heads, cfg.latent, cfg.layers
+        self.spec = CandidateSpec(n_x + H, cfg.operators)
+        C = self.spec.size
+        self.C = C
+        k = cfg.head_hidden
+        # the shared contractive auto-encoder (the only biases of the model)
+        self.enc = torch.nn.ModuleList([torch.nn.Linear(C, cfg.ae_hidden), torch.nn.Linear(cfg.ae_hidden, cfg.ae_hidden),
+                                        torch.nn.Linear(cfg.ae_hidden, d)])
+        self.dec = torch.nn.ModuleList([torch.nn.Linear(d, cfg.ae_hidden), torch.nn.Linear(cfg.ae_hidden, cfg.ae_hidden),
+                                        torch.nn.Linear(cfg.ae_hidden, C)])
+        # per layer (separate tensors: indexing one stacked tensor would make its
+        # backward fill a zero gradient of the whole stack for every layer)
+        def per_layer(shape, bound, reduce_last=False):
+            return torch.nn.ParameterList(
+                [torch.nn.Parameter(_uniform(shape, bound).sum(-1) if reduce_last else _uniform(shape, bound)) for _ in range(L)]
+            )
+
+        self.Q = per_layer((d, d), 1 / math.sqrt(d))            # row-wise linear map of the Gram matrix
+        self.Wq = per_layer((H, d), 1 / math.sqrt(d))           # weighted sum d x d -> d, per head
+        self.W1 = per_layer((H, k, d), 1 / math.sqrt(d))        # head hidden layer
+        self.W2 = per_layer((H, C, k), 1 / math.sqrt(k))        # head output over the candidates
+        # scale: row sums of a C x C layer on a vector of ones (see the module docstring)
+        self.S = per_layer((H, C, C), 1 / math.sqrt(C), reduce_last=True)
+        # gate: sigmoid(g1 . P_j + g2 . prod of the previous layer's distributions)
+        self.G1 = per_layer((H, C), 1 / math.sqrt(2 * C))
+        self.G2 = per_layer((H, C), 1 / math.sqrt(2 * C))
+
+    # -- pieces -------------------------------------------------------------------
+    def encode(self, v: torch.Tensor):
+        a1 = self.enc[0](v)
+        h1 = F.softplus(a1)
+        a2 = self.enc[1](h1)
+        z = self.enc[2](F.softplus(a2))
+        return z, a1, a2
+
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        h = F.softplus(self.dec[0](z))
+        h = F.softplus(self.dec[1](h))
+        return self.dec[2](h)
+
+    def contractive(self, a1: torch.Tensor, a2: torch.Tensor, probes: int = 0, K: torch.Tensor | None = None) -> torch.Tensor:
+        """Mean squared entry of the encoder Jacobian, averaged over rows.
+
+        ``probes == 0``: exact, in closed form. ``probes > 0``: Hutchinson's
+        unbiased estimate ``E ||J^T e||^2`` with that many Rademacher vectors
+        ``e`` (shared by the rows), 16 / probes times cheaper. ``K = W1 W1^T``
+        may be passed in, since every layer shares the encoder.
+        """
+        W1, W2, W3 = self.enc[0].weight, self.enc[1].weight, self.enc[2].weight
+        s1, s2 = torch.sigmoid(a1), torch.sigmoid(a2)  # softplus' = sigmoid
+        if K is None:
+            K = W1 @ W1.T  # (h, h)
+        if probes == 0:
+            M = torch.matmul(W3.unsqueeze(0) * s2.unsqueeze(1), W2) * s1.unsqueeze(1)  # (B, d, h) = J W1^+
+        else:
+            e = torch.randint(0, 2, (probes, W3.shape[0]), dtype=W3.dtype, device=W3.device) * 2 - 1
+            M = ((e @ W3).unsqueeze(1) * s2.unsqueeze(0)) @ W2 * s1.unsqueeze(0)  # (probes, B, h) = e^T J W1^+
+            M = M.transpose(0, 1) / math.sqrt(probes)
+        sq = (torch.matmul(M, K) * M).sum(dim=(1, 2))  # ||J_b||_F^2 (exact or estimated)
+        return sq.mean() / (W3.shape[0] * W1.shape[1])
+
+    def heads(self, layer: int, G: torch.Tensor, prev_prod: torch.Tensor):
+        """Selection of every head of ``layer`` at once: (P, phi, weights)."""
+        Gq = G @ self.Q[layer].T                                   # rows mapped: (d, d)
+        a = torch.einsum("hd,ed->he", self.Wq[layer], Gq)          # weighted sum d x d -> d, per head
+        hidden = F.softplus(_layer_norm((self.W1[layer] * a.unsqueeze(1)).sum(-1)))
+        logits = _layer_norm((self.W2[layer] * hidden.unsqueeze(1)).sum(-1))
+        P = torch.softmax(logits, dim=-1)                          # (H, C)
+        phi = torch.sigmoid((self.G1[layer] * P).sum(-1) + self.G2[layer] @ prev_prod)  # (H,)
+        return P, phi, phi.unsqueeze(1) * P * self.S[layer]
+
+    # -- passes -------------------------------------------------------------------
+    def select(self, x: torch.Tensor):
+        """Training pass on a batch: (output, frozen weights, auxiliary losses)."""
+        cfg = self.cfg
+        B, H = x.shape[0], cfg.heads
+        h = x.new_zeros(B, H)
+        prev = x.new_full((self.C,), (1.0 / H) ** H)
+        weights, ae_loss, c_loss = [], x.new_zeros(()), x.new_zeros(())
+        W1 = self.enc[0].weight
+        K = W1 @ W1.T if cfg.lambda_contractive else None  # shared by the layers' penalties
+        for layer in range(cfg.layers):
+            v = self.spec(torch.cat([x, h], dim=1))
+            vn = _layer_norm(v)
+            z, a1, a2 = self.encode(vn)
+            ae_loss = ae_loss + F.mse_loss(self.decode(z), vn)
+            if cfg.lambda_contractive:
+                ae_loss = ae_loss + cfg.lambda_contractive * self.contractive(a1, a2, cfg.contractive_probes, K)
+            zn = z / z.norm(dim=0, keepdim=True).clamp_min(1e-12)
+            G = zn.T @ zn
+            P, phi, W = self.heads(layer, G, prev)
+            p = phi.unsqueeze(1) * P
+            c_loss = c_loss + self._diversity(p)
+            prev = p.clamp_min(1e-14).prod(dim=0)
+            h = v @ W.T
+            weights.append(W)
+        return h.sum(dim=1), weights, ae_loss + c_loss
+
+    def _diversity(self, p: torch.Tensor) -> torch.Tensor:
+        """``lambda2 * mean_j H(p_j) - lambda3 * mean_{j' != j} H(p_j', p_j)``.
+
+        With ``H(a, b) = -sum_c a_c log b_c``, the sum over all ordered pairs
+        is ``-sum_c (sum_j' p_j'c)(sum_j log p_jc)``, so no H x H matrix is formed.
+        """
+        cfg = self.cfg
+        H = p.shape[0]
+        logp = torch.log(p + EPS_LOG)
+        diagonal = -(p * logp).sum()
+        everything = -(p.sum(0) * logp.sum(0)).sum()
+        off = (everything - diagonal) / max(H * (H - 1), 1)
+        return cfg.lambda_entropy * diagonal / H - cfg.lambda_diversity * off
+
+    def evaluate(self, x: torch.Tensor, weights: list[torch.Tensor]) -> torch.Tensor:
+        """The frozen function: each layer's heads are fixed weighted sums of its candidates."""
+        h = x.new_zeros(x.shape[0], self.cfg.heads)
+        for W in weights:
+            h = self.spec(torch.cat([x, h], dim=1)) @ W.T
+        return h.sum(dim=1)
+
+
+# -- the method ------------------------------------------------------------------------
+
+@METHODS.add("syrenets", "neural", "symbolic", "paper")
+class SyReNets(TorchLagrangianMethod):
+    Config = SyReNetsConfig
+    smoke = {"layers": 2, "heads": 3, "latent": 4, "ae_hidden": 8, "head_hidden": 8, "max_steps": 10,
+             "eval_samples": 128, "refine": False}
+
+    # -- model plumbing -------------------------------------------------------------
+    def _inputs(self, q, qd, qdd=None):
+        if self.config.inputs == "q_qd":
+            return torch.cat([q, qd], dim=1)
+        return torch.cat([q, qd, qdd], dim=1)
+
+    def build_model(self, train):
+        n_x = train.dof * (2 if self.config.inputs == "q_qd" else 3)
+        torch.manual_seed(self.seed)
+        return SyReNet(n_x, self.config)
+
+    def _setup(self, train) -> None:
+        """Model, optimiser (the scale ``S`` at ``C`` times the learning rate) and schedule."""
+        cfg = self.config
+        self.model = self.build_model(train).to(self.dtype)
+        C = self.model.C
+        scale_params = list(self.model.S.parameters())
+        other = [p for n, p in self.model.named_parameters() if not n.startswith("S.")]
+        self.optimizer = torch.optim.Adam(
+            [{"params": other, "lr": cfg.lr}, {"params": scale_params, "lr": cfg.lr * C}],
+            betas=cfg.betas, fused=True,
+        )
+        self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
+            self.optimizer, mode="min", factor=cfg.lr_factor, patience=cfg.lr_patience, min_lr=[cfg.lr_min, cfg.lr_min * C]
+        )
+
+    def train_step(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
+        """One optimisation step on ``batch``; returns each sample's squared error."""
+        q, qd, qdd = batch["q"], batch["qd"], batch["qdd"]
+        out, weights, aux = self.model.select(self._inputs(q, qd, qdd))
+        if experiment == "direct":
+            err = (out - batch["L"]) ** 2
+        else:
+            # the torques of the fixed function the batch selected: gradients flow
+            # into the selection, not through the batch statistics
+            def lag(qq, qqd):
+                return self.model.evaluate(self._inputs(qq, qqd, qdd), weights)
+
+            tau = euler_lagrange(lag, q, qd, qdd, create_graph=True)
+            err = ((tau - batch["tau"]) ** 2).mean(dim=1)
+        loss = err.mean() + aux
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizer.step()
+        self.scheduler.step(err.mean().item())
+        self.frozen = [w.detach() for w in weights]
+        return err.detach()
+
+    def _fit(self, train, experiment, progress):
+        cfg = self.config
+        self._setup(train)
+        t = train.tensors(self.dtype)
+        generator = torch.Generator().manual_seed(self.seed)
+        n, bs = len(train), min(cfg.batch_size, len(train))
+        order, cursor = torch.randperm(n, generator=generator), 0
+        replay_idx = torch.empty(0, dtype=torch.long)
+        # frozen weights before the first step, from the first batch
+        with torch.no_grad():
+            self.frozen = [w.detach() for w in self.model.select(self._inputs(t["q"][:bs], t["qd"][:bs], t["qdd"][:bs]))[1]]
+        progress.reserve(cfg.post_fraction * progress.remaining())
+        while progress.step():
+            if cursor + bs > n:
+                order, cursor = torch.randperm(n, generator=generator), 0
+            idx = torch.cat([order[cursor:cursor + bs], replay_idx])
+            cursor += bs
+            err = self.train_step({k: v[idx] for k, v in t.items()}, experiment)
+            if cfg.replay:
+                replay_idx = idx[torch.argsort(err, descending=True)[: cfg.replay]]
+
+    def _get_state(self):
+        return {"model": {k: v.detach().clone() for k, v in self.model.state_dict().items()},
+                "frozen": [w.clone() for w in self.frozen]}
+
+    def _set_state(self, state):
+        self.model.load_state_dict(state["model"])
+        self.frozen = [w.clone() for w in state["frozen"]]
+
+    # -- the frozen function --------------------------------------------------------------
+    def _frozen_lagrangian(self, qdd=None):
+        def lag(q, qd):
+            return self.model.evaluate(self._inputs(q, qd, qdd), self.frozen)
+        return lag
+
+    def predict_lagrangian(self, data):
+        t = data.tensors(self.dtype)
+        with torch.no_grad():
+            out = self.model.evaluate(self._inputs(t["q"], t["qd"], t["qdd"]), self.frozen)
+        return out.double().numpy()
+
+    def predict_torque(self, data):
+        t = data.tensors(self.dtype)
+        if self.config.inputs == "q_qd":
+            tau, _ = euler_lagrange_chunked(self._frozen_lagrangian(), t["q"], t["qd"], t["qdd"])
+        else:
+            taus = []
+            for sl in range(0, len(data), 8192):
+                part = slice(sl, sl + 8192)
+                taus.append(euler_lagrange(self._frozen_lagrangian(t["qdd"][part]), t["q"][part], t["qd"][part], t["qdd"][part]))
+            tau = torch.cat(taus)
+        return tau.double().numpy()
+
+    def lagrangian(self, q, qd):
+        return self._frozen_lagrangian()(q, qd)
+
+    def _with_weights(self, weights, fn, *args):
+        saved, self.frozen = self.frozen, weights
+        try:
+            return fn(*args)
+        finally:
+            self.frozen = saved
+
+    # -- pruning and refinement -----------------------------------------------------------
+    def _post_fit(self, train, experiment, seconds_left):
+        import time
+
+        deadline = time.perf_counter() + seconds_left
+        self._variants, self._notes = {}, {}
+        rng = np.random.default_rng(self.seed)
+        ref = train.subset(np.sort(rng.choice(len(train), min(len(train), 1024), replace=False)))
+        self._pruned = self._prune(ref, experiment)
+        self._variants["pruned"] = self._pruned
+        if not self.config.refine:
+            return
+        if self.config.inputs != "q_qd":
+            self._notes["refined"] = "refinement needs inputs='q_qd' (a Lagrangian of q and qd)"
+            return
+        try:
+            refined = self._refine(train, experiment, deadline)
+        except _OutOfTime as exc:
+            self._notes["refined"] = f"out of budget during {exc}"
+            return
+        if refined is not None:
+            self._variants["refined"] = refined
+
+    def _layer_values(self, data, weights):
+        """Candidate values of every layer on ``data`` (frozen function)."""
+        t = data.tensors(self.dtype)
+        x = self._inputs(t["q"], t["qd"], t["qdd"])
+        h = x.new_zeros(x.shape[0], self.config.heads)
+        values = []
+        with torch.no_grad():
+            for W in weights:
+                v = self.model.spec(torch.cat([x, h], dim=1))
+                values.append(v)
+                h = v @ W.T
+        return values
+
+    def _prune(self, ref, experiment, tolerance: float = 0.1) -> "_FrozenVariant":
+        """Keep the fewest terms whose frozen model is within ``tolerance`` of the full one.
+
+        Terms (layer, head, candidate) are ranked by their contribution
+        ``|w| * rms(candidate)`` on ``ref``; the smallest prefix of that ranking
+        whose MSE on ``ref`` is at most ``(1 + tolerance)`` times the full
+        model's is kept (found by bisection).
+        """
+        from bench.data import mse
+
+        values = self._layer_values(ref, self.frozen)
+        contrib = [W.abs() * v.pow(2).mean(0).sqrt().unsqueeze(0) for W, v in zip(self.frozen, values)]
+        flat = torch.cat([c.reshape(-1) for c in contrib])
+        order = torch.argsort(flat, descending=True)
+        sizes = [c.numel() for c in contrib]
+        target = ref.target(experiment)
+        full = mse(self.predict(ref, experiment), target)
+
+        def masked(k):
+            keep_flat = torch.zeros_like(flat, dtype=torch.bool)
+            keep_flat[order[:k]] = True
+            weights, keep, start = [], [], 0
+            for W, size in zip(self.frozen, sizes):
+                m = keep_flat[start:start + size].reshape(W.shape)
+                start += size
+                weights.append(W * m)
+                keep.append([torch.nonzero(m[j]).flatten().tolist() for j in range(W.shape[0])])
+            return weights, keep
+
+        def error(k):
+            weights, _ = masked(k)
+            return mse(self._with_weights(weights, self.predict, ref, experiment), target)
+
+        limit = full * (1 + tolerance) if np.isfinite(full) else np.inf
+        lo, hi = 0, flat.numel()
+        k = 1
+        while k < hi and not error(k) <= limit:
+            lo, k = k, min(2 * k, hi)
+        hi = k
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if error(mid) <= limit:
+                hi = mid
+            else:
+                lo = mid
+        weights, keep = masked(hi)
+        self._notes["pruned_terms"] = int(hi)
+        self._notes["total_terms"] = int(flat.numel())
+        return _FrozenVariant(self, weights, keep)
+
+    def _refine(self, train, experiment, deadline):
+        """Exact-recovery refinement: dominant terms, rounded structure, least squares.
+
+        1. Expand the pruned expression into additive terms ``c_k f_k``.
+        2. Round the constants inside each ``f_k`` (function arguments) to
+           simple rationals (denominator <= 4) when within 1e-2, and drop those
+           below 1e-2.
+        3. Refit the ``c_k`` by sequentially thresholded least squares, on ``L``
+           (direct) or on ``g(f_k)`` against ``tau`` (indirect; g is linear in L).
+        """
+        import time
+
+        from bench import regression
+
+        def check(stage):
+            if time.perf_counter() > deadline:
+                raise _OutOfTime(stage)
+
+        expr = self._pruned.expression()
+        if sympy.count_ops(expr) > 20000:
+            self._notes["refined"] = "pruned expression too large to expand"
+            return None
+        check("pruning")
+        expanded = sympy.expand(expr)
+        check("expansion")
+        basis = {}
+        for term in sympy.Add.make_args(expanded):
+            _, f = term.as_coeff_Mul()
+            f = _round_inner_constants(f)
+            if f.free_symbols:
+                _, f = f.as_independent(*f.free_symbols, as_Add=False)  # drop numeric factors such as sin(1/2)
+                basis[sympy.srepr(f)] = f
+        if len(basis) > 2000:
+            self._notes["refined"] = f"{len(basis)} distinct terms after expansion; too many to refit"
+            return None
+        check("rounding")
+        rng = np.random.default_rng(self.seed + 1)
+        sub = train.subset(np.sort(rng.choice(len(train), min(len(train), 4096), replace=False)))
+        refit, coef = regression.fit_basis(list(basis.values()), sub, experiment)
+        check("refit")
+        from methods.base import ExpressionModel
+
+        self._notes["refined_terms"] = int(np.count_nonzero(coef))
+        return ExpressionModel(refit, self.dof)
+
+    def variants(self):
+        return dict(getattr(self, "_variants", {}))
+
+    def readable_expression(self):
+        pruned = getattr(self, "_pruned", None)
+        return pruned.expression() if pruned is not None else None
+
+    def record_details(self):
+        return dict(getattr(self, "_notes", {}))
+
+    # -- equations ---------------------------------------------------------------------
+    def _input_symbols(self):
+        q, qd = symbolic.coordinate_symbols(self.dof)
+        syms = list(q) + list(qd)
+        if self.config.inputs == "q_qd_qdd":
+            syms += list(symbolic.acceleration_symbols(self.dof))
+        return syms
+
+    def expression(self) -> sympy.Expr:
+        """The frozen model pushed through sympy, term for term (large)."""
+        return self._push(self.frozen, self.model.spec)
+
+    def _push(self, weights, spec, keep=None) -> sympy.Expr:
+        x = self._input_symbols()
+        h = [sympy.Integer(0)] * self.config.heads
+        for layer, W in enumerate(weights):
+            cands = spec.symbolic(x + h)
+            Wn = W.double().numpy()
+            new_h = []
+            for j in range(Wn.shape[0]):
+                cols = range(Wn.shape[1]) if keep is None else keep[layer][j]
+                new_h.append(sympy.Add(*[sympy.Float(Wn[j, b]) * cands[b] for b in cols]))
+            h = new_h
+        return sympy.Add(*h)
+
+
+class _OutOfTime(Exception):
+    pass
+
+
+def _round_inner_constants(f: sympy.Expr, tol: float = 1e-2) -> sympy.Expr:
+    """Round every float inside ``f`` to a simple rational when within ``tol``."""
+    from fractions import Fraction
+
+    def simple(x: sympy.Float):
+        value = float(x)
+        if abs(value) < tol:
+            return sympy.Integer(0)
+        frac = Fraction(value).limit_denominator(4)
+        if abs(float(frac) - value) <= tol * max(1.0, abs(value)):
+            return sympy.Rational(frac.numerator, frac.denominator)
+        return x
+
+    return f.xreplace({a: simple(a) for a in f.atoms(sympy.Float)})
+
+
+class _FrozenVariant:
+    """SyReNets' frozen function with some weights pruned to zero."""
+
+    def __init__(self, owner: SyReNets, weights: list[torch.Tensor], keep: list[list[list[int]]]):
+        self.owner, self.weights, self.keep = owner, weights, keep
+
+    def predict_lagrangian(self, data):
+        return self.owner._with_weights(self.weights, self.owner.predict_lagrangian, data)
+
+    def predict_torque(self, data):
+        return self.owner._with_weights(self.weights, self.owner.predict_torque, data)
+
+    def predict(self, data, experiment):
+        return self.predict_lagrangian(data) if experiment == "direct" else self.predict_torque(data)
+
+    def expression(self):
+        return self.owner._push(self.weights, self.owner.model.spec, self.keep)
+
+    readable_expression = expression
