@@ -84,12 +84,39 @@ def combine(basis: Sequence[sympy.Expr], coef: np.ndarray) -> sympy.Expr:
     return sympy.Add(*[sympy.Float(float(c)) * f for c, f in zip(coef, basis) if c != 0.0])
 
 
-def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, threshold: float = 1e-6):
-    """Fit coefficients of ``basis`` on ``data``; returns ``(expression, coef)``."""
+THRESHOLDS = (1e-12, 1e-9, 1e-7, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1)
+
+
+def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, threshold: float | None = None):
+    """Fit coefficients of ``basis`` on ``data``; returns ``(expression, coef)``.
+
+    With ``threshold=None`` the sparsity threshold is chosen on held-out
+    data: the samples are split 3:1, every threshold of :data:`THRESHOLDS` is
+    fitted on the first part, and the largest one whose held-out MSE is within
+    10 % of the best is refitted on all samples (the sparsest model that
+    predicts as well).
+    """
     basis = list(basis)
     if experiment == "direct" and not any(f.is_number for f in basis):
         basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
     F = design_matrix(basis, data, experiment)
-    coef = thresholded_least_squares(F, target_vector(data, experiment), threshold)
+    y = target_vector(data, experiment)
+    if threshold is None:
+        threshold = _validated_threshold(F, y, len(data), data.dof if experiment == "indirect" else 1)
+    coef = thresholded_least_squares(F, y, threshold)
     return combine(basis, coef), coef
 
+
+def _validated_threshold(F: np.ndarray, y: np.ndarray, n: int, rows_per_sample: int) -> float:
+    cut = (3 * n // 4) * rows_per_sample  # split by sample, not by row
+    if cut == 0 or cut >= len(y):
+        return THRESHOLDS[0]
+    errors = []
+    for threshold in THRESHOLDS:
+        coef = thresholded_least_squares(F[:cut], y[:cut], threshold)
+        residual = F[cut:] @ coef - y[cut:]
+        errors.append(float(np.mean(residual * residual)))
+    best = min(errors)
+    scale = float(np.mean(y * y)) or 1.0
+    ok = [t for t, e in zip(THRESHOLDS, errors) if e <= 1.1 * best + 1e-14 * scale]
+    return max(ok)
