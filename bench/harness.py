@@ -208,9 +208,14 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         method.fit(train, spec.experiment, spec.seed, spec.budget_s)
         if on_phase:
             on_phase("evaluate")
-        scores = _scores(method, spec.experiment, train, test)
+        truth = system.lagrangian_sympy if system.simulated else None
+        scores = _scores(method, spec.experiment, train, test, truth, system)
         info = method.fit_info
-        variants = {name: _scores(model, spec.experiment, train, test) for name, model in method.variants().items()}
+        variants = {
+            name: {"status": "failed", "error": model} if isinstance(model, str)
+            else {"status": "ok", **_scores(model, spec.experiment, train, test, truth, system)}
+            for name, model in method.variants().items()
+        }
         fields = dict(
             **scores,
             steps=info.get("steps"),
@@ -238,16 +243,23 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         return rec.new_record(d, "failed", error=f"{type(exc).__name__}: {exc}", details={"traceback": tb})
 
 
-def _scores(model, experiment: str, train, test) -> dict:
-    """Train and test MSE in the experiment's target, and the readable expression."""
+def _scores(model, experiment: str, train, test, truth=None, system=None) -> dict:
+    """Train and test MSE in the experiment's target, the readable expression,
+    and whether it is exactly the true Lagrangian (see :mod:`bench.recovery`)."""
     from bench.data import mse
 
     expr = model.readable_expression()
-    return {
+    out = {
         "train_mse": mse(model.predict(train, experiment), train.target(experiment)),
         "test_mse": mse(model.predict(test, experiment), test.target(experiment)) if test is not None else None,
         "expression": None if expr is None else str(expr),
+        "exact": None,
     }
+    if expr is not None and truth is not None:
+        from bench.recovery import judge
+
+        out["exact"] = judge(expr, truth, system.dof, experiment, domain=system.domain.q).exact
+    return out
 
 
 def _thin(curve: list, keep: int = 300) -> list:

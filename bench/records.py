@@ -119,6 +119,7 @@ def new_record(spec: dict, status: str, **fields) -> dict:
         "stop_reason": None,
         "curve": [],
         "expression": None,
+        "exact": None,
         "hyperparameters": None,
         "details": {},
         "provenance": provenance(),

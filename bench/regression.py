@@ -14,24 +14,30 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import time
+
 import numpy as np
 import sympy
 
 from bench import symbolic
 from bench.data import Dataset, check_experiment
 from bench.dynamics import euler_lagrange_chunked
+from bench.timeouts import Timeout
 
 
-def design_matrix(basis: Sequence[sympy.Expr], data: Dataset, experiment: str) -> np.ndarray:
+def design_matrix(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, deadline: float | None = None) -> np.ndarray:
     """Columns of the basis in the experiment's target space.
 
     Shape ``(n, K)`` for direct, ``(n * dof, K)`` for indirect (rows ordered
-    sample-major, like ``tau.ravel()``).
+    sample-major, like ``tau.ravel()``). Raises :class:`bench.timeouts.Timeout`
+    once ``time.perf_counter()`` passes ``deadline``.
     """
     check_experiment(experiment)
     t = data.tensors()
     cols = []
     for f in basis:
+        if deadline is not None and time.perf_counter() > deadline:
+            raise Timeout(f"design matrix: {len(cols)} of {len(basis)} columns done")
         fn = symbolic.to_torch(sympy.sympify(f), data.dof)
         if experiment == "direct":
             cols.append(fn(t["q"], t["qd"]).numpy())
@@ -87,7 +93,8 @@ def combine(basis: Sequence[sympy.Expr], coef: np.ndarray) -> sympy.Expr:
 THRESHOLDS = (1e-12, 1e-9, 1e-7, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1)
 
 
-def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, threshold: float | None = None):
+def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, threshold: float | None = None,
+              deadline: float | None = None):
     """Fit coefficients of ``basis`` on ``data``; returns ``(expression, coef)``.
 
     With ``threshold=None`` the sparsity threshold is chosen on held-out
@@ -99,7 +106,7 @@ def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, thres
     basis = list(basis)
     if experiment == "direct" and not any(f.is_number for f in basis):
         basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
-    F = design_matrix(basis, data, experiment)
+    F = design_matrix(basis, data, experiment, deadline)
     y = target_vector(data, experiment)
     if threshold is None:
         threshold = _validated_threshold(F, y, len(data), data.dof if experiment == "indirect" else 1)

@@ -21,6 +21,9 @@ Definitions
   ``n < 10``) and "All 10" takes all ``n``. The **Runs** row gives ``n`` and
   what happened to the others (failed, timeout, unavailable, not applicable).
 * std is the population standard deviation (``ddof = 0``).
+* **Exact** counts the seeds whose expression is exactly the true Lagrangian
+  up to the experiment's gauge (:mod:`bench.recovery`); "—" for methods
+  without an expression.
 """
 
 from __future__ import annotations
@@ -78,6 +81,13 @@ def _runs_cell(records: list[dict]) -> str:
     return text + (f" ({', '.join(others)})" if others else "")
 
 
+def _exact_cell(records: list[dict]) -> str:
+    judged = [r for r in records if r.get("exact") is not None]
+    if not judged:
+        return "—"
+    return f"{sum(bool(r['exact']) for r in judged)}/{len(records)} seeds exact"
+
+
 def _header(records: list[dict]) -> list[str]:
     budgets = sorted({r["budget_s"] for r in records})
     seeds = sorted({r["seed"] for r in records})
@@ -124,6 +134,7 @@ def build_table(records: list[dict]) -> str:
             label = group if split == "train" else ""
             lines.append(f"| {label} | {split} | " + " | ".join(cells) + " |")
     lines.append("| Runs | | " + " | ".join(_runs_cell(by_method[m]) for m in methods) + " |")
+    lines.append("| Exact | | " + " | ".join(_exact_cell(by_method[m]) for m in methods) + " |")
     return "\n".join(lines)
 
 
@@ -133,8 +144,8 @@ def expand_variants(records: list[dict]) -> list[dict]:
     for r in records:
         out.append(r)
         for name, scores in (r.get("details") or {}).get("variants", {}).items():
-            v = dict(r, method=f"{r['method']}+{name}", **scores)
-            v["details"] = {}
+            blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None}
+            v = {**r, **blank, "method": f"{r['method']}+{name}", "status": "ok", **scores, "details": {}}
             out.append(v)
     return out
 
@@ -163,7 +174,9 @@ _DEFINITIONS = (
     "Rows follow Tables 1 and 2 of Valle & Haddadin (2021). Seeds are ranked by training MSE; "
     "**Best** is the best seed, **5 Best** / **5 Worse** the mean (± population std) of the 5 best / worst, "
     "**All 10** of all seeds. With n < 10 successful runs, the groups take min(5, n) and n runs "
-    "(see the Runs row). The lowest mean of each row is bold."
+    "(see the Runs row). The lowest mean of each row is bold. **Exact** counts the seeds whose equation is "
+    "the true Lagrangian up to the experiment's gauge (a constant; indirectly also a total time derivative), "
+    "with coefficients within 1e-6 of the largest true one."
 )
 
 

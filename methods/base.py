@@ -379,9 +379,13 @@ class Method:
         """The expression a person should read (what records store); by default :meth:`expression`."""
         return self.expression()
 
-    def variants(self) -> dict[str, "Method"]:
+    def variants(self) -> dict[str, "Method | str"]:
         """Further fitted models derived from this one (for example a refined
-        equation), each reported by the harness as ``<method>+<variant>``."""
+        equation), each reported by the harness as ``<method>+<variant>``.
+
+        A variant that could not be made is given as a string saying why; it
+        is recorded as failed, so that every seed stays counted.
+        """
         return {}
 
     def record_details(self) -> dict:

@@ -101,6 +101,8 @@ from bench.errors import ConfigError
 from methods.base import METHODS, TorchConfig, TorchLagrangianMethod
 
 BINARY = ("sum", "prod", "diff")
+#: the refinement gives up on pruned equations that expand into more terms
+MAX_REFIT_TERMS = 2000
 UNARY = ("sin", "cos", "exp")
 EPS_LOG = 1e-5
 
@@ -501,15 +503,15 @@ class SyReNets(TorchLagrangianMethod):
         if not self.config.refine:
             return
         if self.config.inputs != "q_qd":
-            self._notes["refined"] = "refinement needs inputs='q_qd' (a Lagrangian of q and qd)"
-            return
-        try:
-            refined = self._refine(train, experiment, deadline)
-        except _OutOfTime as exc:
-            self._notes["refined"] = f"out of budget during {exc}"
-            return
-        if refined is not None:
-            self._variants["refined"] = refined
+            refined = "refinement needs inputs='q_qd' (a Lagrangian of q and qd)"
+        else:
+            try:
+                refined = self._refine(train, experiment, deadline)
+            except _OutOfTime as exc:
+                refined = f"out of budget during {exc}"
+        self._variants["refined"] = refined
+        if isinstance(refined, str):
+            self._notes["refined"] = refined
 
     def _layer_values(self, data, weights):
         """Candidate values of every layer on ``data`` (frozen function)."""
@@ -582,40 +584,42 @@ class SyReNets(TorchLagrangianMethod):
            simple rationals (denominator <= 4) when within 1e-2, and drop those
            below 1e-2.
         3. Refit the ``c_k`` by sequentially thresholded least squares, on ``L``
-           (direct) or on ``g(f_k)`` against ``tau`` (indirect; g is linear in L).
+           (direct) or on ``g(f_k)`` against ``tau`` (indirect; g is linear in L),
+           with the sparsity threshold chosen on held-out samples.
+
+        The symbolic steps run under a hard time limit (they cannot be
+        interrupted otherwise), so the refinement never overruns the budget.
         """
         import time
 
         from bench import regression
-
-        def check(stage):
-            if time.perf_counter() > deadline:
-                raise _OutOfTime(stage)
-
-        expr = self._pruned.expression()
-        if sympy.count_ops(expr) > 20000:
-            self._notes["refined"] = "pruned expression too large to expand"
-            return None
-        check("pruning")
-        expanded = sympy.expand(expr)
-        check("expansion")
-        basis = {}
-        for term in sympy.Add.make_args(expanded):
-            _, f = term.as_coeff_Mul()
-            f = _round_inner_constants(f)
-            if f.free_symbols:
-                _, f = f.as_independent(*f.free_symbols, as_Add=False)  # drop numeric factors such as sin(1/2)
-                basis[sympy.srepr(f)] = f
-        if len(basis) > 2000:
-            self._notes["refined"] = f"{len(basis)} distinct terms after expansion; too many to refit"
-            return None
-        check("rounding")
-        rng = np.random.default_rng(self.seed + 1)
-        sub = train.subset(np.sort(rng.choice(len(train), min(len(train), 4096), replace=False)))
-        refit, coef = regression.fit_basis(list(basis.values()), sub, experiment)
-        check("refit")
+        from bench.timeouts import Timeout, call_with_timeout
         from methods.base import ExpressionModel
 
+        pruned = self._pruned
+
+        def structure():
+            basis = {}
+            for term in sympy.Add.make_args(sympy.expand(pruned.expression())):
+                _, f = term.as_coeff_Mul()
+                f = _round_inner_constants(f)
+                if f.free_symbols:
+                    _, f = f.as_independent(*f.free_symbols, as_Add=False)  # drop numeric factors such as sin(1/2)
+                    basis[sympy.srepr(f)] = f
+            return list(basis.values())
+
+        try:
+            basis = call_with_timeout(structure, deadline - time.perf_counter())
+        except Timeout:
+            raise _OutOfTime("the expansion of the pruned equation") from None
+        if len(basis) > MAX_REFIT_TERMS:
+            return f"{len(basis)} distinct terms after expansion; more than {MAX_REFIT_TERMS} to refit"
+        rng = np.random.default_rng(self.seed + 1)
+        sub = train.subset(np.sort(rng.choice(len(train), min(len(train), 4096), replace=False)))
+        try:
+            refit, coef = regression.fit_basis(basis, sub, experiment, deadline=deadline)
+        except Timeout:
+            raise _OutOfTime("the least-squares refit") from None
         self._notes["refined_terms"] = int(np.count_nonzero(coef))
         return ExpressionModel(refit, self.dof)
 

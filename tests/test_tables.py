@@ -84,3 +84,13 @@ def test_variants_get_columns_of_their_own():
     table = build_table(expand_variants([base]))
     assert "| Group | Split | syrenets | syrenets+refined |" in table
     assert "| Best | train | 1.00e+00 | **1.00e-20** |" in table
+
+
+def test_a_failed_variant_is_counted_as_failed():
+    ok = rec("syrenets", 0, 1.0, 2.0)
+    ok["details"] = {"variants": {"refined": {"status": "ok", "train_mse": 0.5, "test_mse": 0.6, "expression": "x", "exact": False}}}
+    missed = rec("syrenets", 1, 1.5, 2.5)
+    missed["details"] = {"variants": {"refined": {"status": "failed", "error": "out of budget"}}}
+    table = build_table(expand_variants([ok, missed]))
+    assert "| Runs | | 2/2 ok | 1/2 ok (1 failed) |" in table
+    assert "| Exact | | — | 0/2 seeds exact |" in table
