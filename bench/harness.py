@@ -252,7 +252,7 @@ def _scores(model, experiment: str, train, test, truth=None, system=None) -> dic
     out = {
         "train_mse": mse(model.predict(train, experiment), train.target(experiment)),
         "test_mse": mse(model.predict(test, experiment), test.target(experiment)) if test is not None else None,
-        "expression": None if expr is None else str(expr),
+        "expression": None if expr is None else _clip(str(expr)),
         "exact": None,
     }
     if expr is not None and truth is not None:
@@ -260,6 +260,17 @@ def _scores(model, experiment: str, train, test, truth=None, system=None) -> dic
 
         out["exact"] = judge(expr, truth, system.dof, experiment, domain=system.domain.q).exact
     return out
+
+
+#: longest expression text kept in a record
+MAX_EXPRESSION_CHARS = 20000
+
+
+def _clip(text: str) -> str:
+    """An expression's text, cut at :data:`MAX_EXPRESSION_CHARS` with a note of its full length."""
+    if len(text) <= MAX_EXPRESSION_CHARS:
+        return text
+    return text[:MAX_EXPRESSION_CHARS] + f" ... [cut: {len(text)} characters in all]"
 
 
 def _thin(curve: list, keep: int = 300) -> list:

@@ -53,8 +53,15 @@ def euler_lagrange_symbolic(L: sympy.Expr, dof: int) -> list[sympy.Expr]:
     return out
 
 
+def _even_functions(expr: sympy.Expr) -> sympy.Expr:
+    """cos is even: ``cos(|u|) = cos(u)`` for real u, which sympy leaves alone."""
+    return expr.replace(
+        lambda e: isinstance(e, sympy.cos) and isinstance(e.args[0], sympy.Abs), lambda e: sympy.cos(e.args[0].args[0])
+    )
+
+
 def _canonical(expr: sympy.Expr) -> sympy.Expr:
-    return sympy.expand(sympy.expand_trig(sympy.expand(expr)))
+    return sympy.expand(sympy.expand_trig(sympy.expand(_even_functions(expr))))
 
 
 def _coefficients(expr: sympy.Expr) -> list[float]:
@@ -100,7 +107,7 @@ def judge(L_hat: sympy.Expr, L_true: sympy.Expr, dof: int, experiment: str, *,
     check runs first; the symbolic one only when it passes, so that a clear
     miss costs no algebra.
     """
-    L_hat = symbolic.numeric_subexpressions_to_floats(sympy.sympify(L_hat))
+    L_hat = _even_functions(symbolic.numeric_subexpressions_to_floats(sympy.sympify(L_hat)))
     if up_to_scale:
         L_hat = _best_scale(L_hat, L_true, dof, domain, seed) * L_hat
     if not _numerically_equal(L_hat, L_true, dof, experiment, tolerance, domain, seed):

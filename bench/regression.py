@@ -107,11 +107,40 @@ def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, thres
     if experiment == "direct" and not any(f.is_number for f in basis):
         basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
     F = design_matrix(basis, data, experiment, deadline)
-    y = target_vector(data, experiment)
-    if threshold is None:
-        threshold = _validated_threshold(F, y, len(data), data.dof if experiment == "indirect" else 1)
-    coef = thresholded_least_squares(F, y, threshold)
+    coef = fit_columns(F, target_vector(data, experiment), len(data), threshold)
     return combine(basis, coef), coef
+
+
+def fit_columns(F: np.ndarray, y: np.ndarray, n_samples: int, threshold: float | None = None) -> np.ndarray:
+    """Sparse coefficients for a design matrix of ``n_samples`` samples (rows
+    grouped by sample); the threshold is validated when not given."""
+    if threshold is None:
+        threshold = _validated_threshold(F, y, n_samples, len(y) // max(n_samples, 1))
+    return thresholded_least_squares(F, y, threshold)
+
+
+def independent_columns(F: np.ndarray, tol: float = 1e-8) -> np.ndarray:
+    """Indices of a maximal set of linearly independent columns, earliest first.
+
+    A column is kept when what remains of it, after projection on the kept
+    columns, is larger than ``tol`` times its norm. Zero columns are dropped.
+    Used to remove the gauge freedom from a library: terms with no
+    Euler–Lagrange image, or with the image of earlier terms.
+    """
+    kept: list[int] = []
+    Q = np.zeros((F.shape[0], 0))
+    for k in range(F.shape[1]):
+        col = F[:, k]
+        norm = float(np.linalg.norm(col))
+        if norm == 0.0 or not np.isfinite(norm):
+            continue
+        r = col - Q @ (Q.T @ col)
+        r = r - Q @ (Q.T @ r)  # re-orthogonalise once for stability
+        rn = float(np.linalg.norm(r))
+        if rn > tol * norm:
+            kept.append(k)
+            Q = np.column_stack([Q, r / rn])
+    return np.asarray(kept, dtype=int)
 
 
 def _validated_threshold(F: np.ndarray, y: np.ndarray, n: int, rows_per_sample: int) -> float:

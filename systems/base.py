@@ -115,6 +115,9 @@ class System:
     name: ClassVar[str] = "unnamed"
     tags: ClassVar[frozenset[str]] = frozenset()
     coordinates: ClassVar[tuple[str, ...]] = ()
+    #: "angle" or "linear" per coordinate (libraries use trigonometric terms of
+    #: angles and polynomials of linear coordinates); all angles if empty
+    coordinate_kinds: ClassVar[tuple[str, ...]] = ()
     Params: ClassVar[type] = type(None)
     sysid_unknowns: ClassVar[tuple[str, ...]] = ()
     default_domain: ClassVar[Domain] = Domain()
@@ -148,6 +151,13 @@ class System:
     @property
     def symbols(self):
         return symbolic.coordinate_symbols(self.dof)
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        kinds = self.coordinate_kinds or ("angle",) * self.dof
+        if len(kinds) != self.dof or set(kinds) - {"angle", "linear"}:
+            raise ValueError(f"{self.name}: coordinate_kinds must give 'angle' or 'linear' for each coordinate")
+        return tuple(kinds)
 
     def param_dict(self) -> dict[str, float]:
         return {f.name: float(getattr(self.params, f.name)) for f in dataclasses.fields(self.params)}

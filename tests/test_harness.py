@@ -81,3 +81,9 @@ def test_execute_in_process_matches_the_record_format(tmp_path):
     record = harness.execute(spec)
     assert record["status"] == "ok" and record["schema"] == SCHEMA
     json.dumps(record)  # serialisable
+
+
+def test_long_expressions_are_clipped_in_records():
+    text = harness._clip("x + " * 10000)
+    assert len(text) < harness.MAX_EXPRESSION_CHARS + 100 and text.endswith("[cut: 40000 characters in all]")
+    assert harness._clip("q_1 + 1") == "q_1 + 1"

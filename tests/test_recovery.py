@@ -69,3 +69,10 @@ def test_tiny_float_noise_within_the_tolerance_is_rounded_away(truth):
     noisy = truth + 1e-9 * qd1**2 + 1e-10 * sympy.sin(q2)
     v = judge(noisy, truth, 2, "indirect")
     assert v.exact and v.symbolic
+
+
+def test_even_functions_of_absolute_values_are_recognised(truth):
+    (q1, q2), _ = syms()
+    rewritten = truth.subs(sympy.cos(q1), sympy.cos(sympy.Abs(q1)))
+    assert rewritten != truth
+    assert judge(rewritten, truth, 2, "indirect").exact

@@ -46,3 +46,12 @@ def test_columns_with_no_euler_lagrange_image_are_dropped(double_pendulum):
     assert np.abs(F[:, :2]).max() < 1e-12
     coef = regression.thresholded_least_squares(F, F[:, 2] * 3.0)
     np.testing.assert_allclose(coef, [0.0, 0.0, 3.0], atol=1e-12)
+
+
+def test_independent_columns_drop_gauge_duplicates(double_pendulum):
+    data = generate(double_pendulum, 300, 6)
+    (q1, q2), (qd1, qd2) = symbolic.coordinate_symbols(2)
+    basis = [qd1**2, sympy.Integer(1), qd1 * sympy.cos(q1), 2 * qd1**2, sympy.cos(q2), qd2**2]
+    F = regression.design_matrix(basis, data, "indirect")
+    # the constant and d/dt sin(q1) have no torque; 2 qd1^2 repeats qd1^2
+    assert regression.independent_columns(F).tolist() == [0, 4, 5]
