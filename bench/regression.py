@@ -17,6 +17,7 @@ from typing import Sequence
 import time
 
 import numpy as np
+import scipy.linalg
 import sympy
 
 from bench import symbolic
@@ -51,12 +52,23 @@ def target_vector(data: Dataset, experiment: str) -> np.ndarray:
 
 
 def least_squares(F: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Minimum-norm least squares with column scaling for conditioning."""
+    """Least squares with column scaling for conditioning.
+
+    A QR factorisation solves full-rank problems (fast for the few columns of
+    a GP individual); rank-deficient ones fall back to the minimum-norm SVD
+    solution.
+    """
     if F.shape[1] == 0:
         return np.zeros(0)
-    scale = np.sqrt(np.mean(F * F, axis=0))
+    scale = np.sqrt(np.einsum("ij,ij->j", F, F) / F.shape[0])
     scale[scale == 0] = 1.0
-    coef, *_ = np.linalg.lstsq(F / scale, y, rcond=None)
+    Fs = F / scale
+    if F.shape[0] >= F.shape[1]:
+        Q, R = np.linalg.qr(Fs)
+        d = np.abs(np.diag(R))
+        if d.min() > 1e-10 * d.max():
+            return scipy.linalg.solve_triangular(R, Q.T @ y) / scale
+    coef, *_ = np.linalg.lstsq(Fs, y, rcond=None)
     return coef / scale
 
 

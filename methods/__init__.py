@@ -6,6 +6,6 @@ Adding a method: write one module and add it to the import line.
 
 from methods.base import METHODS, Method, MethodConfig, Progress, TorchConfig, TorchLagrangianMethod
 
-from methods import mggp, mlp, sparse, syrenets, sysid  # noqa: E402,F401  (registers)
+from methods import mggp, mlp, operon, pysr_adapter, sparse, syrenets, sysid  # noqa: E402,F401  (registers)
 
 __all__ = ["METHODS", "Method", "MethodConfig", "Progress", "TorchConfig", "TorchLagrangianMethod"]

@@ -18,7 +18,8 @@ Settings the paper does not give, filled with GPTIPS-like values
 * gene depth at most 4, counting a lone terminal as depth 1 (GPTIPS'
   default); initial genes by ramped half-and-half, 1 to 8 genes each;
 * terminals: the 2 n coordinates and ephemeral constants uniform in
-  [-10, 10] (GPTIPS' default range);
+  [-10, 10] (GPTIPS' default range), a terminal being a constant with
+  probability about 0.1 (GPTIPS' default);
 * variation: crossover 0.84 (a fifth of it high-level, exchanging whole
   genes between two individuals; the rest low-level, a subtree crossover
   between one gene of each), mutation 0.14 (subtree mutation of one gene,
@@ -53,7 +54,6 @@ the start of every fit.
 
 from __future__ import annotations
 
-import copy
 import math
 import operator
 import random
@@ -97,6 +97,7 @@ class MGGPConfig(MethodConfig):
     p_high_level: float = 0.2
     erc_low: float = -10.0
     erc_high: float = 10.0
+    p_erc: float = 0.1
     operators: tuple[str, ...] = ("add", "sub", "mul", "sqrt", "square", "cube", "sin", "cos")
     fitness_samples: int = 1024
     tolerance: float = 1e-10
@@ -137,7 +138,7 @@ def _fit_weights(F: np.ndarray, y: np.ndarray) -> np.ndarray:
     time derivative) gives a column of round-off; fitting it would give a
     huge, meaningless weight.
     """
-    rms = np.sqrt(np.mean(F * F, axis=0))
+    rms = np.sqrt(np.einsum("ij,ij->j", F, F) / F.shape[0])
     live = rms > 1e-9 * max(rms.max(initial=0.0), 1e-300)
     coef = np.zeros(F.shape[1])
     if live.any():
@@ -183,6 +184,15 @@ class MGGP(Method):
                 pset.addPrimitive(_placeholder(name, 1), 1, name=name)
         erc_name, erc = _erc(self.config.erc_low, self.config.erc_high)
         pset.addEphemeralConstant(erc_name, erc)
+        # DEAP draws terminals uniformly: repeat the coordinates so that a
+        # terminal is a constant with probability close to p_erc
+        copies = max(1, round((1 / self.config.p_erc - 1) / (2 * dof))) if self.config.p_erc > 0 else 1
+        #: terminal value -> coordinate index (the repeats are aliases)
+        self.variable_index = {name: k for k, name in enumerate(pset.arguments)}
+        for c in range(1, copies):
+            for k, name in enumerate(list(pset.arguments)):
+                pset.addTerminal(f"{name}__{c}", name=f"{name}__{c}")
+                self.variable_index[f"{name}__{c}"] = k
         return pset
 
     def _new_gene(self, max_depth: int | None = None) -> gp.PrimitiveTree:
@@ -207,7 +217,7 @@ class MGGP(Method):
         return col
 
     def _evaluate_tree(self, tree: gp.PrimitiveTree, algebra: JetAlgebra):
-        names = self._argument_index
+        names = self.variable_index
         stack = []
         for node in reversed(tree):
             if isinstance(node, gp.Terminal):
@@ -249,7 +259,7 @@ class MGGP(Method):
         return min(random.sample(pop, self.config.tournament), key=Individual.key)
 
     def _crossover(self, a: Individual, b: Individual) -> list[Individual]:
-        ga, gb = [copy.deepcopy(g) for g in a.genes], [copy.deepcopy(g) for g in b.genes]
+        ga, gb = list(a.genes), list(b.genes)  # genes are never changed in place
         if random.random() < self.config.p_high_level:
             # high level: exchange a random run of genes between the parents
             i1, i2 = sorted(random.randint(0, len(ga)) for _ in range(2))
@@ -262,7 +272,7 @@ class MGGP(Method):
             return out
         # low level: subtree crossover between one gene of each parent
         i, j = random.randrange(len(ga)), random.randrange(len(gb))
-        x, y = gp.cxOnePoint(copy.deepcopy(ga[i]), copy.deepcopy(gb[j]))
+        x, y = gp.cxOnePoint(gp.PrimitiveTree(ga[i]), gp.PrimitiveTree(gb[j]))
         if not self._too_deep(x):
             ga[i] = x
         if not self._too_deep(y):
@@ -270,7 +280,7 @@ class MGGP(Method):
         return [Individual(ga), Individual(gb)]
 
     def _mutate(self, a: Individual) -> Individual:
-        genes = [copy.deepcopy(g) for g in a.genes]
+        genes = list(a.genes)
         r = random.random()
         if r < 0.1 and len(genes) < self.config.max_genes:
             genes.append(self._new_gene())
@@ -278,19 +288,19 @@ class MGGP(Method):
             genes.pop(random.randrange(len(genes)))
         else:
             i = random.randrange(len(genes))
-            (mutant,) = gp.mutUniform(copy.deepcopy(genes[i]), expr=self._subtree, pset=self.pset)
+            (mutant,) = gp.mutUniform(gp.PrimitiveTree(genes[i]), expr=self._subtree, pset=self.pset)
             if not self._too_deep(mutant):
                 genes[i] = mutant
         return Individual(genes)
 
     def _subtree(self, pset, type_=None):
-        return gp.genHalfAndHalf(pset, min_=0, max_=max(self.config.max_depth - 2, 0), type_=type_)
+        # any subtree that can fit: the static depth limit rejects what does not
+        return gp.genHalfAndHalf(pset, min_=0, max_=max(self.config.max_depth - 1, 0), type_=type_)
 
     # -- the loop ---------------------------------------------------------------------
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         cfg = self.config
         self.pset = self._primitive_set(train.dof)
-        self._argument_index = {name: k for k, name in enumerate(self.pset.arguments)}
         rng = np.random.default_rng(self.seed)
         idx = np.sort(rng.choice(len(train), min(len(train), cfg.fitness_samples), replace=False))
         fit = train.subset(idx)
@@ -358,11 +368,12 @@ class MGGP(Method):
 
     def _gene_sympy(self, gene: gp.PrimitiveTree) -> sympy.Expr:
         q, qd = symbolic.coordinate_symbols(self.dof)
-        variables = dict(zip(self.pset.arguments, list(q) + list(qd)))
+        coords = list(q) + list(qd)
         stack = []
         for node in reversed(gene):
             if isinstance(node, gp.Terminal):
-                stack.append(variables[node.value] if isinstance(node.value, str) else sympy.Float(node.value))
+                value = node.value
+                stack.append(coords[self.variable_index[value]] if isinstance(value, str) else sympy.Float(value))
             else:
                 args = [stack.pop() for _ in range(node.arity)]
                 op = SYMPY_BINARY.get(node.name) or SYMPY_UNARY[node.name]

@@ -505,10 +505,7 @@ class SyReNets(TorchLagrangianMethod):
         if self.config.inputs != "q_qd":
             refined = "refinement needs inputs='q_qd' (a Lagrangian of q and qd)"
         else:
-            try:
-                refined = self._refine(train, experiment, deadline)
-            except _OutOfTime as exc:
-                refined = f"out of budget during {exc}"
+            refined = self._refine(train, experiment, deadline)
         self._variants["refined"] = refined
         if isinstance(refined, str):
             self._notes["refined"] = refined
@@ -539,25 +536,12 @@ class SyReNets(TorchLagrangianMethod):
         values = self._layer_values(ref, self.frozen)
         contrib = [W.abs() * v.pow(2).mean(0).sqrt().unsqueeze(0) for W, v in zip(self.frozen, values)]
         flat = torch.cat([c.reshape(-1) for c in contrib])
-        order = torch.argsort(flat, descending=True)
-        sizes = [c.numel() for c in contrib]
+        self._ranking = (torch.argsort(flat, descending=True), [c.numel() for c in contrib])
         target = ref.target(experiment)
         full = mse(self.predict(ref, experiment), target)
 
-        def masked(k):
-            keep_flat = torch.zeros_like(flat, dtype=torch.bool)
-            keep_flat[order[:k]] = True
-            weights, keep, start = [], [], 0
-            for W, size in zip(self.frozen, sizes):
-                m = keep_flat[start:start + size].reshape(W.shape)
-                start += size
-                weights.append(W * m)
-                keep.append([torch.nonzero(m[j]).flatten().tolist() for j in range(W.shape[0])])
-            return weights, keep
-
         def error(k):
-            weights, _ = masked(k)
-            return mse(self._with_weights(weights, self.predict, ref, experiment), target)
+            return mse(self._top_terms(k).predict(ref, experiment), target)
 
         limit = full * (1 + tolerance) if np.isfinite(full) else np.inf
         lo, hi = 0, flat.numel()
@@ -571,57 +555,90 @@ class SyReNets(TorchLagrangianMethod):
                 hi = mid
             else:
                 lo = mid
-        weights, keep = masked(hi)
         self._notes["pruned_terms"] = int(hi)
         self._notes["total_terms"] = int(flat.numel())
+        return self._top_terms(hi)
+
+    def _top_terms(self, k: int) -> "_FrozenVariant":
+        """The frozen model with only its ``k`` largest terms (see :meth:`_prune`)."""
+        order, sizes = self._ranking
+        keep_flat = torch.zeros(sum(sizes), dtype=torch.bool)
+        keep_flat[order[:k]] = True
+        weights, keep, start = [], [], 0
+        for W, size in zip(self.frozen, sizes):
+            m = keep_flat[start:start + size].reshape(W.shape)
+            start += size
+            weights.append(W * m)
+            keep.append([torch.nonzero(m[j]).flatten().tolist() for j in range(W.shape[0])])
         return _FrozenVariant(self, weights, keep)
+
+    #: sizes of the candidate structures the refinement tries, smallest first
+    REFINE_SIZES = (8, 16, 32, 64)
 
     def _refine(self, train, experiment, deadline):
         """Exact-recovery refinement: dominant terms, rounded structure, least squares.
 
-        1. Expand the pruned expression into additive terms ``c_k f_k``.
-        2. Round the constants inside each ``f_k`` (function arguments) to
-           simple rationals (denominator <= 4) when within 1e-2, and drop those
-           below 1e-2.
-        3. Refit the ``c_k`` by sequentially thresholded least squares, on ``L``
-           (direct) or on ``g(f_k)`` against ``tau`` (indirect; g is linear in L),
-           with the sparsity threshold chosen on held-out samples.
+        For the ``k`` dominant terms (k = 8, 16, 32, 64, and the pruned
+        equation's own size when smaller), smallest first while the budget
+        lasts:
 
-        The symbolic steps run under a hard time limit (they cannot be
+        1. expand the k-term equation into additive terms ``c_i f_i``;
+        2. round the constants inside each ``f_i`` (function arguments) to
+           simple rationals (denominator <= 4) when within 1e-2, and drop those
+           below 1e-2;
+        3. refit the ``c_i`` by sequentially thresholded least squares, on ``L``
+           (direct) or on ``g(f_i)`` against ``tau`` (indirect; g is linear in
+           L), the threshold chosen on held-out samples.
+
+        The refit with the lowest MSE on further held-out training samples is
+        kept. The symbolic steps run under a hard time limit (they cannot be
         interrupted otherwise), so the refinement never overruns the budget.
         """
         import time
 
         from bench import regression
+        from bench.data import mse
         from bench.timeouts import Timeout, call_with_timeout
         from methods.base import ExpressionModel
 
-        pruned = self._pruned
-
-        def structure():
-            basis = {}
-            for term in sympy.Add.make_args(sympy.expand(pruned.expression())):
-                _, f = term.as_coeff_Mul()
-                f = _round_inner_constants(f)
-                if f.free_symbols:
-                    _, f = f.as_independent(*f.free_symbols, as_Add=False)  # drop numeric factors such as sin(1/2)
-                    basis[sympy.srepr(f)] = f
-            return list(basis.values())
-
-        try:
-            basis = call_with_timeout(structure, deadline - time.perf_counter())
-        except Timeout:
-            raise _OutOfTime("the expansion of the pruned equation") from None
-        if len(basis) > MAX_REFIT_TERMS:
-            return f"{len(basis)} distinct terms after expansion; more than {MAX_REFIT_TERMS} to refit"
+        pruned_k = self._notes["pruned_terms"]
+        sizes = sorted({min(k, pruned_k) for k in self.REFINE_SIZES})
         rng = np.random.default_rng(self.seed + 1)
-        sub = train.subset(np.sort(rng.choice(len(train), min(len(train), 4096), replace=False)))
-        try:
-            refit, coef = regression.fit_basis(basis, sub, experiment, deadline=deadline)
-        except Timeout:
-            raise _OutOfTime("the least-squares refit") from None
-        self._notes["refined_terms"] = int(np.count_nonzero(coef))
-        return ExpressionModel(refit, self.dof)
+        pick = rng.permutation(len(train))
+        fit_set = train.subset(np.sort(pick[:4096]))
+        check_set = train.subset(np.sort(pick[4096:6144])) if len(train) > 4096 else fit_set
+        best, best_err, reasons = None, np.inf, []
+        for k in sizes:
+            variant = self._top_terms(k)
+
+            def structure(variant=variant):
+                basis = {}
+                for term in sympy.Add.make_args(sympy.expand(variant.expression())):
+                    _, f = term.as_coeff_Mul()
+                    f = _round_inner_constants(f)
+                    if f.free_symbols:
+                        _, f = f.as_independent(*f.free_symbols, as_Add=False)  # drop numeric factors such as sin(1/2)
+                        basis[sympy.srepr(f)] = f
+                return list(basis.values())
+
+            try:
+                basis = call_with_timeout(structure, deadline - time.perf_counter())
+                if len(basis) > MAX_REFIT_TERMS:
+                    reasons.append(f"{k} terms: {len(basis)} after expansion")
+                    continue
+                refit, coef = regression.fit_basis(basis, fit_set, experiment, deadline=deadline)
+            except Timeout:
+                reasons.append(f"{k} terms: out of budget")
+                break
+            model = ExpressionModel(refit, self.dof)
+            err = mse(model.predict(check_set, experiment), check_set.target(experiment))
+            if err < best_err:
+                best, best_err = model, err
+                self._notes["refined_from_terms"] = k
+                self._notes["refined_terms"] = int(np.count_nonzero(coef))
+        if best is None:
+            return "no refit finished: " + "; ".join(reasons)
+        return best
 
     def variants(self):
         return dict(getattr(self, "_variants", {}))
@@ -657,10 +674,6 @@ class SyReNets(TorchLagrangianMethod):
                 new_h.append(sympy.Add(*[sympy.Float(Wn[j, b]) * cands[b] for b in cols]))
             h = new_h
         return sympy.Add(*h)
-
-
-class _OutOfTime(Exception):
-    pass
 
 
 def _round_inner_constants(f: sympy.Expr, tol: float = 1e-2) -> sympy.Expr:

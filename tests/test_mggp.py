@@ -59,7 +59,6 @@ def test_indirect_weights_are_the_least_squares_solution(pendulum_data):
     m = _smallish(max_steps=1)
     m.experiment, m.dof = "indirect", 1
     m.pset = m._primitive_set(1)
-    m._argument_index = {name: k for k, name in enumerate(m.pset.arguments)}
     genes = [gp.PrimitiveTree.from_string(s, m.pset) for s in ("square(qd_1)", "cos(q_1)", "mul(q_1, qd_1)")]
     ind = Individual(genes)
     algebra = JetAlgebra(train.q, train.qd, train.qdd)

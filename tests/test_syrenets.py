@@ -120,11 +120,12 @@ def test_refinement_recovers_the_exact_lagrangian_from_a_near_miss(data, double_
             + 65.47 * sympy.cos(0.9998 * q1) + 8.19 * sympy.cos(q2) + 0.002 * q1 * qd2)
     m = METHODS["syrenets"](**SMALL, max_steps=1, eval_samples=64).fit(data[0], experiment, 0, 60)
 
-    class Fake:
+    class Fake:  # stands for the dominant terms of a trained model
         def expression(self):
             return near
 
-    m._pruned = Fake()
+    m._notes["pruned_terms"] = 1
+    m._top_terms = lambda k: Fake()
     refined = m._refine(data[0], experiment, deadline=float("inf"))
     assert mse(refined.predict(data[1], experiment), data[1].target(experiment)) < 1e-20
     terms = sympy.Add.make_args(sympy.expand(refined.expression()))

@@ -19,6 +19,12 @@ def pytest_terminal_summary(terminalreporter, config):
             info = bench.extra_info
             ratio = f"   {info['x_public']:5.1f}x the public implementation" if "x_public" in info else ""
             terminalreporter.write_line(f"{bench.name:<70} {info['steps_per_s']:7.1f} steps/s{ratio}")
+    evals = [b for b in session.benchmarks if b.extra_info.get("evaluations_per_s")]
+    if evals:
+        terminalreporter.write_sep("-", "evaluations per second (trees x samples / s)")
+        for bench in sorted(evals, key=lambda b: -b.extra_info["evaluations_per_s"]):
+            info = bench.extra_info
+            terminalreporter.write_line(f"{info['label']:<45} {info['evaluations_per_s']:12.3e}")
     for group, means in sorted(groups.items()):
         ours = [v for k, v in means.items() if "[ours" in k or k.endswith("ours")]
         if not ours:
