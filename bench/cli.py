@@ -94,7 +94,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--n-train", type=_positive_int, default=harness.N_TRAIN, help=f"training samples (default {harness.N_TRAIN})")
     r.add_argument("--n-test", type=_positive_int, default=harness.N_TEST, help=f"test samples (default {harness.N_TEST})")
     r.add_argument("--domain-half-width", type=_positive, default=None,
-                   help="sample q, qd, qdd from U(-w, w) (default: the system's own domain, pi/2 for the paper)")
+                   help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain, "
+                        "pi/2 for the paper; linear coordinates keep their ranges)")
     r.add_argument("--plugin", action="append", default=[], help="a .py file or module registering extra methods/systems")
     r.add_argument("--no-resume", action="store_true", help="rerun runs that already have a record")
 
@@ -199,11 +200,13 @@ def cmd_table(args) -> int:
 
 def cmd_data(args) -> int:
     from bench.data import generate, write_csv
-    from systems import SYSTEMS, Domain
+    from systems import SYSTEMS
 
     cls = SYSTEMS[args.system]
-    domain = Domain.symmetric(args.domain_half_width) if args.domain_half_width else None
-    data = generate(cls(domain=domain), args.n, args.seed)
+    system = cls()
+    if args.domain_half_width:
+        system = cls(domain=system.scaled_domain(args.domain_half_width))
+    data = generate(system, args.n, args.seed)
     write_csv(data, args.out)
     print(f"wrote {len(data)} samples of {args.system} (seed {args.seed}) to {args.out}")
     return 0

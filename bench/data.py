@@ -133,7 +133,7 @@ def generate(system, n: int, seed: int, *, cache: bool = True) -> Dataset:
             return Dataset(z["q"], z["qd"], z["qdd"], z["tau"], z["L"], system.name, source)
     rng = np.random.default_rng(seed)
     dom = system.domain
-    q, qd, qdd = (rng.uniform(*getattr(dom, k), size=(n, system.dof)) for k in ("q", "qd", "qdd"))
+    q, qd, qdd = (rng.uniform(*dom.bounds(k, system.dof), size=(n, system.dof)) for k in ("q", "qd", "qdd"))
     qt, qdt, qddt = (torch.from_numpy(a) for a in (q, qd, qdd))
     tau, L = euler_lagrange_chunked(system.lagrangian, qt, qdt, qddt)
     extra = system.nonconservative_torque(qt, qdt, qddt)

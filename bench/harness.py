@@ -159,11 +159,12 @@ def load_data(spec: RunSpec, system):
 
 
 def make_system(spec: RunSpec):
-    from systems import SYSTEMS, Domain
+    from systems import SYSTEMS
 
-    cls = SYSTEMS[spec.system]
-    domain = Domain.symmetric(spec.domain_half_width) if spec.domain_half_width else None
-    return cls(domain=domain)
+    system = SYSTEMS[spec.system]()
+    if spec.domain_half_width:
+        system = SYSTEMS[spec.system](domain=system.scaled_domain(spec.domain_half_width))
+    return system
 
 
 def preflight(spec: RunSpec) -> dict | None:
@@ -258,7 +259,7 @@ def _scores(model, experiment: str, train, test, truth=None, system=None) -> dic
     if expr is not None and truth is not None:
         from bench.recovery import judge
 
-        out["exact"] = judge(expr, truth, system.dof, experiment, domain=system.domain.q).exact
+        out["exact"] = judge(expr, truth, system.dof, experiment, domain=system.domain).exact
     return out
 
 
@@ -415,20 +416,24 @@ def run_matrix(
     out_dir = Path(out_dir)
     results: dict[str, dict] = {}
     todo: list[RunSpec] = []
+    resumed = cannot_run = 0
     for spec in specs:
         path = rec.record_path(out_dir, spec.run_id)
         if resume and path.exists():
             with open(path) as f:
                 results[spec.run_id] = json.load(f)
+            resumed += 1
             continue
         early = preflight(spec)
         if early:
             rec.write_record(path, early)
             results[spec.run_id] = early
+            cannot_run += 1
             continue
         todo.append(spec)
-    skipped = len(specs) - len(todo)
-    tracker = _MatrixProgress(len(todo), skipped, workers, report)
+    if report and cannot_run:
+        report(f"{cannot_run} run(s) recorded without running (method unavailable here or not applicable)")
+    tracker = _MatrixProgress(len(todo), resumed, workers, report)
     if todo:
         with ThreadPoolExecutor(max_workers=workers) as pool:
             for record in pool.map(lambda s: tracker.done(run_isolated(s, out_dir)), todo):

@@ -98,7 +98,7 @@ def _vanishes(diff: sympy.Expr, scale: float, tolerance: float, allow_constant: 
 
 def judge(L_hat: sympy.Expr, L_true: sympy.Expr, dof: int, experiment: str, *,
           tolerance: float = TOLERANCE, up_to_scale: bool = False,
-          domain=(-np.pi / 2, np.pi / 2), seed: int = 12345) -> Verdict:
+          domain=None, seed: int = 12345) -> Verdict:
     """Is ``L_hat`` the true Lagrangian ``L_true`` up to the gauge of ``experiment``?
 
     ``up_to_scale=True`` also allows a global factor (for dynamics without
@@ -125,10 +125,13 @@ def judge(L_hat: sympy.Expr, L_true: sympy.Expr, dof: int, experiment: str, *,
 
 
 def _samples(dof, domain, seed):
+    """Fresh states from ``domain`` (a :class:`systems.Domain`, or None for U(-pi/2, pi/2))."""
     import torch
 
     g = np.random.default_rng(seed)
-    return [torch.from_numpy(g.uniform(*domain, size=(2000, dof))) for _ in range(3)]
+    if domain is None:
+        return [torch.from_numpy(g.uniform(-np.pi / 2, np.pi / 2, size=(2000, dof))) for _ in range(3)]
+    return [torch.from_numpy(g.uniform(*domain.bounds(k, dof), size=(2000, dof))) for k in ("q", "qd", "qdd")]
 
 
 def _best_scale(L_hat, L_true, dof, domain, seed) -> sympy.Float:

@@ -4,8 +4,20 @@ Each module below registers its method with ``@METHODS.add(name, *tags)``.
 Adding a method: write one module and add it to the import line.
 """
 
-from methods.base import METHODS, Method, MethodConfig, Progress, TorchConfig, TorchLagrangianMethod
+from methods.base import (
+    METHODS,
+    ExpressionMethod,
+    ExpressionModel,
+    Method,
+    MethodConfig,
+    Progress,
+    TorchConfig,
+    TorchLagrangianMethod,
+)
 
 from methods import mggp, mlp, operon, pysr_adapter, sparse, syrenets, sysid  # noqa: E402,F401  (registers)
 
-__all__ = ["METHODS", "Method", "MethodConfig", "Progress", "TorchConfig", "TorchLagrangianMethod"]
+__all__ = [
+    "METHODS", "ExpressionMethod", "ExpressionModel", "Method", "MethodConfig", "Progress", "TorchConfig",
+    "TorchLagrangianMethod",
+]

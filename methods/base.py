@@ -550,3 +550,29 @@ class ExpressionModel:
         return self.expr
 
     readable_expression = expression
+
+
+class ExpressionMethod(Method):
+    """A method whose fitted state is one :class:`ExpressionModel`.
+
+    A subclass sets ``self.model`` in its loop; state, predictions and the
+    expression follow from it.
+    """
+
+    model: ExpressionModel
+
+    def _get_state(self):
+        return self.model
+
+    def _set_state(self, state):
+        self.model = state
+
+    def expression(self):
+        return self.model.expr
+
+    def predict_lagrangian(self, data):
+        return self.model.predict_lagrangian(data)
+
+    def predict_torque(self, data):
+        return self.model.predict_torque(data)
+

@@ -24,7 +24,7 @@ import sympy
 
 from bench import symbolic
 from bench.data import Dataset
-from methods.base import METHODS, ExpressionModel, Method, MethodConfig, Progress
+from methods.base import METHODS, ExpressionMethod, ExpressionModel, MethodConfig, Progress
 
 NOT_APPLICABLE = (
     "Operon fits y = f(X) to samples of y; the indirect experiment has no samples of L, only torques, "
@@ -44,7 +44,7 @@ class OperonConfig(MethodConfig):
 
 
 @METHODS.add("operon", "symbolic", "genetic")
-class Operon(Method):
+class Operon(ExpressionMethod):
     Config = OperonConfig
     experiments = ("direct",)
     smoke = {"population_size": 50, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}
@@ -83,20 +83,6 @@ class Operon(Method):
             self.model = ExpressionModel(parse_operon(text, self.names), train.dof)
             progress.stop("solved")
 
-    def _get_state(self):
-        return self.model
-
-    def _set_state(self, state):
-        self.model = state
-
-    def expression(self):
-        return self.model.expr
-
-    def predict_lagrangian(self, data):
-        return self.model.predict_lagrangian(data)
-
-    def predict_torque(self, data):
-        return self.model.predict_torque(data)
 
 
 def parse_operon(text: str, names: list[str]) -> sympy.Expr:

@@ -34,7 +34,7 @@ import sympy
 
 from bench import symbolic
 from bench.data import Dataset
-from methods.base import METHODS, ExpressionModel, Method, MethodConfig, Progress
+from methods.base import METHODS, ExpressionMethod, ExpressionModel, MethodConfig, Progress
 
 PROBE_TIMEOUT_S = 120
 
@@ -93,7 +93,7 @@ def _probe() -> str | None:
 
 
 @METHODS.add("pysr", "symbolic", "genetic", "needs-julia")
-class PySR(Method):
+class PySR(ExpressionMethod):
     Config = PySRConfig
     smoke = {"populations": 2, "population_size": 20, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}
 
@@ -134,20 +134,6 @@ class PySR(Method):
             self.model = ExpressionModel(_parse(text, train.dof), train.dof)
             progress.stop("solved")
 
-    def _get_state(self):
-        return self.model
-
-    def _set_state(self, state):
-        self.model = state
-
-    def expression(self):
-        return self.model.expr
-
-    def predict_lagrangian(self, data):
-        return self.model.predict_lagrangian(data)
-
-    def predict_torque(self, data):
-        return self.model.predict_torque(data)
 
 
 def _parse(text: str, dof: int) -> sympy.Expr:

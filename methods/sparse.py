@@ -35,7 +35,7 @@ import sympy
 
 from bench import regression, symbolic
 from bench.data import Dataset
-from methods.base import METHODS, ExpressionModel, Method, MethodConfig, Progress
+from methods.base import METHODS, ExpressionMethod, ExpressionModel, MethodConfig, Progress
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ def library(dof: int, kinds: tuple[str, ...]) -> list[sympy.Expr]:
 
 
 @METHODS.add("sparse", "symbolic", "library")
-class SparseLagrangian(Method):
+class SparseLagrangian(ExpressionMethod):
     Config = SparseConfig
     smoke = {"samples": 256, "max_steps": 1, "eval_samples": 128}
 
@@ -83,21 +83,6 @@ class SparseLagrangian(Method):
             self.kept_terms = len(keep)
             self.model = ExpressionModel(regression.combine([self.library[k] for k in keep], coef), train.dof)
             progress.stop("solved")
-
-    def _get_state(self):
-        return self.model
-
-    def _set_state(self, state):
-        self.model = state
-
-    def expression(self):
-        return self.model.expr
-
-    def predict_lagrangian(self, data):
-        return self.model.predict_lagrangian(data)
-
-    def predict_torque(self, data):
-        return self.model.predict_torque(data)
 
     def record_details(self):
         return {"library": len(self.library), "independent_terms": getattr(self, "kept_terms", None)}

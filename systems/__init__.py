@@ -6,6 +6,6 @@ Adding a system: write one module and add it to the import line.
 
 from systems.base import SYSTEMS, Domain, ParametricForm, System, get_system
 
-from systems import double_pendulum  # noqa: E402,F401  (registers)
+from systems import cart_pole, double_pendulum, n_link_pendulum, single_pendulum, spring_pendulum  # noqa: E402,F401  (registers)
 
 __all__ = ["SYSTEMS", "Domain", "ParametricForm", "System", "get_system"]

@@ -5,16 +5,9 @@ A system knows its degrees of freedom, coordinate names, physical parameters
 batched torch function), a sampling domain, a hook for non-conservative
 generalized forces, and the parametric form that system identification fits.
 
-Adding a system means writing one subclass and registering it::
-
-    @SYSTEMS.add("single_pendulum", "simulated")
-    class SinglePendulum(System):
-        coordinates = ("theta",)
-        Params = SinglePendulumParams
-        sysid_unknowns = ("m", "l")
-
-        def lagrangian_expr(self, q, qd, p):
-            return p.m * p.l**2 * qd[0]**2 / 6 + p.m * p.g * p.l / 2 * sympy.cos(q[0])
+Adding a system means writing one subclass and registering it with
+``@SYSTEMS.add(name, *tags)``; ``systems/single_pendulum.py`` is the
+smallest example.
 
 Sign convention for non-conservative effects
 --------------------------------------------
@@ -32,6 +25,7 @@ from functools import cached_property
 from types import SimpleNamespace
 from typing import ClassVar, Sequence
 
+import numpy as np
 import sympy
 import torch
 
@@ -45,13 +39,15 @@ HALF_PI = math.pi / 2
 class Domain:
     """Independent uniform sampling ranges for q, qd and qdd.
 
-    The paper samples every component from U(-pi/2, pi/2); the authors'
-    public code used (-pi, pi). Use :meth:`symmetric` for either.
+    Each of ``q``, ``qd``, ``qdd`` is one ``(low, high)`` pair for every
+    coordinate, or a tuple of pairs, one per coordinate (a spring's length
+    must stay positive while an angle swings). The paper samples every
+    component from U(-pi/2, pi/2); the authors' public code used (-pi, pi).
     """
 
-    q: tuple[float, float] = (-HALF_PI, HALF_PI)
-    qd: tuple[float, float] = (-HALF_PI, HALF_PI)
-    qdd: tuple[float, float] = (-HALF_PI, HALF_PI)
+    q: tuple = (-HALF_PI, HALF_PI)
+    qd: tuple = (-HALF_PI, HALF_PI)
+    qdd: tuple = (-HALF_PI, HALF_PI)
 
     @classmethod
     def symmetric(cls, half_width: float) -> "Domain":
@@ -60,9 +56,25 @@ class Domain:
 
     def __post_init__(self):
         for name in ("q", "qd", "qdd"):
-            lo, hi = getattr(self, name)
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-                raise ValueError(f"domain.{name} must be a finite (low, high) with low < high, got {(lo, hi)}")
+            for lo, hi in self._pairs(name):
+                if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                    raise ValueError(f"domain.{name} must be finite (low, high) pairs with low < high, got {(lo, hi)}")
+
+    def _pairs(self, name: str) -> list[tuple[float, float]]:
+        value = getattr(self, name)
+        if len(value) == 2 and all(isinstance(v, (int, float)) for v in value):
+            return [tuple(map(float, value))]
+        return [tuple(map(float, pair)) for pair in value]
+
+    def bounds(self, name: str, dof: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(low, high)`` arrays of length ``dof`` for ``q``, ``qd`` or ``qdd``."""
+        pairs = self._pairs(name)
+        if len(pairs) == 1:
+            pairs = pairs * dof
+        if len(pairs) != dof:
+            raise ValueError(f"domain.{name} has {len(pairs)} ranges for {dof} coordinates")
+        lo, hi = zip(*pairs)
+        return np.asarray(lo), np.asarray(hi)
 
 
 @dataclass(frozen=True)
@@ -158,6 +170,14 @@ class System:
         if len(kinds) != self.dof or set(kinds) - {"angle", "linear"}:
             raise ValueError(f"{self.name}: coordinate_kinds must give 'angle' or 'linear' for each coordinate")
         return tuple(kinds)
+
+    def scaled_domain(self, half_width: float) -> Domain:
+        """The domain with angles, velocities and accelerations in U(-w, w);
+        linear coordinates keep their own ranges."""
+        w = (-float(half_width), float(half_width))
+        lo, hi = self.domain.bounds("q", self.dof)
+        q = tuple(w if kind == "angle" else (a, b) for kind, a, b in zip(self.kinds, lo, hi))
+        return Domain(q=q, qd=w, qdd=w)
 
     def param_dict(self) -> dict[str, float]:
         return {f.name: float(getattr(self.params, f.name)) for f in dataclasses.fields(self.params)}

@@ -52,7 +52,7 @@ def check_system(system) -> None:
             arr = getattr(a, k)
             assert arr.shape == (200, system.dof) and np.isfinite(arr).all()
             if k != "tau":
-                lo, hi = getattr(system.domain, k)
+                lo, hi = system.domain.bounds(k, system.dof)
                 assert (arr >= lo).all() and (arr <= hi).all()
             assert np.array_equal(arr, getattr(b, k))
         assert not np.array_equal(a.q, c.q)

@@ -12,14 +12,12 @@ from bench.dynamics import euler_lagrange, euler_lagrange_chunked
 
 
 def sympy_torques(expr: sympy.Expr, dof: int):
-    """Closed-form tau(q, qd, qdd) = d/dt dL/dqd - dL/dq, compiled with numpy."""
+    """Closed-form tau(q, qd, qdd) = d/dt dL/dqd - dL/dq by sympy, compiled with numpy."""
+    from bench.recovery import euler_lagrange_symbolic
+
     q, qd = symbolic.coordinate_symbols(dof)
     qdd = symbolic.acceleration_symbols(dof)
-    taus = []
-    for i in range(dof):
-        p = sympy.diff(expr, qd[i])
-        dt = sum(sympy.diff(p, q[j]) * qd[j] + sympy.diff(p, qd[j]) * qdd[j] for j in range(dof))
-        taus.append(sympy.simplify(dt - sympy.diff(expr, q[i])))
+    taus = [sympy.simplify(t) for t in euler_lagrange_symbolic(expr, dof)]
     f = sympy.lambdify([*q, *qd, *qdd], taus, modules="numpy")
     return lambda Q, QD, QDD: np.stack(np.broadcast_arrays(*f(*Q.T, *QD.T, *QDD.T)), axis=1)
 

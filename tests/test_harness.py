@@ -87,3 +87,12 @@ def test_long_expressions_are_clipped_in_records():
     text = harness._clip("x + " * 10000)
     assert len(text) < harness.MAX_EXPRESSION_CHARS + 100 and text.endswith("[cut: 40000 characters in all]")
     assert harness._clip("q_1 + 1") == "q_1 + 1"
+
+
+def test_progress_tells_resumed_from_unrunnable_runs(tmp_path):
+    lines = []
+    harness.run_matrix(specs(["toy_unavailable", "toy_constant"]), tmp_path, workers=1, report=lines.append)
+    assert lines[0] == "1 run(s) recorded without running (method unavailable here or not applicable)"
+    lines.clear()
+    harness.run_matrix(specs(["toy_constant"]), tmp_path, workers=1, report=lines.append)
+    assert lines[0] == "resuming: 1 run(s) already have records"

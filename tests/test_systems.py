@@ -62,3 +62,29 @@ def test_double_pendulum_is_the_papers():
     f = symbolic.to_numpy(paper, 2)
     np.testing.assert_allclose(dp.lagrangian(torch.from_numpy(Q), torch.from_numpy(QD)).numpy(), f(Q, QD), rtol=1e-13)
     assert dp.domain == Domain()  # U(-pi/2, pi/2), the paper's range
+
+
+def test_per_coordinate_domains_and_widening_keep_linear_ranges():
+    import math
+
+    spring = SYSTEMS["spring_pendulum"]()
+    data = generate(spring, 2000, 0, cache=False)
+    assert data.q[:, 0].min() >= 0.5 and data.q[:, 0].max() <= 1.5  # the spring's length stays positive
+    wide = SYSTEMS["spring_pendulum"](domain=spring.scaled_domain(math.pi))
+    lo, hi = wide.domain.bounds("q", 2)
+    assert (lo[0], hi[0]) == (0.5, 1.5) and (lo[1], hi[1]) == (-math.pi, math.pi)
+    assert wide.domain.bounds("qd", 2)[1].tolist() == [math.pi, math.pi]
+    with pytest.raises(ValueError, match="3 ranges for 2 coordinates"):
+        Domain(q=((0, 1), (0, 1), (0, 1))).bounds("q", 2)
+
+
+def test_n_link_pendulum_with_two_links_is_the_papers_double_pendulum():
+    from systems.n_link_pendulum import n_link_pendulum
+
+    two = n_link_pendulum(2)(params=n_link_pendulum(2).Params(m1=3.0, l1=2.67, m2=1.0, l2=1.67))
+    rng = np.random.default_rng(3)
+    Q, QD = rng.uniform(-2, 2, (50, 2)), rng.uniform(-2, 2, (50, 2))
+    ours = symbolic.to_numpy(two.lagrangian_sympy, 2)(Q, QD)
+    paper = symbolic.to_numpy(SYSTEMS["double_pendulum"]().lagrangian_sympy, 2)(Q, QD)
+    np.testing.assert_allclose(ours, paper, rtol=1e-12)
+    assert SYSTEMS["triple_pendulum"]().dof == 3
