@@ -73,9 +73,9 @@ def group_stats(records: list[dict]) -> dict[str, dict[str, tuple[float, float |
 def _runs_cell(records: list[dict]) -> str:
     counts = Counter(r["status"] for r in records)
     if counts.get("unavailable") and len(counts) == 1:
-        return f"unavailable: {records[0]['error']}"
+        return "unavailable (see below)"
     if counts.get("not_applicable") and len(counts) == 1:
-        return f"n/a: {records[0]['error']}"
+        return "not applicable (see below)"
     text = f"{counts.get('ok', 0)}/{len(records)} ok"
     others = [f"{v} {k.replace('_', ' ')}" for k, v in sorted(counts.items()) if k != "ok"]
     return text + (f" ({', '.join(others)})" if others else "")
@@ -135,6 +135,14 @@ def build_table(records: list[dict]) -> str:
             lines.append(f"| {label} | {split} | " + " | ".join(cells) + " |")
     lines.append("| Runs | | " + " | ".join(_runs_cell(by_method[m]) for m in methods) + " |")
     lines.append("| Exact | | " + " | ".join(_exact_cell(by_method[m]) for m in methods) + " |")
+    notes = []
+    for m in methods:
+        statuses = {r["status"] for r in by_method[m]}
+        if statuses in ({"unavailable"}, {"not_applicable"}):
+            kind = "unavailable" if statuses == {"unavailable"} else "not applicable"
+            notes.append(f"- **{m}** is {kind}: {by_method[m][0]['error']}")
+    if notes:
+        lines += [""] + notes
     return "\n".join(lines)
 
 

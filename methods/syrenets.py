@@ -57,7 +57,7 @@ Choices and deviations, each deliberate
   ``||J||_F^2 = tr(M K M^T)``, ``M = W3 diag(s'(a2)) W2 diag(s'(a1))`` and
   ``K = W1 W1^T``, instead of an autograd Jacobian. Even so, the exact value
   costs two (16 B x 128) x (128 x 128) products per layer and their
-  backward, more than the rest of a step together. By default it is
+  backward, about as much as the rest of a step together. By default it is
   therefore *estimated* without bias by Hutchinson's trace estimator,
   ``E_e ||e^T J||^2`` with one Rademacher vector ``e`` per step (the same
   closed form applied to ``e^T J``), which is 16 times cheaper;
@@ -82,6 +82,20 @@ Choices and deviations, each deliberate
 * The kept state is the one with the lowest training MSE on a fixed subset
   of the training data (see :class:`methods.base.Progress`), not the lowest
   mini-batch MSE, and the test set is not evaluated during training.
+
+Readable equations and exact recovery (beyond the paper)
+--------------------------------------------------------
+The frozen model pushed through sympy (:meth:`SyReNets.expression`) is exact
+but long, since softmax weights are never zero. After training, within the
+budget (``post_fraction`` of it is reserved), two variants are derived and
+reported beside the paper's model:
+
+* ``pruned``: the fewest terms, ranked by ``|weight| * rms(candidate)``, whose
+  frozen model is within 10 % of the full model's training MSE; its equation
+  is what records store as the run's expression;
+* ``refined``: the dominant terms' structure with its inner constants rounded
+  to simple rationals, refitted by least squares (linear in L, and in tau
+  through g), see :meth:`SyReNets._refine`.
 """
 
 from __future__ import annotations

@@ -57,7 +57,8 @@ def test_unavailable_and_not_applicable_columns():
     records = [rec("a", 0, 1.0, 1.0), rec("pysr", 0, None, None, status="unavailable", error="no Julia"),
                rec("operon", 0, None, None, status="not_applicable", error="direct only")]
     table = build_table(records)
-    assert "unavailable: no Julia" in table and "n/a: direct only" in table
+    assert "| Runs | | 1/1 ok | not applicable (see below) | unavailable (see below) |" in table
+    assert "- **operon** is not applicable: direct only" in table and "- **pysr** is unavailable: no Julia" in table
     assert "| Best | train | **1.00e+00** | — | — |" in table
 
 
