@@ -153,6 +153,8 @@ def load_data(spec: RunSpec, system):
         train = read_csv(spec.train_path, dof=system.dof, system=system.name)
         test = read_csv(spec.test_path, dof=system.dof, system=system.name) if spec.test_path else None
         return train, test
+    if not system.simulated:
+        return system.load("train"), system.load("test")
     train = generate(system, spec.n_train, spec.seed)
     test = generate(system, spec.n_test, spec.seed + TEST_SEED_OFFSET)
     return train, test
@@ -162,7 +164,7 @@ def make_system(spec: RunSpec):
     from systems import SYSTEMS
 
     system = SYSTEMS[spec.system]()
-    if spec.domain_half_width:
+    if spec.domain_half_width and system.simulated:
         system = SYSTEMS[spec.system](domain=system.scaled_domain(spec.domain_half_width))
     return system
 
@@ -171,6 +173,8 @@ def preflight(spec: RunSpec) -> dict | None:
     """A record for a run that cannot start (unavailable or not applicable), else ``None``."""
     from methods import METHODS
 
+    from systems import SYSTEMS
+
     d = spec.to_dict()
     entry = METHODS.entry(spec.method)
     reason = entry.unavailable_reason()
@@ -178,6 +182,10 @@ def preflight(spec: RunSpec) -> dict | None:
         return rec.new_record(d, "unavailable", error=reason)
     reason = entry.obj.not_applicable_reason(spec.experiment)
     if reason:
+        return rec.new_record(d, "not_applicable", error=reason)
+    system = SYSTEMS[spec.system]
+    if spec.experiment not in system.experiments and not spec.train_path:
+        reason = system.not_applicable or f"{spec.system} has no data for the {spec.experiment} experiment"
         return rec.new_record(d, "not_applicable", error=reason)
     return None
 

@@ -6,6 +6,13 @@ Adding a system: write one module and add it to the import line.
 
 from systems.base import SYSTEMS, Domain, ParametricForm, System, get_system
 
-from systems import cart_pole, double_pendulum, n_link_pendulum, single_pendulum, spring_pendulum  # noqa: E402,F401  (registers)
+from systems import (  # noqa: E402,F401  (registers)
+    cart_pole,
+    delan_characters,
+    double_pendulum,
+    n_link_pendulum,
+    single_pendulum,
+    spring_pendulum,
+)
 
 __all__ = ["SYSTEMS", "Domain", "ParametricForm", "System", "get_system"]

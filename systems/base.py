@@ -133,8 +133,13 @@ class System:
     Params: ClassVar[type] = type(None)
     sysid_unknowns: ClassVar[tuple[str, ...]] = ()
     default_domain: ClassVar[Domain] = Domain()
-    #: ``False`` for measured systems, which cannot generate data.
+    #: ``False`` for measured systems, which cannot generate data; they
+    #: provide :meth:`load` instead, and their Lagrangian is unknown
     simulated: ClassVar[bool] = True
+    #: the experiments the system's data allow (measured trajectories have no L)
+    experiments: ClassVar[tuple[str, ...]] = ("direct", "indirect")
+    #: why an experiment missing from ``experiments`` does not apply
+    not_applicable: ClassVar[str] = ""
 
     def __init__(self, params=None, domain: Domain | None = None):
         self.params = params if params is not None else self.Params()
@@ -150,6 +155,10 @@ class System:
         true Lagrangian, or a sympy symbol for the parametric form.
         """
         raise NotImplementedError
+
+    def load(self, split: str):
+        """The ``"train"`` or ``"test"`` part of a measured system's data."""
+        raise NotImplementedError(f"{self.name} is simulated: generate its data with bench.data.generate")
 
     def nonconservative_torque(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> torch.Tensor | None:
         """Torque added to ``g(L)`` by non-conservative effects (``None``: none)."""
@@ -211,7 +220,7 @@ class System:
             expr=expr,
             unknowns=unknown_syms,
             dof=self.dof,
-            true_values=tuple(values[n] for n in self.sysid_unknowns),
+            true_values=tuple(values[n] for n in self.sysid_unknowns) if self.simulated else None,
         )
 
     def describe(self) -> dict:

@@ -26,6 +26,9 @@ def check_system(system) -> None:
     assert system.dof == len(system.coordinates) >= 1
     assert dataclasses.is_dataclass(system.params)
     assert isinstance(system.domain, Domain)
+    assert set(system.experiments) <= {"direct", "indirect"} and system.experiments
+    if not system.simulated:
+        return check_measured_system(system)
     q, qd = system.symbols
     expr = system.lagrangian_sympy
     assert expr.free_symbols <= set(q) | set(qd)
@@ -82,3 +85,18 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
         np.testing.assert_allclose(f(test.q, test.qd), L, rtol=1e-9, atol=1e-9)
     else:
         assert expr is None
+
+
+def check_measured_system(system) -> None:
+    """A measured system: its packaged splits load, agree on the coordinates, and are disjoint."""
+    train, test = system.load("train"), system.load("test")
+    for data in (train, test):
+        assert len(data) > 0 and data.dof == system.dof and data.system == system.name
+        for k in ("q", "qd", "qdd", "tau"):
+            assert np.isfinite(getattr(data, k)).all()
+    assert not np.isin(test.q[:, 0], train.q[:, 0]).all()
+    if "direct" not in system.experiments:
+        assert train.L is None and system.not_applicable
+    form = system.parametric_form()
+    assert form.true_values is None and len(form.unknowns) >= 1
+

@@ -96,3 +96,12 @@ def test_progress_tells_resumed_from_unrunnable_runs(tmp_path):
     lines.clear()
     harness.run_matrix(specs(["toy_constant"]), tmp_path, workers=1, report=lines.append)
     assert lines[0] == "resuming: 1 run(s) already have records"
+
+
+def test_measured_systems_use_their_packaged_splits_and_skip_the_direct_experiment():
+    direct, indirect = harness.build_specs(["delan_characters"], ["sparse"], ["direct", "indirect"], [0], 5.0)
+    record = harness.preflight(direct)
+    assert record["status"] == "not_applicable" and "only the indirect experiment applies" in record["error"]
+    assert harness.preflight(indirect) is None
+    train, test = harness.load_data(indirect, harness.make_system(indirect))
+    assert len(train) == 2459 and len(test) == 454 and "characters eqv" in test.source

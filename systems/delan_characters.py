@@ -1,0 +1,91 @@
+"""DeLaN's 2-DoF character trajectories (Lutter, Ritter & Peters, ICLR 2019).
+
+A simulated 2-DoF planar robot writing 20 handwritten characters; 2913 samples
+of ``q, qd, qdd, tau`` at dt = 0.04 s, shipped in ``systems/data`` with its MIT
+license. The published split is kept: the characters ``e``, ``q`` and ``v``
+are the test set, the other 17 the training set. DeLaN's README reports a
+torque MSE of 4.327e-4 on them.
+
+These are trajectories with torques only: there are no samples of ``L``, so
+only the indirect experiment applies. The robot's true Lagrangian is not
+given; system identification fits the rigid-body form of a planar 2-link arm
+with relative joint angles, in lumped (base) parameters,
+
+.. math::
+
+    L = \\tfrac12 a_1 \\dot q_1^2 + (a_2 \\cos q_2 + a_3 \\sin q_2)(\\dot q_1^2 + \\dot q_1 \\dot q_2)
+      + \\tfrac12 a_4 (\\dot q_1 + \\dot q_2)^2
+      - (b_1 \\cos q_1 + b_2 \\sin q_1 + b_3 \\cos(q_1 + q_2) + b_4 \\sin(q_1 + q_2)),
+
+which holds for any link masses, lengths, centres of mass and inertias and
+any direction of gravity in the plane.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import sympy
+
+from bench.data import Dataset, DataError
+from systems.base import SYSTEMS, System
+
+DATA = Path(__file__).parent / "data" / "delan_characters.csv.gz"
+TEST_CHARACTERS = ("e", "q", "v")
+PUBLISHED_TORQUE_MSE = 4.327e-4
+
+
+@dataclass(frozen=True)
+class PlanarArmParams:
+    """Lumped parameters of a planar 2-link arm (no true values are known)."""
+
+    a1: float = 1.0
+    a2: float = 0.0
+    a3: float = 0.0
+    a4: float = 1.0
+    b1: float = 0.0
+    b2: float = 0.0
+    b3: float = 0.0
+    b4: float = 0.0
+
+
+@functools.lru_cache(maxsize=1)
+def _frame():
+    import pandas as pd
+
+    if not DATA.is_file():
+        raise DataError(f"{DATA}: the packaged DeLaN data is missing")
+    return pd.read_csv(DATA)
+
+
+@SYSTEMS.add("delan_characters", "measured", "external")
+class DelanCharacters(System):
+    coordinates = ("q1", "q2_relative")
+    Params = PlanarArmParams
+    sysid_unknowns = ("a1", "a2", "a3", "a4", "b1", "b2", "b3", "b4")
+    simulated = False
+    experiments = ("indirect",)
+    not_applicable = "DeLaN's data are trajectories with torques and no samples of L, so only the indirect experiment applies"
+
+    def lagrangian_expr(self, q, qd, p):
+        """The parametric rigid-body form (the robot's true Lagrangian is not given)."""
+        q1, q2 = q
+        v1, v2 = qd
+        kinetic = p.a1 * v1**2 / 2 + (p.a2 * sympy.cos(q2) + p.a3 * sympy.sin(q2)) * (v1**2 + v1 * v2) + p.a4 * (v1 + v2) ** 2 / 2
+        potential = p.b1 * sympy.cos(q1) + p.b2 * sympy.sin(q1) + p.b3 * sympy.cos(q1 + q2) + p.b4 * sympy.sin(q1 + q2)
+        return kinetic - potential
+
+    def load(self, split: str) -> Dataset:
+        """The published ``train`` or ``test`` split."""
+        frame = _frame()
+        test = frame["character"].isin(TEST_CHARACTERS)
+        if split not in ("train", "test"):
+            raise ValueError(f"split must be 'train' or 'test', got {split!r}")
+        part = frame[test if split == "test" else ~test]
+        cols = {k: part[[f"{k}_1", f"{k}_2"]].to_numpy(dtype=np.float64) for k in ("q", "qd", "qdd", "tau")}
+        chars = "".join(sorted(part["character"].unique()))
+        return Dataset(cols["q"], cols["qd"], cols["qdd"], cols["tau"], None, self.name,
+                       f"{DATA.name}:{split} (characters {chars})")
