@@ -174,8 +174,21 @@ def build_tables(records: list[dict]) -> str:
         target = "L" if experiment == "direct" else "τ"
         parts += [f"## {system}, {experiment} experiment (MSE of {target})", ""]
         parts += [line + "  " for line in _header(recs)]
+        reference = _reference(system)
+        if reference:
+            parts += ["", f"Reference: {reference}"]
         parts += ["", build_table(recs), ""]
     return "\n".join(parts).rstrip() + "\n"
+
+
+def _reference(system: str) -> str:
+    """The system's published reference figure, if it declares one."""
+    from systems import SYSTEMS
+
+    try:
+        return SYSTEMS[system].reference
+    except KeyError:
+        return ""
 
 
 _DEFINITIONS = (

@@ -9,6 +9,7 @@ from systems.base import SYSTEMS, Domain, ParametricForm, System, get_system
 from systems import (  # noqa: E402,F401  (registers)
     cart_pole,
     delan_characters,
+    dfki_double_pendulum,
     double_pendulum,
     n_link_pendulum,
     single_pendulum,

@@ -140,6 +140,8 @@ class System:
     experiments: ClassVar[tuple[str, ...]] = ("direct", "indirect")
     #: why an experiment missing from ``experiments`` does not apply
     not_applicable: ClassVar[str] = ""
+    #: a published figure to read the tables against (printed above them)
+    reference: ClassVar[str] = ""
 
     def __init__(self, params=None, domain: Domain | None = None):
         self.params = params if params is not None else self.Params()

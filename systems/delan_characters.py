@@ -68,6 +68,7 @@ class DelanCharacters(System):
     sysid_unknowns = ("a1", "a2", "a3", "a4", "b1", "b2", "b3", "b4")
     simulated = False
     experiments = ("indirect",)
+    reference = f"DeLaN's README reports a test torque MSE of {PUBLISHED_TORQUE_MSE} on these characters (e, q, v)."
     not_applicable = "DeLaN's data are trajectories with torques and no samples of L, so only the indirect experiment applies"
 
     def lagrangian_expr(self, q, qd, p):

@@ -95,3 +95,10 @@ def test_a_failed_variant_is_counted_as_failed():
     table = build_table(expand_variants([ok, missed]))
     assert "| Runs | | 2/2 ok | 1/2 ok (1 failed) |" in table
     assert "| Exact | | — | 0/2 seeds exact |" in table
+
+
+def test_a_systems_published_reference_is_printed_above_its_table():
+    text = build_tables([rec("sysid", 0, 1e-3, 2e-3, experiment="indirect", system="delan_characters")])
+    section = text.split("## delan_characters, indirect")[1]
+    assert "Reference: DeLaN's README reports a test torque MSE of 0.0004327" in section
+    assert "Reference" not in build_tables([rec("sysid", 0, 1.0, 1.0)])
