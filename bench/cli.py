@@ -96,6 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--domain-half-width", type=_positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain, "
                         "pi/2 for the paper; linear coordinates keep their ranges)")
+    r.add_argument("--no-rollout", action="store_true",
+                   help="skip the rollout error of simulated systems (integrating each model's dynamics for 1 s)")
     r.add_argument("--plugin", action="append", default=[], help="a .py file or module registering extra methods/systems")
     r.add_argument("--no-resume", action="store_true", help="rerun runs that already have a record")
 
@@ -176,6 +178,7 @@ def cmd_run(args) -> int:
         domain_half_width=args.domain_half_width,
         plugins=tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in args.plugin),
         threads=args.threads,
+        rollout=not args.no_rollout,
     )
     for spec in specs:  # fail fast on a bad override, before any process starts
         if spec.method in METHODS and METHODS.entry(spec.method).available:

@@ -65,6 +65,8 @@ class RunSpec:
         ``n_test`` samples from ``seed + TEST_SEED_OFFSET``.
     domain_half_width
         Sample q, qd, qdd from U(-w, w) instead of the system's default.
+    rollout
+        Measure the rollout error (:mod:`bench.rollout`) of simulated systems.
     plugins
         Python files or modules to import before resolving names, for methods
         and systems registered outside the suite.
@@ -84,6 +86,7 @@ class RunSpec:
     domain_half_width: float | None = None
     plugins: tuple[str, ...] = ()
     threads: int = 1
+    rollout: bool = True
 
     @property
     def run_id(self) -> str:
@@ -243,6 +246,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
                 "variants": variants,
             },
         )
+        if system.simulated and test is not None and spec.rollout:
+            fields["rollout"] = _rollout(method, system, test)
         bad = [k for k in ("train_mse", "test_mse") if fields[k] is not None and not math.isfinite(fields[k])]
         if bad:
             return rec.new_record(d, "failed", error=f"non-finite {' and '.join(bad)} (the model produced NaN or inf)", **fields)
@@ -269,6 +274,16 @@ def _scores(model, experiment: str, train, test, truth=None, system=None) -> dic
 
         out["exact"] = judge(expr, truth, system.dof, experiment, domain=system.domain).exact
     return out
+
+
+def _rollout(model, system, test) -> dict:
+    """The rollout entry (:mod:`bench.rollout`); a fault in it is recorded, not raised."""
+    from bench.rollout import rollout_error
+
+    try:
+        return rollout_error(model, system, test)
+    except Exception as exc:  # the model's fault: its own status
+        return {"status": "failed", "q_rmse": None, "detail": f"{type(exc).__name__}: {exc}"}
 
 
 #: longest expression text kept in a record

@@ -120,6 +120,7 @@ def new_record(spec: dict, status: str, **fields) -> dict:
         "curve": [],
         "expression": None,
         "exact": None,
+        "rollout": None,
         "hyperparameters": None,
         "details": {},
         "provenance": provenance(),

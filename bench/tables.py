@@ -88,6 +88,18 @@ def _exact_cell(records: list[dict]) -> str:
     return f"{sum(bool(r['exact']) for r in judged)}/{len(records)} seeds exact"
 
 
+def _rollout_cell(records: list[dict]) -> str:
+    """Median rollout error of q over the ``ok`` runs, and what became of the others."""
+    rolled = [r["rollout"] for r in records if r["status"] == "ok" and r.get("rollout")]
+    if not rolled:
+        return "—"
+    errors = [x["q_rmse"] for x in rolled if x.get("status") == "ok" and x.get("q_rmse") is not None]
+    counts = Counter(x.get("status") for x in rolled if x.get("status") != "ok")
+    text = f"{fmt(float(np.median(errors)))} ({len(errors)}/{len(rolled)}" if errors else f"— (0/{len(rolled)}"
+    others = "".join(f"; {v} {k.replace('_', ' ')}" for k, v in sorted(counts.items()))
+    return text + others + ")"
+
+
 def _header(records: list[dict]) -> list[str]:
     budgets = sorted({r["budget_s"] for r in records})
     seeds = sorted({r["seed"] for r in records})
@@ -135,6 +147,8 @@ def build_table(records: list[dict]) -> str:
             lines.append(f"| {label} | {split} | " + " | ".join(cells) + " |")
     lines.append("| Runs | | " + " | ".join(_runs_cell(by_method[m]) for m in methods) + " |")
     lines.append("| Exact | | " + " | ".join(_exact_cell(by_method[m]) for m in methods) + " |")
+    if any(r.get("rollout") for r in records):
+        lines.append("| Rollout | q RMSE | " + " | ".join(_rollout_cell(by_method[m]) for m in methods) + " |")
     notes = []
     for m in methods:
         statuses = {r["status"] for r in by_method[m]}
@@ -197,7 +211,10 @@ _DEFINITIONS = (
     "**All 10** of all seeds. With n < 10 successful runs, the groups take min(5, n) and n runs "
     "(see the Runs row). The lowest mean of each row is bold. **Exact** counts the seeds whose equation is "
     "the true Lagrangian up to the experiment's gauge (a constant; indirectly also a total time derivative), "
-    "with coefficients within 1e-6 of the largest true one."
+    "with coefficients within 1e-6 of the largest true one. **Rollout** is the median over seeds of the RMS "
+    "error of q when the model's forward dynamics are integrated for 1 s from 8 held-out states, unforced, "
+    "against the true system's motion (bench.rollout); in brackets how many seeds have a rollout and why "
+    "the others do not (an indefinite or singular d2L/dqd2 has no forward dynamics)."
 )
 
 

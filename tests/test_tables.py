@@ -102,3 +102,14 @@ def test_a_systems_published_reference_is_printed_above_its_table():
     section = text.split("## delan_characters, indirect")[1]
     assert "Reference: DeLaN's README reports a test torque MSE of 0.0004327" in section
     assert "Reference" not in build_tables([rec("sysid", 0, 1.0, 1.0)])
+
+
+def test_rollout_row_gives_the_median_and_what_became_of_the_rest():
+    records = []
+    for seed, (status, err) in enumerate([("ok", 0.1), ("ok", 0.3), ("ok", 0.2), ("indefinite", None)]):
+        r = rec("m", seed, 1.0, 1.0)
+        r["rollout"] = {"status": status, "q_rmse": err}
+        records.append(r)
+    row = [line for line in build_table(records).splitlines() if line.startswith("| Rollout")]
+    assert row == ["| Rollout | q RMSE | 2.00e-01 (3/4; 1 indefinite) |"]
+    assert "Rollout" not in build_table([rec("m", 0, 1.0, 1.0)])
