@@ -48,6 +48,13 @@ def _positive(text: str) -> float:
     return value
 
 
+def _noise_level(text: str) -> float:
+    value = float(text)
+    if not (0 <= value < 10 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"a noise level is a fraction of the target's std in [0, 10), got {text}")
+    return value
+
+
 def _positive_int(text: str) -> int:
     value = int(text)
     if value <= 0:
@@ -68,12 +75,19 @@ def _assignment(text: str) -> tuple[str, object]:
     return key.strip(), value
 
 
+class _Parser(argparse.ArgumentParser):
+    """Argument errors in one line (``--help`` still shows the usage)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="python -m bench",
         description="Benchmark suite for learning Lagrangians of physical systems, symbolically and neurally.",
     )
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
     sub.add_parser("list", help="list systems and methods, with availability")
 
@@ -96,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--domain-half-width", type=_positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain, "
                         "pi/2 for the paper; linear coordinates keep their ranges)")
+    r.add_argument("--noise", type=_noise_level, nargs="+", default=[0.0], metavar="LEVEL",
+                   help="Gaussian noise on the training targets as a fraction of their std; several levels "
+                        "add a dimension to the matrix, e.g. --noise 0 0.01 0.1 (default 0)")
     r.add_argument("--no-rollout", action="store_true",
                    help="skip the rollout error of simulated systems (integrating each model's dynamics for 1 s)")
     r.add_argument("--plugin", action="append", default=[], help="a .py file or module registering extra methods/systems")
@@ -171,7 +188,7 @@ def cmd_run(args) -> int:
     _check_names(args.systems, methods, args.experiments)
     seeds = args.seeds if args.seeds is not None else list(harness.SEEDS[: args.n_seeds])
     specs = harness.build_specs(
-        args.systems, methods, args.experiments, seeds, args.budget,
+        args.systems, methods, args.experiments, seeds, args.budget, noises=args.noise,
         profile="smoke" if args.smoke else "default",
         hyperparameters=dict(args.overrides),
         n_train=args.n_train, n_test=args.n_test,

@@ -226,6 +226,28 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
     return Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], L, system, str(path))
 
 
+def add_noise(data: Dataset, experiment: str, level: float, seed: int) -> Dataset:
+    """``data`` with Gaussian noise on the experiment's target.
+
+    The noise of each target column (``L``, or each joint's ``tau``) has a
+    standard deviation of ``level`` times that column's own standard
+    deviation. It is drawn from its own stream of ``seed``, so the samples
+    stay those of the clean data.
+    """
+    check_experiment(experiment)
+    if not (level >= 0 and math.isfinite(level)):
+        raise ValueError(f"noise level must be a finite number >= 0, got {level}")
+    rng = np.random.default_rng([seed, 0x6E6F6973])  # "nois"
+    L, tau = data.L, data.tau
+    if experiment == "direct":
+        target = data.target(experiment)
+        L = target + rng.normal(0.0, level * target.std(), target.shape)
+    else:
+        tau = tau + rng.normal(0.0, 1.0, tau.shape) * (level * tau.std(axis=0))
+    meta = {**data.meta, "noise": level}
+    return Dataset(data.q, data.qd, data.qdd, tau, L, data.system, f"{data.source} + {level:g} x std noise on {experiment} targets", meta)
+
+
 # -- helpers -------------------------------------------------------------------------
 
 def mse(prediction: np.ndarray, target: np.ndarray) -> float:

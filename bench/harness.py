@@ -65,6 +65,10 @@ class RunSpec:
         ``n_test`` samples from ``seed + TEST_SEED_OFFSET``.
     domain_half_width
         Sample q, qd, qdd from U(-w, w) instead of the system's default.
+    noise
+        Gaussian noise added to the training targets, as a fraction of each
+        target column's standard deviation (:func:`bench.data.add_noise`);
+        the test targets stay clean.
     rollout
         Measure the rollout error (:mod:`bench.rollout`) of simulated systems.
     plugins
@@ -87,10 +91,11 @@ class RunSpec:
     plugins: tuple[str, ...] = ()
     threads: int = 1
     rollout: bool = True
+    noise: float = 0.0
 
     @property
     def run_id(self) -> str:
-        return rec.run_id(self.system, self.method, self.experiment, self.seed)
+        return rec.run_id(self.system, self.method, self.experiment, self.seed, self.noise)
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -149,7 +154,17 @@ def method_config(spec: RunSpec) -> dict:
 
 
 def load_data(spec: RunSpec, system):
-    """Train and test data for ``spec`` (test is ``None`` when unavailable)."""
+    """Train and test data for ``spec`` (test is ``None`` when unavailable);
+    the training targets carry ``spec.noise``."""
+    from bench.data import add_noise
+
+    train, test = _clean_data(spec, system)
+    if spec.noise:
+        train = add_noise(train, spec.experiment, spec.noise, spec.seed)
+    return train, test
+
+
+def _clean_data(spec: RunSpec, system):
     from bench.data import generate, read_csv
 
     if spec.train_path:
@@ -407,11 +422,14 @@ def build_specs(
     experiments: Iterable[str],
     seeds: Iterable[int],
     budget_s: float,
+    noises: Iterable[float] = (0.0,),
     **common,
 ) -> list[RunSpec]:
+    """The matrix systems x methods x experiments x noise levels x seeds."""
+    noises = list(noises)
     return [
-        RunSpec(system=s, method=m, experiment=e, seed=k, budget_s=budget_s, **common)
-        for s in systems for m in methods for e in experiments for k in seeds
+        RunSpec(system=s, method=m, experiment=e, seed=k, budget_s=budget_s, noise=float(z), **common)
+        for s in systems for m in methods for e in experiments for z in noises for k in seeds
     ]
 
 

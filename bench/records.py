@@ -31,8 +31,9 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 _PACKAGES = ("torch", "numpy", "scipy", "sympy", "pandas", "deap", "pysr")
 
 
-def run_id(system: str, method: str, experiment: str, seed: int) -> str:
-    return f"{system}__{method}__{experiment}__seed{seed}"
+def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 0.0) -> str:
+    """``system__method__experiment__seedN``, with ``__noiseX`` when the targets are noisy."""
+    return f"{system}__{method}__{experiment}__seed{seed}" + (f"__noise{noise:g}" if noise else "")
 
 
 def record_path(out_dir: str | os.PathLike, rid: str) -> Path:
@@ -102,12 +103,13 @@ def new_record(spec: dict, status: str, **fields) -> dict:
         raise ValueError(f"unknown status {status!r}")
     record = {
         "schema": SCHEMA,
-        "run_id": run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"]),
+        "run_id": run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], spec.get("noise", 0.0)),
         "system": spec["system"],
         "method": spec["method"],
         "experiment": spec["experiment"],
         "seed": spec["seed"],
         "budget_s": spec["budget_s"],
+        "noise": spec.get("noise", 0.0),
         "target": "L" if spec["experiment"] == "direct" else "tau",
         "spec": spec,
         "status": status,

@@ -180,13 +180,14 @@ def build_tables(records: list[dict]) -> str:
     """
     groups = defaultdict(list)
     for r in expand_variants(records):
-        groups[(r["system"], r["experiment"])].append(r)
+        groups[(r["system"], r["experiment"], r.get("noise") or 0.0)].append(r)
     order = {"direct": 0, "indirect": 1}
     parts = ["# Results", "", _DEFINITIONS, ""]
-    for (system, experiment) in sorted(groups, key=lambda k: (k[0], order.get(k[1], 9), k[1])):
-        recs = groups[(system, experiment)]
+    for (system, experiment, noise) in sorted(groups, key=lambda k: (k[0], order.get(k[1], 9), k[1], k[2])):
+        recs = groups[(system, experiment, noise)]
         target = "L" if experiment == "direct" else "τ"
-        parts += [f"## {system}, {experiment} experiment (MSE of {target})", ""]
+        noisy = f", training targets with {noise * 100:g} % noise (test targets clean)" if noise else ""
+        parts += [f"## {system}, {experiment} experiment (MSE of {target}){noisy}", ""]
         parts += [line + "  " for line in _header(recs)]
         reference = _reference(system)
         if reference:

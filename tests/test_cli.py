@@ -87,6 +87,7 @@ def test_bad_csv_exits_2_with_one_line_and_writes_nothing(tmp_path, content, mes
         (["table", "nowhere"], "no records found"),
         (["fit", "--system", "double_pendulum", "--method", "mlp", "--experiment", "direct", "--test", "t.csv"],
          "--test needs --train"),
+        (["run", "--methods", "mlp", "--noise", "-0.1", "--out", "x"], "a noise level is a fraction"),
     ],
 )
 def test_bad_arguments_exit_2_with_one_line(tmp_path, args, message):
@@ -108,3 +109,14 @@ def test_run_writes_records_and_tables_and_resumes(tmp_path):
     assert "[8/8 done" in r.stdout
     again = cli(*args)
     assert "8 run(s) already have records" in again.stdout and "0 run(s) to do" in again.stdout
+
+
+def test_noise_levels_are_a_dimension_of_the_matrix(tmp_path):
+    out = tmp_path / "n"
+    r = cli("run", "--methods", "sysid", "--experiments", "indirect", "--seeds", "0", "--budget", "2", "--smoke",
+            "--n-train", "64", "--n-test", "32", "--noise", "0", "0.1", "--no-rollout", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    names = sorted(p.name for p in (out / "records").glob("*.json"))
+    assert names == ["double_pendulum__sysid__indirect__seed0.json", "double_pendulum__sysid__indirect__seed0__noise0.1.json"]
+    table = (out / "tables.md").read_text()
+    assert "## double_pendulum, indirect experiment (MSE of τ), training targets with 10 % noise (test targets clean)" in table

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from bench.data import DataError, Dataset, generate, read_csv, write_csv
+from bench.data import DataError, Dataset, add_noise, generate, read_csv, write_csv
 
 
 def test_generation_is_a_pure_cached_function(double_pendulum, tmp_path, monkeypatch):
@@ -124,3 +124,18 @@ def test_train_and_test_come_from_different_seeds():
     train, test = load_data(spec, make_system(spec))
     assert train.source.endswith("seed=3") and test.source.endswith("seed=1003")
     assert not np.isin(test.q[:, 0], train.q[:, 0]).any()
+
+
+@pytest.mark.parametrize("experiment", ["direct", "indirect"])
+def test_noise_is_a_stated_fraction_of_each_targets_std(double_pendulum, experiment):
+    clean = generate(double_pendulum, 20000, 0)
+    noisy = add_noise(clean, experiment, 0.1, seed=3)
+    target, noisy_target = clean.target(experiment), noisy.target(experiment)
+    ratio = (noisy_target - target).std(axis=0) / target.std(axis=0)
+    np.testing.assert_allclose(ratio, 0.1, rtol=0.03)
+    np.testing.assert_array_equal(noisy.q, clean.q)
+    other = "tau" if experiment == "direct" else "L"
+    np.testing.assert_array_equal(getattr(noisy, other), getattr(clean, other))
+    np.testing.assert_array_equal(add_noise(clean, experiment, 0.1, seed=3).target(experiment), noisy_target)
+    assert not np.array_equal(add_noise(clean, experiment, 0.1, seed=4).target(experiment), noisy_target)
+    assert noisy.meta["noise"] == 0.1 and "0.1 x std noise" in noisy.source
