@@ -166,21 +166,31 @@ def expand_variants(records: list[dict]) -> list[dict]:
     for r in records:
         out.append(r)
         for name, scores in (r.get("details") or {}).get("variants", {}).items():
-            blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None}
+            blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None,
+                     "curve": [], "rollout": None}  # a variant has no training curve or rollout of its own
             v = {**r, **blank, "method": f"{r['method']}+{name}", "status": "ok", **scores, "details": {}}
             out.append(v)
     return out
 
 
-def build_tables(records: list[dict]) -> str:
-    """All tables, one section per (system, experiment), as one markdown document.
-
-    A method's variants (such as a refined equation) get columns of their own,
-    named ``<method>+<variant>``.
-    """
+def section_groups(records: list[dict]) -> dict[tuple, list[dict]]:
+    """Records by (system, experiment, noise), variants expanded."""
     groups = defaultdict(list)
     for r in expand_variants(records):
         groups[(r["system"], r["experiment"], r.get("noise") or 0.0)].append(r)
+    return groups
+
+
+def build_tables(records: list[dict], plots: dict[tuple, str] | None = None) -> str:
+    """All tables, one section per (system, experiment, noise level), as one
+    markdown document.
+
+    A method's variants (such as a refined equation) get columns of their own,
+    named ``<method>+<variant>``. ``plots`` maps a section's key to an image
+    file (relative to the document) embedded under its table.
+    """
+    plots = plots or {}
+    groups = section_groups(records)
     order = {"direct": 0, "indirect": 1}
     parts = ["# Results", "", _DEFINITIONS, ""]
     for (system, experiment, noise) in sorted(groups, key=lambda k: (k[0], order.get(k[1], 9), k[1], k[2])):
@@ -193,6 +203,8 @@ def build_tables(records: list[dict]) -> str:
         if reference:
             parts += ["", f"Reference: {reference}"]
         parts += ["", build_table(recs), ""]
+        if (system, experiment, noise) in plots:
+            parts += [f"![convergence: {system}, {experiment}]({plots[(system, experiment, noise)]})", ""]
     return "\n".join(parts).rstrip() + "\n"
 
 
@@ -219,11 +231,25 @@ _DEFINITIONS = (
 )
 
 
-def write_tables(out_dir: str | Path, filename: str = "tables.md") -> str:
-    """Build the tables from ``out_dir``'s records and write ``out_dir/filename`` atomically."""
+def write_plots(records: list[dict], out_dir: str | Path) -> dict[tuple, str]:
+    """Convergence plots (:mod:`bench.plots`) next to the tables, by section key."""
+    from bench.plots import convergence_plot, plot_name
+
+    made = {}
+    for (system, experiment, noise), recs in section_groups(records).items():
+        name = plot_name(system, experiment, noise)
+        title = f"{system}, {experiment}" + (f", {noise * 100:g} % noise" if noise else "")
+        if convergence_plot(recs, Path(out_dir) / name, title):
+            made[(system, experiment, noise)] = name
+    return made
+
+
+def write_tables(out_dir: str | Path, filename: str = "tables.md", plots: bool = True) -> str:
+    """Build the tables (and, with ``plots``, the convergence plots) from
+    ``out_dir``'s records and write them into ``out_dir`` atomically."""
     records = read_records(out_dir)
     if not records:
         raise FileNotFoundError(f"{out_dir}: no records found (expected {Path(out_dir) / 'records' / '*.json'})")
-    text = build_tables(records)
+    text = build_tables(records, write_plots(records, out_dir) if plots else None)
     atomic_write(Path(out_dir) / filename, lambda f: f.write(text))
     return text
