@@ -113,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--noise", type=_noise_level, nargs="+", default=[0.0], metavar="LEVEL",
                    help="Gaussian noise on the training targets as a fraction of their std; several levels "
                         "add a dimension to the matrix, e.g. --noise 0 0.01 0.1 (default 0)")
+    r.add_argument("--cluster", default=None, metavar="local|ADDRESS",
+                   help="run on Dask distributed: 'local' starts a LocalCluster of --workers processes; "
+                        "tcp://host:8786 uses a running scheduler (needs the 'dask' extra)")
     r.add_argument("--no-rollout", action="store_true",
                    help="skip the rollout error of simulated systems (integrating each model's dynamics for 1 s)")
     r.add_argument("--plugin", action="append", default=[], help="a .py file or module registering extra methods/systems")
@@ -200,7 +203,7 @@ def cmd_run(args) -> int:
     for spec in specs:  # fail fast on a bad override, before any process starts
         if spec.method in METHODS and METHODS.entry(spec.method).available:
             METHODS[spec.method](**harness.method_config(spec))
-    harness.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume)
+    harness.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume, cluster=args.cluster)
     text = write_tables(args.out)
     print(f"tables written to {args.out / 'tables.md'}")
     print(text)

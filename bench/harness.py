@@ -444,12 +444,21 @@ def run_matrix(
     workers: int | None = None,
     resume: bool = True,
     report: Callable[[str], None] | None = None,
+    cluster=None,
 ) -> list[dict]:
     """Run every spec, ``workers`` at a time, each in its own process.
 
     Runs that already have a record in ``out_dir`` are skipped (``resume``).
     Unavailable and not-applicable runs are recorded without starting a process.
     Returns the records in the order of ``specs``.
+
+    ``cluster`` hands the runs to Dask distributed instead of the local pool:
+    ``"local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
+    processes; a scheduler address (``"tcp://host:8786"``), a Dask cluster
+    object (``dask_jobqueue.SLURMCluster(...)``) or a ``Client`` uses that.
+    Each Dask task runs :func:`run_isolated` on its worker, in a scratch
+    directory there, and returns the record, which is written here; workers
+    need the suite installed, not a shared file system.
     """
     import_plugins({p for s in specs for p in s.plugins})
     report = report if report is not None else _print_now
@@ -475,12 +484,52 @@ def run_matrix(
     if report and cannot_run:
         report(f"{cannot_run} run(s) recorded without running (method unavailable here or not applicable)")
     tracker = _MatrixProgress(len(todo), resumed, workers, report)
-    if todo:
+    if todo and cluster is not None:
+        for record in _run_on_dask(todo, out_dir, cluster, workers, tracker):
+            results[record["run_id"]] = record
+    elif todo:
         with ThreadPoolExecutor(max_workers=workers) as pool:
             for record in pool.map(lambda s: tracker.done(run_isolated(s, out_dir)), todo):
                 results[record["run_id"]] = record
     tracker.summary()
     return [results[s.run_id] for s in specs]
+
+
+def run_remote(spec_dict: dict) -> dict:
+    """A Dask task: :func:`run_isolated` in a scratch directory; returns the record."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="syrenets-bench-") as scratch:
+        return run_isolated(RunSpec.from_dict(spec_dict), scratch)
+
+
+def _run_on_dask(todo: list[RunSpec], out_dir: Path, cluster, workers: int, tracker) -> Iterable[dict]:
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise UserError("--cluster needs Dask distributed: pip install 'syrenets-bench[dask]'") from None
+    own = None
+    if cluster == "local":
+        own = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(own)
+    elif isinstance(cluster, Client):
+        client = cluster
+    else:
+        try:
+            client = Client(cluster, timeout="30s")
+        except OSError as exc:
+            raise UserError(f"cannot reach the Dask scheduler {cluster}: {exc}") from None
+    try:
+        futures = [client.submit(run_remote, s.to_dict(), key=f"bench-{s.run_id}-{time.time_ns()}", pure=False) for s in todo]
+        for future in as_completed(futures):
+            record = future.result()
+            rec.write_record(rec.record_path(out_dir, record["run_id"]), record)
+            yield tracker.done(record)
+    finally:
+        if client is not cluster:
+            client.close()
+        if own is not None:
+            own.close()
 
 
 def _print_now(line: str) -> None:

@@ -105,3 +105,16 @@ def test_measured_systems_use_their_packaged_splits_and_skip_the_direct_experime
     assert harness.preflight(indirect) is None
     train, test = harness.load_data(indirect, harness.make_system(indirect))
     assert len(train) == 2459 and len(test) == 454 and "characters eqv" in test.source
+
+
+def test_matrix_on_a_real_dask_local_cluster(tmp_path):
+    pytest.importorskip("distributed")
+    todo = specs(["toy_constant", "toy_crasher"], seeds=(0, 1), budget=10.0, rollout=False)
+    lines = []
+    records = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
+    assert [r["run_id"] for r in records] == [s.run_id for s in todo]
+    assert [r["status"] for r in records] == ["ok", "ok", "failed", "failed"]
+    assert records[2]["error"] == "RuntimeError: the toy fell over"
+    assert len(read_records(tmp_path)) == 4 and any(line.startswith("[4/4 done, 2 not ok") for line in lines)
+    again = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
+    assert [r["provenance"] for r in again] == [r["provenance"] for r in records]  # resumed, not run again
