@@ -15,7 +15,7 @@ TORCH_INDEX ?=
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: bench test benchmark paper clean-venv
+.PHONY: bench test benchmark paper leaderboard clean-venv
 
 $(STAMP): pyproject.toml Makefile
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -35,6 +35,13 @@ benchmark: $(STAMP)
 # The published double pendulum tables: every method, 10 seeds, 60 s per run.
 paper: $(STAMP)
 	$(BIN)/python -m bench run --systems double_pendulum --n-seeds 10 --budget 60 --workers 2 --out results/double_pendulum_60s
+
+# The published leaderboard (results/README.md): every system and method, both
+# experiments where they apply, 10 seeds; about an hour on 2 cores.
+LEADERBOARD_BUDGET ?= 5
+leaderboard: $(STAMP)
+	$(BIN)/python -m bench run --systems all --n-seeds 10 --budget $(LEADERBOARD_BUDGET) --workers 2 --out results/leaderboard
+	$(BIN)/python -m bench.leaderboard results/leaderboard --commentary results/commentary.md --out results/README.md
 
 clean-venv:
 	rm -rf $(VENV)

@@ -92,7 +92,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_parser("list", help="list systems and methods, with availability")
 
     r = sub.add_parser("run", help="run a matrix of systems x methods x experiments x seeds and write tables")
-    r.add_argument("--systems", type=_csv_list, default=["double_pendulum"], help="comma-separated (default: double_pendulum)")
+    r.add_argument("--systems", type=_csv_list, default=["double_pendulum"],
+                   help="comma-separated, or 'all' (default: double_pendulum)")
     r.add_argument("--methods", type=_csv_list, default=None, help="comma-separated (default: all registered)")
     r.add_argument("--experiments", type=_csv_list, default=["direct", "indirect"], help="direct,indirect (default: both)")
     seeds = r.add_mutually_exclusive_group()
@@ -187,7 +188,11 @@ def cmd_run(args) -> int:
     from methods import METHODS
 
     harness.import_plugins(args.plugin)
+    from systems import SYSTEMS
+
     methods = args.methods or METHODS.names()
+    if args.systems == ["all"]:
+        args.systems = SYSTEMS.names()
     _check_names(args.systems, methods, args.experiments)
     seeds = args.seeds if args.seeds is not None else list(harness.SEEDS[: args.n_seeds])
     specs = harness.build_specs(

@@ -1,0 +1,90 @@
+"""Build the published leaderboard, ``results/README.md``, from records.
+
+The leaderboard is the tables of one run directory (every system, method and
+experiment; :mod:`bench.tables`) with their convergence plots, interleaved
+with a commentary: a markdown file whose ``## `` headings name the table
+sections they comment on (``## double_pendulum, direct``) plus an
+``## Introduction`` that comes first and an ``## Afterword`` that comes last.
+Tables without a paragraph are listed on the console, so none goes
+unexplained by accident. Usage::
+
+    python -m bench.leaderboard results/leaderboard --commentary results/commentary.md --out results/README.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+from pathlib import Path
+
+from bench.errors import UserError
+from bench.fileio import atomic_write
+from bench.records import read_records
+from bench.tables import build_tables, write_plots
+
+
+def read_commentary(path: Path) -> dict[str, str]:
+    """``{heading: paragraph}`` of a commentary file."""
+    if not path.is_file():
+        raise UserError(f"{path}: no such commentary file")
+    sections, key = {}, None
+    for line in path.read_text().splitlines():
+        m = re.match(r"^## (.+?)\s*$", line)
+        if m:
+            key = m.group(1)
+            sections[key] = []
+        elif key is not None:
+            sections[key].append(line)
+    return {k: "\n".join(v).strip() for k, v in sections.items()}
+
+
+def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, list[str]]:
+    """The leaderboard text and the table sections that have no commentary."""
+    records = read_records(run_dir)
+    if not records:
+        raise UserError(f"{run_dir}: no records found")
+    rel = Path(os.path.relpath(run_dir, out.parent))
+    plots = {k: str(rel / v) for k, v in write_plots(records, run_dir).items()}
+    tables = build_tables(records, plots)
+    body = tables.split("\n", 1)[1]  # drop the "# Results" title
+    parts, missing = [], []
+    for chunk in re.split(r"(?m)^(?=## )", body):
+        m = re.match(r"## (\S+), (\w+) experiment", chunk)
+        if m:
+            key = f"{m.group(1)}, {m.group(2)}"
+            noisy = "noise" in chunk.splitlines()[0]
+            text = commentary.get(key) if not noisy else commentary.get(chunk.splitlines()[0][3:])
+            head, _, rest = chunk.partition("\n")
+            if text:
+                chunk = f"{head}\n\n{text}\n{rest}"
+            else:
+                missing.append(key)
+        parts.append(chunk)
+    intro = commentary.get("Introduction", "")
+    after = commentary.get("Afterword", "")
+    text = "# Leaderboard\n\n" + (intro + "\n\n" if intro else "") + "".join(parts).rstrip() + "\n"
+    if after:
+        text += "\n## Afterword\n\n" + after + "\n"
+    return text, missing
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench.leaderboard", description=__doc__.split("\n\n")[0])
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--commentary", type=Path, default=Path("results/commentary.md"))
+    parser.add_argument("--out", type=Path, default=Path("results/README.md"))
+    args = parser.parse_args(argv)
+    try:
+        text, missing = build(args.run_dir, read_commentary(args.commentary), args.out)
+    except UserError as exc:
+        parser.exit(2, f"python -m bench.leaderboard: error: {exc}\n")
+    atomic_write(args.out, lambda f: f.write(text))
+    for key in missing:
+        print(f"no commentary for the table '{key}' (add '## {key}' to {args.commentary})")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
