@@ -131,6 +131,29 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--seed", type=int, required=True)
     d.add_argument("--out", type=Path, required=True, help="CSV file to write")
     d.add_argument("--domain-half-width", type=_positive, default=None)
+    d.add_argument("--effects", nargs="+", default=[], metavar="NAME=c1,...,cn",
+                   help="add effects the system does not declare, one coefficient per joint: viscous_friction, "
+                        "coulomb_friction, armature, spring, offset (e.g. viscous_friction=0.8,0.5)")
+    d.add_argument("--noise", type=_noise_level, default=0.0,
+                   help="Gaussian noise on tau as a fraction of each joint's torque std (default 0)")
+
+    res = sub.add_parser("residual", help="fit, trace the torque residual to missing effects, add them, refit; "
+                                          "report the error before and after")
+    res.add_argument("--system", required=True)
+    res.add_argument("--method", required=True)
+    res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
+    res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
+    res.add_argument("--budget", type=_positive, default=60.0, help="seconds per fit of the method (default 60)")
+    res.add_argument("--seed", type=int, default=0)
+    res.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE")
+    res.add_argument("--json", type=Path, default=None, help="write the result here (see the README for its keys)")
+    res.add_argument("--report", type=Path, default=None, help="write a markdown report with residual plots here")
+
+    cv = sub.add_parser("convert", help="turn a raw recording into the suite's CSV format")
+    cv.add_argument("--format", required=True, choices=["dfki"], help="the recording's format")
+    cv.add_argument("raw", type=Path, help="the raw recording (CSV, may be gzipped)")
+    cv.add_argument("--out", type=Path, required=True, help="CSV file to write")
+    cv.add_argument("--cutoff-hz", type=_positive, default=None, help="low-pass cut-off (default: the documented one)")
 
     f = sub.add_parser("fit", help="one run on your own CSV data or on generated data; prints a one-line summary")
     f.add_argument("--system", required=True)
@@ -232,11 +255,87 @@ def cmd_data(args) -> int:
 
     cls = SYSTEMS[args.system]
     system = cls()
+    if not system.simulated:
+        raise UsageError(f"{args.system} is measured; its data come with the suite (python -m bench residual --system {args.system} ...)")
     if args.domain_half_width:
         system = cls(domain=system.scaled_domain(args.domain_half_width))
+    effects = {}
+    if args.effects:
+        from bench.effects import parse_effects
+
+        effects = parse_effects(args.effects, system.dof)
     data = generate(system, args.n, args.seed)
+    if effects:
+        from bench.effects import add_effects
+
+        data = add_effects(data, effects)
+    if args.noise:
+        from bench.data import add_noise
+
+        data = add_noise(data, "indirect", args.noise, args.seed)
     write_csv(data, args.out)
-    print(f"wrote {len(data)} samples of {args.system} (seed {args.seed}) to {args.out}")
+    extra = "".join([f", undeclared {', '.join(args.effects)}" if effects else "",
+                     f", {args.noise:g} x std noise on tau" if args.noise else ""])
+    print(f"wrote {len(data)} samples of {args.system} (seed {args.seed}{extra}) to {args.out}")
+    return 0
+
+
+def cmd_residual(args) -> int:
+    from bench.data import read_csv
+    from bench.residual import residual_loop, write_outputs
+    from methods import METHODS
+    from systems import SYSTEMS
+
+    _check_names([args.system], [args.method], [])
+    system = SYSTEMS[args.system]()
+    entry = METHODS.entry(args.method)
+    if not entry.available:
+        raise UsageError(f"method {args.method} is unavailable: {entry.unavailable_reason()}")
+    reason = entry.obj.not_applicable_reason("indirect")
+    if reason:
+        raise UsageError(f"method {args.method} cannot run the loop, which fits torques: {reason}")
+    METHODS[args.method](**dict(args.overrides))  # bad hyperparameters: exit 2 now
+    if args.train:
+        train = read_csv(args.train, dof=system.dof, system=system.name)
+        test = read_csv(args.test, dof=system.dof, system=system.name) if args.test else None
+    elif not system.simulated:
+        train, test = system.load("train"), system.load("test")
+    else:
+        raise UsageError(f"{args.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
+    if args.json is None and args.report is None:
+        print("note: neither --json nor --report given; the result is only printed")
+    result = residual_loop(args.method, train, test, budget_s=args.budget, seed=args.seed,
+                           hyperparameters=dict(args.overrides), report=_print_now)
+    write_outputs(result, train, test, args.json, args.report)
+    b, a = result["mse_before"], result["mse_after"]
+    print(f"torque MSE before: train {b['train']:.4g}, test {_maybe(b['test'])}; after: train {a['train']:.4g}, test {_maybe(a['test'])}")
+    for e in result["effects"]:
+        what = e.get("expression") or e["name"]
+        print(f"  {what} on joint {e['joint']}: {e['coefficient']:.6g} ± {e['stderr']:.2g}")
+    if not result["effects"]:
+        print("  no effect added: nothing significant in the residual")
+    return 0
+
+
+def _maybe(x) -> str:
+    return "n/a" if x is None else f"{x:.4g}"
+
+
+def _print_now(line: str) -> None:
+    print(line, flush=True)
+
+
+def cmd_convert(args) -> int:
+    import dataclasses
+
+    from bench.data import Dataset, write_csv
+    from systems.dfki_double_pendulum import DEFAULT_FILTER, preprocess, read_raw
+
+    spec = DEFAULT_FILTER if args.cutoff_hz is None else dataclasses.replace(DEFAULT_FILTER, cutoff_hz=args.cutoff_hz)
+    s = preprocess(read_raw(args.raw), spec)
+    write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, "dfki_double_pendulum", str(args.raw)), args.out)
+    print(f"wrote {len(s['q'])} samples to {args.out} (zero-phase Butterworth order {spec.order} at {spec.cutoff_hz:g} Hz, "
+          f"dt {spec.dt * 1000:g} ms, {spec.trim_s:g} s trimmed, every {spec.decimate}th sample)")
     return 0
 
 
@@ -284,7 +383,8 @@ def summary_line(record: dict) -> str:
     )
 
 
-COMMANDS = {"list": cmd_list, "run": cmd_run, "table": cmd_table, "data": cmd_data, "fit": cmd_fit}
+COMMANDS = {"list": cmd_list, "run": cmd_run, "table": cmd_table, "data": cmd_data, "fit": cmd_fit,
+            "residual": cmd_residual, "convert": cmd_convert}
 
 
 def main(argv: list[str] | None = None) -> int:
