@@ -3,8 +3,9 @@
 The leaderboard is the tables of one run directory (every system, method and
 experiment; :mod:`bench.tables`) with their convergence plots, interleaved
 with a commentary: a markdown file whose ``## `` headings name the table
-sections they comment on (``## double_pendulum, direct``) plus an
-``## Introduction`` that comes first and an ``## Afterword`` that comes last.
+sections they comment on (``## double_pendulum, direct``), plus an
+``## Introduction`` that comes first; any other heading becomes a section of
+its own after the tables, in the file's order.
 Tables without a paragraph are listed on the console, so none goes
 unexplained by accident. Usage::
 
@@ -48,13 +49,15 @@ def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, li
     plots = {k: str(rel / v) for k, v in write_plots(records, run_dir).items()}
     tables = build_tables(records, plots)
     body = tables.split("\n", 1)[1]  # drop the "# Results" title
-    parts, missing = [], []
+    parts, missing, used = [], [], {"Introduction"}
     for chunk in re.split(r"(?m)^(?=## )", body):
         m = re.match(r"## (\S+), (\w+) experiment", chunk)
         if m:
             key = f"{m.group(1)}, {m.group(2)}"
             noisy = "noise" in chunk.splitlines()[0]
-            text = commentary.get(key) if not noisy else commentary.get(chunk.splitlines()[0][3:])
+            lookup = key if not noisy else chunk.splitlines()[0][3:]
+            text = commentary.get(lookup)
+            used.add(lookup)
             head, _, rest = chunk.partition("\n")
             if text:
                 chunk = f"{head}\n\n{text}\n{rest}"
@@ -62,10 +65,10 @@ def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, li
                 missing.append(key)
         parts.append(chunk)
     intro = commentary.get("Introduction", "")
-    after = commentary.get("Afterword", "")
     text = "# Leaderboard\n\n" + (intro + "\n\n" if intro else "") + "".join(parts).rstrip() + "\n"
-    if after:
-        text += "\n## Afterword\n\n" + after + "\n"
+    for heading, paragraph in commentary.items():
+        if heading not in used:
+            text += f"\n## {heading}\n\n{paragraph}\n"
     return text, missing
 
 

@@ -18,7 +18,7 @@ def test_commentary_goes_under_its_table_and_missing_ones_are_named(tmp_path):
         write(run_dir, "double_pendulum", "direct", "mlp", seed)
         write(run_dir, "single_pendulum", "indirect", "mlp", seed)
     notes = tmp_path / "commentary.md"
-    notes.write_text("## Introduction\nRead me first.\n\n## double_pendulum, direct\nThe MLP learns.\n\n## Afterword\nBye.\n")
+    notes.write_text("## Introduction\nRead me first.\n\n## double_pendulum, direct\nThe MLP learns.\n\n## More runs\nBye.\n")
     text, missing = build(run_dir, read_commentary(notes), tmp_path / "results" / "README.md")
     assert text.startswith("# Leaderboard\n\nRead me first.")
     section = text.split("## double_pendulum, direct experiment")[1].split("## single_pendulum")[0]
@@ -26,4 +26,4 @@ def test_commentary_goes_under_its_table_and_missing_ones_are_named(tmp_path):
     assert "![convergence: double_pendulum, direct](lb/convergence_double_pendulum_direct.png)" in section
     assert (run_dir / "convergence_double_pendulum_direct.png").is_file()
     assert missing == ["single_pendulum, indirect"]
-    assert text.rstrip().endswith("Bye.")
+    assert text.rstrip().endswith("## More runs\n\nBye.")
