@@ -24,7 +24,7 @@ def test_statuses_for_every_way_a_run_can_end(tmp_path):
     todo = specs(["toy_constant", "toy_sleeper", "toy_crasher", "toy_exit", "toy_nan", "toy_unavailable", "toy_direct_only"])
     t0 = time.monotonic()
     records = {r["method"]: r for r in harness.run_matrix(todo, tmp_path, workers=2, report=harness.quiet)}
-    assert time.monotonic() - t0 < 60
+    assert time.monotonic() - t0 < 120  # the sleeper is killed, not waited for
     assert records["toy_constant"]["status"] == "ok"
     assert records["toy_constant"]["train_mse"] > 0 and records["toy_constant"]["test_mse"] > 0
     assert records["toy_sleeper"]["status"] == "timeout"
