@@ -94,7 +94,7 @@ def _operon_infix(gene, variable_index) -> str:
             op = {"add": "+", "sub": "-", "mul": "*"}[node.name]
             stack.append(f"({args[0]} {op} {args[1]})")
         elif node.name == "sqrt":
-            stack.append(f"sqrtabs({args[0]})")
+            stack.append(f"sqrt(abs({args[0]}))")
         elif node.name == "cube":
             stack.append(f"({args[0]} ^ 3)")
         else:
