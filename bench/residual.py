@@ -29,7 +29,9 @@ Each round:
    methods are refitted on the targets with the effects' torques taken off;
    then a symbolic model's terms and the effects' coefficients are refitted
    together by linear least squares (``g`` is linear in ``L``), and a neural
-   model's effects on what it leaves (backfitting).
+   model's effects on what it leaves (backfitting). A symbolic model of more
+   than :data:`MAX_SYMBOLIC_TERMS` terms (SyReNets' full equation) is treated
+   like a neural one.
 6. **Repeat** until a round accepts nothing.
 
 Statistics
@@ -70,6 +72,9 @@ MIN_T = 5.0
 MIN_HELDOUT_GAIN = 0.01
 ROUNDOFF = 1e-20
 MAX_ROUNDS = 6
+#: a symbolic model with more terms than this is refitted like a neural one
+#: (a least-squares refit of thousands of terms is neither fast nor meaningful)
+MAX_SYMBOLIC_TERMS = 200
 
 
 @dataclass(frozen=True)
@@ -339,6 +344,8 @@ def _lagrangian_columns(rigid, data: Dataset) -> tuple[list[sympy.Expr], np.ndar
     if expr is None:
         return None
     basis = _terms(expr)
+    if len(basis) > MAX_SYMBOLIC_TERMS:
+        return None
     return basis, regression.design_matrix(basis, data, "indirect")
 
 
@@ -406,7 +413,8 @@ def _is_symbolic(rigid) -> bool:
     if isinstance(rigid, ParametricModel):
         return False
     expression = getattr(rigid, "expression", None)
-    return expression is not None and expression() is not None
+    expr = expression() if expression is not None else None
+    return expr is not None and len(_terms(expr)) <= MAX_SYMBOLIC_TERMS
 
 
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float = 60.0, seed: int = 0,

@@ -169,3 +169,20 @@ def test_cli_converts_a_raw_dfki_recording(tmp_path):
     data = read_csv(tmp_path / "t.csv", dof=2)
     expected = get_system("dfki_double_pendulum").load("test")
     np.testing.assert_allclose(data.qdd, expected.qdd[: len(data)], rtol=1e-12, atol=1e-12)
+
+
+def test_a_huge_symbolic_model_is_refitted_like_a_neural_one():
+    import sympy
+
+    from bench import residual
+    from bench.symbolic import coordinate_symbols
+
+    (q1, q2), (v1, v2) = coordinate_symbols(2)
+    huge = sympy.Add(*[sympy.cos(k * q1) * v1**2 for k in range(1, residual.MAX_SYMBOLIC_TERMS + 2)])
+
+    class Model:
+        def expression(self):
+            return huge
+
+    data = generate(get_system("double_pendulum"), 20, 0)
+    assert residual._lagrangian_columns(Model(), data) is None and not residual._is_symbolic(Model())
