@@ -199,7 +199,8 @@ def trace(target: np.ndarray, data: Dataset, pool: list[Candidate], fixed: np.nd
         gain = (before - after) / before if before > 0 else 0.0
         t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
         ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= MIN_HELDOUT_GAIN
-        steps.append({"candidate": c.label(), "bic_drop": best["bic_drop"], "t": t, "heldout_gain": gain, "accepted": ok})
+        steps.append({"candidate": c.label(), "bic_drop": best["bic_drop"], "t": t if math.isfinite(t) else None,
+                      "heldout_gain": gain, "accepted": ok})
         if not ok:
             break
         accepted.append(c)
@@ -300,12 +301,15 @@ def _polish(rigid: ParametricModel, train: Dataset, seed: int) -> "LoopModel":
     starts = [rigid.theta] + [10 ** rng.uniform(-2, 1, len(rigid.theta)) for _ in range(POLISH_STARTS)]
     best, best_rss = None, math.inf
     for theta in starts:
-        fit = _nonlinear_fit(ParametricModel(rigid.form, theta), train, [], [])
+        try:
+            fit = _nonlinear_fit(ParametricModel(rigid.form, theta), train, [], [])
+        except (ValueError, np.linalg.LinAlgError):  # a start where the form is not finite
+            continue
         r = fit.predict_torque(train) - train.tau
         rss = float(np.sum(r * r))
         if math.isfinite(rss) and rss < best_rss:
             best, best_rss = fit, rss
-    return best
+    return best if best is not None else LoopModel(rigid, [], np.zeros(0), np.zeros(0))
 
 
 def _as_parametric(fitted):
@@ -565,7 +569,7 @@ def report(result: dict, plot_name: str | None = None) -> str:
         added = ", ".join(r["accepted"]) or "nothing"
         removed = f"; dropped as redundant: {', '.join(r['removed'])}" if r.get("removed") else ""
         last = next((t for t in reversed(r["trace"]) if "candidate" in t and not t["accepted"]), None)
-        why = (f" (best rejected: {last['candidate']}, BIC drop {last['bic_drop']:.3g}, |t| {last['t']:.3g}, "
+        why = (f" (best rejected: {last['candidate']}, BIC drop {last['bic_drop']:.3g}, |t| {'∞' if last['t'] is None else format(last['t'], '.3g')}, "
                f"held-out gain {last['heldout_gain']:.2%})") if last else ""
         lines.append(f"- round {r['round']}: test MSE {cell(r['mse']['test'])}; added {added}{removed}{why}")
     if plot_name:
