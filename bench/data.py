@@ -170,6 +170,43 @@ def write_csv(data: Dataset, path: str | os.PathLike) -> None:
     atomic_write(Path(path), lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
 
 
+def read_frame(path: Path):
+    """A CSV file (optionally compressed) as a DataFrame with at least one row;
+    :class:`DataError` naming the file otherwise."""
+    import pandas as pd
+
+    if not path.is_file():
+        raise DataError(f"{path}: no such file")
+    try:
+        frame = pd.read_csv(path)
+    except pd.errors.EmptyDataError:
+        raise DataError(f"{path}: the file is empty") from None
+    except (pd.errors.ParserError, UnicodeDecodeError, ValueError, EOFError, OSError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DataError(f"{path}: not a readable CSV file ({first})") from None
+    if len(frame) == 0:
+        raise DataError(f"{path}: the file has a header but no rows")
+    return frame
+
+
+def numeric_column(frame, col: str, path: Path) -> np.ndarray:
+    """Column ``col`` as float64; :class:`DataError` naming the file, column and
+    data row of the first non-numeric, NaN, empty or infinite value."""
+    import pandas as pd
+
+    values = pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=np.float64)
+    bad_text = np.isnan(values) & frame[col].notna().to_numpy()
+    if bad_text.any():
+        row = int(np.flatnonzero(bad_text)[0])
+        raise DataError(f"{path}: column {col} has a non-numeric value {frame[col].iloc[row]!r} in data row {row + 1}")
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        what = "NaN or empty" if np.isnan(values[row]) else "inf"
+        raise DataError(f"{path}: column {col} has a {what} value in data row {row + 1}")
+    return values
+
+
 def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | None = None) -> Dataset:
     """Load a CSV in the suite's format, checking it thoroughly.
 
@@ -177,20 +214,8 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
     problem for: an unreadable or empty file, missing columns, a number of
     degrees of freedom other than ``dof``, non-numeric, NaN or infinite values.
     """
-    import pandas as pd
-
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: no such file")
-    try:
-        frame = pd.read_csv(path)
-    except pd.errors.EmptyDataError:
-        raise DataError(f"{path}: the file is empty") from None
-    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DataError(f"{path}: not a readable CSV file ({first})") from None
-    if len(frame) == 0:
-        raise DataError(f"{path}: the file has a header but no rows")
+    frame = read_frame(path)
 
     found: dict[str, set[int]] = {k: set() for k in ("q", "qd", "qdd", "tau")}
     for col in frame.columns:
@@ -209,17 +234,7 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
         raise DataError(f"{path}: missing column(s) {', '.join(missing)}")
 
     def numeric(col: str) -> np.ndarray:
-        values = pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=np.float64)
-        bad_text = np.isnan(values) & frame[col].notna().to_numpy()
-        if bad_text.any():
-            row = int(np.flatnonzero(bad_text)[0])
-            raise DataError(f"{path}: column {col} has a non-numeric value {frame[col].iloc[row]!r} in data row {row + 1}")
-        bad = ~np.isfinite(values)
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0])
-            what = "NaN or empty" if np.isnan(values[row]) else "inf"
-            raise DataError(f"{path}: column {col} has a {what} value in data row {row + 1}")
-        return values
+        return numeric_column(frame, col, path)
 
     arrays = {k: np.stack([numeric(f"{k}_{i}") for i in range(1, file_dof + 1)], axis=1) for k in found}
     L = numeric("L") if "L" in frame.columns else None

@@ -62,7 +62,7 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-from bench.data import DataError, Dataset
+from bench.data import DataError, Dataset, numeric_column, read_frame
 from systems.base import SYSTEMS, System
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -130,25 +130,11 @@ def read_raw(path: str | Path):
     import pandas as pd
 
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: no such file")
-    try:
-        frame = pd.read_csv(path)
-    except pd.errors.EmptyDataError:
-        raise DataError(f"{path}: the file is empty") from None
-    except (pd.errors.ParserError, UnicodeDecodeError, ValueError, EOFError, OSError) as exc:
-        raise DataError(f"{path}: not a readable CSV file ({type(exc).__name__}: {str(exc).strip()[:120]})") from None
+    frame = read_frame(path)
     missing = [c for c in RAW_COLUMNS if c not in frame.columns]
     if missing:
         raise DataError(f"{path}: missing column(s) {', '.join(missing)} of a DFKI recording")
-    out = {}
-    for col in RAW_COLUMNS:
-        values = pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=np.float64)
-        bad = ~np.isfinite(values)
-        if bad.any():
-            row = int(np.flatnonzero(bad)[0])
-            raise DataError(f"{path}: column {col} has a non-numeric or non-finite value {frame[col].iloc[row]!r} in data row {row + 1}")
-        out[col] = values
+    out = {col: numeric_column(frame, col, path) for col in RAW_COLUMNS}
     if len(out["time"]) < 16:
         raise DataError(f"{path}: {len(out['time'])} rows are too few for a trajectory")
     if np.any(np.diff(out["time"]) <= 0):
