@@ -29,7 +29,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bench.dynamics import euler_lagrange_chunked
 from bench.errors import ConfigError, DataError
 from bench.fileio import atomic_write
 
@@ -135,10 +134,7 @@ def generate(system, n: int, seed: int, *, cache: bool = True) -> Dataset:
     dom = system.domain
     q, qd, qdd = (rng.uniform(*dom.bounds(k, system.dof), size=(n, system.dof)) for k in ("q", "qd", "qdd"))
     qt, qdt, qddt = (torch.from_numpy(a) for a in (q, qd, qdd))
-    tau, L = euler_lagrange_chunked(system.lagrangian, qt, qdt, qddt)
-    extra = system.nonconservative_torque(qt, qdt, qddt)
-    if extra is not None:
-        tau = tau + extra
+    tau, L = system.torque(qt, qdt, qddt)
     data = Dataset(q, qd, qdd, tau.numpy(), L.numpy(), system.name, source)
     if cache:
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -119,12 +119,8 @@ class TrueModel:
         self.system = system
 
     def predict_torque(self, data: Dataset) -> np.ndarray:
-        from bench.dynamics import euler_lagrange_chunked
-
         t = data.tensors()
-        tau, _ = euler_lagrange_chunked(self.system.lagrangian, t["q"], t["qd"], t["qdd"])
-        extra = self.system.nonconservative_torque(t["q"], t["qd"], t["qdd"])
-        return (tau if extra is None else tau + extra).numpy()
+        return self.system.torque(t["q"], t["qd"], t["qdd"])[0].numpy()
 
 
 def rollout_error(model, system, test: Dataset, horizon: float = HORIZON_S, n_initial: int = N_INITIAL,

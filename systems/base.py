@@ -208,6 +208,14 @@ class System:
         """The true Lagrangian, batched: ``(batch, dof) x 2 -> (batch,)``."""
         return self._lagrangian_torch(q, qd)
 
+    def torque(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The system's torque ``g(L) + nonconservative_torque`` and ``L``, batched."""
+        from bench.dynamics import euler_lagrange_chunked
+
+        tau, L = euler_lagrange_chunked(self.lagrangian, q, qd, qdd)
+        extra = self.nonconservative_torque(q, qd, qdd)
+        return (tau if extra is None else tau + extra), L
+
     def parametric_form(self) -> ParametricForm:
         """The form SysId fits: the true expression with ``sysid_unknowns`` free."""
         if not self.sysid_unknowns:
