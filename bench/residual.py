@@ -385,21 +385,29 @@ def _freedom(model: LoopModel, train: Dataset) -> np.ndarray:
     return np.zeros((train.tau.size, 0)) if lagrangian is None else lagrangian[1]
 
 
+def _fit_problem(model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarray]:
+    """What tracing and pruning fit: the target (``(n, dof)``) and the columns
+    always in the fit, the model's freedom (:func:`_freedom`) then the accepted
+    effects. A symbolic model's terms span its own torque, so the target is the
+    torque itself; otherwise it is what the rigid model leaves."""
+    target = train.tau if _is_symbolic(model.rigid) else train.tau - np.asarray(model.rigid.predict_torque(train))
+    return target, np.hstack([_freedom(model, train), columns(model.effects, train)])
+
+
 def _prune(model: LoopModel, train: Dataset, spec: dict, report) -> tuple[LoopModel, list[str]]:
     """Backward elimination after a joint refit: drop an effect whose removal
     raises the BIC by less than :data:`MIN_BIC_DROP` (it became redundant with
     the refitted model), then refit; repeat until every effect holds."""
     removed = []
     while model.effects:
-        y = (train.tau - (0 if _is_symbolic(model.rigid) else model.rigid.predict_torque(train))).ravel()
-        free = _freedom(model, train)
-        Phi = columns(model.effects, train)
-        n = len(y)
-        rss_all = _lstsq(np.hstack([free, Phi]), y)[2]
-        k = free.shape[1] + Phi.shape[1]
+        target, F = _fit_problem(model, train)
+        y = target.ravel()
+        n, k = len(y), F.shape[1]
+        first = k - len(model.effects)  # the effects' columns come last
+        rss_all = _lstsq(F, y)[2]
         weakest, weakest_gain = None, math.inf
         for i in range(len(model.effects)):
-            rss_without = _lstsq(np.hstack([free, np.delete(Phi, i, axis=1)]), y)[2]
+            rss_without = _lstsq(np.delete(F, first + i, axis=1), y)[2]
             gain = _bic(rss_without, n, k - 1) - _bic(rss_all, n, k)
             if gain < weakest_gain:
                 weakest, weakest_gain = i, gain
@@ -449,16 +457,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     pool = candidates(train.dof)
     report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}")
     for k in range(1, MAX_ROUNDS + 1):
-        lagrangian = None if isinstance(model.rigid, ParametricModel) else _lagrangian_columns(model.rigid, train)
-        Phi = columns(model.effects, train)
-        if isinstance(model.rigid, ParametricModel):  # candidates beside the parameters' local directions
-            residual = train.tau - model.predict_torque(train)
-            selection = trace(residual, train, pool, np.hstack([model.rigid.jacobian(train), Phi]), exclude=model.effects)
-        elif lagrangian is not None:  # judge candidates with the model's own terms refitted beside them
-            selection = trace(train.tau, train, pool, np.hstack([lagrangian[1], Phi]), exclude=model.effects)
-        else:
-            residual = train.tau - np.asarray(model.rigid.predict_torque(train))
-            selection = trace(residual, train, pool, Phi, exclude=model.effects)
+        target, fixed = _fit_problem(model, train)
+        selection = trace(target, train, pool, fixed, exclude=model.effects)
         if not selection.accepted:
             rounds.append({"round": k, "mse": scores(model), "accepted": [], "trace": selection.steps})
             report(f"round {k}: nothing significant left")
@@ -508,7 +508,8 @@ def _fmt(x) -> str:
 
 def write_outputs(result: dict, train: Dataset, test: Dataset | None, json_path=None, report_path=None) -> None:
     """The JSON contract and the markdown report with residual-versus-state plots.
-    Nothing is written unless both can be (plots first, then the files, atomically)."""
+    Each file is written atomically; the plot and the report's text are made
+    before the JSON and the report are written."""
     from pathlib import Path
 
     from bench.fileio import atomic_write, write_json
