@@ -305,7 +305,7 @@ def cmd_residual(args) -> int:
     if args.json is None and args.report is None:
         print("note: neither --json nor --report given; the result is only printed")
     result = residual_loop(args.method, train, test, budget_s=args.budget, seed=args.seed,
-                           hyperparameters=dict(args.overrides), report=_print_now)
+                           hyperparameters=dict(args.overrides), report=harness.print_now)
     write_outputs(result, train, test, args.json, args.report)
     b, a = result["mse_before"], result["mse_after"]
     print(f"torque MSE before: train {b['train']:.4g}, test {_maybe(b['test'])}; after: train {a['train']:.4g}, test {_maybe(a['test'])}")
@@ -319,10 +319,6 @@ def cmd_residual(args) -> int:
 
 def _maybe(x) -> str:
     return "n/a" if x is None else f"{x:.4g}"
-
-
-def _print_now(line: str) -> None:
-    print(line, flush=True)
 
 
 def cmd_convert(args) -> int:

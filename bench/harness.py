@@ -471,7 +471,7 @@ def run_matrix(
     need the suite installed, not a shared file system.
     """
     import_plugins({p for s in specs for p in s.plugins})
-    report = report if report is not None else _print_now
+    report = report if report is not None else print_now
     workers = workers or default_workers()
     out_dir = Path(out_dir)
     results: dict[str, dict] = {}
@@ -542,7 +542,8 @@ def _run_on_dask(todo: list[RunSpec], out_dir: Path, cluster, workers: int, trac
             own.close()
 
 
-def _print_now(line: str) -> None:
+def print_now(line: str) -> None:
+    """A progress ``report`` that prints each line at once."""
     print(line, flush=True)
 
 
