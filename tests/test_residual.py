@@ -186,3 +186,18 @@ def test_a_huge_symbolic_model_is_refitted_like_a_neural_one():
 
     data = generate(get_system("double_pendulum"), 20, 0)
     assert residual._lagrangian_columns(Model(), data) is None and not residual._is_symbolic(Model())
+
+
+def test_cli_bad_files_exit_2_in_one_line_and_write_nothing(tmp_path):
+    raw = tmp_path / "raw.csv"
+    raw.write_text("time,pos_meas1\n0,1\n")
+    r = cli("convert", "--format", "dfki", str(raw), "--out", str(tmp_path / "out.csv"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert f"{raw}: missing column(s) pos_meas2" in r.stderr and not (tmp_path / "out.csv").exists()
+    bad = tmp_path / "train.csv"
+    bad.write_text("q_1,q_2,qd_1,qd_2,qdd_1,qdd_2,tau_1,tau_2\n1,2,3,4,5,6,7,x\n")
+    r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--train", str(bad),
+            "--json", str(tmp_path / "o.json"), "--report", str(tmp_path / "o.md"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert f"{bad}: column tau_2 has a non-numeric value 'x' in data row 1" in r.stderr
+    assert not (tmp_path / "o.json").exists() and not (tmp_path / "o.md").exists()
