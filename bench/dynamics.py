@@ -102,7 +102,7 @@ def euler_lagrange_chunked(
     q: torch.Tensor,
     qd: torch.Tensor,
     qdd: torch.Tensor,
-    chunk: int = 8192,
+    chunk: int = 1024,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Evaluation-only ``(tau, L)`` over a large batch, ``chunk`` rows at a time."""
     taus, Ls = [], []

@@ -2,8 +2,9 @@
 
 * :func:`execute` runs one :class:`RunSpec` in the current process and
   returns its record; it never raises for a failing method.
-* :func:`run_isolated` runs one spec in its own process, with torch and BLAS
-  threads pinned, and kills it at 1.5 x its budget (status ``timeout``). A
+* :func:`run_isolated` runs one spec in its own process (forked from a server
+  that has imported torch and the suite once), with torch and BLAS threads
+  pinned, and kills it at 1.5 x its budget (status ``timeout``). A
   crash or a non-finite result gives status ``failed`` with the reason.
 * :func:`run_matrix` runs many specs on a pool of worker processes, writes
   one record per run atomically, and skips runs that already have a record,
@@ -32,6 +33,7 @@ from typing import Callable, Iterable
 from bench import records as rec
 from bench.errors import ConfigError, UserError
 from bench.fileio import write_json
+from bench.worker import THREAD_VARS
 
 #: The ten seeds of every table, written once.
 SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9)
@@ -45,7 +47,6 @@ KILL_FACTOR = 1.5
 STARTUP_TIMEOUT_S = 300.0
 #: Seconds a worker may take, after its fit, to evaluate the model on the full data.
 EVALUATION_TIMEOUT_S = 900.0
-THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
 
 
 @dataclass(frozen=True)
@@ -227,15 +228,18 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             return early
         from methods import METHODS
 
+        clock = time.perf_counter()
         system = make_system(spec)
         train, test = data if data is not None else load_data(spec, system)
         method = METHODS[spec.method](**method_config(spec))
         warm_up_torch()
+        timing = {"load_s": time.perf_counter() - clock}
         if on_phase:
             on_phase("fit")
         method.fit(train, spec.experiment, spec.seed, spec.budget_s)
         if on_phase:
             on_phase("evaluate")
+        clock = time.perf_counter()
         truth = system.lagrangian_sympy if system.simulated else None
         scores = _scores(method, spec.experiment, train, test, truth, system)
         info = method.fit_info
@@ -244,6 +248,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             else {"status": "ok", **_scores(model, spec.experiment, train, test, truth, system)}
             for name, model in method.variants().items()
         }
+        timing["evaluate_s"] = time.perf_counter() - clock
         fields = dict(
             **scores,
             steps=info.get("steps"),
@@ -263,7 +268,10 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             },
         )
         if system.simulated and test is not None and spec.rollout:
+            clock = time.perf_counter()
             fields["rollout"] = _rollout(method, system, test)
+            timing["rollout_s"] = time.perf_counter() - clock
+        fields["details"]["timing"] = {k: round(v, 3) for k, v in timing.items()}
         bad = [k for k in ("train_mse", "test_mse") if fields[k] is not None and not math.isfinite(fields[k])]
         if bad:
             return rec.new_record(d, "failed", error=f"non-finite {' and '.join(bad)} (the model produced NaN or inf)", **fields)
@@ -341,61 +349,140 @@ def thread_env(threads: int) -> dict:
     return env
 
 
-def run_isolated(spec: RunSpec, out_dir: str | os.PathLike, *, poll_s: float = 0.05) -> dict:
-    """Run ``spec`` in a fresh process; write and return its record.
+_FORK_SERVER = {"context": None, "failed": None}
 
-    The child reports its phases in a small file. From the start of its fit
-    it has ``KILL_FACTOR * budget_s`` seconds to finish the fit before it is
-    killed and recorded as ``timeout``; evaluation on the full data after the
-    fit is not part of the budget and has ``EVALUATION_TIMEOUT_S``. A child
-    that dies without writing a record is recorded as ``failed`` with the tail
-    of its log.
+
+def fork_server():
+    """The multiprocessing fork server that runs are forked from, started on
+    first use with :mod:`bench.preload` imported (torch, the suite, the
+    registries), or ``None`` where it cannot be used: no ``fork`` on this
+    platform, inside a daemonic process (a Dask worker), or it failed to start."""
+    import multiprocessing
+
+    if _FORK_SERVER["context"] is not None or _FORK_SERVER["failed"]:
+        return _FORK_SERVER["context"]
+    if "forkserver" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
+        _FORK_SERVER["failed"] = "unsupported here"
+        return None
+    from multiprocessing import forkserver
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["bench.preload"])
+    saved = {var: os.environ.get(var) for var in THREAD_VARS}
+    try:
+        os.environ.update({var: "1" for var in THREAD_VARS})  # read by the server before it imports torch
+        forkserver.ensure_running()
+    except Exception as exc:
+        _FORK_SERVER["failed"] = f"{type(exc).__name__}: {exc}"
+        return None
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
+    _FORK_SERVER["context"] = ctx
+    return ctx
+
+
+class _Child:
+    """A running worker: a process forked from the fork server, or a fresh
+    interpreter where the fork server cannot serve the spec."""
+
+    def __init__(self, spec: RunSpec, spec_file: Path, record_file: Path, phase_file: Path, log_file: Path, fresh: bool):
+        ctx = None if fresh or spec.threads != 1 else fork_server()
+        self.proc = self.popen = None
+        if ctx is not None:
+            from bench.worker import forked_main
+
+            self.proc = ctx.Process(target=forked_main, args=(str(spec_file), str(record_file), str(phase_file), str(log_file), os.getcwd()))
+            self.proc.start()
+            return
+        with open(log_file, "wb") as log:
+            self.popen = subprocess.Popen(
+                [sys.executable, "-m", "bench.worker", str(spec_file), str(record_file), str(phase_file)],
+                env=thread_env(spec.threads), stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+            )
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid if self.proc is not None else self.popen.pid
+
+    def wait(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` seconds; whether the process has ended."""
+        if self.proc is not None:
+            self.proc.join(timeout)
+            return self.proc.exitcode is not None
+        try:
+            self.popen.wait(timeout=timeout)
+            return True
+        except subprocess.TimeoutExpired:
+            return False
+
+    @property
+    def returncode(self) -> int | None:
+        return self.proc.exitcode if self.proc is not None else self.popen.returncode
+
+    def kill(self) -> None:
+        """Kill the worker's whole process group (it runs in its own session)."""
+        try:
+            os.killpg(self.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            if self.proc is not None:
+                self.proc.kill()
+            else:
+                self.popen.kill()
+        self.wait(None)
+
+
+def run_isolated(spec: RunSpec, out_dir: str | os.PathLike, *, poll_s: float = 0.05, fresh: bool = False) -> dict:
+    """Run ``spec`` in its own process; write and return its record.
+
+    The process is forked from the harness's fork server (:func:`fork_server`),
+    which has imported torch and the suite once; ``fresh=True``, a spec with
+    more than one thread, or a platform without the server starts a fresh
+    interpreter instead. The child reports its phases in a small file. From
+    the start of its fit it has ``KILL_FACTOR * budget_s`` seconds to finish
+    the fit before it is killed and recorded as ``timeout``; evaluation on the
+    full data after the fit is not part of the budget and has
+    ``EVALUATION_TIMEOUT_S``. A child that dies without writing a record is
+    recorded as ``failed`` with the tail of its log.
     """
     out_dir = Path(out_dir)
     path = rec.record_path(out_dir, spec.run_id)
     logs = out_dir / "logs"
     logs.mkdir(parents=True, exist_ok=True)
     spec_file, phase_file, log_file = (logs / f"{spec.run_id}{s}" for s in (".spec.json", ".phase", ".log"))
-    for f in (phase_file, path):
+    for f in (phase_file, path, log_file):
         f.unlink(missing_ok=True)
     write_json(spec_file, spec.to_dict())
     d = spec.to_dict()
-    with open(log_file, "wb") as log:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "bench.worker", str(spec_file), str(path), str(phase_file)],
-            env=thread_env(spec.threads), stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-        )
-        launched = time.monotonic()
-        kill_at = launched + STARTUP_TIMEOUT_S
-        phase = "startup"
-        record = None
-        while True:
-            try:
-                proc.wait(timeout=poll_s)
-                break
-            except subprocess.TimeoutExpired:
-                pass
-            now = time.monotonic()
-            new_phase = _read_phase(phase_file) or phase
-            if new_phase != phase:
-                phase = new_phase
-                kill_at = now + (KILL_FACTOR * spec.budget_s if phase == "fit" else EVALUATION_TIMEOUT_S)
-            if now >= kill_at:
-                _kill(proc)
-                if phase == "fit":
-                    error = f"fit still running at {KILL_FACTOR} x its {spec.budget_s:g} s budget; killed"
-                    record = rec.new_record(d, "timeout", error=error)
-                elif phase == "startup":
-                    record = rec.new_record(d, "failed", error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
-                else:
-                    record = rec.new_record(d, "failed", error=f"evaluation after the fit took over {EVALUATION_TIMEOUT_S:g} s; killed")
-                break
+    child = _Child(spec, spec_file, path, phase_file, log_file, fresh)
+    kill_at = time.monotonic() + STARTUP_TIMEOUT_S
+    phase = "startup"
+    record = None
+    while not child.wait(poll_s):
+        now = time.monotonic()
+        new_phase = _read_phase(phase_file) or phase
+        if new_phase != phase:
+            phase = new_phase
+            kill_at = now + (KILL_FACTOR * spec.budget_s if phase == "fit" else EVALUATION_TIMEOUT_S)
+        if now >= kill_at:
+            child.kill()
+            if phase == "fit":
+                error = f"fit still running at {KILL_FACTOR} x its {spec.budget_s:g} s budget; killed"
+                record = rec.new_record(d, "timeout", error=error)
+            elif phase == "startup":
+                record = rec.new_record(d, "failed", error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
+            else:
+                record = rec.new_record(d, "failed", error=f"evaluation after the fit took over {EVALUATION_TIMEOUT_S:g} s; killed")
+            break
     if record is None:
         if path.exists():
             with open(path) as f:
                 return json.load(f)
         tail = _tail(log_file)
-        record = rec.new_record(d, "failed", error=f"worker exited with code {proc.returncode} and wrote no record: {tail}")
+        record = rec.new_record(d, "failed", error=f"worker exited with code {child.returncode} and wrote no record: {tail}")
     rec.write_record(path, record)
     return record
 
@@ -406,14 +493,6 @@ def _read_phase(path: Path) -> str | None:
     except OSError:
         return None
     return lines[-1] if lines else None
-
-
-def _kill(proc: subprocess.Popen) -> None:
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        proc.kill()
-    proc.wait()
 
 
 def _tail(path: Path, lines: int = 3) -> str:
@@ -552,7 +631,12 @@ def quiet(line: str) -> None:
 
 
 class _MatrixProgress:
-    """One line per finished run with counts and an estimate of the time left."""
+    """Progress of the matrix: finished, failed and remaining runs and the time left.
+
+    With :func:`print_now` on a terminal this is a tqdm bar, with one line per
+    finished run printed above it; otherwise (a log file, or another
+    ``report``) each finished run gives one line that starts with a text bar.
+    """
 
     def __init__(self, total: int, skipped: int, workers: int, report):
         self.total, self.skipped, self.workers, self.report = total, skipped, workers, report
@@ -562,29 +646,45 @@ class _MatrixProgress:
             report(f"resuming: {skipped} run(s) already have records")
         if report:
             report(f"{total} run(s) to do on {workers} worker(s)")
+        self.bar = None
+        if report is print_now and total and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, unit="run", dynamic_ncols=True, postfix={"failed": 0})
 
     def done(self, record: dict) -> dict:
         self.finished += 1
         self.failed += record["status"] != "ok"
-        if self.report:
-            elapsed = time.monotonic() - self.start
-            left = self.total - self.finished
-            eta = elapsed / self.finished * left
-            mse = ""
-            if record["status"] == "ok":
-                test = record["test_mse"]
-                mse = f" train {record['train_mse']:.3g} test {'-' if test is None else f'{test:.3g}'}"
-            else:
-                mse = f" ({record['error']})"
-            self.report(
-                f"[{self.finished}/{self.total} done, {self.failed} not ok, {left} left, ~{_fmt_time(eta)} to go] "
-                f"{record['system']} {record['method']} {record['experiment']} seed={record['seed']}: {record['status']}{mse}"
-            )
+        if not self.report:
+            return record
+        if record["status"] == "ok":
+            test = record["test_mse"]
+            outcome = f"ok train {record['train_mse']:.3g} test {'-' if test is None else f'{test:.3g}'}"
+        else:
+            outcome = f"{record['status']} ({record['error']})"
+        what = f"{record['system']} {record['method']} {record['experiment']} seed={record['seed']}: {outcome}"
+        if self.bar is not None:
+            self.bar.write(what)
+            self.bar.set_postfix(failed=self.failed, refresh=False)
+            self.bar.update(1)
+            return record
+        elapsed = time.monotonic() - self.start
+        left = self.total - self.finished
+        eta = elapsed / self.finished * left
+        self.report(f"{_text_bar(self.finished, self.total)} {self.finished}/{self.total} done, {self.failed} not ok, "
+                    f"{left} left, ~{_fmt_time(eta)} to go | {what}")
         return record
 
     def summary(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
         if self.report and self.total:
             self.report(f"matrix done in {_fmt_time(time.monotonic() - self.start)}: {self.finished - self.failed} ok, {self.failed} not ok")
+
+
+def _text_bar(done: int, total: int, width: int = 20) -> str:
+    filled = round(width * done / total) if total else width
+    return "[" + "#" * filled + "." * (width - filled) + "]"
 
 
 def _fmt_time(seconds: float) -> str:

@@ -117,6 +117,10 @@ from methods.base import METHODS, TorchConfig, TorchLagrangianMethod
 BINARY = ("sum", "prod", "diff")
 #: the refinement gives up on pruned equations that expand into more terms
 MAX_REFIT_TERMS = 2000
+#: a pruned equation keeping more weights than this is not written out: its
+#: text would exceed the record's 20 000 characters, and pushing it through
+#: sympy grows faster than linearly (1.5 s at 512 terms, 15 s at 1600)
+MAX_READABLE_TERMS = 512
 UNARY = ("sin", "cos", "exp")
 EPS_LOG = 1e-5
 
@@ -659,10 +663,13 @@ class SyReNets(TorchLagrangianMethod):
 
     def readable_expression(self):
         pruned = getattr(self, "_pruned", None)
-        return pruned.expression() if pruned is not None else None
+        return pruned.readable_expression() if pruned is not None else None
 
     def record_details(self):
-        return dict(getattr(self, "_notes", {}))
+        notes = dict(getattr(self, "_notes", {}))
+        if notes.get("pruned_terms", 0) > MAX_READABLE_TERMS:
+            notes["expression_omitted"] = f"the pruned equation keeps {notes['pruned_terms']} terms (> {MAX_READABLE_TERMS})"
+        return notes
 
     # -- equations ---------------------------------------------------------------------
     def _input_symbols(self):
@@ -724,4 +731,7 @@ class _FrozenVariant:
     def expression(self):
         return self.owner._push(self.weights, self.owner.model.spec, self.keep)
 
-    readable_expression = expression
+    def readable_expression(self):
+        """The equation, or ``None`` when it keeps more than :data:`MAX_READABLE_TERMS` weights."""
+        kept = sum(len(cols) for layer in self.keep for cols in layer)
+        return self.expression() if kept <= MAX_READABLE_TERMS else None

@@ -71,9 +71,17 @@ def test_progress_lines_count_and_estimate(tmp_path):
     lines = []
     harness.run_matrix(specs(["toy_constant", "toy_crasher"]), tmp_path, workers=1, report=lines.append)
     assert lines[0] == "2 run(s) to do on 1 worker(s)"
-    assert lines[1].startswith("[1/2 done, 0 not ok, 1 left, ~")
-    assert lines[2].startswith("[2/2 done, 1 not ok, 0 left, ~")
+    assert lines[1].startswith("[##########..........] 1/2 done, 0 not ok, 1 left, ~")
+    assert lines[2].startswith("[####################] 2/2 done, 1 not ok, 0 left, ~")
+    assert "toy_crasher" in lines[2] and "failed (RuntimeError" in lines[2]
     assert "matrix done" in lines[-1]
+
+
+def test_progress_bar_on_a_terminal(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr("sys.stderr.isatty", lambda: True)
+    harness.run_matrix(specs(["toy_constant", "toy_crasher"]), tmp_path, workers=1, report=harness.print_now)
+    err = capsys.readouterr().err
+    assert "2/2" in err and "failed=1" in err  # tqdm's bar, with the failed count
 
 
 def test_execute_in_process_matches_the_record_format(tmp_path):
@@ -115,6 +123,22 @@ def test_matrix_on_a_real_dask_local_cluster(tmp_path):
     assert [r["run_id"] for r in records] == [s.run_id for s in todo]
     assert [r["status"] for r in records] == ["ok", "ok", "failed", "failed"]
     assert records[2]["error"] == "RuntimeError: the toy fell over"
-    assert len(read_records(tmp_path)) == 4 and any(line.startswith("[4/4 done, 2 not ok") for line in lines)
+    assert len(read_records(tmp_path)) == 4 and any("4/4 done, 2 not ok" in line for line in lines)
     again = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
     assert [r["provenance"] for r in again] == [r["provenance"] for r in records]  # resumed, not run again
+
+
+def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatch):
+    from bench.data import generate, write_csv
+    from systems import SYSTEMS
+
+    data = generate(SYSTEMS["double_pendulum"](), 64, seed=0)
+    write_csv(data, tmp_path / "train.csv")
+    monkeypatch.chdir(tmp_path)  # relative paths are the caller's, not the fork server's
+    (spec,) = specs(["toy_constant"], train_path="train.csv", test_path="train.csv")
+    (r,) = harness.run_matrix([spec], "out", workers=1, report=harness.quiet)
+    assert r["status"] == "ok", r["error"]
+    assert r["details"]["train_source"].endswith("train.csv")
+    assert harness.fork_server() is not None
+    fresh = harness.run_isolated(spec, "fresh", fresh=True)
+    assert fresh["status"] == "ok" and fresh["train_mse"] == r["train_mse"]
