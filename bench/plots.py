@@ -111,3 +111,41 @@ def residual_plot(data, residual: np.ndarray, path: Path, title: str = "", after
     atomic_write(path, lambda f: fig.savefig(f, format="png"), binary=True)
     plt.close(fig)
     return path
+
+
+def adaptation_plot(results: list[dict], checkpoints, path: Path, title: str = "") -> Path:
+    """Test MSE against fitting time after a switch in the system
+    (:mod:`bench.adaptation`): one colour per learner, each seed a faint step
+    line, the median over seeds at the checkpoints a solid line inside its
+    interquartile band. The time axis is symmetric-log, so that t = 0 (the
+    model at the switch) is drawn."""
+    from bench.adaptation import at
+
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    learners = list(dict.fromkeys(r["learner"] for r in results))
+    grid = np.asarray(checkpoints, dtype=np.float64)
+    for i, learner in enumerate(learners):
+        colour = colours[i % len(colours)]
+        curves = [r["curve"] for r in results if r["learner"] == learner]
+        for c in curves:
+            t, y = np.asarray(c, dtype=np.float64).T
+            ax.step(np.append(t, grid[-1]), np.append(y, y[-1]), where="post", color=colour, alpha=0.2, linewidth=0.7)
+        values = np.array([[at(c, t) for t in grid] for c in curves])
+        q25, q50, q75 = (np.percentile(values, p, axis=0) for p in (25, 50, 75))
+        ax.fill_between(grid, q25, q75, color=colour, alpha=0.2, linewidth=0, step="post")
+        ax.step(grid, q50, where="post", color=colour, linewidth=1.8, label=f"{learner} ({len(curves)} seeds)")
+    ax.set_xscale("symlog", linthresh=1.0)
+    ax.set_yscale("log")
+    ax.set_xlim(0, grid[-1])
+    ax.set_xlabel("fitting time after the switch (s)")
+    ax.set_ylabel("test torque MSE")
+    if title:
+        ax.set_title(title, fontsize=9)
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    atomic_write(path, lambda f: fig.savefig(f, format="png"), binary=True)
+    plt.close(fig)
+    return path

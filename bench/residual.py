@@ -430,12 +430,20 @@ def _is_symbolic(rigid) -> bool:
 
 
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float = 60.0, seed: int = 0,
-                  hyperparameters: dict | None = None, report=print) -> dict:
-    """Run the loop; returns the JSON contract (see ``python -m bench residual``)."""
+                  hyperparameters: dict | None = None, report=print, fitted=None) -> dict:
+    """Run the loop; returns the JSON contract (see ``python -m bench residual``).
+
+    ``fitted`` is an already fitted instance of ``method`` to start from
+    instead of round 0's fit (for instance a model fitted before the system
+    changed). Each round records ``seconds``, the time since the loop began.
+    """
     spec = {"method": method, "seed": seed, "budget_s": budget_s, "hyperparameters": hyperparameters or {}}
     start = time.perf_counter()
-    report(f"round 0: fitting {method} on {len(train)} samples with the declared model only ({budget_s:g} s)")
-    fitted = _fit_method(method, train, seed, budget_s, spec["hyperparameters"])
+    if fitted is None:
+        report(f"round 0: fitting {method} on {len(train)} samples with the declared model only ({budget_s:g} s)")
+        fitted = _fit_method(method, train, seed, budget_s, spec["hyperparameters"])
+    else:
+        report(f"round 0: starting from the given {method} fit")
 
     def scores(m):
         return {"train": mse(m.predict_torque(train), train.tau),
@@ -453,6 +461,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     first = model
     before = scores(model)
     round0["mse"] = before
+    round0["seconds"] = round(time.perf_counter() - start, 3)
     rounds = [round0]
     pool = candidates(train.dof)
     report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}")
@@ -460,7 +469,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         target, fixed = _fit_problem(model, train)
         selection = trace(target, train, pool, fixed, exclude=model.effects)
         if not selection.accepted:
-            rounds.append({"round": k, "mse": scores(model), "accepted": [], "trace": selection.steps})
+            rounds.append({"round": k, "mse": scores(model), "accepted": [], "trace": selection.steps,
+                           "seconds": round(time.perf_counter() - start, 3)})
             report(f"round {k}: nothing significant left")
             break
         effects = model.effects + selection.accepted
@@ -469,7 +479,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         model, removed = _prune(model, train, spec, report)
         s = scores(model)
         rounds.append({"round": k, "mse": s, "accepted": [c.label() for c in selection.accepted], "removed": removed,
-                       "trace": selection.steps})
+                       "trace": selection.steps, "seconds": round(time.perf_counter() - start, 3)})
         if not set(c.label() for c in selection.accepted) - set(removed):
             report(f"round {k}: every effect it added became redundant; stopping")
             break

@@ -264,10 +264,13 @@ class Method:
     smoke: ClassVar[dict] = {"max_steps": 5}
     #: the experiments the method applies to
     experiments: ClassVar[tuple[str, ...]] = EXPERIMENTS
+    #: whether ``fit(..., warm_start=True)`` can continue from the current state
+    supports_warm_start: ClassVar[bool] = False
 
     def __init__(self, **hyperparameters):
         self.config = build_config(self.Config, dict(hyperparameters), self.name)
         self.experiment: str | None = None
+        self.warm_start = False
         self.seed: int | None = None
         self.dof: int | None = None
         self.system = None
@@ -293,14 +296,27 @@ class Method:
         return dataclasses.asdict(self.config)
 
     # -- the protocol ----------------------------------------------------------
-    def fit(self, train: Dataset, experiment: str, seed: int, budget_s: float) -> "Method":
+    def fit(self, train: Dataset, experiment: str, seed: int, budget_s: float, *, warm_start: bool = False) -> "Method":
         """Learn from ``train`` within ``budget_s`` seconds of wall-clock time.
 
         Keeps and restores the state with the lowest training MSE seen.
         Fills :attr:`fit_info` with the steps done, the best-so-far curve of
         training MSE over wall-clock time, and why the loop stopped.
+
+        ``warm_start=True`` continues from the state of the previous fit (its
+        parameters and optimiser state), for methods with
+        :attr:`supports_warm_start`, on new data of the same shape: what a
+        learner does when its training stream changes.
         """
         t0 = time.perf_counter()
+        if warm_start and not self.supports_warm_start:
+            raise ConfigError(f"{self.name} cannot continue a fit (warm_start)")
+        if warm_start and self.experiment is None:
+            raise ConfigError(f"{self.name}: warm_start needs an earlier fit to continue")
+        if warm_start and (experiment != self.experiment or train.dof != self.dof):
+            raise ConfigError(f"{self.name}: warm_start continues a {self.experiment} fit of {self.dof} DoF; "
+                              f"got {experiment} data of {train.dof} DoF")
+        self.warm_start = warm_start
         check_experiment(experiment)
         reason = self.not_applicable_reason(experiment)
         if reason:
@@ -434,6 +450,7 @@ class TorchLagrangianMethod(Method):
     """
 
     Config: ClassVar[type] = TorchConfig
+    supports_warm_start: ClassVar[bool] = True
     model: torch.nn.Module
 
     def build_model(self, train: Dataset) -> torch.nn.Module:
@@ -464,13 +481,15 @@ class TorchLagrangianMethod(Method):
         return torch.mean((pred - target) ** 2) + self.extra_loss()
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        self.model = self.build_model(train).to(self.dtype)
+        if not self.warm_start:
+            self.model = self.build_model(train).to(self.dtype)
+            self._optimizer = torch.optim.Adam(
+                self.model.parameters(), lr=self.config.lr, betas=self.config.betas,
+                **({"fused": True} if _fused_adam_ok(self.dtype) else {}),
+            )
+            self._scheduler = self.make_scheduler(self._optimizer)
+        optimizer, scheduler = self._optimizer, self._scheduler
         tensors = train.tensors(self.dtype)
-        optimizer = torch.optim.Adam(
-            self.model.parameters(), lr=self.config.lr, betas=self.config.betas,
-            **({"fused": True} if _fused_adam_ok(self.dtype) else {}),
-        )
-        scheduler = self.make_scheduler(optimizer)
         generator = torch.Generator().manual_seed(self.seed)
         n, bs = len(train), min(self.config.batch_size, len(train))
         order, cursor = torch.randperm(n, generator=generator), 0

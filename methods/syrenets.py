@@ -447,15 +447,17 @@ class SyReNets(TorchLagrangianMethod):
 
     def _fit(self, train, experiment, progress):
         cfg = self.config
-        self._setup(train)
+        if not self.warm_start:
+            self._setup(train)
         t = train.tensors(self.dtype)
         generator = torch.Generator().manual_seed(self.seed)
         n, bs = len(train), min(cfg.batch_size, len(train))
         order, cursor = torch.randperm(n, generator=generator), 0
         replay_idx = torch.empty(0, dtype=torch.long)
-        # frozen weights before the first step, from the first batch
-        with torch.no_grad():
-            self.frozen = [w.detach() for w in self.model.select(self._inputs(t["q"][:bs], t["qd"][:bs], t["qdd"][:bs]))[1]]
+        # frozen weights before the first step, from the first batch (a warm start keeps its own)
+        if not self.warm_start:
+            with torch.no_grad():
+                self.frozen = [w.detach() for w in self.model.select(self._inputs(t["q"][:bs], t["qd"][:bs], t["qdd"][:bs]))[1]]
         progress.reserve(cfg.post_fraction * progress.remaining())
         while progress.step():
             if cursor + bs > n:
