@@ -11,10 +11,13 @@ Each round:
 2. **Residual.** ``r = tau - g(L_hat) - Phi c`` on the training and test sets.
 3. **Trace.** Forward stepwise selection over candidate torque columns
    ``Phi``: per joint, the effects of :mod:`bench.effects` (viscous and
-   Coulomb friction, armature, spring, offset) and an open-ended library of
-   further terms in ``q, qd, qdd, sign qd`` (quadratic drag ``qd |qd|``,
-   ``qd^3``, a hardening spring ``q^3``, ``sin q``, other joints' ``qd`` and
-   ``qdd``), reported as ``symbolic`` with their expression. Candidates are
+   Coulomb friction, armature, spring, offset) and an open-ended library
+   generated from ``q, qd, qdd, sign qd, |qd|`` and trigonometric functions
+   of the joint's and its neighbours' angles: every product of two of them
+   (quadratic drag ``qd |qd|``, a velocity-dependent coupling
+   ``qd_1 cos(q_1 - q_2)``, ...) and ``q^3``, ``qd^3``
+   (:func:`_symbolic_terms`), reported as ``symbolic`` with their expression.
+   The named effects are tried first at each step. Candidates are
    judged beside the model's own freedom: a symbolic model's terms, or a
    parametric model's parameter directions (its Jacobian), are refitted with
    them, so a candidate the model could already express gains nothing.
@@ -56,6 +59,7 @@ drop of 10 asks for a chi-squared value above 20 (p < 1e-5 per candidate).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -93,21 +97,67 @@ class Candidate:
         return f"{what} on joint {self.joint + 1}"
 
 
-def _symbolic_terms(dof: int, j: int) -> list[tuple[str, object]]:
-    """Open-ended terms for joint ``j``: ``(expression text, feature(data) -> (n,))``."""
+def _primitives(dof: int, j: int) -> list[tuple[str, object]]:
+    """The building blocks of the open-ended terms of joint ``j``: its own
+    ``q, qd, qdd, sign qd, |qd|, sin q, cos q`` and, per other joint ``k``,
+    ``q_k, qd_k, qdd_k, sin(q_j - q_k), cos(q_j - q_k)``."""
     n = j + 1
-    terms = [
-        (f"qd_{n}*Abs(qd_{n})", lambda d: d.qd[:, j] * np.abs(d.qd[:, j])),
-        (f"qd_{n}**3", lambda d: d.qd[:, j] ** 3),
-        (f"q_{n}**3", lambda d: d.q[:, j] ** 3),
+    out = [
+        (f"q_{n}", lambda d: d.q[:, j]),
+        (f"qd_{n}", lambda d: d.qd[:, j]),
+        (f"qdd_{n}", lambda d: d.qdd[:, j]),
+        (f"sign(qd_{n})", lambda d: np.sign(d.qd[:, j])),
+        (f"Abs(qd_{n})", lambda d: np.abs(d.qd[:, j])),
         (f"sin(q_{n})", lambda d: np.sin(d.q[:, j])),
-        (f"sign(qd_{n})*Abs(q_{n})", lambda d: np.sign(d.qd[:, j]) * np.abs(d.q[:, j])),
+        (f"cos(q_{n})", lambda d: np.cos(d.q[:, j])),
     ]
     for k in range(dof):
         if k != j:
-            terms.append((f"qd_{k + 1}", lambda d, k=k: d.qd[:, k]))
-            terms.append((f"qdd_{k + 1}", lambda d, k=k: d.qdd[:, k]))
-    return terms
+            m = k + 1
+            out += [
+                (f"q_{m}", lambda d, k=k: d.q[:, k]),
+                (f"qd_{m}", lambda d, k=k: d.qd[:, k]),
+                (f"qdd_{m}", lambda d, k=k: d.qdd[:, k]),
+                (f"sin(q_{n} - q_{m})", lambda d, k=k: np.sin(d.q[:, j] - d.q[:, k])),
+                (f"cos(q_{n} - q_{m})", lambda d, k=k: np.cos(d.q[:, j] - d.q[:, k])),
+            ]
+    return out
+
+
+#: products of the joint's own sign(qd) and |qd| are not new terms: sign^2 = 1,
+#: sign(x) |x| = x, |x|^2 = x^2 (a square of a cosine, 1 - sin^2, and
+#: qd sign(qd) = |qd| are skipped too)
+_DEGENERATE = {("sign", "sign"), ("sign", "Abs"), ("Abs", "sign"), ("Abs", "Abs")}
+
+
+@functools.lru_cache(maxsize=None)
+def _symbolic_terms(dof: int, j: int) -> tuple[tuple[str, object], ...]:
+    """Open-ended terms for joint ``j``: ``(expression text, feature(data) -> (n,))``.
+
+    Every primitive (:func:`_primitives`) that is not a named effect's own
+    column, every product of two primitives (with repetition, less the
+    degenerate ones), and ``q^3``, ``qd^3`` and ``sign(qd) |q|`` of the joint:
+    a polynomial-trigonometric library of degree two in the states, searched
+    by the same stepwise selection as the named effects.
+    """
+    n = j + 1
+    prims = _primitives(dof, j)
+    named = {f"q_{n}", f"qd_{n}", f"qdd_{n}", f"sign(qd_{n})"}  # spring, viscous, armature, Coulomb
+    terms = [(text, f) for text, f in prims if text not in named]
+    for a in range(len(prims)):
+        for b in range(a, len(prims)):
+            (ta, fa), (tb, fb) = prims[a], prims[b]
+            heads = (ta.split("(")[0], tb.split("(")[0])
+            if heads in _DEGENERATE or (ta == tb and heads[0] == "cos") or {ta, tb} == {f"qd_{n}", f"sign(qd_{n})"}:
+                continue
+            text = f"{ta}**2" if ta == tb else f"{ta}*{tb}"
+            terms.append((text, lambda d, fa=fa, fb=fb: fa(d) * fb(d)))
+    terms += [
+        (f"q_{n}**3", lambda d: d.q[:, j] ** 3),
+        (f"qd_{n}**3", lambda d: d.qd[:, j] ** 3),
+        (f"sign(qd_{n})*Abs(q_{n})", lambda d: np.sign(d.qd[:, j]) * np.abs(d.q[:, j])),
+    ]
+    return tuple(terms)
 
 
 def candidates(dof: int) -> list[Candidate]:
@@ -160,6 +210,10 @@ def trace(target: np.ndarray, data: Dataset, pool: list[Candidate], fixed: np.nd
           exclude: list[Candidate] = ()) -> Selection:
     """Forward stepwise selection of candidates explaining ``target`` (``(n, dof)``).
 
+    Each step tries the named effects first and the open-ended (symbolic)
+    terms only when no named effect passes: a physical effect is preferred
+    where both explain the residual (a spring ``c q`` beside a model whose
+    gravity absorbs ``sin q`` leaves ``c (q - sin q)``, which ``q^3`` also fits).
     ``fixed`` columns (the model's own terms and effects already accepted)
     stay in every fit, so a candidate that only repeats them gains nothing.
     Returns the newly accepted candidates and, per step, the statistics of
@@ -178,33 +232,40 @@ def trace(target: np.ndarray, data: Dataset, pool: list[Candidate], fixed: np.nd
         return np.column_stack([fixed] + [F_all[c.key()][:, None] for c in cands]) if cands else fixed
 
     rss_now = _lstsq(fixed, y)[2] if fixed.shape[1] else float(y @ y)
+    # the named effects first; the open-ended terms only where no named effect passes
+    tiers = [[c for c in pool if c.name != "symbolic"], [c for c in pool if c.name == "symbolic"]]
     while True:
         if rss_now / n_rows <= floor:
             steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
             break
-        best = None
         k_now = fixed.shape[1] + len(accepted)
-        for c in pool:
-            if c in exclude or c in accepted:
+        chosen = None
+        for tier in tiers:
+            best = None
+            for c in tier:
+                if c in exclude or c in accepted:
+                    continue
+                coef, stderr, rss = _lstsq(design(accepted + [c]), y)
+                drop = _bic(rss_now, n_rows, k_now) - _bic(rss, n_rows, k_now + 1)
+                if best is None or drop > best["bic_drop"]:
+                    best = {"candidate": c, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]), "rss": rss}
+            if best is None:
                 continue
-            coef, stderr, rss = _lstsq(design(accepted + [c]), y)
-            drop = _bic(rss_now, n_rows, k_now) - _bic(rss, n_rows, k_now + 1)
-            if best is None or drop > best["bic_drop"]:
-                best = {"candidate": c, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]), "rss": rss}
-        if best is None:
+            c = best["candidate"]
+            before = _heldout_mse(design(accepted), y, fit, held)
+            after = _heldout_mse(design(accepted + [c]), y, fit, held)
+            gain = (before - after) / before if before > 0 else 0.0
+            t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
+            ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= MIN_HELDOUT_GAIN
+            steps.append({"candidate": c.label(), "bic_drop": best["bic_drop"], "t": t if math.isfinite(t) else None,
+                          "heldout_gain": gain, "accepted": ok})
+            if ok:
+                chosen = best
+                break
+        if chosen is None:
             break
-        c = best["candidate"]
-        before = _heldout_mse(design(accepted), y, fit, held)
-        after = _heldout_mse(design(accepted + [c]), y, fit, held)
-        gain = (before - after) / before if before > 0 else 0.0
-        t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
-        ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= MIN_HELDOUT_GAIN
-        steps.append({"candidate": c.label(), "bic_drop": best["bic_drop"], "t": t if math.isfinite(t) else None,
-                      "heldout_gain": gain, "accepted": ok})
-        if not ok:
-            break
-        accepted.append(c)
-        rss_now = best["rss"]
+        accepted.append(chosen["candidate"])
+        rss_now = chosen["rss"]
     return Selection(accepted, steps)
 
 
@@ -404,10 +465,12 @@ def _prune(model: LoopModel, train: Dataset, spec: dict, report) -> tuple[LoopMo
         y = target.ravel()
         n, k = len(y), F.shape[1]
         first = k - len(model.effects)  # the effects' columns come last
-        rss_all = _lstsq(F, y)[2]
+        # residual sums below round-off are equal: their ratios are floating-point noise
+        floor = ROUNDOFF * float(np.mean(train.tau**2)) * n
+        rss_all = max(_lstsq(F, y)[2], floor)
         weakest, weakest_gain = None, math.inf
         for i in range(len(model.effects)):
-            rss_without = _lstsq(np.delete(F, first + i, axis=1), y)[2]
+            rss_without = max(_lstsq(np.delete(F, first + i, axis=1), y)[2], floor)
             gain = _bic(rss_without, n, k - 1) - _bic(rss_all, n, k)
             if gain < weakest_gain:
                 weakest, weakest_gain = i, gain

@@ -201,3 +201,24 @@ def test_cli_bad_files_exit_2_in_one_line_and_write_nothing(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert f"{bad}: column tau_2 has a non-numeric value 'x' in data row 1" in r.stderr
     assert not (tmp_path / "o.json").exists() and not (tmp_path / "o.md").exists()
+
+
+def test_open_ended_search_names_an_effect_outside_the_named_list():
+    # a velocity-dependent coupling: no named effect, one term of the generated library
+    s = get_system("double_pendulum")
+    train, test = generate(s, 3000, 0), generate(s, 1500, 1000)
+    for d in (train, test):
+        d.tau[:, 0] += 0.7 * d.qd[:, 0] * np.cos(d.q[:, 0] - d.q[:, 1])
+    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    (e,) = out["effects"]
+    assert e["name"] == "symbolic" and e["joint"] == 1 and e["expression"] == "qd_1*cos(q_1 - q_2)"
+    assert e["coefficient"] == pytest.approx(0.7, rel=0.05)
+    assert out["mse_after"]["test"] <= 1e-3 * out["mse_before"]["test"]
+
+
+def test_a_named_effect_is_preferred_to_an_open_ended_term_that_mimics_it():
+    # SysId's gravity absorbs sin(q_1) of a spring on joint 1, leaving c (q_1 - sin q_1) ~ q_1^3;
+    # the spring is tried first and named
+    train, test = data_with({"spring": (2.0, 1.0)}, n=2000, noise=0.01)
+    out = residual_loop("sysid", train, test, budget_s=3, report=quiet)
+    assert sorted((e["name"], e["joint"]) for e in out["effects"]) == [("spring", 1), ("spring", 2)]
