@@ -1,4 +1,4 @@
-"""Build the leaderboard, ``results/leaderboard/README.md``, from records.
+"""Build the leaderboard, ``results/README.md``, from the records of ``results/leaderboard``.
 
 The leaderboard is the tables of one run directory (every system, method and
 experiment; :mod:`bench.tables`) with their convergence plots, interleaved
@@ -9,7 +9,7 @@ its own after the tables, in the file's order.
 Tables without a paragraph are listed on the console, so none goes
 unexplained by accident. Usage::
 
-    python -m bench.leaderboard results/leaderboard --commentary results/commentary.md --out results/leaderboard/README.md
+    python -m bench.leaderboard results/leaderboard --commentary results/commentary.md --out results/README.md
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.leaderboard", description=__doc__.split("\n\n")[0])
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("--commentary", type=Path, default=Path("results/commentary.md"))
-    parser.add_argument("--out", type=Path, default=Path("results/leaderboard/README.md"))
+    parser.add_argument("--out", type=Path, default=Path("results/README.md"))
     args = parser.parse_args(argv)
     try:
         text, missing = build(args.run_dir, read_commentary(args.commentary), args.out)
