@@ -29,8 +29,10 @@ TorchLagrangian = Callable[..., torch.Tensor]
 
 
 def numeric_subexpressions_to_floats(expr: sympy.Expr) -> sympy.Expr:
-    """Evaluate function calls on numbers (``sin(1/2)``), which torch cannot take."""
-    return expr.replace(lambda e: isinstance(e, sympy.Function) and e.is_number, lambda e: sympy.Float(e.evalf()))
+    """Evaluate function calls and powers of numbers (``sin(1/2)``, ``sqrt(2)``),
+    which torch cannot take."""
+    return expr.replace(lambda e: isinstance(e, (sympy.Function, sympy.Pow)) and e.is_number,
+                        lambda e: sympy.Float(e.evalf()))
 
 
 def to_torch(

@@ -135,8 +135,8 @@ def test_shape_errors_are_clear(double_pendulum):
         euler_lagrange(lambda a, b: (a * b).sum(), q, qd, qdd)
 
 
-def test_numeric_function_calls_compile():
+def test_numeric_function_calls_and_powers_compile():
     (q1, _), (qd1, _) = symbolic.coordinate_symbols(2)
-    f = symbolic.to_torch(qd1**2 * sympy.sin(sympy.Rational(1, 2)) + sympy.cos(2) * q1, 2)
+    f = symbolic.to_torch(qd1**2 * sympy.sin(sympy.Rational(1, 2)) + sympy.cos(2) * q1 + sympy.sqrt(2) * sympy.sqrt(sympy.Abs(q1)), 2)
     x = torch.ones(3, 2, dtype=torch.float64)
-    torch.testing.assert_close(f(x, x), torch.full((3,), np.sin(0.5) + np.cos(2.0), dtype=torch.float64))
+    torch.testing.assert_close(f(x, x), torch.full((3,), np.sin(0.5) + np.cos(2.0) + np.sqrt(2), dtype=torch.float64))
