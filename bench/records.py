@@ -42,7 +42,9 @@ def record_path(out_dir: str | os.PathLike, rid: str) -> Path:
 
 @functools.lru_cache(maxsize=1)
 def git_state() -> dict:
-    """Commit and dirty flag of the project checkout (results/ excluded)."""
+    """Commit and dirty flag of the project checkout (results/ excluded), read
+    once per process: a process forked after the first call (from the
+    harness's fork server) reports the state its code was imported in."""
 
     def git(*args: str) -> str:
         return subprocess.run(
