@@ -118,7 +118,9 @@ def adaptation_plot(results: list[dict], checkpoints, path: Path, title: str = "
     (:mod:`bench.adaptation`): one colour per learner, each seed a faint step
     line, the median over seeds at the checkpoints a solid line inside its
     interquartile band. The time axis is symmetric-log, so that t = 0 (the
-    model at the switch) is drawn."""
+    model at the switch) is drawn. Errors more than 1e4 times below the
+    smallest median at the switch (round-off) are drawn at that floor, which
+    the legend says, so that they do not flatten the other curves."""
     from bench.adaptation import at
 
     plt = _pyplot()
@@ -126,9 +128,14 @@ def adaptation_plot(results: list[dict], checkpoints, path: Path, title: str = "
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     learners = list(dict.fromkeys(r["learner"] for r in results))
     grid = np.asarray(checkpoints, dtype=np.float64)
+    floor = 1e-4 * min(np.median([r["curve"][0][1] for r in results if r["learner"] == lr]) for lr in learners)
     for i, learner in enumerate(learners):
         colour = colours[i % len(colours)]
         curves = [r["curve"] for r in results if r["learner"] == learner]
+        clipped = any(p[1] < floor for c in curves for p in c)
+        curves = [[[t, max(y, floor)] for t, y in c] for c in curves]
+        if clipped:
+            learner = f"{learner}, at the floor: below {floor:.0e}"
         for c in curves:
             t, y = np.asarray(c, dtype=np.float64).T
             ax.step(np.append(t, grid[-1]), np.append(y, y[-1]), where="post", color=colour, alpha=0.2, linewidth=0.7)
