@@ -45,9 +45,11 @@ A candidate is accepted only if all hold:
   rows, falls by more than :data:`MIN_BIC_DROP` (strong evidence on Kass &
   Raftery's scale);
 * its coefficient is at least :data:`MIN_T` standard errors from zero;
-* it lowers the mean squared residual on held-out rows (every fourth
-  training sample, not used to fit it) by at least :data:`MIN_HELDOUT_GAIN`
-  of that residual;
+* it lowers the mean squared residual on held-out rows (every fourth of
+  :data:`HELDOUT_BLOCKS` contiguous blocks of training samples, not used to
+  fit it: on measured trajectories neighbouring samples are near copies, so
+  interleaved rows would not test generalisation) by at least
+  :data:`MIN_HELDOUT_GAIN` of that residual;
 * the residual is above the floor of numerical round-off
   (:data:`ROUNDOFF` of the torque's mean square), so a model that already
   fits exactly is left alone.
@@ -76,6 +78,8 @@ MIN_T = 5.0
 MIN_HELDOUT_GAIN = 0.01
 ROUNDOFF = 1e-20
 MAX_ROUNDS = 6
+#: the held-out rows are every fourth of this many contiguous blocks of the training data
+HELDOUT_BLOCKS = 16
 #: a symbolic model with more terms than this is refitted like a neural one
 #: (a least-squares refit of thousands of terms is neither fast nor meaningful)
 MAX_SYMBOLIC_TERMS = 200
@@ -221,7 +225,9 @@ def trace(target: np.ndarray, data: Dataset, pool: list[Candidate], fixed: np.nd
     """
     y = target.ravel()
     n_rows = len(y)
-    held = np.repeat(np.arange(len(data)) % 4 == 3, data.dof)
+    # every fourth of 16 contiguous blocks: on trajectories, interleaved samples
+    # are near copies of their neighbours and would not test generalisation
+    held = np.repeat((np.arange(len(data)) * HELDOUT_BLOCKS // len(data)) % 4 == 3, data.dof)
     fit = ~held
     floor = ROUNDOFF * float(np.mean(data.tau**2))
     fixed = np.zeros((n_rows, 0)) if fixed is None else fixed

@@ -106,7 +106,7 @@ def test_run_writes_records_and_tables_and_resumes(tmp_path):
     table = (out / "tables.md").read_text()
     assert "## double_pendulum, direct experiment (MSE of L)" in table
     assert "| Group | Split | mlp | sysid |" in table and "| Runs | | 2/2 ok | 2/2 ok |" in table
-    assert "[8/8 done" in r.stdout
+    assert "] 8/8 done" in r.stdout
     again = cli(*args)
     assert "8 run(s) already have records" in again.stdout and "0 run(s) to do" in again.stdout
 
