@@ -43,6 +43,16 @@ def best_so_far(curve: list, grid: np.ndarray) -> np.ndarray:
     return out
 
 
+def _save_lines(plt, fig, ax, path: Path) -> Path:
+    """Grid and legend of a one-axes line plot, then write it atomically as PNG and close it."""
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    atomic_write(path, lambda f: fig.savefig(f, format="png"), binary=True)
+    plt.close(fig)
+    return path
+
+
 def convergence_plot(records: list[dict], path: Path, title: str) -> Path | None:
     """One convergence figure for the ``ok`` records of one (system, experiment);
     ``None`` when no record has a curve."""
@@ -75,12 +85,7 @@ def convergence_plot(records: list[dict], path: Path, title: str) -> Path | None
     ax.set_xlabel("wall-clock time (s)")
     ax.set_ylabel("best training MSE so far")
     ax.set_title(title, fontsize=10)
-    ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    atomic_write(path, lambda f: fig.savefig(f, format="png"), binary=True)
-    plt.close(fig)
-    return path
+    return _save_lines(plt, fig, ax, path)
 
 
 def residual_plot(data, residual: np.ndarray, path: Path, title: str = "", after: np.ndarray | None = None) -> Path:
@@ -150,9 +155,4 @@ def adaptation_plot(results: list[dict], checkpoints, path: Path, title: str = "
     ax.set_ylabel("test torque MSE")
     if title:
         ax.set_title(title, fontsize=9)
-    ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    atomic_write(path, lambda f: fig.savefig(f, format="png"), binary=True)
-    plt.close(fig)
-    return path
+    return _save_lines(plt, fig, ax, path)

@@ -84,3 +84,11 @@ def test_outputs_table_plot_and_json(tmp_path):
     assert "spring on joint 1: 5 ± 1e-09" in text
     assert (tmp_path / "adaptation.png").stat().st_size > 10000
     assert (tmp_path / "adaptation.json").exists()
+
+
+def test_command_refuses_a_bad_setup_in_one_line_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "adaptation"
+    assert adaptation.main(["--checkpoints", "1", "2", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --checkpoints must start at 0") and "\n" not in err
+    assert not out.exists()
