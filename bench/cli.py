@@ -1,20 +1,43 @@
-"""Command-line interface: ``python -m bench {list,run,table,data,fit}``.
+"""The suite's one command line: ``python -m bench COMMAND``.
 
 A thin layer over the library: every command calls functions that are also
-usable from Python (:mod:`bench.harness`, :mod:`bench.tables`,
-:mod:`bench.data`). Bad input ends with a one-line ``error:`` message on
-stderr and exit code 2; nothing is half-written.
+usable from Python. Bad input ends with a one-line ``error:`` message on
+stderr and exit code 2; nothing is half-written. Every option has a help
+text (``python -m bench COMMAND --help``).
+
+Commands: ``list``, ``run``, ``table``, ``data``, ``fit``, ``residual``,
+``convert``, ``leaderboard``, and the measurement scripts of
+:mod:`bench.experiments`: ``adaptation``, ``residual-acceptance``,
+``overhead``, ``dfki-filter``.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
+import dataclasses
 import math
+import shlex
 import sys
 from pathlib import Path
 
-from bench import harness
-from bench.errors import UserError
+from bench.core.data import Dataset, add_noise, check_experiment, generate, write_csv
+from bench.core.effects import EFFECTS, add_effects, parse_effects
+from bench.core.errors import UserError
+from bench.core.fileio import write_json
+from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance
+from bench.reporting.leaderboard import write_leaderboard
+from bench.reporting.tables import write_tables
+from bench.residual.loop import DEFAULT_TOTAL_FITS, ResidualJob, run_residual
+from bench.runner import matrix
+from bench.runner.execute import execute, load_data, make_system, method_config, preflight
+from bench.runner.isolation import CallFailed
+from bench.runner.plugins import import_plugins
+from bench.runner.records import Record
+from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, RunSpec, build_specs
+from methods import METHODS
+from systems import SYSTEMS
+from systems.dfki_double_pendulum import DEFAULT_FILTER, preprocess, read_raw
 
 EXIT_USAGE = 2
 
@@ -66,8 +89,6 @@ def _assignment(text: str) -> tuple[str, object]:
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
     key, raw = text.split("=", 1)
-    import ast
-
     try:
         value = ast.literal_eval(raw)
     except (ValueError, SyntaxError):
@@ -80,6 +101,10 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+_SET_HELP = "hyperparameter override, e.g. hidden=64 (repeatable)"
+_PLUGIN_HELP = "a .py file or module that registers extra methods or systems (repeatable)"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -106,8 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--smoke", action="store_true", help="use each method's tiny smoke configuration")
     r.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
                    help="hyperparameter override for every method in the run (repeatable)")
-    r.add_argument("--n-train", type=_positive_int, default=harness.N_TRAIN, help=f"training samples (default {harness.N_TRAIN})")
-    r.add_argument("--n-test", type=_positive_int, default=harness.N_TEST, help=f"test samples (default {harness.N_TEST})")
+    r.add_argument("--n-train", type=_positive_int, default=N_TRAIN, help=f"training samples (default {N_TRAIN})")
+    r.add_argument("--n-test", type=_positive_int, default=N_TEST, help=f"test samples (default {N_TEST})")
     r.add_argument("--domain-half-width", type=_positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain, "
                         "pi/2 for the paper; linear coordinates keep their ranges)")
@@ -119,66 +144,93 @@ def build_parser() -> argparse.ArgumentParser:
                         "tcp://host:8786 uses a running scheduler (needs the 'dask' extra)")
     r.add_argument("--no-rollout", action="store_true",
                    help="skip the rollout error of simulated systems (integrating each model's dynamics for 1 s)")
-    r.add_argument("--plugin", action="append", default=[], help="a .py file or module registering extra methods/systems")
+    r.add_argument("--plugin", action="append", default=[], help=_PLUGIN_HELP)
     r.add_argument("--no-resume", action="store_true", help="rerun runs that already have a record")
 
     t = sub.add_parser("table", help="write DIR/tables.md from DIR's records and print it")
-    t.add_argument("dir", type=Path)
+    t.add_argument("dir", type=Path, help="a run folder (with records/) or a folder of records")
 
     d = sub.add_parser("data", help="generate data in the suite's CSV format")
-    d.add_argument("--system", required=True)
+    d.add_argument("--system", required=True, help="a simulated system")
     d.add_argument("--n", type=_positive_int, required=True, help="number of samples")
-    d.add_argument("--seed", type=int, required=True)
+    d.add_argument("--seed", type=int, required=True, help="the generator's seed (the same seed gives the same data)")
     d.add_argument("--out", type=Path, required=True, help="CSV file to write")
-    d.add_argument("--domain-half-width", type=_positive, default=None)
+    d.add_argument("--domain-half-width", type=_positive, default=None,
+                   help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
     d.add_argument("--effects", nargs="+", default=[], metavar="NAME=c1,...,cn",
-                   help="add effects the system does not declare, one coefficient per joint: viscous_friction, "
-                        "coulomb_friction, armature, spring, offset (e.g. viscous_friction=0.8,0.5)")
+                   help=f"add effects the system does not declare, one coefficient per joint: {', '.join(EFFECTS)} "
+                        "(e.g. viscous_friction=0.8,0.5)")
     d.add_argument("--noise", type=_noise_level, default=0.0,
                    help="Gaussian noise on tau as a fraction of each joint's torque std (default 0)")
 
     res = sub.add_parser("residual", help="fit, trace the torque residual to missing effects, add them, refit; "
                                           "report the error before and after")
-    res.add_argument("--system", required=True)
-    res.add_argument("--method", required=True)
+    res.add_argument("--system", required=True, help="the system whose declared model the method fits")
+    res.add_argument("--method", required=True, help="a method that fits torques (indirect experiment)")
     res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
     res.add_argument("--budget", type=_positive, default=60.0, help="seconds per fit of the method (default 60)")
-    res.add_argument("--seed", type=int, default=0)
-    res.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE")
+    res.add_argument("--total-budget", type=_positive, default=None,
+                     help=f"seconds for the whole loop: no round starts after it, and the loop's process is killed "
+                          f"at {matrix.KILL_FACTOR} x it (default {DEFAULT_TOTAL_FITS} x --budget)")
+    res.add_argument("--seed", type=int, default=0, help="the method's seed (default 0)")
+    res.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
+                     help=_SET_HELP)
     res.add_argument("--json", type=Path, default=None, help="write the result here (see the README for its keys)")
     res.add_argument("--report", type=Path, default=None, help="write a markdown report with residual plots here")
+    res.add_argument("--plugin", action="append", default=[], help=_PLUGIN_HELP)
 
     cv = sub.add_parser("convert", help="turn a raw recording into the suite's CSV format")
     cv.add_argument("--format", required=True, choices=["dfki"], help="the recording's format")
     cv.add_argument("raw", type=Path, help="the raw recording (CSV, may be gzipped)")
     cv.add_argument("--out", type=Path, required=True, help="CSV file to write")
-    cv.add_argument("--cutoff-hz", type=_positive, default=None, help="low-pass cut-off (default: the documented one)")
+    cv.add_argument("--cutoff-hz", type=_positive, default=None,
+                    help=f"low-pass cut-off (default: the documented {DEFAULT_FILTER.cutoff_hz:g} Hz)")
 
     f = sub.add_parser("fit", help="one run on your own CSV data or on generated data; prints a one-line summary")
-    f.add_argument("--system", required=True)
-    f.add_argument("--method", required=True)
-    f.add_argument("--experiment", required=True, choices=["direct", "indirect"])
+    f.add_argument("--system", required=True, help="the data's system")
+    f.add_argument("--method", required=True, help="the method to fit")
+    f.add_argument("--experiment", required=True, choices=["direct", "indirect"],
+                   help="learn from samples of L (direct) or from torques (indirect)")
     f.add_argument("--train", type=Path, default=None, help="training CSV (default: generated)")
     f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
-    f.add_argument("--seed", type=int, default=0)
-    f.add_argument("--budget", type=_positive, default=60.0)
+    f.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
+    f.add_argument("--budget", type=_positive, default=60.0, help="wall-clock seconds for the fit (default 60)")
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
-    f.add_argument("--smoke", action="store_true")
-    f.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE")
-    f.add_argument("--n-train", type=_positive_int, default=harness.N_TRAIN)
-    f.add_argument("--n-test", type=_positive_int, default=harness.N_TEST)
-    f.add_argument("--domain-half-width", type=_positive, default=None)
-    f.add_argument("--plugin", action="append", default=[])
+    f.add_argument("--smoke", action="store_true", help="use the method's tiny smoke configuration")
+    f.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
+                   help=_SET_HELP)
+    f.add_argument("--n-train", type=_positive_int, default=N_TRAIN, help=f"generated training samples (default {N_TRAIN})")
+    f.add_argument("--n-test", type=_positive_int, default=N_TEST, help=f"generated test samples (default {N_TEST})")
+    f.add_argument("--domain-half-width", type=_positive, default=None,
+                   help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
+    f.add_argument("--plugin", action="append", default=[], help=_PLUGIN_HELP)
+
+    lb = sub.add_parser("leaderboard", help="write the leaderboard from a run folder's records and a commentary")
+    lb.add_argument("run_dir", type=Path, help="the run folder (default results/leaderboard)", nargs="?",
+                    default=Path("results/leaderboard"))
+    lb.add_argument("--commentary", type=Path, default=Path("results/commentary.md"),
+                    help="markdown with a '## system, experiment' paragraph per table (default results/commentary.md)")
+    lb.add_argument("--out", type=Path, default=Path("results/README.md"), help="the leaderboard (default results/README.md)")
+
+    for name, module in EXPERIMENTS.items():
+        e = sub.add_parser(name, help=module.HELP)
+        module.add_arguments(e)
     return p
+
+
+#: the measurement scripts, by subcommand
+EXPERIMENTS = {
+    "adaptation": adaptation,
+    "residual-acceptance": residual_acceptance,
+    "overhead": overhead,
+    "dfki-filter": dfki_filter,
+}
 
 
 # -- commands ------------------------------------------------------------------------
 
 def cmd_list(args) -> int:
-    from methods import METHODS
-    from systems import SYSTEMS
-
     print("Systems:")
     for entry in SYSTEMS.entries():
         sys_obj = entry.obj()
@@ -194,10 +246,6 @@ def cmd_list(args) -> int:
 
 
 def _check_names(systems=(), methods=(), experiments=()) -> None:
-    from bench.data import check_experiment
-    from methods import METHODS
-    from systems import SYSTEMS
-
     for name in systems:
         SYSTEMS.entry(name)
     for name in methods:
@@ -207,18 +255,13 @@ def _check_names(systems=(), methods=(), experiments=()) -> None:
 
 
 def cmd_run(args) -> int:
-    from bench.tables import write_tables
-    from methods import METHODS
-
-    harness.import_plugins(args.plugin)
-    from systems import SYSTEMS
-
+    import_plugins(args.plugin)
     methods = args.methods or METHODS.names()
     if args.systems == ["all"]:
         args.systems = SYSTEMS.names()
     _check_names(args.systems, methods, args.experiments)
-    seeds = args.seeds if args.seeds is not None else list(harness.SEEDS[: args.n_seeds])
-    specs = harness.build_specs(
+    seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
+    specs = build_specs(
         args.systems, methods, args.experiments, seeds, args.budget, noises=args.noise,
         profile="smoke" if args.smoke else "default",
         hyperparameters=dict(args.overrides),
@@ -230,8 +273,8 @@ def cmd_run(args) -> int:
     )
     for spec in specs:  # fail fast on a bad override, before any process starts
         if spec.method in METHODS and METHODS.entry(spec.method).available:
-            METHODS[spec.method](**harness.method_config(spec))
-    harness.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume, cluster=args.cluster)
+            METHODS[spec.method](**method_config(spec))
+    matrix.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume, cluster=args.cluster)
     text = write_tables(args.out)
     print(f"tables written to {args.out / 'tables.md'}")
     print(text)
@@ -239,8 +282,6 @@ def cmd_run(args) -> int:
 
 
 def cmd_table(args) -> int:
-    from bench.tables import write_tables
-
     try:
         text = write_tables(args.dir)
     except FileNotFoundError as exc:
@@ -250,28 +291,17 @@ def cmd_table(args) -> int:
 
 
 def cmd_data(args) -> int:
-    from bench.data import generate, write_csv
-    from systems import SYSTEMS
-
     cls = SYSTEMS[args.system]
     system = cls()
     if not system.simulated:
         raise UsageError(f"{args.system} is measured; its data come with the suite (python -m bench residual --system {args.system} ...)")
     if args.domain_half_width:
         system = cls(domain=system.scaled_domain(args.domain_half_width))
-    effects = {}
-    if args.effects:
-        from bench.effects import parse_effects
-
-        effects = parse_effects(args.effects, system.dof)
+    effects = parse_effects(args.effects, system.dof) if args.effects else {}
     data = generate(system, args.n, args.seed)
     if effects:
-        from bench.effects import add_effects
-
         data = add_effects(data, effects)
     if args.noise:
-        from bench.data import add_noise
-
         data = add_noise(data, "indirect", args.noise, args.seed)
     write_csv(data, args.out)
     extra = "".join([f", undeclared {', '.join(args.effects)}" if effects else "",
@@ -281,11 +311,7 @@ def cmd_data(args) -> int:
 
 
 def cmd_residual(args) -> int:
-    from bench.data import read_csv
-    from bench.residual import residual_loop, write_outputs
-    from methods import METHODS
-    from systems import SYSTEMS
-
+    import_plugins(args.plugin)
     _check_names([args.system], [args.method], [])
     system = SYSTEMS[args.system]()
     entry = METHODS.entry(args.method)
@@ -295,24 +321,24 @@ def cmd_residual(args) -> int:
     if reason:
         raise UsageError(f"method {args.method} cannot run the loop, which fits torques: {reason}")
     METHODS[args.method](**dict(args.overrides))  # bad hyperparameters: exit 2 now
-    if args.train:
-        train = read_csv(args.train, dof=system.dof, system=system.name)
-        test = read_csv(args.test, dof=system.dof, system=system.name) if args.test else None
-    elif not system.simulated:
-        train, test = system.load("train"), system.load("test")
-    else:
+    if not args.train and system.simulated:
         raise UsageError(f"{args.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
     if args.json is None and args.report is None:
         print("note: neither --json nor --report given; the result is only printed")
-    result = residual_loop(args.method, train, test, budget_s=args.budget, seed=args.seed,
-                           hyperparameters=dict(args.overrides), report=harness.print_now)
-    write_outputs(result, train, test, args.json, args.report)
-    b, a = result["mse_before"], result["mse_after"]
+    job = ResidualJob(
+        system=args.system, method=args.method,
+        train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
+        budget_s=args.budget, total_budget_s=args.total_budget, seed=args.seed, hyperparameters=dict(args.overrides),
+        json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
+        plugins=tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in args.plugin),
+    )
+    result = run_residual(job)
+    b, a = result.mse_before, result.mse_after
     print(f"torque MSE before: train {b['train']:.4g}, test {_maybe(b['test'])}; after: train {a['train']:.4g}, test {_maybe(a['test'])}")
-    for e in result["effects"]:
+    for e in result.effects:
         what = e.get("expression") or e["name"]
         print(f"  {what} on joint {e['joint']}: {e['coefficient']:.6g} ± {e['stderr']:.2g}")
-    if not result["effects"]:
+    if not result.effects:
         print("  no effect added: nothing significant in the residual")
     return 0
 
@@ -322,11 +348,6 @@ def _maybe(x) -> str:
 
 
 def cmd_convert(args) -> int:
-    import dataclasses
-
-    from bench.data import Dataset, write_csv
-    from systems.dfki_double_pendulum import DEFAULT_FILTER, preprocess, read_raw
-
     spec = DEFAULT_FILTER if args.cutoff_hz is None else dataclasses.replace(DEFAULT_FILTER, cutoff_hz=args.cutoff_hz)
     s = preprocess(read_raw(args.raw), spec)
     write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, "dfki_double_pendulum", str(args.raw)), args.out)
@@ -336,60 +357,69 @@ def cmd_convert(args) -> int:
 
 
 def cmd_fit(args) -> int:
-    from bench.data import check_experiment
-    from bench.fileio import write_json
-    from methods import METHODS
-
-    harness.import_plugins(args.plugin)
+    import_plugins(args.plugin)
     _check_names([args.system], [args.method], [args.experiment])
     if args.test and not args.train:
         raise UsageError("--test needs --train (generated training data comes with generated test data)")
-    spec = harness.RunSpec(
+    spec = RunSpec(
         system=args.system, method=args.method, experiment=args.experiment, seed=args.seed,
         budget_s=args.budget, profile="smoke" if args.smoke else "default",
         hyperparameters=dict(args.overrides), n_train=args.n_train, n_test=args.n_test,
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
         domain_half_width=args.domain_half_width, plugins=tuple(args.plugin),
     )
-    check_experiment(args.experiment)
     if METHODS.entry(args.method).available:
-        METHODS[args.method](**harness.method_config(spec))  # bad hyperparameters: exit 2 now
-    system = harness.make_system(spec)
+        METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now
+    system = make_system(spec)
     data = None
-    if harness.preflight(spec) is None:
-        data = harness.load_data(spec, system)  # DataError -> exit 2
+    if preflight(spec) is None:
+        data = load_data(spec, system)  # DataError -> exit 2
         for part in data:
             if part is not None:
                 part.target(args.experiment)
-    record = harness.execute(spec, data=data)
+    record = execute(spec, data=data)
     if args.json:
-        write_json(args.json, record)
+        write_json(args.json, record.to_json())
     print(summary_line(record))
-    return 0 if record["status"] in ("ok", "unavailable", "not_applicable") else 1
+    return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
 
 
-def summary_line(record: dict) -> str:
-    head = f"{record['system']} {record['method']} {record['experiment']} seed={record['seed']}: {record['status']}"
-    if record["status"] != "ok":
-        return f"{head} ({record['error']})"
-    test = record["test_mse"]
+def summary_line(record: Record) -> str:
+    head = f"{record.system} {record.method} {record.experiment} seed={record.seed}: {record.status}"
+    if record.status != "ok":
+        return f"{head} ({record.error})"
+    test = record.test_mse
     return (
-        f"{head} | train MSE {record['train_mse']:.4g} | test MSE {'n/a (no test data)' if test is None else f'{test:.4g}'}"
-        f" | {record['steps']} steps in {record['fit_seconds']:.1f} s ({record['stop_reason']})"
+        f"{head} | train MSE {record.train_mse:.4g} | test MSE {'n/a (no test data)' if test is None else f'{test:.4g}'}"
+        f" | {record.steps} steps in {record.fit_seconds:.1f} s ({record.stop_reason})"
     )
 
 
+def cmd_leaderboard(args) -> int:
+    missing = write_leaderboard(args.run_dir, args.commentary, args.out)
+    for key in missing:
+        print(f"no commentary for the table '{key}' (add '## {key}' to {args.commentary})")
+    print(f"wrote {args.out}")
+    return 0
+
+
 COMMANDS = {"list": cmd_list, "run": cmd_run, "table": cmd_table, "data": cmd_data, "fit": cmd_fit,
-            "residual": cmd_residual, "convert": cmd_convert}
+            "residual": cmd_residual, "convert": cmd_convert, "leaderboard": cmd_leaderboard,
+            **{name: module.main for name, module in EXPERIMENTS.items()}}
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.invocation = "python -m bench " + shlex.join(argv)
     try:
         return COMMANDS[args.command](args)
     except (UserError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except CallFailed as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("interrupted; finished runs keep their records, rerun the same command to resume", file=sys.stderr)
         return 130

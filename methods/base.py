@@ -1,6 +1,6 @@
 """The method contract, owned by the base class.
 
-A method learns a Lagrangian from a :class:`~bench.data.Dataset`, directly
+A method learns a Lagrangian from a :class:`~bench.core.data.Dataset`, directly
 (from samples of ``L``) or indirectly (from torques only, through the suite's
 Euler–Lagrange transform). The base class owns the protocol:
 
@@ -18,10 +18,13 @@ Euler–Lagrange transform). The base class owns the protocol:
               ...one step...
 
 Each method declares a tiny ``smoke`` configuration next to its real one.
+A fitted method is a :class:`~bench.core.models.FittedModel`: it predicts
+``L`` and ``tau`` and, where it has one, gives its expression.
 """
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import difflib
 import math
@@ -33,12 +36,14 @@ from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
 import numpy as np
-import sympy
 import torch
 
-from bench.data import EXPERIMENTS, Dataset, check_experiment, mse
-from bench.errors import ConfigError, DataError
-from bench.registry import Registry
+from bench.core.data import EXPERIMENTS, Dataset, check_experiment, mse
+from bench.core.dynamics import euler_lagrange
+from bench.core.errors import ConfigError, DataError
+from bench.core.models import ExpressionModel, FittedModel, LagrangianFunction
+from bench.core.registry import Registry
+from bench.core.system import SYSTEMS, System
 
 
 # -- hyperparameters --------------------------------------------------------------
@@ -254,8 +259,12 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-class Method:
-    """Base class of every learning method. See the module docstring."""
+class Method(FittedModel):
+    """Base class of every learning method. See the module docstring.
+
+    A method writes :meth:`_fit`, :meth:`_get_state`, :meth:`_set_state` and
+    the predictions of :class:`~bench.core.models.FittedModel`.
+    """
 
     name: ClassVar[str] = "unnamed"
     tags: ClassVar[frozenset[str]] = frozenset()
@@ -296,7 +305,8 @@ class Method:
         return dataclasses.asdict(self.config)
 
     # -- the protocol ----------------------------------------------------------
-    def fit(self, train: Dataset, experiment: str, seed: int, budget_s: float, *, warm_start: bool = False) -> "Method":
+    def fit(self, train: Dataset, experiment: str, seed: int, budget_s: float, *, warm_start: bool = False,
+            system: System | None = None) -> "Method":
         """Learn from ``train`` within ``budget_s`` seconds of wall-clock time.
 
         Keeps and restores the state with the lowest training MSE seen.
@@ -307,6 +317,9 @@ class Method:
         parameters and optimiser state), for methods with
         :attr:`supports_warm_start`, on new data of the same shape: what a
         learner does when its training stream changes.
+
+        ``system`` is the system the data belong to, for methods that read its
+        declared form; by default the registered system named by ``train.system``.
         """
         t0 = time.perf_counter()
         if warm_start and not self.supports_warm_start:
@@ -327,7 +340,7 @@ class Method:
         if not (budget_s > 0):
             raise ConfigError(f"budget_s must be positive, got {budget_s}")
         self.experiment, self.seed, self.dof = experiment, int(seed), train.dof
-        self.system = self._resolve_system(train)
+        self.system = system if system is not None else self._resolve_system(train)
         seed_everything(self.seed)
 
         rng = np.random.default_rng(self.seed)
@@ -357,45 +370,29 @@ class Method:
         }
         return self
 
-    def _resolve_system(self, train: Dataset):
-        if train.system is None:
-            return None
-        from systems import SYSTEMS
-
-        if train.system not in SYSTEMS:
+    @staticmethod
+    def _resolve_system(train: Dataset) -> System | None:
+        if train.system is None or train.system not in SYSTEMS:
             return None
         return SYSTEMS[train.system]()
 
     # -- hooks a method writes ------------------------------------------------
+    @abc.abstractmethod
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        raise NotImplementedError
+        """The learning loop: one ``progress.step()`` per step (see the module docstring)."""
 
+    @abc.abstractmethod
     def _get_state(self) -> Any:
-        raise NotImplementedError
+        """A copy of the current state, to be restored later."""
 
+    @abc.abstractmethod
     def _set_state(self, state: Any) -> None:
-        raise NotImplementedError
-
-    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
-        """``L`` at the states of ``data``, shape ``(n,)``."""
-        raise NotImplementedError
-
-    def predict_torque(self, data: Dataset) -> np.ndarray:
-        """``tau = g(L)`` at the states of ``data``, shape ``(n, dof)``."""
-        raise NotImplementedError
+        """Restore a state from :meth:`_get_state`."""
 
     def _post_fit(self, train: Dataset, experiment: str, seconds_left: float) -> None:
         """Work after the best state is restored, within what is left of the budget."""
 
-    def expression(self) -> sympy.Expr | None:
-        """The learned Lagrangian in ``q_i, qd_i``, for symbolic methods."""
-        return None
-
-    def readable_expression(self) -> sympy.Expr | None:
-        """The expression a person should read (what records store); by default :meth:`expression`."""
-        return self.expression()
-
-    def variants(self) -> dict[str, "Method | str"]:
+    def variants(self) -> dict[str, "FittedModel | str"]:
         """Further fitted models derived from this one (for example a refined
         equation), each reported by the harness as ``<method>+<variant>``.
 
@@ -410,10 +407,8 @@ class Method:
 
     # -- derived -----------------------------------------------------------------
     def predict(self, data: Dataset, experiment: str | None = None) -> np.ndarray:
-        """The prediction in the experiment's own target (L or tau)."""
-        experiment = experiment or self.experiment
-        check_experiment(experiment)
-        return self.predict_lagrangian(data) if experiment == "direct" else self.predict_torque(data)
+        """The prediction in the experiment's own target (L or tau), by default the fitted one's."""
+        return super().predict(data, experiment or self.experiment)
 
 
 # -- torch methods that learn L(q, qd) by mini-batch gradient descent ------------------
@@ -441,7 +436,7 @@ class TorchConfig(MethodConfig):
     dtype: typing.Literal["float64", "float32"] = "float64"
 
 
-class TorchLagrangianMethod(Method):
+class TorchLagrangianMethod(Method, LagrangianFunction):
     """A method whose model is a ``torch.nn.Module`` mapping ``(q, qd) -> L``.
 
     The loop is mini-batch Adam on the direct loss ``MSE(L_hat, L)`` or the
@@ -453,8 +448,9 @@ class TorchLagrangianMethod(Method):
     supports_warm_start: ClassVar[bool] = True
     model: torch.nn.Module
 
+    @abc.abstractmethod
     def build_model(self, train: Dataset) -> torch.nn.Module:
-        raise NotImplementedError
+        """The network, for data of ``train``'s shape."""
 
     def make_scheduler(self, optimizer: torch.optim.Optimizer):
         """Return an object with ``step(loss: float)``, or ``None``."""
@@ -474,8 +470,6 @@ class TorchLagrangianMethod(Method):
         if experiment == "direct":
             pred, target = self.lagrangian(batch["q"], batch["qd"]), batch["L"]
         else:
-            from bench.dynamics import euler_lagrange
-
             pred = euler_lagrange(self.lagrangian, batch["q"], batch["qd"], batch["qdd"], create_graph=True)
             target = batch["tau"]
         return torch.mean((pred - target) ** 2) + self.extra_loss()
@@ -512,19 +506,6 @@ class TorchLagrangianMethod(Method):
     def _set_state(self, state) -> None:
         self.model.load_state_dict(state)
 
-    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
-        t = data.tensors(self.dtype)
-        with torch.no_grad():
-            out = torch.cat([self.lagrangian(q, qd) for q, qd in zip(t["q"].split(8192), t["qd"].split(8192))])
-        return out.double().numpy()
-
-    def predict_torque(self, data: Dataset) -> np.ndarray:
-        from bench.dynamics import euler_lagrange_chunked
-
-        t = data.tensors(self.dtype)
-        tau, _ = euler_lagrange_chunked(self.lagrangian, t["q"], t["qd"], t["qdd"])
-        return tau.double().numpy()
-
 
 def _fused_adam_ok(dtype: torch.dtype) -> bool:
     # fused Adam on CPU exists from torch 2.4 and is ~3x faster for a 5x300 MLP
@@ -533,42 +514,6 @@ def _fused_adam_ok(dtype: torch.dtype) -> bool:
 
 
 METHODS: Registry[type[Method]] = Registry("method")
-
-
-class ExpressionModel:
-    """A fitted model given by a sympy Lagrangian in ``q_i, qd_i``.
-
-    Predicts ``L`` by evaluating the expression and ``tau`` through the suite's
-    Euler–Lagrange transform. Used for variants such as refined equations.
-    """
-
-    def __init__(self, expr: sympy.Expr, dof: int):
-        from bench import symbolic
-
-        self.expr, self.dof = expr, dof
-        self._fn = symbolic.to_torch(expr, dof)
-
-    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
-        return self._fn(q, qd)
-
-    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
-        t = data.tensors()
-        return self._fn(t["q"], t["qd"]).numpy()
-
-    def predict_torque(self, data: Dataset) -> np.ndarray:
-        from bench.dynamics import euler_lagrange_chunked
-
-        t = data.tensors()
-        return euler_lagrange_chunked(self._fn, t["q"], t["qd"], t["qdd"])[0].numpy()
-
-    def predict(self, data: Dataset, experiment: str) -> np.ndarray:
-        check_experiment(experiment)
-        return self.predict_lagrangian(data) if experiment == "direct" else self.predict_torque(data)
-
-    def expression(self) -> sympy.Expr:
-        return self.expr
-
-    readable_expression = expression
 
 
 class ExpressionMethod(Method):

@@ -65,10 +65,11 @@ import numpy as np
 import sympy
 from deap import gp
 
-from bench import regression, symbolic
-from bench.data import Dataset
-from bench.errors import ConfigError
-from methods.base import METHODS, ExpressionModel, Method, MethodConfig, Progress
+from bench.core import regression, symbolic
+from bench.core.data import Dataset
+from bench.core.errors import ConfigError
+from bench.core.models import ExpressionModel
+from methods.base import METHODS, Method, MethodConfig, Progress
 from methods.jets import UNARY, JetAlgebra
 
 BINARY_OPS = {"add": operator.add, "sub": operator.sub, "mul": operator.mul}

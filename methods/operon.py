@@ -22,9 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 import sympy
 
-from bench import symbolic
-from bench.data import Dataset
-from methods.base import METHODS, ExpressionMethod, ExpressionModel, MethodConfig, Progress
+from bench.core import symbolic
+from bench.core.data import Dataset
+from bench.core.models import ExpressionModel
+from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress
 
 NOT_APPLICABLE = (
     "Operon fits y = f(X) to samples of y; the indirect experiment has no samples of L, only torques, "

@@ -32,9 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 import sympy
 
-from bench import symbolic
-from bench.data import Dataset
-from methods.base import METHODS, ExpressionMethod, ExpressionModel, MethodConfig, Progress
+from bench.core import symbolic
+from bench.core.data import Dataset
+from bench.core.models import ExpressionModel
+from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress
 
 PROBE_TIMEOUT_S = 120
 

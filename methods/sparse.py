@@ -14,13 +14,13 @@ generically from the system's coordinates:
 Gauge: in the indirect experiment the library is mapped through ``g``, and
 terms whose image is zero (constants, total time derivatives such as
 ``qd_i cos q_i``) or a combination of earlier terms' images are removed
-(:func:`bench.regression.independent_columns`), so the fit is unique. Columns
+(:func:`bench.core.regression.independent_columns`), so the fit is unique. Columns
 are scaled to unit RMS (the scale of ``L`` is fixed by ``tau``, or by ``L``
 itself in the direct experiment).
 
 Fit: sequentially thresholded least squares, on ``g(library)`` against
 ``tau`` (indirect) or on the library against ``L`` (direct), with the
-threshold chosen on held-out samples (:func:`bench.regression.fit_columns`).
+threshold chosen on held-out samples (:func:`bench.core.regression.fit_columns`).
 It is the "knows a good basis" reference: when the true Lagrangian lies in
 the library's span, it is recovered exactly.
 """
@@ -33,9 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 import sympy
 
-from bench import regression, symbolic
-from bench.data import Dataset
-from methods.base import METHODS, ExpressionMethod, ExpressionModel, MethodConfig, Progress
+from bench.core import regression, symbolic
+from bench.core.data import Dataset
+from bench.core.models import ExpressionModel
+from bench.core.terms import TermLibrary
+from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress
 
 
 @dataclass(frozen=True)
@@ -46,7 +48,7 @@ class SparseConfig(MethodConfig):
     threshold: float | None = None
 
 
-def library(dof: int, kinds: tuple[str, ...]) -> list[sympy.Expr]:
+def library(dof: int, kinds: tuple[str, ...]) -> TermLibrary:
     """The candidate library for coordinates of the given kinds, simplest first."""
     q, qd = symbolic.coordinate_symbols(dof)
     angles = [q[i] for i in range(dof) if kinds[i] == "angle"]
@@ -61,7 +63,7 @@ def library(dof: int, kinds: tuple[str, ...]) -> list[sympy.Expr]:
         for a in angles:
             positions += [x * sympy.sin(a), x * sympy.cos(a)]
     velocities = [sympy.Integer(1)] + list(qd) + [qd[i] * qd[j] for i in range(dof) for j in range(i, dof)]
-    return [v * p for v in velocities for p in positions]
+    return TermLibrary.of_lagrangian(v * p for v in velocities for p in positions)
 
 
 @METHODS.add("sparse", "symbolic", "library")
@@ -76,12 +78,13 @@ class SparseLagrangian(ExpressionMethod):
         sub = train.subset(np.sort(rng.choice(len(train), min(len(train), self.config.samples), replace=False)))
         self.model = ExpressionModel(sympy.Integer(0), train.dof)
         while progress.step():
-            F = regression.design_matrix(self.library, sub, experiment)
+            F = self.library.design(sub, experiment)
             keep = regression.independent_columns(F)
-            y = regression.target_vector(sub, experiment)
+            y = sub.target(experiment).ravel()
             coef = regression.fit_columns(F[:, keep], y, len(sub), self.config.threshold)
             self.kept_terms = len(keep)
-            self.model = ExpressionModel(regression.combine([self.library[k] for k in keep], coef), train.dof)
+            kept = TermLibrary(self.library[k] for k in keep)
+            self.model = ExpressionModel(kept.lagrangian(coef), train.dof)
             progress.stop("solved")
 
     def record_details(self):

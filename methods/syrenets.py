@@ -101,6 +101,7 @@ reported beside the paper's model:
 from __future__ import annotations
 
 import math
+import time
 import typing
 from dataclasses import dataclass
 
@@ -109,9 +110,12 @@ import sympy
 import torch
 import torch.nn.functional as F
 
-from bench import symbolic
-from bench.dynamics import euler_lagrange, euler_lagrange_chunked
-from bench.errors import ConfigError
+from bench.core import regression, symbolic
+from bench.core.data import mse
+from bench.core.dynamics import euler_lagrange
+from bench.core.errors import ConfigError
+from bench.core.models import ExpressionModel, FittedModel
+from bench.core.timeouts import Timeout, call_with_timeout
 from methods.base import METHODS, TorchConfig, TorchLagrangianMethod
 
 BINARY = ("sum", "prod", "diff")
@@ -489,16 +493,15 @@ class SyReNets(TorchLagrangianMethod):
         return out.double().numpy()
 
     def predict_torque(self, data):
-        t = data.tensors(self.dtype)
         if self.config.inputs == "q_qd":
-            tau, _ = euler_lagrange_chunked(self._frozen_lagrangian(), t["q"], t["qd"], t["qdd"])
-        else:
-            taus = []
-            for sl in range(0, len(data), 8192):
-                part = slice(sl, sl + 8192)
-                taus.append(euler_lagrange(self._frozen_lagrangian(t["qdd"][part]), t["q"][part], t["qd"][part], t["qdd"][part]))
-            tau = torch.cat(taus)
-        return tau.double().numpy()
+            return super().predict_torque(data)
+        # qdd is an input too: each chunk's Lagrangian sees its own accelerations
+        t = data.tensors(self.dtype)
+        taus = []
+        for sl in range(0, len(data), 8192):
+            part = slice(sl, sl + 8192)
+            taus.append(euler_lagrange(self._frozen_lagrangian(t["qdd"][part]), t["q"][part], t["qd"][part], t["qdd"][part]))
+        return torch.cat(taus).double().numpy()
 
     def lagrangian(self, q, qd):
         return self._frozen_lagrangian()(q, qd)
@@ -512,8 +515,6 @@ class SyReNets(TorchLagrangianMethod):
 
     # -- pruning and refinement -----------------------------------------------------------
     def _post_fit(self, train, experiment, seconds_left):
-        import time
-
         deadline = time.perf_counter() + seconds_left
         self._variants, self._notes = {}, {}
         rng = np.random.default_rng(self.seed)
@@ -551,8 +552,6 @@ class SyReNets(TorchLagrangianMethod):
         whose MSE on ``ref`` is at most ``(1 + tolerance)`` times the full
         model's is kept (found by bisection).
         """
-        from bench.data import mse
-
         values = self._layer_values(ref, self.frozen)
         contrib = [W.abs() * v.pow(2).mean(0).sqrt().unsqueeze(0) for W, v in zip(self.frozen, values)]
         flat = torch.cat([c.reshape(-1) for c in contrib])
@@ -614,13 +613,6 @@ class SyReNets(TorchLagrangianMethod):
         kept. The symbolic steps run under a hard time limit (they cannot be
         interrupted otherwise), so the refinement never overruns the budget.
         """
-        import time
-
-        from bench import regression
-        from bench.data import mse
-        from bench.timeouts import Timeout, call_with_timeout
-        from methods.base import ExpressionModel
-
         pruned_k = self._notes["pruned_terms"]
         sizes = sorted({min(k, pruned_k) for k in self.REFINE_SIZES})
         rng = np.random.default_rng(self.seed + 1)
@@ -715,7 +707,7 @@ def _round_inner_constants(f: sympy.Expr, tol: float = 1e-2) -> sympy.Expr:
     return f.xreplace({a: simple(a) for a in f.atoms(sympy.Float)})
 
 
-class _FrozenVariant:
+class _FrozenVariant(FittedModel):
     """SyReNets' frozen function with some weights pruned to zero."""
 
     def __init__(self, owner: SyReNets, weights: list[torch.Tensor], keep: list[list[list[int]]]):
@@ -726,9 +718,6 @@ class _FrozenVariant:
 
     def predict_torque(self, data):
         return self.owner._with_weights(self.weights, self.owner.predict_torque, data)
-
-    def predict(self, data, experiment):
-        return self.predict_lagrangian(data) if experiment == "direct" else self.predict_torque(data)
 
     def expression(self):
         return self.owner._push(self.weights, self.owner.model.spec, self.keep)

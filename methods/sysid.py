@@ -12,7 +12,7 @@ Choices the paper leaves open
 -----------------------------
 * The constant input has one element.
 * The output layer keeps its bias.
-* The parametric form comes from the system (:meth:`systems.base.System.parametric_form`),
+* The parametric form comes from the system (:meth:`bench.core.system.System.parametric_form`),
   so any registered system that declares one can be identified.
 """
 
@@ -23,7 +23,8 @@ from dataclasses import dataclass
 import sympy
 import torch
 
-from bench.data import DataError
+from bench.core.errors import DataError
+from bench.core.models import ParametricModel
 from methods.base import METHODS, TorchConfig, TorchLagrangianMethod
 
 
@@ -62,11 +63,14 @@ class SysId(TorchLagrangianMethod):
         self.form = self.system.parametric_form()
         return ParameterNetwork(self.form, self.config.hidden)
 
+    def parametric(self) -> ParametricModel:
+        """The form at the identified parameter values."""
+        with torch.no_grad():
+            return ParametricModel(self.form, self.model.theta().double().tolist())
+
     def identified_parameters(self) -> dict[str, float]:
         """The identified parameter values, by name."""
-        with torch.no_grad():
-            values = self.model.theta().double().tolist()
-        return {s.name: v for s, v in zip(self.form.unknowns, values)}
+        return self.parametric().parameters()
 
     def expression(self) -> sympy.Expr:
-        return sympy.expand(self.form.substitute(list(self.identified_parameters().values())))
+        return self.parametric().expression()

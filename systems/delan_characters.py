@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-from bench.data import Dataset, DataError
+from bench.core.data import DataError, Dataset, numeric_column, read_frame
 from systems.base import SYSTEMS, System
 
 DATA = Path(__file__).parent / "data" / "delan_characters.csv.gz"
@@ -54,11 +54,9 @@ class PlanarArmParams:
 
 @functools.lru_cache(maxsize=1)
 def _frame():
-    import pandas as pd
-
     if not DATA.is_file():
         raise DataError(f"{DATA}: the packaged DeLaN data is missing")
-    return pd.read_csv(DATA)
+    return read_frame(DATA)
 
 
 @SYSTEMS.add("delan_characters", "measured", "external")
@@ -86,7 +84,7 @@ class DelanCharacters(System):
         if split not in ("train", "test"):
             raise ValueError(f"split must be 'train' or 'test', got {split!r}")
         part = frame[test if split == "test" else ~test]
-        cols = {k: part[[f"{k}_1", f"{k}_2"]].to_numpy(dtype=np.float64) for k in ("q", "qd", "qdd", "tau")}
+        cols = {k: np.stack([numeric_column(part, f"{k}_{i}", DATA) for i in (1, 2)], axis=1) for k in ("q", "qd", "qdd", "tau")}
         chars = "".join(sorted(part["character"].unique()))
         return Dataset(cols["q"], cols["qd"], cols["qdd"], cols["tau"], None, self.name,
                        f"{DATA.name}:{split} (characters {chars})")

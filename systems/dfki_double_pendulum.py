@@ -62,7 +62,7 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-from bench.data import DataError, Dataset, numeric_column, read_frame
+from bench.core.data import DataError, Dataset, numeric_column, read_frame
 from systems.base import SYSTEMS, System
 
 DATA_DIR = Path(__file__).parent / "data"

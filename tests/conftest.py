@@ -29,6 +29,6 @@ def double_pendulum():
 @pytest.fixture(scope="session")
 def small_data(double_pendulum):
     """(train, test) with 512 and 256 samples, from different seeds."""
-    from bench.data import generate
+    from bench.core.data import generate
 
     return generate(double_pendulum, 512, 0), generate(double_pendulum, 256, 1000)

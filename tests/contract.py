@@ -12,8 +12,8 @@ import numpy as np
 import sympy
 import torch
 
-from bench import symbolic
-from bench.data import Dataset, generate
+from bench.core import symbolic
+from bench.core.data import Dataset, generate
 from systems import Domain
 
 

@@ -13,10 +13,11 @@ from pathlib import Path
 import numpy as np
 import sympy
 
+# the README's imports, unchanged since bench/ was split into layers
 from bench import harness, symbolic
 from bench.data import generate
 from bench.dynamics import euler_lagrange
-from bench.tables import write_tables
+from bench.reporting.tables import write_tables
 from methods import METHODS, Method, MethodConfig
 from systems import SYSTEMS, System
 from tests.contract import check_method, check_system
@@ -112,11 +113,11 @@ def test_toy_runs_through_the_harness_and_the_tables(tmp_path):
         profile="smoke", n_train=128, n_test=64, plugins=(str(Path(__file__).resolve()),),
     )
     records = harness.run_matrix(specs, tmp_path, workers=2, report=harness.quiet)
-    assert all(r["status"] == "ok" for r in records), [r["error"] for r in records if r["status"] != "ok"]
-    exact = [r for r in records if r["system"] == "toy_mass_spring" and r["method"] == "toy_quadratic"]
-    assert len(exact) == 4 and all(r["test_mse"] < 1e-20 for r in exact)
+    assert all(r.status == "ok" for r in records), [r.error for r in records if r.status != "ok"]
+    exact = [r for r in records if r.system == "toy_mass_spring" and r.method == "toy_quadratic"]
+    assert len(exact) == 4 and all(r.test_mse < 1e-20 for r in exact)
     # the toy cannot express the double pendulum
-    assert all(r["test_mse"] > 1e-3 for r in records if r["system"] == "double_pendulum" and r["method"] == "toy_quadratic")
+    assert all(r.test_mse > 1e-3 for r in records if r.system == "double_pendulum" and r.method == "toy_quadratic")
     text = write_tables(tmp_path)
     assert "## toy_mass_spring, direct experiment" in text and "## toy_mass_spring, indirect experiment" in text
     assert "| Group | Split | sysid | toy_quadratic |" in text

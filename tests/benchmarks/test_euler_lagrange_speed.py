@@ -20,7 +20,7 @@ import pytest
 import torch
 from torch.func import functional_call, jacfwd, jacrev, vmap
 
-from bench.dynamics import euler_lagrange
+from bench.core.dynamics import euler_lagrange
 from methods.mlp import LagrangianMLP
 
 pytestmark = pytest.mark.benchmark

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 import torch
 
-from bench.data import generate
-from bench.dynamics import euler_lagrange
-from bench import symbolic
+from bench.core.data import generate
+from bench.core.dynamics import euler_lagrange
+from bench.core import symbolic
 from methods import METHODS
 from methods.jets import JetAlgebra
 from systems import get_system

@@ -17,7 +17,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from bench.data import generate
+from bench.core.data import generate
 from methods import METHODS
 from systems import get_system
 

@@ -1,0 +1,270 @@
+"""The suite's one data format.
+
+In memory, a :class:`Dataset` holds float64 arrays ``q, qd, qdd, tau`` of shape
+``(n, dof)`` and, where it is known, the Lagrangian ``L`` of shape ``(n,)``.
+
+On disk it is a CSV file with the columns::
+
+    q_1..q_n, qd_1..qd_n, qdd_1..qdd_n, tau_1..tau_n[, L]
+
+Further columns (time stamps, labels) are allowed and ignored. The same
+format serves generated and measured data, so any method can be given
+measured data.
+
+Generated data is a pure function of ``(system, n, seed)`` (and of the
+system's parameters and domain) and is cached as ``.npz`` under
+``$SYRENETS_BENCH_CACHE`` (default ``~/.cache/syrenets-bench``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bench.core.errors import ConfigError, DataError
+from bench.core.fileio import atomic_write
+
+EXPERIMENTS = ("direct", "indirect")
+#: bump when the generator changes what it produces for the same key
+GENERATOR_VERSION = 1
+
+
+@dataclass(frozen=True, eq=False)
+class Dataset:
+    """Samples of a Lagrangian system.
+
+    Attributes
+    ----------
+    q, qd, qdd, tau
+        float64 arrays of shape ``(n, dof)``.
+    L
+        float64 array of shape ``(n,)`` or ``None`` when unknown (measured data).
+    system
+        The registered system name the data belongs to, if any.
+    source
+        Where it came from: a file path or a generator description.
+    """
+
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    L: np.ndarray | None = None
+    system: str | None = None
+    source: str = "memory"
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        shapes = {a.shape for a in (self.q, self.qd, self.qdd, self.tau)}
+        if len(shapes) != 1 or self.q.ndim != 2:
+            raise DataError(f"{self.source}: q, qd, qdd, tau must share one (n, dof) shape, got {sorted(shapes)}")
+        if self.L is not None and self.L.shape != (self.q.shape[0],):
+            raise DataError(f"{self.source}: L must have shape ({self.q.shape[0]},), got {self.L.shape}")
+
+    def __len__(self) -> int:
+        return self.q.shape[0]
+
+    @property
+    def dof(self) -> int:
+        return self.q.shape[1]
+
+    def target(self, experiment: str) -> np.ndarray:
+        """The experiment's target: ``L`` (direct, shape (n,)) or ``tau`` (indirect)."""
+        check_experiment(experiment)
+        if experiment == "direct":
+            if self.L is None:
+                raise DataError(f"{self.source}: the direct experiment needs column 'L', which this data lacks")
+            return self.L
+        return self.tau
+
+    def subset(self, index) -> "Dataset":
+        return Dataset(
+            self.q[index], self.qd[index], self.qdd[index], self.tau[index],
+            None if self.L is None else self.L[index], self.system, self.source, dict(self.meta),
+        )
+
+    def tensors(self, dtype: torch.dtype = torch.float64) -> dict[str, torch.Tensor]:
+        out = {k: torch.tensor(getattr(self, k), dtype=dtype) for k in ("q", "qd", "qdd", "tau")}
+        if self.L is not None:
+            out["L"] = torch.tensor(self.L, dtype=dtype)
+        return out
+
+
+def check_experiment(experiment: str) -> None:
+    if experiment not in EXPERIMENTS:
+        raise ConfigError(f"unknown experiment {experiment!r}; choose one of {', '.join(EXPERIMENTS)}")
+
+
+# -- generation ------------------------------------------------------------------
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("SYRENETS_BENCH_CACHE", Path.home() / ".cache" / "syrenets-bench"))
+
+
+def _cache_key(system, n: int, seed: int) -> str:
+    desc = {"v": GENERATOR_VERSION, "n": n, "seed": seed, **system.describe()}
+    return hashlib.sha256(json.dumps(desc, sort_keys=True).encode()).hexdigest()[:20]
+
+
+def generate(system, n: int, seed: int, *, cache: bool = True) -> Dataset:
+    """Sample ``n`` states of ``system`` with ``seed``; torques from :mod:`bench.dynamics`.
+
+    ``q``, ``qd`` and ``qdd`` are drawn independently and uniformly from the
+    system's domain, in that order, from ``numpy.random.default_rng(seed)``.
+    The torque is ``g(L) + system.nonconservative_torque``, in float64.
+    """
+    if not getattr(system, "simulated", True):
+        raise DataError(f"system {system.name!r} is measured; it cannot generate data")
+    if n <= 0:
+        raise DataError(f"generate: n must be positive, got {n}")
+    source = f"generated:{system.name}:n={n}:seed={seed}"
+    path = cache_dir() / f"{system.name}-{_cache_key(system, n, seed)}.npz"
+    if cache and path.exists():
+        with np.load(path) as z:
+            return Dataset(z["q"], z["qd"], z["qdd"], z["tau"], z["L"], system.name, source)
+    rng = np.random.default_rng(seed)
+    dom = system.domain
+    q, qd, qdd = (rng.uniform(*dom.bounds(k, system.dof), size=(n, system.dof)) for k in ("q", "qd", "qdd"))
+    qt, qdt, qddt = (torch.from_numpy(a) for a in (q, qd, qdd))
+    tau, L = system.torque(qt, qdt, qddt)
+    data = Dataset(q, qd, qdd, tau.numpy(), L.numpy(), system.name, source)
+    if cache:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(path, lambda f: np.savez(f, q=q, qd=qd, qdd=qdd, tau=data.tau, L=data.L), binary=True)
+    return data
+
+
+# -- CSV ---------------------------------------------------------------------------
+
+_COLUMN = re.compile(r"^(q|qd|qdd|tau)_(\d+)$")
+
+
+def columns(dof: int, with_L: bool) -> list[str]:
+    cols = [f"{k}_{i}" for k in ("q", "qd", "qdd", "tau") for i in range(1, dof + 1)]
+    return cols + (["L"] if with_L else [])
+
+
+def write_csv(data: Dataset, path: str | os.PathLike) -> None:
+    """Write ``data`` in the suite's CSV format, atomically (no partial file)."""
+    import pandas as pd
+
+    arrays = {}
+    for k in ("q", "qd", "qdd", "tau"):
+        for i in range(data.dof):
+            arrays[f"{k}_{i + 1}"] = getattr(data, k)[:, i]
+    if data.L is not None:
+        arrays["L"] = data.L
+    frame = pd.DataFrame(arrays)
+    atomic_write(Path(path), lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
+
+
+def read_frame(path: Path):
+    """A CSV file (optionally compressed) as a DataFrame with at least one row;
+    :class:`DataError` naming the file otherwise."""
+    import pandas as pd
+
+    if not path.is_file():
+        raise DataError(f"{path}: no such file")
+    try:
+        frame = pd.read_csv(path)
+    except pd.errors.EmptyDataError:
+        raise DataError(f"{path}: the file is empty") from None
+    except (pd.errors.ParserError, UnicodeDecodeError, ValueError, EOFError, OSError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DataError(f"{path}: not a readable CSV file ({first})") from None
+    if len(frame) == 0:
+        raise DataError(f"{path}: the file has a header but no rows")
+    return frame
+
+
+def numeric_column(frame, col: str, path: Path) -> np.ndarray:
+    """Column ``col`` as float64; :class:`DataError` naming the file, column and
+    data row of the first non-numeric, NaN, empty or infinite value."""
+    import pandas as pd
+
+    values = pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=np.float64)
+    bad_text = np.isnan(values) & frame[col].notna().to_numpy()
+    if bad_text.any():
+        row = int(np.flatnonzero(bad_text)[0])
+        raise DataError(f"{path}: column {col} has a non-numeric value {frame[col].iloc[row]!r} in data row {row + 1}")
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        what = "NaN or empty" if np.isnan(values[row]) else "inf"
+        raise DataError(f"{path}: column {col} has a {what} value in data row {row + 1}")
+    return values
+
+
+def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | None = None) -> Dataset:
+    """Load a CSV in the suite's format, checking it thoroughly.
+
+    Raises :class:`DataError` with a one-line message naming the file and the
+    problem for: an unreadable or empty file, missing columns, a number of
+    degrees of freedom other than ``dof``, non-numeric, NaN or infinite values.
+    """
+    path = Path(path)
+    frame = read_frame(path)
+
+    found: dict[str, set[int]] = {k: set() for k in ("q", "qd", "qdd", "tau")}
+    for col in frame.columns:
+        m = _COLUMN.match(str(col).strip())
+        if m:
+            found[m.group(1)].add(int(m.group(2)))
+    file_dof = max((max(v) for v in found.values() if v), default=0)
+    if file_dof == 0:
+        raise DataError(f"{path}: no q_1 column; expected columns {', '.join(columns(dof or 1, False))}")
+    if dof is not None and file_dof != dof:
+        who = f"system {system!r}" if system else "the model"
+        raise DataError(f"{path}: the file has {file_dof} degrees of freedom (q_1..q_{file_dof}) but {who} has {dof}")
+    need = columns(file_dof, False)
+    missing = [c for c in need if c not in frame.columns]
+    if missing:
+        raise DataError(f"{path}: missing column(s) {', '.join(missing)}")
+
+    def numeric(col: str) -> np.ndarray:
+        return numeric_column(frame, col, path)
+
+    arrays = {k: np.stack([numeric(f"{k}_{i}") for i in range(1, file_dof + 1)], axis=1) for k in found}
+    L = numeric("L") if "L" in frame.columns else None
+    return Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], L, system, str(path))
+
+
+def add_noise(data: Dataset, experiment: str, level: float, seed: int) -> Dataset:
+    """``data`` with Gaussian noise on the experiment's target.
+
+    The noise of each target column (``L``, or each joint's ``tau``) has a
+    standard deviation of ``level`` times that column's own standard
+    deviation. It is drawn from its own stream of ``seed``, so the samples
+    stay those of the clean data.
+    """
+    check_experiment(experiment)
+    if not (level >= 0 and math.isfinite(level)):
+        raise ValueError(f"noise level must be a finite number >= 0, got {level}")
+    rng = np.random.default_rng([seed, 0x6E6F6973])  # "nois"
+    L, tau = data.L, data.tau
+    if experiment == "direct":
+        target = data.target(experiment)
+        L = target + rng.normal(0.0, level * target.std(), target.shape)
+    else:
+        tau = tau + rng.normal(0.0, 1.0, tau.shape) * (level * tau.std(axis=0))
+    meta = {**data.meta, "noise": level}
+    return Dataset(data.q, data.qd, data.qdd, tau, L, data.system, f"{data.source} + {level:g} x std noise on {experiment} targets", meta)
+
+
+# -- helpers -------------------------------------------------------------------------
+
+def mse(prediction: np.ndarray, target: np.ndarray) -> float:
+    """Mean squared error over all elements; ``nan`` when any input is not finite."""
+    diff = np.asarray(prediction, dtype=np.float64) - np.asarray(target, dtype=np.float64)
+    if diff.shape != np.shape(target):
+        raise ValueError(f"prediction shape {np.shape(prediction)} != target shape {np.shape(target)}")
+    value = float(np.mean(diff * diff))
+    return value if math.isfinite(value) else float("nan")

@@ -1,0 +1,140 @@
+"""The one fitted-model interface, and the models the suite builds from it.
+
+A fitted model predicts a Lagrangian and its torques at the states of a
+:class:`~bench.core.data.Dataset`. Every method's fit
+(:class:`methods.base.Method`), every variant a method derives, the residual
+loop's models and the rollout's true model are :class:`FittedModel` s, and
+the rest of the suite uses nothing else of them:
+
+* :meth:`~FittedModel.predict_lagrangian` and
+  :meth:`~FittedModel.predict_torque` (abstract);
+* :meth:`~FittedModel.expression`: the Lagrangian as a sympy expression, or
+  ``None`` for a model without one (a neural network);
+* :meth:`~FittedModel.parametric`: the model as a parametric form with
+  identified values (:class:`ParametricModel`), or ``None``.
+
+Models given by a batched torch function ``L(q, qd)`` subclass
+:class:`LagrangianFunction`, which owns their predictions (torques through
+the suite's one Euler–Lagrange transform); :class:`ExpressionModel` (a sympy
+Lagrangian) and :class:`ParametricModel` (a system's parametric form at
+given parameter values) are two of them.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Sequence
+
+import numpy as np
+import sympy
+import torch
+
+from bench.core import symbolic
+from bench.core.data import Dataset, check_experiment
+from bench.core.dynamics import euler_lagrange_chunked
+
+#: rows per call when a model's Lagrangian is evaluated on a large data set
+CHUNK = 8192
+
+
+class FittedModel(abc.ABC):
+    """A fitted Lagrangian model; see the module docstring."""
+
+    @abc.abstractmethod
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        """``L`` at the states of ``data``, shape ``(n,)``."""
+
+    @abc.abstractmethod
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        """``tau`` at the states of ``data``, shape ``(n, dof)``."""
+
+    def expression(self) -> sympy.Expr | None:
+        """The Lagrangian in ``q_i, qd_i``; ``None`` for a model without one."""
+        return None
+
+    def readable_expression(self) -> sympy.Expr | None:
+        """The expression a person should read (what records store); by default :meth:`expression`."""
+        return self.expression()
+
+    def parametric(self) -> "ParametricModel | None":
+        """The model as a parametric form with identified values, if it is one."""
+        return None
+
+    def predict(self, data: Dataset, experiment: str) -> np.ndarray:
+        """The prediction in the experiment's own target: ``L`` (direct) or ``tau`` (indirect)."""
+        check_experiment(experiment)
+        return self.predict_lagrangian(data) if experiment == "direct" else self.predict_torque(data)
+
+
+class LagrangianFunction(FittedModel):
+    """A model given by a batched torch function :meth:`lagrangian`
+    ``(q, qd) -> L`` in the dtype :attr:`dtype`; predictions are returned in
+    float64."""
+
+    dtype: torch.dtype = torch.float64
+
+    @abc.abstractmethod
+    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        """``L`` for a batch: ``(batch, dof) x 2 -> (batch,)``."""
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        t = data.tensors(self.dtype)
+        with torch.no_grad():
+            out = torch.cat([self.lagrangian(q, qd) for q, qd in zip(t["q"].split(CHUNK), t["qd"].split(CHUNK))])
+        return out.double().numpy()
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        t = data.tensors(self.dtype)
+        tau, _ = euler_lagrange_chunked(self.lagrangian, t["q"], t["qd"], t["qdd"])
+        return tau.double().numpy()
+
+
+class ExpressionModel(LagrangianFunction):
+    """A fitted model given by a sympy Lagrangian in ``q_i, qd_i``."""
+
+    def __init__(self, expr: sympy.Expr, dof: int):
+        self.expr, self.dof = expr, dof
+        self._fn = symbolic.to_torch(expr, dof)
+
+    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return self._fn(q, qd)
+
+    def expression(self) -> sympy.Expr:
+        return self.expr
+
+
+class ParametricModel(LagrangianFunction):
+    """A system's parametric form (:class:`~bench.core.system.ParametricForm`)
+    at the parameter values ``theta``."""
+
+    def __init__(self, form, theta: Sequence[float]):
+        self.form, self.theta = form, np.asarray(theta, dtype=np.float64)
+        self._theta = torch.tensor(self.theta, dtype=torch.float64)
+
+    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return self.form.torch_fn(q, qd, self._theta)
+
+    def with_parameters(self, theta: Sequence[float]) -> "ParametricModel":
+        return ParametricModel(self.form, theta)
+
+    def parameters(self) -> dict[str, float]:
+        """The parameter values, by name."""
+        return {s.name: float(v) for s, v in zip(self.form.unknowns, self.theta)}
+
+    def jacobian(self, data: Dataset) -> np.ndarray:
+        """``d tau / d theta``, flattened sample-major, by central differences."""
+        cols = []
+        for i, value in enumerate(self.theta):
+            h = 1e-6 * max(1.0, abs(value))
+            up, down = self.theta.copy(), self.theta.copy()
+            up[i] += h
+            down[i] -= h
+            diff = self.with_parameters(up).predict_torque(data) - self.with_parameters(down).predict_torque(data)
+            cols.append(diff.ravel() / (2 * h))
+        return np.stack(cols, axis=1)
+
+    def expression(self) -> sympy.Expr:
+        return sympy.expand(self.form.substitute(self.theta.tolist()))
+
+    def parametric(self) -> "ParametricModel":
+        return self

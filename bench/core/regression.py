@@ -1,0 +1,154 @@
+"""Linear least squares over terms.
+
+The Euler–Lagrange transform ``g`` is linear in ``L``, so a Lagrangian
+``L = sum_k c_k f_k(q, qd)`` has torques ``tau = sum_k c_k g(f_k)``. Fitting
+the coefficients of a :class:`~bench.core.terms.TermLibrary` is therefore
+linear in both experiments:
+
+* direct: columns ``f_k`` evaluated on the data, target ``L``;
+* indirect: columns ``g(f_k)`` (one row per sample and joint), target ``tau``.
+
+:func:`least_squares` is the suite's one solver; :func:`fit_statistics` adds
+the standard errors and residual sum of squares that model selection needs.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import scipy.linalg
+import sympy
+
+from bench.core.data import Dataset
+from bench.core.terms import TermLibrary
+
+
+def least_squares(F: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least squares with column scaling for conditioning.
+
+    A QR factorisation solves full-rank problems (fast for the few columns of
+    a GP individual); rank-deficient ones fall back to the minimum-norm SVD
+    solution.
+    """
+    if F.shape[1] == 0:
+        return np.zeros(0)
+    scale = np.sqrt(np.einsum("ij,ij->j", F, F) / F.shape[0])
+    scale[scale == 0] = 1.0
+    Fs = F / scale
+    if F.shape[0] >= F.shape[1]:
+        Q, R = np.linalg.qr(Fs)
+        d = np.abs(np.diag(R))
+        if d.min() > 1e-10 * d.max():
+            return scipy.linalg.solve_triangular(R, Q.T @ y) / scale
+    coef, *_ = np.linalg.lstsq(Fs, y, rcond=None)
+    return coef / scale
+
+
+def fit_statistics(F: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`least_squares` coefficients, their standard errors, and the
+    residual sum of squares (the errors from ``pinv(F^T F) * RSS / (rows - columns)``)."""
+    coef = least_squares(F, y)
+    resid = y - F @ coef
+    rss = float(resid @ resid)
+    dof = max(len(y) - F.shape[1], 1)
+    try:
+        cov = np.linalg.pinv(F.T @ F) * (rss / dof)
+        stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    except np.linalg.LinAlgError:
+        stderr = np.full(F.shape[1], np.inf)
+    return coef, stderr, rss
+
+
+def thresholded_least_squares(
+    F: np.ndarray, y: np.ndarray, threshold: float = 1e-6, max_iter: int = 10
+) -> np.ndarray:
+    """Sequentially thresholded least squares (as in SINDy).
+
+    Repeatedly refit, dropping columns whose contribution ``|c_k| rms(F_k)``
+    falls below ``threshold * rms(y)``. Columns that are zero on the data (an
+    empty Euler–Lagrange image, for instance a constant) are dropped first.
+    """
+    K = F.shape[1]
+    rms_f = np.sqrt(np.mean(F * F, axis=0)) if K else np.zeros(0)
+    rms_y = float(np.sqrt(np.mean(y * y))) or 1.0
+    active = rms_f > 1e-12 * max(rms_f.max(initial=0.0), 1e-300)
+    coef = np.zeros(K)
+    for _ in range(max_iter):
+        coef = np.zeros(K)
+        coef[active] = least_squares(F[:, active], y)
+        keep = active & (np.abs(coef) * rms_f >= threshold * rms_y)
+        if np.array_equal(keep, active):
+            break
+        active = keep
+    coef[~active] = 0.0
+    return coef
+
+
+THRESHOLDS = (1e-12, 1e-9, 1e-7, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1)
+
+
+def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, threshold: float | None = None,
+              deadline: float | None = None):
+    """Fit coefficients of the Lagrangian terms ``basis`` on ``data``; returns ``(expression, coef)``.
+
+    With ``threshold=None`` the sparsity threshold is chosen on held-out
+    data: the samples are split 3:1, every threshold of :data:`THRESHOLDS` is
+    fitted on the first part, and the largest one whose held-out MSE is within
+    10 % of the best is refitted on all samples (the sparsest model that
+    predicts as well).
+    """
+    basis = list(basis)
+    if experiment == "direct" and not any(f.is_number for f in basis):
+        basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
+    library = TermLibrary.of_lagrangian(basis)
+    F = library.design(data, experiment, deadline)
+    coef = fit_columns(F, data.target(experiment).ravel(), len(data), threshold)
+    return library.lagrangian(coef), coef
+
+
+def fit_columns(F: np.ndarray, y: np.ndarray, n_samples: int, threshold: float | None = None) -> np.ndarray:
+    """Sparse coefficients for a design matrix of ``n_samples`` samples (rows
+    grouped by sample); the threshold is validated when not given."""
+    if threshold is None:
+        threshold = _validated_threshold(F, y, n_samples, len(y) // max(n_samples, 1))
+    return thresholded_least_squares(F, y, threshold)
+
+
+def independent_columns(F: np.ndarray, tol: float = 1e-8) -> np.ndarray:
+    """Indices of a maximal set of linearly independent columns, earliest first.
+
+    A column is kept when what remains of it, after projection on the kept
+    columns, is larger than ``tol`` times its norm. Zero columns are dropped.
+    Used to remove the gauge freedom from a library: terms with no
+    Euler–Lagrange image, or with the image of earlier terms.
+    """
+    kept: list[int] = []
+    Q = np.zeros((F.shape[0], 0))
+    for k in range(F.shape[1]):
+        col = F[:, k]
+        norm = float(np.linalg.norm(col))
+        if norm == 0.0 or not np.isfinite(norm):
+            continue
+        r = col - Q @ (Q.T @ col)
+        r = r - Q @ (Q.T @ r)  # re-orthogonalise once for stability
+        rn = float(np.linalg.norm(r))
+        if rn > tol * norm:
+            kept.append(k)
+            Q = np.column_stack([Q, r / rn])
+    return np.asarray(kept, dtype=int)
+
+
+def _validated_threshold(F: np.ndarray, y: np.ndarray, n: int, rows_per_sample: int) -> float:
+    cut = (3 * n // 4) * rows_per_sample  # split by sample, not by row
+    if cut == 0 or cut >= len(y):
+        return THRESHOLDS[0]
+    errors = []
+    for threshold in THRESHOLDS:
+        coef = thresholded_least_squares(F[:cut], y[:cut], threshold)
+        residual = F[cut:] @ coef - y[cut:]
+        errors.append(float(np.mean(residual * residual)))
+    best = min(errors)
+    scale = float(np.mean(y * y)) or 1.0
+    ok = [t for t, e in zip(THRESHOLDS, errors) if e <= 1.1 * best + 1e-14 * scale]
+    return max(ok)

@@ -1,0 +1,256 @@
+"""The :class:`System` abstraction: a physical system that carries its truth.
+
+A system knows its degrees of freedom, coordinate names, physical parameters
+(a dataclass), the true Lagrangian as a sympy expression (compiled to a
+batched torch function), a sampling domain, a hook for non-conservative
+generalized forces, and the parametric form that system identification fits.
+
+Adding a system means writing one subclass in ``systems/`` and registering
+it with ``@SYSTEMS.add(name, *tags)``; ``systems/single_pendulum.py`` is the
+smallest example. The contract lives in the core, below ``methods/``,
+because methods read a system's declared parametric form and coordinate
+kinds.
+
+Sign convention for non-conservative effects
+--------------------------------------------
+The data's torque is ``tau = g(L)(q, qd, qdd) + nonconservative_torque(q, qd, qdd)``:
+the effect's torque is *added* to the rigid-body torque. Viscous friction
+``b * qd`` therefore has a positive coefficient ``b``.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import math
+from dataclasses import dataclass
+from functools import cached_property
+from types import SimpleNamespace
+from typing import ClassVar, Sequence
+
+import numpy as np
+import sympy
+import torch
+
+from bench.core import symbolic
+from bench.core.dynamics import euler_lagrange_chunked
+from bench.core.registry import Registry
+
+HALF_PI = math.pi / 2
+
+
+@dataclass(frozen=True)
+class Domain:
+    """Independent uniform sampling ranges for q, qd and qdd.
+
+    Each of ``q``, ``qd``, ``qdd`` is one ``(low, high)`` pair for every
+    coordinate, or a tuple of pairs, one per coordinate (a spring's length
+    must stay positive while an angle swings). The paper samples every
+    component from U(-pi/2, pi/2); the authors' public code used (-pi, pi).
+    """
+
+    q: tuple = (-HALF_PI, HALF_PI)
+    qd: tuple = (-HALF_PI, HALF_PI)
+    qdd: tuple = (-HALF_PI, HALF_PI)
+
+    @classmethod
+    def symmetric(cls, half_width: float) -> "Domain":
+        r = (-float(half_width), float(half_width))
+        return cls(q=r, qd=r, qdd=r)
+
+    def __post_init__(self):
+        for name in ("q", "qd", "qdd"):
+            for lo, hi in self._pairs(name):
+                if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                    raise ValueError(f"domain.{name} must be finite (low, high) pairs with low < high, got {(lo, hi)}")
+
+    def _pairs(self, name: str) -> list[tuple[float, float]]:
+        value = getattr(self, name)
+        if len(value) == 2 and all(isinstance(v, (int, float)) for v in value):
+            return [tuple(map(float, value))]
+        return [tuple(map(float, pair)) for pair in value]
+
+    def bounds(self, name: str, dof: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(low, high)`` arrays of length ``dof`` for ``q``, ``qd`` or ``qdd``."""
+        pairs = self._pairs(name)
+        if len(pairs) == 1:
+            pairs = pairs * dof
+        if len(pairs) != dof:
+            raise ValueError(f"domain.{name} has {len(pairs)} ranges for {dof} coordinates")
+        lo, hi = zip(*pairs)
+        return np.asarray(lo), np.asarray(hi)
+
+
+@dataclass(frozen=True)
+class ParametricForm:
+    """A Lagrangian with unknown parameters, for system identification.
+
+    Attributes
+    ----------
+    expr
+        Sympy expression in ``q_i, qd_i`` and the ``unknowns``.
+    unknowns
+        The parameter symbols to identify, in output order.
+    true_values
+        The values the unknowns take in the simulated system (``None`` for
+        measured systems, where the truth is not known).
+    dof
+        Degrees of freedom.
+    """
+
+    expr: sympy.Expr
+    unknowns: tuple[sympy.Symbol, ...]
+    dof: int
+    true_values: tuple[float, ...] | None = None
+
+    @cached_property
+    def torch_fn(self):
+        """``f(q, qd, theta) -> L`` with ``theta`` of shape ``(len(unknowns),)``."""
+        return symbolic.to_torch(self.expr, self.dof, self.unknowns)
+
+    def substitute(self, values: Sequence[float]) -> sympy.Expr:
+        return self.expr.subs(dict(zip(self.unknowns, map(sympy.Float, values))))
+
+
+class System(abc.ABC):
+    """Base class of every system in the suite.
+
+    Subclasses set ``coordinates`` and ``Params`` and write
+    :meth:`lagrangian_expr`. Everything else is derived: the sympy Lagrangian
+    with the numeric parameters, its batched torch function, and the default
+    parametric form (the true expression with ``sysid_unknowns`` left free).
+
+    Parameters
+    ----------
+    params
+        An instance of ``Params``; the defaults when omitted.
+    domain
+        The sampling domain; :attr:`default_domain` when omitted.
+    """
+
+    name: ClassVar[str] = "unnamed"
+    tags: ClassVar[frozenset[str]] = frozenset()
+    coordinates: ClassVar[tuple[str, ...]] = ()
+    #: "angle" or "linear" per coordinate (libraries use trigonometric terms of
+    #: angles and polynomials of linear coordinates); all angles if empty
+    coordinate_kinds: ClassVar[tuple[str, ...]] = ()
+    Params: ClassVar[type] = type(None)
+    sysid_unknowns: ClassVar[tuple[str, ...]] = ()
+    default_domain: ClassVar[Domain] = Domain()
+    #: ``False`` for measured systems, which cannot generate data; they
+    #: provide :meth:`load` instead, and their Lagrangian is unknown
+    simulated: ClassVar[bool] = True
+    #: the experiments the system's data allow (measured trajectories have no L)
+    experiments: ClassVar[tuple[str, ...]] = ("direct", "indirect")
+    #: why an experiment missing from ``experiments`` does not apply
+    not_applicable: ClassVar[str] = ""
+    #: a published figure to read the tables against (printed above them)
+    reference: ClassVar[str] = ""
+
+    def __init__(self, params=None, domain: Domain | None = None):
+        self.params = params if params is not None else self.Params()
+        if not isinstance(self.params, self.Params):
+            raise TypeError(f"{self.name}: params must be a {self.Params.__name__}")
+        self.domain = domain if domain is not None else self.default_domain
+
+    # -- what a subclass writes -------------------------------------------------
+    @abc.abstractmethod
+    def lagrangian_expr(self, q: Sequence[sympy.Symbol], qd: Sequence[sympy.Symbol], p) -> sympy.Expr:
+        """The Lagrangian in the symbols ``q``, ``qd`` with parameters ``p``.
+
+        ``p`` has one attribute per field of ``Params``; each is a number for the
+        true Lagrangian, or a sympy symbol for the parametric form.
+        """
+
+    def load(self, split: str):
+        """The ``"train"`` or ``"test"`` part of a measured system's data."""
+        raise NotImplementedError(f"{self.name} is simulated: generate its data with bench.core.data.generate")
+
+    def nonconservative_torque(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> torch.Tensor | None:
+        """Torque added to ``g(L)`` by non-conservative effects (``None``: none)."""
+        return None
+
+    # -- derived -----------------------------------------------------------------
+    @property
+    def dof(self) -> int:
+        return len(self.coordinates)
+
+    @property
+    def symbols(self):
+        return symbolic.coordinate_symbols(self.dof)
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        kinds = self.coordinate_kinds or ("angle",) * self.dof
+        if len(kinds) != self.dof or set(kinds) - {"angle", "linear"}:
+            raise ValueError(f"{self.name}: coordinate_kinds must give 'angle' or 'linear' for each coordinate")
+        return tuple(kinds)
+
+    def scaled_domain(self, half_width: float) -> Domain:
+        """The domain with angles, velocities and accelerations in U(-w, w);
+        linear coordinates keep their own ranges."""
+        w = (-float(half_width), float(half_width))
+        lo, hi = self.domain.bounds("q", self.dof)
+        q = tuple(w if kind == "angle" else (a, b) for kind, a, b in zip(self.kinds, lo, hi))
+        return Domain(q=q, qd=w, qdd=w)
+
+    def param_dict(self) -> dict[str, float]:
+        return {f.name: float(getattr(self.params, f.name)) for f in dataclasses.fields(self.params)}
+
+    @cached_property
+    def lagrangian_sympy(self) -> sympy.Expr:
+        """The true Lagrangian with the numeric parameters substituted."""
+        q, qd = self.symbols
+        p = SimpleNamespace(**{k: sympy.Float(v) for k, v in self.param_dict().items()})
+        return sympy.expand(self.lagrangian_expr(q, qd, p))
+
+    @cached_property
+    def _lagrangian_torch(self):
+        return symbolic.to_torch(self.lagrangian_sympy, self.dof)
+
+    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        """The true Lagrangian, batched: ``(batch, dof) x 2 -> (batch,)``."""
+        return self._lagrangian_torch(q, qd)
+
+    def torque(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The system's torque ``g(L) + nonconservative_torque`` and ``L``, batched."""
+        tau, L = euler_lagrange_chunked(self.lagrangian, q, qd, qdd)
+        extra = self.nonconservative_torque(q, qd, qdd)
+        return (tau if extra is None else tau + extra), L
+
+    def parametric_form(self) -> ParametricForm:
+        """The form SysId fits: the true expression with ``sysid_unknowns`` free."""
+        if not self.sysid_unknowns:
+            raise NotImplementedError(f"system {self.name!r} declares no parametric form for SysId")
+        q, qd = self.symbols
+        values = self.param_dict()
+        unknown_syms = tuple(sympy.Symbol(n, real=True) for n in self.sysid_unknowns)
+        fields = {k: sympy.Float(v) for k, v in values.items()}
+        fields.update({s.name: s for s in unknown_syms})
+        expr = sympy.expand(self.lagrangian_expr(q, qd, SimpleNamespace(**fields)))
+        return ParametricForm(
+            expr=expr,
+            unknowns=unknown_syms,
+            dof=self.dof,
+            true_values=tuple(values[n] for n in self.sysid_unknowns) if self.simulated else None,
+        )
+
+    def describe(self) -> dict:
+        return {
+            "name": self.name,
+            "dof": self.dof,
+            "coordinates": list(self.coordinates),
+            "params": self.param_dict(),
+            "domain": dataclasses.asdict(self.domain),
+        }
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.params!r}, {self.domain!r})"
+
+
+SYSTEMS: Registry[type[System]] = Registry("system")
+
+
+def get_system(name: str, **kwargs) -> System:
+    """Instantiate the registered system ``name``."""
+    return SYSTEMS[name](**kwargs)

@@ -1,0 +1,184 @@
+r"""The suite's one term-library type.
+
+A model that is linear in its coefficients is a list of terms, each one
+column of a design matrix. A term is either
+
+* a **Lagrangian term** ``f(q, qd)``, a piece of ``L``: its value is ``f``
+  and its torque is ``g(f)``, through the suite's one Euler–Lagrange transform
+  (``g`` is linear in ``L``, so ``L = sum_k c_k f_k`` has the torque
+  ``sum_k c_k g(f_k)``); or
+* a **generalized force** on one joint ``j``: an expression in
+  ``q, qd, qdd`` (with ``sign`` and ``Abs`` allowed) that acts on joint
+  ``j``'s torque directly, such as friction or an offset. It has no value
+  in ``L``.
+
+A :class:`TermLibrary` is an ordered collection of terms; its
+:meth:`~TermLibrary.design` gives their columns in an experiment's target:
+``L`` (direct; Lagrangian terms only) or ``tau`` flattened sample-major
+(indirect). Sparse regression's candidate library, the residual loop's
+effects and open-ended terms, and the DFKI filter study's rigid-body and
+friction columns are all term libraries.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass
+from typing import Iterable, Iterator, Sequence
+
+import numpy as np
+import sympy
+
+from bench.core import symbolic
+from bench.core.data import Dataset, check_experiment
+from bench.core.dynamics import euler_lagrange_chunked
+from bench.core.timeouts import Timeout
+
+
+@dataclass(frozen=True)
+class Term:
+    """One column of a linear model.
+
+    Attributes
+    ----------
+    expr
+        The term in the suite's symbols ``q_i, qd_i`` (and ``qdd_i`` for a
+        generalized force).
+    force_on
+        ``None`` for a Lagrangian term; the joint (0-based) a generalized
+        force acts on.
+    name
+        What reports call the term (an effect's name, say); ``str(expr)``
+        when empty.
+    joint
+        The joint a Lagrangian term belongs to, where it belongs to one (an
+        armature of joint ``j``); for a generalized force, ``force_on``.
+    """
+
+    expr: sympy.Expr
+    force_on: int | None = None
+    name: str = ""
+    joint: int | None = None
+
+    def __post_init__(self):
+        if self.force_on is not None and self.joint is None:
+            object.__setattr__(self, "joint", self.force_on)
+
+    @classmethod
+    def lagrangian(cls, expr, name: str = "", joint: int | None = None) -> "Term":
+        return cls(sympy.sympify(expr), None, name, joint)
+
+    @classmethod
+    def force(cls, expr, joint: int, name: str = "") -> "Term":
+        return cls(sympy.sympify(expr), int(joint), name)
+
+    @property
+    def is_force(self) -> bool:
+        return self.force_on is not None
+
+    @property
+    def label(self) -> str:
+        return self.name or str(self.expr)
+
+    def value(self, data: Dataset) -> np.ndarray:
+        """The term's value in ``L`` at the states of ``data``, shape ``(n,)``
+        (zero for a generalized force)."""
+        if self.is_force:
+            return np.zeros(len(data))
+        return np.broadcast_to(symbolic.to_numpy(self.expr, data.dof)(data.q, data.qd), (len(data),)).astype(np.float64)
+
+    def torque(self, data: Dataset) -> np.ndarray:
+        """The term's torque per unit coefficient, shape ``(n, dof)``."""
+        if self.is_force:
+            out = np.zeros_like(data.tau)
+            out[:, self.force_on] = _force_function(self.expr)(data)
+            return out
+        t = data.tensors()
+        fn = symbolic.to_torch(self.expr, data.dof)
+        return euler_lagrange_chunked(fn, t["q"], t["qd"], t["qdd"])[0].numpy()
+
+    def column(self, data: Dataset, experiment: str) -> np.ndarray:
+        """The term's column in ``experiment``'s target: ``L`` (``(n,)``) or
+        ``tau`` flattened sample-major (``(n * dof,)``)."""
+        check_experiment(experiment)
+        if experiment == "direct":
+            if self.is_force:
+                raise ValueError(f"{self.label} is a generalized force: it has no value in L (direct experiment)")
+            return self.value(data)
+        return self.torque(data).ravel()
+
+
+@functools.lru_cache(maxsize=4096)
+def _force_function(expr: sympy.Expr):
+    """``f(data) -> (n,)`` for a generalized force, compiled once per expression
+    over the symbols it uses (``q_i``, ``qd_i``, ``qdd_i``)."""
+    symbols = sorted(expr.free_symbols, key=str)
+    columns = []
+    for s in symbols:
+        kind, _, index = str(s).rpartition("_")
+        if kind not in ("q", "qd", "qdd") or not index.isdigit():
+            raise ValueError(f"a generalized force may use q_i, qd_i and qdd_i only, got {s}")
+        columns.append((kind, int(index) - 1))
+    raw = sympy.lambdify(symbols, expr, modules="numpy")
+
+    def f(data: Dataset) -> np.ndarray:
+        out = raw(*[getattr(data, kind)[:, i] for kind, i in columns])
+        return np.broadcast_to(np.asarray(out, dtype=np.float64), (len(data),))
+
+    return f
+
+
+class TermLibrary(Sequence[Term]):
+    """An ordered, immutable collection of terms."""
+
+    def __init__(self, terms: Iterable[Term | sympy.Expr]):
+        self.terms = tuple(t if isinstance(t, Term) else Term.lagrangian(t) for t in terms)
+
+    @classmethod
+    def of_lagrangian(cls, exprs: Iterable) -> "TermLibrary":
+        return cls(Term.lagrangian(e) for e in exprs)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return TermLibrary(self.terms[index])
+        return self.terms[index]
+
+    def __len__(self) -> int:
+        return len(self.terms)
+
+    def __iter__(self) -> Iterator[Term]:
+        return iter(self.terms)
+
+    def __add__(self, other: Iterable[Term]) -> "TermLibrary":
+        return TermLibrary(self.terms + tuple(other))
+
+    def __repr__(self) -> str:
+        return f"TermLibrary({len(self)} terms)"
+
+    @property
+    def expressions(self) -> list[sympy.Expr]:
+        return [t.expr for t in self.terms]
+
+    def design(self, data: Dataset, experiment: str, deadline: float | None = None) -> np.ndarray:
+        """The terms' columns in ``experiment``'s target.
+
+        Shape ``(n, K)`` for direct, ``(n * dof, K)`` for indirect (rows
+        ordered sample-major, like ``tau.ravel()``). Raises
+        :class:`~bench.core.timeouts.Timeout` once ``time.perf_counter()``
+        passes ``deadline``.
+        """
+        check_experiment(experiment)
+        cols = []
+        for term in self.terms:
+            if deadline is not None and time.perf_counter() > deadline:
+                raise Timeout(f"design matrix: {len(cols)} of {len(self)} columns done")
+            cols.append(term.column(data, experiment))
+        rows = len(data) * (1 if experiment == "direct" else data.dof)
+        return np.stack(cols, axis=1) if cols else np.zeros((rows, 0))
+
+    def lagrangian(self, coef: Sequence[float]) -> sympy.Expr:
+        """``sum_k c_k f_k`` over the Lagrangian terms with a nonzero coefficient."""
+        if len(coef) != len(self):
+            raise ValueError(f"{len(coef)} coefficients for {len(self)} terms")
+        return sympy.Add(*[sympy.Float(float(c)) * t.expr for c, t in zip(coef, self.terms) if c != 0.0 and not t.is_force])

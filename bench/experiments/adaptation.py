@@ -1,0 +1,261 @@
+"""Adapting to a change in the system: the error over time after the training
+stream switches to the same system plus an undeclared effect.
+
+The paper's abstract says SyReNets "remains flexible enough to adapt to an
+unforeseen change in the physical system structure". This experiment makes
+that measurable. Protocol, per seed:
+
+1. **Before the switch.** Each learner is fitted for ``--before`` seconds on
+   ``--n-train`` torque samples of the system (indirect experiment: torques
+   only, as a robot would log them).
+2. **The switch.** The training stream becomes ``--n-train`` fresh samples of
+   the same system plus the undeclared effect(s) ``--effects`` (default: a
+   spring of 5 N m/rad on joint 1, which changes the Lagrangian's structure:
+   L gains -5 q1^2 / 2). Nothing tells a learner that the system changed.
+3. **After the switch.** The test torque MSE on ``--n-test`` held-out samples
+   of the changed system is recorded at the training times ``--checkpoints``
+   (seconds of fitting after the switch, the first being 0: the model as it
+   was at the switch).
+
+Learners:
+
+* ``sysid`` (fixed structure), ``mlp`` and ``syrenets`` continue their fit on
+  the new stream from their state at the switch: the same parameters and
+  optimiser state (:meth:`methods.base.Method.fit` with ``warm_start``).
+  SyReNets runs without its exact-recovery refinement (``refine=False``,
+  ``post_fraction=0``): its frozen equation is what is scored, at every
+  checkpoint.
+* ``sysid+residual``: at the switch, the residual loop
+  (:func:`bench.residual.residual_loop`) starts from the pre-switch SysId fit
+  and runs on the new stream (polish, trace, add, refit, repeat). Its error
+  is the pre-switch model's until the loop's round 0 (the polished declared
+  model) ends, then each finished round's; its time axis is the loop's own
+  wall-clock time.
+
+A checkpoint's time is the fitting time actually spent (each segment of fit
+stops a little before its budget); evaluating the test MSE is not counted.
+Each learner and seed runs in its own process through the runner
+(:mod:`bench.runner.isolation`). Usage::
+
+    python -m bench adaptation [--seeds 5] [--effects spring=5,0] [--out results/adaptation]
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from bench.core.data import generate, mse
+from bench.core.effects import add_effects, parse_effects
+from bench.core.errors import ConfigError
+from bench.core.fileio import atomic_write, write_json
+from bench.reporting.plots import adaptation_plot, step_values
+from bench.residual.loop import DEFAULT_TOTAL_FITS, residual_loop
+from bench.runner.isolation import Call, CallFailed, map_calls
+from bench.runner.matrix import KILL_FACTOR
+from bench.runner.progress import Report, quiet
+from bench.runner.provenance import provenance
+from bench.runner.spec import TEST_SEED_OFFSET
+from methods import METHODS
+from systems import SYSTEMS
+
+LEARNERS = ("sysid", "mlp", "syrenets", "sysid+residual")
+#: hyperparameters on top of each method's defaults
+HYPERPARAMETERS = {"syrenets": {"refine": False, "post_fraction": 0.0}}
+#: seeds of the switched stream are offset from the ones before it
+SWITCH_SEED_OFFSET = 500
+#: the residual loop's budget per fit of the method (its total is its default multiple of it)
+LOOP_BUDGET_S = 60.0
+
+
+@dataclass(frozen=True)
+class Setup:
+    system: str = "double_pendulum"
+    effects: tuple[str, ...] = ("spring=5,0",)
+    before_s: float = 20.0
+    checkpoints: tuple[float, ...] = (0.0, 1.0, 2.0, 5.0, 10.0, 20.0, 40.0)
+    n_train: int = 4000
+    n_test: int = 2000
+
+    def check(self) -> None:
+        system = SYSTEMS[self.system]()
+        if not system.simulated:
+            raise ConfigError(f"--system {self.system}: the experiment needs a simulated system")
+        parse_effects(list(self.effects), system.dof)
+        c = self.checkpoints
+        if not c or c[0] != 0 or any(b <= a for a, b in zip(c, c[1:])):
+            raise ConfigError(f"--checkpoints must start at 0 and increase, got {list(c)}")
+        if self.before_s <= 0 or self.n_train <= 0 or self.n_test <= 0:
+            raise ConfigError("--before, --n-train and --n-test must be positive")
+
+
+def streams(setup: Setup, seed: int):
+    """``(train before, test before, train after, test after)`` for ``seed``."""
+    system = SYSTEMS[setup.system]()
+    effects = parse_effects(list(setup.effects), system.dof)
+    after = seed + SWITCH_SEED_OFFSET
+    return (
+        generate(system, setup.n_train, seed),
+        generate(system, setup.n_test, seed + TEST_SEED_OFFSET),
+        add_effects(generate(system, setup.n_train, after), effects),
+        add_effects(generate(system, setup.n_test, after + TEST_SEED_OFFSET), effects),
+    )
+
+
+def run_learner(learner: str, setup: Setup, seed: int) -> dict:
+    """One learner on one seed: its errors before the switch and its curve after."""
+    train_a, test_a, train_b, test_b = streams(setup, seed)
+    base = learner.split("+")[0]
+    method = METHODS[base](**HYPERPARAMETERS.get(base, {}))
+    method.fit(train_a, "indirect", seed, setup.before_s)
+
+    def error(data):
+        return mse(method.predict_torque(data), data.tau)
+
+    out = {"learner": learner, "seed": seed, "before": error(test_a), "fit_before_s": method.fit_info["fit_seconds"]}
+    curve = [[0.0, error(test_b)]]
+    if learner == "sysid+residual":
+        result = residual_loop(base, train_b, test_b, seed=seed, fitted=method, report=quiet,
+                               budget_s=LOOP_BUDGET_S)
+        curve += [[r["seconds"], r["mse"]["test"]] for r in result.rounds if "seconds" in r]
+        out["effects"] = [{k: e[k] for k in ("name", "joint", "coefficient", "stderr")} for e in result.effects]
+    else:
+        spent = 0.0
+        for t in setup.checkpoints[1:]:
+            method.fit(train_b, "indirect", seed, max(t - spent, 1e-3), warm_start=True)
+            spent += method.fit_info["fit_seconds"]
+            curve.append([spent, error(test_b)])
+    out["curve"] = curve
+    return out
+
+
+def at(curve: list, t: float) -> float:
+    """The test MSE of a ``[(seconds, mse), ...]`` curve at time ``t``: the last value reached by then."""
+    return float(step_values(curve, [t], tolerance=1e-9)[0])
+
+
+def run_payload(payload: dict, on_phase) -> dict:
+    """One learner on one seed, in its own process (see :func:`run`)."""
+    setup = Setup(**{**payload["setup"], "effects": tuple(payload["setup"]["effects"]),
+                     "checkpoints": tuple(payload["setup"]["checkpoints"])})
+    on_phase("run")
+    return run_learner(payload["learner"], setup, payload["seed"])
+
+
+def run(setup: Setup, seeds: list[int], workers: int, report: Report = print) -> list[dict]:
+    """Every learner on every seed, ``workers`` processes at a time, each
+    killed at 1.5 x its fitting time plus its loop's total budget."""
+    jobs = [(learner, s) for s in seeds for learner in LEARNERS]
+    limit = KILL_FACTOR * (setup.before_s + setup.checkpoints[-1] + DEFAULT_TOTAL_FITS * LOOP_BUDGET_S)
+    start = time.monotonic()
+    finished = []
+
+    def done(name, outcome):
+        finished.append(outcome)
+        r = outcome.result
+        what = (f"before {r['before']:.3g}, at the switch {r['curve'][0][1]:.3g}, last {r['curve'][-1][1]:.3g}" if r
+                else f"did not finish ({'killed' if outcome.killed else outcome.log_tail})")
+        report(f"[{len(finished)}/{len(jobs)}, {time.monotonic() - start:.0f} s] {name.replace('_', ' ')}: {what}")
+
+    with tempfile.TemporaryDirectory(prefix="bench-adaptation-") as work:
+        calls = [(Call("bench.experiments.adaptation:run_payload", {"learner": learner, "setup": asdict(setup), "seed": s}),
+                  Path(work) / f"{learner}_seed={s}.json", f"{learner}_seed={s}") for learner, s in jobs]
+        outcomes = list(map_calls(calls, work, {"run": limit}, workers, done))
+    failed = [f"{learner} seed={s}" for (learner, s), o in zip(jobs, outcomes) if o.result is None]
+    if failed:
+        raise CallFailed(f"{len(failed)} job(s) did not finish: {', '.join(failed)}")
+    return sorted((o.result for o in outcomes), key=lambda r: (LEARNERS.index(r["learner"]), r["seed"]))
+
+
+def table(results: list[dict], setup: Setup) -> str:
+    """Median test MSE over seeds per learner: before the switch, at it, at
+    each checkpoint after it, and the final one with the time it was reached."""
+    cols = list(setup.checkpoints)
+    head = ("| learner | before the switch | " + " | ".join(f"t = {t:g} s" for t in cols)
+            + " | final | final reached at (s) | final ÷ at the switch |")
+    lines = [head, "|---|" + "---:|" * (len(cols) + 4)]
+    for learner in LEARNERS:
+        rs = [r for r in results if r["learner"] == learner]
+        if not rs:
+            continue
+        before = statistics.median(r["before"] for r in rs)
+        values = [statistics.median(at(r["curve"], t) for r in rs) for t in cols]
+        final = statistics.median(r["curve"][-1][1] for r in rs)
+        reached = statistics.median(r["curve"][-1][0] for r in rs)
+        ratio = statistics.median(r["curve"][-1][1] / r["curve"][0][1] for r in rs)
+        lines.append(f"| {learner} | {before:.3g} | " + " | ".join(f"{v:.3g}" for v in values)
+                     + f" | {final:.3g} | {reached:.1f} | {ratio:.3g} |")
+    return "\n".join(lines)
+
+
+def effects_found(results: list[dict]) -> str:
+    rs = [r for r in results if "effects" in r]
+    if not rs:
+        return ""
+    lines = ["| seed | effects the loop added (coefficient ± std. error) | loop time (s) |", "|---:|---|---:|"]
+    for r in rs:
+        text = ", ".join(f"{e['name']} on joint {e['joint']}: {e['coefficient']:.4g} ± {e['stderr']:.2g}" for e in r["effects"]) or "none"
+        lines.append(f"| {r['seed']} | {text} | {r['curve'][-1][0]:.1f} |")
+    return "\n".join(lines)
+
+
+def write(results: list[dict], setup: Setup, seeds: list[int], out: Path, command: str) -> Path:
+    out.mkdir(parents=True, exist_ok=True)
+    plot = adaptation_plot(results, setup.checkpoints, out / "adaptation.png",
+                           title=f"{setup.system} + undeclared {' '.join(setup.effects)}: test MSE after the switch")
+    prov = provenance()
+    text = "\n".join([
+        "# Adapting to a change in the system",
+        "",
+        f"Generated by `{command}` (commit {prov.get('commit', '?')[:7]}{', dirty tree' if prov.get('dirty') else ''}, "
+        f"{prov.get('cpu', 'cpu unknown')}). Protocol: [bench/experiments/adaptation.py](../../bench/experiments/adaptation.py).",
+        "",
+        f"System `{setup.system}`; before the switch each learner fits {setup.before_s:g} s on {setup.n_train} torque "
+        f"samples of it; then the stream becomes {setup.n_train} samples of the same system plus the undeclared "
+        f"`{' '.join(setup.effects)}`. Test torque MSE on {setup.n_test} held-out samples of the changed system "
+        f"(before the switch: of the original system), median over {len(seeds)} seeds, at t seconds of fitting after "
+        "the switch. Learners fit on one core each.",
+        "",
+        table(results, setup),
+        "",
+        effects_found(results),
+        "",
+        f"![test MSE after the switch]({plot.name})",
+        "",
+    ])
+    write_json(out / "adaptation.json", {"setup": asdict(setup), "seeds": seeds, "results": results, "provenance": prov})
+    atomic_write(out / "README.md", lambda f: f.write(text))
+    return out / "README.md"
+
+
+#: the subcommand's one-line help
+HELP = "measure how learners adapt when the system gains an undeclared effect (results/adaptation)"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--system", default=Setup.system, help=f"a simulated system (default {Setup.system})")
+    parser.add_argument("--effects", nargs="+", default=list(Setup.effects), metavar="NAME=c1,...",
+                        help="the undeclared effect(s) after the switch, one coefficient per joint (default: spring=5,0)")
+    parser.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 (default 5)")
+    parser.add_argument("--before", type=float, default=Setup.before_s, help="seconds of fitting before the switch (default 20)")
+    parser.add_argument("--checkpoints", type=float, nargs="+", default=list(Setup.checkpoints),
+                        help="seconds of fitting after the switch at which the test MSE is measured, from 0")
+    parser.add_argument("--n-train", type=int, default=Setup.n_train, help=f"training samples per stream (default {Setup.n_train})")
+    parser.add_argument("--n-test", type=int, default=Setup.n_test, help=f"test samples (default {Setup.n_test})")
+    parser.add_argument("--workers", type=int, default=2, help="jobs at a time, one process each (default 2)")
+    parser.add_argument("--out", type=Path, default=Path("results/adaptation"), help="output folder (default results/adaptation)")
+
+
+def main(args) -> int:
+    setup = Setup(args.system, tuple(args.effects), args.before, tuple(args.checkpoints), args.n_train, args.n_test)
+    setup.check()
+    seeds = list(range(args.seeds))
+    results = run(setup, seeds, args.workers)
+    path = write(results, setup, seeds, args.out, args.invocation)
+    print(json.dumps({"table": str(path)}))
+    print((args.out / "README.md").read_text())
+    return 0

@@ -1,0 +1,79 @@
+"""Build the leaderboard, ``results/README.md``, from the records of ``results/leaderboard``.
+
+The leaderboard is the tables of one run directory (every system, method and
+experiment; :mod:`bench.reporting.tables`) with their convergence plots, interleaved
+with a commentary: a markdown file whose ``## `` headings name the table
+sections they comment on (``## double_pendulum, direct``), plus an
+``## Introduction`` that comes first; any other heading becomes a section of
+its own after the tables, in the file's order.
+Tables without a paragraph are listed on the console, so none goes
+unexplained by accident. Usage::
+
+    python -m bench leaderboard results/leaderboard --commentary results/commentary.md --out results/README.md
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+from bench.core.errors import UserError
+from bench.core.fileio import atomic_write
+from bench.reporting.tables import build_tables, write_plots
+from bench.runner.records import read_records
+
+
+def read_commentary(path: Path) -> dict[str, str]:
+    """``{heading: paragraph}`` of a commentary file."""
+    if not path.is_file():
+        raise UserError(f"{path}: no such commentary file")
+    sections, key = {}, None
+    for line in path.read_text().splitlines():
+        m = re.match(r"^## (.+?)\s*$", line)
+        if m:
+            key = m.group(1)
+            sections[key] = []
+        elif key is not None:
+            sections[key].append(line)
+    return {k: "\n".join(v).strip() for k, v in sections.items()}
+
+
+def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, list[str]]:
+    """The leaderboard text and the table sections that have no commentary."""
+    records = read_records(run_dir)
+    if not records:
+        raise UserError(f"{run_dir}: no records found")
+    rel = Path(os.path.relpath(run_dir, out.parent))
+    plots = {k: str(rel / v) for k, v in write_plots(records, run_dir).items()}
+    tables = build_tables(records, plots)
+    body = tables.split("\n", 1)[1]  # drop the "# Results" title
+    parts, missing, used = [], [], {"Introduction"}
+    for chunk in re.split(r"(?m)^(?=## )", body):
+        m = re.match(r"## (\S+), (\w+) experiment", chunk)
+        if m:
+            key = f"{m.group(1)}, {m.group(2)}"
+            noisy = "noise" in chunk.splitlines()[0]
+            lookup = key if not noisy else chunk.splitlines()[0][3:]
+            text = commentary.get(lookup)
+            used.add(lookup)
+            head, _, rest = chunk.partition("\n")
+            if text:
+                chunk = f"{head}\n\n{text}\n{rest}"
+            else:
+                missing.append(key)
+        parts.append(chunk)
+    intro = commentary.get("Introduction", "")
+    text = "# Leaderboard\n\n" + (intro + "\n\n" if intro else "") + "".join(parts).rstrip() + "\n"
+    for heading, paragraph in commentary.items():
+        if heading not in used:
+            text += f"\n## {heading}\n\n{paragraph}\n"
+    return text, missing
+
+
+def write_leaderboard(run_dir: Path, commentary: Path, out: Path) -> list[str]:
+    """Write the leaderboard ``out`` from ``run_dir``'s records and the
+    ``commentary`` file; returns the table sections without commentary."""
+    text, missing = build(run_dir, read_commentary(commentary), out)
+    atomic_write(out, lambda f: f.write(text))
+    return missing

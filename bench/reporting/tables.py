@@ -1,0 +1,252 @@
+"""Tables in the paper's format, as a pure function of the records.
+
+For each (system, experiment) there is one markdown table with one column per
+method and the rows of Valle & Haddadin (2021), Tables 1 and 2:
+
+* **Best**: the best seed;
+* **5 Best**: mean (± std) over the 5 best seeds;
+* **All 10**: mean (± std) over all seeds;
+* **5 Worse**: mean (± std) over the 5 worst seeds;
+
+each split into train and test MSE, in the experiment's own target (``L``
+for direct, ``tau`` for indirect). The lowest mean of each row is bold.
+
+Definitions
+-----------
+* Seeds are ranked by their **training** MSE, so that picking the "best"
+  seed uses no test information; the test row shows the test MSE of the same
+  seeds. Ties break by seed number.
+* Only runs with status ``ok`` enter the groups. With ``n`` such runs,
+  "5 Best" and "5 Worse" take ``min(5, n)`` runs (they overlap when
+  ``n < 10``) and "All 10" takes all ``n``. The **Runs** row gives ``n`` and
+  what happened to the others (failed, timeout, unavailable, not applicable).
+* std is the population standard deviation (``ddof = 0``).
+* **Exact** counts the seeds whose expression is exactly the true Lagrangian
+  up to the experiment's gauge (:mod:`bench.evaluation.recovery`); "—" for
+  methods without an expression.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter, defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from bench.core.fileio import atomic_write
+from bench.reporting.plots import convergence_plot, plot_name
+from bench.runner.records import Record, read_records
+from systems import SYSTEMS
+
+GROUPS = ("Best", "5 Best", "All 10", "5 Worse")
+
+
+def fmt(value: float) -> str:
+    if value is None or not math.isfinite(value):
+        return "nan"
+    return f"{value:.2e}"
+
+
+def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float | None]]]:
+    """``{group: {"train": (mean, std), "test": (mean, std)}}`` over ``ok`` records.
+
+    ``std`` is ``None`` for the single-run "Best" group; a split without test
+    data is absent.
+    """
+    ok = sorted((r for r in records if r.status == "ok"), key=lambda r: (r.train_mse, r.seed))
+    n = len(ok)
+    if n == 0:
+        return {}
+    k = min(5, n)
+    members = {"Best": ok[:1], "5 Best": ok[:k], "All 10": ok, "5 Worse": ok[n - k:]}
+    out = {}
+    for group, runs in members.items():
+        out[group] = {}
+        for split in ("train", "test"):
+            vals = [getattr(r, f"{split}_mse") for r in runs]
+            if any(v is None for v in vals):
+                continue
+            arr = np.asarray(vals, dtype=np.float64)
+            out[group][split] = (float(arr.mean()), None if group == "Best" else float(arr.std()))
+    return out
+
+
+def _runs_cell(records: list[Record]) -> str:
+    counts = Counter(r.status for r in records)
+    if counts.get("unavailable") and len(counts) == 1:
+        return "unavailable (see below)"
+    if counts.get("not_applicable") and len(counts) == 1:
+        return "not applicable (see below)"
+    text = f"{counts.get('ok', 0)}/{len(records)} ok"
+    others = [f"{v} {k.replace('_', ' ')}" for k, v in sorted(counts.items()) if k != "ok"]
+    return text + (f" ({', '.join(others)})" if others else "")
+
+
+def _exact_cell(records: list[Record]) -> str:
+    judged = [r for r in records if r.exact is not None]
+    if not judged:
+        return "—"
+    return f"{sum(bool(r.exact) for r in judged)}/{len(records)} seeds exact"
+
+
+def _rollout_cell(records: list[Record]) -> str:
+    """Median rollout error of q over the ``ok`` runs, and what became of the others."""
+    rolled = [r.rollout for r in records if r.status == "ok" and r.rollout]
+    if not rolled:
+        return "—"
+    errors = [x["q_rmse"] for x in rolled if x.get("status") == "ok" and x.get("q_rmse") is not None]
+    counts = Counter(x.get("status") for x in rolled if x.get("status") != "ok")
+    text = f"{fmt(float(np.median(errors)))} ({len(errors)}/{len(rolled)}" if errors else f"— (0/{len(rolled)}"
+    others = "".join(f"; {v} {k.replace('_', ' ')}" for k, v in sorted(counts.items()))
+    return text + others + ")"
+
+
+def _header(records: list[Record]) -> list[str]:
+    budgets = sorted({r.budget_s for r in records})
+    seeds = sorted({r.seed for r in records})
+    prov = [r.provenance for r in records]
+    cpus = sorted({f"{p['cpu']} ({p['cpu_count']} cores)" for p in prov})
+    ran = [r.provenance for r in records if r.status not in ("unavailable", "not_applicable")] or prov
+    threads = sorted({str(p["threads"].get("torch_intra_op", "?")) for p in ran})
+    commits = sorted({f"{p['commit'][:10]}{' (dirty)' if p.get('dirty') else ''}" for p in prov})
+    torch_versions = sorted({str(p["packages"].get("torch")) for p in prov})
+    dates = sorted(p["utc"][:10] for p in prov)
+    profiles = sorted({r.spec.get("profile", "default") for r in records})
+    lines = [
+        f"Budget: {', '.join(f'{b:g} s' for b in budgets)} of wall-clock per run; "
+        f"{len(seeds)} seed(s) ({', '.join(map(str, seeds))}); configuration: {', '.join(profiles)}.",
+        f"Machine: {'; '.join(cpus)}; {', '.join(threads)} thread(s) per run; torch {', '.join(torch_versions)}.",
+        f"Commit: {', '.join(commits)}; run {dates[0]}{'' if dates[0] == dates[-1] else ' to ' + dates[-1]}.",
+    ]
+    return lines
+
+
+def build_table(records: list[Record]) -> str:
+    """One markdown table for records of a single (system, experiment)."""
+    if not records:
+        return ""
+    methods = sorted({r.method for r in records})
+    by_method = defaultdict(list)
+    for r in records:
+        by_method[r.method].append(r)
+    stats = {m: group_stats(by_method[m]) for m in methods}
+    lines = ["| Group | Split | " + " | ".join(methods) + " |", "|---|---|" + "---|" * len(methods)]
+    for group in GROUPS:
+        for split in ("train", "test"):
+            means = {m: stats[m].get(group, {}).get(split) for m in methods}
+            finite = [v[0] for v in means.values() if v is not None and math.isfinite(v[0])]
+            best = min(finite) if finite else None
+            cells = []
+            for m in methods:
+                v = means[m]
+                if v is None:
+                    cells.append("—")
+                    continue
+                text = fmt(v[0]) + ("" if v[1] is None else f" (± {fmt(v[1])})")
+                cells.append(f"**{text}**" if best is not None and v[0] == best else text)
+            label = group if split == "train" else ""
+            lines.append(f"| {label} | {split} | " + " | ".join(cells) + " |")
+    lines.append("| Runs | | " + " | ".join(_runs_cell(by_method[m]) for m in methods) + " |")
+    lines.append("| Exact | | " + " | ".join(_exact_cell(by_method[m]) for m in methods) + " |")
+    if any(r.rollout for r in records):
+        lines.append("| Rollout | q RMSE | " + " | ".join(_rollout_cell(by_method[m]) for m in methods) + " |")
+    notes = []
+    for m in methods:
+        statuses = {r.status for r in by_method[m]}
+        if statuses in ({"unavailable"}, {"not_applicable"}):
+            kind = "unavailable" if statuses == {"unavailable"} else "not applicable"
+            notes.append(f"- **{m}** is {kind}: {by_method[m][0].error}")
+    if notes:
+        lines += [""] + notes
+    return "\n".join(lines)
+
+
+def expand_variants(records: list[Record]) -> list[Record]:
+    """Add one pseudo-record ``<method>+<variant>`` per variant a run reported."""
+    out = []
+    for r in records:
+        out.append(r)
+        for name, scores in (r.details or {}).get("variants", {}).items():
+            blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None,
+                     "curve": [], "rollout": None}  # a variant has no training curve or rollout of its own
+            out.append(r.replace(**{**blank, "method": f"{r.method}+{name}", "status": "ok", **scores, "details": {}}))
+    return out
+
+
+def section_groups(records: list[Record]) -> dict[tuple, list[Record]]:
+    """Records by (system, experiment, noise), variants expanded."""
+    groups = defaultdict(list)
+    for r in expand_variants(records):
+        groups[(r.system, r.experiment, r.noise or 0.0)].append(r)
+    return groups
+
+
+def build_tables(records: list[Record], plots: dict[tuple, str] | None = None) -> str:
+    """All tables, one section per (system, experiment, noise level), as one
+    markdown document.
+
+    A method's variants (such as a refined equation) get columns of their own,
+    named ``<method>+<variant>``. ``plots`` maps a section's key to an image
+    file (relative to the document) embedded under its table.
+    """
+    plots = plots or {}
+    groups = section_groups(records)
+    order = {"direct": 0, "indirect": 1}
+    parts = ["# Results", "", _DEFINITIONS, ""]
+    for (system, experiment, noise) in sorted(groups, key=lambda k: (k[0], order.get(k[1], 9), k[1], k[2])):
+        recs = groups[(system, experiment, noise)]
+        target = "L" if experiment == "direct" else "τ"
+        noisy = f", training targets with {noise * 100:g} % noise (test targets clean)" if noise else ""
+        parts += [f"## {system}, {experiment} experiment (MSE of {target}){noisy}", ""]
+        parts += [line + "  " for line in _header(recs)]
+        reference = _reference(system)
+        if reference:
+            parts += ["", f"Reference: {reference}"]
+        parts += ["", build_table(recs), ""]
+        if (system, experiment, noise) in plots:
+            parts += [f"![convergence: {system}, {experiment}]({plots[(system, experiment, noise)]})", ""]
+    return "\n".join(parts).rstrip() + "\n"
+
+
+def _reference(system: str) -> str:
+    """The system's published reference figure, if it declares one."""
+    try:
+        return SYSTEMS[system].reference
+    except KeyError:
+        return ""
+
+
+_DEFINITIONS = (
+    "Rows follow Tables 1 and 2 of Valle & Haddadin (2021). Seeds are ranked by training MSE; "
+    "**Best** is the best seed, **5 Best** / **5 Worse** the mean (± population std) of the 5 best / worst, "
+    "**All 10** of all seeds. With n < 10 successful runs, the groups take min(5, n) and n runs "
+    "(see the Runs row). The lowest mean of each row is bold. **Exact** counts the seeds whose equation is "
+    "the true Lagrangian up to the experiment's gauge (a constant; indirectly also a total time derivative), "
+    "with coefficients within 1e-6 of the largest true one. **Rollout** is the median over seeds of the RMS "
+    "error of q when the model's forward dynamics are integrated for 1 s from 8 held-out states, unforced, "
+    "against the true system's motion (bench.rollout); in brackets how many seeds have a rollout and why "
+    "the others do not (an indefinite or singular d2L/dqd2 has no forward dynamics)."
+)
+
+
+def write_plots(records: list[Record], out_dir: str | Path) -> dict[tuple, str]:
+    """Convergence plots (:mod:`bench.reporting.plots`) next to the tables, by section key."""
+    made = {}
+    for (system, experiment, noise), recs in section_groups(records).items():
+        name = plot_name(system, experiment, noise)
+        title = f"{system}, {experiment}" + (f", {noise * 100:g} % noise" if noise else "")
+        if convergence_plot(recs, Path(out_dir) / name, title):
+            made[(system, experiment, noise)] = name
+    return made
+
+
+def write_tables(out_dir: str | Path, filename: str = "tables.md", plots: bool = True) -> str:
+    """Build the tables (and, with ``plots``, the convergence plots) from
+    ``out_dir``'s records and write them into ``out_dir`` atomically."""
+    records = read_records(out_dir)
+    if not records:
+        raise FileNotFoundError(f"{out_dir}: no records found (expected {Path(out_dir) / 'records' / '*.json'})")
+    text = build_tables(records, write_plots(records, out_dir) if plots else None)
+    atomic_write(Path(out_dir) / filename, lambda f: f.write(text))
+    return text

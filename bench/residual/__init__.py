@@ -1,0 +1,19 @@
+"""The residual loop: trace what a fitted model lacks to physical effects,
+add them, refit, and report the error before and after.
+
+* :mod:`~bench.residual.candidates`: the named effects and the open-ended
+  library, as terms;
+* :mod:`~bench.residual.selection`: stepwise selection with its statistics;
+* :mod:`~bench.residual.loop`: the loop, in this process
+  (:func:`residual_loop`) or through the runner (:func:`run_residual`);
+* :mod:`~bench.residual.result`, :mod:`~bench.residual.report`: its typed
+  result and its outputs.
+"""
+
+from bench.residual.candidates import candidates
+from bench.residual.loop import ResidualJob, residual_loop, run_residual
+from bench.residual.report import write_outputs
+from bench.residual.result import ResidualResult
+from bench.residual.selection import trace
+
+__all__ = ["ResidualJob", "ResidualResult", "candidates", "residual_loop", "run_residual", "trace", "write_outputs"]

@@ -1,0 +1,102 @@
+"""The residual loop's candidates: terms of the suite's term library
+(:class:`~bench.core.terms.TermLibrary`) on one joint each.
+
+* the named effects of :mod:`bench.core.effects` on every joint (viscous and
+  Coulomb friction, armature, spring, offset);
+* an open-ended library generated per joint ``j`` from the primitives
+  ``q, qd, qdd, sign qd, |qd|, sin q, cos q`` of the joint and, per other
+  joint ``k``, ``q_k, qd_k, qdd_k, sin(q_j - q_k), cos(q_j - q_k)``: every
+  primitive that is not a named effect's own column, every product of two
+  primitives (less the degenerate ones), and ``q^3``, ``qd^3`` and
+  ``sign(qd) |q|``. These are generalized forces on joint ``j``, reported as
+  ``symbolic`` with their expression (the term's name).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import sympy
+
+from bench.core.effects import EFFECTS
+from bench.core.terms import Term, TermLibrary
+
+
+def _primitives(dof: int, j: int) -> list[tuple[str, sympy.Expr]]:
+    """The building blocks of the open-ended terms of joint ``j``, with their text."""
+    n = j + 1
+    q = sympy.symbols(f"q_1:{dof + 1}", real=True)
+    qd = sympy.symbols(f"qd_1:{dof + 1}", real=True)
+    qdd = sympy.symbols(f"qdd_1:{dof + 1}", real=True)
+    out = [
+        (f"q_{n}", q[j]),
+        (f"qd_{n}", qd[j]),
+        (f"qdd_{n}", qdd[j]),
+        (f"sign(qd_{n})", sympy.sign(qd[j])),
+        (f"Abs(qd_{n})", sympy.Abs(qd[j])),
+        (f"sin(q_{n})", sympy.sin(q[j])),
+        (f"cos(q_{n})", sympy.cos(q[j])),
+    ]
+    for k in range(dof):
+        if k != j:
+            m = k + 1
+            out += [
+                (f"q_{m}", q[k]),
+                (f"qd_{m}", qd[k]),
+                (f"qdd_{m}", qdd[k]),
+                (f"sin(q_{n} - q_{m})", sympy.sin(q[j] - q[k])),
+                (f"cos(q_{n} - q_{m})", sympy.cos(q[j] - q[k])),
+            ]
+    return out
+
+
+#: products of the joint's own sign(qd) and |qd| are not new terms: sign^2 = 1,
+#: sign(x) |x| = x, |x|^2 = x^2 (a square of a cosine, 1 - sin^2, and
+#: qd sign(qd) = |qd| are skipped too)
+_DEGENERATE = {("sign", "sign"), ("sign", "Abs"), ("Abs", "sign"), ("Abs", "Abs")}
+
+
+@functools.lru_cache(maxsize=None)
+def symbolic_terms(dof: int, j: int) -> TermLibrary:
+    """The open-ended terms of joint ``j`` (see the module docstring), each a
+    generalized force named by its expression's text."""
+    n = j + 1
+    prims = _primitives(dof, j)
+    named = {f"q_{n}", f"qd_{n}", f"qdd_{n}", f"sign(qd_{n})"}  # spring, viscous, armature, Coulomb
+    terms = [(text, e) for text, e in prims if text not in named]
+    for a in range(len(prims)):
+        for b in range(a, len(prims)):
+            (ta, ea), (tb, eb) = prims[a], prims[b]
+            heads = (ta.split("(")[0], tb.split("(")[0])
+            if heads in _DEGENERATE or (ta == tb and heads[0] == "cos") or {ta, tb} == {f"qd_{n}", f"sign(qd_{n})"}:
+                continue
+            terms.append((f"{ta}**2" if ta == tb else f"{ta}*{tb}", ea * eb))
+    q, qd = prims[0][1], prims[1][1]
+    terms += [(f"q_{n}**3", q**3), (f"qd_{n}**3", qd**3), (f"sign(qd_{n})*Abs(q_{n})", sympy.sign(qd) * sympy.Abs(q))]
+    return TermLibrary(Term.force(e, j, text) for text, e in terms)
+
+
+def candidates(dof: int) -> TermLibrary:
+    """Every candidate: the named effects on every joint, then the open-ended terms."""
+    named = [effect.term(j) for effect in EFFECTS.values() for j in range(dof)]
+    return TermLibrary(named + [t for j in range(dof) for t in symbolic_terms(dof, j)])
+
+
+def is_named(term: Term) -> bool:
+    """A named effect (not an open-ended symbolic term)."""
+    return term.name in EFFECTS
+
+
+def label(term: Term) -> str:
+    """``"<effect or expression> on joint <j>"``, joints from 1."""
+    return f"{term.name} on joint {term.joint + 1}"
+
+
+def describe(term: Term, coefficient: float, stderr: float) -> dict:
+    """The JSON entry of an accepted effect: ``name``, ``joint`` (from 1),
+    ``coefficient``, ``stderr``, and ``expression`` for a symbolic one."""
+    entry = {"name": term.name if is_named(term) else "symbolic", "joint": term.joint + 1,
+             "coefficient": float(coefficient), "stderr": float(stderr)}
+    if not is_named(term):
+        entry["expression"] = term.name
+    return entry

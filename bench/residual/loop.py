@@ -1,0 +1,418 @@
+"""The residual loop: find what a fitted model lacks, add it, refit, repeat.
+
+Each round:
+
+1. **Fit.** The method is fitted on the training torques (indirect
+   experiment) with the system's declared model only. A parametric model's
+   parameters (:meth:`~bench.core.models.FittedModel.parametric`) are then
+   polished by nonlinear least squares (from the method's parameters and 16
+   random starts), so that an optimiser's shortfall is not taken for a
+   physical effect; ``mse_before`` is the polished model's, and round 0
+   records the method's own.
+2. **Residual.** ``r = tau - g(L_hat) - Phi c`` on the training and test sets.
+3. **Trace.** Forward stepwise selection (:mod:`bench.residual.selection`)
+   over the candidates of :mod:`bench.residual.candidates`: the named
+   effects on every joint and an open-ended library of generalized forces.
+   The named effects are tried first at each step. Candidates are judged
+   beside the model's own freedom: a symbolic model's terms, or a parametric
+   model's parameter directions (its Jacobian), are refitted with them, so a
+   candidate the model could already express gains nothing.
+4. **Add** the accepted effects: conservative ones to the Lagrangian
+   (armature ``+c qd^2/2``, spring ``-c q^2/2``), dissipative ones as
+   generalized forces (viscous friction from the Rayleigh function
+   ``c qd^2/2``, Coulomb friction, offsets, symbolic terms).
+5. **Refit jointly.** A parametric model (SysId: the system's declared form
+   with unknown physical parameters) is refitted with the effects by
+   nonlinear least squares over parameters and coefficients together, which
+   keeps the form's constraints (an armature cannot hide in a mass). Other
+   methods are refitted on the targets with the effects' torques taken off;
+   then a symbolic model's terms and the effects' coefficients are refitted
+   together by linear least squares (``g`` is linear in ``L``), and a neural
+   model's effects on what it leaves (backfitting). A symbolic model of more
+   than :data:`MAX_SYMBOLIC_TERMS` terms (SyReNets' full equation) is treated
+   like a neural one. Effects made redundant by the refit are dropped again
+   (backward elimination on the BIC).
+6. **Repeat** until a round accepts nothing, for at most :data:`MAX_ROUNDS`
+   rounds, and start no round once the total budget is spent.
+
+:func:`residual_loop` runs the loop in this process and returns a
+:class:`ResidualResult`; :func:`run_residual` runs a :class:`ResidualJob`
+through the runner, in its own process, killed at 1.5 x its total budget.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import sympy
+from scipy.optimize import least_squares
+
+from bench.core.data import Dataset, mse, read_csv
+from bench.core.errors import UserError
+from bench.core.models import ExpressionModel, FittedModel, ParametricModel
+from bench.core.regression import fit_statistics
+from bench.core.terms import Term, TermLibrary
+from bench.residual.candidates import candidates, describe, label
+from bench.residual.report import write_outputs
+from bench.residual.result import ResidualResult
+from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, bic, trace
+from bench.runner.isolation import Call, CallFailed, run_call
+from bench.runner.matrix import KILL_FACTOR
+from bench.runner.plugins import import_plugins
+from bench.runner.progress import Report, print_now
+from bench.runner.provenance import provenance
+from methods import METHODS
+from systems import SYSTEMS
+
+MAX_ROUNDS = 6
+#: a symbolic model with more terms than this is refitted like a neural one
+#: (a least-squares refit of thousands of terms is neither fast nor meaningful)
+MAX_SYMBOLIC_TERMS = 200
+#: random starts of the parametric polish, beside the method's own parameters
+POLISH_STARTS = 16
+#: the total budget, in fits of the method, when none is given
+DEFAULT_TOTAL_FITS = 20
+
+
+class LoopModel(FittedModel):
+    """``tau_hat = g(L_hat) + Phi c``: a fitted Lagrangian plus accepted effects."""
+
+    def __init__(self, rigid: FittedModel, effects: list[Term], coef, stderr):
+        self.rigid, self.effects = rigid, list(effects)
+        self.coef, self.stderr = np.asarray(coef, dtype=np.float64), np.asarray(stderr, dtype=np.float64)
+
+    def columns(self, data: Dataset) -> np.ndarray:
+        return TermLibrary(self.effects).design(data, "indirect")
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        tau = np.asarray(self.rigid.predict_torque(data), dtype=np.float64)
+        if self.effects:
+            tau = tau + (self.columns(data) @ self.coef).reshape(tau.shape)
+        return tau
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        """The rigid model's ``L`` plus the conservative effects' terms."""
+        L = np.asarray(self.rigid.predict_lagrangian(data), dtype=np.float64)
+        return L + sum((c * t.value(data) for c, t in zip(self.coef, self.effects)), np.zeros(len(data)))
+
+    def expression(self):
+        return self.rigid.expression()
+
+
+@dataclass(frozen=True)
+class _Fitter:
+    """How the loop fits its method."""
+
+    method: str
+    seed: int
+    budget_s: float
+    hyperparameters: dict
+
+    def fit(self, train: Dataset) -> FittedModel:
+        return METHODS[self.method](**self.hyperparameters).fit(train, "indirect", self.seed, self.budget_s)
+
+
+def _nonlinear_fit(rigid: ParametricModel, train: Dataset, effects: list[Term], coef0) -> LoopModel:
+    """Parameters and effects' coefficients together, by nonlinear least squares
+    (trust-region reflective, analytic effect columns, differenced parameter columns)."""
+    Phi = TermLibrary(effects).design(train, "indirect")
+    y = train.tau.ravel()
+    p = len(rigid.theta)
+
+    def residual(x):
+        return rigid.with_parameters(x[:p]).predict_torque(train).ravel() + Phi @ x[p:] - y
+
+    def jac(x):
+        return np.hstack([rigid.with_parameters(x[:p]).jacobian(train), Phi])
+
+    x0 = np.concatenate([rigid.theta, np.asarray(coef0, dtype=np.float64)])
+    sol = least_squares(residual, x0, jac=jac, method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200)
+    J = sol.jac
+    rss = float(sol.fun @ sol.fun)
+    cov = np.linalg.pinv(J.T @ J) * (rss / max(len(y) - len(sol.x), 1))
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return LoopModel(rigid.with_parameters(sol.x[:p]), effects, sol.x[p:], stderr[p:])
+
+
+def _polish(rigid: ParametricModel, train: Dataset, seed: int) -> LoopModel:
+    """Nonlinear least squares from the method's parameters and from
+    :data:`POLISH_STARTS` log-uniform starts in [0.01, 10]; the best fit is kept."""
+    rng = np.random.default_rng([seed, 0x706F6C])
+    starts = [rigid.theta] + [10 ** rng.uniform(-2, 1, len(rigid.theta)) for _ in range(POLISH_STARTS)]
+    best, best_rss = None, math.inf
+    for theta in starts:
+        try:
+            fit = _nonlinear_fit(rigid.with_parameters(theta), train, [], [])
+        except (ValueError, np.linalg.LinAlgError):  # a start where the form is not finite
+            continue
+        r = fit.predict_torque(train) - train.tau
+        rss = float(np.sum(r * r))
+        if math.isfinite(rss) and rss < best_rss:
+            best, best_rss = fit, rss
+    return best if best is not None else LoopModel(rigid, [], np.zeros(0), np.zeros(0))
+
+
+def _with_tau(data: Dataset, tau: np.ndarray) -> Dataset:
+    return Dataset(data.q, data.qd, data.qdd, tau, None, data.system, data.source, dict(data.meta))
+
+
+def _terms(expr: sympy.Expr) -> list[sympy.Expr]:
+    """The coefficient-free terms of an expanded expression that act on the torque."""
+    out = []
+    for term in sympy.Add.make_args(sympy.expand(expr)):
+        _, rest = term.as_coeff_Mul()
+        if rest.free_symbols and rest not in out:
+            out.append(rest)
+    return out
+
+
+def _lagrangian_columns(rigid: FittedModel, data: Dataset) -> tuple[list[sympy.Expr], np.ndarray] | None:
+    """The symbolic model's terms and their torque columns; ``None`` for a
+    model without an expression or with more than :data:`MAX_SYMBOLIC_TERMS` terms."""
+    expr = rigid.expression()
+    if expr is None:
+        return None
+    basis = _terms(expr)
+    if len(basis) > MAX_SYMBOLIC_TERMS:
+        return None
+    return basis, TermLibrary.of_lagrangian(basis).design(data, "indirect")
+
+
+def _refit(model: LoopModel, train: Dataset, effects: list[Term], fitter: _Fitter) -> LoopModel:
+    """Refit the method with the effects' torques off the targets, then the
+    Lagrangian's terms (symbolic models) and the effects together."""
+    y = train.tau.ravel()
+    Phi = TermLibrary(effects).design(train, "indirect")
+    coef = fit_statistics(Phi, y - np.ravel(model.rigid.predict_torque(train)))[0]
+    if isinstance(model.rigid, ParametricModel):
+        return _nonlinear_fit(model.rigid, train, effects, coef)
+    rigid = fitter.fit(_with_tau(train, train.tau - (Phi @ coef).reshape(train.tau.shape)))
+    lagrangian = _lagrangian_columns(rigid, train)
+    if lagrangian is None:
+        coef, stderr, _ = fit_statistics(Phi, y - np.ravel(rigid.predict_torque(train)))
+        return LoopModel(rigid, effects, coef, stderr)
+    basis, F_L = lagrangian
+    coef, stderr, _ = fit_statistics(np.hstack([F_L, Phi]), y)
+    k = len(basis)
+    expr = sympy.Add(*[sympy.Float(a) * b for a, b in zip(coef[:k], basis)])
+    return LoopModel(ExpressionModel(expr, train.dof), effects, coef[k:], stderr[k:])
+
+
+def _freedom(model: LoopModel, train: Dataset) -> np.ndarray:
+    """Columns for what the model can already express: a parametric model's
+    parameter directions, a symbolic model's terms, nothing for a neural one."""
+    if isinstance(model.rigid, ParametricModel):
+        return model.rigid.jacobian(train)
+    lagrangian = _lagrangian_columns(model.rigid, train)
+    return np.zeros((train.tau.size, 0)) if lagrangian is None else lagrangian[1]
+
+
+def _is_symbolic(rigid: FittedModel) -> bool:
+    """A model given by an expression whose terms :func:`_freedom` refits (not a parametric one)."""
+    if isinstance(rigid, ParametricModel):
+        return False
+    expr = rigid.expression()
+    return expr is not None and len(_terms(expr)) <= MAX_SYMBOLIC_TERMS
+
+
+def _fit_problem(model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarray]:
+    """What tracing and pruning fit: the target (``(n, dof)``) and the columns
+    always in the fit, the model's freedom (:func:`_freedom`) then the accepted
+    effects. A symbolic model's terms span its own torque, so the target is the
+    torque itself; otherwise it is what the rigid model leaves."""
+    target = train.tau if _is_symbolic(model.rigid) else train.tau - np.asarray(model.rigid.predict_torque(train))
+    return target, np.hstack([_freedom(model, train), model.columns(train)])
+
+
+def _prune(model: LoopModel, train: Dataset, fitter: _Fitter, report: Report) -> tuple[LoopModel, list[str]]:
+    """Backward elimination after a joint refit: drop an effect whose removal
+    raises the BIC by less than :data:`MIN_BIC_DROP` (it became redundant with
+    the refitted model), then refit; repeat until every effect holds."""
+    removed = []
+    while model.effects:
+        target, F = _fit_problem(model, train)
+        y = target.ravel()
+        n, k = len(y), F.shape[1]
+        first = k - len(model.effects)  # the effects' columns come last
+        # residual sums below round-off are equal: their ratios are floating-point noise
+        floor = ROUNDOFF * float(np.mean(train.tau**2)) * n
+        rss_all = max(fit_statistics(F, y)[2], floor)
+        weakest, weakest_gain = None, math.inf
+        for i in range(len(model.effects)):
+            rss_without = max(fit_statistics(np.delete(F, first + i, axis=1), y)[2], floor)
+            gain = bic(rss_without, n, k - 1) - bic(rss_all, n, k)
+            if gain < weakest_gain:
+                weakest, weakest_gain = i, gain
+        if weakest_gain >= MIN_BIC_DROP:
+            break
+        gone = model.effects[weakest]
+        removed.append(label(gone))
+        report(f"  dropping {label(gone)}: redundant after the joint refit (BIC gain {weakest_gain:.3g})")
+        model = _refit(model, train, model.effects[:weakest] + model.effects[weakest + 1:], fitter)
+    return model, removed
+
+
+def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float = 60.0, seed: int = 0,
+                  hyperparameters: dict | None = None, report: Report = print, fitted: FittedModel | None = None,
+                  total_budget_s: float | None = None) -> ResidualResult:
+    """Run the loop in this process; see the module docstring.
+
+    ``budget_s`` is each fit of the method's budget; no round starts once
+    ``total_budget_s`` (default :data:`DEFAULT_TOTAL_FITS` x ``budget_s``)
+    has passed. ``fitted`` is an already fitted instance of ``method`` to
+    start from instead of round 0's fit (for instance a model fitted before
+    the system changed). Each round records ``seconds``, the time since the
+    loop began.
+    """
+    fitter = _Fitter(method, seed, budget_s, dict(hyperparameters or {}))
+    total = DEFAULT_TOTAL_FITS * budget_s if total_budget_s is None else total_budget_s
+    start = time.perf_counter()
+    if fitted is None:
+        report(f"round 0: fitting {method} on {len(train)} samples with the declared model only ({budget_s:g} s)")
+        fitted = fitter.fit(train)
+    else:
+        report(f"round 0: starting from the given {method} fit")
+
+    def scores(m):
+        return {"train": mse(m.predict_torque(train), train.tau),
+                "test": None if test is None else mse(m.predict_torque(test), test.tau)}
+
+    model = LoopModel(fitted, [], np.zeros(0), np.zeros(0))
+    round0 = {"round": 0, "accepted": [], "trace": []}
+    parametric = fitted.parametric()
+    if parametric is not None:
+        # polish the parameters, so that an optimiser's shortfall is not taken for an effect
+        round0["method_mse"] = scores(model)
+        model = _polish(parametric, train, seed)
+        report(f"round 0: {method}'s parameters polished by nonlinear least squares "
+               f"(train MSE {round0['method_mse']['train']:.4g} -> {scores(model)['train']:.4g})")
+    first = model
+    before = scores(model)
+    round0["mse"] = before
+    round0["seconds"] = round(time.perf_counter() - start, 3)
+    rounds = [round0]
+    pool = candidates(train.dof)
+    report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}")
+    for k in range(1, MAX_ROUNDS + 1):
+        if time.perf_counter() - start >= total:
+            rounds.append({"round": k, "mse": scores(model), "accepted": [], "trace": [],
+                           "stop": f"the total budget of {total:g} s is spent",
+                           "seconds": round(time.perf_counter() - start, 3)})
+            report(f"round {k}: not started, the total budget of {total:g} s is spent")
+            break
+        target, fixed = _fit_problem(model, train)
+        selection = trace(target, train, pool, fixed, exclude=model.effects)
+        if not selection.accepted:
+            rounds.append({"round": k, "mse": scores(model), "accepted": [], "trace": selection.steps,
+                           "seconds": round(time.perf_counter() - start, 3)})
+            report(f"round {k}: nothing significant left")
+            break
+        effects = model.effects + selection.accepted
+        report(f"round {k}: adding {', '.join(label(c) for c in selection.accepted)}; refitting jointly")
+        model = _refit(model, train, effects, fitter)
+        model, removed = _prune(model, train, fitter, report)
+        s = scores(model)
+        rounds.append({"round": k, "mse": s, "accepted": [label(c) for c in selection.accepted], "removed": removed,
+                       "trace": selection.steps, "seconds": round(time.perf_counter() - start, 3)})
+        if not set(label(c) for c in selection.accepted) - set(removed):
+            report(f"round {k}: every effect it added became redundant; stopping")
+            break
+        report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}")
+    after = scores(model)
+    expr = model.expression()
+    return ResidualResult(
+        system=train.system, method=method, mse_before=before, mse_after=after,
+        effects=[describe(c, a, s) for c, a, s in zip(model.effects, model.coef, model.stderr)],
+        rounds=rounds, lagrangian=None if expr is None else str(expr),
+        seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, total_budget_s=total, seed=seed,
+        train_source=train.source, test_source=None if test is None else test.source,
+        provenance=provenance(), models=(first, model),
+    )
+
+
+def _fmt(x) -> str:
+    return "—" if x is None else f"{x:.4g}"
+
+
+# -- through the runner -----------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ResidualJob:
+    """One run of the loop, as the command line gives it.
+
+    ``train_path`` / ``test_path`` are CSV files in the suite's format; a
+    measured system without them uses its own splits. ``json_path`` and
+    ``report_path`` are written by the loop's process, atomically.
+    """
+
+    system: str
+    method: str
+    train_path: str | None = None
+    test_path: str | None = None
+    budget_s: float = 60.0
+    total_budget_s: float | None = None
+    seed: int = 0
+    hyperparameters: dict = field(default_factory=dict)
+    json_path: str | None = None
+    report_path: str | None = None
+    plugins: tuple[str, ...] = ()
+
+    @property
+    def total(self) -> float:
+        return DEFAULT_TOTAL_FITS * self.budget_s if self.total_budget_s is None else self.total_budget_s
+
+    def data(self) -> tuple[Dataset, Dataset | None]:
+        system = SYSTEMS[self.system]()
+        if self.train_path:
+            train = read_csv(self.train_path, dof=system.dof, system=system.name)
+            test = read_csv(self.test_path, dof=system.dof, system=system.name) if self.test_path else None
+            return train, test
+        if not system.simulated:
+            return system.load("train"), system.load("test")
+        raise UserError(f"{self.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
+
+    def run(self, report: Report = print_now) -> ResidualResult:
+        """The loop in this process, with its outputs written."""
+        import_plugins(self.plugins)
+        train, test = self.data()
+        result = residual_loop(self.method, train, test, budget_s=self.budget_s, seed=self.seed,
+                               hyperparameters=self.hyperparameters, report=report, total_budget_s=self.total)
+        write_outputs(result, train, test, self.json_path, self.report_path)
+        return result
+
+
+def run_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
+    """The entry point of the loop in its own process: ``payload`` is a
+    :class:`ResidualJob` as a dict; returns the result's JSON, or the
+    one-line ``user_error`` that bad input gave."""
+    job = ResidualJob(**{**payload, "plugins": tuple(payload.get("plugins", ()))})
+    on_phase("loop")
+    try:
+        return job.run(print_now).to_json()
+    except UserError as exc:
+        return {"user_error": str(exc)}
+
+
+def run_residual(job: ResidualJob, report: Report = print_now) -> ResidualResult:
+    """Run ``job`` in its own process, forked from the runner's fork server,
+    showing its progress lines through ``report``; the process is killed at
+    1.5 x the job's total budget. Bad input raises :class:`UserError` with
+    the loop's one-line message."""
+    with tempfile.TemporaryDirectory(prefix="bench-residual-") as work:
+        result_file = Path(work) / "result.json"
+        call = Call("bench.residual.loop:run_payload", dataclasses.asdict(job))
+        outcome = run_call(call, result_file, work, "residual", {"loop": KILL_FACTOR * job.total}, echo=report)
+    if outcome.killed:
+        raise CallFailed(f"the residual loop was still running at {KILL_FACTOR} x its total budget of {job.total:g} s; killed")
+    if outcome.result is None:
+        raise CallFailed(f"the residual loop's process exited with code {outcome.exit_code}: {outcome.log_tail}")
+    if "user_error" in outcome.result:
+        raise UserError(outcome.result["user_error"])
+    return ResidualResult.from_json(outcome.result)

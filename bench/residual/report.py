@@ -1,0 +1,80 @@
+"""The residual loop's outputs: the JSON contract and a markdown report with
+residual-versus-state plots before and after the loop."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bench.core.data import Dataset
+from bench.core.fileio import atomic_write, write_json
+from bench.reporting.plots import residual_plot
+from bench.residual.result import ResidualResult
+
+
+def write_outputs(result: ResidualResult, train: Dataset, test: Dataset | None, json_path=None, report_path=None) -> None:
+    """Write the JSON (:meth:`ResidualResult.to_json`) and the report.
+
+    Each file is written atomically; the plot and the report's text are made
+    before the JSON and the report are written.
+    """
+    if report_path is not None:
+        report_path = Path(report_path)
+        first, final = result.models
+        data = test if test is not None else train
+        split = "test" if test is not None else "train"
+        stem = report_path.with_suffix("")
+        plot = residual_plot(data, data.tau - first.predict_torque(data), Path(f"{stem}_residuals.png"),
+                             title=f"{result.system}, {result.method}: torque residual on the {split} set, "
+                                   "before and after the loop",
+                             after=data.tau - final.predict_torque(data))
+        text = markdown(result, plot.name)
+    if json_path is not None:
+        write_json(json_path, result.to_json())
+    if report_path is not None:
+        atomic_write(report_path, lambda f: f.write(text))
+
+
+def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
+    """The report: errors before and after, the effects, the rounds."""
+    b, a = result.mse_before, result.mse_after
+
+    def cell(x):
+        return "—" if x is None else f"{x:.4g}"
+
+    def ratio(x, y):
+        return "—" if x is None or y is None or y == 0 else f"{x / y:.3g}"
+
+    lines = [
+        f"# Residual loop: {result.system}, {result.method}",
+        "",
+        f"Training data: `{result.train_source}`; test data: `{result.test_source}`. "
+        f"{result.budget_s:g} s per fit of the method, seed {result.seed}; {result.seconds:g} s in all.",
+        "",
+        "| torque MSE | train | test |",
+        "|---|---:|---:|",
+        f"| before (declared model only) | {cell(b['train'])} | {cell(b['test'])} |",
+        f"| after (with the effects below) | {cell(a['train'])} | {cell(a['test'])} |",
+        f"| after ÷ before | {ratio(a['train'], b['train'])} | {ratio(a['test'], b['test'])} |",
+        "",
+    ]
+    if result.effects:
+        lines += ["| effect | joint | coefficient | std. error |", "|---|---:|---:|---:|"]
+        for e in result.effects:
+            name = f"symbolic: `{e['expression']}`" if e.get("expression") else e["name"]
+            lines.append(f"| {name} | {e['joint']} | {e['coefficient']:.6g} | {e['stderr']:.2g} |")
+    else:
+        lines.append("No effect added: nothing significant in the residual.")
+    lines += ["", "Rounds:", ""]
+    for r in result.rounds:
+        added = ", ".join(r["accepted"]) or "nothing"
+        removed = f"; dropped as redundant: {', '.join(r['removed'])}" if r.get("removed") else ""
+        stop = f" ({r['stop']})" if r.get("stop") else ""
+        last = next((t for t in reversed(r["trace"]) if "candidate" in t and not t["accepted"]), None)
+        why = (f" (best rejected: {last['candidate']}, BIC drop {last['bic_drop']:.3g}, |t| {'∞' if last['t'] is None else format(last['t'], '.3g')}, "
+               f"held-out gain {last['heldout_gain']:.2%})") if last else ""
+        lines.append(f"- round {r['round']}: test MSE {cell(r['mse']['test'])}; added {added}{removed}{stop}{why}")
+    if plot_name:
+        lines += ["", f"![residuals before and after]({plot_name})"]
+    if result.lagrangian:
+        lines += ["", "Final Lagrangian:", "", f"    {result.lagrangian}"]
+    return "\n".join(lines) + "\n"

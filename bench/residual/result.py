@@ -1,0 +1,41 @@
+"""The residual loop's typed result (:func:`bench.residual.loop.residual_loop`)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from bench.core.models import FittedModel
+
+
+@dataclass
+class ResidualResult:
+    """What the loop found; :meth:`to_json` is the JSON contract of
+    ``python -m bench residual --json``.
+
+    ``models`` holds the fitted models before and after the loop, for the
+    report's residual plots; it is not part of the JSON.
+    """
+
+    system: str | None
+    method: str
+    mse_before: dict
+    mse_after: dict
+    effects: list[dict]
+    rounds: list[dict]
+    lagrangian: str | None
+    seconds: float
+    budget_s: float
+    total_budget_s: float | None
+    seed: int
+    train_source: str
+    test_source: str | None
+    provenance: dict = field(default_factory=dict)
+    models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
+
+    def to_json(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "models"}
+
+    @classmethod
+    def from_json(cls, obj: dict) -> "ResidualResult":
+        return cls(**obj)

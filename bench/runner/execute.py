@@ -1,0 +1,171 @@
+"""One run, in this process: resolve the spec's names, load its data, fit
+within the budget, score, and return the :class:`~bench.runner.records.Record`.
+
+:func:`execute` never raises for a method's faults: a crash or a NaN result
+is a record with status ``failed`` and the reason. :func:`run_payload` is the
+entry point of a run in its own process (:mod:`bench.runner.isolation`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import traceback
+from typing import Callable
+
+import torch
+
+from bench.core.data import Dataset, add_noise, generate, read_csv
+from bench.core.errors import ConfigError
+from bench.core.system import System
+from bench.evaluation.scores import rollout_entry, scores
+from bench.runner.plugins import import_plugins
+from bench.runner.records import Record
+from bench.runner.spec import TEST_SEED_OFFSET, RunSpec
+from methods import METHODS
+from systems import SYSTEMS
+
+
+def method_config(spec: RunSpec) -> dict:
+    """The method's hyperparameters for ``spec``: its profile, then the spec's overrides."""
+    cls = METHODS[spec.method]
+    if spec.profile not in ("default", "smoke"):
+        raise ConfigError(f"unknown profile {spec.profile!r}; choose default or smoke")
+    config = cls.smoke_config() if spec.profile == "smoke" else {}
+    config.update(spec.hyperparameters)
+    return config
+
+
+def make_system(spec: RunSpec) -> System:
+    """The spec's system, with its domain widened where the spec asks."""
+    system = SYSTEMS[spec.system]()
+    if spec.domain_half_width and system.simulated:
+        system = SYSTEMS[spec.system](domain=system.scaled_domain(spec.domain_half_width))
+    return system
+
+
+def load_data(spec: RunSpec, system: System) -> tuple[Dataset, Dataset | None]:
+    """Train and test data for ``spec`` (test is ``None`` when unavailable);
+    the training targets carry ``spec.noise``."""
+    train, test = _clean_data(spec, system)
+    if spec.noise:
+        train = add_noise(train, spec.experiment, spec.noise, spec.seed)
+    return train, test
+
+
+def _clean_data(spec: RunSpec, system: System):
+    if spec.train_path:
+        train = read_csv(spec.train_path, dof=system.dof, system=system.name)
+        test = read_csv(spec.test_path, dof=system.dof, system=system.name) if spec.test_path else None
+        return train, test
+    if not system.simulated:
+        return system.load("train"), system.load("test")
+    train = generate(system, spec.n_train, spec.seed)
+    test = generate(system, spec.n_test, spec.seed + TEST_SEED_OFFSET)
+    return train, test
+
+
+def preflight(spec: RunSpec) -> Record | None:
+    """A record for a run that cannot start (unavailable or not applicable), else ``None``."""
+    entry = METHODS.entry(spec.method)
+    reason = entry.unavailable_reason()
+    if reason:
+        return Record.new(spec, "unavailable", error=reason)
+    reason = entry.obj.not_applicable_reason(spec.experiment)
+    if reason:
+        return Record.new(spec, "not_applicable", error=reason)
+    system = SYSTEMS[spec.system]
+    if spec.experiment not in system.experiments and not spec.train_path:
+        reason = system.not_applicable or f"{spec.system} has no data for the {spec.experiment} experiment"
+        return Record.new(spec, "not_applicable", error=reason)
+    return None
+
+
+def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: tuple | None = None) -> Record:
+    """Run ``spec`` in this process and return its record (never raises for the method's faults).
+
+    Variants a method derives from its fit (:meth:`methods.base.Method.variants`)
+    are scored on the same data and stored under ``details["variants"]``.
+
+    ``on_phase`` is called with ``"fit"`` when the fit starts and with
+    ``"evaluate"`` when it has ended (the budget covers the fit only).
+    ``data`` is an already loaded ``(train, test)`` pair, else it is loaded
+    from the spec.
+    """
+    try:
+        import_plugins(spec.plugins)
+        early = preflight(spec)
+        if early:
+            return early
+        clock = time.perf_counter()
+        system = make_system(spec)
+        train, test = data if data is not None else load_data(spec, system)
+        method = METHODS[spec.method](**method_config(spec))
+        warm_up_torch()
+        timing = {"load_s": time.perf_counter() - clock}
+        if on_phase:
+            on_phase("fit")
+        method.fit(train, spec.experiment, spec.seed, spec.budget_s, system=system)
+        if on_phase:
+            on_phase("evaluate")
+        clock = time.perf_counter()
+        result = scores(method, spec.experiment, train, test, system)
+        info = method.fit_info
+        variants = {
+            name: {"status": "failed", "error": model} if isinstance(model, str)
+            else {"status": "ok", **scores(model, spec.experiment, train, test, system)}
+            for name, model in method.variants().items()
+        }
+        timing["evaluate_s"] = time.perf_counter() - clock
+        fields = dict(
+            **result,
+            steps=info.get("steps"),
+            fit_seconds=info.get("fit_seconds"),
+            stop_reason=info.get("stop_reason"),
+            curve=_thin(info.get("curve", [])),
+            hyperparameters=method.hyperparameters(),
+            details={
+                "train_source": train.source,
+                "test_source": None if test is None else test.source,
+                "n_train": len(train),
+                "n_test": None if test is None else len(test),
+                "domain": dataclasses.asdict(system.domain),
+                **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason")},
+                **method.record_details(),
+                "variants": variants,
+            },
+        )
+        if system.simulated and test is not None and spec.rollout:
+            clock = time.perf_counter()
+            fields["rollout"] = rollout_entry(method, system, test)
+            timing["rollout_s"] = time.perf_counter() - clock
+        fields["details"]["timing"] = {k: round(v, 3) for k, v in timing.items()}
+        bad = [k for k in ("train_mse", "test_mse") if fields[k] is not None and not math.isfinite(fields[k])]
+        if bad:
+            return Record.new(spec, "failed", error=f"non-finite {' and '.join(bad)} (the model produced NaN or inf)", **fields)
+        return Record.new(spec, "ok", **fields)
+    except Exception as exc:
+        tb = traceback.format_exc(limit=-6)
+        return Record.new(spec, "failed", error=f"{type(exc).__name__}: {exc}", details={"traceback": tb})
+
+
+def run_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
+    """The entry point of a run in its own process: ``payload`` is a
+    :meth:`RunSpec.to_dict`; returns the record's JSON."""
+    return execute(RunSpec.from_dict(payload), on_phase).to_json()
+
+
+def warm_up_torch() -> None:
+    """Do torch's lazy one-time work before a budget starts: constructing the
+    first optimiser imports ``torch._dynamo`` (about 1 s on a laptop core),
+    which would otherwise be charged to the first run's fit."""
+    torch.optim.Adam([torch.zeros(1, requires_grad=True)])
+
+
+def _thin(curve: list, keep: int = 300) -> list:
+    """Keep at most ``keep`` curve points, always the first and last."""
+    if len(curve) <= keep:
+        return [list(p) for p in curve]
+    step = (len(curve) - 1) / (keep - 1)
+    return [list(curve[round(i * step)]) for i in range(keep)]

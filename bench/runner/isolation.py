@@ -1,0 +1,275 @@
+"""Process isolation: a call runs in its own process, under time limits per phase.
+
+Every run of the suite goes through :func:`run_call`: a matrix run
+(:func:`bench.runner.matrix.run_isolated`), the residual loop, and the
+experiments' jobs. A :class:`Call` names a function by its import path and
+gives it a JSON payload; the child (:mod:`bench.runner.worker`) reports
+the phases it enters, and the parent kills its whole process group when it
+stays in a phase longer than that phase's limit.
+
+The child is forked from a fork server (:func:`fork_server`) that has
+imported torch, the suite and both registries once (:mod:`bench.runner.preload`),
+so a run does not pay for those imports; where the server cannot be used (no
+``fork`` on the platform, inside a daemonic process such as a Dask worker,
+a call with more than one thread, or ``fresh=True``) the child is a fresh
+interpreter, ``python -m bench.runner.worker``.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Iterator, Mapping
+
+from bench.core.fileio import write_json
+from bench.runner.provenance import PROJECT_ROOT
+from bench.runner.threads import THREAD_VARS, thread_env
+from bench.runner.worker import forked_main
+
+#: the phase a child is in until it reports another
+STARTUP = "startup"
+#: seconds a child may take to import and load its data before its first phase
+STARTUP_TIMEOUT_S = 300.0
+
+
+@dataclass(frozen=True)
+class Call:
+    """``target(payload, on_phase) -> JSON``, run in a child process.
+
+    ``target`` is ``"module:function"``; ``payload`` must be JSON; the
+    child pins ``threads`` torch and BLAS threads.
+    """
+
+    target: str
+    payload: dict
+    threads: int = 1
+
+    def to_json(self) -> dict:
+        return {"target": self.target, "payload": self.payload, "threads": self.threads}
+
+
+class CallFailed(RuntimeError):
+    """A call that did not return: killed at its limit, or its process died."""
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a call ended.
+
+    Attributes
+    ----------
+    result
+        The JSON the target returned; ``None`` when it did not return.
+    phase
+        The last phase the child reported (``"startup"`` if none).
+    killed
+        The child stayed in ``phase`` past its limit and was killed.
+    exit_code
+        The child's exit code (``None`` when killed).
+    log_tail
+        The last lines of the child's output, for a child that died.
+    """
+
+    result: dict | None
+    phase: str
+    killed: bool = False
+    exit_code: int | None = None
+    log_tail: str = ""
+
+
+_FORK_SERVER = {"context": None, "failed": None}
+
+
+def fork_server():
+    """The multiprocessing fork server that calls are forked from, started on
+    first use with :mod:`bench.runner.preload` imported, or ``None`` where it
+    cannot be used: no ``fork`` on this platform, inside a daemonic process (a
+    Dask worker), or it failed to start."""
+    if _FORK_SERVER["context"] is not None or _FORK_SERVER["failed"]:
+        return _FORK_SERVER["context"]
+    if "forkserver" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:
+        _FORK_SERVER["failed"] = "unsupported here"
+        return None
+    from multiprocessing import forkserver
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["bench.runner.preload"])
+    saved = {var: os.environ.get(var) for var in THREAD_VARS}
+    try:
+        os.environ.update({var: "1" for var in THREAD_VARS})  # read by the server before it imports torch
+        forkserver.ensure_running()
+    except Exception as exc:
+        _FORK_SERVER["failed"] = f"{type(exc).__name__}: {exc}"
+        return None
+    finally:
+        for var, value in saved.items():
+            if value is None:
+                os.environ.pop(var, None)
+            else:
+                os.environ[var] = value
+    _FORK_SERVER["context"] = ctx
+    return ctx
+
+
+class _Child:
+    """A running child: a process forked from the fork server, or a fresh interpreter."""
+
+    def __init__(self, threads: int, files: tuple[Path, Path, Path], log_file: Path, fresh: bool):
+        ctx = None if fresh or threads != 1 else fork_server()
+        self.proc = self.popen = None
+        if ctx is not None:
+            self.proc = ctx.Process(target=forked_main, args=(*map(str, files), str(log_file), os.getcwd()))
+            self.proc.start()
+            return
+        env = thread_env(threads)
+        root = str(PROJECT_ROOT)
+        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        with open(log_file, "wb") as log:
+            self.popen = subprocess.Popen(
+                [sys.executable, "-m", "bench.runner.worker", *map(str, files)],
+                env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
+            )
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid if self.proc is not None else self.popen.pid
+
+    def wait(self, timeout: float | None) -> bool:
+        """Wait up to ``timeout`` seconds; whether the process has ended."""
+        if self.proc is not None:
+            self.proc.join(timeout)
+            return self.proc.exitcode is not None
+        try:
+            self.popen.wait(timeout=timeout)
+            return True
+        except subprocess.TimeoutExpired:
+            return False
+
+    @property
+    def returncode(self) -> int | None:
+        return self.proc.exitcode if self.proc is not None else self.popen.returncode
+
+    def kill(self) -> None:
+        """Kill the child's whole process group (it runs in its own session)."""
+        try:
+            os.killpg(self.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            if self.proc is not None:
+                self.proc.kill()
+            else:
+                self.popen.kill()
+        self.wait(None)
+
+
+def run_call(call: Call, result_file: str | os.PathLike, log_dir: str | os.PathLike, name: str,
+             limits: Mapping[str, float], *, fresh: bool = False, poll_s: float = 0.05,
+             echo: Callable[[str], None] | None = None) -> Outcome:
+    """Run ``call`` in its own process and wait for it.
+
+    The child writes what the target returns to ``result_file``; its call,
+    phases and output go to ``log_dir/<name>.*``. ``limits`` gives the
+    seconds allowed in each phase, counted from the phase's start; the
+    start-up phase has :data:`STARTUP_TIMEOUT_S` unless ``limits`` says
+    otherwise, and a phase without a limit has none. ``echo``, if given,
+    receives each line the child prints, as it prints it.
+    """
+    result_file, log_dir = Path(result_file), Path(log_dir)
+    log_dir.mkdir(parents=True, exist_ok=True)
+    call_file, phase_file, log_file = (log_dir / f"{name}{s}" for s in (".call.json", ".phase", ".log"))
+    for f in (phase_file, result_file, log_file):
+        f.unlink(missing_ok=True)
+    write_json(call_file, call.to_json())
+    limits = {STARTUP: STARTUP_TIMEOUT_S, **limits}
+    child = _Child(call.threads, (call_file, result_file, phase_file), log_file, fresh)
+    phase = STARTUP
+    kill_at = time.monotonic() + limits[STARTUP]
+    output = _Lines(log_file, echo)
+    while not child.wait(poll_s):
+        output.read()
+        now = time.monotonic()
+        new_phase = _read_phase(phase_file) or phase
+        if new_phase != phase:
+            phase = new_phase
+            kill_at = now + limits.get(phase, float("inf"))
+        if now >= kill_at:
+            child.kill()
+            output.read(final=True)
+            return Outcome(None, phase, killed=True)
+    output.read(final=True)
+    phase = _read_phase(phase_file) or phase
+    result = _read_result(result_file)
+    if result is None:
+        return Outcome(None, phase, exit_code=child.returncode, log_tail=_tail(log_file))
+    return Outcome(result, phase, exit_code=child.returncode)
+
+
+def map_calls(calls: Iterable[tuple[Call, Path, str]], log_dir: str | os.PathLike, limits: Mapping[str, float],
+              workers: int, done: Callable[[str, Outcome], None] | None = None) -> Iterator[Outcome]:
+    """Run ``(call, result_file, name)`` triples, ``workers`` at a time, each
+    in its own process; yields their outcomes in the order given, and calls
+    ``done(name, outcome)`` as each ends."""
+    def one(item):
+        call, result_file, name = item
+        outcome = run_call(call, result_file, log_dir, name, limits)
+        if done is not None:
+            done(name, outcome)
+        return outcome
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        yield from pool.map(one, list(calls))
+
+
+class _Lines:
+    """The lines a child has added to its log since the last read, passed to ``echo``."""
+
+    def __init__(self, path: Path, echo: Callable[[str], None] | None):
+        self.path, self.echo, self.offset, self.partial = path, echo, 0, b""
+
+    def read(self, final: bool = False) -> None:
+        if self.echo is None:
+            return
+        try:
+            with open(self.path, "rb") as f:
+                f.seek(self.offset)
+                chunk = f.read()
+        except OSError:
+            return
+        self.offset += len(chunk)
+        *lines, self.partial = (self.partial + chunk).split(b"\n")
+        if final and self.partial:
+            lines.append(self.partial)
+            self.partial = b""
+        for line in lines:
+            self.echo(line.decode(errors="replace"))
+
+
+def _read_result(path: Path) -> dict | None:
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def _read_phase(path: Path) -> str | None:
+    try:
+        lines = path.read_text().split()
+    except OSError:
+        return None
+    return lines[-1] if lines else None
+
+
+def _tail(path: Path, lines: int = 3) -> str:
+    try:
+        text = path.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return "(no log)"
+    return " | ".join(text[-lines:]) or "(empty log)"

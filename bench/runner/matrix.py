@@ -1,0 +1,178 @@
+"""The matrix: systems x methods x experiments x seeds under a wall-clock budget.
+
+* :func:`run_isolated` runs one :class:`~bench.runner.spec.RunSpec` in its
+  own process (:mod:`bench.runner.isolation`), with torch and BLAS threads
+  pinned, kills it at 1.5 x its budget (status ``timeout``), and writes its
+  record. A crash or a non-finite result gives status ``failed`` with the
+  reason.
+* :func:`run_matrix` runs many specs on a pool of worker processes, or on
+  Dask distributed, writes one record per run atomically, and skips runs that
+  already have a record, so a killed matrix loses no finished run and
+  re-running it resumes.
+
+``from bench import harness`` gives this module: it also offers the names of
+:mod:`bench.runner.spec` and :mod:`bench.runner.execute` that scripts use.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Iterable
+
+from bench.core.errors import UserError
+from bench.evaluation.scores import MAX_EXPRESSION_CHARS, clip  # noqa: F401  (the harness's names)
+from bench.runner.execute import execute, load_data, make_system, method_config, preflight, warm_up_torch  # noqa: F401
+from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, fork_server, run_call  # noqa: F401
+from bench.runner.plugins import import_plugins
+from bench.runner.progress import MatrixProgress, Report, print_now, quiet  # noqa: F401
+from bench.runner.records import Record, read_record, record_path, write_record
+from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, TEST_SEED_OFFSET, RunSpec, build_specs  # noqa: F401
+
+#: A run is killed at this multiple of its budget.
+KILL_FACTOR = 1.5
+#: Seconds a run may take, after its fit, to evaluate the model on the full data.
+EVALUATION_TIMEOUT_S = 900.0
+
+
+def run_isolated(spec: RunSpec, out_dir: str | os.PathLike, *, poll_s: float = 0.05, fresh: bool = False) -> Record:
+    """Run ``spec`` in its own process; write and return its record.
+
+    From the start of its fit the run has ``KILL_FACTOR * budget_s`` seconds
+    to finish the fit before it is killed and recorded as ``timeout``;
+    evaluation on the full data after the fit is not part of the budget and
+    has ``EVALUATION_TIMEOUT_S``. A child that dies without writing a record
+    is recorded as ``failed`` with the tail of its log. ``fresh=True`` starts
+    a fresh interpreter instead of forking from the fork server.
+    """
+    out_dir = Path(out_dir)
+    path = record_path(out_dir, spec.run_id)
+    limits = {"fit": KILL_FACTOR * spec.budget_s, "evaluate": EVALUATION_TIMEOUT_S}
+    call = Call("bench.runner.execute:run_payload", spec.to_dict(), spec.threads)
+    outcome = run_call(call, path, out_dir / "logs", spec.run_id, limits, fresh=fresh, poll_s=poll_s)
+    if outcome.result is not None:
+        return Record.from_json(outcome.result, str(path))
+    if not outcome.killed:
+        error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
+        record = Record.new(spec, "failed", error=error)
+    elif outcome.phase == "fit":
+        record = Record.new(spec, "timeout", error=f"fit still running at {KILL_FACTOR} x its {spec.budget_s:g} s budget; killed")
+    elif outcome.phase == "evaluate":
+        record = Record.new(spec, "failed", error=f"evaluation after the fit took over {EVALUATION_TIMEOUT_S:g} s; killed")
+    else:
+        record = Record.new(spec, "failed", error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
+    write_record(path, record)
+    return record
+
+
+def default_workers() -> int:
+    return max(1, os.cpu_count() or 1)
+
+
+def run_matrix(
+    specs: list[RunSpec],
+    out_dir: str | os.PathLike,
+    *,
+    workers: int | None = None,
+    resume: bool = True,
+    report: Report | None = None,
+    cluster=None,
+) -> list[Record]:
+    """Run every spec, ``workers`` at a time, each in its own process.
+
+    Runs that already have a record in ``out_dir`` are skipped (``resume``).
+    Unavailable and not-applicable runs are recorded without starting a process.
+    Returns the records in the order of ``specs``.
+
+    ``cluster`` hands the runs to Dask distributed instead of the local pool:
+    ``"local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
+    processes; a scheduler address (``"tcp://host:8786"``), a Dask cluster
+    object (``dask_jobqueue.SLURMCluster(...)``) or a ``Client`` uses that.
+    Each Dask task runs :func:`run_isolated` on its worker, in a scratch
+    directory there, and returns the record, which is written here; workers
+    need the suite installed, not a shared file system.
+    """
+    import_plugins({p for s in specs for p in s.plugins})
+    report = report if report is not None else print_now
+    workers = workers or default_workers()
+    out_dir = Path(out_dir)
+    results: dict[str, Record] = {}
+    todo: list[RunSpec] = []
+    resumed = cannot_run = 0
+    for spec in specs:
+        path = record_path(out_dir, spec.run_id)
+        if resume and path.exists():
+            results[spec.run_id] = read_record(path)
+            resumed += 1
+            continue
+        early = preflight(spec)
+        if early:
+            write_record(path, early)
+            results[spec.run_id] = early
+            cannot_run += 1
+            continue
+        todo.append(spec)
+    if report and cannot_run:
+        report(f"{cannot_run} run(s) recorded without running (method unavailable here or not applicable)")
+    tracker = MatrixProgress(len(todo), resumed, workers, report)
+
+    def done(record: Record) -> Record:
+        tracker.done(record.status == "ok", _describe(record))
+        return record
+
+    if todo and cluster is not None:
+        for record in _run_on_dask(todo, out_dir, cluster, workers):
+            results[record.run_id] = done(record)
+    elif todo:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for record in pool.map(lambda s: done(run_isolated(s, out_dir)), todo):
+                results[record.run_id] = record
+    tracker.summary()
+    return [results[s.run_id] for s in specs]
+
+
+def _describe(record: Record) -> str:
+    if record.status == "ok":
+        test = record.test_mse
+        outcome = f"ok train {record.train_mse:.3g} test {'-' if test is None else f'{test:.3g}'}"
+    else:
+        outcome = f"{record.status} ({record.error})"
+    return f"{record.system} {record.method} {record.experiment} seed={record.seed}: {outcome}"
+
+
+def run_remote(spec_dict: dict) -> dict:
+    """A Dask task: :func:`run_isolated` in a scratch directory; returns the record's JSON."""
+    with tempfile.TemporaryDirectory(prefix="syrenets-bench-") as scratch:
+        return run_isolated(RunSpec.from_dict(spec_dict), scratch).to_json()
+
+
+def _run_on_dask(todo: list[RunSpec], out_dir: Path, cluster, workers: int) -> Iterable[Record]:
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise UserError("--cluster needs Dask distributed: pip install 'syrenets-bench[dask]'") from None
+    own = None
+    if cluster == "local":
+        own = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(own)
+    elif isinstance(cluster, Client):
+        client = cluster
+    else:
+        try:
+            client = Client(cluster, timeout="30s")
+        except OSError as exc:
+            raise UserError(f"cannot reach the Dask scheduler {cluster}: {exc}") from None
+    try:
+        futures = [client.submit(run_remote, s.to_dict(), key=f"bench-{s.run_id}-{time.time_ns()}", pure=False) for s in todo]
+        for future in as_completed(futures):
+            record = Record.from_json(future.result(), "a Dask worker's record")
+            write_record(record_path(out_dir, record.run_id), record)
+            yield record
+    finally:
+        if client is not cluster:
+            client.close()
+        if own is not None:
+            own.close()

@@ -1,0 +1,46 @@
+"""Plugins: methods and systems registered outside the suite, imported by
+file path or module name before their names are resolved."""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+import zlib
+from pathlib import Path
+from typing import Iterable
+
+from bench.core.errors import UserError
+
+
+def import_plugins(plugins: Iterable[str]) -> None:
+    """Import each plugin once: a ``.py`` path or a module name."""
+    for plugin in plugins:
+        try:
+            _import_plugin(plugin)
+        except UserError:
+            raise
+        except Exception as exc:
+            raise UserError(f"plugin {plugin}: {type(exc).__name__}: {exc}") from exc
+
+
+def _import_plugin(plugin: str) -> None:
+    if not plugin.endswith(".py"):
+        importlib.import_module(plugin)
+        return
+    path = Path(plugin).resolve()
+    if not path.is_file():
+        raise UserError(f"plugin {plugin}: no such file")
+    if any(getattr(m, "__file__", None) and Path(m.__file__).resolve() == path for m in list(sys.modules.values())):
+        return  # already imported (for instance by a test runner): do not register twice
+    name = f"_bench_plugin_{path.stem}_{zlib.crc32(str(path).encode()):08x}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise UserError(f"plugin {plugin}: not an importable Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise

@@ -1,0 +1,17 @@
+"""Imported once by the fork server (:func:`bench.runner.isolation.fork_server`):
+torch with one thread, the suite's run path (both registries, the core, the
+evaluation), and torch's lazy one-time work, so that every run forked from
+the server starts with them done.
+
+Runs forked from the server run the code as it was when the server started,
+and the checkout's commit is read once here, for the runs' provenance."""
+
+from bench.runner.threads import pin_threads, pin_torch
+
+pin_threads(1)
+pin_torch(1)
+
+from bench.runner import execute, provenance  # noqa: E402
+
+provenance.git_state()  # cached: the forked runs' provenance
+execute.warm_up_torch()

@@ -1,0 +1,169 @@
+"""The suite's one record type: one immutable JSON file per run.
+
+A :class:`Record` holds the run's configuration (system, method, experiment,
+seed, budget, hyperparameters, data), its status (``ok``, ``failed``,
+``timeout``, ``unavailable`` or ``not_applicable``) and error, the train and
+test MSE in the experiment's own target (``L`` for direct, ``tau`` for
+indirect), the best-so-far curve of training MSE over wall-clock time, the
+number of steps, the learned expression where there is one, and provenance
+(:mod:`bench.runner.provenance`).
+
+On disk a record is the JSON object of :meth:`Record.to_json`, written
+atomically to ``OUT/records/<run id>.json``; :meth:`Record.from_json`
+checks a file's object field by field. Tables are a pure function of a
+folder of records.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bench.core.data import EXPERIMENTS
+from bench.core.errors import UserError
+from bench.core.fileio import write_json
+from bench.runner.provenance import provenance
+from bench.runner.spec import RunSpec, run_id
+
+SCHEMA = "syrenets-bench/record/1"
+STATUSES = ("ok", "failed", "timeout", "unavailable", "not_applicable")
+#: fields added to the schema after records were first published, with the
+#: value a record written before them has
+ADDED_LATER = {"exact": None, "noise": 0.0, "rollout": None}
+
+
+class RecordError(UserError, ValueError):
+    """A record file that is not a valid record; the message names the file and the field."""
+
+
+@dataclass(frozen=True)
+class Record:
+    """One run's record; fields in the order of the JSON file."""
+
+    schema: str
+    run_id: str
+    system: str
+    method: str
+    experiment: str
+    seed: int
+    budget_s: float
+    noise: float
+    target: str
+    spec: dict
+    status: str
+    error: str | None = None
+    train_mse: float | None = None
+    test_mse: float | None = None
+    steps: int | None = None
+    fit_seconds: float | None = None
+    stop_reason: str | None = None
+    curve: list = field(default_factory=list)
+    expression: str | None = None
+    exact: bool | None = None
+    rollout: dict | None = None
+    hyperparameters: dict | None = None
+    details: dict = field(default_factory=dict)
+    provenance: dict = field(default_factory=dict)
+
+    @classmethod
+    def new(cls, spec: RunSpec | dict, status: str, **fields) -> "Record":
+        """A complete record of ``spec``, stamped with this process's provenance."""
+        spec = spec.to_dict() if isinstance(spec, RunSpec) else dict(spec)
+        if status not in STATUSES:
+            raise ValueError(f"unknown status {status!r}")
+        noise = spec.get("noise", 0.0)
+        return cls(
+            schema=SCHEMA,
+            run_id=run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], noise),
+            system=spec["system"], method=spec["method"], experiment=spec["experiment"], seed=spec["seed"],
+            budget_s=spec["budget_s"], noise=noise, target="L" if spec["experiment"] == "direct" else "tau",
+            spec=spec, status=status, provenance=provenance(), **fields,
+        )
+
+    def replace(self, **changes) -> "Record":
+        return dataclasses.replace(self, **changes)
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, obj, source: str = "record") -> "Record":
+        """The record in ``obj`` (a file's JSON object); :class:`RecordError`
+        naming ``source`` and the first field that is wrong otherwise."""
+        if not isinstance(obj, dict):
+            raise RecordError(f"{source}: not a record (a JSON {type(obj).__name__}, not an object)")
+        names = [f.name for f in dataclasses.fields(cls)]
+        obj = {**{k: v for k, v in ADDED_LATER.items() if k not in obj}, **obj}
+        missing = [n for n in names if n not in obj]
+        if missing:
+            raise RecordError(f"{source}: not a record (missing field(s) {', '.join(missing)})")
+        unknown = sorted(set(obj) - set(names))
+        if unknown:
+            raise RecordError(f"{source}: unknown record field(s) {', '.join(unknown)}")
+
+        def bad(name: str, why: str):
+            return RecordError(f"{source}: field {name} {why}, got {obj[name]!r}"[:300])
+
+        if obj["schema"] != SCHEMA:
+            raise bad("schema", f"must be {SCHEMA!r}")
+        for name in ("run_id", "system", "method", "target"):
+            if not isinstance(obj[name], str) or not obj[name]:
+                raise bad(name, "must be a non-empty string")
+        if obj["status"] not in STATUSES:
+            raise bad("status", f"must be one of {', '.join(STATUSES)}")
+        if obj["experiment"] not in EXPERIMENTS:
+            raise bad("experiment", f"must be one of {', '.join(EXPERIMENTS)}")
+        if not _is_int(obj["seed"]):
+            raise bad("seed", "must be an integer")
+        for name in ("budget_s", "noise"):
+            if not _is_number(obj[name]):
+                raise bad(name, "must be a number")
+        for name, kind in (("spec", dict), ("details", dict), ("provenance", dict), ("curve", list)):
+            if not isinstance(obj[name], kind):
+                raise bad(name, f"must be a JSON {'object' if kind is dict else 'array'}")
+        for name in ("train_mse", "test_mse", "fit_seconds"):
+            if obj[name] is not None and not _is_number(obj[name]):
+                raise bad(name, "must be a number or null")
+        if obj["status"] == "ok" and not (_is_number(obj["train_mse"]) and math.isfinite(obj["train_mse"])):
+            raise bad("train_mse", "of an ok run must be a finite number")
+        return cls(**obj)
+
+
+def _is_int(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def record_path(out_dir: str | os.PathLike, rid: str) -> Path:
+    return Path(out_dir) / "records" / f"{rid}.json"
+
+
+def write_record(path: str | os.PathLike, record: Record) -> None:
+    write_json(path, record.to_json())
+
+
+def read_record(path: str | os.PathLike) -> Record:
+    """The record in the file ``path``; :class:`RecordError` naming the file otherwise."""
+    path = Path(path)
+    try:
+        with open(path) as f:
+            obj = json.load(f)
+    except json.JSONDecodeError as exc:
+        raise RecordError(f"{path}: not a JSON file ({exc.msg} at line {exc.lineno})") from None
+    except UnicodeDecodeError:
+        raise RecordError(f"{path}: not a text file") from None
+    return Record.from_json(obj, str(path))
+
+
+def read_records(out_dir: str | os.PathLike) -> list[Record]:
+    """All records under ``out_dir/records`` (or ``out_dir`` itself), sorted by file name."""
+    root = Path(out_dir)
+    folder = root / "records" if (root / "records").is_dir() else root
+    return [read_record(path) for path in sorted(folder.glob("*.json"))]

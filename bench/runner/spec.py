@@ -1,0 +1,98 @@
+"""What defines one run of the matrix: :class:`RunSpec`, and the matrix of
+specs, :func:`build_specs`."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Iterable
+
+#: The ten seeds of every table, written once.
+SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9)
+#: Test data for seed ``s`` is generated with seed ``s + TEST_SEED_OFFSET``.
+TEST_SEED_OFFSET = 1000
+#: The paper's data sizes.
+N_TRAIN, N_TEST = 32000, 10000
+
+
+def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 0.0) -> str:
+    """``system__method__experiment__seedN``, with ``__noiseX`` when the targets are noisy."""
+    return f"{system}__{method}__{experiment}__seed{seed}" + (f"__noise{noise:g}" if noise else "")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything that defines one run.
+
+    Attributes
+    ----------
+    profile
+        ``"default"`` (the method's real configuration) or ``"smoke"`` (its
+        tiny CI configuration).
+    hyperparameters
+        Overrides on top of the profile.
+    train_path, test_path
+        CSV files in the suite's format; when ``train_path`` is ``None`` the
+        data is generated with ``n_train`` samples from ``seed`` and
+        ``n_test`` samples from ``seed + TEST_SEED_OFFSET``.
+    domain_half_width
+        Sample q, qd, qdd from U(-w, w) instead of the system's default.
+    noise
+        Gaussian noise added to the training targets, as a fraction of each
+        target column's standard deviation (:func:`bench.core.data.add_noise`);
+        the test targets stay clean.
+    rollout
+        Measure the rollout error (:mod:`bench.evaluation.rollout`) of simulated systems.
+    plugins
+        Python files or modules to import before resolving names, for methods
+        and systems registered outside the suite.
+    """
+
+    system: str
+    method: str
+    experiment: str
+    seed: int
+    budget_s: float
+    profile: str = "default"
+    hyperparameters: dict = field(default_factory=dict)
+    n_train: int = N_TRAIN
+    n_test: int = N_TEST
+    train_path: str | None = None
+    test_path: str | None = None
+    domain_half_width: float | None = None
+    plugins: tuple[str, ...] = ()
+    threads: int = 1
+    rollout: bool = True
+    noise: float = 0.0
+
+    @property
+    def run_id(self) -> str:
+        return run_id(self.system, self.method, self.experiment, self.seed, self.noise)
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["plugins"] = list(self.plugins)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RunSpec":
+        d = dict(d)
+        d["plugins"] = tuple(d.get("plugins", ()))
+        return cls(**d)
+
+
+def build_specs(
+    systems: Iterable[str],
+    methods: Iterable[str],
+    experiments: Iterable[str],
+    seeds: Iterable[int],
+    budget_s: float,
+    noises: Iterable[float] = (0.0,),
+    **common,
+) -> list[RunSpec]:
+    """The matrix systems x methods x experiments x noise levels x seeds."""
+    noises = list(noises)
+    return [
+        RunSpec(system=s, method=m, experiment=e, seed=k, budget_s=budget_s, noise=float(z), **common)
+        for s in systems for m in methods for e in experiments for z in noises for k in seeds
+    ]

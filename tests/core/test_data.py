@@ -1,0 +1,140 @@
+"""The data format: generation, caching, CSV round trip, and bad input."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from bench.core.data import DataError, Dataset, add_noise, generate, read_csv, write_csv
+
+
+def test_generation_is_a_pure_cached_function(double_pendulum, tmp_path, monkeypatch):
+    monkeypatch.setenv("SYRENETS_BENCH_CACHE", str(tmp_path))
+    a = generate(double_pendulum, 100, 5)
+    files = list(tmp_path.glob("*.npz"))
+    assert len(files) == 1
+    b = generate(double_pendulum, 100, 5)  # from the cache
+    fresh = generate(double_pendulum, 100, 5, cache=False)
+    for k in ("q", "qd", "qdd", "tau", "L"):
+        assert np.array_equal(getattr(a, k), getattr(b, k))
+        assert np.array_equal(getattr(a, k), getattr(fresh, k))
+    generate(double_pendulum, 100, 6)
+    generate(double_pendulum, 101, 5)
+    assert len(list(tmp_path.glob("*.npz"))) == 3
+
+
+def test_torques_come_from_the_suites_transform(double_pendulum):
+    import torch
+
+    from bench.core.dynamics import euler_lagrange
+
+    d = generate(double_pendulum, 64, 9, cache=False)
+    t = d.tensors()
+    tau = euler_lagrange(double_pendulum.lagrangian, t["q"], t["qd"], t["qdd"]).numpy()
+    np.testing.assert_array_equal(d.tau, tau)
+    np.testing.assert_array_equal(d.L, double_pendulum.lagrangian(t["q"], t["qd"]).numpy())
+    assert isinstance(t["q"], torch.Tensor)
+
+
+def test_csv_round_trip_is_exact(small_data, tmp_path):
+    train, _ = small_data
+    path = tmp_path / "d.csv"
+    write_csv(train, path)
+    back = read_csv(path, dof=2, system="double_pendulum")
+    for k in ("q", "qd", "qdd", "tau", "L"):
+        assert np.array_equal(getattr(train, k), getattr(back, k)), k
+    header = path.read_text().splitlines()[0]
+    assert header == "q_1,q_2,qd_1,qd_2,qdd_1,qdd_2,tau_1,tau_2,L"
+
+
+def test_csv_without_L_and_with_extra_columns(tmp_path):
+    path = tmp_path / "m.csv"
+    path.write_text("t,q_1,qd_1,qdd_1,tau_1,label\n0.0,0.1,0.2,0.3,0.4,a\n0.1,0.5,0.6,0.7,0.8,b\n")
+    d = read_csv(path)
+    assert d.dof == 1 and d.L is None and len(d) == 2
+    assert d.tau[1, 0] == 0.8
+    with pytest.raises(DataError, match="direct experiment needs column 'L'"):
+        d.target("direct")
+
+
+GOOD = "q_1,q_2,qd_1,qd_2,qdd_1,qdd_2,tau_1,tau_2\n" + "0.1,0.2,0.3,0.4,0.5,0.6,0.7,0.8\n" * 3
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("", "the file is empty"),
+        ("q_1,q_2,qd_1,qd_2,qdd_1,qdd_2,tau_1,tau_2\n", "header but no rows"),
+        (GOOD.replace("tau_2", "torque_2"), "missing column\\(s\\) tau_2"),
+        (GOOD.replace("0.8\n", "nan\n", 1), "column tau_2 has a NaN or empty value in data row 1"),
+        (GOOD.replace("0.8\n", "\n", 1), "column tau_2 has a NaN or empty value in data row 1"),
+        (GOOD.replace("0.1,", "inf,", 2), "column q_1 has a inf value in data row 1"),
+        (GOOD.replace("0.5,", "fast,", 1), "column qdd_1 has a non-numeric value 'fast' in data row 1"),
+        ("a,b\n1,2\n", "no q_1 column"),
+        ("q_1,q_2,q_3,qd_1,qd_2,qd_3,qdd_1,qdd_2,qdd_3,tau_1,tau_2,tau_3\n" + "0,0,0,0,0,0,0,0,0,0,0,0\n",
+         "3 degrees of freedom .* but system 'double_pendulum' has 2"),
+    ],
+)
+def test_bad_csv_gets_one_line_error_naming_file_and_problem(tmp_path, text, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(DataError, match=message) as info:
+        read_csv(path, dof=2, system="double_pendulum")
+    assert str(path) in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(DataError, match="no such file"):
+        read_csv(tmp_path / "nope.csv")
+
+
+def test_write_is_atomic(small_data, tmp_path, monkeypatch):
+    train, _ = small_data
+    path = tmp_path / "out.csv"
+    path.write_text("previous content\n")
+    import pandas as pd
+
+    def broken(self, *a, **k):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", broken)
+    with pytest.raises(RuntimeError):
+        write_csv(train, path)
+    assert path.read_text() == "previous content\n"
+    assert os.listdir(tmp_path) == ["out.csv"]
+
+
+def test_dataset_checks_shapes():
+    z = np.zeros((3, 2))
+    with pytest.raises(DataError, match="share one"):
+        Dataset(z, z, z, np.zeros((3, 1)))
+    with pytest.raises(DataError, match="L must have shape"):
+        Dataset(z, z, z, z, L=np.zeros(2))
+
+
+def test_train_and_test_come_from_different_seeds():
+    from bench.runner.execute import load_data, make_system
+    from bench.runner.spec import RunSpec
+
+    spec = RunSpec("double_pendulum", "mlp", "direct", 3, 1.0, n_train=50, n_test=40)
+    train, test = load_data(spec, make_system(spec))
+    assert train.source.endswith("seed=3") and test.source.endswith("seed=1003")
+    assert not np.isin(test.q[:, 0], train.q[:, 0]).any()
+
+
+@pytest.mark.parametrize("experiment", ["direct", "indirect"])
+def test_noise_is_a_stated_fraction_of_each_targets_std(double_pendulum, experiment):
+    clean = generate(double_pendulum, 20000, 0)
+    noisy = add_noise(clean, experiment, 0.1, seed=3)
+    target, noisy_target = clean.target(experiment), noisy.target(experiment)
+    ratio = (noisy_target - target).std(axis=0) / target.std(axis=0)
+    np.testing.assert_allclose(ratio, 0.1, rtol=0.03)
+    np.testing.assert_array_equal(noisy.q, clean.q)
+    other = "tau" if experiment == "direct" else "L"
+    np.testing.assert_array_equal(getattr(noisy, other), getattr(clean, other))
+    np.testing.assert_array_equal(add_noise(clean, experiment, 0.1, seed=3).target(experiment), noisy_target)
+    assert not np.array_equal(add_noise(clean, experiment, 0.1, seed=4).target(experiment), noisy_target)
+    assert noisy.meta["noise"] == 0.1 and "0.1 x std noise" in noisy.source

@@ -1,0 +1,58 @@
+"""Least squares over term libraries, direct and indirect."""
+
+from __future__ import annotations
+
+import numpy as np
+import sympy
+
+from bench.core import regression, symbolic
+from bench.core.data import generate
+from bench.core.terms import TermLibrary
+
+
+def _basis():
+    (q1, q2), (qd1, qd2) = symbolic.coordinate_symbols(2)
+    return [qd1**2, qd2**2, qd1 * qd2 * sympy.cos(q1 - q2), sympy.cos(q1), sympy.cos(q2), q1 * qd2, sympy.sin(q2)]
+
+
+def test_indirect_weights_equal_a_direct_solve_on_a_planted_case(double_pendulum):
+    data = generate(double_pendulum, 400, 3)
+    basis = _basis()
+    F = TermLibrary.of_lagrangian(basis).design(data, "indirect")
+    assert F.shape == (800, len(basis))
+    planted = np.array([1.5, -0.7, 2.0, 30.0, -4.0, 0.25, 1.1])
+    y = F @ planted
+    np.testing.assert_allclose(regression.least_squares(F, y), planted, rtol=1e-10)
+    np.testing.assert_allclose(regression.least_squares(F, y), np.linalg.solve(F.T @ F, F.T @ y), rtol=1e-8)
+
+
+def test_fit_basis_recovers_the_double_pendulum_in_both_experiments(double_pendulum):
+    data = generate(double_pendulum, 500, 4)
+    truth = symbolic.to_numpy(double_pendulum.lagrangian_sympy, 2)
+    for experiment in ("direct", "indirect"):
+        expr, coef = regression.fit_basis(_basis(), data, experiment)
+        # the spurious terms are thresholded away; the true ones are exact
+        assert np.count_nonzero(coef) == 5
+        if experiment == "direct":
+            np.testing.assert_allclose(symbolic.to_numpy(expr, 2)(data.q, data.qd), truth(data.q, data.qd), rtol=1e-12)
+        np.testing.assert_allclose(sorted(np.abs(coef[coef != 0])), sorted([7.1289, 0.4648166666666667, 2.22945, 65.48175, 8.19135]),
+                                   rtol=1e-10)
+
+
+def test_columns_with_no_euler_lagrange_image_are_dropped(double_pendulum):
+    data = generate(double_pendulum, 100, 5)
+    (q1, _), (qd1, _) = symbolic.coordinate_symbols(2)
+    # a constant and a total time derivative d/dt(q1^2 / 2) = q1 qd1 have no torque
+    F = TermLibrary.of_lagrangian([sympy.Integer(1), q1 * qd1, qd1**2]).design(data, "indirect")
+    assert np.abs(F[:, :2]).max() < 1e-12
+    coef = regression.thresholded_least_squares(F, F[:, 2] * 3.0)
+    np.testing.assert_allclose(coef, [0.0, 0.0, 3.0], atol=1e-12)
+
+
+def test_independent_columns_drop_gauge_duplicates(double_pendulum):
+    data = generate(double_pendulum, 300, 6)
+    (q1, q2), (qd1, qd2) = symbolic.coordinate_symbols(2)
+    basis = [qd1**2, sympy.Integer(1), qd1 * sympy.cos(q1), 2 * qd1**2, sympy.cos(q2), qd2**2]
+    F = TermLibrary.of_lagrangian(basis).design(data, "indirect")
+    # the constant and d/dt sin(q1) have no torque; 2 qd1^2 repeats qd1^2
+    assert regression.independent_columns(F).tolist() == [0, 4, 5]

@@ -1,0 +1,106 @@
+"""The method base class: hyperparameters, the fit protocol, the best state, the deadline."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from bench.core.errors import ConfigError
+from methods import METHODS, Method, MethodConfig, Progress
+
+def test_hyperparameters_are_validated_without_mutating_input():
+    given = {"hidden": 8, "layers": 1}
+    m = METHODS["mlp"](**given)
+    assert given == {"hidden": 8, "layers": 1} and m.config.hidden == 8
+    with pytest.raises(ConfigError, match="unknown hyperparameter 'hiden'; did you mean 'hidden'"):
+        METHODS["mlp"](hiden=8)
+    with pytest.raises(ConfigError, match="must be an integer"):
+        METHODS["mlp"](hidden=8.5)
+    with pytest.raises(ConfigError, match="must be one of"):
+        METHODS["mlp"](dtype="float16")
+    assert METHODS["mlp"](lr=1).config.lr == 1.0
+
+
+class _Scripted(Method):
+    """A fake method whose 'loss' follows a script, to test the base protocol."""
+
+    Config = MethodConfig
+
+    def __init__(self, script, sleep=0.0, **kw):
+        super().__init__(**kw)
+        self.script, self.sleep, self.value = list(script), sleep, None
+
+    def _fit(self, train, experiment, progress):
+        i = 0
+        self.value = self.script[0]
+        while progress.step():
+            i += 1
+            self.value = self.script[min(i, len(self.script) - 1)]
+            time.sleep(self.sleep)
+
+    def _get_state(self):
+        return self.value
+
+    def _set_state(self, state):
+        self.value = state
+
+    def predict_lagrangian(self, data):
+        return data.L + np.sqrt(self.value)
+
+    def predict_torque(self, data):
+        return data.tau + np.sqrt(self.value)
+
+
+def test_best_state_is_kept_and_restored(small_data):
+    train, _ = small_data
+    # steps of 20 ms: early on, every step is evaluated (the gap is 10 % of the elapsed time)
+    m = _Scripted([9.0, 4.0, 1.0, 25.0, 36.0], sleep=0.02, max_steps=4).fit(train, "direct", 0, 10.0)
+    assert m.value == 1.0
+    assert m.fit_info["best_step"] == 2
+    assert m.fit_info["curve"][-1][1] == pytest.approx(1.0)
+
+
+def test_deadline_is_honoured(small_data):
+    train, _ = small_data
+    t0 = time.perf_counter()
+    m = _Scripted([1.0], sleep=0.01).fit(train, "indirect", 0, 0.5)
+    elapsed = time.perf_counter() - t0
+    assert m.fit_info["stop_reason"] == "budget"
+    assert elapsed < 1.0
+
+
+def test_non_finite_loss_stops_and_keeps_the_last_good_state(small_data):
+    train, _ = small_data
+    m = _Scripted([4.0, 2.0, float("nan")], sleep=0.02, max_steps=50).fit(train, "direct", 0, 10.0)
+    assert m.value == 2.0 and m.fit_info["stop_reason"] == "non-finite training loss"
+
+
+def test_progress_evaluations_are_spaced():
+    calls = []
+    p = Progress(0.3, evaluate=lambda: calls.append(1) or 1.0, snapshot=lambda: None)
+    steps = 0
+    while p.step():
+        steps += 1
+    assert steps > 100 and p.evaluations < 60  # evaluation is not done every step
+    assert p.stop_reason == "budget"
+
+
+def test_fit_rejects_bad_calls(small_data):
+    train, _ = small_data
+    m = METHODS["mlp"](**METHODS["mlp"].smoke_config())
+    with pytest.raises(ConfigError, match="unknown experiment"):
+        m.fit(train, "sideways", 0, 1.0)
+    with pytest.raises(ConfigError, match="budget_s must be positive"):
+        m.fit(train, "direct", 0, 0.0)
+
+
+def test_sysid_needs_a_system(small_data):
+    from bench.core.data import Dataset
+    from bench.core.errors import DataError
+
+    train, _ = small_data
+    anonymous = Dataset(train.q, train.qd, train.qdd, train.tau, train.L, system=None, source="anon.csv")
+    with pytest.raises(DataError, match="anon.csv: sysid needs to know the data's system"):
+        METHODS["sysid"](max_steps=2).fit(anonymous, "indirect", 0, 5.0)

@@ -1,0 +1,157 @@
+"""SyReNets: candidates, selection, losses, the frozen function and its equations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy
+import torch
+
+from bench.core import symbolic
+from bench.core.data import generate, mse
+from bench.core.dynamics import euler_lagrange
+from methods import METHODS
+from methods.syrenets import CandidateSpec, SyReNet, SyReNetsConfig, _round_inner_constants
+
+SMALL = dict(layers=2, heads=3, latent=4, ae_hidden=8, head_hidden=8)
+
+
+def test_candidate_count_and_order():
+    spec = CandidateSpec(3, ("sum", "prod", "sin", "cos"))
+    u = torch.tensor([[2.0, 3.0, 5.0]], dtype=torch.float64)
+    expected = [2, 5, 7, 3, 8, 5,  # sums: u1, u1+u2, u1+u3, u2, u2+u3, u3
+                4, 6, 10, 9, 15, 25,  # products: u1^2, u1u2, u1u3, u2^2, u2u3, u3^2
+                *np.sin([2, 3, 5]), *np.cos([2, 3, 5])]
+    np.testing.assert_allclose(spec(u)[0].numpy(), expected, rtol=1e-15)
+    a, b, c = sympy.symbols("a b c")
+    assert spec.symbolic([a, b, c])[:6] == [a, a + b, a + c, b, b + c, c]
+    assert spec.symbolic([a, b, c])[6:9] == [a**2, a * b, a * c]
+    assert CandidateSpec(6 + 12, ("sum", "prod", "sin", "cos")).size == 378
+    assert CandidateSpec(4 + 12, ("sum", "prod", "sin", "cos")).size == 304
+    assert CandidateSpec(3, ("diff", "exp")).size == 3 + 3
+
+
+def test_operator_set_is_validated():
+    with pytest.raises(Exception, match="unknown operator"):
+        METHODS["syrenets"](operators=("sum", "tan"))
+
+
+def _net(n_x=4, **kw):
+    torch.manual_seed(0)
+    return SyReNet(n_x, SyReNetsConfig(**{**SMALL, **kw})).double()
+
+
+def test_selection_distributions_gates_and_scales():
+    net = _net(heads=5, layers=3)
+    G = torch.rand(4, 4, dtype=torch.float64)
+    prev = torch.full((net.C,), 0.2**5, dtype=torch.float64)
+    P, phi, W = net.heads(1, G, prev)
+    assert P.shape == (5, net.C) and phi.shape == (5,) and W.shape == (5, net.C)
+    torch.testing.assert_close(P.sum(-1), torch.ones(5, dtype=torch.float64))
+    assert ((phi > 0) & (phi < 1)).all()
+    assert len(net.S) == 3 and net.S[1].shape == (5, net.C)
+    torch.testing.assert_close(W, phi[:, None] * P * net.S[1])
+
+
+def test_closed_form_contractive_penalty_matches_autograd():
+    net = _net()
+    v = torch.randn(7, net.C, dtype=torch.float64)
+    _, a1, a2 = net.encode(v)
+    closed = net.contractive(a1, a2)
+    J = torch.autograd.functional.jacobian(lambda x: net.encode(x)[0].sum(0), v)  # (d, B, C)
+    torch.testing.assert_close(closed, J.pow(2).mean(), rtol=1e-12, atol=0)
+
+
+def test_frozen_function_equals_the_training_pass():
+    net = _net(layers=3)
+    x = torch.rand(32, 4, dtype=torch.float64) * 3 - 1.5
+    out, weights, _ = net.select(x)
+    torch.testing.assert_close(net.evaluate(x, weights), out, rtol=1e-13, atol=1e-13)
+
+
+def test_gram_matrix_ignores_sample_order():
+    net = _net()
+    x = torch.rand(16, 4, dtype=torch.float64)
+    _, w1, _ = net.select(x)
+    _, w2, _ = net.select(x[torch.randperm(16)])
+    for a, b in zip(w1, w2):
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-14)
+
+
+@pytest.fixture(scope="module")
+def data(double_pendulum):
+    return generate(double_pendulum, 512, 0), generate(double_pendulum, 128, 1000)
+
+
+@pytest.mark.parametrize("experiment", ["direct", "indirect"])
+def test_expression_evaluates_to_the_frozen_model(data, experiment):
+    m = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], experiment, 0, 60)
+    f = symbolic.to_numpy(m.expression(), 2)
+    np.testing.assert_allclose(f(data[1].q, data[1].qd), m.predict_lagrangian(data[1]), rtol=1e-10, atol=1e-10)
+    # the indirect training loss uses exactly the torques of the frozen function
+    t = data[1].tensors()
+    tau = euler_lagrange(m.lagrangian, t["q"], t["qd"], t["qdd"]).numpy()
+    np.testing.assert_allclose(tau, m.predict_torque(data[1]), rtol=1e-12, atol=1e-12)
+
+
+def test_pruned_variant_keeps_few_terms_within_tolerance(data):
+    m = METHODS["syrenets"](**SMALL, max_steps=30, eval_samples=64, refine=False).fit(data[0], "direct", 0, 60)
+    pruned = m.variants()["pruned"]
+    details = m.record_details()
+    assert 0 < details["pruned_terms"] < details["total_terms"]
+    full = mse(m.predict(data[0], "direct"), data[0].L)
+    assert mse(pruned.predict(data[0], "direct"), data[0].L) <= 1.3 * full
+    f = symbolic.to_numpy(pruned.expression(), 2)
+    np.testing.assert_allclose(f(data[1].q, data[1].qd), pruned.predict_lagrangian(data[1]), rtol=1e-9, atol=1e-9)
+
+
+def test_round_inner_constants():
+    q1, q2 = sympy.symbols("q_1 q_2", real=True)
+    f = sympy.cos(1.0004 * q1 - 0.9991 * q2 + 0.003) * sympy.sin(0.4999 * q1 + 0.3)
+    assert _round_inner_constants(f) == sympy.cos(q1 - q2) * sympy.sin(q1 / 2 + sympy.Float(0.3))
+
+
+@pytest.mark.parametrize("experiment", ["direct", "indirect"])
+def test_refinement_recovers_the_exact_lagrangian_from_a_near_miss(data, double_pendulum, experiment):
+    """A pruned equation with the right structure but perturbed constants and a
+    spurious term is refined into the true Lagrangian."""
+    (q1, q2), (qd1, qd2) = symbolic.coordinate_symbols(2)
+    near = (7.13 * qd1**2 + 0.4651 * qd2**2 + 2.2301 * qd1 * qd2 * sympy.cos(1.0003 * q1 - 0.9996 * q2)
+            + 65.47 * sympy.cos(0.9998 * q1) + 8.19 * sympy.cos(q2) + 0.002 * q1 * qd2)
+    m = METHODS["syrenets"](**SMALL, max_steps=1, eval_samples=64).fit(data[0], experiment, 0, 60)
+
+    class Fake:  # stands for the dominant terms of a trained model
+        def expression(self):
+            return near
+
+    m._notes["pruned_terms"] = 1
+    m._top_terms = lambda k: Fake()
+    refined = m._refine(data[0], experiment, deadline=float("inf"))
+    assert mse(refined.predict(data[1], experiment), data[1].target(experiment)) < 1e-20
+    terms = sympy.Add.make_args(sympy.expand(refined.expression()))
+    assert len([t for t in terms if t.free_symbols]) == 5
+
+
+def test_six_input_variant_runs_and_is_flagged(data):
+    m = METHODS["syrenets"](**SMALL, inputs="q_qd_qdd", max_steps=3, eval_samples=64).fit(data[0], "indirect", 0, 60)
+    assert np.isfinite(m.predict_torque(data[1])).all()
+    assert "refinement needs inputs='q_qd'" in m.record_details()["refined"]
+
+
+def test_hutchinson_contractive_estimate_is_unbiased():
+    net = _net()
+    v = torch.randn(6, net.C, dtype=torch.float64)
+    _, a1, a2 = net.encode(v)
+    exact = net.contractive(a1, a2).item()
+    torch.manual_seed(1)
+    estimate = np.mean([net.contractive(a1, a2, probes=8).item() for _ in range(400)])
+    assert estimate == pytest.approx(exact, rel=0.03)
+
+
+def test_diversity_loss_matches_its_definition():
+    net = _net(heads=4)
+    p = torch.softmax(torch.randn(4, net.C, dtype=torch.float64), -1) * torch.rand(4, 1, dtype=torch.float64)
+    ce = lambda a, b: -(a * torch.log(b + 1e-5)).sum()  # noqa: E731
+    entropy = sum(ce(p[j], p[j]) for j in range(4)) / 4
+    cross = sum(ce(p[i], p[j]) for i in range(4) for j in range(4) if i != j) / 12
+    torch.testing.assert_close(net._diversity(p), 1e-3 * entropy - 1.0 * cross)

@@ -1,0 +1,29 @@
+"""The published leaderboard: tables, plots and a commentary in one document."""
+
+from __future__ import annotations
+
+from bench.reporting.leaderboard import build, read_commentary
+from bench.runner.records import Record, record_path, write_record
+
+
+def write(run_dir, system, experiment, method, seed):
+    spec = {"system": system, "method": method, "experiment": experiment, "seed": seed, "budget_s": 5.0}
+    r = Record.new(spec, "ok", train_mse=1.0 + seed, test_mse=2.0 + seed, curve=[[0.1, 9.0], [1.0, 1.0 + seed]])
+    write_record(record_path(run_dir, r.run_id), r)
+
+
+def test_commentary_goes_under_its_table_and_missing_ones_are_named(tmp_path):
+    run_dir = tmp_path / "results" / "lb"
+    for seed in range(3):
+        write(run_dir, "double_pendulum", "direct", "mlp", seed)
+        write(run_dir, "single_pendulum", "indirect", "mlp", seed)
+    notes = tmp_path / "commentary.md"
+    notes.write_text("## Introduction\nRead me first.\n\n## double_pendulum, direct\nThe MLP learns.\n\n## More runs\nBye.\n")
+    text, missing = build(run_dir, read_commentary(notes), tmp_path / "results" / "README.md")
+    assert text.startswith("# Leaderboard\n\nRead me first.")
+    section = text.split("## double_pendulum, direct experiment")[1].split("## single_pendulum")[0]
+    assert "The MLP learns." in section and "| Group | Split | mlp |" in section
+    assert "![convergence: double_pendulum, direct](lb/convergence_double_pendulum_direct.png)" in section
+    assert (run_dir / "convergence_double_pendulum_direct.png").is_file()
+    assert missing == ["single_pendulum, indirect"]
+    assert text.rstrip().endswith("## More runs\n\nBye.")

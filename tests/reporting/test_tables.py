@@ -1,0 +1,112 @@
+"""Tables are a pure function of the records; checked on synthetic records."""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.reporting.tables import build_table, build_tables, expand_variants, group_stats, write_tables
+from bench.runner.records import Record, record_path, write_record
+
+
+def rec(method, seed, train, test, status="ok", experiment="direct", system="double_pendulum", error=None):
+    spec = {"system": system, "method": method, "experiment": experiment, "seed": seed, "budget_s": 60.0, "profile": "default"}
+    fields = {"error": error}
+    if status == "ok":
+        fields.update(train_mse=train, test_mse=test)
+    return Record.new(spec, status, **fields)
+
+
+def test_groups_rank_by_training_mse():
+    # train MSE 1..10 for seeds 9..0; test MSE = 2 * train
+    records = [rec("a", s, float(10 - s), 2.0 * (10 - s)) for s in range(10)]
+    g = group_stats(records)
+    assert g["Best"]["train"] == (1.0, None) and g["Best"]["test"] == (2.0, None)
+    assert g["5 Best"]["train"][0] == pytest.approx(3.0)
+    assert g["5 Best"]["train"][1] == pytest.approx(2**0.5)  # population std of 1..5
+    assert g["All 10"]["test"][0] == pytest.approx(11.0)
+    assert g["5 Worse"]["train"][0] == pytest.approx(8.0)
+
+
+def test_best_row_uses_the_seed_with_lowest_train_not_test():
+    records = [rec("a", 0, 1.0, 50.0), rec("a", 1, 2.0, 3.0)]
+    assert group_stats(records)["Best"]["test"] == (50.0, None)
+
+
+def test_fewer_seeds_and_failures():
+    records = [rec("a", s, float(s + 1), float(s + 1)) for s in range(3)]
+    records += [rec("a", 3, None, None, status="timeout", error="killed"), rec("a", 4, None, None, status="failed", error="boom")]
+    g = group_stats(records)
+    assert g["5 Best"]["train"][0] == pytest.approx(2.0)  # min(5, 3) = all three
+    assert g["5 Worse"]["train"][0] == pytest.approx(2.0)
+    table = build_table(records)
+    assert "| Runs | | 3/5 ok (1 failed, 1 timeout) |" in table
+
+
+def test_bold_marks_the_lowest_mean_of_each_row():
+    records = [rec("a", s, 1.0, 5.0) for s in range(2)] + [rec("b", s, 2.0, 4.0) for s in range(2)]
+    table = build_table(records).splitlines()
+    best_train = next(line for line in table if line.startswith("| Best | train"))
+    best_test = next(line for line in table if line.startswith("|  | test"))
+    assert best_train == "| Best | train | **1.00e+00** | 2.00e+00 |"
+    assert best_test == "|  | test | 5.00e+00 | **4.00e+00** |"
+    assert "| 5 Best | train | **1.00e+00 (± 0.00e+00)** | 2.00e+00 (± 0.00e+00) |" in table
+
+
+def test_unavailable_and_not_applicable_columns():
+    records = [rec("a", 0, 1.0, 1.0), rec("pysr", 0, None, None, status="unavailable", error="no Julia"),
+               rec("operon", 0, None, None, status="not_applicable", error="direct only")]
+    table = build_table(records)
+    assert "| Runs | | 1/1 ok | not applicable (see below) | unavailable (see below) |" in table
+    assert "- **operon** is not applicable: direct only" in table and "- **pysr** is unavailable: no Julia" in table
+    assert "| Best | train | **1.00e+00** | — | — |" in table
+
+
+def test_document_has_one_section_per_system_and_experiment_with_header(tmp_path):
+    records = [rec("a", 0, 1.0, 1.0), rec("a", 0, 2.0, 2.0, experiment="indirect")]
+    text = build_tables(records)
+    assert text.index("## double_pendulum, direct") < text.index("## double_pendulum, indirect")
+    assert "Budget: 60 s of wall-clock per run; 1 seed(s) (0)" in text
+    assert "Machine: " in text and "Commit: " in text
+    for r in records:
+        write_record(record_path(tmp_path, r.run_id), r)
+    assert write_tables(tmp_path) == text
+    assert (tmp_path / "tables.md").read_text() == text
+
+
+def test_no_records_is_an_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no records found"):
+        write_tables(tmp_path)
+
+
+def test_variants_get_columns_of_their_own():
+    base = rec("syrenets", 0, 1.0, 2.0)
+    base = base.replace(details={"variants": {"refined": {"train_mse": 1e-20, "test_mse": 2e-20, "expression": "x"}}})
+    table = build_table(expand_variants([base]))
+    assert "| Group | Split | syrenets | syrenets+refined |" in table
+    assert "| Best | train | 1.00e+00 | **1.00e-20** |" in table
+
+
+def test_a_failed_variant_is_counted_as_failed():
+    ok = rec("syrenets", 0, 1.0, 2.0)
+    ok = ok.replace(details={"variants": {"refined": {"status": "ok", "train_mse": 0.5, "test_mse": 0.6, "expression": "x", "exact": False}}})
+    missed = rec("syrenets", 1, 1.5, 2.5)
+    missed = missed.replace(details={"variants": {"refined": {"status": "failed", "error": "out of budget"}}})
+    table = build_table(expand_variants([ok, missed]))
+    assert "| Runs | | 2/2 ok | 1/2 ok (1 failed) |" in table
+    assert "| Exact | | — | 0/2 seeds exact |" in table
+
+
+def test_a_systems_published_reference_is_printed_above_its_table():
+    text = build_tables([rec("sysid", 0, 1e-3, 2e-3, experiment="indirect", system="delan_characters")])
+    section = text.split("## delan_characters, indirect")[1]
+    assert "Reference: DeLaN's README reports a test torque MSE of 0.0004327" in section
+    assert "Reference" not in build_tables([rec("sysid", 0, 1.0, 1.0)])
+
+
+def test_rollout_row_gives_the_median_and_what_became_of_the_rest():
+    records = []
+    for seed, (status, err) in enumerate([("ok", 0.1), ("ok", 0.3), ("ok", 0.2), ("indefinite", None)]):
+        records.append(rec("m", seed, 1.0, 1.0).replace(rollout={"status": status, "q_rmse": err}))
+    row = [line for line in build_table(records).splitlines() if line.startswith("| Rollout")]
+    assert row == ["| Rollout | q RMSE | 2.00e-01 (3/4; 1 indefinite) |"]
+    assert "Rollout" not in build_table([rec("m", 0, 1.0, 1.0)])

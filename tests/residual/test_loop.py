@@ -1,0 +1,222 @@
+"""The residual loop: it names undeclared effects with their coefficients,
+leaves clean and noise-only data alone, and keeps its output contract."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.core.data import add_noise, generate
+from bench.core.effects import EFFECTS, add_effects, parse_effects
+from bench.core.errors import ConfigError
+from bench.core.models import ExpressionModel
+from bench.residual import residual_loop, trace, candidates
+from systems import get_system
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def quiet(_line):
+    pass
+
+
+def data_with(effects, n=3000, noise=0.0, system="double_pendulum"):
+    s = get_system(system)
+    train = add_effects(generate(s, n, 0), effects)
+    test = add_effects(generate(s, n // 2, 1000), effects)
+    if noise:
+        train, test = add_noise(train, "indirect", noise, 0), add_noise(test, "indirect", noise, 1)
+    return train, test
+
+
+@pytest.mark.parametrize(
+    "effects",
+    [
+        {"viscous_friction": (0.8, 0.5)},
+        {"coulomb_friction": (1.5, 0.7)},
+        {"spring": (2.0, 1.0)},
+        {"offset": (0.5, -0.3)},
+        {"viscous_friction": (0.8, 0.0), "coulomb_friction": (0.0, 0.7)},
+    ],
+    ids=["viscous", "coulomb", "spring", "offset", "mixed"],
+)
+def test_each_effect_is_named_on_its_joint_with_its_coefficient(effects):
+    train, test = data_with(effects)
+    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    want = {(name, j + 1): c for name, coefs in effects.items() for j, c in enumerate(coefs) if c}
+    found = {(e["name"], e["joint"]): e["coefficient"] for e in out.effects}
+    assert set(found) == set(want)
+    for key, c in want.items():
+        assert found[key] == pytest.approx(c, rel=0.05)
+    assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
+
+
+def test_armature_is_found_by_sysid_whose_declared_form_cannot_absorb_it():
+    # a generic library would absorb qd_1^2 / 2 into L; the declared form cannot
+    train, test = data_with({"armature": (0.3, 0.0)}, n=1500)
+    out = residual_loop("sysid", train, test, budget_s=3, report=quiet)
+    assert [(e["name"], e["joint"]) for e in out.effects] == [("armature", 1)]
+    assert out.effects[0]["coefficient"] == pytest.approx(0.3, rel=0.05)
+    assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
+
+
+def test_clean_data_is_left_alone():
+    train, test = data_with({})
+    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    assert out.effects == [] and out.mse_after == out.mse_before
+
+
+def test_noise_alone_produces_no_effect_and_noisy_effects_are_still_found():
+    train, test = data_with({}, noise=0.05)
+    assert residual_loop("sparse", train, test, budget_s=20, report=quiet).effects == []
+    train, test = data_with({"viscous_friction": (0.8, 0.5)}, noise=0.01)
+    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    found = {(e["name"], e["joint"]): e for e in out.effects}
+    assert set(found) == {("viscous_friction", 1), ("viscous_friction", 2)}
+    for (name, joint), c in {("viscous_friction", 1): 0.8, ("viscous_friction", 2): 0.5}.items():
+        e = found[(name, joint)]
+        assert abs(e["coefficient"] - c) < 5 * e["stderr"] + 0.02 * c
+
+
+def test_pure_noise_residual_accepts_nothing():
+    data = generate(get_system("double_pendulum"), 5000, 2)
+    rng = np.random.default_rng(0)
+    selection = trace(rng.normal(size=data.tau.shape), data, candidates(2))
+    assert selection.accepted == [] and selection.steps[-1]["accepted"] is False
+
+
+def test_effects_add_to_tau_and_conservative_ones_to_L():
+    s = get_system("double_pendulum")
+    clean = generate(s, 50, 0)
+    withfx = add_effects(clean, {"armature": (0.3, 0.0), "spring": (0.0, 2.0)})
+    np.testing.assert_allclose(withfx.tau[:, 0] - clean.tau[:, 0], 0.3 * clean.qdd[:, 0])
+    np.testing.assert_allclose(withfx.tau[:, 1] - clean.tau[:, 1], 2.0 * clean.q[:, 1])
+    np.testing.assert_allclose(withfx.L - clean.L, 0.15 * clean.qd[:, 0] ** 2 - clean.q[:, 1] ** 2)
+    # the Lagrangian terms are consistent with the torques through the suite's transform
+    from bench.core.dynamics import euler_lagrange_chunked
+    from bench.core import symbolic
+    import sympy
+
+    (q1, q2), (v1, v2) = symbolic.coordinate_symbols(2)
+    extra = symbolic.to_torch(sympy.Rational(3, 20) * v1**2 - q2**2, 2)
+    t = clean.tensors()
+    tau_extra = euler_lagrange_chunked(extra, t["q"], t["qd"], t["qdd"])[0].numpy()
+    np.testing.assert_allclose(withfx.tau - clean.tau, tau_extra, atol=1e-12)
+    assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset"}
+
+
+@pytest.mark.parametrize(
+    "items, message",
+    [
+        (["viscous=1,2"], "unknown effect 'viscous'"),
+        (["viscous_friction=1"], "needs 2 finite coefficient"),
+        (["viscous_friction"], "expected NAME=c1,...,c2"),
+        (["spring=a,b"], "needs numbers"),
+    ],
+)
+def test_bad_effect_specs_are_refused(items, message):
+    with pytest.raises(ConfigError, match=message):
+        parse_effects(items, 2)
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=cwd or ROOT,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+
+
+def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
+    for name, n, seed in (("train", 2000, 0), ("test", 1000, 1000)):
+        r = cli("data", "--system", "double_pendulum", "--n", str(n), "--seed", str(seed),
+                "--out", str(tmp_path / f"{name}.csv"), "--effects", "viscous_friction=0.8,0.5", "coulomb_friction=1.5,0.7")
+        assert r.returncode == 0, r.stderr
+    r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--train", str(tmp_path / "train.csv"),
+            "--test", str(tmp_path / "test.csv"), "--budget", "20", "--json", str(tmp_path / "out.json"),
+            "--report", str(tmp_path / "report.md"))
+    assert r.returncode == 0, r.stderr
+    out = json.loads((tmp_path / "out.json").read_text())
+    assert {"system", "method", "mse_before", "mse_after", "effects", "rounds"} <= set(out)
+    assert set(out["mse_before"]) == {"train", "test"}
+    assert sorted((e["name"], e["joint"]) for e in out["effects"]) == [
+        ("coulomb_friction", 1), ("coulomb_friction", 2), ("viscous_friction", 1), ("viscous_friction", 2)]
+    assert all({"name", "joint", "coefficient", "stderr"} <= set(e) for e in out["effects"])
+    report = (tmp_path / "report.md").read_text()
+    assert "| before (declared model only) |" in report and "![residuals before and after](report_residuals.png)" in report
+    assert (tmp_path / "report_residuals.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_cli_refuses_bad_input_in_one_line(tmp_path):
+    r = cli("data", "--system", "double_pendulum", "--n", "10", "--seed", "0", "--out", str(tmp_path / "x.csv"),
+            "--effects", "friction=1,2")
+    assert r.returncode == 2 and "unknown effect 'friction'" in r.stderr and r.stderr.count("\n") == 1
+    assert not (tmp_path / "x.csv").exists()
+    r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--json", str(tmp_path / "o.json"))
+    assert r.returncode == 2 and "give --train" in r.stderr and not (tmp_path / "o.json").exists()
+    r = cli("residual", "--system", "double_pendulum", "--method", "operon", "--train", "x.csv")
+    assert r.returncode == 2 and "operon" in r.stderr
+
+
+def test_cli_converts_a_raw_dfki_recording(tmp_path):
+    from systems.dfki_double_pendulum import trajectory_path
+
+    r = cli("convert", "--format", "dfki", str(trajectory_path("03")), "--out", str(tmp_path / "t.csv"))
+    assert r.returncode == 0, r.stderr
+    from bench.core.data import read_csv
+
+    data = read_csv(tmp_path / "t.csv", dof=2)
+    expected = get_system("dfki_double_pendulum").load("test")
+    np.testing.assert_allclose(data.qdd, expected.qdd[: len(data)], rtol=1e-12, atol=1e-12)
+
+
+def test_a_huge_symbolic_model_is_refitted_like_a_neural_one():
+    import sympy
+
+    from bench.core.symbolic import coordinate_symbols
+    from bench.residual import loop
+
+    (q1, q2), (v1, v2) = coordinate_symbols(2)
+    huge = sympy.Add(*[sympy.cos(k * q1) * v1**2 for k in range(1, loop.MAX_SYMBOLIC_TERMS + 2)])
+    model = ExpressionModel(huge, 2)
+    data = generate(get_system("double_pendulum"), 20, 0)
+    assert loop._lagrangian_columns(model, data) is None and not loop._is_symbolic(model)
+
+
+def test_cli_bad_files_exit_2_in_one_line_and_write_nothing(tmp_path):
+    raw = tmp_path / "raw.csv"
+    raw.write_text("time,pos_meas1\n0,1\n")
+    r = cli("convert", "--format", "dfki", str(raw), "--out", str(tmp_path / "out.csv"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert f"{raw}: missing column(s) pos_meas2" in r.stderr and not (tmp_path / "out.csv").exists()
+    bad = tmp_path / "train.csv"
+    bad.write_text("q_1,q_2,qd_1,qd_2,qdd_1,qdd_2,tau_1,tau_2\n1,2,3,4,5,6,7,x\n")
+    r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--train", str(bad),
+            "--json", str(tmp_path / "o.json"), "--report", str(tmp_path / "o.md"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert f"{bad}: column tau_2 has a non-numeric value 'x' in data row 1" in r.stderr
+    assert not (tmp_path / "o.json").exists() and not (tmp_path / "o.md").exists()
+
+
+def test_open_ended_search_names_an_effect_outside_the_named_list():
+    # a velocity-dependent coupling: no named effect, one term of the generated library
+    s = get_system("double_pendulum")
+    train, test = generate(s, 3000, 0), generate(s, 1500, 1000)
+    for d in (train, test):
+        d.tau[:, 0] += 0.7 * d.qd[:, 0] * np.cos(d.q[:, 0] - d.q[:, 1])
+    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    (e,) = out.effects
+    assert e["name"] == "symbolic" and e["joint"] == 1 and e["expression"] == "qd_1*cos(q_1 - q_2)"
+    assert e["coefficient"] == pytest.approx(0.7, rel=0.05)
+    assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
+
+
+def test_a_named_effect_is_preferred_to_an_open_ended_term_that_mimics_it():
+    # SysId's gravity absorbs sin(q_1) of a spring on joint 1, leaving c (q_1 - sin q_1) ~ q_1^3;
+    # the spring is tried first and named
+    train, test = data_with({"spring": (2.0, 1.0)}, n=2000, noise=0.01)
+    out = residual_loop("sysid", train, test, budget_s=3, report=quiet)
+    assert sorted((e["name"], e["joint"]) for e in out.effects) == [("spring", 1), ("spring", 2)]

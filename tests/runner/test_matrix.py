@@ -1,0 +1,145 @@
+"""The harness: process isolation, timeouts, failures, records, resuming."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+
+from bench.evaluation.scores import MAX_EXPRESSION_CHARS, clip
+from bench.runner import matrix as harness
+from bench.runner.records import SCHEMA, read_records
+
+PLUGIN = str(Path(__file__).resolve().parents[1] / "plugins" / "faulty.py")
+
+
+def specs(methods, experiments=("indirect",), seeds=(0,), budget=1.0, **kw):
+    kw.setdefault("n_train", 64)
+    kw.setdefault("n_test", 32)
+    return harness.build_specs(["double_pendulum"], methods, experiments, seeds, budget, plugins=(PLUGIN,), **kw)
+
+
+def test_statuses_for_every_way_a_run_can_end(tmp_path):
+    todo = specs(["toy_constant", "toy_sleeper", "toy_crasher", "toy_exit", "toy_nan", "toy_unavailable", "toy_direct_only"])
+    t0 = time.monotonic()
+    records = {r.method: r for r in harness.run_matrix(todo, tmp_path, workers=2, report=harness.quiet)}
+    assert time.monotonic() - t0 < 120  # the sleeper is killed, not waited for
+    assert records["toy_constant"].status == "ok"
+    assert records["toy_constant"].train_mse > 0 and records["toy_constant"].test_mse > 0
+    assert records["toy_sleeper"].status == "timeout"
+    assert "1.5 x its 1 s budget" in records["toy_sleeper"].error
+    assert records["toy_crasher"].status == "failed"
+    assert records["toy_crasher"].error == "RuntimeError: the toy fell over"
+    assert records["toy_exit"].status == "failed"
+    assert "exited with code 3" in records["toy_exit"].error and "about to vanish" in records["toy_exit"].error
+    assert records["toy_nan"].status == "failed" and "non-finite" in records["toy_nan"].error
+    assert records["toy_unavailable"].status == "unavailable"
+    assert records["toy_unavailable"].error == "needs a runtime this machine lacks"
+    assert records["toy_direct_only"].status == "not_applicable"
+    on_disk = read_records(tmp_path)
+    assert len(on_disk) == 7 and all(r.schema == SCHEMA for r in on_disk)
+    assert not list((tmp_path / "records").glob(".*.tmp"))
+
+
+def test_record_holds_configuration_results_and_provenance(tmp_path):
+    (r,) = harness.run_matrix(specs(["sysid"], experiments=("direct",), profile="smoke"), tmp_path, workers=1, report=harness.quiet)
+    assert r.status == "ok", r.error
+    assert r.target == "L" and r.budget_s == 1.0 and r.seed == 0
+    assert r.hyperparameters["max_steps"] == 20 and r.hyperparameters["lr"] == 1e-3
+    assert r.steps == 20 and r.curve and r.expression.count("qd_1") >= 1
+    assert r.details["n_train"] == 64 and r.details["test_source"].endswith("seed=1000")
+    p = r.provenance
+    assert {"commit", "dirty", "packages", "threads", "cpu", "utc"} <= set(p)
+    assert p["threads"]["OMP_NUM_THREADS"] == "1" and p["threads"]["torch_intra_op"] == 1
+    assert p["packages"]["torch"]
+
+
+def test_resume_skips_finished_runs(tmp_path):
+    todo = specs(["toy_constant"], seeds=(0, 1))
+    harness.run_matrix(todo, tmp_path, workers=1, report=harness.quiet)
+    paths = sorted((tmp_path / "records").glob("*.json"))
+    stamps = [p.stat().st_mtime_ns for p in paths]
+    lines = []
+    harness.run_matrix(todo + specs(["toy_constant"], seeds=(2,)), tmp_path, workers=1, report=lines.append)
+    assert [p.stat().st_mtime_ns for p in paths] == stamps
+    assert any("2 run(s) already have records" in line for line in lines)
+    assert len(list((tmp_path / "records").glob("*.json"))) == 3
+
+
+def test_progress_lines_count_and_estimate(tmp_path):
+    lines = []
+    harness.run_matrix(specs(["toy_constant", "toy_crasher"]), tmp_path, workers=1, report=lines.append)
+    assert lines[0] == "2 run(s) to do on 1 worker(s)"
+    assert lines[1].startswith("[##########..........] 1/2 done, 0 not ok, 1 left, ~")
+    assert lines[2].startswith("[####################] 2/2 done, 1 not ok, 0 left, ~")
+    assert "toy_crasher" in lines[2] and "failed (RuntimeError" in lines[2]
+    assert "matrix done" in lines[-1]
+
+
+def test_progress_bar_on_a_terminal(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr("sys.stderr.isatty", lambda: True)
+    harness.run_matrix(specs(["toy_constant", "toy_crasher"]), tmp_path, workers=1, report=harness.print_now)
+    err = capsys.readouterr().err
+    assert "2/2" in err and "failed=1" in err  # tqdm's bar, with the failed count
+
+
+def test_execute_in_process_matches_the_record_format(tmp_path):
+    spec = specs(["toy_constant"])[0]
+    record = harness.execute(spec)
+    assert record.status == "ok" and record.schema == SCHEMA
+    json.dumps(record.to_json())  # serialisable
+
+
+def test_long_expressions_are_clipped_in_records():
+    text = clip("x + " * 10000)
+    assert len(text) < MAX_EXPRESSION_CHARS + 100 and text.endswith("[cut: 40000 characters in all]")
+    assert clip("q_1 + 1") == "q_1 + 1"
+
+
+def test_progress_tells_resumed_from_unrunnable_runs(tmp_path):
+    lines = []
+    harness.run_matrix(specs(["toy_unavailable", "toy_constant"]), tmp_path, workers=1, report=lines.append)
+    assert lines[0] == "1 run(s) recorded without running (method unavailable here or not applicable)"
+    lines.clear()
+    harness.run_matrix(specs(["toy_constant"]), tmp_path, workers=1, report=lines.append)
+    assert lines[0] == "resuming: 1 run(s) already have records"
+
+
+def test_measured_systems_use_their_packaged_splits_and_skip_the_direct_experiment():
+    direct, indirect = harness.build_specs(["delan_characters"], ["sparse"], ["direct", "indirect"], [0], 5.0)
+    record = harness.preflight(direct)
+    assert record.status == "not_applicable" and "only the indirect experiment applies" in record.error
+    assert harness.preflight(indirect) is None
+    train, test = harness.load_data(indirect, harness.make_system(indirect))
+    assert len(train) == 2459 and len(test) == 454 and "characters eqv" in test.source
+
+
+def test_matrix_on_a_real_dask_local_cluster(tmp_path):
+    pytest.importorskip("distributed")
+    todo = specs(["toy_constant", "toy_crasher"], seeds=(0, 1), budget=10.0, rollout=False)
+    lines = []
+    records = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
+    assert [r.run_id for r in records] == [s.run_id for s in todo]
+    assert [r.status for r in records] == ["ok", "ok", "failed", "failed"]
+    assert records[2].error == "RuntimeError: the toy fell over"
+    assert len(read_records(tmp_path)) == 4 and any("4/4 done, 2 not ok" in line for line in lines)
+    again = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
+    assert [r.provenance for r in again] == [r.provenance for r in records]  # resumed, not run again
+
+
+def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatch):
+    from bench.core.data import generate, write_csv
+    from systems import SYSTEMS
+
+    data = generate(SYSTEMS["double_pendulum"](), 64, seed=0)
+    write_csv(data, tmp_path / "train.csv")
+    monkeypatch.chdir(tmp_path)  # relative paths are the caller's, not the fork server's
+    (spec,) = specs(["toy_constant"], train_path="train.csv", test_path="train.csv")
+    (r,) = harness.run_matrix([spec], "out", workers=1, report=harness.quiet)
+    assert r.status == "ok", r.error
+    assert r.details["train_source"].endswith("train.csv")
+    assert harness.fork_server() is not None
+    fresh = harness.run_isolated(spec, "fresh", fresh=True)
+    assert fresh.status == "ok" and fresh.train_mse == r.train_mse

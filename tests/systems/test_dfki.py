@@ -1,0 +1,101 @@
+"""The DFKI real double pendulum: raw-file checks, the filter-and-differentiate
+step, and the rigid-body form against the measured torques."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bench.core.data import DataError
+from bench.experiments.dfki_filter import lab_coefficients, lab_design
+from systems import get_system
+from systems.dfki_double_pendulum import DEFAULT_FILTER, RAW_COLUMNS, preprocess, read_raw
+
+
+def synthetic_recording(rng, seconds=6.0, quantum=0.011):
+    """Two joints swinging at 1.3 and 0.7 Hz, sampled at 2 ms with gaps to
+    3.4 ms, velocities quantized like the robot's encoders."""
+    steps = np.where(rng.random(int(seconds / 0.002)) < 0.05, 0.0034, 0.002)
+    t = np.concatenate([[0.0], np.cumsum(steps)])
+    t = t[t < seconds]
+    w = 2 * np.pi * np.array([1.3, 0.7])
+    amp = np.array([0.8, 1.5])
+    q = amp * np.sin(w * t[:, None])
+    qd = amp * w * np.cos(w * t[:, None])
+    frame = pd.DataFrame({"time": t})
+    for i in (0, 1):
+        frame[f"pos_meas{i + 1}"] = q[:, i]
+        frame[f"vel_meas{i + 1}"] = np.round(qd[:, i] / quantum) * quantum + rng.normal(0, 0.01, len(t))
+        frame[f"tau_meas{i + 1}"] = np.sin(w[i] * t)
+    return frame, amp, w
+
+
+def test_preprocess_recovers_accelerations_without_delay():
+    frame, amp, w = synthetic_recording(np.random.default_rng(0))
+    s = preprocess(frame)
+    t = frame["time"].iloc[0] + DEFAULT_FILTER.trim_s + np.arange(len(s["q"])) * DEFAULT_FILTER.dt * DEFAULT_FILTER.decimate
+    qdd_true = -amp * w**2 * np.sin(w * t[:, None])
+    q_true = amp * np.sin(w * t[:, None])
+    # a delayed filter would miss by amp * w * delay; 1 ms of delay at 1.3 Hz is 0.0065 rad
+    assert np.max(np.abs(s["q"] - q_true)) < 2e-3
+    assert np.max(np.abs(s["qdd"] - qdd_true), axis=0) == pytest.approx([0, 0], abs=0.03 * np.max(amp * w**2))
+    assert s["q"].shape == s["qdd"].shape == s["tau"].shape and s["q"].shape[1] == 2
+
+
+def test_preprocess_with_a_too_high_cutoff_is_refused():
+    with pytest.raises(ValueError, match="cutoff_hz"):
+        type(DEFAULT_FILTER)(cutoff_hz=300.0)
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda f: f.drop(columns=["vel_meas2"]), "missing column.*vel_meas2"),
+        (lambda f: f.assign(tau_meas1=f["tau_meas1"].astype(object).where(f.index != 3, "x")), "column tau_meas1 has a non-numeric.*row 4"),
+        (lambda f: f.assign(time=f["time"].where(f.index != 10, 0.0)), "column time does not increase"),
+    ],
+)
+def test_bad_raw_files_name_the_file_and_column(tmp_path, edit, message):
+    frame, _, _ = synthetic_recording(np.random.default_rng(1), seconds=1.0)
+    path = tmp_path / "rec.csv"
+    edit(frame).to_csv(path, index=False)
+    with pytest.raises(DataError, match=message) as err:
+        read_raw(path)
+    assert str(path) in str(err.value)
+
+
+def test_packaged_recordings_have_the_raw_columns():
+    system = get_system("dfki_double_pendulum")
+    train, test = system.load("train"), system.load("test")
+    assert set(RAW_COLUMNS) <= set(pd.read_csv(system_path("00")).columns)
+    assert 3500 < len(train) < 4000 and 1700 < len(test) < 2000
+    assert train.meta["filter"]["cutoff_hz"] == DEFAULT_FILTER.cutoff_hz
+
+
+def system_path(name):
+    from systems.dfki_double_pendulum import trajectory_path
+
+    return trajectory_path(name)
+
+
+def test_the_labs_model_explains_the_measured_torque():
+    """Relative angles, hanging-down zero and the sign of gravity are right if the
+    lab's identified model explains most of the measured torque's variance."""
+    test = get_system("dfki_double_pendulum").load("test")
+    residual = lab_design(test) @ lab_coefficients() - test.tau.ravel()
+    explained = 1 - residual.var() / test.tau.ravel().var()
+    assert explained > 0.8
+
+
+def test_rigid_body_form_at_the_labs_values_matches_the_lab_model_without_rotor_and_friction():
+    system = get_system("dfki_double_pendulum")
+    test = system.load("test").subset(slice(0, 200))
+    from bench.core.dynamics import euler_lagrange_chunked
+
+    t = test.tensors()
+    tau, _ = euler_lagrange_chunked(system.lagrangian, t["q"], t["qd"], t["qdd"])
+    coef = lab_coefficients()
+    coef[0] -= coef[5] + coef[5] / 36  # remove the rotor inertia from the first column (gr = 6)
+    coef[5:] = 0.0
+    np.testing.assert_allclose(tau.numpy().ravel(), lab_design(test) @ coef, rtol=1e-9, atol=1e-9)
