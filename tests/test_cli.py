@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -18,12 +19,30 @@ def cli(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=cwd or ROOT)
 
 
+COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "leaderboard",
+            "adaptation", "residual-acceptance", "overhead", "dfki-filter")
+
+
+def _subparsers():
+    (sub,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+    return sub
+
+
 def test_help_lists_every_command():
     text = build_parser().format_help()
-    for command in ("list", "run", "table", "data", "fit"):
+    for command in COMMANDS:
         assert command in text
+    assert set(_subparsers().choices) == set(COMMANDS)
     fit_help = cli("fit", "--help").stdout
     assert "--train" in fit_help and "--json" in fit_help
+
+
+def test_every_option_of_every_command_has_a_help_text():
+    sub = _subparsers()
+    assert all(action.help for action in sub._choices_actions)
+    missing = [f"{name} {'/'.join(a.option_strings) or a.dest}" for name, parser in sub.choices.items()
+               for a in parser._actions if not isinstance(a, argparse._HelpAction) and not a.help]
+    assert missing == []
 
 
 def test_list_shows_systems_and_methods_with_availability(capsys):

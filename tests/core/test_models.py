@@ -1,0 +1,79 @@
+"""The one fitted-model interface: abstract where it must be, and the
+expression-backed and parametric models against independent evaluations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy
+
+from bench.core import symbolic
+from bench.core.data import generate
+from bench.core.models import ExpressionModel, FittedModel, ParametricModel
+from bench.core.system import ParametricForm
+from methods import METHODS, Method
+from systems import get_system
+
+
+def test_the_interface_and_the_method_hooks_are_abstract():
+    with pytest.raises(TypeError, match="predict_lagrangian"):
+        FittedModel()
+
+    class NoLoop(Method):
+        def _get_state(self):
+            return None
+
+        def _set_state(self, state):
+            pass
+
+        def predict_lagrangian(self, data):
+            return np.zeros(len(data))
+
+        def predict_torque(self, data):
+            return np.zeros_like(data.tau)
+
+    with pytest.raises(TypeError, match="_fit"):
+        NoLoop()
+
+
+def test_an_expression_model_predicts_its_lagrangian_and_torques():
+    system = get_system("double_pendulum")
+    data = generate(system, 200, 3)
+    model = ExpressionModel(system.lagrangian_sympy, 2)
+    np.testing.assert_allclose(model.predict_lagrangian(data), data.L, rtol=1e-12)
+    np.testing.assert_allclose(model.predict_torque(data), data.tau, rtol=1e-10, atol=1e-10)
+    np.testing.assert_array_equal(model.predict(data, "direct"), model.predict_lagrangian(data))
+    assert model.expression() == system.lagrangian_sympy and model.parametric() is None
+
+
+def test_a_parametric_model_at_the_true_values_is_the_system():
+    system = get_system("double_pendulum")
+    data = generate(system, 200, 4)
+    form = system.parametric_form()
+    model = ParametricModel(form, form.true_values)
+    np.testing.assert_allclose(model.predict_torque(data), data.tau, rtol=1e-10, atol=1e-10)
+    assert model.parameters() == dict(zip(system.sysid_unknowns, form.true_values))
+    residual = sympy.expand(model.expression() - system.lagrangian_sympy)
+    assert all(abs(float(c)) < 1e-12 for c in residual.as_coefficients_dict().values())
+
+
+def test_the_parameter_jacobian_of_a_form_linear_in_its_parameters():
+    # L = m qd^2/2 - k q^2/2: d tau / d m = qdd and d tau / d k = q, exactly
+    system = get_system("single_pendulum")
+    (q,), (qd,) = symbolic.coordinate_symbols(1)
+    m, k = sympy.symbols("m k", real=True)
+    form = ParametricForm(m * qd**2 / 2 - k * q**2 / 2, (m, k), 1, (2.0, 5.0))
+    data = generate(system, 100, 5)
+    J = ParametricModel(form, [2.0, 5.0]).jacobian(data)
+    np.testing.assert_allclose(J[:, 0], data.qdd.ravel(), rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(J[:, 1], data.q.ravel(), rtol=1e-7, atol=1e-9)
+
+
+def test_sysid_gives_its_fit_as_a_parametric_model():
+    system = get_system("double_pendulum")
+    data = generate(system, 256, 6)
+    sysid = METHODS["sysid"](max_steps=5).fit(data, "indirect", 0, 10.0)
+    model = sysid.parametric()
+    assert isinstance(model, ParametricModel) and model.parameters() == sysid.identified_parameters()
+    np.testing.assert_allclose(model.predict_torque(data), sysid.predict_torque(data), rtol=1e-10, atol=1e-10)
+    assert METHODS["mlp"](max_steps=1, hidden=4, layers=1).fit(data, "indirect", 0, 5.0).parametric() is None

@@ -1,0 +1,59 @@
+"""The term library: Lagrangian terms through the Euler-Lagrange transform,
+generalized forces on one joint, and design matrices in either experiment."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy
+
+from bench.core import symbolic
+from bench.core.data import generate
+from bench.core.terms import Term, TermLibrary
+from bench.evaluation.recovery import euler_lagrange_symbolic
+from systems import get_system
+
+
+@pytest.fixture(scope="module")
+def data():
+    return generate(get_system("double_pendulum"), 300, 7)
+
+
+def test_a_lagrangian_terms_torque_is_its_symbolic_euler_lagrange_image(data):
+    (q1, q2), (v1, v2) = symbolic.coordinate_symbols(2)
+    term = Term.lagrangian(v1 * v2 * sympy.cos(q1 - q2))
+    qdd = symbolic.acceleration_symbols(2)
+    images = euler_lagrange_symbolic(term.expr, 2)
+    for j, image in enumerate(images):
+        f = sympy.lambdify([q1, q2, v1, v2, *qdd], image, "numpy")
+        np.testing.assert_allclose(term.torque(data)[:, j], f(*data.q.T, *data.qd.T, *data.qdd.T), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(term.value(data), data.qd[:, 0] * data.qd[:, 1] * np.cos(data.q[:, 0] - data.q[:, 1]))
+
+
+def test_a_generalized_force_acts_on_its_joint_only(data):
+    _, (v1, v2) = symbolic.coordinate_symbols(2)
+    term = Term.force(sympy.sign(v2) * sympy.Abs(v1), 1, "stiction")
+    tau = term.torque(data)
+    np.testing.assert_array_equal(tau[:, 1], np.sign(data.qd[:, 1]) * np.abs(data.qd[:, 0]))
+    assert not tau[:, 0].any() and term.label == "stiction" and term.joint == 1
+    assert not term.value(data).any()
+    with pytest.raises(ValueError, match="no value in L"):
+        term.column(data, "direct")
+    with pytest.raises(ValueError, match="q_i, qd_i and qdd_i only"):
+        Term.force(sympy.Symbol("x"), 0).torque(data)
+
+
+def test_design_matrices_in_either_experiment(data):
+    (q1, _), (v1, v2) = symbolic.coordinate_symbols(2)
+    library = TermLibrary.of_lagrangian([v1**2, sympy.cos(q1)]) + [Term.force(v2, 1)]
+    assert len(library) == 3 and library.expressions[2] == v2 and isinstance(library[:2], TermLibrary)
+    F = library.design(data, "indirect")
+    assert F.shape == (600, 3)
+    np.testing.assert_allclose(F[:, 0].reshape(300, 2)[:, 0], 2 * data.qdd[:, 0], rtol=1e-12)
+    np.testing.assert_array_equal(F[:, 2].reshape(300, 2), np.column_stack([np.zeros(300), data.qd[:, 1]]))
+    direct = library[:2].design(data, "direct")
+    np.testing.assert_allclose(direct, np.column_stack([data.qd[:, 0] ** 2, np.cos(data.q[:, 0])]))
+    # the Lagrangian of fitted coefficients leaves out zeros and generalized forces
+    assert library.lagrangian([2.0, 0.0, 5.0]) == sympy.Float(2.0) * v1**2
+    with pytest.raises(ValueError, match="2 coefficients for 3 terms"):
+        library.lagrangian([1.0, 2.0])

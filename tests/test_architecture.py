@@ -1,0 +1,82 @@
+"""The layers hold: import-linter's contracts in pyproject.toml (imports point
+down the layers, no cycles between sibling modules), and what they do not
+cover, measured from the source by :mod:`tests.architecture`."""
+
+from __future__ import annotations
+
+import importlib
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import bench
+from tests import architecture
+
+ROOT = Path(__file__).resolve().parent.parent
+LINT = shutil.which("lint-imports", path=str(Path(sys.executable).parent))
+
+
+def lint(cwd: Path, pythonpath: Path | None = None) -> subprocess.CompletedProcess:
+    env = dict(os.environ)
+    if pythonpath is not None:
+        env["PYTHONPATH"] = str(pythonpath)
+    return subprocess.run([LINT, "--no-cache", "--config", str(ROOT / "pyproject.toml")], cwd=cwd,
+                          capture_output=True, text=True, env=env)
+
+
+@pytest.fixture(scope="module")
+def measured():
+    return architecture.measure()
+
+
+@pytest.mark.skipif(LINT is None, reason="import-linter is not installed (pip install -e '.[test]')")
+def test_the_import_contracts_are_kept():
+    r = lint(ROOT)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "Contracts: 2 kept, 0 broken." in r.stdout
+
+
+@pytest.mark.skipif(LINT is None, reason="import-linter is not installed (pip install -e '.[test]')")
+def test_an_upward_import_breaks_the_layers_contract(tmp_path):
+    for package in architecture.PACKAGES:
+        shutil.copytree(ROOT / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__", "data"))
+    data = tmp_path / "bench" / "core" / "data.py"
+    data.write_text(data.read_text() + "\nfrom bench.runner import records  # noqa: E402,F401  (upward, on purpose)\n")
+    r = lint(tmp_path, pythonpath=tmp_path)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "Imports point down the layers BROKEN" in r.stdout
+    assert "bench.core.data -> bench.runner.records" in r.stdout
+
+
+def test_bench_holds_only_its_entry_points_and_the_layers():
+    assert sorted(p.name for p in (ROOT / "bench").glob("*.py")) == ["__init__.py", "__main__.py", "cli.py"]
+    layers = sorted(p.name for p in (ROOT / "bench").iterdir() if (p / "__init__.py").is_file())
+    assert layers == ["core", "evaluation", "experiments", "reporting", "residual", "runner"]
+
+
+def test_no_module_cycles_and_no_imports_hidden_in_functions(measured):
+    assert measured["module cycles"] == []
+    assert measured["subpackage cycles"] == []
+    # optional heavy dependencies may still be imported late; the suite's own modules may not
+    assert [f"{i.importer}:{i.line} {i.target}" for i in measured["in-function imports of suite modules"]] == []
+
+
+def test_methods_and_systems_use_only_the_core_of_bench(measured):
+    assert measured["imports from methods/ or systems/ into bench outside bench.core"] == []
+
+
+def test_the_suite_imports_no_module_by_its_old_name():
+    found = architecture.imports(architecture.suite_modules())
+    old = [f"{i.importer}:{i.line} {i.target}" for i in found if i.target in bench.MOVED]
+    assert old == []
+
+
+@pytest.mark.parametrize("old, new", sorted(bench.MOVED.items()))
+def test_old_module_names_import_as_the_modules_that_hold_them_now(old, new):
+    module = importlib.import_module(old)
+    assert module is importlib.import_module(new)
+    assert module.__spec__.name == new  # the module keeps its own identity
