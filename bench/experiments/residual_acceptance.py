@@ -1,14 +1,14 @@
 """Measure the residual loop on simulated data with known undeclared effects.
 
 For each effect type (and clean data), each noise level and each method, the
-double pendulum's torques get the effect (``bench.data`` with ``--effects``)
+double pendulum's torques get the effect (:func:`bench.core.effects.add_effects`)
 and Gaussian noise on train and test torques (a fraction of each joint's
 torque standard deviation); the loop (:func:`bench.residual.residual_loop`)
-is run, each case in its own process through the runner, and the table says whether it named exactly the right effects on the
-right joints, the worst relative coefficient error, the test torque MSE before
-and after, and the test set's noise floor (the mean square of the noise that
-was added), so that "after ÷ floor" near 1 means that all but the noise was
-explained. Usage::
+is run, each case in its own process through the runner, and the table says
+whether it named exactly the right effects on the right joints, the worst
+relative coefficient error, the test torque MSE before and after, and the
+test set's noise floor (the mean square of the noise that was added), so that
+"after ÷ floor" near 1 means that all but the noise was explained. Usage::
 
     python -m bench residual-acceptance [--noise 0 0.01 0.1] [--methods sysid sparse] [--out results/residual/acceptance.md]
 """
