@@ -54,7 +54,7 @@ import numpy as np
 import sympy
 from scipy.optimize import least_squares
 
-from bench.core.data import Dataset, mse, read_csv
+from bench.core.data import Dataset, mse
 from bench.core.errors import UserError
 from bench.core.models import ExpressionModel, FittedModel, ParametricModel
 from bench.core.regression import fit_statistics
@@ -63,6 +63,7 @@ from bench.residual.candidates import candidates, describe, label
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, bic, trace
+from bench.runner.execute import given_data
 from bench.runner.isolation import Call, CallFailed, run_call
 from bench.runner.matrix import KILL_FACTOR
 from bench.runner.plugins import import_plugins
@@ -369,14 +370,10 @@ class ResidualJob:
         return DEFAULT_TOTAL_FITS * self.budget_s if self.total_budget_s is None else self.total_budget_s
 
     def data(self) -> tuple[Dataset, Dataset | None]:
-        system = SYSTEMS[self.system]()
-        if self.train_path:
-            train = read_csv(self.train_path, dof=system.dof, system=system.name)
-            test = read_csv(self.test_path, dof=system.dof, system=system.name) if self.test_path else None
-            return train, test
-        if not system.simulated:
-            return system.load("train"), system.load("test")
-        raise UserError(f"{self.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
+        data = given_data(SYSTEMS[self.system](), self.train_path, self.test_path)
+        if data is None:
+            raise UserError(f"{self.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
+        return data
 
     def run(self, report: Report = print_now) -> ResidualResult:
         """The loop in this process, with its outputs written."""

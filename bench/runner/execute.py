@@ -55,15 +55,23 @@ def load_data(spec: RunSpec, system: System) -> tuple[Dataset, Dataset | None]:
 
 
 def _clean_data(spec: RunSpec, system: System):
-    if spec.train_path:
-        train = read_csv(spec.train_path, dof=system.dof, system=system.name)
-        test = read_csv(spec.test_path, dof=system.dof, system=system.name) if spec.test_path else None
+    given = given_data(system, spec.train_path, spec.test_path)
+    if given is not None:
+        return given
+    return generate(system, spec.n_train, spec.seed), generate(system, spec.n_test, spec.seed + TEST_SEED_OFFSET)
+
+
+def given_data(system: System, train_path: str | None, test_path: str | None) -> tuple[Dataset, Dataset | None] | None:
+    """Train and test data that need no generating: CSV files in the suite's
+    format (checked against the system), else a measured system's own splits;
+    ``None`` for a simulated system without files."""
+    if train_path:
+        train = read_csv(train_path, dof=system.dof, system=system.name)
+        test = read_csv(test_path, dof=system.dof, system=system.name) if test_path else None
         return train, test
     if not system.simulated:
         return system.load("train"), system.load("test")
-    train = generate(system, spec.n_train, spec.seed)
-    test = generate(system, spec.n_test, spec.seed + TEST_SEED_OFFSET)
-    return train, test
+    return None
 
 
 def preflight(spec: RunSpec) -> Record | None:
