@@ -52,7 +52,6 @@ from typing import Callable
 
 import numpy as np
 import sympy
-from scipy.optimize import least_squares
 
 from bench.core.data import Dataset, mse
 from bench.core.errors import UserError
@@ -123,6 +122,8 @@ class _Fitter:
 def _nonlinear_fit(rigid: ParametricModel, train: Dataset, effects: list[Term], coef0) -> LoopModel:
     """Parameters and effects' coefficients together, by nonlinear least squares
     (trust-region reflective, analytic effect columns, differenced parameter columns)."""
+    from scipy.optimize import least_squares  # 0.7 s to import: only parametric models need it
+
     Phi = TermLibrary(effects).design(train, "indirect")
     y = train.tau.ravel()
     p = len(rigid.theta)
