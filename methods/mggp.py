@@ -69,7 +69,7 @@ from bench.core import regression, symbolic
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
 from bench.core.models import ExpressionModel
-from methods.base import METHODS, Method, MethodConfig, Progress
+from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress
 from methods.jets import UNARY, JetAlgebra
 
 BINARY_OPS = {"add": operator.add, "sub": operator.sub, "mul": operator.mul}
@@ -168,7 +168,7 @@ def _placeholder(name: str, arity: int):
 
 
 @METHODS.add("mggp", "symbolic", "genetic", "paper")
-class MGGP(Method):
+class MGGP(ExpressionMethod):
     Config = MGGPConfig
     smoke = {"population": 40, "generations": 3, "tournament": 3, "fitness_samples": 128, "max_steps": 3,
              "eval_samples": 128}
@@ -381,24 +381,21 @@ class MGGP(Method):
                 stack.append(op(*args))
         return stack[0]
 
-    def expression(self) -> sympy.Expr:
+    def _equation(self) -> sympy.Expr:
+        """The best individual's model ``a0 + sum_k a_k gene_k`` (no ``a0`` indirectly)."""
         coef = self.best.coef if self.best.coef is not None else np.zeros(len(self.best.genes) + 1)
         terms = [self._gene_sympy(g) for g in self.best.genes]
         if self.experiment == "direct":
             return sympy.Float(float(coef[0])) + sum(sympy.Float(float(c)) * t for c, t in zip(coef[1:], terms))
         return sum((sympy.Float(float(c)) * t for c, t in zip(coef, terms)), sympy.Integer(0))
 
-    def _expression_model(self) -> ExpressionModel:
+    @property
+    def model(self) -> ExpressionModel:
+        """The best individual as an expression model, built once per individual."""
         if getattr(self, "_model", None) is None or self._model_for is not self.best:
-            self._model = ExpressionModel(self.expression(), self.dof)
+            self._model = ExpressionModel(self._equation(), self.dof)
             self._model_for = self.best
         return self._model
-
-    def predict_lagrangian(self, data):
-        return self._expression_model().predict_lagrangian(data)
-
-    def predict_torque(self, data):
-        return self._expression_model().predict_torque(data)
 
     def record_details(self):
         return {"generations": getattr(self, "generations_done", None), "genes": len(self.best.genes),
