@@ -58,10 +58,6 @@ class Effect:
             return Term.lagrangian(expr, self.name, joint)
         return Term.force(expr, joint, self.name)
 
-    def torque(self, data: Dataset, joint: int) -> np.ndarray:
-        """``(n, dof)`` torque per unit coefficient on ``joint`` (0-based)."""
-        return self.term(joint).torque(data)
-
 
 EFFECTS: dict[str, Effect] = {
     e.name: e
