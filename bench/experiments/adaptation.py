@@ -44,8 +44,6 @@ from __future__ import annotations
 
 import json
 import statistics
-import tempfile
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -55,7 +53,7 @@ from bench.core.errors import ConfigError
 from bench.core.fileio import atomic_write, write_json
 from bench.reporting.plots import adaptation_plot, step_values
 from bench.residual.loop import DEFAULT_TOTAL_FITS, residual_loop
-from bench.runner.isolation import Call, CallFailed, map_calls
+from bench.runner.isolation import run_jobs
 from bench.runner.matrix import KILL_FACTOR
 from bench.runner.progress import Report, quiet
 from bench.runner.provenance import provenance
@@ -149,26 +147,15 @@ def run_payload(payload: dict, on_phase) -> dict:
 def run(setup: Setup, seeds: list[int], workers: int, report: Report = print) -> list[dict]:
     """Every learner on every seed, ``workers`` processes at a time, each
     killed at 1.5 x its fitting time plus its loop's total budget."""
-    jobs = [(learner, s) for s in seeds for learner in LEARNERS]
+    payloads = {f"{learner} seed={s}": {"learner": learner, "setup": asdict(setup), "seed": s}
+                for s in seeds for learner in LEARNERS}
     limit = KILL_FACTOR * (setup.before_s + setup.checkpoints[-1] + DEFAULT_TOTAL_FITS * LOOP_BUDGET_S)
-    start = time.monotonic()
-    finished = []
 
-    def done(name, outcome):
-        finished.append(outcome)
-        r = outcome.result
-        what = (f"before {r['before']:.3g}, at the switch {r['curve'][0][1]:.3g}, last {r['curve'][-1][1]:.3g}" if r
-                else f"did not finish ({'killed' if outcome.killed else outcome.log_tail})")
-        report(f"[{len(finished)}/{len(jobs)}, {time.monotonic() - start:.0f} s] {name.replace('_', ' ')}: {what}")
+    def describe(r: dict) -> str:
+        return f"before {r['before']:.3g}, at the switch {r['curve'][0][1]:.3g}, last {r['curve'][-1][1]:.3g}"
 
-    with tempfile.TemporaryDirectory(prefix="bench-adaptation-") as work:
-        calls = [(Call("bench.experiments.adaptation:run_payload", {"learner": learner, "setup": asdict(setup), "seed": s}),
-                  Path(work) / f"{learner}_seed={s}.json", f"{learner}_seed={s}") for learner, s in jobs]
-        outcomes = list(map_calls(calls, work, {"run": limit}, workers, done))
-    failed = [f"{learner} seed={s}" for (learner, s), o in zip(jobs, outcomes) if o.result is None]
-    if failed:
-        raise CallFailed(f"{len(failed)} job(s) did not finish: {', '.join(failed)}")
-    return sorted((o.result for o in outcomes), key=lambda r: (LEARNERS.index(r["learner"]), r["seed"]))
+    results = run_jobs("bench.experiments.adaptation:run_payload", payloads, limit, workers, describe, report)
+    return sorted(results.values(), key=lambda r: (LEARNERS.index(r["learner"]), r["seed"]))
 
 
 def table(results: list[dict], setup: Setup) -> str:

@@ -15,7 +15,6 @@ test set's noise floor (the mean square of the noise that was added), so that
 
 from __future__ import annotations
 
-import tempfile
 import time
 from pathlib import Path
 
@@ -25,9 +24,9 @@ from bench.core.data import add_noise, generate
 from bench.core.effects import add_effects
 from bench.core.fileio import atomic_write
 from bench.residual.loop import DEFAULT_TOTAL_FITS, residual_loop
-from bench.runner.isolation import Call, CallFailed, map_calls
+from bench.runner.isolation import run_jobs
 from bench.runner.matrix import KILL_FACTOR
-from bench.runner.progress import quiet
+from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import provenance
 from systems import SYSTEMS
 
@@ -108,27 +107,16 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    jobs = [{"case": c, "noise": z, "method": m, "n_train": args.n_train, "n_test": args.n_test, "budget": args.budget}
-            for c in args.cases for z in args.noise for m in args.methods]
-    rows = []
+    payloads = {f"{c} noise={z:g} {m}": {"case": c, "noise": z, "method": m, "n_train": args.n_train,
+                                          "n_test": args.n_test, "budget": args.budget}
+                for c in args.cases for z in args.noise for m in args.methods}
 
-    def done(name, outcome):
-        r = outcome.result
-        if r is None:
-            print(f"[{len(rows) + 1}/{len(jobs)}] {name}: did not finish "
-                  f"({'killed' if outcome.killed else outcome.log_tail})", flush=True)
-            return
-        rows.append(r)
-        print(f"[{len(rows)}/{len(jobs)}] {r['case']} noise={r['noise']:g} {r['method']}: named right {r['named_right']}, "
-              f"test MSE {r['before']:.3g} -> {r['after']:.3g} (floor {r['floor']:.3g})", flush=True)
+    def describe(r: dict) -> str:
+        return f"named right {r['named_right']}, test MSE {r['before']:.3g} -> {r['after']:.3g} (floor {r['floor']:.3g})"
 
-    limit = KILL_FACTOR * (DEFAULT_TOTAL_FITS + 1) * args.budget + 120
-    with tempfile.TemporaryDirectory(prefix="bench-acceptance-") as work:
-        calls = [(Call("bench.experiments.residual_acceptance:run_payload", job), Path(work) / f"{i}.json",
-                  f"{job['case']}_noise={job['noise']:g}_{job['method']}") for i, job in enumerate(jobs)]
-        outcomes = list(map_calls(calls, work, {"run": limit}, args.workers, done))
-    if any(o.result is None for o in outcomes):
-        raise CallFailed(f"{sum(o.result is None for o in outcomes)} case(s) did not finish; see the lines above")
+    limit = KILL_FACTOR * (DEFAULT_TOTAL_FITS + 1) * args.budget
+    rows = list(run_jobs("bench.experiments.residual_acceptance:run_payload", payloads, limit, args.workers, describe,
+                         print_now).values())
     order = {c: i for i, c in enumerate(args.cases)}
     rows.sort(key=lambda r: (order[r["case"]], r["noise"], args.methods.index(r["method"])))
     prov = provenance()

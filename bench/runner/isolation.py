@@ -2,7 +2,7 @@
 
 Every run of the suite goes through :func:`run_call`: a matrix run
 (:func:`bench.runner.matrix.run_isolated`), the residual loop, and the
-experiments' jobs. A :class:`Call` names a function by its import path and
+experiments' jobs (:func:`run_jobs`). A :class:`Call` names a function by its import path and
 gives it a JSON payload; the child (:mod:`bench.runner.worker`) reports
 the phases it enters, and the parent kills its whole process group when it
 stays in a phase longer than that phase's limit.
@@ -23,11 +23,12 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Iterator, Mapping
+from typing import Callable, Mapping
 
 from bench.core.fileio import write_json
 from bench.runner.provenance import PROJECT_ROOT
@@ -211,20 +212,35 @@ def run_call(call: Call, result_file: str | os.PathLike, log_dir: str | os.PathL
     return Outcome(result, phase, exit_code=child.returncode)
 
 
-def map_calls(calls: Iterable[tuple[Call, Path, str]], log_dir: str | os.PathLike, limits: Mapping[str, float],
-              workers: int, done: Callable[[str, Outcome], None] | None = None) -> Iterator[Outcome]:
-    """Run ``(call, result_file, name)`` triples, ``workers`` at a time, each
-    in its own process; yields their outcomes in the order given, and calls
-    ``done(name, outcome)`` as each ends."""
-    def one(item):
-        call, result_file, name = item
-        outcome = run_call(call, result_file, log_dir, name, limits)
-        if done is not None:
-            done(name, outcome)
+def run_jobs(target: str, payloads: Mapping[str, dict], limit: float, workers: int,
+             describe: Callable[[dict], str], report: Callable[[str], None]) -> dict[str, dict]:
+    """Run ``target(payload, on_phase)`` for each named payload, ``workers``
+    at a time, each in its own process; returns the results by name, in the
+    order given.
+
+    A job that calls ``on_phase("run")`` is killed after ``limit`` seconds in
+    that phase. Each finished job is reported in one line, ``[k/n, t s] name:
+    describe(result)``; jobs that did not finish raise :class:`CallFailed`,
+    named, once all have ended.
+    """
+    start = time.monotonic()
+    finished: list[str] = []
+
+    def one(name: str, result_file: Path, log_dir: str) -> Outcome:
+        outcome = run_call(Call(target, payloads[name]), result_file, log_dir, name, {"run": limit})
+        finished.append(name)
+        what = describe(outcome.result) if outcome.result is not None else \
+            f"did not finish ({'killed' if outcome.killed else outcome.log_tail})"
+        report(f"[{len(finished)}/{len(payloads)}, {time.monotonic() - start:.0f} s] {name}: {what}")
         return outcome
 
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        yield from pool.map(one, list(calls))
+    with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work, ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = {name: pool.submit(one, name, Path(work) / f"{i}.json", work) for i, name in enumerate(payloads)}
+        outcomes = {name: future.result() for name, future in futures.items()}
+    failed = [name for name, outcome in outcomes.items() if outcome.result is None]
+    if failed:
+        raise CallFailed(f"{len(failed)} of {len(payloads)} job(s) did not finish: {', '.join(failed)}")
+    return {name: outcome.result for name, outcome in outcomes.items()}
 
 
 class _Lines:

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Iterable
 
 from bench.core.errors import UserError
-from bench.evaluation.scores import MAX_EXPRESSION_CHARS, clip  # noqa: F401  (the harness's names)
+from bench.evaluation.scores import MAX_EXPRESSION_CHARS  # noqa: F401  (a name of the old harness module)
 from bench.runner.execute import execute, load_data, make_system, method_config, preflight, warm_up_torch  # noqa: F401
 from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, fork_server, run_call  # noqa: F401
 from bench.runner.plugins import import_plugins
