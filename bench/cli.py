@@ -15,29 +15,30 @@ from __future__ import annotations
 
 import argparse
 import ast
-import dataclasses
 import math
 import shlex
 import sys
+import tempfile
 from pathlib import Path
 
 from bench.core.data import Dataset, add_noise, check_experiment, generate, write_csv
 from bench.core.effects import EFFECTS, add_effects, parse_effects
 from bench.core.errors import UserError
-from bench.core.fileio import write_json
+from bench.core.fileio import check_output, write_json
+from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preprocess, read_recording
 from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance
 from bench.reporting.leaderboard import write_leaderboard
 from bench.reporting.tables import write_tables
 from bench.residual.loop import DEFAULT_TOTAL_FITS, ResidualJob, run_residual
 from bench.runner import matrix
-from bench.runner.execute import execute, load_data, make_system, method_config, preflight
+from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.isolation import CallFailed
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, RunSpec, build_specs
 from methods import METHODS
 from systems import SYSTEMS
-from systems.dfki_double_pendulum import DEFAULT_FILTER, preprocess, read_raw
+from systems.dfki_double_pendulum import read_raw
 
 EXIT_USAGE = 2
 
@@ -53,33 +54,65 @@ def _csv_list(text: str) -> list[str]:
     return items
 
 
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text}")
+    return value
+
+
 def _seed_list(text: str) -> list[int]:
     out = []
     for part in _csv_list(text):
-        if "-" in part[1:]:
-            lo, hi = part.split("-", 1)
-            out += list(range(int(lo), int(hi) + 1))
+        lo, dash, hi = part.partition("-")
+        if dash and lo:
+            first, last = _seed(lo), _seed(hi)
+            if last < first:
+                raise argparse.ArgumentTypeError(f"the seed range {part} is empty (write it low-high)")
+            out += list(range(first, last + 1))
         else:
-            out.append(int(part))
+            out.append(_seed(part))
+    if len(set(out)) != len(out):
+        raise argparse.ArgumentTypeError(f"a seed is given twice in {text}")
     return out
 
 
+def _n_seeds(text: str) -> int:
+    value = _positive_int(text)
+    if value > len(SEEDS):
+        raise argparse.ArgumentTypeError(f"at most {len(SEEDS)} (the tables' fixed seeds), got {value}; "
+                                         f"give --seeds 0-{value - 1} for more")
+    return value
+
+
 def _positive(text: str) -> float:
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
     if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return value
 
 
 def _noise_level(text: str) -> float:
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a noise level is a number, got {text!r}") from None
     if not (0 <= value < 10 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"a noise level is a fraction of the target's std in [0, 10), got {text}")
     return value
 
 
 def _positive_int(text: str) -> int:
-    value = int(text)
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
     return value
@@ -123,7 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--experiments", type=_csv_list, default=["direct", "indirect"], help="direct,indirect (default: both)")
     seeds = r.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=_seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
-    seeds.add_argument("--n-seeds", type=_positive_int, default=10, help="the first N of the ten fixed seeds (default 10)")
+    seeds.add_argument("--n-seeds", type=_n_seeds, default=10, help="the first N of the ten fixed seeds (default 10)")
     r.add_argument("--budget", type=_positive, default=60.0, help="wall-clock seconds per run (default 60)")
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
     r.add_argument("--workers", type=_positive_int, default=None, help="runs at a time (default: one per core)")
@@ -153,7 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("data", help="generate data in the suite's CSV format")
     d.add_argument("--system", required=True, help="a simulated system")
     d.add_argument("--n", type=_positive_int, required=True, help="number of samples")
-    d.add_argument("--seed", type=int, required=True, help="the generator's seed (the same seed gives the same data)")
+    d.add_argument("--seed", type=_seed, required=True, help="the generator's seed (the same seed gives the same data)")
     d.add_argument("--out", type=Path, required=True, help="CSV file to write")
     d.add_argument("--domain-half-width", type=_positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
@@ -173,19 +206,31 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--total-budget", type=_positive, default=None,
                      help=f"seconds for the whole loop: no round starts after it, and the loop's process is killed "
                           f"at {matrix.KILL_FACTOR} x it (default {DEFAULT_TOTAL_FITS} x --budget)")
-    res.add_argument("--seed", type=int, default=0, help="the method's seed (default 0)")
+    res.add_argument("--seed", type=_seed, default=0, help="the method's seed (default 0)")
     res.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
                      help=_SET_HELP)
     res.add_argument("--json", type=Path, default=None, help="write the result here (see the README for its keys)")
     res.add_argument("--report", type=Path, default=None, help="write a markdown report with residual plots here")
     res.add_argument("--plugin", action="append", default=[], help=_PLUGIN_HELP)
 
-    cv = sub.add_parser("convert", help="turn a raw recording into the suite's CSV format")
-    cv.add_argument("--format", required=True, choices=["dfki"], help="the recording's format")
-    cv.add_argument("raw", type=Path, help="the raw recording (CSV, may be gzipped)")
+    cv = sub.add_parser("convert", help="turn a robot's log into the suite's CSV format: resample, low-pass, differentiate")
+    layout = cv.add_mutually_exclusive_group(required=True)
+    layout.add_argument("--format", choices=["dfki"], help="a DFKI double pendulum recording, in either of the lab's layouts")
+    layout.add_argument("--columns", metavar="time=T,q_1=C,qd_1=C,tau_1=C,...",
+                        help="any log: which columns hold the time (s) and each joint's q, qd and tau")
+    cv.add_argument("raw", type=Path, help="the log (CSV, may be gzipped)")
     cv.add_argument("--out", type=Path, required=True, help="CSV file to write")
-    cv.add_argument("--cutoff-hz", type=_positive, default=None,
-                    help=f"low-pass cut-off (default: the documented {DEFAULT_FILTER.cutoff_hz:g} Hz)")
+    cv.add_argument("--dt", type=_positive, default=DEFAULT_FILTER.dt,
+                    help=f"the uniform time step the log is resampled to, s (default {DEFAULT_FILTER.dt:g})")
+    cv.add_argument("--cutoff-hz", type=_positive, default=DEFAULT_FILTER.cutoff_hz,
+                    help=f"the zero-phase Butterworth low-pass's cut-off on q, qd and tau, Hz "
+                         f"(default {DEFAULT_FILTER.cutoff_hz:g}, measured for the DFKI robot)")
+    cv.add_argument("--order", type=_positive_int, default=DEFAULT_FILTER.order,
+                    help=f"the low-pass's order (default {DEFAULT_FILTER.order})")
+    cv.add_argument("--trim", type=float, default=DEFAULT_FILTER.trim_s,
+                    help=f"seconds cut from each end, the filter's start-up (default {DEFAULT_FILTER.trim_s:g})")
+    cv.add_argument("--decimate", type=_positive_int, default=DEFAULT_FILTER.decimate,
+                    help=f"keep every N-th sample (default {DEFAULT_FILTER.decimate})")
 
     f = sub.add_parser("fit", help="one run on your own CSV data or on generated data; prints a one-line summary")
     f.add_argument("--system", required=True, help="the data's system")
@@ -194,7 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="learn from samples of L (direct) or from torques (indirect)")
     f.add_argument("--train", type=Path, default=None, help="training CSV (default: generated)")
     f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
-    f.add_argument("--seed", type=int, default=0, help="the run's seed (default 0)")
+    f.add_argument("--seed", type=_seed, default=0, help="the run's seed (default 0)")
     f.add_argument("--budget", type=_positive, default=60.0, help="wall-clock seconds for the fit (default 60)")
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
     f.add_argument("--smoke", action="store_true", help="use the method's tiny smoke configuration")
@@ -245,6 +290,11 @@ def cmd_list(args) -> int:
     return 0
 
 
+def _plugin_paths(plugins: list[str]) -> tuple[str, ...]:
+    """Plugin files as absolute paths (runs import them in their own processes); module names as given."""
+    return tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)
+
+
 def _check_names(systems=(), methods=(), experiments=()) -> None:
     for name in systems:
         SYSTEMS.entry(name)
@@ -255,6 +305,7 @@ def _check_names(systems=(), methods=(), experiments=()) -> None:
 
 
 def cmd_run(args) -> int:
+    check_output(args.out, folder=True)
     import_plugins(args.plugin)
     methods = args.methods or METHODS.names()
     if args.systems == ["all"]:
@@ -267,7 +318,7 @@ def cmd_run(args) -> int:
         hyperparameters=dict(args.overrides),
         n_train=args.n_train, n_test=args.n_test,
         domain_half_width=args.domain_half_width,
-        plugins=tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in args.plugin),
+        plugins=_plugin_paths(args.plugin),
         threads=args.threads,
         rollout=not args.no_rollout,
     )
@@ -291,6 +342,7 @@ def cmd_table(args) -> int:
 
 
 def cmd_data(args) -> int:
+    check_output(args.out)
     cls = SYSTEMS[args.system]
     system = cls()
     if not system.simulated:
@@ -311,6 +363,9 @@ def cmd_data(args) -> int:
 
 
 def cmd_residual(args) -> int:
+    for path in (args.json, args.report):
+        if path is not None:
+            check_output(path)
     import_plugins(args.plugin)
     _check_names([args.system], [args.method], [])
     system = SYSTEMS[args.system]()
@@ -330,7 +385,7 @@ def cmd_residual(args) -> int:
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
         budget_s=args.budget, total_budget_s=args.total_budget, seed=args.seed, hyperparameters=dict(args.overrides),
         json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
-        plugins=tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in args.plugin),
+        plugins=_plugin_paths(args.plugin),
     )
     result = run_residual(job)
     b, a = result.mse_before, result.mse_after
@@ -348,15 +403,21 @@ def _maybe(x) -> str:
 
 
 def cmd_convert(args) -> int:
-    spec = DEFAULT_FILTER if args.cutoff_hz is None else dataclasses.replace(DEFAULT_FILTER, cutoff_hz=args.cutoff_hz)
-    s = preprocess(read_raw(args.raw), spec)
-    write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, "dfki_double_pendulum", str(args.raw)), args.out)
-    print(f"wrote {len(s['q'])} samples to {args.out} (zero-phase Butterworth order {spec.order} at {spec.cutoff_hz:g} Hz, "
-          f"dt {spec.dt * 1000:g} ms, {spec.trim_s:g} s trimmed, every {spec.decimate}th sample)")
+    check_output(args.out)
+    spec = FilterSpec(dt=args.dt, cutoff_hz=args.cutoff_hz, order=args.order, trim_s=args.trim, decimate=args.decimate)
+    if args.columns:
+        recording, system = read_recording(args.raw, ColumnMap.parse(args.columns)), None
+    else:
+        recording, system = read_raw(args.raw), "dfki_double_pendulum"
+    s = preprocess(recording, spec)
+    write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, system, str(args.raw)), args.out)
+    print(f"wrote {len(s['q'])} samples of {s['q'].shape[1]} joint(s) to {args.out} ({spec.describe()})")
     return 0
 
 
 def cmd_fit(args) -> int:
+    if args.json:
+        check_output(args.json)
     import_plugins(args.plugin)
     _check_names([args.system], [args.method], [args.experiment])
     if args.test and not args.train:
@@ -366,18 +427,16 @@ def cmd_fit(args) -> int:
         budget_s=args.budget, profile="smoke" if args.smoke else "default",
         hyperparameters=dict(args.overrides), n_train=args.n_train, n_test=args.n_test,
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
-        domain_half_width=args.domain_half_width, plugins=tuple(args.plugin),
+        domain_half_width=args.domain_half_width, plugins=_plugin_paths(args.plugin),
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now
-    system = make_system(spec)
-    data = None
-    if preflight(spec) is None:
-        data = load_data(spec, system)  # DataError -> exit 2
-        for part in data:
-            if part is not None:
-                part.target(args.experiment)
-    record = execute(spec, data=data)
+    given = given_data(make_system(spec), spec.train_path, spec.test_path) if preflight(spec) is None else None
+    for part in given or ():
+        if part is not None:
+            part.target(args.experiment)  # bad files: exit 2 now, before the run's process starts
+    with tempfile.TemporaryDirectory(prefix="bench-fit-") as work:
+        record = matrix.run_isolated(spec, work)  # its own process, threads pinned, killed like any run
     if args.json:
         write_json(args.json, record.to_json())
     print(summary_line(record))
@@ -396,6 +455,7 @@ def summary_line(record: Record) -> str:
 
 
 def cmd_leaderboard(args) -> int:
+    check_output(args.out)
     missing = write_leaderboard(args.run_dir, args.commentary, args.out)
     for key in missing:
         print(f"no commentary for the table '{key}' (add '## {key}' to {args.commentary})")

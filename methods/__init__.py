@@ -5,12 +5,15 @@ Adding a method: write one module and add it to the import line.
 """
 
 from methods.base import (
+    FRACTION,
     METHODS,
+    POSITIVE,
     ExpressionMethod,
     ExpressionModel,
     Method,
     MethodConfig,
     Progress,
+    Range,
     TorchConfig,
     TorchLagrangianMethod,
 )
@@ -18,6 +21,6 @@ from methods.base import (
 from methods import mggp, mlp, operon, pysr_adapter, sparse, syrenets, sysid  # noqa: E402,F401  (registers)
 
 __all__ = [
-    "METHODS", "ExpressionMethod", "ExpressionModel", "Method", "MethodConfig", "Progress", "TorchConfig",
-    "TorchLagrangianMethod",
+    "FRACTION", "METHODS", "POSITIVE", "ExpressionMethod", "ExpressionModel", "Method", "MethodConfig", "Progress",
+    "Range", "TorchConfig", "TorchLagrangianMethod",
 ]

@@ -59,6 +59,7 @@ import operator
 import random
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Annotated
 from functools import partial
 
 import numpy as np
@@ -69,7 +70,7 @@ from bench.core import regression, symbolic
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
 from bench.core.models import ExpressionModel
-from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress
+from methods.base import FRACTION, METHODS, ExpressionMethod, MethodConfig, Progress, Range
 from methods.jets import UNARY, JetAlgebra
 
 BINARY_OPS = {"add": operator.add, "sub": operator.sub, "mul": operator.mul}
@@ -87,22 +88,22 @@ SYMPY_BINARY = {"add": operator.add, "sub": operator.sub, "mul": operator.mul}
 class MGGPConfig(MethodConfig):
     """Hyperparameters; see the module docstring for their sources."""
 
-    population: int = 1000
-    generations: int = 300
-    tournament: int = 15
-    elite_fraction: float = 0.1
-    max_genes: int = 8
-    max_depth: int = 4
-    p_crossover: float = 0.84
-    p_mutation: float = 0.14
-    p_high_level: float = 0.2
+    population: Annotated[int, Range(2)] = 1000
+    generations: Annotated[int, Range(1)] = 300
+    tournament: Annotated[int, Range(1)] = 15
+    elite_fraction: Annotated[float, FRACTION] = 0.1
+    max_genes: Annotated[int, Range(1)] = 8
+    max_depth: Annotated[int, Range(1)] = 4
+    p_crossover: Annotated[float, FRACTION] = 0.84
+    p_mutation: Annotated[float, FRACTION] = 0.14
+    p_high_level: Annotated[float, FRACTION] = 0.2
     erc_low: float = -10.0
     erc_high: float = 10.0
-    p_erc: float = 0.1
+    p_erc: Annotated[float, FRACTION] = 0.1
     operators: tuple[str, ...] = ("add", "sub", "mul", "sqrt", "square", "cube", "sin", "cos")
-    fitness_samples: int = 1024
-    tolerance: float = 1e-10
-    gene_cache: int = 20000
+    fitness_samples: Annotated[int, Range(1)] = 1024
+    tolerance: Annotated[float, Range(0)] = 1e-10
+    gene_cache: Annotated[int, Range(0)] = 20000
 
     def validate(self) -> None:
         bad = [op for op in self.operators if op not in BINARY_OPS and op not in UNARY]
@@ -112,8 +113,8 @@ class MGGPConfig(MethodConfig):
             raise ConfigError("mggp: tournament must be between 1 and the population size")
         if not (0 <= self.p_crossover + self.p_mutation <= 1):
             raise ConfigError("mggp: p_crossover + p_mutation must be at most 1")
-        if self.max_depth < 1 or self.max_genes < 1:
-            raise ConfigError("mggp: max_depth and max_genes must be at least 1")
+        if self.erc_low >= self.erc_high:
+            raise ConfigError("mggp: erc_low must be below erc_high")
 
 
 class Individual:

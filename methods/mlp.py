@@ -20,10 +20,11 @@ Choices the paper leaves open
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import torch
 
-from methods.base import METHODS, TorchConfig, TorchLagrangianMethod
+from methods.base import METHODS, Range, TorchConfig, TorchLagrangianMethod
 
 
 @dataclass(frozen=True)
@@ -31,11 +32,11 @@ class MLPConfig(TorchConfig):
     """Attributes: ``hidden`` units per layer, ``layers`` hidden layers, and the
     plateau schedule ``lr_patience`` steps, ``lr_factor``, ``lr_min``."""
 
-    hidden: int = 300
-    layers: int = 5
-    lr_patience: int = 2000
-    lr_factor: float = 0.1
-    lr_min: float = 1e-5
+    hidden: Annotated[int, Range(1)] = 300
+    layers: Annotated[int, Range(1)] = 5
+    lr_patience: Annotated[int, Range(0)] = 2000
+    lr_factor: Annotated[float, Range(0, 1, low_open=True, high_open=True)] = 0.1
+    lr_min: Annotated[float, Range(0)] = 1e-5
 
 
 class LagrangianMLP(torch.nn.Module):

@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib.util
 import math
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import sympy
@@ -25,7 +26,7 @@ import sympy
 from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
-from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress
+from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
 
 NOT_APPLICABLE = (
     "Operon fits y = f(X) to samples of y; the indirect experiment has no samples of L, only torques, "
@@ -38,10 +39,10 @@ class OperonConfig(MethodConfig):
     """Attributes: Operon's ``population_size``, ``allowed_symbols``,
     ``max_length``; ``fit_samples`` training samples given to it."""
 
-    population_size: int = 1000
+    population_size: Annotated[int, Range(1)] = 1000
     allowed_symbols: str = "add,sub,mul,sin,cos,square,sqrtabs,constant,variable"
-    max_length: int = 50
-    fit_samples: int = 4096
+    max_length: Annotated[int, Range(1)] = 50
+    fit_samples: Annotated[int, Range(1)] = 4096
 
 
 @METHODS.add("operon", "symbolic", "genetic")

@@ -28,6 +28,7 @@ import os
 import subprocess
 import sys
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import sympy
@@ -35,7 +36,7 @@ import sympy
 from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
-from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress
+from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
 
 PROBE_TIMEOUT_S = 120
 
@@ -45,10 +46,10 @@ class PySRConfig(MethodConfig):
     """Attributes: PySR's ``populations``, ``population_size``, ``maxsize``;
     ``fit_samples`` training samples given to it."""
 
-    populations: int = 15
-    population_size: int = 33
-    maxsize: int = 40
-    fit_samples: int = 2048
+    populations: Annotated[int, Range(1)] = 15
+    population_size: Annotated[int, Range(1)] = 33
+    maxsize: Annotated[int, Range(1)] = 40
+    fit_samples: Annotated[int, Range(1)] = 2048
 
 
 BINARY = ["+", "-", "*"]

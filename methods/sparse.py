@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import sympy
@@ -37,15 +38,15 @@ from bench.core import regression, symbolic
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
 from bench.core.terms import TermLibrary
-from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress
+from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
 
 
 @dataclass(frozen=True)
 class SparseConfig(MethodConfig):
     """Attributes: ``samples`` used for the fit; ``threshold`` (None: validated)."""
 
-    samples: int = 4096
-    threshold: float | None = None
+    samples: Annotated[int, Range(1)] = 4096
+    threshold: Annotated[float, Range(0)] | None = None
 
 
 def library(dof: int, kinds: tuple[str, ...]) -> TermLibrary:

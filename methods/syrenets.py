@@ -104,6 +104,7 @@ import math
 import time
 import typing
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import sympy
@@ -116,7 +117,7 @@ from bench.core.dynamics import euler_lagrange
 from bench.core.errors import ConfigError
 from bench.core.models import ExpressionModel, FittedModel
 from bench.core.timeouts import Timeout, call_with_timeout
-from methods.base import METHODS, TorchConfig, TorchLagrangianMethod
+from methods.base import METHODS, Range, TorchConfig, TorchLagrangianMethod
 
 BINARY = ("sum", "prod", "diff")
 #: the refinement gives up on pruned equations that expand into more terms
@@ -159,23 +160,23 @@ class SyReNetsConfig(TorchConfig):
         Share of the budget reserved for pruning and refinement after training.
     """
 
-    layers: int = 3
-    heads: int = 12
+    layers: Annotated[int, Range(1)] = 3
+    heads: Annotated[int, Range(1)] = 12
     inputs: typing.Literal["q_qd", "q_qd_qdd"] = "q_qd"
     operators: tuple[str, ...] = ("sum", "prod", "sin", "cos")
-    latent: int = 16
-    ae_hidden: int = 128
-    head_hidden: int = 64
-    lambda_contractive: float = 1.0
-    lambda_entropy: float = 1e-3
-    lambda_diversity: float = 1.0
-    contractive_probes: int = 1
-    lr_patience: int = 1000
-    lr_factor: float = 0.1
-    lr_min: float = 1e-5
-    replay: int = 0
+    latent: Annotated[int, Range(1)] = 16
+    ae_hidden: Annotated[int, Range(1)] = 128
+    head_hidden: Annotated[int, Range(1)] = 64
+    lambda_contractive: Annotated[float, Range(0)] = 1.0
+    lambda_entropy: Annotated[float, Range(0)] = 1e-3
+    lambda_diversity: Annotated[float, Range(0)] = 1.0
+    contractive_probes: Annotated[int, Range(0)] = 1
+    lr_patience: Annotated[int, Range(0)] = 1000
+    lr_factor: Annotated[float, Range(0, 1, low_open=True, high_open=True)] = 0.1
+    lr_min: Annotated[float, Range(0)] = 1e-5
+    replay: Annotated[int, Range(0)] = 0
     refine: bool = True
-    post_fraction: float = 0.1
+    post_fraction: Annotated[float, Range(0, 1, high_open=True)] = 0.1
 
     def validate(self) -> None:
         bad = [op for op in self.operators if op not in BINARY + UNARY]
@@ -183,10 +184,6 @@ class SyReNetsConfig(TorchConfig):
             raise ConfigError(f"syrenets: unknown operator(s) {bad}; choose from {', '.join(BINARY + UNARY)}")
         if len(set(self.operators)) != len(self.operators):
             raise ConfigError("syrenets: operators must not repeat")
-        if self.layers < 1 or self.heads < 1:
-            raise ConfigError("syrenets: layers and heads must be at least 1")
-        if not 0.0 <= self.post_fraction < 1.0:
-            raise ConfigError("syrenets: post_fraction must be in [0, 1)")
 
 
 # -- candidates ------------------------------------------------------------------------

@@ -19,20 +19,21 @@ Choices the paper leaves open
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import sympy
 import torch
 
 from bench.core.errors import DataError
 from bench.core.models import ParametricModel
-from methods.base import METHODS, TorchConfig, TorchLagrangianMethod
+from methods.base import METHODS, Range, TorchConfig, TorchLagrangianMethod
 
 
 @dataclass(frozen=True)
 class SysIdConfig(TorchConfig):
     """Attributes: ``hidden`` softplus units of the parameter network."""
 
-    hidden: int = 64
+    hidden: Annotated[int, Range(1)] = 64
 
 
 class ParameterNetwork(torch.nn.Module):

@@ -11,20 +11,19 @@ Split
 Trajectories 00, 01, 02 and 04 train, 03 and 05 test. 04 and 05 are the two
 fast ones (joint 2 turns over, velocities to 20 rad/s), so each side has one.
 
-From a recording to samples (``preprocess``)
---------------------------------------------
+From a recording to samples (:func:`bench.core.recordings.preprocess`)
+----------------------------------------------------------------------
 No accelerations are recorded, the timestamps are not uniform (2 ms, with
 gaps to 3.6 ms) and the measured velocities are quantized (steps of
-0.011 rad/s). Each trajectory is turned into samples by:
+0.011 rad/s). Each trajectory is turned into samples by the suite's
+filter-and-differentiate step: interpolation onto a uniform 2 ms grid, a
+zero-phase Butterworth low-pass of order 4 on q, qd and tau, qdd by central
+differences, 0.25 s trimmed from each end, every 5th sample kept.
 
-1. linear interpolation of ``pos_meas``, ``vel_meas`` and ``tau_meas`` onto a
-   uniform grid of ``dt`` = 2 ms;
-2. a zero-phase Butterworth low-pass (``order`` 4 run forwards and backwards,
-   cut-off ``cutoff_hz``) applied alike to q, qd and tau, so that no signal is
-   delayed against another and both sides of ``tau = g(L)`` see one filter;
-3. ``qdd`` as the central difference of the filtered velocity;
-4. ``trim_s`` cut from both ends (filter start-up), then every
-   ``decimate``-th sample kept.
+The lab publishes recordings in two column layouts (:data:`LAYOUTS`):
+``time, pos_meas1, pos_meas2, vel_meas1, vel_meas2, tau_meas1, tau_meas2``
+(the shipped ones) and ``time, pos1, pos2, vel1, vel2, tau1, tau2``;
+:func:`read_raw` reads either.
 
 The cut-off was chosen by measuring: ``python -m bench dfki-filter`` fits the
 lab's model structure (rigid body, rotor inertia, viscous and Coulomb
@@ -62,36 +61,21 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-from bench.core.data import DataError, Dataset, numeric_column, read_frame
+from bench.core.data import DataError, Dataset, read_frame
+from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, Recording, preprocess
 from systems.base import SYSTEMS, System
 
 DATA_DIR = Path(__file__).parent / "data"
 TRAIN_TRAJECTORIES = ("00", "01", "02", "04")
 TEST_TRAJECTORIES = ("03", "05")
-RAW_COLUMNS = ("time", "pos_meas1", "pos_meas2", "vel_meas1", "vel_meas2", "tau_meas1", "tau_meas2")
+#: the lab's two column layouts of a recording
+LAYOUTS = (
+    ColumnMap("time", ("pos_meas1", "pos_meas2"), ("vel_meas1", "vel_meas2"), ("tau_meas1", "tau_meas2")),
+    ColumnMap("time", ("pos1", "pos2"), ("vel1", "vel2"), ("tau1", "tau2")),
+)
+RAW_COLUMNS = LAYOUTS[0].columns
 #: the lab's own identified friction (model 2.0), for reference
 LAB_FRICTION = {"viscous": (0.001, 0.001), "coulomb": (0.093, 0.078), "coulomb_slope": 100.0}
-
-
-@dataclass(frozen=True)
-class FilterSpec:
-    """How a recording becomes samples; see the module docstring."""
-
-    dt: float = 0.002
-    cutoff_hz: float = 6.0
-    order: int = 4
-    trim_s: float = 0.25
-    decimate: int = 5
-
-    def __post_init__(self):
-        nyquist = 0.5 / self.dt
-        if not 0 < self.cutoff_hz < nyquist:
-            raise ValueError(f"cutoff_hz must lie in (0, {nyquist:g}) for dt = {self.dt:g}, got {self.cutoff_hz}")
-        if self.order < 1 or self.decimate < 1 or self.trim_s < 0:
-            raise ValueError("order and decimate must be >= 1 and trim_s >= 0")
-
-
-DEFAULT_FILTER = FilterSpec()
 
 
 @dataclass(frozen=True)
@@ -123,50 +107,19 @@ def lab_parameters() -> dict[str, float]:
     return values
 
 
-def read_raw(path: str | Path):
-    """A raw DFKI recording as a DataFrame, checked: the columns in ``RAW_COLUMNS``,
-    numeric and finite, with strictly increasing time. Raises :class:`DataError`
-    naming the file and the column."""
-    import pandas as pd
-
+def read_raw(path: str | Path) -> Recording:
+    """A raw DFKI recording in either of the lab's layouts (:data:`LAYOUTS`),
+    checked: numeric and finite, with strictly increasing time. Raises
+    :class:`DataError` naming the file and the column."""
     path = Path(path)
     frame = read_frame(path)
-    missing = [c for c in RAW_COLUMNS if c not in frame.columns]
-    if missing:
-        raise DataError(f"{path}: missing column(s) {', '.join(missing)} of a DFKI recording")
-    out = {col: numeric_column(frame, col, path) for col in RAW_COLUMNS}
-    if len(out["time"]) < 16:
-        raise DataError(f"{path}: {len(out['time'])} rows are too few for a trajectory")
-    if np.any(np.diff(out["time"]) <= 0):
-        row = int(np.flatnonzero(np.diff(out["time"]) <= 0)[0]) + 2
-        raise DataError(f"{path}: column time does not increase at data row {row}")
-    return pd.DataFrame(out)
-
-
-def preprocess(frame, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> dict[str, np.ndarray]:
-    """Samples ``q, qd, qdd, tau`` (each ``(n, 2)``) of one recording; see the
-    module docstring for the steps. ``filter_torque=False`` keeps the measured
-    torque unfiltered (it is still resampled), for judging a filter."""
-    from scipy.signal import butter, sosfiltfilt
-
-    t = frame["time"].to_numpy()
-    grid = np.arange(t[0], t[-1], spec.dt)
-    trim = int(round(spec.trim_s / spec.dt))
-    if len(grid) <= 2 * trim + 2:
-        raise DataError(f"recording of {t[-1] - t[0]:.3g} s is shorter than twice the trim of {spec.trim_s} s")
-
-    def resampled(stem):
-        return np.stack([np.interp(grid, t, frame[f"{stem}{i}"].to_numpy()) for i in (1, 2)], axis=1)
-
-    sos = butter(spec.order, spec.cutoff_hz, fs=1.0 / spec.dt, output="sos")
-    q = sosfiltfilt(sos, resampled("pos_meas"), axis=0)
-    qd = sosfiltfilt(sos, resampled("vel_meas"), axis=0)
-    tau = resampled("tau_meas")
-    if filter_torque:
-        tau = sosfiltfilt(sos, tau, axis=0)
-    qdd = np.gradient(qd, spec.dt, axis=0)
-    keep = slice(trim, len(grid) - trim, spec.decimate)
-    return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep]}
+    layout = next((m for m in LAYOUTS if set(m.columns) <= set(frame.columns)), None)
+    if layout is None:
+        best = min(LAYOUTS, key=lambda m: len(set(m.columns) - set(frame.columns)))
+        missing = [c for c in best.columns if c not in frame.columns]
+        raise DataError(f"{path}: missing column(s) {', '.join(missing)} of a DFKI recording "
+                        f"(or give your own layout: bench convert --columns time=...,q_1=...,qd_1=...,tau_1=...)")
+    return layout.take(frame, path)
 
 
 def trajectory_path(name: str) -> Path:

@@ -167,27 +167,41 @@ def write_csv(data: Dataset, path: str | os.PathLike) -> None:
 
 
 def read_frame(path: Path):
-    """A CSV file (optionally compressed) as a DataFrame with at least one row;
-    :class:`DataError` naming the file otherwise."""
+    """A CSV file (optionally compressed) as a DataFrame with at least one row
+    and distinct column names; :class:`DataError` naming the file otherwise."""
     import pandas as pd
 
+    path = Path(path)
+    if path.is_dir():
+        raise DataError(f"{path}: is a folder, not a file")
     if not path.is_file():
         raise DataError(f"{path}: no such file")
     try:
+        header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False)
         frame = pd.read_csv(path)
     except pd.errors.EmptyDataError:
         raise DataError(f"{path}: the file is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError, EOFError, OSError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise DataError(f"{path}: not a readable CSV file ({first})") from None
+    names = [str(v).strip() for v in header.iloc[0]] if len(header) else []
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise DataError(f"{path}: column name(s) {', '.join(map(repr, repeated))} appear more than once")
     if len(frame) == 0:
         raise DataError(f"{path}: the file has a header but no rows")
     return frame
 
 
+#: the largest magnitude a value read from a file may have: its square stays finite,
+#: so that least squares on it cannot overflow
+MAX_ABS_VALUE = float(np.sqrt(np.finfo(np.float64).max))
+
+
 def numeric_column(frame, col: str, path: Path) -> np.ndarray:
     """Column ``col`` as float64; :class:`DataError` naming the file, column and
-    data row of the first non-numeric, NaN, empty or infinite value."""
+    data row of the first non-numeric, NaN, empty or infinite value, or of a
+    value whose square would overflow (above :data:`MAX_ABS_VALUE`)."""
     import pandas as pd
 
     values = pd.to_numeric(frame[col], errors="coerce").to_numpy(dtype=np.float64)
@@ -200,6 +214,11 @@ def numeric_column(frame, col: str, path: Path) -> np.ndarray:
         row = int(np.flatnonzero(bad)[0])
         what = "NaN or empty" if np.isnan(values[row]) else "inf"
         raise DataError(f"{path}: column {col} has a {what} value in data row {row + 1}")
+    huge = np.abs(values) > MAX_ABS_VALUE
+    if huge.any():
+        row = int(np.flatnonzero(huge)[0])
+        raise DataError(f"{path}: column {col} has a value too large to compute with ({values[row]:g}, above "
+                        f"{MAX_ABS_VALUE:.3g}) in data row {row + 1}")
     return values
 
 

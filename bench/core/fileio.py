@@ -1,22 +1,32 @@
-"""Atomic file writes: a reader never sees a partial file."""
+"""Files: atomic writes (a reader never sees a partial file, and a killed
+writer leaves nothing behind for good), and checks of output paths before
+any work starts."""
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import Any, Callable, IO
+
+from bench.core.errors import UserError
+from bench.core.processes import process_alive
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[IO], Any], *, binary: bool = False) -> None:
     """Call ``write(f)`` on a temporary file beside ``path``, then rename it into place.
 
-    On any error the temporary file is removed and ``path`` is left as it was.
+    On any error the temporary file is removed and ``path`` is left as it
+    was. The temporary file's name carries the writer's process id, so that
+    the next write of ``path`` removes what a killed writer left.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    remove_leftovers(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp")
     try:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
         with os.fdopen(fd, "wb" if binary else "w", **({} if binary else {"newline": ""})) as f:
@@ -30,6 +40,22 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO], Any], *, binary:
         raise
 
 
+def remove_leftovers(path: Path) -> None:
+    """Remove temporary files of ``path`` whose writer is no longer running."""
+    pattern = re.compile(re.escape(f".{path.name}.") + r"(\d+)\..*\.tmp$")
+    try:
+        names = os.listdir(path.parent)
+    except OSError:
+        return
+    for name in names:
+        m = pattern.match(name)
+        if m and not process_alive(int(m.group(1))):
+            try:
+                os.unlink(path.parent / name)
+            except OSError:
+                pass
+
+
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -38,3 +64,28 @@ def _umask() -> int:
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     atomic_write(path, lambda f: (json.dump(obj, f, indent=1, allow_nan=True), f.write("\n")))
+
+
+def check_output(path: str | os.PathLike, *, folder: bool = False) -> Path:
+    """``path`` if the suite can write a file (or, with ``folder``, a folder)
+    there; :class:`UserError` in one line otherwise, before any work starts.
+
+    Refused: a file path that is an existing folder (or a folder path that is
+    an existing file), a path under an existing file, and a folder that
+    cannot be written.
+    """
+    path = Path(path)
+    if path.exists():
+        if folder and not path.is_dir():
+            raise UserError(f"{path}: is a file, not a folder")
+        if not folder and path.is_dir():
+            raise UserError(f"{path}: is a folder, not a file")
+    parent = path if folder and path.is_dir() else path.parent
+    ancestor = parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise UserError(f"{path}: cannot be written, {ancestor} is a file, not a folder")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise UserError(f"{path}: cannot be written, {ancestor} is not writable ({os.strerror(errno.EACCES)})")
+    return path

@@ -13,6 +13,8 @@ import multiprocessing
 import pickle
 from typing import Any, Callable
 
+from bench.core.processes import die_with_parent
+
 
 class Timeout(Exception):
     """The computation did not finish in time (it was killed)."""
@@ -34,6 +36,7 @@ def call_with_timeout(fn: Callable[[], Any], seconds: float) -> Any:
     reader, writer = ctx.Pipe(duplex=False)
 
     def child() -> None:
+        die_with_parent()
         try:
             payload = (True, fn())
         except BaseException as exc:  # report any failure to the parent

@@ -50,7 +50,7 @@ from pathlib import Path
 from bench.core.data import generate, mse
 from bench.core.effects import add_effects, parse_effects
 from bench.core.errors import ConfigError
-from bench.core.fileio import atomic_write, write_json
+from bench.core.fileio import atomic_write, check_output, write_json
 from bench.reporting.plots import adaptation_plot, step_values
 from bench.residual.loop import DEFAULT_TOTAL_FITS, residual_loop
 from bench.runner.isolation import run_jobs
@@ -238,6 +238,7 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
+    check_output(args.out, folder=True)
     setup = Setup(args.system, tuple(args.effects), args.before, tuple(args.checkpoints), args.n_train, args.n_test)
     setup.check()
     seeds = list(range(args.seeds))

@@ -1,7 +1,7 @@
 """Measure how the DFKI pre-processing filter changes the identified model.
 
 For each low-pass cut-off, the DFKI trajectories are turned into samples
-(:func:`systems.dfki_double_pendulum.preprocess`) and two linear
+(:func:`bench.core.recordings.preprocess`) and two linear
 least-squares models are fitted on the training trajectories:
 
 * ``rigid``: the rigid-body Lagrangian in its five base parameters;
@@ -28,10 +28,11 @@ import sympy
 
 from bench.core import regression
 from bench.core.data import Dataset
-from bench.core.fileio import atomic_write
+from bench.core.fileio import atomic_write, check_output
+from bench.core.recordings import DEFAULT_FILTER, FilterSpec
 from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary
-from systems.dfki_double_pendulum import DEFAULT_FILTER, LAB_FRICTION, DfkiDoublePendulum, FilterSpec, lab_parameters
+from systems.dfki_double_pendulum import LAB_FRICTION, DfkiDoublePendulum, lab_parameters
 
 CUTOFFS_HZ = (2.0, 4.0, 6.0, 8.0, 10.0, 15.0, 20.0, 30.0, 50.0)
 
@@ -134,6 +135,7 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
+    check_output(args.out)
     rows = []
     for i, cutoff in enumerate(CUTOFFS_HZ, 1):
         rows.append(evaluate(dataclasses.replace(DEFAULT_FILTER, cutoff_hz=cutoff)))

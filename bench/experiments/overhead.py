@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench.core.fileio import atomic_write
+from bench.core.fileio import atomic_write, check_output
 from bench.runner.matrix import run_matrix
 from bench.runner.progress import quiet
 from bench.runner.spec import build_specs
@@ -63,6 +63,7 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
+    check_output(args.out)
     rows = []
     for w in args.workers:
         print(f"{args.runs} runs of {args.budget:g} s on {w} worker(s) ...", flush=True)

@@ -22,7 +22,7 @@ import numpy as np
 
 from bench.core.data import add_noise, generate
 from bench.core.effects import add_effects
-from bench.core.fileio import atomic_write
+from bench.core.fileio import atomic_write, check_output
 from bench.residual.loop import DEFAULT_TOTAL_FITS, residual_loop
 from bench.runner.isolation import run_jobs
 from bench.runner.matrix import KILL_FACTOR
@@ -107,6 +107,7 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
+    check_output(args.out)
     payloads = {f"{c} noise={z:g} {m}": {"case": c, "noise": z, "method": m, "n_train": args.n_train,
                                           "n_test": args.n_test, "budget": args.budget}
                 for c in args.cases for z in args.noise for m in args.methods}

@@ -20,8 +20,7 @@ from pathlib import Path
 
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
-from bench.reporting.tables import build_tables, write_plots
-from bench.runner.records import read_records
+from bench.reporting.tables import build_tables, read_for_tables, write_plots
 
 
 def read_commentary(path: Path) -> dict[str, str]:
@@ -41,7 +40,7 @@ def read_commentary(path: Path) -> dict[str, str]:
 
 def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, list[str]]:
     """The leaderboard text and the table sections that have no commentary."""
-    records = read_records(run_dir)
+    records = read_for_tables(run_dir)
     if not records:
         raise UserError(f"{run_dir}: no records found")
     rel = Path(os.path.relpath(run_dir, out.parent))

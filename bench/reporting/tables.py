@@ -24,19 +24,27 @@ Definitions
 * **Exact** counts the seeds whose expression is exactly the true Lagrangian
   up to the experiment's gauge (:mod:`bench.evaluation.recovery`); "—" for
   methods without an expression.
+* Above each table: the budget, seeds and configuration; the data (the
+  sampling ranges of generated data, or the files or recordings, and the
+  noise on the training targets); the hyperparameters set beside each
+  method's defaults; the machine and the commit.
+* A run whose record file was corrupt, and which has not been redone, is
+  counted in the Runs row as missing (:func:`bench.runner.records.missing_runs`).
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from collections import Counter, defaultdict
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from bench.core.fileio import atomic_write
 from bench.reporting.plots import convergence_plot, plot_name
-from bench.runner.records import Record, read_records
+from bench.runner.records import MISSING, Record, missing_runs, quarantine, read_records
 from systems import SYSTEMS
 
 GROUPS = ("Best", "5 Best", "All 10", "5 Worse")
@@ -102,13 +110,75 @@ def _rollout_cell(records: list[Record]) -> str:
     return text + others + ")"
 
 
+def _angle(value: float) -> str:
+    for name, angle in (("π/2", math.pi / 2), ("π", math.pi)):
+        if math.isclose(abs(value), angle, rel_tol=1e-9):
+            return f"{'−' if value < 0 else ''}{name}"
+    return f"{value:g}".replace("-", "−")
+
+
+def _uniform(pairs) -> str:
+    """``U(a, b)``, or one per coordinate joined by ×."""
+    if len(pairs) == 2 and all(isinstance(v, (int, float)) for v in pairs):
+        pairs = [pairs]
+    if all(list(p) == list(pairs[0]) for p in pairs):
+        pairs = pairs[:1]  # the same range for every coordinate
+    return " × ".join(f"U({_angle(lo)}, {_angle(hi)})" for lo, hi in pairs)
+
+
+def _data(records: list[Record]) -> str:
+    """What the section's runs learned from: sampling ranges or files, sizes, noise."""
+    described = [r for r in records if r.details.get("train_source")] or records
+    sources = set()
+    for r in described:
+        if r.spec.get("train_path"):
+            sources.add(f"the files {r.spec['train_path']} (test: {r.spec.get('test_path') or 'none'})")
+        elif not _simulated(r.system):
+            sources.add("the system's recordings, its published train and test split")
+        elif "domain" in r.details:
+            d = r.details["domain"]
+            ranges = {k: _uniform(d[k]) for k in ("q", "qd", "qdd")}
+            text = (f"q, q̇, q̈ ~ {ranges['q']}" if len(set(ranges.values())) == 1 else
+                    f"q ~ {ranges['q']}, q̇ ~ {ranges['qd']}, q̈ ~ {ranges['qdd']}")
+            sources.add(f"{r.details.get('n_train')} training and {r.details.get('n_test')} test samples, {text}")
+        else:
+            w = r.spec.get("domain_half_width")
+            sources.add("samples from the system's own domain" if not w else f"samples with angles, q̇ and q̈ ~ U(−{_angle(w)}, {_angle(w)})")
+    noises = sorted({r.noise or 0.0 for r in records})
+    noise = ", ".join("none" if z == 0 else f"{z * 100:g} % of each target column's std on the training targets" for z in noises)
+    return f"Data: {'; '.join(sorted(sources))}; noise: {noise}."
+
+
+def _simulated(system: str) -> bool:
+    try:
+        return bool(SYSTEMS[system].simulated)
+    except KeyError:  # a system registered by a plugin that is not loaded
+        return True
+
+
+def _overrides(records: list[Record]) -> str:
+    """The hyperparameters the runs set beside each method's defaults (or its smoke configuration)."""
+    by_method = defaultdict(dict)
+    for r in records:
+        for key, value in (r.spec.get("hyperparameters") or {}).items():
+            by_method[r.method.split("+")[0]][key] = value
+    if not by_method:
+        return "Hyperparameters: each method's own (none set)."
+    parts = [f"{m}: {', '.join(f'{k}={v!r}' for k, v in sorted(kv.items()))}" for m, kv in sorted(by_method.items())]
+    return f"Hyperparameters set beside each method's own: {'; '.join(parts)}."
+
+
 def _header(records: list[Record]) -> list[str]:
+    records = [r for r in records if r.status != MISSING]
+    if not records:
+        return ["Every run of this section is missing its record (see the Runs row)."]
     budgets = sorted({r.budget_s for r in records})
     seeds = sorted({r.seed for r in records})
     prov = [r.provenance for r in records]
     cpus = sorted({f"{p['cpu']} ({p['cpu_count']} cores)" for p in prov})
-    ran = [r.provenance for r in records if r.status not in ("unavailable", "not_applicable")] or prov
+    ran = [r.provenance for r in records if r.status not in ("unavailable", "not_applicable")]
     threads = sorted({str(p["threads"].get("torch_intra_op", "?")) for p in ran})
+    per_run = f"{', '.join(threads)} thread(s) per run" if ran else "no run ran"
     commits = sorted({f"{p['commit'][:10]}{' (dirty)' if p.get('dirty') else ''}" for p in prov})
     torch_versions = sorted({str(p["packages"].get("torch")) for p in prov})
     dates = sorted(p["utc"][:10] for p in prov)
@@ -116,7 +186,9 @@ def _header(records: list[Record]) -> list[str]:
     lines = [
         f"Budget: {', '.join(f'{b:g} s' for b in budgets)} of wall-clock per run; "
         f"{len(seeds)} seed(s) ({', '.join(map(str, seeds))}); configuration: {', '.join(profiles)}.",
-        f"Machine: {'; '.join(cpus)}; {', '.join(threads)} thread(s) per run; torch {', '.join(torch_versions)}.",
+        _data(records),
+        _overrides(records),
+        f"Machine: {'; '.join(cpus)}; {per_run}; torch {', '.join(torch_versions)}.",
         f"Commit: {', '.join(commits)}; run {dates[0]}{'' if dates[0] == dates[-1] else ' to ' + dates[-1]}.",
     ]
     return lines
@@ -241,10 +313,27 @@ def write_plots(records: list[Record], out_dir: str | Path) -> dict[tuple, str]:
     return made
 
 
-def write_tables(out_dir: str | Path, filename: str = "tables.md", plots: bool = True) -> str:
+def warn(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def read_for_tables(out_dir: str | Path, report: Callable[[str], None] = warn) -> list[Record]:
+    """``out_dir``'s valid records, and stand-ins for the runs whose record
+    is corrupt: such a file is reported in one line and moved to
+    ``records/corrupt/`` (:func:`bench.runner.records.quarantine`), so that
+    the matrix's resume redoes its run."""
+    def bad(path, error):
+        report(f"warning: {error}; moved to {quarantine(path)}, and counted as missing")
+
+    records = read_records(out_dir, on_bad=bad)
+    return records + missing_runs(out_dir, records)
+
+
+def write_tables(out_dir: str | Path, filename: str = "tables.md", plots: bool = True,
+                 report: Callable[[str], None] = warn) -> str:
     """Build the tables (and, with ``plots``, the convergence plots) from
     ``out_dir``'s records and write them into ``out_dir`` atomically."""
-    records = read_records(out_dir)
+    records = read_for_tables(out_dir, report)
     if not records:
         raise FileNotFoundError(f"{out_dir}: no records found (expected {Path(out_dir) / 'records' / '*.json'})")
     text = build_tables(records, write_plots(records, out_dir) if plots else None)

@@ -79,14 +79,14 @@ def preflight(spec: RunSpec) -> Record | None:
     entry = METHODS.entry(spec.method)
     reason = entry.unavailable_reason()
     if reason:
-        return Record.new(spec, "unavailable", error=reason)
+        return Record.new(spec, "unavailable", elsewhere=True, error=reason)
     reason = entry.obj.not_applicable_reason(spec.experiment)
     if reason:
-        return Record.new(spec, "not_applicable", error=reason)
+        return Record.new(spec, "not_applicable", elsewhere=True, error=reason)
     system = SYSTEMS[spec.system]
     if spec.experiment not in system.experiments and not spec.train_path:
         reason = system.not_applicable or f"{spec.system} has no data for the {spec.experiment} experiment"
-        return Record.new(spec, "not_applicable", error=reason)
+        return Record.new(spec, "not_applicable", elsewhere=True, error=reason)
     return None
 
 

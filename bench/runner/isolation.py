@@ -24,11 +24,12 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable, Iterator, Mapping
 
 from bench.core.fileio import write_json
 from bench.runner.provenance import PROJECT_ROOT
@@ -77,6 +78,9 @@ class Outcome:
         The child's exit code (``None`` when killed).
     log_tail
         The last lines of the child's output, for a child that died.
+    interrupted
+        The caller was interrupted and killed the child (:func:`kill_children`):
+        the call neither finished nor failed.
     """
 
     result: dict | None
@@ -84,6 +88,7 @@ class Outcome:
     killed: bool = False
     exit_code: int | None = None
     log_tail: str = ""
+    interrupted: bool = False
 
 
 _FORK_SERVER = {"context": None, "failed": None}
@@ -120,15 +125,32 @@ def fork_server():
     return ctx
 
 
+#: the children running now, killed by :func:`kill_children` when their caller is interrupted
+_RUNNING: set["_Child"] = set()
+_RUNNING_LOCK = threading.Lock()
+
+
+def kill_children() -> int:
+    """Kill every child still running (for an interrupted caller); returns how many."""
+    with _RUNNING_LOCK:
+        children = list(_RUNNING)
+    for child in children:
+        child.interrupted = True
+        child.kill()
+    return len(children)
+
+
 class _Child:
     """A running child: a process forked from the fork server, or a fresh interpreter."""
 
     def __init__(self, threads: int, files: tuple[Path, Path, Path], log_file: Path, fresh: bool):
         ctx = None if fresh or threads != 1 else fork_server()
         self.proc = self.popen = None
+        self.interrupted = False
         if ctx is not None:
             self.proc = ctx.Process(target=forked_main, args=(*map(str, files), str(log_file), os.getcwd()))
             self.proc.start()
+            self._register()
             return
         env = thread_env(threads)
         root = str(PROJECT_ROOT)
@@ -138,6 +160,11 @@ class _Child:
                 [sys.executable, "-m", "bench.runner.worker", *map(str, files)],
                 env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
             )
+        self._register()
+
+    def _register(self) -> None:
+        with _RUNNING_LOCK:
+            _RUNNING.add(self)
 
     @property
     def pid(self) -> int:
@@ -147,12 +174,17 @@ class _Child:
         """Wait up to ``timeout`` seconds; whether the process has ended."""
         if self.proc is not None:
             self.proc.join(timeout)
-            return self.proc.exitcode is not None
-        try:
-            self.popen.wait(timeout=timeout)
-            return True
-        except subprocess.TimeoutExpired:
-            return False
+            ended = self.proc.exitcode is not None
+        else:
+            try:
+                self.popen.wait(timeout=timeout)
+                ended = True
+            except subprocess.TimeoutExpired:
+                ended = False
+        if ended:
+            with _RUNNING_LOCK:
+                _RUNNING.discard(self)
+        return ended
 
     @property
     def returncode(self) -> int | None:
@@ -205,6 +237,8 @@ def run_call(call: Call, result_file: str | os.PathLike, log_dir: str | os.PathL
             output.read(final=True)
             return Outcome(None, phase, killed=True)
     output.read(final=True)
+    if child.interrupted:
+        return Outcome(None, phase, interrupted=True)
     phase = _read_phase(phase_file) or phase
     result = _read_result(result_file)
     if result is None:
@@ -234,13 +268,29 @@ def run_jobs(target: str, payloads: Mapping[str, dict], limit: float, workers: i
         report(f"[{len(finished)}/{len(payloads)}, {time.monotonic() - start:.0f} s] {name}: {what}")
         return outcome
 
-    with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work, ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {name: pool.submit(one, name, Path(work) / f"{i}.json", work) for i, name in enumerate(payloads)}
-        outcomes = {name: future.result() for name, future in futures.items()}
+    with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work:
+        items = [(name, Path(work) / f"{i}.json", work) for i, name in enumerate(payloads)]
+        outcomes = dict(zip(payloads, map_interruptibly(lambda item: one(*item), items, workers)))
     failed = [name for name, outcome in outcomes.items() if outcome.result is None]
     if failed:
         raise CallFailed(f"{len(failed)} of {len(payloads)} job(s) did not finish: {', '.join(failed)}")
     return {name: outcome.result for name, outcome in outcomes.items()}
+
+
+def map_interruptibly(fn: Callable, items: list, workers: int) -> Iterator:
+    """``fn`` over ``items`` on ``workers`` threads, results in order, like
+    ``ThreadPoolExecutor.map``; if the caller is interrupted (Ctrl-C, or any
+    error), queued items are dropped and running children killed at once
+    instead of being waited for."""
+    pool = ThreadPoolExecutor(max_workers=workers)
+    try:
+        yield from pool.map(fn, items)
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        kill_children()
+        raise
+    finally:
+        pool.shutdown(wait=True)
 
 
 class _Lines:

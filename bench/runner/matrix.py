@@ -2,13 +2,17 @@
 
 * :func:`run_isolated` runs one :class:`~bench.runner.spec.RunSpec` in its
   own process (:mod:`bench.runner.isolation`), with torch and BLAS threads
-  pinned, kills it at 1.5 x its budget (status ``timeout``), and writes its
-  record. A crash or a non-finite result gives status ``failed`` with the
-  reason.
+  pinned, and writes its record. Its fit is killed at :data:`KILL_FACTOR` x
+  its budget, and what follows the fit (scores on the full data, variants,
+  the exact-recovery judgement, the rollout) at :func:`evaluation_limit`;
+  either gives status ``timeout``. A crash or a non-finite result gives
+  status ``failed`` with the reason.
 * :func:`run_matrix` runs many specs on a pool of worker processes, or on
   Dask distributed, writes one record per run atomically, and skips runs that
-  already have a record, so a killed matrix loses no finished run and
-  re-running it resumes.
+  already have a valid record, so a killed matrix loses no finished run and
+  re-running it resumes. A corrupt record is moved aside
+  (:func:`~bench.runner.records.quarantine`) and its run redone. One matrix
+  at a time may write into a folder (:class:`FolderLock`).
 
 ``from bench import harness`` gives this module: it also offers the names of
 :mod:`bench.runner.spec` and :mod:`bench.runner.execute` that scripts use.
@@ -16,56 +20,100 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
 import tempfile
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Iterable
 
 from bench.core.errors import UserError
+from bench.core.processes import process_alive
 from bench.evaluation.scores import MAX_EXPRESSION_CHARS  # noqa: F401  (a name of the old harness module)
 from bench.runner.execute import execute, load_data, make_system, method_config, preflight, warm_up_torch  # noqa: F401
-from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, fork_server, run_call  # noqa: F401
+from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, fork_server, map_interruptibly, run_call  # noqa: F401
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now, quiet  # noqa: F401
-from bench.runner.records import Record, read_record, record_path, write_record
+from bench.runner.records import Record, RecordError, quarantine, read_record, record_path, write_record
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, TEST_SEED_OFFSET, RunSpec, build_specs  # noqa: F401
 
-#: A run is killed at this multiple of its budget.
+#: A run's fit is killed at this multiple of its budget.
 KILL_FACTOR = 1.5
-#: Seconds a run may take, after its fit, to evaluate the model on the full data.
-EVALUATION_TIMEOUT_S = 900.0
+#: What follows a run's fit (evaluation on the full data, variants, exact
+#: recovery, rollout) may take its budget, and at least this many seconds.
+EVALUATION_MIN_S = 120.0
+
+
+def evaluation_limit(budget_s: float) -> float:
+    """Seconds a run may take after its fit: ``max(EVALUATION_MIN_S, budget_s)``."""
+    return max(EVALUATION_MIN_S, budget_s)
 
 
 def run_isolated(spec: RunSpec, out_dir: str | os.PathLike, *, poll_s: float = 0.05, fresh: bool = False) -> Record:
     """Run ``spec`` in its own process; write and return its record.
 
     From the start of its fit the run has ``KILL_FACTOR * budget_s`` seconds
-    to finish the fit before it is killed and recorded as ``timeout``;
-    evaluation on the full data after the fit is not part of the budget and
-    has ``EVALUATION_TIMEOUT_S``. A child that dies without writing a record
-    is recorded as ``failed`` with the tail of its log. ``fresh=True`` starts
-    a fresh interpreter instead of forking from the fork server.
+    to finish the fit, then :func:`evaluation_limit` seconds for what follows;
+    past either it is killed and recorded as ``timeout``. A child that dies
+    without writing a record is recorded as ``failed`` with the tail of its
+    log. ``fresh=True`` starts a fresh interpreter instead of forking from the
+    fork server.
     """
     out_dir = Path(out_dir)
     path = record_path(out_dir, spec.run_id)
-    limits = {"fit": KILL_FACTOR * spec.budget_s, "evaluate": EVALUATION_TIMEOUT_S}
+    limits = {"fit": KILL_FACTOR * spec.budget_s, "evaluate": evaluation_limit(spec.budget_s)}
     call = Call("bench.runner.execute:run_payload", spec.to_dict(), spec.threads)
     outcome = run_call(call, path, out_dir / "logs", spec.run_id, limits, fresh=fresh, poll_s=poll_s)
+    if outcome.interrupted:  # no record: the resume runs it again
+        raise KeyboardInterrupt(f"{spec.run_id} interrupted")
     if outcome.result is not None:
         return Record.from_json(outcome.result, str(path))
     if not outcome.killed:
         error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
-        record = Record.new(spec, "failed", error=error)
+        record = Record.new(spec, "failed", elsewhere=True, error=error)
     elif outcome.phase == "fit":
-        record = Record.new(spec, "timeout", error=f"fit still running at {KILL_FACTOR} x its {spec.budget_s:g} s budget; killed")
+        record = Record.new(spec, "timeout", elsewhere=True,
+                            error=f"fit still running at {KILL_FACTOR} x its {spec.budget_s:g} s budget; killed")
     elif outcome.phase == "evaluate":
-        record = Record.new(spec, "failed", error=f"evaluation after the fit took over {EVALUATION_TIMEOUT_S:g} s; killed")
+        record = Record.new(spec, "timeout", elsewhere=True,
+                            error=f"evaluation after the fit still running after {limits['evaluate']:g} s; killed")
     else:
-        record = Record.new(spec, "failed", error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
+        record = Record.new(spec, "failed", elsewhere=True, error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
     write_record(path, record)
     return record
+
+
+class FolderLock:
+    """One matrix at a time writes into a folder: an exclusive ``flock`` on
+    ``OUT/.lock``, which the kernel releases when its holder ends, however it
+    ends, so a killed matrix leaves no stale lock. The file holds the
+    holder's process id and start time, for the message to a second matrix."""
+
+    def __init__(self, folder: str | os.PathLike):
+        self.path = Path(folder) / ".lock"
+        self.fd: int | None = None
+
+    def __enter__(self) -> "FolderLock":
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 200).decode(errors="replace").split()
+            os.close(fd)
+            who = f"process {holder[0]}, started {holder[1]}" if len(holder) >= 2 and process_alive(int(holder[0])) \
+                else "another process"
+            raise UserError(f"{self.path.parent}: another matrix is writing here ({who}); "
+                            "wait for it to end or choose another --out") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()} {time.strftime('%Y-%m-%dT%H:%M:%S')}\n".encode())
+        self.fd = fd
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.fd is not None:
+            os.close(self.fd)  # releases the lock
+            self.fd = None
 
 
 def default_workers() -> int:
@@ -83,9 +131,12 @@ def run_matrix(
 ) -> list[Record]:
     """Run every spec, ``workers`` at a time, each in its own process.
 
-    Runs that already have a record in ``out_dir`` are skipped (``resume``).
-    Unavailable and not-applicable runs are recorded without starting a process.
-    Returns the records in the order of ``specs``.
+    Runs that already have a valid record in ``out_dir`` are skipped
+    (``resume``); a record file that is not valid is reported in one line,
+    moved to ``records/corrupt/`` and its run redone. Unavailable and
+    not-applicable runs are recorded without starting a process. Returns the
+    records in the order of ``specs``. Holds :class:`FolderLock` on
+    ``out_dir`` throughout; an interrupted matrix kills its running children.
 
     ``cluster`` hands the runs to Dask distributed instead of the local pool:
     ``"local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
@@ -99,15 +150,23 @@ def run_matrix(
     report = report if report is not None else print_now
     workers = workers or default_workers()
     out_dir = Path(out_dir)
+    with FolderLock(out_dir):
+        return _run_matrix(specs, out_dir, workers, resume, report, cluster)
+
+
+def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool, report: Report, cluster) -> list[Record]:
     results: dict[str, Record] = {}
     todo: list[RunSpec] = []
     resumed = cannot_run = 0
     for spec in specs:
         path = record_path(out_dir, spec.run_id)
         if resume and path.exists():
-            results[spec.run_id] = read_record(path)
-            resumed += 1
-            continue
+            try:
+                results[spec.run_id] = read_record(path)
+                resumed += 1
+                continue
+            except RecordError as exc:
+                report(f"warning: {exc}; moved to {quarantine(path)}, and the run is redone")
         early = preflight(spec)
         if early:
             write_record(path, early)
@@ -127,9 +186,8 @@ def run_matrix(
         for record in _run_on_dask(todo, out_dir, cluster, workers):
             results[record.run_id] = done(record)
     elif todo:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            for record in pool.map(lambda s: done(run_isolated(s, out_dir)), todo):
-                results[record.run_id] = record
+        for record in map_interruptibly(lambda s: done(run_isolated(s, out_dir)), todo, workers):
+            results[record.run_id] = record
     tracker.summary()
     return [results[s.run_id] for s in specs]
 

@@ -4,7 +4,10 @@ evaluation), and torch's lazy one-time work, so that every run forked from
 the server starts with them done.
 
 Runs forked from the server run the code as it was when the server started,
-and the checkout's commit is read once here, for the runs' provenance."""
+and the checkout's commit is read once here, for the runs' provenance. The
+server ends when the process that started it ends (its pipe from that
+process closes), and each run forked from it ends with it
+(:func:`bench.core.processes.die_with_parent`)."""
 
 from bench.runner.threads import pin_threads, pin_torch
 

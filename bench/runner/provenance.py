@@ -58,8 +58,16 @@ def package_versions() -> dict:
     return out
 
 
-def provenance() -> dict:
-    """This process's provenance, now."""
+def provenance(threads: int | None = None) -> dict:
+    """This process's provenance, now.
+
+    ``threads`` is given for a record this process makes of a run that ran
+    (or would have run) elsewhere with that many threads pinned: the record
+    then states the run's threads, not this process's.
+    """
+    if threads is not None:
+        pinned = {k: str(threads) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+        return {**provenance(), "threads": {**pinned, "torch_intra_op": threads, "torch_inter_op": 1}}
     threads = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
     if "torch" in sys.modules:
         import torch

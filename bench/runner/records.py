@@ -10,30 +10,38 @@ number of steps, the learned expression where there is one, and provenance
 
 On disk a record is the JSON object of :meth:`Record.to_json`, written
 atomically to ``OUT/records/<run id>.json``; :meth:`Record.from_json`
-checks a file's object field by field. Tables are a pure function of a
-folder of records.
+checks a file's object field by field. A file that fails the check is moved
+aside to ``OUT/records/corrupt/`` (:func:`quarantine`): the resume redoes its
+run, and tables count it as missing until then (:meth:`Record.missing`).
+Tables are a pure function of a folder of records.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import datetime as _dt
 import json
 import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 from bench.core.data import EXPERIMENTS
 from bench.core.errors import UserError
 from bench.core.fileio import write_json
 from bench.runner.provenance import provenance
-from bench.runner.spec import RunSpec, run_id
+from bench.runner.spec import RunSpec, parse_run_id, run_id
 
 SCHEMA = "syrenets-bench/record/1"
 STATUSES = ("ok", "failed", "timeout", "unavailable", "not_applicable")
 #: fields added to the schema after records were first published, with the
 #: value a record written before them has
 ADDED_LATER = {"exact": None, "noise": 0.0, "rollout": None}
+#: the status of a run whose record file was corrupt (in memory only, never written)
+MISSING = "missing"
+#: where corrupt record files are moved, under ``OUT/records``
+CORRUPT = "corrupt"
 
 
 class RecordError(UserError, ValueError):
@@ -70,8 +78,9 @@ class Record:
     provenance: dict = field(default_factory=dict)
 
     @classmethod
-    def new(cls, spec: RunSpec | dict, status: str, **fields) -> "Record":
-        """A complete record of ``spec``, stamped with this process's provenance."""
+    def new(cls, spec: RunSpec | dict, status: str, *, elsewhere: bool = False, **fields) -> "Record":
+        """A complete record of ``spec``, stamped with this process's provenance
+        or, with ``elsewhere``, with the threads the run has in its own process."""
         spec = spec.to_dict() if isinstance(spec, RunSpec) else dict(spec)
         if status not in STATUSES:
             raise ValueError(f"unknown status {status!r}")
@@ -81,8 +90,19 @@ class Record:
             run_id=run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], noise),
             system=spec["system"], method=spec["method"], experiment=spec["experiment"], seed=spec["seed"],
             budget_s=spec["budget_s"], noise=noise, target="L" if spec["experiment"] == "direct" else "tau",
-            spec=spec, status=status, provenance=provenance(), **fields,
+            spec=spec, status=status, provenance=provenance(spec.get("threads", 1) if elsewhere else None), **fields,
         )
+
+    @classmethod
+    def missing(cls, rid: str, why: str) -> "Record | None":
+        """An in-memory stand-in for a run whose record is missing (status
+        :data:`MISSING`), so that tables count it; ``None`` where ``rid`` is
+        not a run id."""
+        parts = parse_run_id(rid)
+        if parts is None:
+            return None
+        return cls(schema=SCHEMA, run_id=rid, target="L" if parts["experiment"] == "direct" else "tau", budget_s=math.nan,
+                   spec={}, status=MISSING, error=why, **parts)
 
     def replace(self, **changes) -> "Record":
         return dataclasses.replace(self, **changes)
@@ -162,8 +182,49 @@ def read_record(path: str | os.PathLike) -> Record:
     return Record.from_json(obj, str(path))
 
 
-def read_records(out_dir: str | os.PathLike) -> list[Record]:
-    """All records under ``out_dir/records`` (or ``out_dir`` itself), sorted by file name."""
+def records_folder(out_dir: str | os.PathLike) -> Path:
+    """``out_dir/records``, or ``out_dir`` itself when it holds the records directly."""
     root = Path(out_dir)
-    folder = root / "records" if (root / "records").is_dir() else root
-    return [read_record(path) for path in sorted(folder.glob("*.json"))]
+    return root / "records" if (root / "records").is_dir() else root
+
+
+def read_records(out_dir: str | os.PathLike, on_bad: Callable[[Path, RecordError], None] | None = None) -> list[Record]:
+    """All records under ``out_dir/records`` (or ``out_dir`` itself), sorted by file name.
+
+    A file that is not a valid record raises :class:`RecordError`, or, with
+    ``on_bad``, is passed to it with the error and left out.
+    """
+    records = []
+    for path in sorted(records_folder(out_dir).glob("*.json")):
+        try:
+            records.append(read_record(path))
+        except RecordError as exc:
+            if on_bad is None:
+                raise
+            on_bad(path, exc)
+    return records
+
+
+def quarantine(path: Path) -> Path:
+    """Move a corrupt record file to ``records/corrupt/``, stamped with the
+    time, so that its run is redone; returns where it went."""
+    folder = path.parent / CORRUPT
+    folder.mkdir(exist_ok=True)
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%S%fZ")
+    target = folder / f"{path.stem}.{stamp}.json"
+    os.replace(path, target)
+    return target
+
+
+def missing_runs(out_dir: str | os.PathLike, records: list[Record]) -> list[Record]:
+    """Stand-ins (:meth:`Record.missing`) for the runs whose record was moved
+    to ``records/corrupt/`` and has not been redone."""
+    have = {r.run_id for r in records}
+    out = {}
+    for path in sorted((records_folder(out_dir) / CORRUPT).glob("*.json")):
+        rid = path.name.rsplit(".", 2)[0]  # <run id>.<time stamp>.json
+        if rid not in have and rid not in out:
+            stand_in = Record.missing(rid, f"its record was corrupt (moved to {path})")
+            if stand_in is not None:
+                out[rid] = stand_in
+    return list(out.values())

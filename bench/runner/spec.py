@@ -4,6 +4,7 @@ specs, :func:`build_specs`."""
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass, field
 from typing import Iterable
 
@@ -18,6 +19,24 @@ N_TRAIN, N_TEST = 32000, 10000
 def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 0.0) -> str:
     """``system__method__experiment__seedN``, with ``__noiseX`` when the targets are noisy."""
     return f"{system}__{method}__{experiment}__seed{seed}" + (f"__noise{noise:g}" if noise else "")
+
+
+_RUN_ID = re.compile(r"^(?P<system>\w+?)__(?P<method>\w+?)__(?P<experiment>direct|indirect)__seed(?P<seed>\d+)"
+                     r"(?:__noise(?P<noise>[0-9.e+-]+))?$")
+
+
+def parse_run_id(rid: str) -> dict | None:
+    """The ``system``, ``method``, ``experiment``, ``seed`` and ``noise`` of a
+    run id (:func:`run_id`), or ``None`` where ``rid`` is not one."""
+    m = _RUN_ID.match(rid)
+    if m is None:
+        return None
+    try:
+        noise = float(m["noise"]) if m["noise"] else 0.0
+    except ValueError:
+        return None
+    return {"system": m["system"], "method": m["method"], "experiment": m["experiment"], "seed": int(m["seed"]),
+            "noise": noise}
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """The child side of an isolated call (:mod:`bench.runner.isolation`).
 
 A call is a JSON file ``{"target": "module:function", "payload": {...},
-"threads": n}``. The child pins its threads before numpy or torch is
+"threads": n}``. The child first asks to be killed when its parent ends
+(:func:`bench.core.processes.die_with_parent`), then pins its threads before numpy or torch is
 imported (in the fork server, before the server imports them), imports the
 target by name, calls ``target(payload, on_phase)``, and writes the JSON it
 returns to the result file, atomically. ``on_phase(name)`` appends the
@@ -22,10 +23,12 @@ import os
 import sys
 
 from bench.core.fileio import write_json
+from bench.core.processes import die_with_parent
 from bench.runner.threads import pin_threads, pin_torch
 
 
 def run(call_file: str, result_file: str, phase_file: str) -> None:
+    die_with_parent()
     with open(call_file) as f:
         call = json.load(f)
     threads = int(call.get("threads", 1))

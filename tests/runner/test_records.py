@@ -61,12 +61,23 @@ def test_a_bad_field_is_named_with_its_file(tmp_path, change, message):
 
 
 @pytest.mark.parametrize("content, message", [("x", "not a JSON file"), ("{}", "not a record (missing field"),
-                                              ("[1]", "not a record (a JSON list")])
-def test_the_table_command_refuses_a_broken_record_in_one_line(tmp_path, capsys, content, message):
+                                              ("[1]", "not a record (a JSON list"),
+                                              ('{"status": "ok"}', "not a record (missing field")])
+def test_a_broken_record_is_moved_aside_and_counted_as_missing_by_the_table(tmp_path, capsys, content, message):
     good = ok_record()
     write_record(record_path(tmp_path, good.run_id), good)
-    (tmp_path / "records" / "broken.json").write_text(content)
-    assert main(["table", str(tmp_path)]) == 2
+    broken_id = "double_pendulum__mlp__indirect__seed4__noise0.1"
+    (tmp_path / "records" / f"{broken_id}.json").write_text(content)
+    assert main(["table", str(tmp_path)]) == 0
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and err.count("\n") == 1 and "broken.json" in err and message in err
-    assert not (tmp_path / "tables.md").exists()
+    assert err.startswith("warning: ") and err.count("\n") == 1 and f"{broken_id}.json" in err and message in err
+    assert not (tmp_path / "records" / f"{broken_id}.json").exists()
+    (moved,) = (tmp_path / "records" / "corrupt").glob(f"{broken_id}.*.json")
+    assert moved.read_text() == content
+    table = (tmp_path / "tables.md").read_text()
+    assert "| Runs | | 1/2 ok (1 missing) |" in table  # the broken run is missing, never ok
+    # once the run is redone, it is no longer missing
+    write_record(record_path(tmp_path, broken_id), Record.new(SPEC.__class__(**{**SPEC.to_dict(), "seed": 4,
+                                                                               "plugins": ()}), "ok", train_mse=0.4))
+    assert main(["table", str(tmp_path)]) == 0
+    assert "| Runs | | 2/2 ok |" in (tmp_path / "tables.md").read_text()

@@ -8,9 +8,11 @@ import pandas as pd
 import pytest
 
 from bench.core.data import DataError
+from bench.core.errors import ConfigError
 from bench.experiments.dfki_filter import lab_coefficients, lab_design
 from systems import get_system
-from systems.dfki_double_pendulum import DEFAULT_FILTER, RAW_COLUMNS, preprocess, read_raw
+from bench.core.recordings import DEFAULT_FILTER, FilterSpec, preprocess
+from systems.dfki_double_pendulum import LAYOUTS, RAW_COLUMNS, read_raw
 
 
 def synthetic_recording(rng, seconds=6.0, quantum=0.011):
@@ -33,7 +35,7 @@ def synthetic_recording(rng, seconds=6.0, quantum=0.011):
 
 def test_preprocess_recovers_accelerations_without_delay():
     frame, amp, w = synthetic_recording(np.random.default_rng(0))
-    s = preprocess(frame)
+    s = preprocess(LAYOUTS[0].take(frame))
     t = frame["time"].iloc[0] + DEFAULT_FILTER.trim_s + np.arange(len(s["q"])) * DEFAULT_FILTER.dt * DEFAULT_FILTER.decimate
     qdd_true = -amp * w**2 * np.sin(w * t[:, None])
     q_true = amp * np.sin(w * t[:, None])
@@ -44,8 +46,8 @@ def test_preprocess_recovers_accelerations_without_delay():
 
 
 def test_preprocess_with_a_too_high_cutoff_is_refused():
-    with pytest.raises(ValueError, match="cutoff_hz"):
-        type(DEFAULT_FILTER)(cutoff_hz=300.0)
+    with pytest.raises(ConfigError, match="cutoff_hz"):
+        FilterSpec(cutoff_hz=300.0)
 
 
 @pytest.mark.parametrize(

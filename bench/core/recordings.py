@@ -1,0 +1,166 @@
+"""Measured recordings: from a robot's log to samples in the suite's format.
+
+A log is a CSV file (optionally compressed) with a time column, in seconds,
+and per joint a position, a velocity and a torque column; a
+:class:`ColumnMap` names them (``time=t,q_1=pos1,qd_1=vel1,tau_1=eff1,...``).
+Robots rarely log accelerations, and their clocks and encoders are not
+clean, so :func:`preprocess` turns a recording into samples in four steps:
+
+1. linear interpolation of q, qd and tau onto a uniform grid of ``dt``;
+2. a zero-phase Butterworth low-pass (``order``, run forwards and backwards,
+   cut-off ``cutoff_hz``) applied alike to q, qd and tau, so that no signal
+   is delayed against another and both sides of ``tau = g(L)`` see one filter;
+3. ``qdd`` as the central difference of the filtered velocity;
+4. ``trim_s`` cut from both ends (the filter's start-up), then every
+   ``decimate``-th sample kept.
+
+The defaults (:data:`DEFAULT_FILTER`) are those measured for the DFKI
+double pendulum (``python -m bench dfki-filter``); a robot of its own wants
+its own cut-off, chosen the same way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bench.core.data import DataError, numeric_column, read_frame
+from bench.core.errors import ConfigError
+
+#: the fewest rows a recording may have
+MIN_ROWS = 16
+
+
+@dataclass(frozen=True)
+class FilterSpec:
+    """How a recording becomes samples; see the module docstring."""
+
+    dt: float = 0.002
+    cutoff_hz: float = 6.0
+    order: int = 4
+    trim_s: float = 0.25
+    decimate: int = 5
+
+    def __post_init__(self):
+        if not self.dt > 0:
+            raise ConfigError(f"dt must be positive, got {self.dt}")
+        nyquist = 0.5 / self.dt
+        if not 0 < self.cutoff_hz < nyquist:
+            raise ConfigError(f"cutoff_hz must lie in (0, {nyquist:g}) for dt = {self.dt:g}, got {self.cutoff_hz}")
+        if self.order < 1 or self.decimate < 1 or self.trim_s < 0:
+            raise ConfigError("order and decimate must be >= 1 and trim_s >= 0")
+
+    def describe(self) -> str:
+        return (f"resampled to {self.dt * 1000:g} ms, zero-phase Butterworth low-pass of order {self.order} at "
+                f"{self.cutoff_hz:g} Hz on q, qd and tau, qdd by central differences of qd, {self.trim_s:g} s trimmed "
+                f"from each end, every {self.decimate}th sample kept")
+
+
+DEFAULT_FILTER = FilterSpec()
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One recording: ``time`` of shape ``(n,)``; ``q``, ``qd``, ``tau`` of shape ``(n, dof)``."""
+
+    time: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    tau: np.ndarray
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """Which columns of a log hold time and each joint's q, qd and tau."""
+
+    time: str
+    q: tuple[str, ...]
+    qd: tuple[str, ...]
+    tau: tuple[str, ...]
+
+    @classmethod
+    def parse(cls, text: str, source: str = "--columns") -> "ColumnMap":
+        """``"time=t,q_1=pos1,qd_1=vel1,tau_1=eff1,..."``: every joint from 1 to
+        n needs q, qd and tau; a clear :class:`ConfigError` otherwise."""
+        roles: dict[str, str] = {}
+        for item in (part.strip() for part in text.split(",") if part.strip()):
+            role, sep, column = item.partition("=")
+            role, column = role.strip(), column.strip()
+            if not sep or not column:
+                raise ConfigError(f"{source}: expected ROLE=COLUMN, got {item!r}")
+            if role in roles:
+                raise ConfigError(f"{source}: {role} is given twice")
+            roles[role] = column
+        if "time" not in roles:
+            raise ConfigError(f"{source}: name the time column (time=COLUMN)")
+        joints = sorted({int(r.rsplit("_", 1)[1]) for r in roles if r != "time" and r.rsplit("_", 1)[-1].isdigit()})
+        unknown = [r for r in roles if r != "time" and not (r.rsplit("_", 1)[0] in ("q", "qd", "tau") and r.rsplit("_", 1)[-1].isdigit())]
+        if unknown:
+            raise ConfigError(f"{source}: unknown role(s) {', '.join(unknown)}; use time, q_i, qd_i and tau_i")
+        dof = max(joints, default=0)
+        if dof == 0:
+            raise ConfigError(f"{source}: name the columns of q_1, qd_1 and tau_1 at least")
+        missing = [f"{k}_{i}" for i in range(1, dof + 1) for k in ("q", "qd", "tau") if f"{k}_{i}" not in roles]
+        if missing:
+            raise ConfigError(f"{source}: missing {', '.join(missing)} (every joint from 1 to {dof} needs q, qd and tau)")
+        return cls(roles["time"], *(tuple(roles[f"{k}_{i}"] for i in range(1, dof + 1)) for k in ("q", "qd", "tau")))
+
+    @property
+    def dof(self) -> int:
+        return len(self.q)
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        return (self.time, *self.q, *self.qd, *self.tau)
+
+    def take(self, frame, path: Path | str = "recording") -> Recording:
+        """The recording in ``frame`` (a DataFrame), checked: the columns
+        present, numeric and finite, and time strictly increasing."""
+        missing = [c for c in self.columns if c not in frame.columns]
+        if missing:
+            raise DataError(f"{path}: missing column(s) {', '.join(missing)}")
+        if len(frame) < MIN_ROWS:
+            raise DataError(f"{path}: {len(frame)} rows are too few for a trajectory (at least {MIN_ROWS})")
+        time = numeric_column(frame, self.time, path)
+        steps = np.diff(time)
+        if np.any(steps <= 0):
+            row = int(np.flatnonzero(steps <= 0)[0]) + 2
+            raise DataError(f"{path}: column {self.time} does not increase at data row {row}")
+        q, qd, tau = (np.stack([numeric_column(frame, c, path) for c in cols], axis=1) for cols in (self.q, self.qd, self.tau))
+        return Recording(time, q, qd, tau)
+
+
+def read_recording(path: str | Path, columns: ColumnMap) -> Recording:
+    """A log file's recording, checked (:meth:`ColumnMap.take`); :class:`DataError` naming the file otherwise."""
+    path = Path(path)
+    return columns.take(read_frame(path), path)
+
+
+def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> dict[str, np.ndarray]:
+    """Samples ``q, qd, qdd, tau`` (each ``(n, dof)``) of one recording; see
+    the module docstring for the steps. ``filter_torque=False`` keeps the
+    measured torque unfiltered (it is still resampled), for judging a filter."""
+    from scipy.signal import butter, sosfiltfilt  # 0.3 s to import: only conversions need it
+
+    t = recording.time
+    grid = np.arange(t[0], t[-1], spec.dt)
+    trim = int(round(spec.trim_s / spec.dt))
+    sos = butter(spec.order, spec.cutoff_hz, fs=1.0 / spec.dt, output="sos")
+    padding = 3 * (2 * len(sos) + 1)  # what sosfiltfilt extends each end by
+    if len(grid) <= max(2 * trim + 2, padding):
+        raise DataError(f"a recording of {t[-1] - t[0]:.3g} s is too short for the filter "
+                        f"(twice the trim of {spec.trim_s:g} s, and at least {padding} steps of {spec.dt:g} s)")
+
+    def resampled(values: np.ndarray) -> np.ndarray:
+        return np.stack([np.interp(grid, t, values[:, i]) for i in range(values.shape[1])], axis=1)
+
+    q = sosfiltfilt(sos, resampled(recording.q), axis=0)
+    qd = sosfiltfilt(sos, resampled(recording.qd), axis=0)
+    tau = resampled(recording.tau)
+    if filter_torque:
+        tau = sosfiltfilt(sos, tau, axis=0)
+    qdd = np.gradient(qd, spec.dt, axis=0)
+    keep = slice(trim, len(grid) - trim, spec.decimate)
+    return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep]}
