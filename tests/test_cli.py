@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bench.cli import build_parser, main
@@ -139,3 +143,118 @@ def test_noise_levels_are_a_dimension_of_the_matrix(tmp_path):
     assert names == ["double_pendulum__sysid__indirect__seed0.json", "double_pendulum__sysid__indirect__seed0__noise0.1.json"]
     table = (out / "tables.md").read_text()
     assert "## double_pendulum, indirect experiment (MSE of τ), training targets with 10 % noise (test targets clean)" in table
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["data", "--system", "double_pendulum", "--n", "10", "--seed", "-1", "--out", "d.csv"], "a seed is a whole number >= 0"),
+        (["fit", "--system", "double_pendulum", "--method", "mlp", "--experiment", "direct", "--seed", "-3"],
+         "a seed is a whole number >= 0"),
+        (["run", "--methods", "mlp", "--n-seeds", "20", "--out", "x"], "at most 10 (the tables' fixed seeds)"),
+        (["run", "--methods", "mlp", "--seeds", "3-1", "--out", "x"], "the seed range 3-1 is empty"),
+        (["run", "--methods", "mlp", "--seeds", "1,1", "--out", "x"], "a seed is given twice"),
+        (["run", "--methods", "mlp", "--set", "batch_size=0", "--out", "x"], "batch_size must be at least 1, got 0"),
+        (["run", "--methods", "mlp", "--set", "max_steps=-5", "--out", "x"], "max_steps must be at least 1, got -5"),
+        (["fit", "--system", "double_pendulum", "--method", "mlp", "--experiment", "direct", "--set", "eval_samples=0"],
+         "eval_samples must be at least 1, got 0"),
+        (["fit", "--system", "double_pendulum", "--method", "mlp", "--experiment", "direct", "--train", "."],
+         "is a folder, not a file"),
+        (["convert", "--columns", "time=t,q_1=p", "raw.csv", "--out", "o.csv"], "missing qd_1, tau_1"),
+    ],
+)
+def test_what_users_type_wrong_is_refused_in_one_line(tmp_path, monkeypatch, capsys, args, message):
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = main(args)
+    except SystemExit as exc:  # argparse's own exit, in one line (see _Parser)
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2
+    assert message in err and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing written
+
+
+def test_an_output_path_under_a_file_is_refused_before_any_work(tmp_path):
+    (tmp_path / "f").write_text("x")
+    t0 = time.monotonic()
+    r = cli("fit", "--system", "double_pendulum", "--method", "sysid", "--experiment", "indirect", "--budget", "60",
+            "--json", str(tmp_path / "f" / "run.json"))
+    assert r.returncode == 2 and "is a file, not a folder" in r.stderr and r.stderr.count("\n") == 1
+    assert time.monotonic() - t0 < 30  # refused at once, not after a 60 s fit
+
+
+def test_fit_pins_its_threads_and_accepts_booleans_as_typed(tmp_path):
+    out = tmp_path / "run.json"
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    r = subprocess.run([sys.executable, "-m", "bench", "fit", "--system", "double_pendulum", "--method", "syrenets",
+                        "--experiment", "indirect", "--smoke", "--set", "refine=FALSE", "--n-train", "64", "--n-test",
+                        "32", "--budget", "5", "--json", str(out)], capture_output=True, text=True, cwd=ROOT, env=env)
+    assert r.returncode == 0, r.stderr
+    record = json.loads(out.read_text())
+    assert record["hyperparameters"]["refine"] is False
+    threads = record["provenance"]["threads"]
+    assert threads["OMP_NUM_THREADS"] == "1" and threads["torch_intra_op"] == 1 and threads["torch_inter_op"] == 1
+
+
+def test_table_headers_state_the_sampling_range_noise_and_hyperparameters_set(tmp_path):
+    out = tmp_path / "m"
+    r = cli("run", "--methods", "mlp", "--experiments", "direct", "--seeds", "0", "--budget", "2", "--smoke",
+            "--set", "hidden=8", "--n-train", "64", "--n-test", "32", "--no-rollout", "--noise", "0.01",
+            "--domain-half-width", str(math.pi), "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    table = (out / "tables.md").read_text()
+    assert "Data: 64 training and 32 test samples, q, q̇, q̈ ~ U(−π, π); noise: 1 % of each target column's std" in table
+    assert "Hyperparameters set beside each method's own: mlp: hidden=8." in table
+    assert "configuration: smoke." in table
+
+
+def dfki_raw(tmp_path, layout):
+    import pandas as pd
+
+    from systems.dfki_double_pendulum import LAYOUTS, trajectory_path
+
+    frame = pd.read_csv(trajectory_path("03"))
+    frame = frame.rename(columns=dict(zip(LAYOUTS[0].columns, layout)))
+    path = tmp_path / f"raw_{len(list(tmp_path.iterdir()))}.csv"
+    frame.to_csv(path, index=False)
+    return path
+
+
+def test_convert_reads_both_dfki_layouts_and_any_log_by_its_columns(tmp_path):
+    from bench.core.data import read_csv
+    from systems.dfki_double_pendulum import LAYOUTS
+
+    outputs = []
+    for args in (["--format", "dfki", str(dfki_raw(tmp_path, LAYOUTS[0].columns))],
+                 ["--format", "dfki", str(dfki_raw(tmp_path, LAYOUTS[1].columns))],
+                 ["--columns", "time=t,q_1=a,q_2=b,qd_1=c,qd_2=d,tau_1=e,tau_2=f",
+                  str(dfki_raw(tmp_path, ("t", "a", "b", "c", "d", "e", "f")))]):
+        out = tmp_path / f"out{len(outputs)}.csv"
+        r = cli("convert", *args, "--out", str(out))
+        assert r.returncode == 0, r.stderr
+        assert "zero-phase Butterworth low-pass of order 4 at 6 Hz" in r.stdout  # the converter states its filter
+        outputs.append(read_csv(out, dof=2))
+    for other in outputs[1:]:
+        np.testing.assert_array_equal(other.qdd, outputs[0].qdd)
+
+
+def test_convert_and_residual_refuse_values_whose_square_overflows(tmp_path):
+    from systems.dfki_double_pendulum import LAYOUTS
+
+    raw = dfki_raw(tmp_path, LAYOUTS[0].columns)
+    raw.write_text(_with_huge_cell(raw.read_text()))
+    r = cli("convert", "--format", "dfki", str(raw), "--out", str(tmp_path / "o.csv"))
+    assert r.returncode == 2 and "too large to compute with" in r.stderr and r.stderr.count("\n") == 1
+    assert not (tmp_path / "o.csv").exists()
+    train = tmp_path / "train.csv"
+    train.write_text("q_1,q_2,qd_1,qd_2,qdd_1,qdd_2,tau_1,tau_2\n" + "0.1,0.2,0.3,0.4,0.5,0.6,1e200,0.8\n" * 20)
+    r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--train", str(train), "--budget", "5")
+    assert r.returncode == 2 and "too large to compute with" in r.stderr and r.stderr.count("\n") == 1
+
+
+def _with_huge_cell(text: str) -> str:
+    header, first, rest = text.split("\n", 2)
+    cells = first.split(",")
+    cells[1] = "1e308"
+    return "\n".join([header, ",".join(cells), rest])

@@ -47,7 +47,15 @@ def run(call_file: str, result_file: str, phase_file: str) -> None:
 def forked_main(call_file: str, result_file: str, phase_file: str, log_file: str, cwd: str) -> None:
     """The target of a process forked from the fork server: its own session
     (so the parent can kill its whole process group), the parent's working
-    directory (the server keeps the one it started in), output to ``log_file``."""
+    directory (the server keeps the one it started in), output to ``log_file``.
+
+    multiprocessing hands each forked process a copy of the pipe that keeps
+    the fork server alive, so that the server outlives the process that
+    started it while any forked process runs. Closed here: the server then
+    ends with the process that started it, and this process with the server
+    (:func:`bench.core.processes.die_with_parent`), even after ``kill -9``.
+    """
+    _release_fork_server()
     os.setsid()
     os.chdir(cwd)
     fd = os.open(log_file, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
@@ -57,6 +65,19 @@ def forked_main(call_file: str, result_file: str, phase_file: str, log_file: str
     os.dup2(fd, 2)
     os.close(fd)
     run(call_file, result_file, phase_file)
+
+
+def _release_fork_server() -> None:
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    fd = getattr(server, "_forkserver_alive_fd", None)
+    if fd is not None:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+        server._forkserver_alive_fd = None
 
 
 def main(argv: list[str]) -> int:

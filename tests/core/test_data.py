@@ -75,6 +75,11 @@ GOOD = "q_1,q_2,qd_1,qd_2,qdd_1,qdd_2,tau_1,tau_2\n" + "0.1,0.2,0.3,0.4,0.5,0.6,
         ("a,b\n1,2\n", "no q_1 column"),
         ("q_1,q_2,q_3,qd_1,qd_2,qd_3,qdd_1,qdd_2,qdd_3,tau_1,tau_2,tau_3\n" + "0,0,0,0,0,0,0,0,0,0,0,0\n",
          "3 degrees of freedom .* but system 'double_pendulum' has 2"),
+        # values whose square overflows would overflow a least-squares fit
+        (GOOD.replace("0.7,", "1e308,", 1), "column tau_1 has a value too large to compute with \\(1e\\+308"),
+        (GOOD.replace("0.7,", "-2e154,", 1), "column tau_1 has a value too large"),
+        (GOOD.replace("tau_2", "tau_1"), "column name\\(s\\) 'tau_1' appear more than once"),
+        (GOOD.replace("q_1,", "q_2,", 1), "column name\\(s\\) 'q_2' appear more than once"),
     ],
 )
 def test_bad_csv_gets_one_line_error_naming_file_and_problem(tmp_path, text, message):
@@ -86,9 +91,18 @@ def test_bad_csv_gets_one_line_error_naming_file_and_problem(tmp_path, text, mes
     assert "\n" not in str(info.value)
 
 
-def test_missing_file(tmp_path):
+def test_missing_file_and_a_folder_given_as_a_file(tmp_path):
     with pytest.raises(DataError, match="no such file"):
         read_csv(tmp_path / "nope.csv")
+    with pytest.raises(DataError, match="is a folder, not a file"):
+        read_csv(tmp_path)
+
+
+def test_values_up_to_the_overflow_bound_load(tmp_path):
+    path = tmp_path / "big.csv"
+    path.write_text(GOOD.replace("0.7,", "1e150,", 1))
+    data = read_csv(path, dof=2)
+    assert data.tau[0, 0] == 1e150 and np.isfinite(data.tau**2).all()
 
 
 def test_write_is_atomic(small_data, tmp_path, monkeypatch):

@@ -104,3 +104,44 @@ def test_sysid_needs_a_system(small_data):
     anonymous = Dataset(train.q, train.qd, train.qdd, train.tau, train.L, system=None, source="anon.csv")
     with pytest.raises(DataError, match="anon.csv: sysid needs to know the data's system"):
         METHODS["sysid"](max_steps=2).fit(anonymous, "indirect", 0, 5.0)
+
+
+@pytest.mark.parametrize("typed, value", [("false", False), ("FALSE", False), ("No", False), ("0", False), (0, False),
+                                          ("true", True), ("Yes", True), ("1", True), (1, True), (True, True)])
+def test_booleans_are_accepted_as_users_type_them(typed, value):
+    assert METHODS["syrenets"](refine=typed).config.refine is value
+
+
+@pytest.mark.parametrize("typed", ["maybe", 2, 0.5, None])
+def test_other_booleans_are_refused(typed):
+    with pytest.raises(ConfigError, match="refine must be true or false"):
+        METHODS["syrenets"](refine=typed)
+
+
+@pytest.mark.parametrize(
+    "method, given, message",
+    [
+        ("mlp", {"batch_size": 0}, "batch_size must be at least 1, got 0"),
+        ("mlp", {"hidden": 0}, "hidden must be at least 1, got 0"),
+        ("mlp", {"max_steps": -5}, "max_steps must be at least 1, got -5"),
+        ("mlp", {"eval_samples": 0}, "eval_samples must be at least 1, got 0"),
+        ("mlp", {"lr": 0.0}, "lr must be greater than 0, got 0.0"),
+        ("mlp", {"lr": float("inf")}, "lr must be a finite number"),
+        ("mlp", {"lr_factor": 1.0}, r"lr_factor must be in \(0, 1\), got 1.0"),
+        ("syrenets", {"post_fraction": 1.0}, r"post_fraction must be in \[0, 1\), got 1.0"),
+        ("syrenets", {"betas": (0.9, 1.0)}, r"betas must be in \[0, 1\) \(each item\)"),
+        ("mggp", {"p_erc": 1.5}, r"p_erc must be in \[0, 1\], got 1.5"),
+        ("sparse", {"threshold": -1e-3}, "threshold must be at least 0"),
+    ],
+)
+def test_hyperparameters_outside_their_declared_range_are_refused_at_construction(method, given, message):
+    with pytest.raises(ConfigError, match=message):
+        METHODS[method](**given)
+
+
+def test_every_methods_defaults_and_smoke_configuration_lie_in_their_ranges():
+    for name in METHODS:
+        cls = METHODS[name]
+        cls()  # the defaults are checked too
+        cls(**cls.smoke_config())
+    assert METHODS["sparse"](threshold=None).config.threshold is None  # an optional range admits None

@@ -85,3 +85,11 @@ class ToyUnavailable(_Constant):
 @METHODS.add("toy_direct_only", "toy")
 class ToyDirectOnly(_Constant):
     experiments = ("direct",)
+
+
+@METHODS.add("toy_slow_judge", "toy")
+class ToySlowJudge(_Constant):
+    """Fits at once, then hangs in the evaluation after the fit."""
+
+    def readable_expression(self):
+        time.sleep(3600)

@@ -108,6 +108,7 @@ def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
     assert "round 0: fitting sparse" in r.stdout and "round 1: adding" in r.stdout
     out = json.loads((tmp_path / "out.json").read_text())
     assert {"system", "method", "mse_before", "mse_after", "effects", "rounds", "total_budget_s", "provenance"} <= set(out)
+    assert out["provenance"]["threads"]["torch_intra_op"] == 1  # the loop's process pins its threads like any run
     assert set(out["mse_before"]) == {"train", "test"}
     assert sorted((e["name"], e["joint"]) for e in out["effects"]) == [
         ("coulomb_friction", 1), ("coulomb_friction", 2), ("viscous_friction", 1), ("viscous_friction", 2)]

@@ -143,3 +143,70 @@ def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatc
     assert harness.fork_server() is not None
     fresh = harness.run_isolated(spec, "fresh", fresh=True)
     assert fresh.status == "ok" and fresh.train_mse == r.train_mse
+
+
+def test_a_hang_after_the_fit_is_a_timeout_at_the_evaluation_limit(tmp_path, monkeypatch):
+    monkeypatch.setattr(harness, "EVALUATION_MIN_S", 2.0)
+    t0 = time.monotonic()
+    (r,) = harness.run_matrix(specs(["toy_slow_judge"]), tmp_path, workers=1, report=harness.quiet)
+    assert r.status == "timeout" and "evaluation after the fit still running after 2 s" in r.error
+    assert time.monotonic() - t0 < 30
+    assert harness.evaluation_limit(60.0) == 60.0 and harness.evaluation_limit(1.0) == 2.0
+
+
+def test_records_made_outside_a_run_state_the_runs_threads(tmp_path):
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(2)  # this process's setting must not reach the records it writes for runs
+    try:
+        records = harness.run_matrix(specs(["toy_sleeper", "toy_unavailable"], budget=0.5), tmp_path, workers=2,
+                                     report=harness.quiet)
+    finally:
+        torch.set_num_threads(threads)
+    assert [r.status for r in records] == ["timeout", "unavailable"]
+    for r in records:
+        assert r.provenance["threads"]["torch_intra_op"] == 1 and r.provenance["threads"]["OMP_NUM_THREADS"] == "1"
+
+
+@pytest.mark.parametrize("content", ["x", "{}", '{"schema": "syrenets-bench/record/1", "status": "ok"}'])
+def test_a_corrupt_record_is_moved_aside_and_its_run_redone(tmp_path, content):
+    todo = specs(["toy_constant"], seeds=(0, 1))
+    harness.run_matrix(todo, tmp_path, workers=1, report=harness.quiet)
+    broken = tmp_path / "records" / f"{todo[1].run_id}.json"
+    broken.write_text(content)
+    lines = []
+    records = harness.run_matrix(todo, tmp_path, workers=1, report=lines.append)
+    assert [r.status for r in records] == ["ok", "ok"]
+    (warning,) = [line for line in lines if line.startswith("warning: ")]
+    assert str(broken) in warning and "the run is redone" in warning
+    assert any("1 run(s) already have records" in line for line in lines) and "1 run(s) to do" in "\n".join(lines)
+    (moved,) = (tmp_path / "records" / "corrupt").iterdir()
+    assert moved.read_text() == content and read_records(tmp_path)[1].status == "ok"
+
+
+def test_a_second_matrix_on_the_same_folder_is_refused_until_the_first_ends(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from bench.core.errors import UserError
+
+    out = tmp_path / "out"
+    first = subprocess.Popen(
+        [sys.executable, "-m", "bench", "run", "--methods", "toy_sleeper", "--plugin", PLUGIN, "--seeds", "0",
+         "--budget", "100", "--experiments", "indirect", "--n-train", "64", "--n-test", "32", "--no-rollout",
+         "--out", str(out)], cwd=Path(__file__).resolve().parents[2], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not any("fit" in p.read_text() for p in (out / "logs").glob("*.phase")) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        with pytest.raises(UserError, match=f"another matrix is writing here \\(process {first.pid}, started "):
+            harness.run_matrix(specs(["toy_constant"]), out, workers=1, report=harness.quiet)
+    finally:
+        os.kill(first.pid, signal.SIGKILL)
+        first.wait()
+    # the killed matrix's lock went with it
+    (r,) = harness.run_matrix(specs(["toy_constant"]), out, workers=1, report=harness.quiet)
+    assert r.status == "ok"
