@@ -31,6 +31,8 @@ from bench.core.errors import ConfigError
 
 #: the fewest rows a recording may have
 MIN_ROWS = 16
+#: the most samples a recording may span on the uniform grid (5.5 hours at 2 ms)
+MAX_GRID = 10_000_000
 
 
 @dataclass(frozen=True)
@@ -145,6 +147,10 @@ def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filte
     from scipy.signal import butter, sosfiltfilt  # 0.3 s to import: only conversions need it
 
     t = recording.time
+    span = float(t[-1] - t[0])
+    if span / spec.dt > MAX_GRID:
+        raise DataError(f"the recording spans {span:.6g} s: at a step of {spec.dt:g} s that is more than "
+                        f"{MAX_GRID:,} samples (is the time column in seconds?)")
     grid = np.arange(t[0], t[-1], spec.dt)
     trim = int(round(spec.trim_s / spec.dt))
     sos = butter(spec.order, spec.cutoff_hz, fs=1.0 / spec.dt, output="sos")

@@ -1,0 +1,173 @@
+"""Generated hostile input: CSV files, robot logs, record files and ``--set``
+values, each either accepted whole or refused in one line naming the file,
+with nothing written and no traceback."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from bench.cli import _assignment, main
+from bench.core.data import MAX_ABS_VALUE, DataError, read_csv
+from bench.core.errors import UserError
+from bench.runner.records import Record, RecordError, read_records, record_path, write_record
+from bench.runner.spec import RunSpec
+from methods import METHODS
+
+SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+REQUIRED = ["q_1", "q_2", "qd_1", "qd_2", "qdd_1", "qdd_2", "tau_1", "tau_2"]
+COLUMNS = REQUIRED + ["L", "time", "q_3", "tau", "", "q_1 "]
+CELLS = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.sampled_from(["1e308", "-1e308", "1e155", "5e-324", "2.2250738585072014e-308", "inf", "-inf", "nan", "NaN",
+                     "", " ", "x", "1,5", '"', "0x10", "1e", "--1", "٣"]),
+    st.integers(-10**30, 10**30).map(str),
+)
+
+
+@st.composite
+def csv_texts(draw):
+    # any header, or the suite's columns in any order with extras: most of the latter load
+    header = draw(st.one_of(st.lists(st.sampled_from(COLUMNS), max_size=10),
+                            st.tuples(st.permutations(REQUIRED), st.lists(st.sampled_from(COLUMNS), max_size=2))
+                            .map(lambda t: list(t[0]) + t[1])))
+    cells = st.one_of(CELLS, st.floats(-1e6, 1e6).map(repr)) if draw(st.booleans()) else st.floats(-1e6, 1e6).map(repr)
+    rows = draw(st.lists(st.lists(cells, min_size=len(header), max_size=len(header)), max_size=4))
+    text = "\n".join([",".join(header)] + [",".join(row) for row in rows])
+    return text + draw(st.sampled_from(["", "\n", "\n\n"]))
+
+
+def check_refusal(exc: Exception, path) -> None:
+    message = str(exc)
+    assert str(path) in message and "\n" not in message and "Traceback" not in message
+
+
+@SETTINGS
+@given(content=st.one_of(csv_texts().map(str.encode), st.binary(max_size=200)))
+def test_a_csv_file_loads_whole_or_is_refused_in_one_line(tmp_path, content):
+    path = tmp_path / "data.csv"
+    path.write_bytes(content)
+    try:
+        data = read_csv(path, dof=2)
+    except DataError as exc:
+        check_refusal(exc, path)
+        event("refused")
+        return
+    event("loaded")
+    for name in ("q", "qd", "qdd", "tau"):
+        values = getattr(data, name)
+        assert values.shape == (len(data), 2) and np.isfinite(values).all() and (np.abs(values) <= MAX_ABS_VALUE).all()
+    assert data.L is None or np.isfinite(data.L).all()
+
+
+@st.composite
+def log_texts(draw):
+    """A log of time, q_1, qd_1, tau_1 in any order with extras, a time column
+    that mostly increases, and values that are mostly sound."""
+    header = list(draw(st.permutations(["time", "q_1", "qd_1", "tau_1"]))) + draw(st.lists(st.sampled_from(COLUMNS), max_size=2))
+    n = draw(st.integers(0, 300))
+    rows = []
+    for i in range(n):
+        row = [repr(i * 0.002) if name == "time" else repr(math.sin(0.01 * i + k)) for k, name in enumerate(header)]
+        rows.append(row)
+    for _ in range(draw(st.integers(0, 3))):  # a few hostile cells
+        if rows:
+            rows[draw(st.integers(0, n - 1))][draw(st.integers(0, len(header) - 1))] = draw(CELLS)
+    return "\n".join([",".join(header)] + [",".join(r) for r in rows]) + "\n"
+
+
+@SETTINGS
+@given(content=log_texts())
+def test_a_robot_log_converts_or_is_refused_in_one_line_and_nothing_is_written(tmp_path, capsys, content):
+    raw, out = tmp_path / "log.csv", tmp_path / "out.csv"
+    raw.write_text(content)
+    out.unlink(missing_ok=True)
+    code = main(["convert", "--columns", "time=time,q_1=q_1,qd_1=qd_1,tau_1=tau_1", "--trim", "0.02", "--decimate", "1",
+                 str(raw), "--out", str(out)])
+    err = capsys.readouterr().err
+    if code == 0:
+        assert read_csv(out, dof=1) is not None
+        event("converted")
+    else:
+        assert code == 2 and err.startswith("error: ") and err.count("\n") == 1 and not out.exists()
+
+
+def valid_record() -> dict:
+    spec = RunSpec(system="double_pendulum", method="mlp", experiment="direct", seed=0, budget_s=1.0)
+    return Record.new(spec, "ok", train_mse=1.0, test_mse=2.0).to_json()
+
+
+JSON_VALUES = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=5),
+                        st.lists(st.integers(), max_size=2), st.dictionaries(st.text(max_size=3), st.integers(), max_size=2))
+
+
+@st.composite
+def record_texts(draw):
+    kind = draw(st.sampled_from(["mutated", "bytes", "json"]))
+    if kind == "bytes":
+        return draw(st.binary(max_size=100))
+    if kind == "json":
+        return json.dumps(draw(JSON_VALUES)).encode()
+    obj = valid_record()
+    for key in draw(st.lists(st.sampled_from(sorted(obj)), max_size=3, unique=True)):
+        if draw(st.booleans()):
+            del obj[key]
+        else:
+            obj[key] = draw(JSON_VALUES)
+    return json.dumps(obj, allow_nan=True).encode()
+
+
+@SETTINGS
+@given(content=record_texts())
+def test_a_record_file_is_read_whole_or_set_aside_in_one_line(tmp_path, content):
+    folder = tmp_path / "records"
+    folder.mkdir(exist_ok=True)
+    path = folder / "double_pendulum__mlp__direct__seed0.json"
+    path.write_bytes(content)
+    bad = []
+    records = read_records(tmp_path, on_bad=lambda p, e: bad.append((p, e)))
+    if records:
+        (r,) = records
+        assert r.status in ("ok", "failed", "timeout", "unavailable", "not_applicable")
+        if r.status == "ok":
+            assert math.isfinite(r.train_mse)
+        assert bad == []
+    else:
+        ((where, error),) = bad
+        assert where == path and isinstance(error, RecordError)
+        check_refusal(error, path)
+
+
+@SETTINGS
+@given(name=st.sampled_from(["hidden", "layers", "lr", "batch_size", "max_steps", "eval_samples", "betas", "dtype",
+                             "lr_factor", "hiden", "", "x y"]),
+       value=st.one_of(st.text(max_size=8), st.integers(-5, 5).map(str), st.floats().map(repr),
+                       st.sampled_from(["true", "No", "(0.9, 0.99)", "[1, 2]", "None", "'float32'", "1e400", "nan"])))
+def test_a_set_value_is_taken_or_refused_in_one_line(name, value):
+    try:
+        key, parsed = _assignment(f"{name}={value}")
+        model = METHODS["mlp"](**{key: parsed})
+    except UserError as exc:
+        assert "\n" not in str(exc)
+        return
+    assert getattr(model.config, key) is not None or key == "max_steps"
+
+
+def test_the_table_command_never_counts_a_broken_record_as_ok(tmp_path, capsys):
+    good = Record.from_json(valid_record())
+    write_record(record_path(tmp_path, good.run_id), good)
+    (tmp_path / "records" / "double_pendulum__mlp__direct__seed1.json").write_text('{"status": "ok", "train_mse": 1}')
+    assert main(["table", str(tmp_path)]) == 0
+    assert "| Runs | | 1/2 ok (1 missing) |" in (tmp_path / "tables.md").read_text()
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+@pytest.fixture(autouse=True)
+def _quiet_matplotlib(monkeypatch):
+    monkeypatch.setenv("MPLBACKEND", "Agg")
