@@ -167,6 +167,10 @@ def test_records_made_outside_a_run_state_the_runs_threads(tmp_path):
     assert [r.status for r in records] == ["timeout", "unavailable"]
     for r in records:
         assert r.provenance["threads"]["torch_intra_op"] == 1 and r.provenance["threads"]["OMP_NUM_THREADS"] == "1"
+    harness.run_matrix(specs(["toy_constant"]), tmp_path, workers=1, report=harness.quiet)
+    from bench.reporting.tables import write_tables
+
+    assert "; 1 thread(s) per run;" in write_tables(tmp_path, plots=False)
 
 
 @pytest.mark.parametrize("content", ["x", "{}", '{"schema": "syrenets-bench/record/1", "status": "ok"}'])
