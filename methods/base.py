@@ -346,7 +346,9 @@ class Method(FittedModel):
         return None
 
     @classmethod
-    def not_applicable_reason(cls, experiment: str) -> str | None:
+    def not_applicable_reason(cls, experiment: str, system: System | None = None) -> str | None:
+        """Why the method cannot run ``experiment`` (on ``system``, where one is
+        given); ``None`` when it can."""
         if experiment not in cls.experiments:
             return f"{cls.name} does not apply to the {experiment} experiment"
         return None
@@ -385,7 +387,7 @@ class Method(FittedModel):
                               f"got {experiment} data of {train.dof} DoF")
         self.warm_start = warm_start
         check_experiment(experiment)
-        reason = self.not_applicable_reason(experiment)
+        reason = self.not_applicable_reason(experiment, system if system is not None else self._resolve_system(train))
         if reason:
             raise ConfigError(reason)
         if len(train) == 0:

@@ -58,7 +58,7 @@ class Operon(ExpressionMethod):
         return None
 
     @classmethod
-    def not_applicable_reason(cls, experiment):
+    def not_applicable_reason(cls, experiment, system=None):
         return None if experiment == "direct" else NOT_APPLICABLE
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:

@@ -23,6 +23,14 @@ Fit: sequentially thresholded least squares, on ``g(library)`` against
 threshold chosen on held-out samples (:func:`bench.core.regression.fit_columns`).
 It is the "knows a good basis" reference: when the true Lagrangian lies in
 the library's span, it is recovered exactly.
+
+Size
+----
+The library grows as the fourth power of the coordinates (2052 terms at 7
+angles, 97 251 at 20). The design matrix is held in memory: at most
+:data:`MAX_DESIGN_BYTES`, so larger libraries are fitted on fewer samples
+(the record says how many), and a library whose smallest useful design (two
+rows per term) would exceed it is not applicable, with the reason.
 """
 
 from __future__ import annotations
@@ -41,12 +49,25 @@ from bench.core.terms import TermLibrary
 from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
 
 
+#: the most memory the design matrix may take
+MAX_DESIGN_BYTES = 256 * 2**20
+
+
 @dataclass(frozen=True)
 class SparseConfig(MethodConfig):
     """Attributes: ``samples`` used for the fit; ``threshold`` (None: validated)."""
 
     samples: Annotated[int, Range(1)] = 4096
     threshold: Annotated[float, Range(0)] | None = None
+
+
+def library_size(dof: int, kinds: tuple[str, ...]) -> int:
+    """The number of terms of :func:`library`, without building it."""
+    n_angle = sum(k == "angle" for k in kinds)
+    n_linear = dof - n_angle
+    positions = 1 + 2 * n_angle + n_angle * (n_angle - 1) + n_linear * (2 + 2 * n_angle)
+    velocities = 1 + dof + dof * (dof + 1) // 2
+    return positions * velocities
 
 
 def library(dof: int, kinds: tuple[str, ...]) -> TermLibrary:
@@ -70,16 +91,32 @@ def library(dof: int, kinds: tuple[str, ...]) -> TermLibrary:
 @METHODS.add("sparse", "symbolic", "library")
 class SparseLagrangian(ExpressionMethod):
     Config = SparseConfig
-    smoke = {"samples": 256, "max_steps": 1, "eval_samples": 128}
+    smoke = {"samples": 64, "max_steps": 1, "eval_samples": 128}
+
+    @classmethod
+    def not_applicable_reason(cls, experiment, system=None):
+        reason = super().not_applicable_reason(experiment, system)
+        if reason or system is None:
+            return reason
+        terms = library_size(system.dof, system.kinds)
+        smallest = 2 * terms * terms * 8
+        if smallest > MAX_DESIGN_BYTES:
+            return (f"the library has {terms:,} terms for {system.dof} coordinates; even its smallest least-squares "
+                    f"problem (two rows a term) needs {smallest / 2**20:,.0f} MB, above the "
+                    f"{MAX_DESIGN_BYTES // 2**20} MB this method allows")
+        return None
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         kinds = self.system.kinds if self.system is not None else ("angle",) * train.dof
         self.library = library(train.dof, kinds)
+        rows = 1 if experiment == "direct" else train.dof
+        fits = max(1, MAX_DESIGN_BYTES // (8 * len(self.library) * rows))  # samples whose design fits in memory
+        self.samples = min(len(train), self.config.samples, fits)
         rng = np.random.default_rng(self.seed)
-        sub = train.subset(np.sort(rng.choice(len(train), min(len(train), self.config.samples), replace=False)))
+        sub = train.subset(np.sort(rng.choice(len(train), self.samples, replace=False)))
         self.model = ExpressionModel(sympy.Integer(0), train.dof)
         while progress.step():
-            F = self.library.design(sub, experiment)
+            F = self.library.design(sub, experiment, deadline=progress.deadline)
             keep = regression.independent_columns(F)
             y = sub.target(experiment).ravel()
             coef = regression.fit_columns(F[:, keep], y, len(sub), self.config.threshold)
@@ -89,4 +126,5 @@ class SparseLagrangian(ExpressionMethod):
             progress.stop("solved")
 
     def record_details(self):
-        return {"library": len(self.library), "independent_terms": getattr(self, "kept_terms", None)}
+        return {"library": len(self.library), "independent_terms": getattr(self, "kept_terms", None),
+                "samples": getattr(self, "samples", None)}

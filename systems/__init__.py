@@ -14,6 +14,7 @@ from systems import (  # noqa: E402,F401  (registers)
     n_link_pendulum,
     single_pendulum,
     spring_pendulum,
+    urdf_arm,
 )
 
 __all__ = ["SYSTEMS", "Domain", "ParametricForm", "System", "get_system"]

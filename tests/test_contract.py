@@ -37,7 +37,7 @@ def datasets():
 @pytest.mark.parametrize("method_name", SUITE_METHODS)
 def test_method_contract(method_name, experiment, system_name, datasets):
     cls = METHODS[method_name]
-    reason = cls.not_applicable_reason(experiment) or (
+    reason = cls.not_applicable_reason(experiment, SYSTEMS[system_name]()) or (
         SYSTEMS[system_name].not_applicable if experiment not in SYSTEMS[system_name].experiments else None)
     if reason:
         pytest.skip(reason)

@@ -138,3 +138,52 @@ class ParametricModel(LagrangianFunction):
 
     def parametric(self) -> "ParametricModel":
         return self
+
+
+class LinearParametricModel(FittedModel):
+    """A :class:`~bench.core.system.LinearForm` at fitted values of some of its
+    columns (its base parameters): ``tau = Y[:, :, columns] @ coef`` and
+    ``L = Y_L[:, columns] @ coef + offset``.
+
+    ``names`` say what each coefficient is (a base parameter is a parameter
+    plus the combination of those that act only together with it).
+    """
+
+    def __init__(self, form, columns, coef, names: Sequence[str] | None = None, offset: float = 0.0):
+        self.form, self.columns = form, np.asarray(columns, dtype=int)
+        self.coef, self.offset = np.asarray(coef, dtype=np.float64), float(offset)
+        self.names = tuple(names) if names is not None else tuple(form.names[i] for i in self.columns)
+
+    def torque_columns(self, data: Dataset) -> np.ndarray:
+        """The model's columns in torque space, flattened sample-major: ``(n * dof, k)``."""
+        Y = self.form.torque_regressor(data.q, data.qd, data.qdd)[:, :, self.columns]
+        return Y.reshape(-1, len(self.columns))
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        return (self.torque_columns(data) @ self.coef).reshape(len(data), data.dof)
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        return self.form.lagrangian_regressor(data.q, data.qd)[:, self.columns] @ self.coef + self.offset
+
+    def with_coefficients(self, coef) -> "LinearParametricModel":
+        return LinearParametricModel(self.form, self.columns, coef, self.names, self.offset)
+
+    def parameters(self) -> dict[str, float]:
+        """The fitted values, by name."""
+        return dict(zip(self.names, self.coef.tolist()))
+
+
+def mass_and_bias(model: FittedModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``M`` of shape ``(n, dof, dof)`` and ``c`` of shape ``(n, dof)`` with
+    ``tau = M qdd + c``, from one :meth:`~FittedModel.predict_torque` call
+    (every Lagrangian's torque is affine in ``qdd``)."""
+    n, dof = q.shape
+    qdd = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
+    batch = Dataset(
+        np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0),
+        np.tile(qdd, (n, 1)), np.zeros((n * (dof + 1), dof)),
+    )
+    tau = np.asarray(model.predict_torque(batch), dtype=np.float64).reshape(n, dof + 1, dof)
+    c = tau[:, 0]
+    M = np.transpose(tau[:, 1:] - c[:, None, :], (0, 2, 1))  # column j is tau(e_j) - c
+    return M, c

@@ -115,6 +115,33 @@ def fit_columns(F: np.ndarray, y: np.ndarray, n_samples: int, threshold: float |
     return thresholded_least_squares(F, y, threshold)
 
 
+def base_columns(F: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A basis of ``F``'s column space among its columns, by QR with column
+    pivoting (the standard way to find a rigid body's base parameters, Gautier 1990).
+
+    Returns ``(independent, dependent, beta)`` with
+    ``F[:, dependent] = F[:, independent] @ beta``: a model ``F @ pi`` is
+    then ``F[:, independent] @ pi_base`` with ``pi_base = pi[independent] +
+    beta @ pi[dependent]``, the identifiable combinations of ``pi``.
+    Columns are scaled to unit RMS first, so ``tol`` is relative; a column
+    whose RMS is round-off (below 1e-12 of the largest) counts as zero, since
+    scaled up it would be noise, independent of everything.
+    """
+    scale = np.sqrt(np.einsum("ij,ij->j", F, F) / max(F.shape[0], 1))
+    live = scale > 1e-12 * max(scale.max(initial=0.0), 1e-300)
+    _, R, P = scipy.linalg.qr(F[:, live] / scale[live], mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    r = int(np.sum(d > tol * d[0])) if len(d) else 0
+    cols = np.flatnonzero(live)
+    independent, rest = cols[P[:r]], cols[P[r:]]
+    beta = scipy.linalg.solve_triangular(R[:r, :r], R[:r, r:]) if r else np.zeros((0, len(rest)))
+    beta = beta * scale[rest][None, :] / scale[independent][:, None]  # back to the unscaled columns
+    dead = np.flatnonzero(~live)  # columns of zeros depend on nothing
+    dependent = np.concatenate([rest, dead]).astype(int)
+    beta = np.hstack([beta, np.zeros((r, len(dead)))])
+    return independent.astype(int), dependent, beta
+
+
 def independent_columns(F: np.ndarray, tol: float = 1e-8) -> np.ndarray:
     """Indices of a maximal set of linearly independent columns, earliest first.
 

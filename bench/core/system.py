@@ -11,6 +11,16 @@ smallest example. The contract lives in the core, below ``methods/``,
 because methods read a system's declared parametric form and coordinate
 kinds.
 
+Systems given by an engine
+--------------------------
+A system whose dynamics come from a rigid-body engine (a robot arm loaded
+from its URDF through Pinocchio, ``systems/urdf_arm.py``) has no sympy
+Lagrangian: it sets :attr:`System.symbolic` to ``False``, gives its torques
+and ``L = T - V`` by overriding :meth:`System.torque` and
+:meth:`System.lagrangian`, and offers SysId a :class:`LinearForm`, the
+torque and energy regressors linear in its inertial parameters, instead of a
+:class:`ParametricForm`.
+
 Sign convention for non-conservative effects
 --------------------------------------------
 The data's torque is ``tau = g(L)(q, qd, qdd) + nonconservative_torque(q, qd, qdd)``:
@@ -26,7 +36,7 @@ import math
 from dataclasses import dataclass
 from functools import cached_property
 from types import SimpleNamespace
-from typing import ClassVar, Sequence
+from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 import sympy
@@ -112,6 +122,30 @@ class ParametricForm:
         return self.expr.subs(dict(zip(self.unknowns, map(sympy.Float, values))))
 
 
+@dataclass(frozen=True)
+class LinearForm:
+    """A model linear in its parameters ``pi``: ``tau = Y(q, qd, qdd) pi`` and
+    ``L = Y_L(q, qd) pi`` (the kinetic minus the potential energy regressor).
+
+    Attributes
+    ----------
+    names
+        The parameters, in the order of the regressors' columns.
+    torque_regressor
+        ``(q, qd, qdd) -> (n, dof, p)`` for arrays of shape ``(n, dof)``.
+    lagrangian_regressor
+        ``(q, qd) -> (n, p)``.
+    true_values
+        The parameters of the simulated system (``None`` where unknown).
+    """
+
+    names: tuple[str, ...]
+    dof: int
+    torque_regressor: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+    lagrangian_regressor: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    true_values: tuple[float, ...] | None = None
+
+
 class System(abc.ABC):
     """Base class of every system in the suite.
 
@@ -146,6 +180,9 @@ class System(abc.ABC):
     not_applicable: ClassVar[str] = ""
     #: a published figure to read the tables against (printed above them)
     reference: ClassVar[str] = ""
+    #: ``False`` for a system given by an engine: no sympy Lagrangian exists
+    #: (see the module docstring), so no expression can be judged exact
+    symbolic: ClassVar[bool] = True
 
     def __init__(self, params=None, domain: Domain | None = None):
         self.params = params if params is not None else self.Params()
@@ -218,8 +255,22 @@ class System(abc.ABC):
         extra = self.nonconservative_torque(q, qd, qdd)
         return (tau if extra is None else tau + extra), L
 
+    def forward_dynamics(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Unforced accelerations ``(n, dof)`` from an engine-backed system's own
+        forward dynamics; symbolic systems have none (the rollout derives the
+        motion from the torques)."""
+        raise NotImplementedError(f"{self.name} is symbolic: its motion follows from its torques")
+
+    def linear_form(self) -> LinearForm | None:
+        """The form SysId fits by least squares, for a system linear in its
+        parameters (an engine-backed arm); ``None`` for the others, which give
+        :meth:`parametric_form`."""
+        return None
+
     def parametric_form(self) -> ParametricForm:
         """The form SysId fits: the true expression with ``sysid_unknowns`` free."""
+        if not self.symbolic:
+            raise NotImplementedError(f"system {self.name!r} has no symbolic form; SysId uses its linear_form()")
         if not self.sysid_unknowns:
             raise NotImplementedError(f"system {self.name!r} declares no parametric form for SysId")
         q, qd = self.symbols

@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.models import FittedModel
+from bench.core.models import FittedModel, mass_and_bias
 
 HORIZON_S = 1.0
 N_INITIAL = 8
@@ -47,21 +47,6 @@ class NoDynamics(Exception):
     def __init__(self, status: str, message: str):
         super().__init__(message)
         self.status = status
-
-
-def mass_and_bias(model, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``M`` of shape ``(n, dof, dof)`` and ``c`` of shape ``(n, dof)`` with
-    ``tau = M qdd + c``, from one :meth:`predict_torque` call."""
-    n, dof = q.shape
-    qdd = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
-    batch = Dataset(
-        np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0),
-        np.tile(qdd, (n, 1)), np.zeros((n * (dof + 1), dof)),
-    )
-    tau = np.asarray(model.predict_torque(batch), dtype=np.float64).reshape(n, dof + 1, dof)
-    c = tau[:, 0]
-    M = np.transpose(tau[:, 1:] - c[:, None, :], (0, 2, 1))  # column j is tau(e_j) - c
-    return M, c
 
 
 def forward_dynamics(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
@@ -83,12 +68,14 @@ def forward_dynamics(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
 
 
 def rollout(model, q0: np.ndarray, qd0: np.ndarray, horizon: float = HORIZON_S, n_points: int = N_POINTS,
-            deadline: float | None = None) -> np.ndarray:
+            deadline: float | None = None, accelerations=None) -> np.ndarray:
     """``q`` at ``n_points`` times in ``[0, horizon]``: shape ``(n_points, n, dof)``.
 
     All initial states are integrated together as one system. Raises
     :class:`NoDynamics` if the dynamics stop existing, blow up, or take too
-    long (past ``deadline`` of ``time.perf_counter()``).
+    long (past ``deadline`` of ``time.perf_counter()``). ``accelerations(q,
+    qd)``, where given, replaces :func:`forward_dynamics` (an engine's own
+    forward dynamics for the true system).
     """
     from scipy.integrate import solve_ivp
 
@@ -103,7 +90,8 @@ def rollout(model, q0: np.ndarray, qd0: np.ndarray, horizon: float = HORIZON_S, 
         q, qd = y[: n * dof].reshape(n, dof), y[n * dof:].reshape(n, dof)
         if not np.all(np.isfinite(qd)) or np.max(np.abs(qd)) > BLOW_UP:
             raise NoDynamics("diverged", f"the motion blew up (|qd| > {BLOW_UP:g})")
-        return np.concatenate([qd.ravel(), forward_dynamics(model, q, qd).ravel()])
+        qdd = forward_dynamics(model, q, qd) if accelerations is None else accelerations(q, qd)
+        return np.concatenate([qd.ravel(), qdd.ravel()])
 
     times = np.linspace(0.0, horizon, n_points)
     sol = solve_ivp(rhs, (0.0, horizon), np.concatenate([q0.ravel(), qd0.ravel()]), method="RK45",
@@ -137,7 +125,8 @@ def rollout_error(model, system, test: Dataset, horizon: float = HORIZON_S, n_in
     q0, qd0 = test.q[:n_initial], test.qd[:n_initial]
     out = {"horizon_s": horizon, "n_initial": len(q0), "status": "ok", "q_rmse": None, "detail": None}
     start = time.perf_counter()
-    truth = rollout(TrueModel(system), q0, qd0, horizon)
+    engine = None if system.symbolic else system.forward_dynamics  # an engine's own forward dynamics
+    truth = rollout(TrueModel(system), q0, qd0, horizon, accelerations=engine)
     try:
         learned = rollout(model, q0, qd0, horizon, deadline=start + time_limit_s)
     except NoDynamics as exc:

@@ -23,7 +23,8 @@ MAX_EXPRESSION_CHARS = 20000
 def scores(model: FittedModel, experiment: str, train: Dataset, test: Dataset | None, system: System | None = None) -> dict:
     """``train_mse``, ``test_mse`` (``None`` without test data), ``expression``
     and ``exact`` (``None`` unless the model has an expression and the system
-    is simulated, so that its truth is known)."""
+    is simulated with a closed-form Lagrangian, so that its truth is known;
+    :func:`not_judged` says why not)."""
     expr = model.readable_expression()
     out = {
         "train_mse": mse(model.predict(train, experiment), train.target(experiment)),
@@ -31,9 +32,18 @@ def scores(model: FittedModel, experiment: str, train: Dataset, test: Dataset | 
         "expression": None if expr is None else clip(str(expr)),
         "exact": None,
     }
-    if expr is not None and system is not None and system.simulated:
+    if expr is not None and system is not None and not_judged(system) is None:
         out["exact"] = judge(expr, system.lagrangian_sympy, system.dof, experiment, domain=system.domain).exact
     return out
+
+
+def not_judged(system: System) -> str | None:
+    """Why no expression can be judged exact on ``system`` (``None``: it can be)."""
+    if not system.simulated:
+        return "the measured system's Lagrangian is not known"
+    if not system.symbolic:
+        return "the system has no closed-form Lagrangian (its dynamics come from an engine)"
+    return None
 
 
 def rollout_entry(model: FittedModel, system: System, test: Dataset) -> dict:

@@ -94,7 +94,8 @@ def _runs_cell(records: list[Record]) -> str:
 def _exact_cell(records: list[Record]) -> str:
     judged = [r for r in records if r.exact is not None]
     if not judged:
-        return "—"
+        reasons = {r.details.get("exact_not_judged") for r in records if r.details.get("exact_not_judged")}
+        return "not judged: no closed-form Lagrangian" if reasons else "—"
     return f"{sum(bool(r.exact) for r in judged)}/{len(records)} seeds exact"
 
 

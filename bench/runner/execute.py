@@ -19,7 +19,7 @@ import torch
 from bench.core.data import Dataset, add_noise, generate, read_csv
 from bench.core.errors import ConfigError
 from bench.core.system import System
-from bench.evaluation.scores import rollout_entry, scores
+from bench.evaluation.scores import not_judged, rollout_entry, scores
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record
 from bench.runner.spec import TEST_SEED_OFFSET, RunSpec
@@ -80,7 +80,7 @@ def preflight(spec: RunSpec) -> Record | None:
     reason = entry.unavailable_reason()
     if reason:
         return Record.new(spec, "unavailable", elsewhere=True, error=reason)
-    reason = entry.obj.not_applicable_reason(spec.experiment)
+    reason = entry.obj.not_applicable_reason(spec.experiment, make_system(spec))
     if reason:
         return Record.new(spec, "not_applicable", elsewhere=True, error=reason)
     system = SYSTEMS[spec.system]
@@ -142,6 +142,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
                 **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason")},
                 **method.record_details(),
                 "variants": variants,
+                **({"exact_not_judged": not_judged(system)} if not_judged(system) and system.simulated else {}),
             },
         )
         if system.simulated and test is not None and spec.rollout:

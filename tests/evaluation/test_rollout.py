@@ -10,7 +10,8 @@ from bench.core import symbolic
 from bench.runner import execute
 from bench.runner.spec import RunSpec, build_specs
 from bench.core.data import generate
-from bench.evaluation.rollout import TrueModel, forward_dynamics, mass_and_bias, rollout, rollout_error
+from bench.core.models import mass_and_bias
+from bench.evaluation.rollout import TrueModel, forward_dynamics, rollout, rollout_error
 from bench.core.models import ExpressionModel
 from systems import get_system
 
