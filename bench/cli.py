@@ -33,7 +33,7 @@ from bench.residual.loop import DEFAULT_TOTAL_FITS, ResidualJob, run_residual
 from bench.runner import matrix
 from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.isolation import CallFailed
-from bench.runner.plugins import import_plugins
+from bench.runner.plugins import import_plugins, system_plugins
 from bench.runner.records import Record
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, RunSpec, build_specs
 from methods import METHODS
@@ -151,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="run a matrix of systems x methods x experiments x seeds and write tables")
     r.add_argument("--systems", type=_csv_list, default=["double_pendulum"],
-                   help="comma-separated, or 'all' (default: double_pendulum)")
+                   help="comma-separated, or 'all'; urdf:PATH for any arm's URDF (default: double_pendulum)")
     r.add_argument("--methods", type=_csv_list, default=None, help="comma-separated (default: all registered)")
     r.add_argument("--experiments", type=_csv_list, default=["direct", "indirect"], help="direct,indirect (default: both)")
     seeds = r.add_mutually_exclusive_group()
@@ -310,6 +310,7 @@ def cmd_run(args) -> int:
     methods = args.methods or METHODS.names()
     if args.systems == ["all"]:
         args.systems = SYSTEMS.names()
+    args.systems, arms = system_plugins(args.systems)
     _check_names(args.systems, methods, args.experiments)
     seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
     specs = build_specs(
@@ -318,7 +319,7 @@ def cmd_run(args) -> int:
         hyperparameters=dict(args.overrides),
         n_train=args.n_train, n_test=args.n_test,
         domain_half_width=args.domain_half_width,
-        plugins=_plugin_paths(args.plugin),
+        plugins=_plugin_paths(args.plugin) + arms,
         threads=args.threads,
         rollout=not args.no_rollout,
     )
@@ -343,6 +344,7 @@ def cmd_table(args) -> int:
 
 def cmd_data(args) -> int:
     check_output(args.out)
+    (args.system,), _ = system_plugins([args.system])
     cls = SYSTEMS[args.system]
     system = cls()
     if not system.simulated:
@@ -367,6 +369,7 @@ def cmd_residual(args) -> int:
         if path is not None:
             check_output(path)
     import_plugins(args.plugin)
+    (args.system,), arms = system_plugins([args.system])
     _check_names([args.system], [args.method], [])
     system = SYSTEMS[args.system]()
     entry = METHODS.entry(args.method)
@@ -385,7 +388,7 @@ def cmd_residual(args) -> int:
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
         budget_s=args.budget, total_budget_s=args.total_budget, seed=args.seed, hyperparameters=dict(args.overrides),
         json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
-        plugins=_plugin_paths(args.plugin),
+        plugins=_plugin_paths(args.plugin) + arms,
     )
     result = run_residual(job)
     b, a = result.mse_before, result.mse_after
@@ -419,6 +422,7 @@ def cmd_fit(args) -> int:
     if args.json:
         check_output(args.json)
     import_plugins(args.plugin)
+    (args.system,), arms = system_plugins([args.system])
     _check_names([args.system], [args.method], [args.experiment])
     if args.test and not args.train:
         raise UsageError("--test needs --train (generated training data comes with generated test data)")
@@ -427,7 +431,7 @@ def cmd_fit(args) -> int:
         budget_s=args.budget, profile="smoke" if args.smoke else "default",
         hyperparameters=dict(args.overrides), n_train=args.n_train, n_test=args.n_test,
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
-        domain_half_width=args.domain_half_width, plugins=_plugin_paths(args.plugin),
+        domain_half_width=args.domain_half_width, plugins=_plugin_paths(args.plugin) + arms,
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now

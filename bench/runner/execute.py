@@ -18,6 +18,7 @@ import torch
 
 from bench.core.data import Dataset, add_noise, generate, read_csv
 from bench.core.errors import ConfigError
+from bench.core.timeouts import Timeout
 from bench.core.system import System
 from bench.evaluation.scores import not_judged, rollout_entry, scores
 from bench.runner.plugins import import_plugins
@@ -154,6 +155,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         if bad:
             return Record.new(spec, "failed", error=f"non-finite {' and '.join(bad)} (the model produced NaN or inf)", **fields)
         return Record.new(spec, "ok", **fields)
+    except Timeout as exc:  # the method's own work ran out of its budget and stopped itself
+        return Record.new(spec, "timeout", error=f"out of budget: {exc}")
     except Exception as exc:
         tb = traceback.format_exc(limit=-6)
         return Record.new(spec, "failed", error=f"{type(exc).__name__}: {exc}", details={"traceback": tb})

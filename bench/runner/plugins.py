@@ -1,5 +1,6 @@
 """Plugins: methods and systems registered outside the suite, imported by
-file path or module name before their names are resolved."""
+file path or module name before their names are resolved, and robot arms
+given as ``urdf:PATH`` (:func:`systems.urdf_arm.register_urdf`)."""
 
 from __future__ import annotations
 
@@ -11,12 +12,19 @@ from pathlib import Path
 from typing import Iterable
 
 from bench.core.errors import UserError
+from systems.urdf_arm import register_urdf
+
+#: a system given by its robot description: ``urdf:PATH``
+URDF = "urdf:"
 
 
 def import_plugins(plugins: Iterable[str]) -> None:
-    """Import each plugin once: a ``.py`` path or a module name."""
+    """Import each plugin once: a ``.py`` path, a module name, or ``urdf:PATH``."""
     for plugin in plugins:
         try:
+            if plugin.startswith(URDF):
+                register_urdf(plugin)
+                continue
             _import_plugin(plugin)
         except UserError:
             raise
@@ -44,3 +52,18 @@ def _import_plugin(plugin: str) -> None:
     except BaseException:
         del sys.modules[name]
         raise
+
+
+def system_plugins(names: Iterable[str]) -> tuple[list[str], tuple[str, ...]]:
+    """System names as given on a command line, with ``urdf:PATH`` entries
+    registered and replaced by their names; returns the names and the
+    plugins a run's own process needs to resolve them."""
+    out, plugins = [], []
+    for name in names:
+        if name.startswith(URDF):
+            plugin = URDF + str(Path(name[len(URDF):]).expanduser().resolve())
+            out.append(register_urdf(plugin))
+            plugins.append(plugin)
+        else:
+            out.append(name)
+    return out, tuple(plugins)
