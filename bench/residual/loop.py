@@ -55,7 +55,7 @@ import sympy
 
 from bench.core.data import Dataset, mse
 from bench.core.errors import UserError
-from bench.core.models import ExpressionModel, FittedModel, ParametricModel
+from bench.core.models import ExpressionModel, FittedModel, LinearParametricModel, ParametricModel
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
 from bench.residual.candidates import candidates, describe, label
@@ -195,6 +195,11 @@ def _refit(model: LoopModel, train: Dataset, effects: list[Term], fitter: _Fitte
     coef = fit_statistics(Phi, y - np.ravel(model.rigid.predict_torque(train)))[0]
     if isinstance(model.rigid, ParametricModel):
         return _nonlinear_fit(model.rigid, train, effects, coef)
+    if isinstance(model.rigid, LinearParametricModel):  # its base parameters and the effects, by least squares
+        F_L = model.rigid.torque_columns(train)
+        coef, stderr, _ = fit_statistics(np.hstack([F_L, Phi]), y)
+        k = F_L.shape[1]
+        return LoopModel(model.rigid.with_coefficients(coef[:k]), effects, coef[k:], stderr[k:])
     rigid = fitter.fit(_with_tau(train, train.tau - (Phi @ coef).reshape(train.tau.shape)))
     lagrangian = _lagrangian_columns(rigid, train)
     if lagrangian is None:
@@ -209,15 +214,22 @@ def _refit(model: LoopModel, train: Dataset, effects: list[Term], fitter: _Fitte
 
 def _freedom(model: LoopModel, train: Dataset) -> np.ndarray:
     """Columns for what the model can already express: a parametric model's
-    parameter directions, a symbolic model's terms, nothing for a neural one."""
+    parameter directions, a linear form's base columns, a symbolic model's
+    terms, nothing for a neural one."""
     if isinstance(model.rigid, ParametricModel):
         return model.rigid.jacobian(train)
+    if isinstance(model.rigid, LinearParametricModel):
+        return model.rigid.torque_columns(train)
     lagrangian = _lagrangian_columns(model.rigid, train)
     return np.zeros((train.tau.size, 0)) if lagrangian is None else lagrangian[1]
 
 
 def _is_symbolic(rigid: FittedModel) -> bool:
-    """A model given by an expression whose terms :func:`_freedom` refits (not a parametric one)."""
+    """A model whose columns :func:`_freedom` refits linearly and span its own
+    torque: an expression's terms or a linear form's base columns (not a
+    nonlinear parametric one)."""
+    if isinstance(rigid, LinearParametricModel):
+        return True
     if isinstance(rigid, ParametricModel):
         return False
     expr = rigid.expression()
@@ -289,7 +301,9 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     model = LoopModel(fitted, [], np.zeros(0), np.zeros(0))
     round0 = {"round": 0, "accepted": [], "trace": []}
     parametric = fitted.parametric()
-    if parametric is not None:
+    if isinstance(parametric, LinearParametricModel):  # least squares already reached its optimum
+        model = LoopModel(parametric, [], np.zeros(0), np.zeros(0))
+    elif parametric is not None:
         # polish the parameters, so that an optimiser's shortfall is not taken for an effect
         round0["method_mse"] = scores(model)
         model = _polish(parametric, train, seed)

@@ -204,3 +204,17 @@ def test_the_result_is_typed_and_its_json_is_plain():
     assert final.predict_torque(test).shape == test.tau.shape and "models" not in out.to_json()
     assert json.loads(json.dumps(out.to_json())) == out.to_json()
     assert [(e["name"], e["joint"]) for e in out.effects] == [("offset", 1)]
+
+
+def test_friction_on_every_joint_of_the_panda_is_found_beside_its_base_parameters():
+    panda = get_system("panda")
+    effects = {"viscous_friction": tuple(0.1 + 0.05 * j for j in range(7)),
+               "coulomb_friction": tuple(0.3 + 0.1 * j for j in range(7))}
+    train, test = add_effects(generate(panda, 1000, 0), effects), add_effects(generate(panda, 500, 1000), effects)
+    out = residual_loop("sysid", train, test, budget_s=10, report=quiet)
+    found = {(e["name"], e["joint"]): e["coefficient"] for e in out.effects}
+    want = {(name, j + 1): c for name, coefs in effects.items() for j, c in enumerate(coefs)}
+    assert set(found) == set(want)
+    for key, c in want.items():
+        assert found[key] == pytest.approx(c, rel=0.05)
+    assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
