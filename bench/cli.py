@@ -26,7 +26,7 @@ from bench.core.effects import EFFECTS, add_effects, parse_effects
 from bench.core.errors import UserError
 from bench.core.fileio import check_output, write_json
 from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preprocess, read_recording
-from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance
+from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance, scaling
 from bench.reporting.leaderboard import write_leaderboard
 from bench.reporting.tables import write_tables
 from bench.residual.loop import DEFAULT_TOTAL_FITS, ResidualJob, run_residual
@@ -270,6 +270,7 @@ EXPERIMENTS = {
     "residual-acceptance": residual_acceptance,
     "overhead": overhead,
     "dfki-filter": dfki_filter,
+    "scaling": scaling,
 }
 
 

@@ -24,7 +24,7 @@ def cli(*args, cwd=None):
 
 
 COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "leaderboard",
-            "adaptation", "residual-acceptance", "overhead", "dfki-filter")
+            "adaptation", "residual-acceptance", "overhead", "dfki-filter", "scaling")
 
 
 def _subparsers():

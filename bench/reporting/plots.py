@@ -164,3 +164,25 @@ def adaptation_plot(results: list[dict], checkpoints, path: Path, title: str = "
     if title:
         ax.set_title(title, fontsize=9)
     return _save_lines(plt, fig, ax, path)
+
+
+def line_plot(series: dict[str, list[tuple[float, float]]], path: Path, *, xlabel: str, ylabel: str, title: str = "",
+              markers: dict[str, tuple[float, float]] | None = None) -> Path:
+    """One line per label through its ``(x, y)`` points, on log–log axes;
+    ``markers`` add one diamond per label in the same colour (a point off the line)."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (label, points) in enumerate(sorted(series.items())):
+        colour = colours[i % len(colours)]
+        x, y = np.asarray(sorted(points), dtype=np.float64).T
+        ax.plot(x, y, "o-", color=colour, linewidth=1.5, markersize=3.5, label=label)
+        if markers and label in markers:
+            ax.plot(*markers[label], "D", color=colour, markersize=6, markeredgecolor="black", markeredgewidth=0.6)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return _save_lines(plt, fig, ax, path)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import resource
 import time
 import traceback
 from typing import Callable
@@ -113,6 +115,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         method = METHODS[spec.method](**method_config(spec))
         warm_up_torch()
         timing = {"load_s": time.perf_counter() - clock}
+        memory = {"start_mb": resident_mb()}
         if on_phase:
             on_phase("fit")
         method.fit(train, spec.experiment, spec.seed, spec.budget_s, system=system)
@@ -151,6 +154,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             fields["rollout"] = rollout_entry(method, system, test)
             timing["rollout_s"] = time.perf_counter() - clock
         fields["details"]["timing"] = {k: round(v, 3) for k, v in timing.items()}
+        memory["peak_mb"] = peak_resident_mb()
+        fields["details"]["memory"] = {k: round(v, 1) for k, v in memory.items()}
         bad = [k for k in ("train_mse", "test_mse") if fields[k] is not None and not math.isfinite(fields[k])]
         if bad:
             return Record.new(spec, "failed", error=f"non-finite {' and '.join(bad)} (the model produced NaN or inf)", **fields)
@@ -166,6 +171,22 @@ def run_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
     """The entry point of a run in its own process: ``payload`` is a
     :meth:`RunSpec.to_dict`; returns the record's JSON."""
     return execute(RunSpec.from_dict(payload), on_phase).to_json()
+
+
+def resident_mb() -> float:
+    """This process's resident memory now, MB (Linux; NaN elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return math.nan
+
+
+def peak_resident_mb() -> float:
+    """This process's peak resident memory so far, MB: with :func:`resident_mb`
+    at the start of the fit, what the run itself took (the rest is what the
+    process started with: torch and the suite, shared with the fork server)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def warm_up_torch() -> None:
