@@ -1,0 +1,42 @@
+"""The scaling study: its systems, and its table from records."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from bench.experiments import scaling
+from bench.runner.plugins import import_plugins
+from bench.runner.records import Record
+from systems import SYSTEMS
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def record(method, system, seed, status="ok", steps=10, fit=2.0, mse=1.0, memory=(300.0, 350.0)):
+    spec = {"system": system, "method": method, "experiment": "indirect", "seed": seed, "budget_s": 5.0}
+    fields = {"steps": steps, "fit_seconds": fit, "train_mse": mse, "test_mse": mse,
+              "details": {"memory": {"start_mb": memory[0], "peak_mb": memory[1]}}} if status == "ok" else {"error": "too big"}
+    return Record.new(spec, status, **fields)
+
+
+def test_the_pendulums_are_registered_only_by_the_plugin():
+    code = "import bench.cli; from systems import SYSTEMS; print('pendulum_7link' in SYSTEMS)"
+    listed = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT).stdout.strip()
+    assert listed == "False"  # the command line and `bench list` do not show the study's pendulums
+    import_plugins([scaling.PLUGIN])
+    assert [SYSTEMS[n]().dof for n in scaling.studied_systems()] == [1, 2, 3, 4, 5, 6, 7, 6, 7]
+
+
+def test_the_table_gives_medians_over_the_ok_seeds_and_why_others_did_not_run():
+    import_plugins([scaling.PLUGIN])
+    records = [record("mlp", "pendulum_2link", s, steps=10 * (s + 1), fit=2.0, mse=float(s + 1)) for s in range(3)]
+    records += [record("sparse", "panda", s, status="not_applicable") for s in range(2)]
+    rows = scaling.summarize(records)
+    (mlp,) = [r for r in rows if r["method"] == "mlp"]
+    assert mlp["dof"] == 2 and mlp["ok"] == 3 and mlp["steps"] == 20 and mlp["test_mse"] == 2.0
+    assert mlp["step_s"] == 0.1 and mlp["memory_mb"] == 50.0
+    text = scaling.table(rows)
+    assert "| mlp | indirect | pendulum_2link | 2 | 3/3 | 0.1 | 20 | 50 | 2 |" in text
+    assert "| sparse | indirect | panda | 7 | 0/2 | — | — | — | not_applicable: too big |" in text
