@@ -37,9 +37,9 @@ paper: $(STAMP)
 	$(BIN)/python -m bench run --systems double_pendulum --n-seeds 10 --budget 60 --workers 2 --out results/double_pendulum_60s
 
 # The leaderboard (results/README.md, from the records in results/leaderboard): every system and method, both
-# experiments where they apply, 10 seeds. About 650 runs: at 8 s each plus
-# evaluation and rollout (about 2 s a run on average), about 55
-# minutes on 2 cores.
+# experiments where they apply, 10 seeds. About 870 runs: at 8 s each plus
+# evaluation and rollout (about 2 s a run on average), about an hour on
+# 2 cores (the 7-DoF arms take 16 of those minutes).
 LEADERBOARD_BUDGET ?= 8
 leaderboard: $(STAMP)
 	$(BIN)/python -m bench run --systems all --n-seeds 10 --budget $(LEADERBOARD_BUDGET) --workers 2 --out results/leaderboard
