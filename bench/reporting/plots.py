@@ -169,18 +169,27 @@ def adaptation_plot(results: list[dict], checkpoints, path: Path, title: str = "
 def line_plot(series: dict[str, list[tuple[float, float]]], path: Path, *, xlabel: str, ylabel: str, title: str = "",
               markers: dict[str, tuple[float, float]] | None = None) -> Path:
     """One line per label through its ``(x, y)`` points, on log–log axes;
-    ``markers`` add one diamond per label in the same colour (a point off the line)."""
+    ``markers`` add one diamond per label in the same colour (a point off the line).
+
+    A log axis has no place for zero: points with ``y <= 0`` are left out
+    (a line breaks there), and the x axis is labelled at the data's own x."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    xs = set()
     for i, (label, points) in enumerate(sorted(series.items())):
         colour = colours[i % len(colours)]
         x, y = np.asarray(sorted(points), dtype=np.float64).T
-        ax.plot(x, y, "o-", color=colour, linewidth=1.5, markersize=3.5, label=label)
-        if markers and label in markers:
+        xs.update(x)
+        ax.plot(x, np.where(y > 0, y, np.nan), "o-", color=colour, linewidth=1.5, markersize=3.5, label=label)
+        if markers and label in markers and markers[label][1] > 0:
             ax.plot(*markers[label], "D", color=colour, markersize=6, markeredgecolor="black", markeredgewidth=0.6)
+            xs.add(markers[label][0])
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ticks = sorted(xs)
+    ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+    ax.xaxis.set_minor_locator(plt.NullLocator())
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     if title:

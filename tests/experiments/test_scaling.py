@@ -40,3 +40,21 @@ def test_the_table_gives_medians_over_the_ok_seeds_and_why_others_did_not_run():
     text = scaling.table(rows)
     assert "| mlp | indirect | pendulum_2link | 2 | 3/3 | 0.1 | 20 | 50 | 2 |" in text
     assert "| sparse | indirect | panda | 7 | 0/2 | — | — | — | not_applicable: too big |" in text
+
+
+def test_a_reason_keeps_its_status_and_first_clause():
+    why = "not_applicable: Operon fits y = f(X) to samples of y; the indirect experiment has no samples of L"
+    assert scaling.reason(why) == "not_applicable: Operon fits y = f(X) to samples of y"
+    long = "timeout: " + "word " * 60
+    cut = scaling.reason(long, limit=40)
+    assert cut.startswith("timeout: word") and cut.endswith(" …") and len(cut) <= 42
+    assert scaling.reason("failed: a | b") == "failed: a \\| b"  # a pipe would split the table's cell
+
+
+def test_growth_divides_the_largest_pendulum_by_the_smallest():
+    import_plugins([scaling.PLUGIN])
+    records = [record("mlp", f"pendulum_{n}link", 0, steps=10, fit=float(n), memory=(0.0, 100.0 * n)) for n in (1, 4)]
+    records += [record("sparse", "pendulum_1link", 0), record("sparse", "pendulum_2link", 0, status="timeout")]
+    text = scaling.growth(scaling.summarize(records))
+    assert "| mlp | indirect | 1–4 DoF | 4× | 4× |" in text
+    assert "sparse" not in text  # one pendulum ran: nothing to divide
