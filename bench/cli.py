@@ -21,6 +21,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from bench.core.data import Dataset, add_noise, check_experiment, generate, write_csv
 from bench.core.effects import EFFECTS, add_effects, parse_effects
 from bench.core.errors import UserError
@@ -218,7 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
     layout.add_argument("--format", choices=["dfki"], help="a DFKI double pendulum recording, in either of the lab's layouts")
     layout.add_argument("--columns", metavar="time=T,q_1=C,qd_1=C,tau_1=C,...",
                         help="any log: which columns hold the time (s) and each joint's q, qd and tau")
-    cv.add_argument("raw", type=Path, help="the log (CSV, may be gzipped)")
+    cv.add_argument("raw", type=Path, nargs="+",
+                    help="the log(s) (CSV, may be gzipped); each is one recording, named in the output's "
+                         "trajectory column by its file name")
     cv.add_argument("--out", type=Path, required=True, help="CSV file to write")
     cv.add_argument("--dt", type=_positive, default=DEFAULT_FILTER.dt,
                     help=f"the uniform time step the log is resampled to, s (default {DEFAULT_FILTER.dt:g})")
@@ -409,14 +413,35 @@ def _maybe(x) -> str:
 def cmd_convert(args) -> int:
     check_output(args.out)
     spec = FilterSpec(dt=args.dt, cutoff_hz=args.cutoff_hz, order=args.order, trim_s=args.trim, decimate=args.decimate)
-    if args.columns:
-        recording, system = read_recording(args.raw, ColumnMap.parse(args.columns)), None
-    else:
-        recording, system = read_raw(args.raw), "dfki_double_pendulum"
-    s = preprocess(recording, spec)
-    write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, system, str(args.raw)), args.out)
-    print(f"wrote {len(s['q'])} samples of {s['q'].shape[1]} joint(s) to {args.out} ({spec.describe()})")
+    names = [recording_name(p) for p in args.raw]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise UsageError(f"two logs would be the same recording {repeated[0]!r}: give files with distinct names")
+    parts = []
+    for path in args.raw:  # every log read and checked before anything is written
+        if args.columns:
+            recording, system = read_recording(path, ColumnMap.parse(args.columns)), None
+        else:
+            recording, system = read_raw(path), "dfki_double_pendulum"
+        parts.append(preprocess(recording, spec))
+    dofs = {p["q"].shape[1] for p in parts}
+    if len(dofs) > 1:
+        raise UsageError(f"the logs have different numbers of joints ({', '.join(map(str, sorted(dofs)))})")
+    arrays = {k: np.concatenate([p[k] for p in parts]) for k in ("q", "qd", "qdd", "tau")}
+    labels = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
+    source = ", ".join(map(str, args.raw))
+    write_csv(Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], None, system, source, recording=labels), args.out)
+    print(f"wrote {len(labels)} samples of {dofs.pop()} joint(s) from {len(parts)} recording(s) to {args.out} "
+          f"({spec.describe()})")
     return 0
+
+
+def recording_name(path: Path) -> str:
+    """A log's recording name: its file name without the .csv and compression suffixes."""
+    name = path.name
+    for suffix in (".gz", ".bz2", ".xz", ".zip", ".csv"):
+        name = name.removesuffix(suffix)
+    return name or path.name
 
 
 def cmd_fit(args) -> int:

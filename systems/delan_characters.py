@@ -87,4 +87,4 @@ class DelanCharacters(System):
         cols = {k: np.stack([numeric_column(part, f"{k}_{i}", DATA) for i in (1, 2)], axis=1) for k in ("q", "qd", "qdd", "tau")}
         chars = "".join(sorted(part["character"].unique()))
         return Dataset(cols["q"], cols["qd"], cols["qdd"], cols["tau"], None, self.name,
-                       f"{DATA.name}:{split} (characters {chars})")
+                       f"{DATA.name}:{split} (characters {chars})", recording=part["character"].astype(str).to_numpy())

@@ -68,6 +68,8 @@ from systems.base import SYSTEMS, System
 DATA_DIR = Path(__file__).parent / "data"
 TRAIN_TRAJECTORIES = ("00", "01", "02", "04")
 TEST_TRAJECTORIES = ("03", "05")
+#: the suite's split, and every recording (for validation that leaves one recording out at a time)
+SPLITS = {"train": TRAIN_TRAJECTORIES, "test": TEST_TRAJECTORIES, "all": tuple(sorted(TRAIN_TRAJECTORIES + TEST_TRAJECTORIES))}
 #: the lab's two column layouts of a recording
 LAYOUTS = (
     ColumnMap("time", ("pos_meas1", "pos_meas2"), ("vel_meas1", "vel_meas2"), ("tau_meas1", "tau_meas2")),
@@ -128,9 +130,11 @@ def trajectory_path(name: str) -> Path:
 
 @functools.lru_cache(maxsize=8)
 def _samples(split: str, spec: FilterSpec, filter_torque: bool) -> dict[str, np.ndarray]:
-    names = TRAIN_TRAJECTORIES if split == "train" else TEST_TRAJECTORIES
+    names = SPLITS[split]
     parts = [preprocess(read_raw(trajectory_path(n)), spec, filter_torque=filter_torque) for n in names]
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    out["recording"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
+    return out
 
 
 @SYSTEMS.add("dfki_double_pendulum", "measured", "external")
@@ -161,11 +165,13 @@ class DfkiDoublePendulum(System):
         return kinetic + gravity
 
     def load(self, split: str, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> Dataset:
-        """The ``train`` (trajectories 00, 01, 02, 04) or ``test`` (03, 05) split."""
-        if split not in ("train", "test"):
-            raise ValueError(f"split must be 'train' or 'test', got {split!r}")
+        """The ``train`` (trajectories 00, 01, 02, 04) or ``test`` (03, 05) split,
+        or ``all`` six; each sample's ``recording`` is its trajectory's name."""
+        if split not in SPLITS:
+            raise ValueError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
         s = _samples(split, spec, filter_torque)
-        names = TRAIN_TRAJECTORIES if split == "train" else TEST_TRAJECTORIES
+        names = SPLITS[split]
         source = f"dfki_trajectory_{{{','.join(names)}}}.csv.gz:{split}"
         meta = {"filter": asdict(spec), "torque_filtered": filter_torque}
-        return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta)
+        return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,
+                       recording=s["recording"].copy())

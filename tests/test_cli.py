@@ -239,6 +239,24 @@ def test_convert_reads_both_dfki_layouts_and_any_log_by_its_columns(tmp_path):
         np.testing.assert_array_equal(other.qdd, outputs[0].qdd)
 
 
+def test_convert_names_each_log_as_a_recording(tmp_path):
+    from bench.core.data import read_csv
+    from systems.dfki_double_pendulum import LAYOUTS
+
+    first, second = dfki_raw(tmp_path, LAYOUTS[0].columns), dfki_raw(tmp_path, LAYOUTS[1].columns)
+    out = tmp_path / "both.csv"
+    r = cli("convert", "--format", "dfki", str(first), str(second), "--out", str(out))
+    assert r.returncode == 0 and "from 2 recording(s)" in r.stdout, r.stderr
+    data = read_csv(out, dof=2)
+    assert data.recordings() == [first.stem, second.stem]
+    assert (data.recording == first.stem).sum() == (data.recording == second.stem).sum() == len(data) // 2
+    same = tmp_path / "again" / first.name
+    same.parent.mkdir()
+    same.write_bytes(first.read_bytes())
+    r = cli("convert", "--format", "dfki", str(first), str(same), "--out", str(tmp_path / "x.csv"))
+    assert r.returncode == 2 and "the same recording" in r.stderr and not (tmp_path / "x.csv").exists()
+
+
 def test_convert_and_residual_refuse_values_whose_square_overflows(tmp_path):
     from systems.dfki_double_pendulum import LAYOUTS
 

@@ -22,7 +22,7 @@ from methods import METHODS
 SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 REQUIRED = ["q_1", "q_2", "qd_1", "qd_2", "qdd_1", "qdd_2", "tau_1", "tau_2"]
-COLUMNS = REQUIRED + ["L", "time", "q_3", "tau", "", "q_1 "]
+COLUMNS = REQUIRED + ["L", "time", "q_3", "tau", "", "q_1 ", "trajectory"]
 CELLS = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
     st.sampled_from(["1e308", "-1e308", "1e155", "5e-324", "2.2250738585072014e-308", "inf", "-inf", "nan", "NaN",
@@ -64,6 +64,7 @@ def test_a_csv_file_loads_whole_or_is_refused_in_one_line(tmp_path, content):
         values = getattr(data, name)
         assert values.shape == (len(data), 2) and np.isfinite(values).all() and (np.abs(values) <= MAX_ABS_VALUE).all()
     assert data.L is None or np.isfinite(data.L).all()
+    assert data.recording is None or (data.recording.shape == (len(data),) and all(r.strip() for r in data.recording))
 
 
 @st.composite

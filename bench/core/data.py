@@ -5,7 +5,13 @@ In memory, a :class:`Dataset` holds float64 arrays ``q, qd, qdd, tau`` of shape
 
 On disk it is a CSV file with the columns::
 
-    q_1..q_n, qd_1..qd_n, qdd_1..qdd_n, tau_1..tau_n[, L]
+    q_1..q_n, qd_1..qd_n, qdd_1..qdd_n, tau_1..tau_n[, L][, trajectory]
+
+``trajectory`` is optional: the recording each sample comes from (any
+non-empty text). Measured data come in recordings, and neighbouring samples
+of one recording are near copies, so whatever is validated on held-out data
+holds out whole recordings where the data name them. Generated samples are
+independent and have no recording.
 
 Further columns (time stamps, labels) are allowed and ignored. The same
 format serves generated and measured data, so any method can be given
@@ -18,6 +24,7 @@ system's parameters and domain) and is cached as ``.npz`` under
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -51,6 +58,9 @@ class Dataset:
         The registered system name the data belongs to, if any.
     source
         Where it came from: a file path or a generator description.
+    recording
+        Array of shape ``(n,)`` of text labels: the recording (trajectory)
+        each sample comes from, or ``None`` for independent samples.
     """
 
     q: np.ndarray
@@ -61,6 +71,7 @@ class Dataset:
     system: str | None = None
     source: str = "memory"
     meta: dict = field(default_factory=dict)
+    recording: np.ndarray | None = None
 
     def __post_init__(self):
         shapes = {a.shape for a in (self.q, self.qd, self.qdd, self.tau)}
@@ -68,6 +79,11 @@ class Dataset:
             raise DataError(f"{self.source}: q, qd, qdd, tau must share one (n, dof) shape, got {sorted(shapes)}")
         if self.L is not None and self.L.shape != (self.q.shape[0],):
             raise DataError(f"{self.source}: L must have shape ({self.q.shape[0]},), got {self.L.shape}")
+        if self.recording is not None:
+            labels = np.asarray(self.recording, dtype=str)
+            if labels.shape != (self.q.shape[0],):
+                raise DataError(f"{self.source}: recording must have shape ({self.q.shape[0]},), got {labels.shape}")
+            object.__setattr__(self, "recording", labels)
 
     def __len__(self) -> int:
         return self.q.shape[0]
@@ -89,7 +105,19 @@ class Dataset:
         return Dataset(
             self.q[index], self.qd[index], self.qdd[index], self.tau[index],
             None if self.L is None else self.L[index], self.system, self.source, dict(self.meta),
+            None if self.recording is None else self.recording[index],
         )
+
+    def replace(self, **changes) -> "Dataset":
+        """A copy with the given fields changed (the rest, recordings included, kept)."""
+        return dataclasses.replace(self, **changes)
+
+    def recordings(self) -> list[str]:
+        """The recordings' labels in order of first appearance; ``[]`` for independent samples."""
+        if self.recording is None:
+            return []
+        labels, first = np.unique(self.recording, return_index=True)
+        return [str(labels[i]) for i in np.argsort(first)]
 
     def tensors(self, dtype: torch.dtype = torch.float64) -> dict[str, torch.Tensor]:
         out = {k: torch.tensor(getattr(self, k), dtype=dtype) for k in ("q", "qd", "qdd", "tau")}
@@ -145,6 +173,8 @@ def generate(system, n: int, seed: int, *, cache: bool = True) -> Dataset:
 # -- CSV ---------------------------------------------------------------------------
 
 _COLUMN = re.compile(r"^(q|qd|qdd|tau)_(\d+)$")
+#: the optional column naming each sample's recording
+RECORDING = "trajectory"
 
 
 def columns(dof: int, with_L: bool) -> list[str]:
@@ -162,6 +192,8 @@ def write_csv(data: Dataset, path: str | os.PathLike) -> None:
             arrays[f"{k}_{i + 1}"] = getattr(data, k)[:, i]
     if data.L is not None:
         arrays["L"] = data.L
+    if data.recording is not None:
+        arrays[RECORDING] = data.recording
     frame = pd.DataFrame(arrays)
     atomic_write(Path(path), lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
 
@@ -253,7 +285,19 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
 
     arrays = {k: np.stack([numeric(f"{k}_{i}") for i in range(1, file_dof + 1)], axis=1) for k in found}
     L = numeric("L") if "L" in frame.columns else None
-    return Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], L, system, str(path))
+    recording = label_column(frame, RECORDING, path) if RECORDING in frame.columns else None
+    return Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], L, system, str(path), recording=recording)
+
+
+def label_column(frame, col: str, path: Path) -> np.ndarray:
+    """Column ``col`` as text labels; :class:`DataError` naming the file, column
+    and data row of the first empty value."""
+    raw = frame[col]
+    empty = raw.isna().to_numpy() | (raw.astype(str).str.strip() == "").to_numpy()
+    if empty.any():
+        row = int(np.flatnonzero(empty)[0])
+        raise DataError(f"{path}: column {col} has an empty value in data row {row + 1}")
+    return raw.astype(str).str.strip().to_numpy(dtype=str)
 
 
 def add_noise(data: Dataset, experiment: str, level: float, seed: int) -> Dataset:
@@ -275,7 +319,7 @@ def add_noise(data: Dataset, experiment: str, level: float, seed: int) -> Datase
     else:
         tau = tau + rng.normal(0.0, 1.0, tau.shape) * (level * tau.std(axis=0))
     meta = {**data.meta, "noise": level}
-    return Dataset(data.q, data.qd, data.qdd, tau, L, data.system, f"{data.source} + {level:g} x std noise on {experiment} targets", meta)
+    return data.replace(tau=tau, L=L, source=f"{data.source} + {level:g} x std noise on {experiment} targets", meta=meta)
 
 
 # -- helpers -------------------------------------------------------------------------

@@ -106,5 +106,5 @@ def add_effects(data: Dataset, effects: dict[str, tuple[float, ...]]) -> Dataset
             if L is not None and not term.is_force:
                 L += c * term.value(data)
     text = ", ".join(f"{k}={','.join(f'{c:g}' for c in v)}" for k, v in effects.items())
-    return Dataset(data.q, data.qd, data.qdd, tau, L, data.system, f"{data.source} + undeclared {text}",
-                   {**data.meta, "effects": {k: list(v) for k, v in effects.items()}})
+    return data.replace(tau=tau, L=L, source=f"{data.source} + undeclared {text}",
+                        meta={**data.meta, "effects": {k: list(v) for k, v in effects.items()}})

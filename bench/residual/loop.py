@@ -162,7 +162,7 @@ def _polish(rigid: ParametricModel, train: Dataset, seed: int) -> LoopModel:
 
 
 def _with_tau(data: Dataset, tau: np.ndarray) -> Dataset:
-    return Dataset(data.q, data.qd, data.qdd, tau, None, data.system, data.source, dict(data.meta))
+    return data.replace(tau=tau, L=None, meta=dict(data.meta))
 
 
 def _terms(expr: sympy.Expr) -> list[sympy.Expr]:

@@ -152,3 +152,25 @@ def test_noise_is_a_stated_fraction_of_each_targets_std(double_pendulum, experim
     np.testing.assert_array_equal(add_noise(clean, experiment, 0.1, seed=3).target(experiment), noisy_target)
     assert not np.array_equal(add_noise(clean, experiment, 0.1, seed=4).target(experiment), noisy_target)
     assert noisy.meta["noise"] == 0.1 and "0.1 x std noise" in noisy.source
+
+
+def test_recordings_travel_through_csv_subsets_and_changes(small_data, tmp_path):
+    train = small_data[0]
+    assert train.recording is None and train.recordings() == []  # generated samples are independent
+    labels = np.where(np.arange(len(train)) < len(train) // 3, "run b", "run a")
+    data = train.replace(recording=labels)
+    path = tmp_path / "r.csv"
+    write_csv(data, path)
+    back = read_csv(path, dof=2)
+    assert back.recordings() == ["run b", "run a"]  # in order of first appearance
+    np.testing.assert_array_equal(back.recording, labels)
+    assert add_noise(back, "indirect", 0.1, 0).subset(slice(0, 3)).recording.tolist() == ["run b"] * 3
+
+
+@pytest.mark.parametrize("cell", ["", " "])
+def test_an_empty_recording_label_is_refused_naming_the_row(tmp_path, cell):
+    path = tmp_path / "r.csv"
+    path.write_text(GOOD.replace("tau_2\n", "tau_2,trajectory\n").replace("0.8\n", "0.8,a\n", 1)
+                    .replace("0.8\n", f"0.8,{cell}\n", 1).replace("0.8\n", "0.8,b\n"))
+    with pytest.raises(DataError, match=f"{path}: column trajectory has an empty value in data row 2"):
+        read_csv(path, dof=2)

@@ -21,7 +21,8 @@ def start_hanging_matrix(out: Path) -> subprocess.Popen:
         [sys.executable, "-m", "bench", "run", "--methods", "toy_sleeper", "--plugin", PLUGIN, "--seeds", "0",
          "--budget", "100", "--experiments", "indirect", "--n-train", "64", "--n-test", "32", "--no-rollout",
          "--workers", "1", "--out", str(out)],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONFAULTHANDLER": "1"})  # SIGABRT then prints every thread's stack
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:  # until the run is in its (endless) fit
         if any("fit" in p.read_text() for p in (out / "logs").glob("*.phase")):
@@ -71,7 +72,12 @@ def test_ctrl_c_kills_the_runs_and_records_none_of_them(tmp_path):
     proc = start_hanging_matrix(out)
     tree = descendants(proc.pid)
     proc.send_signal(signal.SIGINT)
-    assert proc.wait(timeout=20) == 130
+    try:
+        code = proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:  # say where it hangs: the stacks of all its threads
+        proc.send_signal(signal.SIGABRT)
+        raise AssertionError(f"still running 20 s after Ctrl-C; its stacks:\n{proc.communicate(timeout=20)[1]}") from None
+    assert code == 130
     assert "interrupted" in proc.stderr.read()
     assert not list((out / "records").glob("*.json"))  # the resume will run it
     t0 = time.monotonic()
