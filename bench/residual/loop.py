@@ -21,18 +21,26 @@ Each round:
    (armature ``+c qd^2/2``, spring ``-c q^2/2``), dissipative ones as
    generalized forces (viscous friction from the Rayleigh function
    ``c qd^2/2``, Coulomb friction, offsets, symbolic terms).
-5. **Refit jointly.** A parametric model (SysId: the system's declared form
-   with unknown physical parameters) is refitted with the effects by
-   nonlinear least squares over parameters and coefficients together, which
-   keeps the form's constraints (an armature cannot hide in a mass). Other
-   methods are refitted on the targets with the effects' torques taken off;
-   then a symbolic model's terms and the effects' coefficients are refitted
-   together by linear least squares (``g`` is linear in ``L``), and a neural
-   model's effects on what it leaves (backfitting). A symbolic model of more
-   than :data:`MAX_SYMBOLIC_TERMS` terms (SyReNets' full equation) is treated
-   like a neural one. Effects made redundant by the refit are dropped again
-   (backward elimination on the BIC).
-6. **Repeat** until a round accepts nothing, for at most :data:`MAX_ROUNDS`
+5. **Refit jointly**, without fitting the method again. A parametric model
+   (SysId: the system's declared form with unknown physical parameters) is
+   refitted with the effects by nonlinear least squares over parameters and
+   coefficients together, which keeps the form's constraints (an armature
+   cannot hide in a mass); a linear form's base parameters and a symbolic
+   model's terms (``g`` is linear in ``L``) are refitted with the effects by
+   linear least squares. A neural model, or a symbolic one of more than
+   :data:`MAX_SYMBOLIC_TERMS` terms (SyReNets' full equation, which is never
+   expanded: :func:`_small` looks at its size first), keeps its fit: only
+   the effects are fitted, to what it leaves. Its own terms therefore cannot
+   grow to absorb noise in the refit. Effects made redundant by the refit
+   are dropped again (backward elimination on the BIC).
+6. **Keep the round only if it generalises.** The round's model is scored by
+   cross-validation over whole recordings (:mod:`bench.residual.validation`:
+   leave one recording out, or contiguous blocks where the training data
+   name fewer than two); a round that does not lower that held-out error is
+   undone and the loop ends, so the final model is never worse than the
+   starting one on held-out recordings. Each round records the figure
+   (``heldout_mse``).
+7. **Repeat** until a round accepts nothing, for at most :data:`MAX_ROUNDS`
    rounds, and start no round once the total budget is spent.
 
 :func:`residual_loop` runs the loop in this process and returns a
@@ -43,6 +51,7 @@ through the runner, in its own process, killed at 1.5 x its total budget.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import tempfile
 import time
@@ -62,6 +71,8 @@ from bench.residual.candidates import candidates, describe, label
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, bic, trace
+from bench.residual.validation import cv_mse, row_folds
+from bench.residual.validation import describe as describe_validation
 from bench.runner.execute import given_data
 from bench.runner.isolation import Call, CallFailed, run_call
 from bench.runner.matrix import KILL_FACTOR
@@ -75,6 +86,8 @@ MAX_ROUNDS = 6
 #: a symbolic model with more terms than this is refitted like a neural one
 #: (a least-squares refit of thousands of terms is neither fast nor meaningful)
 MAX_SYMBOLIC_TERMS = 200
+#: an expression with more nodes than this is not expanded into terms at all
+MAX_SYMBOLIC_NODES = 50 * MAX_SYMBOLIC_TERMS
 #: random starts of the parametric polish, beside the method's own parameters
 POLISH_STARTS = 16
 #: the total budget, in fits of the method, when none is given
@@ -161,35 +174,43 @@ def _polish(rigid: ParametricModel, train: Dataset, seed: int) -> LoopModel:
     return best if best is not None else LoopModel(rigid, [], np.zeros(0), np.zeros(0))
 
 
-def _with_tau(data: Dataset, tau: np.ndarray) -> Dataset:
-    return data.replace(tau=tau, L=None, meta=dict(data.meta))
+def _small(expr: sympy.Expr) -> bool:
+    """Whether ``expr`` has at most :data:`MAX_SYMBOLIC_NODES` nodes, found
+    without expanding it (counting stops at the limit)."""
+    for i, _ in enumerate(sympy.preorder_traversal(expr)):
+        if i >= MAX_SYMBOLIC_NODES:
+            return False
+    return True
 
 
-def _terms(expr: sympy.Expr) -> list[sympy.Expr]:
-    """The coefficient-free terms of an expanded expression that act on the torque."""
+@functools.lru_cache(maxsize=16)
+def _terms(expr: sympy.Expr) -> tuple[sympy.Expr, ...] | None:
+    """The coefficient-free terms of an expanded expression that act on the
+    torque; ``None`` for an expression too large to expand (:func:`_small`)
+    or with more than :data:`MAX_SYMBOLIC_TERMS` terms."""
+    if not _small(expr):
+        return None
     out = []
     for term in sympy.Add.make_args(sympy.expand(expr)):
         _, rest = term.as_coeff_Mul()
         if rest.free_symbols and rest not in out:
             out.append(rest)
-    return out
+    return tuple(out) if len(out) <= MAX_SYMBOLIC_TERMS else None
 
 
 def _lagrangian_columns(rigid: FittedModel, data: Dataset) -> tuple[list[sympy.Expr], np.ndarray] | None:
     """The symbolic model's terms and their torque columns; ``None`` for a
     model without an expression or with more than :data:`MAX_SYMBOLIC_TERMS` terms."""
     expr = rigid.expression()
-    if expr is None:
+    basis = None if expr is None else _terms(expr)
+    if basis is None:
         return None
-    basis = _terms(expr)
-    if len(basis) > MAX_SYMBOLIC_TERMS:
-        return None
-    return basis, TermLibrary.of_lagrangian(basis).design(data, "indirect")
+    return list(basis), TermLibrary.of_lagrangian(basis).design(data, "indirect")
 
 
-def _refit(model: LoopModel, train: Dataset, effects: list[Term], fitter: _Fitter) -> LoopModel:
-    """Refit the method with the effects' torques off the targets, then the
-    Lagrangian's terms (symbolic models) and the effects together."""
+def _refit(model: LoopModel, train: Dataset, effects: list[Term]) -> LoopModel:
+    """The model's own freedom and the effects together (see step 5 of the
+    module docstring); the method is not fitted again."""
     y = train.tau.ravel()
     Phi = TermLibrary(effects).design(train, "indirect")
     coef = fit_statistics(Phi, y - np.ravel(model.rigid.predict_torque(train)))[0]
@@ -200,7 +221,7 @@ def _refit(model: LoopModel, train: Dataset, effects: list[Term], fitter: _Fitte
         coef, stderr, _ = fit_statistics(np.hstack([F_L, Phi]), y)
         k = F_L.shape[1]
         return LoopModel(model.rigid.with_coefficients(coef[:k]), effects, coef[k:], stderr[k:])
-    rigid = fitter.fit(_with_tau(train, train.tau - (Phi @ coef).reshape(train.tau.shape)))
+    rigid = model.rigid
     lagrangian = _lagrangian_columns(rigid, train)
     if lagrangian is None:
         coef, stderr, _ = fit_statistics(Phi, y - np.ravel(rigid.predict_torque(train)))
@@ -233,7 +254,7 @@ def _is_symbolic(rigid: FittedModel) -> bool:
     if isinstance(rigid, ParametricModel):
         return False
     expr = rigid.expression()
-    return expr is not None and len(_terms(expr)) <= MAX_SYMBOLIC_TERMS
+    return expr is not None and _terms(expr) is not None
 
 
 def _fit_problem(model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarray]:
@@ -245,7 +266,7 @@ def _fit_problem(model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarr
     return target, np.hstack([_freedom(model, train), model.columns(train)])
 
 
-def _prune(model: LoopModel, train: Dataset, fitter: _Fitter, report: Report) -> tuple[LoopModel, list[str]]:
+def _prune(model: LoopModel, train: Dataset, report: Report) -> tuple[LoopModel, list[str]]:
     """Backward elimination after a joint refit: drop an effect whose removal
     raises the BIC by less than :data:`MIN_BIC_DROP` (it became redundant with
     the refitted model), then refit; repeat until every effect holds."""
@@ -269,8 +290,16 @@ def _prune(model: LoopModel, train: Dataset, fitter: _Fitter, report: Report) ->
         gone = model.effects[weakest]
         removed.append(label(gone))
         report(f"  dropping {label(gone)}: redundant after the joint refit (BIC gain {weakest_gain:.3g})")
-        model = _refit(model, train, model.effects[:weakest] + model.effects[weakest + 1:], fitter)
+        model = _refit(model, train, model.effects[:weakest] + model.effects[weakest + 1:])
     return model, removed
+
+
+def _heldout(model: LoopModel, train: Dataset) -> float:
+    """The model's torque MSE on held-out data: the linear problem that
+    tracing and pruning fit (:func:`_fit_problem`), cross-validated over whole
+    recordings (:func:`bench.residual.validation.cv_mse`)."""
+    target, F = _fit_problem(model, train)
+    return cv_mse(F, target.ravel(), row_folds(train))
 
 
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float = 60.0, seed: int = 0,
@@ -311,14 +340,18 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
                f"(train MSE {round0['method_mse']['train']:.4g} -> {scores(model)['train']:.4g})")
     first = model
     before = scores(model)
+    heldout = _heldout(model, train)
     round0["mse"] = before
+    round0["heldout_mse"] = heldout
     round0["seconds"] = round(time.perf_counter() - start, 3)
     rounds = [round0]
     pool = candidates(train.dof)
-    report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}")
+    split = describe_validation(train)
+    report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
+           f"held out ({split}) {heldout:.4g}")
     for k in range(1, MAX_ROUNDS + 1):
         if time.perf_counter() - start >= total:
-            rounds.append({"round": k, "mse": scores(model), "accepted": [], "trace": [],
+            rounds.append({"round": k, "mse": scores(model), "heldout_mse": heldout, "accepted": [], "trace": [],
                            "stop": f"the total budget of {total:g} s is spent",
                            "seconds": round(time.perf_counter() - start, 3)})
             report(f"round {k}: not started, the total budget of {total:g} s is spent")
@@ -326,27 +359,37 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         target, fixed = _fit_problem(model, train)
         selection = trace(target, train, pool, fixed, exclude=model.effects)
         if not selection.accepted:
-            rounds.append({"round": k, "mse": scores(model), "accepted": [], "trace": selection.steps,
-                           "seconds": round(time.perf_counter() - start, 3)})
+            rounds.append({"round": k, "mse": scores(model), "heldout_mse": heldout, "accepted": [],
+                           "trace": selection.steps, "seconds": round(time.perf_counter() - start, 3)})
             report(f"round {k}: nothing significant left")
             break
         effects = model.effects + selection.accepted
         report(f"round {k}: adding {', '.join(label(c) for c in selection.accepted)}; refitting jointly")
-        model = _refit(model, train, effects, fitter)
-        model, removed = _prune(model, train, fitter, report)
+        candidate = _refit(model, train, effects)
+        candidate, removed = _prune(candidate, train, report)
+        held = _heldout(candidate, train)
+        entry = {"round": k, "accepted": [label(c) for c in selection.accepted], "removed": removed,
+                 "trace": selection.steps}
+        if not held < heldout:
+            rounds.append({**entry, "mse": scores(model), "heldout_mse": heldout, "candidate_heldout_mse": held,
+                           "stop": "undone: the refitted model does not lower the held-out error",
+                           "seconds": round(time.perf_counter() - start, 3)})
+            report(f"round {k}: undone, held-out MSE {held:.4g} is not below {heldout:.4g}")
+            break
+        model, heldout = candidate, held
         s = scores(model)
-        rounds.append({"round": k, "mse": s, "accepted": [label(c) for c in selection.accepted], "removed": removed,
-                       "trace": selection.steps, "seconds": round(time.perf_counter() - start, 3)})
+        rounds.append({**entry, "mse": s, "heldout_mse": held, "seconds": round(time.perf_counter() - start, 3)})
         if not set(label(c) for c in selection.accepted) - set(removed):
             report(f"round {k}: every effect it added became redundant; stopping")
             break
-        report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}")
+        report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {held:.4g}")
     after = scores(model)
     expr = model.expression()
     return ResidualResult(
         system=train.system, method=method, mse_before=before, mse_after=after,
         effects=[describe(c, a, s) for c, a, s in zip(model.effects, model.coef, model.stderr)],
-        rounds=rounds, lagrangian=None if expr is None else str(expr),
+        rounds=rounds, validation=split,
+        mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None, lagrangian=None if expr is None else str(expr),
         seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, total_budget_s=total, seed=seed,
         train_source=train.source, test_source=None if test is None else test.source,
         provenance=provenance(), models=(first, model),

@@ -13,6 +13,9 @@ class ResidualResult:
     """What the loop found; :meth:`to_json` is the JSON contract of
     ``python -m bench residual --json``.
 
+    ``validation`` says how held-out data were formed (:mod:`bench.residual.validation`);
+    ``mse_heldout_recordings`` is the cross-validated torque MSE before and
+    after the loop where the training data name two or more recordings.
     ``models`` holds the fitted models before and after the loop, for the
     report's residual plots; it is not part of the JSON.
     """
@@ -30,6 +33,8 @@ class ResidualResult:
     seed: int
     train_source: str
     test_source: str | None
+    validation: str = ""
+    mse_heldout_recordings: dict | None = None
     provenance: dict = field(default_factory=dict)
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 

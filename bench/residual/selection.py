@@ -7,11 +7,12 @@ A candidate is accepted only if all hold:
   rows, falls by more than :data:`MIN_BIC_DROP` (strong evidence on Kass &
   Raftery's scale);
 * its coefficient is at least :data:`MIN_T` standard errors from zero;
-* it lowers the mean squared residual on held-out rows (every fourth of
-  :data:`HELDOUT_BLOCKS` contiguous blocks of training samples, not used to
-  fit it: on measured trajectories neighbouring samples are near copies, so
-  interleaved rows would not test generalisation) by at least
-  :data:`MIN_HELDOUT_GAIN` of that residual;
+* it lowers the cross-validated mean squared residual on held-out data by at
+  least :data:`MIN_HELDOUT_GAIN` of that residual: leave one recording out
+  where the training data name several recordings, contiguous blocks
+  otherwise (:mod:`bench.residual.validation`; on measured trajectories
+  neighbouring samples are near copies, so interleaved rows would not test
+  generalisation);
 * the residual is above the floor of numerical round-off
   (:data:`ROUNDOFF` of the torque's mean square), so a model that already
   fits exactly is left alone.
@@ -30,16 +31,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.regression import fit_statistics, least_squares
+from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
 from bench.residual.candidates import is_named, label
+from bench.residual.validation import cv_mse, row_folds
 
 MIN_BIC_DROP = 10.0
 MIN_T = 5.0
 MIN_HELDOUT_GAIN = 0.01
 ROUNDOFF = 1e-20
-#: the held-out rows are every fourth of this many contiguous blocks of the training data
-HELDOUT_BLOCKS = 16
 
 
 def bic(rss: float, n: int, k: int) -> float:
@@ -68,10 +68,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     """
     y = target.ravel()
     n_rows = len(y)
-    # every fourth of 16 contiguous blocks: on trajectories, interleaved samples
-    # are near copies of their neighbours and would not test generalisation
-    held = np.repeat((np.arange(len(data)) * HELDOUT_BLOCKS // len(data)) % 4 == 3, data.dof)
-    fit = ~held
+    held = row_folds(data)
     floor = ROUNDOFF * float(np.mean(data.tau**2))
     fixed = np.zeros((n_rows, 0)) if fixed is None else fixed
     F_all = {c: c.column(data, "indirect") for c in pool if c not in exclude}
@@ -101,8 +98,8 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
             if best is None:
                 continue
             c = best["candidate"]
-            before = _heldout_mse(design(accepted), y, fit, held)
-            after = _heldout_mse(design(accepted + [c]), y, fit, held)
+            before = cv_mse(design(accepted), y, held)
+            after = cv_mse(design(accepted + [c]), y, held)
             gain = (before - after) / before if before > 0 else 0.0
             t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
             ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= MIN_HELDOUT_GAIN
@@ -116,13 +113,3 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         accepted.append(chosen["candidate"])
         rss_now = chosen["rss"]
     return Selection(accepted, steps)
-
-
-def _heldout_mse(F: np.ndarray, y: np.ndarray, fit: np.ndarray, held: np.ndarray) -> float:
-    if F.shape[1] == 0:
-        return float(np.mean(y[held] ** 2))
-    coef = least_squares(F[fit], y[fit])
-    r = y[held] - F[held] @ coef
-    return float(np.mean(r**2))
-
-

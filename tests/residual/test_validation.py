@@ -1,0 +1,67 @@
+"""Held-out validation by whole recordings, and the loop's rule that a round
+which does not lower the held-out error is undone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.core.data import generate
+from bench.core.effects import EFFECTS, add_effects
+from bench.core.terms import TermLibrary
+from bench.residual import loop, residual_loop, trace
+from bench.residual.validation import BLOCKS, cv_mse, describe, folds
+from systems import get_system
+
+
+def quiet(_line):
+    pass
+
+
+def test_folds_are_whole_recordings_where_the_data_name_them_and_blocks_otherwise():
+    data = generate(get_system("double_pendulum"), 1000, 0)
+    blocks = folds(data)
+    assert len(blocks) == BLOCKS and all(b.sum() == 250 for b in blocks)
+    assert all(np.ptp(np.flatnonzero(b)) == 249 for b in blocks)  # contiguous
+    assert describe(data) == f"{BLOCKS} contiguous blocks of samples without recordings"
+    labelled = data.replace(recording=np.array(list("abc"))[np.arange(1000) % 3])
+    by_recording = folds(labelled)
+    assert [int(f.sum()) for f in by_recording] == [334, 333, 333]
+    assert all(len(set(labelled.recording[f])) == 1 for f in by_recording)
+    assert np.logical_or.reduce(by_recording).all()  # every sample held out once
+    assert describe(labelled) == "leave one recording out, over 3 recordings"
+
+
+def test_cv_mse_scores_each_fold_by_a_fit_on_the_others():
+    F = np.array([[1.0], [1.0], [1.0], [1.0]])
+    y = np.array([0.0, 0.0, 2.0, 2.0])
+    held = [np.array([True, True, False, False]), np.array([False, False, True, True])]
+    assert cv_mse(F, y, held) == pytest.approx(4.0)  # each half predicted by the other's mean
+    assert cv_mse(np.zeros((4, 0)), y, held) == pytest.approx(2.0)
+
+
+def test_an_effect_of_one_recording_is_refused_when_recordings_are_held_out():
+    # a bias on joint 1 in one of four recordings, their samples interleaved: held-out blocks
+    # each contain some of that recording and accept an offset; holding out whole recordings does not
+    data = generate(get_system("double_pendulum"), 4000, 3)
+    labels = np.array(list("abcd"))[np.arange(len(data)) % 4]
+    residual = np.zeros_like(data.tau)
+    residual[labels == "a", 0] = 0.5
+    residual += np.random.default_rng(0).normal(0, 0.01, residual.shape)
+    pool = TermLibrary([EFFECTS["offset"].term(0)])
+    assert [t.name for t in trace(residual, data, pool).accepted] == ["offset"]
+    refused = trace(residual, data.replace(recording=labels), pool)
+    assert refused.accepted == [] and refused.steps[-1]["heldout_gain"] < 0
+
+
+def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
+    s = get_system("double_pendulum")
+    train = add_effects(generate(s, 2000, 0), {"viscous_friction": (0.8, 0.5)})
+    test = add_effects(generate(s, 1000, 1), {"viscous_friction": (0.8, 0.5)})
+    calls = iter([1.0, 2.0])  # round 0, then the refitted round 1: worse
+    monkeypatch.setattr(loop, "_heldout", lambda model, data: next(calls))
+    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    assert out.effects == [] and out.mse_after == out.mse_before
+    last = out.rounds[-1]
+    assert last["stop"].startswith("undone") and last["candidate_heldout_mse"] == 2.0 and last["heldout_mse"] == 1.0
+    assert [r["heldout_mse"] for r in out.rounds] == [1.0, 1.0]
