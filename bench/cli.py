@@ -193,8 +193,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--domain-half-width", type=_positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
     d.add_argument("--effects", nargs="+", default=[], metavar="NAME=c1,...,cn",
-                   help=f"add effects the system does not declare, one coefficient per joint: {', '.join(EFFECTS)} "
-                        "(e.g. viscous_friction=0.8,0.5)")
+                   help="add effects the system does not declare: one coefficient per joint for "
+                        f"{', '.join(n for n, e in EFFECTS.items() if e.arity == 1)} (e.g. viscous_friction=0.8,0.5); "
+                        f"i-j:c items for {', '.join(n for n, e in EFFECTS.items() if e.arity == 2)} on the "
+                        "difference of coordinates i and j (e.g. coupled_spring=1-2:3.0)")
     d.add_argument("--noise", type=_noise_level, default=0.0,
                    help="Gaussian noise on tau as a fraction of each joint's torque std (default 0)")
 
@@ -400,7 +402,9 @@ def cmd_residual(args) -> int:
     print(f"torque MSE before: train {b['train']:.4g}, test {_maybe(b['test'])}; after: train {a['train']:.4g}, test {_maybe(a['test'])}")
     for e in result.effects:
         what = e.get("expression") or e["name"]
-        print(f"  {what} on joint {e['joint']}: {e['coefficient']:.6g} ± {e['stderr']:.2g}")
+        where = f"joint{'s' if len(e['joints']) > 1 else ''} {'-'.join(map(str, e['joints']))}"
+        params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items())
+        print(f"  {what} ({e['kind']}) on {where}: {params}")
     if not result.effects:
         print("  no effect added: nothing significant in the residual")
     return 0

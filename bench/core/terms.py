@@ -7,10 +7,13 @@ column of a design matrix. A term is either
   and its torque is ``g(f)``, through the suite's one Euler–Lagrange transform
   (``g`` is linear in ``L``, so ``L = sum_k c_k f_k`` has the torque
   ``sum_k c_k g(f_k)``); or
+* a **Rayleigh term** ``D(q, qd)``, a piece of the dissipation function:
+  its torque is ``dD/dqd`` on every joint (viscous friction ``b qd_j^2 / 2``,
+  Coulomb friction ``F |qd_j|``, a damper between two coordinates
+  ``b (qd_i - qd_j)^2 / 2``). It has no value in ``L``; or
 * a **generalized force** on one joint ``j``: an expression in
   ``q, qd, qdd`` (with ``sign`` and ``Abs`` allowed) that acts on joint
-  ``j``'s torque directly, such as friction or an offset. It has no value
-  in ``L``.
+  ``j``'s torque directly, such as an offset. It has no value in ``L``.
 
 A :class:`TermLibrary` is an ordered collection of terms; its
 :meth:`~TermLibrary.design` gives their columns in an experiment's target:
@@ -54,12 +57,16 @@ class Term:
     joint
         The joint a Lagrangian term belongs to, where it belongs to one (an
         armature of joint ``j``); for a generalized force, ``force_on``.
+    rayleigh
+        ``expr`` is a piece of the dissipation function ``D``: its torque is
+        ``dD/dqd``.
     """
 
     expr: sympy.Expr
     force_on: int | None = None
     name: str = ""
     joint: int | None = None
+    rayleigh: bool = False
 
     def __post_init__(self):
         if self.force_on is not None and self.joint is None:
@@ -73,9 +80,26 @@ class Term:
     def force(cls, expr, joint: int, name: str = "") -> "Term":
         return cls(sympy.sympify(expr), int(joint), name)
 
+    @classmethod
+    def dissipation(cls, expr, name: str = "") -> "Term":
+        """A Rayleigh term ``D(q, qd)``: torque ``dD/dqd``."""
+        return cls(sympy.sympify(expr), None, name, None, True)
+
     @property
     def is_force(self) -> bool:
-        return self.force_on is not None
+        """Whether the term acts on the torque only (a Rayleigh term or a generalized force), not in ``L``."""
+        return self.force_on is not None or self.rayleigh
+
+    @property
+    def joints(self) -> tuple[int, ...]:
+        """The joints (0-based) the term acts on: a generalized force's joint,
+        the joint a term belongs to, or else every coordinate its expression uses."""
+        if self.force_on is not None:
+            return (self.force_on,)
+        if self.joint is not None:
+            return (self.joint,)
+        found = {int(str(s).rpartition("_")[2]) - 1 for s in self.expr.free_symbols}
+        return tuple(sorted(found))
 
     @property
     def label(self) -> str:
@@ -90,6 +114,13 @@ class Term:
 
     def torque(self, data: Dataset) -> np.ndarray:
         """The term's torque per unit coefficient, shape ``(n, dof)``."""
+        if self.rayleigh:
+            out = np.zeros_like(data.tau)
+            for j in range(data.dof):
+                dD = sympy.diff(self.expr, sympy.Symbol(f"qd_{j + 1}", real=True))
+                if dD != 0:
+                    out[:, j] = _force_function(dD)(data)
+            return out
         if self.is_force:
             out = np.zeros_like(data.tau)
             out[:, self.force_on] = _force_function(self.expr)(data)

@@ -120,7 +120,8 @@ def run_learner(learner: str, setup: Setup, seed: int) -> dict:
         result = residual_loop(base, train_b, test_b, seed=seed, fitted=method, report=quiet,
                                budget_s=LOOP_BUDGET_S)
         curve += [[r["seconds"], r["mse"]["test"]] for r in result.rounds if "seconds" in r]
-        out["effects"] = [{k: e[k] for k in ("name", "joint", "coefficient", "stderr")} for e in result.effects]
+        out["effects"] = [{"name": e["name"], "joints": e["joints"], "law": e["law"], "parameters": e["parameters"]}
+                          for e in result.effects]
     else:
         spent = 0.0
         for t in setup.checkpoints[1:]:
@@ -185,7 +186,9 @@ def effects_found(results: list[dict]) -> str:
         return ""
     lines = ["| seed | effects the loop added (coefficient ± std. error) | loop time (s) |", "|---:|---|---:|"]
     for r in rs:
-        text = ", ".join(f"{e['name']} on joint {e['joint']}: {e['coefficient']:.4g} ± {e['stderr']:.2g}" for e in r["effects"]) or "none"
+        text = ", ".join(f"{e['name']} on joint{'s' if len(e['joints']) > 1 else ''} {'-'.join(map(str, e['joints']))}: "
+                         + ", ".join(f"{k} = {p['value']:.4g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items())
+                         for e in r["effects"]) or "none"
         lines.append(f"| {r['seed']} | {text} | {r['curve'][-1][0]:.1f} |")
     return "\n".join(lines)
 

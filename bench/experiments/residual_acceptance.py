@@ -55,7 +55,8 @@ def run_case(case: str, noise: float, method: str, n_train: int, n_test: int, bu
     start = time.perf_counter()
     out = residual_loop(method, train, test, budget_s=budget, report=quiet)
     want = {(name, j + 1): c for name, coefs in effects.items() for j, c in enumerate(coefs) if c}
-    found = {(e["name"], e["joint"]): e["coefficient"] for e in out.effects}
+    found = {(e["name"], e["joint"] if len(e["joints"]) == 1 else tuple(e["joints"])):
+             next(iter(e["parameters"].values()))["value"] for e in out.effects}
     errors = [abs(found[k] - c) / abs(c) for k, c in want.items() if k in found]
     return {
         "case": case, "noise": noise, "method": method, "named_right": set(found) == set(want),

@@ -2,7 +2,8 @@
 (:class:`~bench.core.terms.TermLibrary`) on one joint each.
 
 * the named effects of :mod:`bench.core.effects` on every joint (viscous and
-  Coulomb friction, armature, spring, offset);
+  Coulomb friction, armature, spring, offset) and the coupled ones on every
+  pair of coordinates (a spring or damper on their difference);
 * an open-ended library generated per joint ``j`` from the primitives
   ``q, qd, qdd, sign qd, |qd|, sin q, cos q`` of the joint and, per other
   joint ``k``, ``q_k, qd_k, qdd_k, sin(q_j - q_k), cos(q_j - q_k)``: every
@@ -77,9 +78,16 @@ def symbolic_terms(dof: int, j: int) -> TermLibrary:
 
 
 def candidates(dof: int) -> TermLibrary:
-    """Every candidate: the named effects on every joint, then the open-ended terms."""
-    named = [effect.term(j) for effect in EFFECTS.values() for j in range(dof)]
+    """Every candidate: the named effects on every joint (the coupled ones on
+    every pair), then the open-ended terms."""
+    named = [effect.term(*joints) for effect in EFFECTS.values() for joints in _placements(effect.arity, dof)]
     return TermLibrary(named + [t for j in range(dof) for t in symbolic_terms(dof, j)])
+
+
+def _placements(arity: int, dof: int) -> list[tuple[int, ...]]:
+    if arity == 1:
+        return [(j,) for j in range(dof)]
+    return [(i, j) for i in range(dof) for j in range(i + 1, dof)]
 
 
 def is_named(term: Term) -> bool:
@@ -88,15 +96,36 @@ def is_named(term: Term) -> bool:
 
 
 def label(term: Term) -> str:
-    """``"<effect or expression> on joint <j>"``, joints from 1."""
-    return f"{term.name} on joint {term.joint + 1}"
+    """``"<effect or expression> on joint <j>"`` or ``"... on joints <i>-<j>"``, joints from 1."""
+    joints = [j + 1 for j in term.joints]
+    where = f"joint {joints[0]}" if len(joints) == 1 else f"joints {'-'.join(map(str, joints))}"
+    return f"{term.name} on {where}"
+
+
+def kind(term: Term) -> str:
+    """``conservative`` (a term of ``L``), ``dissipative`` (of ``D``) or
+    ``force`` (a generalized force: an offset or an open-ended term)."""
+    if term.rayleigh:
+        return "dissipative"
+    return "force" if term.is_force else "conservative"
 
 
 def describe(term: Term, coefficient: float, stderr: float) -> dict:
-    """The JSON entry of an accepted effect: ``name``, ``joint`` (from 1),
-    ``coefficient``, ``stderr``, and ``expression`` for a symbolic one."""
-    entry = {"name": term.name if is_named(term) else "symbolic", "joint": term.joint + 1,
-             "coefficient": float(coefficient), "stderr": float(stderr)}
-    if not is_named(term):
+    """The JSON entry of an accepted effect (the README's contract): ``name``,
+    ``kind``, ``law`` (the sympy text of its term of ``L`` or ``D``, or of
+    its generalized force, with its parameter), ``joints`` (from 1),
+    ``parameters`` ``{name: {"value", "stderr"}}``; an effect on one joint
+    also keeps ``joint``, ``coefficient`` and ``stderr``, and an open-ended
+    term ``expression``."""
+    named = is_named(term)
+    parameter = EFFECTS[term.name].parameter if named else "c"
+    law = sympy.Symbol(parameter) * term.expr
+    where = {"conservative": "L += ", "dissipative": "D = "}.get(kind(term), "tau += ")
+    entry = {"name": term.name if named else "symbolic", "kind": kind(term), "law": f"{where}{law}",
+             "joints": [j + 1 for j in term.joints],
+             "parameters": {parameter: {"value": float(coefficient), "stderr": float(stderr)}}}
+    if len(term.joints) == 1:
+        entry.update(joint=term.joints[0] + 1, coefficient=float(coefficient), stderr=float(stderr))
+    if not named:
         entry["expression"] = term.name
     return entry

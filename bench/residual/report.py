@@ -58,10 +58,12 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         "",
     ]
     if result.effects:
-        lines += ["| effect | joint | coefficient | std. error |", "|---|---:|---:|---:|"]
+        lines += ["| effect | kind | law | joints | parameters (± std. error) |", "|---|---|---|---|---|"]
         for e in result.effects:
             name = f"symbolic: `{e['expression']}`" if e.get("expression") else e["name"]
-            lines.append(f"| {name} | {e['joint']} | {e['coefficient']:.6g} | {e['stderr']:.2g} |")
+            params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items())
+            joints = ", ".join(map(str, e["joints"]))
+            lines.append(f"| {name} | {e['kind']} | `{e['law']}` | {joints} | {params} |")
     else:
         lines.append("No effect added: nothing significant in the residual.")
     lines += ["", "Rounds:", ""]

@@ -28,7 +28,8 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
     t = clean.tensors()
     tau_extra = euler_lagrange_chunked(extra, t["q"], t["qd"], t["qdd"])[0].numpy()
     np.testing.assert_allclose(withfx.tau - clean.tau, tau_extra, atol=1e-12)
-    assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset"}
+    assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset",
+                            "coupled_spring", "coupled_damper"}
 
 
 @pytest.mark.parametrize(
@@ -38,6 +39,11 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
         (["viscous_friction=1"], "needs 2 finite coefficient"),
         (["viscous_friction"], "expected NAME=c1,...,c2"),
         (["spring=a,b"], "needs numbers"),
+        (["coupled_spring=1-1:2"], "two distinct joints in 1..2"),
+        (["coupled_spring=1-3:2"], "two distinct joints in 1..2"),
+        (["coupled_damper=1:2"], "i-j:c items"),
+        (["coupled_damper=1-2:x"], "i-j:c items"),
+        (["coupled_damper=1-2:inf"], "finite coefficient"),
     ],
 )
 def test_bad_effect_specs_are_refused(items, message):
@@ -50,9 +56,35 @@ def test_each_effect_is_a_term_on_its_joint():
     expected = {"viscous_friction": data.qd, "coulomb_friction": np.sign(data.qd), "armature": data.qdd,
                 "spring": data.q, "offset": np.ones_like(data.q)}
     for name, columns in expected.items():
+        assert EFFECTS[name].arity == 1
         for j in range(2):
             term = EFFECTS[name].term(j)
             assert term.name == name and term.joint == j and term.is_force == (not EFFECTS[name].conservative)
             tau = term.torque(data)
             np.testing.assert_array_equal(tau[:, j], columns[:, j])  # exact, through the transform too
             assert not tau[:, 1 - j].any()
+
+
+@pytest.mark.parametrize("name, column", [("coupled_spring", "q"), ("coupled_damper", "qd")])
+def test_a_coupled_effect_acts_on_a_coordinate_difference_with_opposite_torques(name, column):
+    data = generate(get_system("double_pendulum"), 200, 0)
+    (fx,) = parse_effects([f"{name}=1-2:2.5"], 2).values()
+    assert fx == {(0, 1): 2.5}
+    diff = getattr(data, column)[:, 0] - getattr(data, column)[:, 1]
+    tau = add_effects(data, {name: fx}).tau - data.tau
+    np.testing.assert_allclose(tau, 2.5 * np.stack([diff, -diff], axis=1), rtol=1e-12, atol=1e-12)
+    term = EFFECTS[name].term(0, 1)
+    assert term.joints == (0, 1) and term.rayleigh == (name == "coupled_damper")
+    with pytest.raises(ValueError, match="2 distinct joint"):
+        EFFECTS[name].term(1, 1)
+
+
+def test_dissipative_effects_never_produce_energy():
+    # D >= 0 with a coefficient >= 0, and the power qd . dD/dqd they take out is >= 0
+    data = generate(get_system("double_pendulum"), 500, 1)
+    for name, effect in EFFECTS.items():
+        if effect.kind != "dissipative":
+            continue
+        term = effect.term(*range(effect.arity))
+        power = np.sum(data.qd * term.torque(data), axis=1)
+        assert (power >= -1e-12).all(), name

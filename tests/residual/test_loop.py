@@ -56,6 +56,26 @@ def test_each_effect_is_named_on_its_joint_with_its_coefficient(effects):
     assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
 
 
+@pytest.mark.parametrize("method", ["sysid", "sparse"])
+@pytest.mark.parametrize("spec", ["coupled_spring=1-2:3.0", "coupled_damper=1-2:0.6"], ids=["elbow spring", "elbow damper"])
+def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec):
+    # absolute angles: the elbow's relative angle is q_1 - q_2, and its law is one term of L or D
+    from bench.core.effects import parse_effects
+
+    effects = parse_effects([spec], 2)
+    train, test = data_with(effects)
+    out = residual_loop(method, train, test, budget_s=10, report=quiet)
+    (effect,) = out.effects
+    (name, pairs), = effects.items()
+    (value,) = pairs.values()
+    assert effect["name"] == name and effect["joints"] == [1, 2] and "joint" not in effect
+    assert effect["kind"] == ("conservative" if name == "coupled_spring" else "dissipative")
+    (param,) = effect["parameters"].values()
+    assert param["value"] == pytest.approx(value, rel=0.02)
+    assert effect["law"] in ("L += -k*(q_1 - q_2)**2/2", "D = b*(qd_1 - qd_2)**2/2")
+    assert out.mse_after["test"] <= 1e-6 * out.mse_before["test"]
+
+
 def test_armature_is_found_by_sysid_whose_declared_form_cannot_absorb_it():
     # a generic library would absorb qd_1^2 / 2 into L; the declared form cannot
     train, test = data_with({"armature": (0.3, 0.0)}, n=1500)
