@@ -58,6 +58,10 @@ class Effect:
         or ``force`` (a generalized force on the joint).
     parameter
         The coefficient's name in reports (``b``, ``k``, ...).
+    nonnegative
+        Whether only a coefficient >= 0 is physical: dissipation cannot
+        produce energy, and a rotor inertia or a passive spring's stiffness
+        is not negative. An offset may have either sign.
     """
 
     name: str
@@ -66,6 +70,11 @@ class Effect:
     parameter: str
     formula: str
     arity: int = 1
+    nonnegative: bool = True
+
+    def admissible(self, coefficient: float) -> bool:
+        """Whether ``coefficient`` is physical for this effect."""
+        return coefficient >= 0 or not self.nonnegative
 
     @property
     def conservative(self) -> bool:
@@ -93,7 +102,7 @@ EFFECTS: dict[str, Effect] = {
         Effect("coulomb_friction", lambda q, qd: sympy.Abs(qd[0]), "dissipative", "F_c", "F_c·sign(qd) (D = F_c·|qd|)"),
         Effect("armature", lambda q, qd: qd[0] ** 2 / 2, "conservative", "I", "I·qdd (L += I·qd²/2)"),
         Effect("spring", lambda q, qd: -(q[0] ** 2) / 2, "conservative", "k", "k·q (L −= k·q²/2)"),
-        Effect("offset", lambda q, qd: sympy.Integer(1), "force", "tau_0", "tau_0"),
+        Effect("offset", lambda q, qd: sympy.Integer(1), "force", "tau_0", "tau_0", nonnegative=False),
         Effect("coupled_spring", lambda q, qd: -((q[0] - q[1]) ** 2) / 2, "conservative", "k",
                "k·(q_i − q_j) on i, −k·(q_i − q_j) on j (L −= k·(q_i − q_j)²/2)", 2),
         Effect("coupled_damper", lambda q, qd: (qd[0] - qd[1]) ** 2 / 2, "dissipative", "b",

@@ -95,6 +95,26 @@ def is_named(term: Term) -> bool:
     return term.name in EFFECTS
 
 
+def admissible(term: Term, coefficient: float) -> bool:
+    """Whether a named effect's coefficient is physical (:meth:`Effect.admissible`);
+    an open-ended generalized force has no sign to keep."""
+    return EFFECTS[term.name].admissible(coefficient) if is_named(term) else True
+
+
+def structural(term: Term, coefficient: float, stderr: float) -> dict:
+    """The JSON entry of a residual that only an inadmissible coefficient
+    explains: the declared form lacks this freedom. It names the term and the
+    coefficient that would be needed; the term is not added to the model."""
+    effect = EFFECTS[term.name]
+    law = sympy.Symbol(effect.parameter) * term.expr
+    where = {"conservative": "L += ", "dissipative": "D = "}.get(kind(term), "tau += ")
+    return {"name": term.name, "kind": "structural", "law": f"{where}{law}", "joints": [j + 1 for j in term.joints],
+            "parameters": {},
+            "finding": (f"the declared form lacks this freedom: the residual is explained by {where}{law} only with "
+                        f"{effect.parameter} = {coefficient:.4g} ± {stderr:.2g}, which is not physical "
+                        f"({effect.parameter} >= 0); the term is not added")}
+
+
 def label(term: Term) -> str:
     """``"<effect or expression> on joint <j>"`` or ``"... on joints <i>-<j>"``, joints from 1."""
     joints = [j + 1 for j in term.joints]

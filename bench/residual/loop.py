@@ -67,7 +67,7 @@ from bench.core.errors import UserError
 from bench.core.models import ExpressionModel, FittedModel, LinearParametricModel, ParametricModel
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
-from bench.residual.candidates import candidates, describe, label
+from bench.residual.candidates import admissible, candidates, describe, label, structural
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, bic, trace
@@ -294,6 +294,21 @@ def _prune(model: LoopModel, train: Dataset, report: Report) -> tuple[LoopModel,
     return model, removed
 
 
+def _drop_inadmissible(model: LoopModel, train: Dataset, report: Report) -> tuple[LoopModel, list[tuple]]:
+    """Drop effects whose coefficient the joint refit made impossible (a
+    negative friction, say), one at a time, refitting after each; returns
+    the model and the dropped ``(term, coefficient, stderr)``."""
+    dropped = []
+    while True:
+        bad = [i for i, (t, c) in enumerate(zip(model.effects, model.coef)) if not admissible(t, c)]
+        if not bad:
+            return model, dropped
+        i = bad[0]
+        dropped.append((model.effects[i], float(model.coef[i]), float(model.stderr[i])))
+        report(f"  dropping {label(model.effects[i])}: the joint refit gives it an impossible coefficient {model.coef[i]:.4g}")
+        model = _refit(model, train, model.effects[:i] + model.effects[i + 1:])
+
+
 def _heldout(model: LoopModel, train: Dataset) -> float:
     """The model's torque MSE on held-out data: the linear problem that
     tracing and pruning fit (:func:`_fit_problem`), cross-validated over whole
@@ -345,6 +360,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     round0["heldout_mse"] = heldout
     round0["seconds"] = round(time.perf_counter() - start, 3)
     rounds = [round0]
+    findings: dict[str, dict] = {}  # structural findings, by the term's label
     pool = candidates(train.dof)
     split = describe_validation(train)
     report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
@@ -358,6 +374,9 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
             break
         target, fixed = _fit_problem(model, train)
         selection = trace(target, train, pool, fixed, exclude=model.effects)
+        for term, c, se in selection.structural:
+            findings[label(term)] = structural(term, c, se)
+            report(f"round {k}: structural finding: {findings[label(term)]['finding']}")
         if not selection.accepted:
             rounds.append({"round": k, "mse": scores(model), "heldout_mse": heldout, "accepted": [],
                            "trace": selection.steps, "seconds": round(time.perf_counter() - start, 3)})
@@ -367,6 +386,10 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         report(f"round {k}: adding {', '.join(label(c) for c in selection.accepted)}; refitting jointly")
         candidate = _refit(model, train, effects)
         candidate, removed = _prune(candidate, train, report)
+        candidate, impossible = _drop_inadmissible(candidate, train, report)
+        for term, c, se in impossible:
+            findings[label(term)] = structural(term, c, se)
+            removed.append(label(term))
         held = _heldout(candidate, train)
         entry = {"round": k, "accepted": [label(c) for c in selection.accepted], "removed": removed,
                  "trace": selection.steps}
@@ -387,7 +410,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     expr = model.expression()
     return ResidualResult(
         system=train.system, method=method, mse_before=before, mse_after=after,
-        effects=[describe(c, a, s) for c, a, s in zip(model.effects, model.coef, model.stderr)],
+        effects=[describe(c, a, s) for c, a, s in zip(model.effects, model.coef, model.stderr)] + list(findings.values()),
         rounds=rounds, validation=split,
         mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None, lagrangian=None if expr is None else str(expr),
         seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, total_budget_s=total, seed=seed,

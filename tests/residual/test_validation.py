@@ -65,3 +65,48 @@ def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
     last = out.rounds[-1]
     assert last["stop"].startswith("undone") and last["candidate_heldout_mse"] == 2.0 and last["heldout_mse"] == 1.0
     assert [r["heldout_mse"] for r in out.rounds] == [1.0, 1.0]
+
+
+def _with_force(data, term):
+    return data.replace(tau=data.tau + term.torque(data))
+
+
+def test_a_tip_payload_under_the_rod_form_gives_no_impossible_parameter():
+    # a point mass at the tip of link 2: the rod form explains it exactly with a negative rotor inertia,
+    # which the loop reports as a structural finding instead of an armature of -0.24
+    import sympy
+
+    from bench.core.terms import Term
+
+    s = get_system("double_pendulum")
+    p = s.params
+    q1, q2, v1, v2 = sympy.symbols("q_1 q_2 qd_1 qd_2", real=True)
+    m = 0.5
+    payload = Term.lagrangian(m / 2 * (p.l1**2 * v1**2 + p.l2**2 * v2**2 + 2 * p.l1 * p.l2 * sympy.cos(q1 - q2) * v1 * v2)
+                              + m * p.g * (p.l1 * sympy.cos(q1) + p.l2 * sympy.cos(q2)))
+    train, test = _with_force(generate(s, 3000, 0), payload), _with_force(generate(s, 1500, 1000), payload)
+    out = residual_loop("sysid", train, test, budget_s=10, report=quiet)
+    for e in out.effects:
+        if e["kind"] != "structural":
+            assert all(EFFECTS[e["name"]].admissible(v["value"]) for v in e["parameters"].values()), e
+    (finding,) = [e for e in out.effects if e["kind"] == "structural"]
+    assert finding["name"] == "armature" and finding["joints"] == [1] and finding["parameters"] == {}
+    assert "lacks this freedom" in finding["finding"] and "I = -0.23" in finding["finding"]
+    assert out.mse_after["test"] <= out.mse_before["test"]
+
+
+def test_friction_the_list_cannot_express_is_never_reported_as_negative_viscous_friction():
+    import sympy
+
+    from bench.core.terms import Term
+
+    qd = sympy.Symbol("qd_1", real=True)
+    stribeck = Term.force((1.0 + sympy.exp(-(qd / 0.5) ** 2)) * sympy.sign(qd) + 0.3 * qd, 0)
+    s = get_system("double_pendulum")
+    train, test = _with_force(generate(s, 3000, 0), stribeck), _with_force(generate(s, 1500, 1000), stribeck)
+    out = residual_loop("sparse", train, test, budget_s=10, report=quiet)
+    physical = {e["name"]: e["parameters"] for e in out.effects if e["kind"] != "structural"}
+    assert physical["coulomb_friction"]["F_c"]["value"] > 0
+    assert "viscous_friction" not in physical
+    assert any(e["kind"] == "structural" and e["name"] == "viscous_friction" for e in out.effects)
+    assert out.mse_after["test"] < 0.05 * out.mse_before["test"]
