@@ -23,7 +23,17 @@ name                   kind           term per unit coefficient                 
 ``offset``             force          ``c`` on joint j                          ``c`` on joint j
 ``coupled_spring``     conservative   ``L += -(q_i - q_j)^2 / 2``               ``k (q_i - q_j)`` on i, minus on j
 ``coupled_damper``     dissipative    ``D = (qd_i - qd_j)^2 / 2``               ``b (qd_i - qd_j)`` on i, minus on j
+``stribeck``           dissipative    ``D = v_s sqrt(pi)/2 erf(|qd_j| / v_s)``  ``dF exp(-(qd_j/v_s)^2) sign(qd_j)``
 =====================  =============  ========================================  ===================================
+
+``stribeck`` is the hump of Stribeck friction at low speed, its velocity
+``v_s`` fixed in the term (:attr:`~bench.core.terms.Term.shape`) and its
+coefficient ``dF = F_s - F_c``. With Coulomb and viscous friction on the same
+joint it makes the Stribeck law (:data:`LAWS`)::
+
+    tau = (F_c + (F_s - F_c) exp(-(qd / v_s)^2)) sign(qd) + b qd,
+
+which is physical with ``F_s >= F_c >= 0``, ``v_s > 0`` and ``b >= 0``.
 
 On absolute angles, ``q_i - q_j`` is the relative angle of the joint
 between links ``i`` and ``j``: an elbow spring or damper is one coupled
@@ -62,6 +72,9 @@ class Effect:
         Whether only a coefficient >= 0 is physical: dissipation cannot
         produce energy, and a rotor inertia or a passive spring's stiffness
         is not negative. An offset may have either sign.
+    shaped
+        The name of a nonlinear parameter the term needs (``v_s``), given
+        to :meth:`term` and to ``expr`` as a third argument; ``None`` if none.
     """
 
     name: str
@@ -71,6 +84,10 @@ class Effect:
     formula: str
     arity: int = 1
     nonnegative: bool = True
+    shaped: str | None = None
+    #: for a shaped effect, ``numeric(q_j, qd_j, shape)``: its torque on its joint per unit
+    #: coefficient, in numpy (a search over the shape evaluates it often; tested equal to the term's)
+    numeric: Callable | None = None
 
     def admissible(self, coefficient: float) -> bool:
         """Whether ``coefficient`` is physical for this effect."""
@@ -80,18 +97,21 @@ class Effect:
     def conservative(self) -> bool:
         return self.kind == "conservative"
 
-    def term(self, *joints: int) -> Term:
-        """The effect on ``joints`` (0-based; two for a coupled effect) as a term."""
+    def term(self, *joints: int, shape: float | None = None) -> Term:
+        """The effect on ``joints`` (0-based; two for a coupled effect) as a
+        term; ``shape`` is the value of its nonlinear parameter, if it has one."""
         if len(joints) != self.arity or len(set(joints)) != len(joints):
             raise ValueError(f"{self.name} acts on {self.arity} distinct joint(s), got {joints}")
+        if (shape is None) != (self.shaped is None) or (shape is not None and not shape > 0):
+            raise ValueError(f"{self.name} needs {'a positive ' + self.shaped if self.shaped else 'no shape'}, got {shape}")
         q = tuple(sympy.Symbol(f"q_{j + 1}", real=True) for j in joints)
         qd = tuple(sympy.Symbol(f"qd_{j + 1}", real=True) for j in joints)
-        expr = sympy.sympify(self.expr(q, qd))
+        expr = sympy.sympify(self.expr(q, qd) if shape is None else self.expr(q, qd, sympy.Float(shape)))
         joint = joints[0] if self.arity == 1 else None
         if self.kind == "conservative":
-            return Term(expr, None, self.name, joint)
+            return Term(expr, None, self.name, joint, shape=shape)
         if self.kind == "dissipative":
-            return Term(expr, None, self.name, joint, True)
+            return Term(expr, None, self.name, joint, True, shape=shape)
         return Term.force(expr, joints[0], self.name)
 
 
@@ -107,8 +127,27 @@ EFFECTS: dict[str, Effect] = {
                "k·(q_i − q_j) on i, −k·(q_i − q_j) on j (L −= k·(q_i − q_j)²/2)", 2),
         Effect("coupled_damper", lambda q, qd: (qd[0] - qd[1]) ** 2 / 2, "dissipative", "b",
                "b·(qd_i − qd_j) on i, −b·(qd_i − qd_j) on j (D = b·(qd_i − qd_j)²/2)", 2),
+        Effect("stribeck", lambda q, qd, v: v * sympy.sqrt(sympy.pi) / 2 * sympy.erf(sympy.Abs(qd[0]) / v), "dissipative",
+               "dF", "dF·exp(−(qd/v_s)²)·sign(qd) (D = dF·v_s·√π/2·erf(|qd|/v_s))", shaped="v_s",
+               numeric=lambda q, qd, v: np.exp(-((qd / v) ** 2)) * np.sign(qd)),
     )
 }
+
+#: friction laws made of several effects on one joint: their parameters, in
+#: the order ``--effects NAME=j:p1,p2,...`` gives them
+LAWS = {"stribeck_friction": ("F_c", "F_s", "v_s", "b")}
+
+
+def stribeck_terms(joint: int, F_c: float, F_s: float, v_s: float, b: float) -> list[tuple[Term, float]]:
+    """The Stribeck law on ``joint`` as ``(term, coefficient)`` pairs: Coulomb,
+    the low-speed hump and viscous friction."""
+    return [(EFFECTS["coulomb_friction"].term(joint), F_c), (EFFECTS["stribeck"].term(joint, shape=v_s), F_s - F_c),
+            (EFFECTS["viscous_friction"].term(joint), b)]
+
+
+def stribeck_admissible(F_c: float, F_s: float, v_s: float, b: float) -> bool:
+    """``F_s >= F_c >= 0``, ``v_s > 0``, ``b >= 0``."""
+    return F_s >= F_c >= 0 and v_s > 0 and b >= 0
 
 def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict[str, dict[tuple[int, ...], float]]:
     """``["viscous_friction=0.8,0.5", "coupled_spring=1-2:3.0"]`` ->
@@ -123,8 +162,12 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
         name = name.strip()
         if not sep:
             raise ConfigError(f"{source}: expected NAME=c1,...,c{dof} or NAME=i-j:c, got {item!r}")
-        if name not in EFFECTS:
-            raise ConfigError(f"{source}: unknown effect {name!r}; known: {', '.join(EFFECTS)}")
+        known = [n for n, e in EFFECTS.items() if e.shaped is None] + list(LAWS)
+        if name not in known:
+            raise ConfigError(f"{source}: unknown effect {name!r}; known: {', '.join(known)}")
+        if name in LAWS:
+            out[name] = _parse_law(name, values, dof, source)
+            continue
         if EFFECTS[name].arity == 1:
             try:
                 coefs = tuple(float(v) for v in values.split(","))
@@ -150,6 +193,26 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
     return out
 
 
+def _parse_law(name: str, values: str, dof: int, source: str) -> dict[tuple[int], tuple[float, ...]]:
+    """``j:p1,...,pk;j:...`` -> ``{(j - 1,): (p1, ..., pk)}`` for a friction law."""
+    params = LAWS[name]
+    out = {}
+    for part in values.split(";"):
+        joint, colon, rest = part.partition(":")
+        try:
+            j, ps = int(joint) - 1, tuple(float(v) for v in rest.split(","))
+        except ValueError:
+            j, ps = -1, ()
+        if not colon or not 0 <= j < dof or len(ps) != len(params) or not all(map(math.isfinite, ps)):
+            raise ConfigError(f"{source}: {name} needs j:{','.join(params)} items (a joint in 1..{dof} and "
+                              f"{len(params)} finite numbers), ';'-separated, got {part!r}")
+        if not stribeck_admissible(*ps):
+            raise ConfigError(f"{source}: {name} on joint {j + 1} is not physical: it needs F_s >= F_c >= 0, "
+                              f"v_s > 0 and b >= 0, got {part!r}")
+        out[(j,)] = ps
+    return out
+
+
 def add_effects(data: Dataset, effects: dict) -> Dataset:
     """``data`` with the effects' torques added (and, for conservative effects,
     their terms added to ``L``); ``effects`` as :func:`parse_effects` gives
@@ -161,14 +224,18 @@ def add_effects(data: Dataset, effects: dict) -> Dataset:
                for name, coefs in effects.items()}
     for name, coefs in effects.items():
         for joints, c in coefs.items():
-            if c == 0:
-                continue
-            term = EFFECTS[name].term(*joints)
-            tau += c * term.torque(data)
-            if L is not None and not term.is_force:
-                L += c * term.value(data)
-    text = ", ".join(f"{k}=" + ",".join(f"{'-'.join(str(j + 1) for j in js)}:{c:g}" if len(js) > 1 else f"{c:g}"
-                                        for js, c in v.items()) for k, v in effects.items())
+            pairs = stribeck_terms(joints[0], *c) if name in LAWS else [(EFFECTS[name].term(*joints), c)]
+            for term, coef in pairs:
+                if coef == 0:
+                    continue
+                tau += coef * term.torque(data)
+                if L is not None and not term.is_force:
+                    L += coef * term.value(data)
+    def value(c):
+        return ",".join(f"{x:g}" for x in c) if isinstance(c, tuple) else f"{c:g}"
+
+    text = ", ".join(f"{k}=" + ",".join(f"{'-'.join(str(j + 1) for j in js)}:{value(c)}" if len(js) > 1 or k in LAWS
+                                        else value(c) for js, c in v.items()) for k, v in effects.items())
     return data.replace(tau=tau, L=L, source=f"{data.source} + undeclared {text}",
                         meta={**data.meta, "effects": {k: {"-".join(str(j + 1) for j in js): c for js, c in v.items()}
                                                        for k, v in effects.items()}})

@@ -60,6 +60,9 @@ class Term:
     rayleigh
         ``expr`` is a piece of the dissipation function ``D``: its torque is
         ``dD/dqd``.
+    shape
+        A nonlinear parameter fixed in ``expr`` (a Stribeck velocity), where
+        the term has one; its coefficient stays linear.
     """
 
     expr: sympy.Expr
@@ -67,6 +70,7 @@ class Term:
     name: str = ""
     joint: int | None = None
     rayleigh: bool = False
+    shape: float | None = None
 
     def __post_init__(self):
         if self.force_on is not None and self.joint is None:

@@ -77,10 +77,16 @@ def symbolic_terms(dof: int, j: int) -> TermLibrary:
     return TermLibrary(Term.force(e, j, text) for text, e in terms)
 
 
+#: the Stribeck velocities (rad/s, or m/s) the candidates start from; the loop refines an accepted one
+STRIBECK_GRID = (0.03, 0.1, 0.3, 1.0, 3.0)
+
+
 def candidates(dof: int) -> TermLibrary:
     """Every candidate: the named effects on every joint (the coupled ones on
-    every pair), then the open-ended terms."""
-    named = [effect.term(*joints) for effect in EFFECTS.values() for joints in _placements(effect.arity, dof)]
+    every pair; the Stribeck hump at each velocity of :data:`STRIBECK_GRID`),
+    then the open-ended terms."""
+    named = [effect.term(*joints, shape=v) for effect in EFFECTS.values() for joints in _placements(effect.arity, dof)
+             for v in (STRIBECK_GRID if effect.shaped else (None,))]
     return TermLibrary(named + [t for j in range(dof) for t in symbolic_terms(dof, j)])
 
 
@@ -116,10 +122,12 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
 
 
 def label(term: Term) -> str:
-    """``"<effect or expression> on joint <j>"`` or ``"... on joints <i>-<j>"``, joints from 1."""
+    """``"<effect or expression> on joint <j>"`` or ``"... on joints <i>-<j>"``,
+    joints from 1, with a shaped effect's parameter (``stribeck (v_s=0.3)``)."""
     joints = [j + 1 for j in term.joints]
     where = f"joint {joints[0]}" if len(joints) == 1 else f"joints {'-'.join(map(str, joints))}"
-    return f"{term.name} on {where}"
+    shape = f" ({EFFECTS[term.name].shaped}={term.shape:.4g})" if term.shape is not None else ""
+    return f"{term.name}{shape} on {where}"
 
 
 def kind(term: Term) -> str:
@@ -128,6 +136,32 @@ def kind(term: Term) -> str:
     if term.rayleigh:
         return "dissipative"
     return "force" if term.is_force else "conservative"
+
+
+def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float]) -> list[dict]:
+    """The JSON entries of the accepted effects: a Stribeck hump and the
+    Coulomb and viscous friction on its joint make one ``stribeck_friction``
+    entry with ``F_c, F_s, v_s, b`` (``F_s``'s error from those of ``F_c`` and
+    ``F_s - F_c`` as if independent; ``v_s``'s from ``shape_stderr``); every
+    other effect is one entry (:func:`describe`)."""
+    fits = {t: (float(c), float(s)) for t, c, s in zip(terms, coef, stderr)}
+    humps = {t.joint: t for t in terms if t.shape is not None and t.name == "stribeck"}
+    grouped = {t for t in terms if t.joint in humps and t.name in ("coulomb_friction", "viscous_friction", "stribeck")
+               and len(t.joints) == 1}
+    out = [describe(t, *fits[t]) for t in terms if t not in grouped]
+    for j, hump in sorted(humps.items()):
+        def part(name):
+            found = [t for t in grouped if t.name == name and t.joint == j]
+            return fits[found[0]] if found else (0.0, 0.0)
+        (F_c, se_c), (dF, se_d), (b, se_b) = part("coulomb_friction"), part("stribeck"), part("viscous_friction")
+        n = j + 1
+        law = (f"D = F_c*Abs(qd_{n}) + (F_s - F_c)*v_s*sqrt(pi)/2*erf(Abs(qd_{n})/v_s) + b*qd_{n}**2/2")
+        out.append({"name": "stribeck_friction", "kind": "dissipative", "law": law, "joints": [n],
+                    "parameters": {"F_c": {"value": F_c, "stderr": se_c},
+                                   "F_s": {"value": F_c + dF, "stderr": float((se_c**2 + se_d**2) ** 0.5)},
+                                   "v_s": {"value": float(hump.shape), "stderr": float(shape_stderr.get(hump, float("nan")))},
+                                   "b": {"value": b, "stderr": se_b}}})
+    return out
 
 
 def describe(term: Term, coefficient: float, stderr: float) -> dict:

@@ -63,14 +63,15 @@ import numpy as np
 import sympy
 
 from bench.core.data import Dataset, mse
+from bench.core.effects import EFFECTS
 from bench.core.errors import UserError
 from bench.core.models import ExpressionModel, FittedModel, LinearParametricModel, ParametricModel
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
-from bench.residual.candidates import admissible, candidates, describe, label, structural
+from bench.residual.candidates import admissible, candidates, describe_all, label, structural
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
-from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, bic, trace
+from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, SHAPE_RANGE, bic, trace
 from bench.residual.validation import cv_mse, row_folds
 from bench.residual.validation import describe as describe_validation
 from bench.runner.execute import given_data
@@ -294,6 +295,59 @@ def _prune(model: LoopModel, train: Dataset, report: Report) -> tuple[LoopModel,
     return model, removed
 
 
+def _shape_rss(model: LoopModel, train: Dataset, index: int):
+    """``rss(v)``: the residual sum of squares of the linear problem
+    (:func:`_fit_problem`) with effect ``index``'s nonlinear parameter at ``v``."""
+    target, F = _fit_problem(model, train)
+    y = target.ravel()
+    column = F.shape[1] - len(model.effects) + index
+    term = model.effects[index]
+
+    def rss(v: float) -> float:
+        torque = np.zeros((len(train), train.dof))
+        torque[:, term.joint] = EFFECTS[term.name].numeric(train.q[:, term.joint], train.qd[:, term.joint], v)
+        F[:, column] = torque.ravel()
+        return fit_statistics(F, y)[2]
+
+    return rss, len(y), F.shape[1]
+
+
+def _refine_shapes(model: LoopModel, train: Dataset, report: Report) -> LoopModel:
+    """Each shaped effect's nonlinear parameter (a Stribeck velocity) by a
+    bounded scalar search of the residual sum of squares, the linear
+    coefficients refitted at each value (variable projection), within a
+    factor of :data:`SHAPE_RANGE` of where it stands; then a joint refit."""
+    from scipy.optimize import minimize_scalar  # 0.7 s to import, like the polish's least_squares
+
+    for i, term in enumerate(model.effects):
+        if term.shape is None:
+            continue
+        rss, _, _ = _shape_rss(model, train, i)
+        lo, hi = math.log(term.shape / SHAPE_RANGE), math.log(term.shape * SHAPE_RANGE)
+        sol = minimize_scalar(lambda x: rss(math.exp(x)), bounds=(lo, hi), method="bounded", options={"xatol": 1e-10})
+        v = float(math.exp(sol.x))
+        refined = EFFECTS[term.name].term(term.joint, shape=v)
+        report(f"  {label(term)}: {EFFECTS[term.name].shaped} refined to {v:.5g}")
+        model = _refit(model, train, model.effects[:i] + [refined] + model.effects[i + 1:])
+    return model
+
+
+def _shape_stderr(model: LoopModel, train: Dataset) -> dict[Term, float]:
+    """The standard error of each shaped effect's parameter, from the
+    curvature of the residual sum of squares: ``sqrt(2 sigma^2 / rss''(v))``."""
+    out = {}
+    for i, term in enumerate(model.effects):
+        if term.shape is None:
+            continue
+        rss, n, k = _shape_rss(model, train, i)
+        v, h = term.shape, 1e-3 * term.shape
+        r0 = rss(v)
+        curvature = (rss(v + h) - 2 * r0 + rss(v - h)) / h**2
+        sigma2 = r0 / max(n - k - 1, 1)
+        out[term] = math.sqrt(2 * sigma2 / curvature) if curvature > 0 else float("inf")
+    return out
+
+
 def _drop_inadmissible(model: LoopModel, train: Dataset, report: Report) -> tuple[LoopModel, list[tuple]]:
     """Drop effects whose coefficient the joint refit made impossible (a
     negative friction, say), one at a time, refitting after each; returns
@@ -373,7 +427,12 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
             report(f"round {k}: not started, the total budget of {total:g} s is spent")
             break
         target, fixed = _fit_problem(model, train)
-        selection = trace(target, train, pool, fixed, exclude=model.effects)
+        # a nonlinear model's columns are its parameters' directions where it stands: one step a
+        # round, then the joint refit moves it, so a large step is not followed by terms that
+        # only mend the linearisation
+        steps = 1 if isinstance(model.rigid, ParametricModel) else None
+        selection = trace(target, train, pool, fixed, exclude=model.effects, max_steps=steps)
+        findings = {}  # what is left unexplained where the loop ends
         for term, c, se in selection.structural:
             findings[label(term)] = structural(term, c, se)
             report(f"round {k}: structural finding: {findings[label(term)]['finding']}")
@@ -386,6 +445,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         report(f"round {k}: adding {', '.join(label(c) for c in selection.accepted)}; refitting jointly")
         candidate = _refit(model, train, effects)
         candidate, removed = _prune(candidate, train, report)
+        candidate = _refine_shapes(candidate, train, report)
         candidate, impossible = _drop_inadmissible(candidate, train, report)
         for term, c, se in impossible:
             findings[label(term)] = structural(term, c, se)
@@ -410,7 +470,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     expr = model.expression()
     return ResidualResult(
         system=train.system, method=method, mse_before=before, mse_after=after,
-        effects=[describe(c, a, s) for c, a, s in zip(model.effects, model.coef, model.stderr)] + list(findings.values()),
+        effects=describe_all(model.effects, model.coef, model.stderr, _shape_stderr(model, train)) + list(findings.values()),
         rounds=rounds, validation=split,
         mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None, lagrangian=None if expr is None else str(expr),
         seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, total_budget_s=total, seed=seed,

@@ -27,7 +27,10 @@ A candidate is accepted only if all hold:
 Noise alone fails the first two tests: with Gaussian residuals, a useless
 column lowers ``n log RSS`` by a chi-squared(1) amount, and ``log n`` plus the
 drop of 10 asks for a chi-squared value above 20 (p < 1e-5 per candidate).
-All fits are :func:`bench.core.regression.fit_statistics`.
+A candidate is fitted beside the columns already in the design by projecting
+it off them (Frisch–Waugh–Lovell: the same coefficients, errors and residual
+as refitting the whole design, at a fraction of the cost when the design has
+a linear form's dozens of base columns).
 """
 
 from __future__ import annotations
@@ -38,6 +41,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bench.core.data import Dataset
+import scipy.linalg
+from scipy.optimize import minimize_scalar
+
+from bench.core.effects import EFFECTS
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
 from bench.residual.candidates import admissible, is_named, label
@@ -47,6 +54,8 @@ MIN_BIC_DROP = 10.0
 MIN_T = 5.0
 MIN_HELDOUT_GAIN = 0.01
 ROUNDOFF = 1e-20
+#: a shaped candidate's parameter is refined within this factor of its grid value
+SHAPE_RANGE = 4.0
 #: an admissible candidate replaces a better one with an impossible coefficient
 #: only if it removes at least this share of what that one removes
 AS_WELL = 0.9
@@ -66,7 +75,7 @@ class Selection:
 
 
 def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
-          exclude: list[Term] = ()) -> Selection:
+          exclude: list[Term] = (), max_steps: int | None = None) -> Selection:
     """Forward stepwise selection of candidates explaining ``target`` (``(n, dof)``).
 
     Each step tries the named effects first and the open-ended (symbolic)
@@ -75,6 +84,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     gravity absorbs ``sin q`` leaves ``c (q - sin q)``, which ``q^3`` also fits).
     ``fixed`` columns (the model's own terms and effects already accepted)
     stay in every fit, so a candidate that only repeats them gains nothing.
+    At most ``max_steps`` candidates (or laws) are accepted, where given.
     Returns the newly accepted candidates, per step the statistics of the
     best candidate, accepted or not, and any structural finding.
     """
@@ -85,63 +95,177 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     fixed = np.zeros((n_rows, 0)) if fixed is None else fixed
     F_all = {c: c.column(data, "indirect") for c in pool if c not in exclude}
     accepted, steps, structural = [], [], []
+    taken = {slot(t) for t in exclude}
+    steps_taken: list[dict] = []
 
     def design(cands):
         return np.column_stack([fixed] + [F_all[c][:, None] for c in cands]) if cands else fixed
 
+    def group(c: Term) -> list[Term]:
+        """A candidate with the companions its law needs: a Stribeck hump
+        comes with Coulomb and viscous friction on its joint, where those are
+        not in the model yet."""
+        if c.name != "stribeck":
+            return [c]
+        mates = [EFFECTS[n].term(c.joint) for n in ("coulomb_friction", "viscous_friction")]
+        mates = [t for t in mates if slot(t) not in taken]
+        for t in mates:
+            if t not in F_all:
+                F_all[t] = t.column(data, "indirect")
+        return mates + [c]
+
+    def refine(c: Term) -> Term:
+        """``c`` with its shape at the least residual beside the accepted columns and its companions."""
+        effect = EFFECTS[c.name]
+        mates = group(c)[:-1]
+        Qm = Q if not mates else np.hstack([Q, _basis(_off(Q, np.column_stack([F_all[t] for t in mates])))])
+        rm = y - Qm @ (Qm.T @ y)
+        rr = float(rm @ rm)
+
+        def rss(x: float) -> float:
+            column = np.zeros((len(data), data.dof))
+            column[:, c.joint] = effect.numeric(data.q[:, c.joint], data.qd[:, c.joint], math.exp(x))
+            column = _off(Qm, column.ravel())
+            cc = float(column @ column)
+            return rr - float(rm @ column) ** 2 / cc if cc > 0 else rr
+
+        bounds = (math.log(c.shape / SHAPE_RANGE), math.log(c.shape * SHAPE_RANGE))
+        x = minimize_scalar(rss, bounds=bounds, method="bounded", options={"xatol": 1e-10}).x
+        refined = effect.term(c.joint, shape=float(math.exp(x)))
+        F_all[refined] = refined.column(data, "indirect")
+        return refined
+
+    def stats(c: Term, k_now: int, rss_now: float) -> dict:
+        # Frisch-Waugh-Lovell: the group's coefficients, errors and residual are those of its
+        # columns' part orthogonal to the design, fitted to the design's residual
+        g = group(c)
+        coef, stderr, rss = _fit_beside(Q, r, np.column_stack([F_all[t] for t in g]), k_now)
+        if len(g) > 1:  # companions the data do not support leave the law (a Stribeck law without viscous friction)
+            weak = [t for t, a, e in zip(g[:-1], coef, stderr) if not abs(a) >= MIN_T * e]
+            if weak:
+                g = [t for t in g if t not in weak]
+                coef, stderr, rss = _fit_beside(Q, r, np.column_stack([F_all[t] for t in g]), k_now)
+        k_new = k_now + len(g) + (c.shape is not None)  # a shape is a parameter too
+        drop = bic(rss_now, n_rows, k_now) - bic(rss, n_rows, k_new)
+        if len(g) > 1:
+            # a law is judged by what it adds to its companions: they compete on their own as well
+            rss_mates = _fit_beside(Q, r, np.column_stack([F_all[t] for t in g[:-1]]), k_now)[2]
+            extra = bic(rss_mates, n_rows, k_new - 2) - bic(rss, n_rows, k_new)
+            drop = drop if extra > MIN_BIC_DROP else -math.inf
+        return {"candidate": c, "group": g, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]),
+                "coefs": [float(v) for v in coef[-len(g):]], "stderrs": [float(v) for v in stderr[-len(g):]], "rss": rss}
+
+    def physical(best: dict) -> tuple[Term, float, float] | None:
+        """The first member of the candidate's group with an impossible coefficient, or ``None``."""
+        for t, a, e in zip(best["group"], best["coefs"], best["stderrs"]):
+            if not admissible(t, a):
+                return t, a, e
+        return None
+
     rss_now = fit_statistics(fixed, y)[2] if fixed.shape[1] else float(y @ y)
     # the named effects first; the open-ended terms only where no named effect passes
     tiers = [[c for c in pool if is_named(c)], [c for c in pool if not is_named(c)]]
-    while True:
+    while max_steps is None or len(steps_taken) < max_steps:
         if rss_now / n_rows <= floor:
             steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
             break
         k_now = fixed.shape[1] + len(accepted)
-        chosen = inadmissible = None
+        Q = _basis(design(accepted))
+        r = y - Q @ (Q.T @ y)
+        chosen = inadmissible = before = None
         for tier in tiers:
-            ranked = []
-            for c in tier:
-                if c in exclude or c in accepted:
+            # a shaped candidate (a Stribeck velocity from a grid) stands for its best shape: the
+            # best of its slot (a physical one first) is refined, the others of that slot dropped
+            ranked = sorted((stats(c, k_now, rss_now) for c in tier if slot(c) not in taken),
+                            key=lambda b: (physical(b) is not None, -b["bic_drop"]))
+            seen, unique = set(), []
+            for best in ranked:
+                if slot(best["candidate"]) in seen:
                     continue
-                coef, stderr, rss = fit_statistics(design(accepted + [c]), y)
-                drop = bic(rss_now, n_rows, k_now) - bic(rss, n_rows, k_now + 1)
-                ranked.append({"candidate": c, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]),
-                               "rss": rss})
-            ranked.sort(key=lambda b: -b["bic_drop"])
+                seen.add(slot(best["candidate"]))
+                if best["candidate"].shape is not None and best["bic_drop"] > MIN_BIC_DROP:
+                    best = stats(refine(best["candidate"]), k_now, rss_now)
+                unique.append(best)
+            ranked = sorted(unique, key=lambda b: -b["bic_drop"])
             for best in ranked:  # the best first; past an impossible coefficient, the next best that fits as well
                 if inadmissible is not None and rss_now - best["rss"] < AS_WELL * (rss_now - inadmissible["rss"]):
                     break
-                ok, stats = _passes(best, accepted, design, y, held)
-                if ok and admissible(best["candidate"], best["coef"]):
-                    steps.append(stats)
+                if before is None:
+                    before = cv_mse(design(accepted), y, held)
+                ok, info = _passes(best, before, design, accepted, y, held)
+                impossible = physical(best)
+                if ok and impossible is None:
+                    steps.append({**info, "accepted": True})
                     chosen = best
                     break
                 if ok:
                     if inadmissible is None:
-                        steps.append({**stats, "inadmissible": True})
-                        inadmissible = best
+                        steps.append({**info, "accepted": False, "inadmissible": label(impossible[0])})
+                        inadmissible = {**best, "impossible": impossible}
                     continue
                 if inadmissible is None:
-                    steps.append(stats)  # the best candidate, rejected
+                    steps.append(info)  # the best candidate, rejected
                 break  # a weaker candidate would fail as well
             if chosen is not None or inadmissible is not None:
                 break  # an impossible coefficient is not handed to the open-ended terms to mimic
         if chosen is None:
             if inadmissible is not None:
-                structural.append((inadmissible["candidate"], inadmissible["coef"], inadmissible["stderr"]))
+                structural.append(inadmissible["impossible"])
             break
-        accepted.append(chosen["candidate"])
+        accepted.extend(chosen["group"])
+        steps_taken.append(chosen)
+        taken.update(slot(t) for t in chosen["group"])
         rss_now = chosen["rss"]
     return Selection(accepted, steps, structural)
 
 
-def _passes(best: dict, accepted: list[Term], design, y: np.ndarray, held: list[np.ndarray]) -> tuple[bool, dict]:
-    """Whether ``best`` passes the BIC, significance and held-out tests, with its statistics."""
-    c = best["candidate"]
-    before = cv_mse(design(accepted), y, held)
-    after = cv_mse(design(accepted + [c]), y, held)
+def _basis(D: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the columns of ``D`` (pivoted QR of the
+    column-scaled matrix; columns dependent to 1e-10 left out)."""
+    if D.shape[1] == 0:
+        return np.zeros((D.shape[0], 0))
+    scale = np.sqrt(np.einsum("ij,ij->j", D, D))
+    scale[scale == 0] = 1.0
+    Q, R, _ = scipy.linalg.qr(D / scale, mode="economic", pivoting=True)
+    d = np.abs(np.diag(R))
+    return Q[:, d > 1e-10 * d[0]] if d[0] > 0 else Q[:, :0]
+
+
+def _off(Q: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """``G`` less its projection on the orthonormal columns ``Q`` (twice, for accuracy)."""
+    G = G - Q @ (Q.T @ G)
+    return G - Q @ (Q.T @ G)
+
+
+def _fit_beside(Q: np.ndarray, r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Coefficients, standard errors and residual sum of squares of the
+    columns ``G`` added to a design with orthonormal basis ``Q``, residual
+    ``r`` and ``k`` columns: the fit of ``r`` on ``G``'s part orthogonal to ``Q``."""
+    G = _off(Q, G)
+    coef, *_ = np.linalg.lstsq(G, r, rcond=None)
+    res = r - G @ coef
+    rss = float(res @ res)
+    cov = np.linalg.pinv(G.T @ G) * (rss / max(len(r) - k - G.shape[1], 1))
+    return coef, np.sqrt(np.clip(np.diag(cov), 0, None)), rss
+
+
+def slot(term: Term):
+    """What a candidate occupies: a shaped effect's name and joints (one
+    Stribeck hump a joint, whatever its velocity), else the term itself."""
+    return (term.name, term.joints) if term.shape is not None else term
+
+
+def _passes(best: dict, before: float, design, accepted: list[Term], y: np.ndarray,
+            held: list[np.ndarray]) -> tuple[bool, dict]:
+    """Whether ``best`` passes the BIC, significance and held-out tests (``before``:
+    the design's held-out error without it), with its statistics."""
+    if not (best["bic_drop"] > MIN_BIC_DROP):  # the cheap test first
+        return False, {"candidate": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
+                       "coefficient": best["coef"], "accepted": False}
+    after = cv_mse(design(accepted + best["group"]), y, held)
     gain = (before - after) / before if before > 0 else 0.0
     t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
     ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= MIN_HELDOUT_GAIN
-    return ok, {"candidate": label(c), "bic_drop": best["bic_drop"], "t": t if math.isfinite(t) else None,
-                "coefficient": best["coef"], "heldout_gain": gain, "accepted": ok and admissible(c, best["coef"])}
+    info = {"candidate": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
+            "t": t if math.isfinite(t) else None, "coefficient": best["coef"], "heldout_gain": gain, "accepted": False}
+    return ok, info

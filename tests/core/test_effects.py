@@ -29,7 +29,7 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
     tau_extra = euler_lagrange_chunked(extra, t["q"], t["qd"], t["qdd"])[0].numpy()
     np.testing.assert_allclose(withfx.tau - clean.tau, tau_extra, atol=1e-12)
     assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset",
-                            "coupled_spring", "coupled_damper"}
+                            "coupled_spring", "coupled_damper", "stribeck"}
 
 
 @pytest.mark.parametrize(
@@ -44,6 +44,11 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
         (["coupled_damper=1:2"], "i-j:c items"),
         (["coupled_damper=1-2:x"], "i-j:c items"),
         (["coupled_damper=1-2:inf"], "finite coefficient"),
+        (["stribeck_friction=1:1,2,0.5"], "needs j:F_c,F_s,v_s,b items"),
+        (["stribeck_friction=3:1,2,0.5,0.1"], "a joint in 1..2"),
+        (["stribeck_friction=1:2,1,0.5,0.1"], "not physical: it needs F_s >= F_c >= 0"),
+        (["stribeck_friction=1:1,2,0,0.1"], "not physical"),
+        (["stribeck=1,2"], "unknown effect 'stribeck'"),
     ],
 )
 def test_bad_effect_specs_are_refused(items, message):
@@ -85,6 +90,24 @@ def test_dissipative_effects_never_produce_energy():
     for name, effect in EFFECTS.items():
         if effect.kind != "dissipative":
             continue
-        term = effect.term(*range(effect.arity))
+        term = effect.term(*range(effect.arity), shape=0.3 if effect.shaped else None)
         power = np.sum(data.qd * term.torque(data), axis=1)
         assert (power >= -1e-12).all(), name
+
+
+def test_the_stribeck_law_adds_its_torque_on_its_joint():
+    data = generate(get_system("double_pendulum"), 300, 0)
+    fx = parse_effects(["stribeck_friction=2:1.0,2.0,0.5,0.3"], 2)
+    tau = add_effects(data, fx).tau - data.tau
+    v = data.qd[:, 1]
+    np.testing.assert_allclose(tau[:, 1], (1.0 + np.exp(-(v / 0.5) ** 2)) * np.sign(v) + 0.3 * v, atol=1e-12)
+    assert not tau[:, 0].any()
+
+
+def test_a_shaped_effects_numeric_torque_is_its_terms():
+    data = generate(get_system("double_pendulum"), 300, 0)
+    for name, effect in EFFECTS.items():
+        if effect.shaped:
+            for v in (0.05, 0.5, 3.0):
+                tau = effect.term(1, shape=v).torque(data)
+                np.testing.assert_allclose(effect.numeric(data.q[:, 1], data.qd[:, 1], v), tau[:, 1], rtol=1e-13, atol=1e-15)

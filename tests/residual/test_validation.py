@@ -95,18 +95,38 @@ def test_a_tip_payload_under_the_rod_form_gives_no_impossible_parameter():
     assert out.mse_after["test"] <= out.mse_before["test"]
 
 
-def test_friction_the_list_cannot_express_is_never_reported_as_negative_viscous_friction():
+@pytest.mark.parametrize("method", ["sparse", "sysid"])
+def test_stribeck_friction_is_found_as_its_law_with_its_four_parameters(method):
+    from bench.core.effects import parse_effects
+
+    s = get_system("double_pendulum")
+    fx = parse_effects(["stribeck_friction=1:1.0,2.0,0.5,0.3"], 2)
+    train, test = add_effects(generate(s, 3000, 0), fx), add_effects(generate(s, 1500, 1000), fx)
+    out = residual_loop(method, train, test, budget_s=10, report=quiet)
+    (law,) = out.effects  # one entry, not a viscous term of the wrong sign and polynomials
+    assert law["name"] == "stribeck_friction" and law["kind"] == "dissipative" and law["joints"] == [1]
+    want = {"F_c": 1.0, "F_s": 2.0, "v_s": 0.5, "b": 0.3}
+    assert {k: p["value"] for k, p in law["parameters"].items()} == pytest.approx(want, rel=0.05)
+    assert out.mse_after["test"] < 1e-6 * out.mse_before["test"]
+
+
+def test_friction_outside_the_laws_is_never_reported_with_an_impossible_coefficient():
+    # a friction curve that rises with speed below 0.5 rad/s (no law here has that shape)
     import sympy
 
     from bench.core.terms import Term
 
     qd = sympy.Symbol("qd_1", real=True)
-    stribeck = Term.force((1.0 + sympy.exp(-(qd / 0.5) ** 2)) * sympy.sign(qd) + 0.3 * qd, 0)
+    rising = Term.force((1.5 - sympy.exp(-(qd / 0.5) ** 2)) * sympy.sign(qd) + 0.3 * qd, 0)
     s = get_system("double_pendulum")
-    train, test = _with_force(generate(s, 3000, 0), stribeck), _with_force(generate(s, 1500, 1000), stribeck)
+    train, test = _with_force(generate(s, 3000, 0), rising), _with_force(generate(s, 1500, 1000), rising)
     out = residual_loop("sparse", train, test, budget_s=10, report=quiet)
-    physical = {e["name"]: e["parameters"] for e in out.effects if e["kind"] != "structural"}
-    assert physical["coulomb_friction"]["F_c"]["value"] > 0
-    assert "viscous_friction" not in physical
-    assert any(e["kind"] == "structural" and e["name"] == "viscous_friction" for e in out.effects)
-    assert out.mse_after["test"] < 0.05 * out.mse_before["test"]
+    for e in out.effects:
+        if e["kind"] == "structural":
+            assert e["parameters"] == {} and "not physical" in e["finding"]
+        elif e["name"] == "stribeck_friction":
+            p = {k: v["value"] for k, v in e["parameters"].items()}
+            assert p["F_s"] >= p["F_c"] >= 0 and p["v_s"] > 0 and p["b"] >= 0
+        elif e["name"] in EFFECTS:
+            assert all(EFFECTS[e["name"]].admissible(v["value"]) for v in e["parameters"].values()), e
+    assert out.mse_after["test"] <= out.mse_before["test"]
