@@ -31,7 +31,7 @@ from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preproc
 from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance, scaling
 from bench.reporting.leaderboard import write_leaderboard
 from bench.reporting.tables import write_tables
-from bench.residual.loop import DEFAULT_TOTAL_FITS, ResidualJob, run_residual
+from bench.residual.loop import FIT_SHARE, ResidualJob, run_residual
 from bench.runner import matrix
 from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.isolation import CallFailed
@@ -206,10 +206,10 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--method", required=True, help="a method that fits torques (indirect experiment)")
     res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
-    res.add_argument("--budget", type=_positive, default=60.0, help="seconds per fit of the method (default 60)")
-    res.add_argument("--total-budget", type=_positive, default=None,
-                     help=f"seconds for the whole loop: no round starts after it, and the loop's process is killed "
-                          f"at {matrix.KILL_FACTOR} x it (default {DEFAULT_TOTAL_FITS} x --budget)")
+    res.add_argument("--budget", type=_positive, default=60.0,
+                     help=f"seconds for the whole loop (default 60): the method's fit has {FIT_SHARE:.0%} of it, no "
+                          f"round starts that would end past it, and the loop's process is killed at "
+                          f"{matrix.KILL_FACTOR} x it")
     res.add_argument("--seed", type=_seed, default=0, help="the method's seed (default 0)")
     res.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
                      help=_SET_HELP)
@@ -393,7 +393,7 @@ def cmd_residual(args) -> int:
     job = ResidualJob(
         system=args.system, method=args.method,
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
-        budget_s=args.budget, total_budget_s=args.total_budget, seed=args.seed, hyperparameters=dict(args.overrides),
+        budget_s=args.budget, seed=args.seed, hyperparameters=dict(args.overrides),
         json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
         plugins=_plugin_paths(args.plugin) + arms,
     )

@@ -52,7 +52,7 @@ from bench.core.effects import add_effects, parse_effects
 from bench.core.errors import ConfigError
 from bench.core.fileio import atomic_write, check_output, write_json
 from bench.reporting.plots import adaptation_plot, step_values
-from bench.residual.loop import DEFAULT_TOTAL_FITS, residual_loop
+from bench.residual.loop import residual_loop
 from bench.runner.isolation import run_jobs
 from bench.runner.matrix import KILL_FACTOR
 from bench.runner.progress import Report, quiet
@@ -66,8 +66,8 @@ LEARNERS = ("sysid", "mlp", "syrenets", "sysid+residual")
 HYPERPARAMETERS = {"syrenets": {"refine": False, "post_fraction": 0.0}}
 #: seeds of the switched stream are offset from the ones before it
 SWITCH_SEED_OFFSET = 500
-#: the residual loop's budget per fit of the method (its total is its default multiple of it)
-LOOP_BUDGET_S = 60.0
+#: the residual loop's whole budget
+LOOP_BUDGET_S = 120.0
 
 
 @dataclass(frozen=True)
@@ -150,7 +150,7 @@ def run(setup: Setup, seeds: list[int], workers: int, report: Report = print) ->
     killed at 1.5 x its fitting time plus its loop's total budget."""
     payloads = {f"{learner} seed={s}": {"learner": learner, "setup": asdict(setup), "seed": s}
                 for s in seeds for learner in LEARNERS}
-    limit = KILL_FACTOR * (setup.before_s + setup.checkpoints[-1] + DEFAULT_TOTAL_FITS * LOOP_BUDGET_S)
+    limit = KILL_FACTOR * (setup.before_s + setup.checkpoints[-1] + LOOP_BUDGET_S)
 
     def describe(r: dict) -> str:
         return f"before {r['before']:.3g}, at the switch {r['curve'][0][1]:.3g}, last {r['curve'][-1][1]:.3g}"

@@ -41,11 +41,16 @@ Each round:
    starting one on held-out recordings. Each round records the figure
    (``heldout_mse``).
 7. **Repeat** until a round accepts nothing, for at most :data:`MAX_ROUNDS`
-   rounds, and start no round once the total budget is spent.
+   rounds.
+
+``budget_s`` bounds the whole loop: the method's fit has
+:data:`FIT_SHARE` of it, the polish stops starting new starts at
+:data:`POLISH_SHARE`, and a round starts only if the time it is expected to
+take (the longest round so far) still fits in the budget.
 
 :func:`residual_loop` runs the loop in this process and returns a
 :class:`ResidualResult`; :func:`run_residual` runs a :class:`ResidualJob`
-through the runner, in its own process, killed at 1.5 x its total budget.
+through the runner, in its own process, killed at 1.5 x its budget.
 """
 
 from __future__ import annotations
@@ -91,8 +96,10 @@ MAX_SYMBOLIC_TERMS = 200
 MAX_SYMBOLIC_NODES = 50 * MAX_SYMBOLIC_TERMS
 #: random starts of the parametric polish, beside the method's own parameters
 POLISH_STARTS = 16
-#: the total budget, in fits of the method, when none is given
-DEFAULT_TOTAL_FITS = 20
+#: the share of the loop's budget its method's fit has
+FIT_SHARE = 0.5
+#: the polish starts no new start after this share of the loop's budget
+POLISH_SHARE = 0.75
 
 
 class LoopModel(FittedModel):
@@ -157,13 +164,16 @@ def _nonlinear_fit(rigid: ParametricModel, train: Dataset, effects: list[Term], 
     return LoopModel(rigid.with_parameters(sol.x[:p]), effects, sol.x[p:], stderr[p:])
 
 
-def _polish(rigid: ParametricModel, train: Dataset, seed: int) -> LoopModel:
+def _polish(rigid: ParametricModel, train: Dataset, seed: int, deadline: float = math.inf) -> LoopModel:
     """Nonlinear least squares from the method's parameters and from
-    :data:`POLISH_STARTS` log-uniform starts in [0.01, 10]; the best fit is kept."""
+    :data:`POLISH_STARTS` log-uniform starts in [0.01, 10]; the best fit is
+    kept. No start begins after ``deadline`` (``time.perf_counter()``) but the first."""
     rng = np.random.default_rng([seed, 0x706F6C])
     starts = [rigid.theta] + [10 ** rng.uniform(-2, 1, len(rigid.theta)) for _ in range(POLISH_STARTS)]
     best, best_rss = None, math.inf
-    for theta in starts:
+    for i, theta in enumerate(starts):
+        if i and time.perf_counter() > deadline:
+            break
         try:
             fit = _nonlinear_fit(rigid.with_parameters(theta), train, [], [])
         except (ValueError, np.linalg.LinAlgError):  # a start where the form is not finite
@@ -372,22 +382,23 @@ def _heldout(model: LoopModel, train: Dataset) -> float:
 
 
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float = 60.0, seed: int = 0,
-                  hyperparameters: dict | None = None, report: Report = print, fitted: FittedModel | None = None,
-                  total_budget_s: float | None = None) -> ResidualResult:
+                  hyperparameters: dict | None = None, report: Report = print,
+                  fitted: FittedModel | None = None) -> ResidualResult:
     """Run the loop in this process; see the module docstring.
 
-    ``budget_s`` is each fit of the method's budget; no round starts once
-    ``total_budget_s`` (default :data:`DEFAULT_TOTAL_FITS` x ``budget_s``)
-    has passed. ``fitted`` is an already fitted instance of ``method`` to
-    start from instead of round 0's fit (for instance a model fitted before
-    the system changed). Each round records ``seconds``, the time since the
-    loop began.
+    ``budget_s`` bounds the whole loop (its method's fit has
+    :data:`FIT_SHARE` of it). ``fitted`` is an already fitted instance of
+    ``method`` to start from instead of round 0's fit (for instance a model
+    fitted before the system changed). Each round records ``seconds``, the
+    time since the loop began.
     """
-    fitter = _Fitter(method, seed, budget_s, dict(hyperparameters or {}))
-    total = DEFAULT_TOTAL_FITS * budget_s if total_budget_s is None else total_budget_s
+    fit_budget = FIT_SHARE * budget_s
+    fitter = _Fitter(method, seed, fit_budget, dict(hyperparameters or {}))
+    total = budget_s
     start = time.perf_counter()
     if fitted is None:
-        report(f"round 0: fitting {method} on {len(train)} samples with the declared model only ({budget_s:g} s)")
+        report(f"round 0: fitting {method} on {len(train)} samples with the declared model only "
+               f"({fit_budget:g} s of the loop's {budget_s:g} s)")
         fitted = fitter.fit(train)
     else:
         report(f"round 0: starting from the given {method} fit")
@@ -404,7 +415,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     elif parametric is not None:
         # polish the parameters, so that an optimiser's shortfall is not taken for an effect
         round0["method_mse"] = scores(model)
-        model = _polish(parametric, train, seed)
+        model = _polish(parametric, train, seed, deadline=start + POLISH_SHARE * budget_s)
         report(f"round 0: {method}'s parameters polished by nonlinear least squares "
                f"(train MSE {round0['method_mse']['train']:.4g} -> {scores(model)['train']:.4g})")
     first = model
@@ -419,12 +430,14 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     split = describe_validation(train)
     report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
            f"held out ({split}) {heldout:.4g}")
+    longest = 0.0  # the longest round so far
     for k in range(1, MAX_ROUNDS + 1):
-        if time.perf_counter() - start >= total:
+        began = time.perf_counter()
+        if began - start + longest >= total:
             rounds.append({"round": k, "mse": scores(model), "heldout_mse": heldout, "accepted": [], "trace": [],
-                           "stop": f"the total budget of {total:g} s is spent",
+                           "stop": f"the budget of {total:g} s would be spent before a round ended",
                            "seconds": round(time.perf_counter() - start, 3)})
-            report(f"round {k}: not started, the total budget of {total:g} s is spent")
+            report(f"round {k}: not started, the budget of {total:g} s would be spent before it ended")
             break
         target, fixed = _fit_problem(model, train)
         # a nonlinear model's columns are its parameters' directions where it stands: one step a
@@ -462,6 +475,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         model, heldout = candidate, held
         s = scores(model)
         rounds.append({**entry, "mse": s, "heldout_mse": held, "seconds": round(time.perf_counter() - start, 3)})
+        longest = max(longest, time.perf_counter() - began)
         if not set(label(c) for c in selection.accepted) - set(removed):
             report(f"round {k}: every effect it added became redundant; stopping")
             break
@@ -473,7 +487,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         effects=describe_all(model.effects, model.coef, model.stderr, _shape_stderr(model, train)) + list(findings.values()),
         rounds=rounds, validation=split,
         mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None, lagrangian=None if expr is None else str(expr),
-        seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, total_budget_s=total, seed=seed,
+        seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, fit_budget_s=fit_budget, seed=seed,
         train_source=train.source, test_source=None if test is None else test.source,
         provenance=provenance(), models=(first, model),
     )
@@ -499,7 +513,6 @@ class ResidualJob:
     train_path: str | None = None
     test_path: str | None = None
     budget_s: float = 60.0
-    total_budget_s: float | None = None
     seed: int = 0
     hyperparameters: dict = field(default_factory=dict)
     json_path: str | None = None
@@ -508,7 +521,7 @@ class ResidualJob:
 
     @property
     def total(self) -> float:
-        return DEFAULT_TOTAL_FITS * self.budget_s if self.total_budget_s is None else self.total_budget_s
+        return self.budget_s
 
     def data(self) -> tuple[Dataset, Dataset | None]:
         data = given_data(SYSTEMS[self.system](), self.train_path, self.test_path)
@@ -521,7 +534,7 @@ class ResidualJob:
         import_plugins(self.plugins)
         train, test = self.data()
         result = residual_loop(self.method, train, test, budget_s=self.budget_s, seed=self.seed,
-                               hyperparameters=self.hyperparameters, report=report, total_budget_s=self.total)
+                               hyperparameters=self.hyperparameters, report=report)
         write_outputs(result, train, test, self.json_path, self.report_path)
         return result
 
@@ -548,7 +561,7 @@ def run_residual(job: ResidualJob, report: Report = print_now) -> ResidualResult
         call = Call("bench.residual.loop:run_payload", dataclasses.asdict(job))
         outcome = run_call(call, result_file, work, "residual", {"loop": KILL_FACTOR * job.total}, echo=report)
     if outcome.killed:
-        raise CallFailed(f"the residual loop was still running at {KILL_FACTOR} x its total budget of {job.total:g} s; killed")
+        raise CallFailed(f"the residual loop was still running at {KILL_FACTOR} x its budget of {job.total:g} s; killed")
     if outcome.result is None:
         raise CallFailed(f"the residual loop's process exited with code {outcome.exit_code}: {outcome.log_tail}")
     if "user_error" in outcome.result:

@@ -29,7 +29,7 @@ class ResidualResult:
     lagrangian: str | None
     seconds: float
     budget_s: float
-    total_budget_s: float | None
+    fit_budget_s: float | None
     seed: int
     train_source: str
     test_source: str | None

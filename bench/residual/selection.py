@@ -21,8 +21,10 @@ A candidate is accepted only if all hold:
   candidate of a step passes the other tests with an impossible coefficient,
   the best admissible one that passes them and fits as well (removes at
   least :data:`AS_WELL` of the residual sum of squares the best removes) is
-  taken instead; where none does, the step ends the selection with a *structural finding*: the
-  declared form lacks this freedom, and no term is added for it.
+  taken instead; where none does, the step makes a *structural finding*: the
+  declared form lacks this freedom, and no term is added for it. The
+  finding's column stays in the later steps' fits (and in no model), so no
+  admissible term is accepted for mimicking it, while other effects still can be.
 
 Noise alone fails the first two tests: with Gaussian residuals, a useless
 column lowers ``n log RSS`` by a chi-squared(1) amount, and ``log n`` plus the
@@ -98,7 +100,10 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     taken = {slot(t) for t in exclude}
     steps_taken: list[dict] = []
 
+    nuisance: list[Term] = []  # what structural findings explain: in every later fit, in no model
+
     def design(cands):
+        cands = nuisance + list(cands)
         return np.column_stack([fixed] + [F_all[c][:, None] for c in cands]) if cands else fixed
 
     def group(c: Term) -> list[Term]:
@@ -169,7 +174,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         if rss_now / n_rows <= floor:
             steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
             break
-        k_now = fixed.shape[1] + len(accepted)
+        k_now = fixed.shape[1] + len(nuisance) + len(accepted)
         Q = _basis(design(accepted))
         r = y - Q @ (Q.T @ y)
         chosen = inadmissible = before = None
@@ -209,9 +214,15 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
             if chosen is not None or inadmissible is not None:
                 break  # an impossible coefficient is not handed to the open-ended terms to mimic
         if chosen is None:
-            if inadmissible is not None:
-                structural.append(inadmissible["impossible"])
-            break
+            if inadmissible is None:
+                break
+            # the finding explains its share of the residual, so that no admissible term mimics it;
+            # the selection goes on for what else is there
+            structural.append(inadmissible["impossible"])
+            nuisance.extend(inadmissible["group"])
+            taken.update(slot(t) for t in inadmissible["group"])
+            rss_now = inadmissible["rss"]
+            continue
         accepted.extend(chosen["group"])
         steps_taken.append(chosen)
         taken.update(slot(t) for t in chosen["group"])
