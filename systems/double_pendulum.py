@@ -37,6 +37,7 @@ class DoublePendulumParams:
 @SYSTEMS.add("double_pendulum", "simulated", "paper")
 class DoublePendulum(System):
     coordinates = ("theta1", "theta2")
+    absolute_angles = True
     Params = DoublePendulumParams
     sysid_unknowns = ("m1", "l1", "m2", "l2")
 

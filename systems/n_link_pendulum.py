@@ -38,6 +38,7 @@ def n_link_pendulum(n: int) -> type[System]:
 
     class NLinkPendulum(System):
         coordinates = tuple(f"theta{i}" for i in range(1, n + 1))
+        absolute_angles = True
         sysid_unknowns = tuple(f"m{i}" for i in range(1, n + 1)) + tuple(f"l{i}" for i in range(1, n + 1))
 
         def lagrangian_expr(self, q, qd, p):

@@ -23,10 +23,13 @@ name                   kind           term per unit coefficient                 
 ``offset``             force          ``c`` on joint j                          ``c`` on joint j
 ``coupled_spring``     conservative   ``L += -(q_i - q_j)^2 / 2``               ``k (q_i - q_j)`` on i, minus on j
 ``coupled_damper``     dissipative    ``D = (qd_i - qd_j)^2 / 2``               ``b (qd_i - qd_j)`` on i, minus on j
+``smooth_coulomb``     dissipative    ``D = v_s log cosh(qd_j / v_s)``          ``F_c tanh(qd_j / v_s)``
 ``stribeck``           dissipative    ``D = v_s sqrt(pi)/2 erf(|qd_j| / v_s)``  ``dF exp(-(qd_j/v_s)^2) sign(qd_j)``
 =====================  =============  ========================================  ===================================
 
-``stribeck`` is the hump of Stribeck friction at low speed, its velocity
+``smooth_coulomb`` is Coulomb friction that reaches its level over a
+velocity ``v_s`` (a recording's low-pass filter, or a real drive's
+compliance, rounds the sign function off); ``stribeck`` is the hump of Stribeck friction at low speed, its velocity
 ``v_s`` fixed in the term (:attr:`~bench.core.terms.Term.shape`) and its
 coefficient ``dF = F_s - F_c``. With Coulomb and viscous friction on the same
 joint it makes the Stribeck law (:data:`LAWS`)::
@@ -127,6 +130,9 @@ EFFECTS: dict[str, Effect] = {
                "k·(q_i − q_j) on i, −k·(q_i − q_j) on j (L −= k·(q_i − q_j)²/2)", 2),
         Effect("coupled_damper", lambda q, qd: (qd[0] - qd[1]) ** 2 / 2, "dissipative", "b",
                "b·(qd_i − qd_j) on i, −b·(qd_i − qd_j) on j (D = b·(qd_i − qd_j)²/2)", 2),
+        Effect("smooth_coulomb", lambda q, qd, v: v * sympy.log(sympy.cosh(qd[0] / v)), "dissipative", "F_c",
+               "F_c·tanh(qd/v_s) (D = F_c·v_s·log cosh(qd/v_s))", shaped="v_s",
+               numeric=lambda q, qd, v: np.tanh(qd / v)),
         Effect("stribeck", lambda q, qd, v: v * sympy.sqrt(sympy.pi) / 2 * sympy.erf(sympy.Abs(qd[0]) / v), "dissipative",
                "dF", "dF·exp(−(qd/v_s)²)·sign(qd) (D = dF·v_s·√π/2·erf(|qd|/v_s))", shaped="v_s",
                numeric=lambda q, qd, v: np.exp(-((qd / v) ** 2)) * np.sign(qd)),

@@ -168,6 +168,11 @@ class System(abc.ABC):
     #: "angle" or "linear" per coordinate (libraries use trigonometric terms of
     #: angles and polynomials of linear coordinates); all angles if empty
     coordinate_kinds: ClassVar[tuple[str, ...]] = ()
+    #: whether the coordinates are absolute angles of the links (from one fixed
+    #: direction), so that a joint between links i and j turns by ``q_i - q_j``
+    #: and a spring or damper there acts on that difference; joint angles that
+    #: are already relative (a robot's, DFKI's ``q2_relative``) are not
+    absolute_angles: ClassVar[bool] = False
     Params: ClassVar[type] = type(None)
     sysid_unknowns: ClassVar[tuple[str, ...]] = ()
     default_domain: ClassVar[Domain] = Domain()

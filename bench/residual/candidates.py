@@ -81,12 +81,13 @@ def symbolic_terms(dof: int, j: int) -> TermLibrary:
 STRIBECK_GRID = (0.03, 0.1, 0.3, 1.0, 3.0)
 
 
-def candidates(dof: int) -> TermLibrary:
+def candidates(dof: int, coupled: bool = True) -> TermLibrary:
     """Every candidate: the named effects on every joint (the coupled ones on
-    every pair; the Stribeck hump at each velocity of :data:`STRIBECK_GRID`),
-    then the open-ended terms."""
-    named = [effect.term(*joints, shape=v) for effect in EFFECTS.values() for joints in _placements(effect.arity, dof)
-             for v in (STRIBECK_GRID if effect.shaped else (None,))]
+    every pair, where ``coupled``: the coordinates are absolute angles; the
+    shaped ones at each velocity of :data:`STRIBECK_GRID`), then the
+    open-ended terms."""
+    named = [effect.term(*joints, shape=v) for effect in EFFECTS.values() if coupled or effect.arity == 1
+             for joints in _placements(effect.arity, dof) for v in (STRIBECK_GRID if effect.shaped else (None,))]
     return TermLibrary(named + [t for j in range(dof) for t in symbolic_terms(dof, j)])
 
 
@@ -148,7 +149,17 @@ def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float
     humps = {t.joint: t for t in terms if t.shape is not None and t.name == "stribeck"}
     grouped = {t for t in terms if t.joint in humps and t.name in ("coulomb_friction", "viscous_friction", "stribeck")
                and len(t.joints) == 1}
-    out = [describe(t, *fits[t]) for t in terms if t not in grouped]
+    out = []
+    for t in terms:
+        if t in grouped:
+            continue
+        entry = describe(t, *fits[t])
+        if t.shape is not None:  # a shaped law on its own: its shape is a parameter too
+            entry["parameters"][EFFECTS[t.name].shaped] = {"value": float(t.shape),
+                                                           "stderr": float(shape_stderr.get(t, float("nan")))}
+            for key in ("joint", "coefficient", "stderr"):
+                entry.pop(key, None)
+        out.append(entry)
     for j, hump in sorted(humps.items()):
         def part(name):
             found = [t for t in grouped if t.name == name and t.joint == j]

@@ -426,7 +426,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     round0["seconds"] = round(time.perf_counter() - start, 3)
     rounds = [round0]
     findings: dict[str, dict] = {}  # structural findings, by the term's label
-    pool = candidates(train.dof)
+    system = SYSTEMS[train.system] if train.system in SYSTEMS else None
+    pool = candidates(train.dof, coupled=bool(getattr(system, "absolute_angles", False)))
     split = describe_validation(train)
     report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
            f"held out ({split}) {heldout:.4g}")

@@ -58,6 +58,8 @@ MIN_HELDOUT_GAIN = 0.01
 ROUNDOFF = 1e-20
 #: a shaped candidate's parameter is refined within this factor of its grid value
 SHAPE_RANGE = 4.0
+#: candidates tried a step, best first, past ones that fail on significance or held-out error
+MAX_TRIES = 8
 #: an admissible candidate replaces a better one with an impossible coefficient
 #: only if it removes at least this share of what that one removes
 AS_WELL = 0.9
@@ -167,16 +169,16 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                 return t, a, e
         return None
 
-    rss_now = fit_statistics(fixed, y)[2] if fixed.shape[1] else float(y @ y)
     # the named effects first; the open-ended terms only where no named effect passes
     tiers = [[c for c in pool if is_named(c)], [c for c in pool if not is_named(c)]]
     while max_steps is None or len(steps_taken) < max_steps:
-        if rss_now / n_rows <= floor:
-            steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
-            break
         k_now = fixed.shape[1] + len(nuisance) + len(accepted)
         Q = _basis(design(accepted))
         r = y - Q @ (Q.T @ y)
+        rss_now = float(r @ r)
+        if rss_now / n_rows <= floor:
+            steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
+            break
         chosen = inadmissible = before = None
         for tier in tiers:
             # a shaped candidate (a Stribeck velocity from a grid) stands for its best shape: the
@@ -192,6 +194,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                     best = stats(refine(best["candidate"]), k_now, rss_now)
                 unique.append(best)
             ranked = sorted(unique, key=lambda b: -b["bic_drop"])
+            tried = 0
             for best in ranked:  # the best first; past an impossible coefficient, the next best that fits as well
                 if inadmissible is not None and rss_now - best["rss"] < AS_WELL * (rss_now - inadmissible["rss"]):
                     break
@@ -208,9 +211,11 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                         steps.append({**info, "accepted": False, "inadmissible": label(impossible[0])})
                         inadmissible = {**best, "impossible": impossible}
                     continue
-                if inadmissible is None:
+                if inadmissible is None and not tried:
                     steps.append(info)  # the best candidate, rejected
-                break  # a weaker candidate would fail as well
+                tried += 1
+                if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
+                    break  # weaker candidates explain less still
             if chosen is not None or inadmissible is not None:
                 break  # an impossible coefficient is not handed to the open-ended terms to mimic
         if chosen is None:
@@ -219,9 +224,9 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
             # the finding explains its share of the residual, so that no admissible term mimics it;
             # the selection goes on for what else is there
             structural.append(inadmissible["impossible"])
-            nuisance.extend(inadmissible["group"])
-            taken.update(slot(t) for t in inadmissible["group"])
-            rss_now = inadmissible["rss"]
+            wrong = inadmissible["impossible"][0]
+            nuisance.append(wrong)  # its companions (a law's Coulomb part, say) stay candidates
+            taken.add(slot(wrong))
             continue
         accepted.extend(chosen["group"])
         steps_taken.append(chosen)

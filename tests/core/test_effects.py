@@ -29,7 +29,7 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
     tau_extra = euler_lagrange_chunked(extra, t["q"], t["qd"], t["qdd"])[0].numpy()
     np.testing.assert_allclose(withfx.tau - clean.tau, tau_extra, atol=1e-12)
     assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset",
-                            "coupled_spring", "coupled_damper", "stribeck"}
+                            "coupled_spring", "coupled_damper", "smooth_coulomb", "stribeck"}
 
 
 @pytest.mark.parametrize(

@@ -85,7 +85,7 @@ def test_a_tip_payload_under_the_rod_form_gives_no_impossible_parameter():
     payload = Term.lagrangian(m / 2 * (p.l1**2 * v1**2 + p.l2**2 * v2**2 + 2 * p.l1 * p.l2 * sympy.cos(q1 - q2) * v1 * v2)
                               + m * p.g * (p.l1 * sympy.cos(q1) + p.l2 * sympy.cos(q2)))
     train, test = _with_force(generate(s, 3000, 0), payload), _with_force(generate(s, 1500, 1000), payload)
-    out = residual_loop("sysid", train, test, budget_s=12, report=quiet)
+    out = residual_loop("sysid", train, test, budget_s=20, report=quiet)
     for e in out.effects:
         if e["kind"] != "structural":
             assert all(EFFECTS[e["name"]].admissible(v["value"]) for v in e["parameters"].values()), e
@@ -102,7 +102,7 @@ def test_stribeck_friction_is_found_as_its_law_with_its_four_parameters(method):
     s = get_system("double_pendulum")
     fx = parse_effects(["stribeck_friction=1:1.0,2.0,0.5,0.3"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx), add_effects(generate(s, 1500, 1000), fx)
-    out = residual_loop(method, train, test, budget_s=12, report=quiet)
+    out = residual_loop(method, train, test, budget_s=20, report=quiet)
     (law,) = out.effects  # one entry, not a viscous term of the wrong sign and polynomials
     assert law["name"] == "stribeck_friction" and law["kind"] == "dissipative" and law["joints"] == [1]
     want = {"F_c": 1.0, "F_s": 2.0, "v_s": 0.5, "b": 0.3}
