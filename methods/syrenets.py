@@ -670,6 +670,12 @@ class SyReNets(TorchLagrangianMethod):
             syms += list(symbolic.acceleration_symbols(self.dof))
         return syms
 
+    def expression_terms_bound(self) -> int:
+        """The candidates of a layer to the power of the layers: pushing the
+        frozen model through sympy takes minutes, so callers that only need
+        a small expression ask this first."""
+        return int(self.model.spec.size) ** len(self.frozen)
+
     def expression(self) -> sympy.Expr:
         """The frozen model pushed through sympy, term for term (large)."""
         return self._push(self.frozen, self.model.spec)

@@ -52,6 +52,12 @@ class FittedModel(abc.ABC):
         """The Lagrangian in ``q_i, qd_i``; ``None`` for a model without one."""
         return None
 
+    def expression_terms_bound(self) -> int | None:
+        """An upper bound on the number of terms of :meth:`expression`, known
+        without building it, for a model whose expression is costly to build;
+        ``None`` where building it is cheap (it is then built and counted)."""
+        return None
+
     def readable_expression(self) -> sympy.Expr | None:
         """The expression a person should read (what records store); by default :meth:`expression`."""
         return self.expression()

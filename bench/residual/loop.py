@@ -212,6 +212,8 @@ def _terms(expr: sympy.Expr) -> tuple[sympy.Expr, ...] | None:
 def _lagrangian_columns(rigid: FittedModel, data: Dataset) -> tuple[list[sympy.Expr], np.ndarray] | None:
     """The symbolic model's terms and their torque columns; ``None`` for a
     model without an expression or with more than :data:`MAX_SYMBOLIC_TERMS` terms."""
+    if not _expression_small(rigid):
+        return None
     expr = rigid.expression()
     basis = None if expr is None else _terms(expr)
     if basis is None:
@@ -264,8 +266,17 @@ def _is_symbolic(rigid: FittedModel) -> bool:
         return True
     if isinstance(rigid, ParametricModel):
         return False
+    if not _expression_small(rigid):
+        return False
     expr = rigid.expression()
     return expr is not None and _terms(expr) is not None
+
+
+def _expression_small(rigid: FittedModel) -> bool:
+    """Whether the model's expression may be built at all: not where it says
+    its terms exceed :data:`MAX_SYMBOLIC_TERMS` (SyReNets' full equation)."""
+    bound = rigid.expression_terms_bound()
+    return bound is None or bound <= MAX_SYMBOLIC_TERMS
 
 
 def _fit_problem(model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarray]:
@@ -482,7 +493,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
             break
         report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {held:.4g}")
     after = scores(model)
-    expr = model.expression()
+    expr = model.expression() if _expression_small(model.rigid) else None
     return ResidualResult(
         system=train.system, method=method, mse_before=before, mse_after=after,
         effects=describe_all(model.effects, model.coef, model.stderr, _shape_stderr(model, train)) + list(findings.values()),
