@@ -22,7 +22,11 @@ def start_hanging_matrix(out: Path) -> subprocess.Popen:
          "--budget", "100", "--experiments", "indirect", "--n-train", "64", "--n-test", "32", "--no-rollout",
          "--workers", "1", "--out", str(out)],
         cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-        env={**os.environ, "PYTHONFAULTHANDLER": "1"})  # SIGABRT then prints every thread's stack
+        env={**os.environ, "PYTHONFAULTHANDLER": "1"},  # SIGABRT then prints every thread's stack
+        # Python turns SIGINT into KeyboardInterrupt only if SIGINT is not ignored when it starts, and
+        # a child inherits its parent's dispositions: the matrix gets the terminal's default, whatever
+        # this test process was started with
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:  # until the run is in its (endless) fit
         if any("fit" in p.read_text() for p in (out / "logs").glob("*.phase")):
@@ -76,7 +80,8 @@ def test_ctrl_c_kills_the_runs_and_records_none_of_them(tmp_path):
         code = proc.wait(timeout=20)
     except subprocess.TimeoutExpired:  # say where it hangs: the stacks of all its threads
         proc.send_signal(signal.SIGABRT)
-        raise AssertionError(f"still running 20 s after Ctrl-C; its stacks:\n{proc.communicate(timeout=20)[1]}") from None
+        raise AssertionError(f"still running 20 s after Ctrl-C (SIGINT here: {signal.getsignal(signal.SIGINT)}); "
+                             f"its stacks:\n{proc.communicate(timeout=20)[1]}") from None
     assert code == 130
     assert "interrupted" in proc.stderr.read()
     assert not list((out / "records").glob("*.json"))  # the resume will run it
