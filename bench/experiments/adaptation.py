@@ -147,7 +147,7 @@ def run_payload(payload: dict, on_phase) -> dict:
 
 def run(setup: Setup, seeds: list[int], workers: int, report: Report = print) -> list[dict]:
     """Every learner on every seed, ``workers`` processes at a time, each
-    killed at 1.5 x its fitting time plus its loop's total budget."""
+    killed at 1.5 x its fitting time plus its loop's budget."""
     payloads = {f"{learner} seed={s}": {"learner": learner, "setup": asdict(setup), "seed": s}
                 for s in seeds for learner in LEARNERS}
     limit = KILL_FACTOR * (setup.before_s + setup.checkpoints[-1] + LOOP_BUDGET_S)

@@ -114,7 +114,7 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     coefficient that would be needed; the term is not added to the model."""
     effect = EFFECTS[term.name]
     law = sympy.Symbol(effect.parameter) * term.expr
-    where = {"conservative": "L += ", "dissipative": "D = "}.get(kind(term), "tau += ")
+    where = _where(term)
     return {"name": term.name, "kind": "structural", "law": f"{where}{law}", "joints": [j + 1 for j in term.joints],
             "parameters": {},
             "finding": (f"the declared form lacks this freedom: the residual is explained by {where}{law} only with "
@@ -139,6 +139,11 @@ def kind(term: Term) -> str:
     return "force" if term.is_force else "conservative"
 
 
+def _where(term: Term) -> str:
+    """What a law's text adds to: ``L += ``, ``D = `` or ``tau += ``."""
+    return {"conservative": "L += ", "dissipative": "D = "}.get(kind(term), "tau += ")
+
+
 def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float]) -> list[dict]:
     """The JSON entries of the accepted effects: a Stribeck hump and the
     Coulomb and viscous friction on its joint make one ``stribeck_friction``
@@ -154,9 +159,14 @@ def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float
         if t in grouped:
             continue
         entry = describe(t, *fits[t])
-        if t.shape is not None:  # a shaped law on its own: its shape is a parameter too
-            entry["parameters"][EFFECTS[t.name].shaped] = {"value": float(t.shape),
-                                                           "stderr": float(shape_stderr.get(t, float("nan")))}
+        if t.shape is not None:  # a shaped law on its own: its shape is a parameter too, named in its law
+            effect = EFFECTS[t.name]
+            n = t.joint + 1
+            q, qd = (sympy.Symbol(f"q_{n}", real=True),), (sympy.Symbol(f"qd_{n}", real=True),)
+            law = sympy.Symbol(effect.parameter) * effect.expr(q, qd, sympy.Symbol(effect.shaped, positive=True))
+            entry["law"] = f"{_where(t)}{law}"
+            entry["parameters"][effect.shaped] = {"value": float(t.shape),
+                                                  "stderr": float(shape_stderr.get(t, float("nan")))}
             for key in ("joint", "coefficient", "stderr"):
                 entry.pop(key, None)
         out.append(entry)
@@ -185,8 +195,7 @@ def describe(term: Term, coefficient: float, stderr: float) -> dict:
     named = is_named(term)
     parameter = EFFECTS[term.name].parameter if named else "c"
     law = sympy.Symbol(parameter) * term.expr
-    where = {"conservative": "L += ", "dissipative": "D = "}.get(kind(term), "tau += ")
-    entry = {"name": term.name if named else "symbolic", "kind": kind(term), "law": f"{where}{law}",
+    entry = {"name": term.name if named else "symbolic", "kind": kind(term), "law": f"{_where(term)}{law}",
              "joints": [j + 1 for j in term.joints],
              "parameters": {parameter: {"value": float(coefficient), "stderr": float(stderr)}}}
     if len(term.joints) == 1:

@@ -1,8 +1,8 @@
 """The residual loop: find what a fitted model lacks, add it, refit, repeat.
 
-Each round:
+Round 0 fits; each later round traces, adds, refits and keeps or undoes:
 
-1. **Fit.** The method is fitted on the training torques (indirect
+1. **Fit** (round 0 only). The method is fitted on the training torques (indirect
    experiment) with the system's declared model only. A parametric model's
    parameters (:meth:`~bench.core.models.FittedModel.parametric`) are then
    polished by nonlinear least squares (from the method's parameters and 16
@@ -566,7 +566,7 @@ def run_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
 def run_residual(job: ResidualJob, report: Report = print_now) -> ResidualResult:
     """Run ``job`` in its own process, forked from the runner's fork server,
     showing its progress lines through ``report``; the process is killed at
-    1.5 x the job's total budget. Bad input raises :class:`UserError` with
+    1.5 x the job's budget. Bad input raises :class:`UserError` with
     the loop's one-line message."""
     with tempfile.TemporaryDirectory(prefix="bench-residual-") as work:
         result_file = Path(work) / "result.json"

@@ -48,7 +48,8 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         f"# Residual loop: {result.system}, {result.method}",
         "",
         f"Training data: `{result.train_source}`; test data: `{result.test_source}`. "
-        f"{result.budget_s:g} s per fit of the method, seed {result.seed}; {result.seconds:g} s in all.",
+        f"{result.budget_s:g} s for the loop ({result.fit_budget_s:g} s of it the method's fit), seed {result.seed}; "
+        f"{result.seconds:g} s in all. Held out: {result.validation}.",
         "",
         "| torque MSE | train | test |",
         "|---|---:|---:|",
@@ -61,7 +62,8 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         lines += ["| effect | kind | law | joints | parameters (± std. error) |", "|---|---|---|---|---|"]
         for e in result.effects:
             name = f"symbolic: `{e['expression']}`" if e.get("expression") else e["name"]
-            params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items())
+            params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items()) \
+                or e.get("finding", "")
             joints = ", ".join(map(str, e["joints"]))
             lines.append(f"| {name} | {e['kind']} | `{e['law']}` | {joints} | {params} |")
     else:
@@ -72,9 +74,14 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         removed = f"; dropped as redundant: {', '.join(r['removed'])}" if r.get("removed") else ""
         stop = f" ({r['stop']})" if r.get("stop") else ""
         last = next((t for t in reversed(r["trace"]) if "candidate" in t and not t["accepted"]), None)
-        why = (f" (best rejected: {last['candidate']}, BIC drop {last['bic_drop']:.3g}, |t| {'∞' if last['t'] is None else format(last['t'], '.3g')}, "
-               f"held-out gain {last['heldout_gain']:.2%})") if last else ""
-        lines.append(f"- round {r['round']}: test MSE {cell(r['mse']['test'])}; added {added}{removed}{stop}{why}")
+        why = ""
+        if last:
+            t, gain = last.get("t"), last.get("heldout_gain")
+            why = (f" (best rejected: {last['candidate']}, BIC drop {last['bic_drop']:.3g}"
+                   + ("" if "t" not in last else f", |t| {'∞' if t is None else format(t, '.3g')}")
+                   + ("" if gain is None else f", held-out gain {gain:.2%}") + ")")
+        held = f", held out {cell(r['heldout_mse'])}" if r.get("heldout_mse") is not None else ""
+        lines.append(f"- round {r['round']}: test MSE {cell(r['mse']['test'])}{held}; added {added}{removed}{stop}{why}")
     if plot_name:
         lines += ["", f"![residuals before and after]({plot_name})"]
     if result.lagrangian:
