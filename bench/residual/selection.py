@@ -47,7 +47,6 @@ import scipy.linalg
 from scipy.optimize import minimize_scalar
 
 from bench.core.effects import EFFECTS
-from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
 from bench.residual.candidates import admissible, is_named, label
 from bench.residual.validation import cv_mse, row_folds
