@@ -421,21 +421,15 @@ def cmd_convert(args) -> int:
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
         raise UsageError(f"two logs would be the same recording {repeated[0]!r}: give files with distinct names")
-    parts = []
-    for path in args.raw:  # every log read and checked before anything is written
-        if args.columns:
-            recording, system = read_recording(path, ColumnMap.parse(args.columns)), None
-        else:
-            recording, system = read_raw(path), "dfki_double_pendulum"
-        parts.append(preprocess(recording, spec))
-    dofs = {p["q"].shape[1] for p in parts}
-    if len(dofs) > 1:
-        raise UsageError(f"the logs have different numbers of joints ({', '.join(map(str, sorted(dofs)))})")
+    # one column map for every log, so they share their joints; each is read and checked before anything is written
+    columns = ColumnMap.parse(args.columns) if args.columns else None
+    system = None if columns else "dfki_double_pendulum"
+    parts = [preprocess(read_recording(path, columns) if columns else read_raw(path), spec) for path in args.raw]
     arrays = {k: np.concatenate([p[k] for p in parts]) for k in ("q", "qd", "qdd", "tau")}
     labels = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
     source = ", ".join(map(str, args.raw))
     write_csv(Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], None, system, source, recording=labels), args.out)
-    print(f"wrote {len(labels)} samples of {dofs.pop()} joint(s) from {len(parts)} recording(s) to {args.out} "
+    print(f"wrote {len(labels)} samples of {arrays['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
           f"({spec.describe()})")
     return 0
 

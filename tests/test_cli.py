@@ -255,6 +255,11 @@ def test_convert_names_each_log_as_a_recording(tmp_path):
     same.write_bytes(first.read_bytes())
     r = cli("convert", "--format", "dfki", str(first), str(same), "--out", str(tmp_path / "x.csv"))
     assert r.returncode == 2 and "the same recording" in r.stderr and not (tmp_path / "x.csv").exists()
+    broken = tmp_path / "broken.csv"
+    broken.write_text(_with_huge_cell(first.read_text()))
+    r = cli("convert", "--format", "dfki", str(first), str(broken), "--out", str(tmp_path / "y.csv"))
+    assert r.returncode == 2 and str(broken) in r.stderr and r.stderr.count("\n") == 1
+    assert not (tmp_path / "y.csv").exists()  # the good first log is not written alone
 
 
 def test_convert_and_residual_refuse_values_whose_square_overflows(tmp_path):

@@ -100,6 +100,14 @@ class Effect:
     def conservative(self) -> bool:
         return self.kind == "conservative"
 
+    def numeric_torque(self, data: Dataset, joint: int, shape: float) -> np.ndarray:
+        """A shaped effect's torque on ``joint`` per unit coefficient at
+        ``shape``, ``(n, dof)``, by :attr:`numeric` (what :meth:`term`'s
+        torque is, without building and compiling a term for each value)."""
+        out = np.zeros((len(data), data.dof))
+        out[:, joint] = self.numeric(data.q[:, joint], data.qd[:, joint], shape)
+        return out
+
     def term(self, *joints: int, shape: float | None = None) -> Term:
         """The effect on ``joints`` (0-based; two for a coupled effect) as a
         term; ``shape`` is the value of its nonlinear parameter, if it has one."""
@@ -114,7 +122,7 @@ class Effect:
         if self.kind == "conservative":
             return Term(expr, None, self.name, joint, shape=shape)
         if self.kind == "dissipative":
-            return Term(expr, None, self.name, joint, True, shape=shape)
+            return Term.dissipation(expr, self.name, joint, shape)
         return Term.force(expr, joints[0], self.name)
 
 

@@ -85,9 +85,9 @@ class Term:
         return cls(sympy.sympify(expr), int(joint), name)
 
     @classmethod
-    def dissipation(cls, expr, name: str = "") -> "Term":
+    def dissipation(cls, expr, name: str = "", joint: int | None = None, shape: float | None = None) -> "Term":
         """A Rayleigh term ``D(q, qd)``: torque ``dD/dqd``."""
-        return cls(sympy.sympify(expr), None, name, None, True)
+        return cls(sympy.sympify(expr), None, name, joint, True, shape)
 
     @property
     def is_force(self) -> bool:

@@ -113,11 +113,10 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     explains: the declared form lacks this freedom. It names the term and the
     coefficient that would be needed; the term is not added to the model."""
     effect = EFFECTS[term.name]
-    law = sympy.Symbol(effect.parameter) * term.expr
-    where = _where(term)
-    return {"name": term.name, "kind": "structural", "law": f"{where}{law}", "joints": [j + 1 for j in term.joints],
+    law = _law(term, effect.parameter)
+    return {"name": term.name, "kind": "structural", "law": law, "joints": [j + 1 for j in term.joints],
             "parameters": {},
-            "finding": (f"the declared form lacks this freedom: the residual is explained by {where}{law} only with "
+            "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "
                         f"{effect.parameter} = {coefficient:.4g} ± {stderr:.2g}, which is not physical "
                         f"({effect.parameter} >= 0); the term is not added")}
 
@@ -139,9 +138,11 @@ def kind(term: Term) -> str:
     return "force" if term.is_force else "conservative"
 
 
-def _where(term: Term) -> str:
-    """What a law's text adds to: ``L += ``, ``D = `` or ``tau += ``."""
-    return {"conservative": "L += ", "dissipative": "D = "}.get(kind(term), "tau += ")
+def _law(term: Term, parameter: str, expr: sympy.Expr | None = None) -> str:
+    """The text of a term's law with its parameter: ``L += ...``, ``D = ...``
+    or ``tau += ...``; ``expr`` in place of the term's own expression."""
+    where = {"conservative": "L += ", "dissipative": "D = "}.get(kind(term), "tau += ")
+    return f"{where}{sympy.Symbol(parameter) * (term.expr if expr is None else expr)}"
 
 
 def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float]) -> list[dict]:
@@ -163,8 +164,7 @@ def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float
             effect = EFFECTS[t.name]
             n = t.joint + 1
             q, qd = (sympy.Symbol(f"q_{n}", real=True),), (sympy.Symbol(f"qd_{n}", real=True),)
-            law = sympy.Symbol(effect.parameter) * effect.expr(q, qd, sympy.Symbol(effect.shaped, positive=True))
-            entry["law"] = f"{_where(t)}{law}"
+            entry["law"] = _law(t, effect.parameter, effect.expr(q, qd, sympy.Symbol(effect.shaped, positive=True)))
             entry["parameters"][effect.shaped] = {"value": float(t.shape),
                                                   "stderr": float(shape_stderr.get(t, float("nan")))}
             for key in ("joint", "coefficient", "stderr"):
@@ -194,8 +194,7 @@ def describe(term: Term, coefficient: float, stderr: float) -> dict:
     term ``expression``."""
     named = is_named(term)
     parameter = EFFECTS[term.name].parameter if named else "c"
-    law = sympy.Symbol(parameter) * term.expr
-    entry = {"name": term.name if named else "symbolic", "kind": kind(term), "law": f"{_where(term)}{law}",
+    entry = {"name": term.name if named else "symbolic", "kind": kind(term), "law": _law(term, parameter),
              "joints": [j + 1 for j in term.joints],
              "parameters": {parameter: {"value": float(coefficient), "stderr": float(stderr)}}}
     if len(term.joints) == 1:

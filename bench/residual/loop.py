@@ -76,7 +76,7 @@ from bench.core.terms import Term, TermLibrary
 from bench.residual.candidates import admissible, candidates, describe_all, label, structural
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
-from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, SHAPE_RANGE, bic, trace
+from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, best_shape, bic, trace
 from bench.residual.validation import cv_mse, row_folds
 from bench.residual.validation import describe as describe_validation
 from bench.runner.execute import given_data
@@ -325,9 +325,7 @@ def _shape_rss(model: LoopModel, train: Dataset, index: int):
     term = model.effects[index]
 
     def rss(v: float) -> float:
-        torque = np.zeros((len(train), train.dof))
-        torque[:, term.joint] = EFFECTS[term.name].numeric(train.q[:, term.joint], train.qd[:, term.joint], v)
-        F[:, column] = torque.ravel()
+        F[:, column] = EFFECTS[term.name].numeric_torque(train, term.joint, v).ravel()
         return fit_statistics(F, y)[2]
 
     return rss, len(y), F.shape[1]
@@ -336,17 +334,12 @@ def _shape_rss(model: LoopModel, train: Dataset, index: int):
 def _refine_shapes(model: LoopModel, train: Dataset, report: Report) -> LoopModel:
     """Each shaped effect's nonlinear parameter (a Stribeck velocity) by a
     bounded scalar search of the residual sum of squares, the linear
-    coefficients refitted at each value (variable projection), within a
-    factor of :data:`SHAPE_RANGE` of where it stands; then a joint refit."""
-    from scipy.optimize import minimize_scalar  # 0.7 s to import, like the polish's least_squares
-
+    coefficients refitted at each value (variable projection), near where it
+    stands (:func:`~bench.residual.selection.best_shape`); then a joint refit."""
     for i, term in enumerate(model.effects):
         if term.shape is None:
             continue
-        rss, _, _ = _shape_rss(model, train, i)
-        lo, hi = math.log(term.shape / SHAPE_RANGE), math.log(term.shape * SHAPE_RANGE)
-        sol = minimize_scalar(lambda x: rss(math.exp(x)), bounds=(lo, hi), method="bounded", options={"xatol": 1e-10})
-        v = float(math.exp(sol.x))
+        v = best_shape(_shape_rss(model, train, i)[0], term.shape)
         refined = EFFECTS[term.name].term(term.joint, shape=v)
         report(f"  {label(term)}: {EFFECTS[term.name].shaped} refined to {v:.5g}")
         model = _refit(model, train, model.effects[:i] + [refined] + model.effects[i + 1:])
@@ -405,7 +398,6 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     """
     fit_budget = FIT_SHARE * budget_s
     fitter = _Fitter(method, seed, fit_budget, dict(hyperparameters or {}))
-    total = budget_s
     start = time.perf_counter()
     if fitted is None:
         report(f"round 0: fitting {method} on {len(train)} samples with the declared model only "
@@ -445,11 +437,11 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     longest = 0.0  # the longest round so far
     for k in range(1, MAX_ROUNDS + 1):
         began = time.perf_counter()
-        if began - start + longest >= total:
+        if began - start + longest >= budget_s:
             rounds.append({"round": k, "mse": scores(model), "heldout_mse": heldout, "accepted": [], "trace": [],
-                           "stop": f"the budget of {total:g} s would be spent before a round ended",
+                           "stop": f"the budget of {budget_s:g} s would be spent before a round ended",
                            "seconds": round(time.perf_counter() - start, 3)})
-            report(f"round {k}: not started, the budget of {total:g} s would be spent before it ended")
+            report(f"round {k}: not started, the budget of {budget_s:g} s would be spent before it ended")
             break
         target, fixed = _fit_problem(model, train)
         # a nonlinear model's columns are its parameters' directions where it stands: one step a
@@ -498,7 +490,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         system=train.system, method=method, mse_before=before, mse_after=after,
         effects=describe_all(model.effects, model.coef, model.stderr, _shape_stderr(model, train)) + list(findings.values()),
         rounds=rounds, validation=split,
-        mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None, lagrangian=None if expr is None else str(expr),
+        mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None,
+        lagrangian=None if expr is None else str(expr),
         seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, fit_budget_s=fit_budget, seed=seed,
         train_source=train.source, test_source=None if test is None else test.source,
         provenance=provenance(), models=(first, model),
@@ -530,10 +523,6 @@ class ResidualJob:
     json_path: str | None = None
     report_path: str | None = None
     plugins: tuple[str, ...] = ()
-
-    @property
-    def total(self) -> float:
-        return self.budget_s
 
     def data(self) -> tuple[Dataset, Dataset | None]:
         data = given_data(SYSTEMS[self.system](), self.train_path, self.test_path)
@@ -571,9 +560,9 @@ def run_residual(job: ResidualJob, report: Report = print_now) -> ResidualResult
     with tempfile.TemporaryDirectory(prefix="bench-residual-") as work:
         result_file = Path(work) / "result.json"
         call = Call("bench.residual.loop:run_payload", dataclasses.asdict(job))
-        outcome = run_call(call, result_file, work, "residual", {"loop": KILL_FACTOR * job.total}, echo=report)
+        outcome = run_call(call, result_file, work, "residual", {"loop": KILL_FACTOR * job.budget_s}, echo=report)
     if outcome.killed:
-        raise CallFailed(f"the residual loop was still running at {KILL_FACTOR} x its budget of {job.total:g} s; killed")
+        raise CallFailed(f"the residual loop was still running at {KILL_FACTOR} x its budget of {job.budget_s:g} s; killed")
     if outcome.result is None:
         raise CallFailed(f"the residual loop's process exited with code {outcome.exit_code}: {outcome.log_tail}")
     if "user_error" in outcome.result:

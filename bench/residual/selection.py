@@ -44,7 +44,6 @@ import numpy as np
 
 from bench.core.data import Dataset
 import scipy.linalg
-from scipy.optimize import minimize_scalar
 
 from bench.core.effects import EFFECTS
 from bench.core.terms import Term, TermLibrary
@@ -128,16 +127,12 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         rm = y - Qm @ (Qm.T @ y)
         rr = float(rm @ rm)
 
-        def rss(x: float) -> float:
-            column = np.zeros((len(data), data.dof))
-            column[:, c.joint] = effect.numeric(data.q[:, c.joint], data.qd[:, c.joint], math.exp(x))
-            column = _off(Qm, column.ravel())
+        def rss(v: float) -> float:
+            column = _off(Qm, effect.numeric_torque(data, c.joint, v).ravel())
             cc = float(column @ column)
             return rr - float(rm @ column) ** 2 / cc if cc > 0 else rr
 
-        bounds = (math.log(c.shape / SHAPE_RANGE), math.log(c.shape * SHAPE_RANGE))
-        x = minimize_scalar(rss, bounds=bounds, method="bounded", options={"xatol": 1e-10}).x
-        refined = effect.term(c.joint, shape=float(math.exp(x)))
+        refined = effect.term(c.joint, shape=best_shape(rss, c.shape))
         F_all[refined] = refined.column(data, "indirect")
         return refined
 
@@ -232,6 +227,16 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         taken.update(slot(t) for t in chosen["group"])
         rss_now = chosen["rss"]
     return Selection(accepted, steps, structural)
+
+
+def best_shape(rss, shape: float) -> float:
+    """The value within a factor of :data:`SHAPE_RANGE` of ``shape`` where
+    ``rss(value)`` is least: a bounded scalar search in ``log(value)``."""
+    from scipy.optimize import minimize_scalar  # 0.3 s to import: only a shaped effect needs it
+
+    bounds = (math.log(shape / SHAPE_RANGE), math.log(shape * SHAPE_RANGE))
+    x = minimize_scalar(lambda x: rss(math.exp(x)), bounds=bounds, method="bounded", options={"xatol": 1e-10}).x
+    return float(math.exp(x))
 
 
 def _basis(D: np.ndarray) -> np.ndarray:
