@@ -190,6 +190,12 @@ class Progress:
     (at least 10 % of the elapsed time apart), which gives an even curve on
     log-time axes. The state with the lowest evaluated MSE is kept.
 
+    With a step limit the schedule counts steps instead: every step up to
+    the tenth, then at least 10 % of the steps done apart, and the last
+    step. Which states are compared then does not depend on the machine's
+    speed or load, so a step-limited run is a pure function of its seed
+    (unless the budget ends it first).
+
     Parameters
     ----------
     budget_s
@@ -231,6 +237,7 @@ class Progress:
         self.eval_seconds = 0.0
         self._last_eval_cost = 0.0
         self._next_eval = self.start
+        self._next_eval_step = 0
         self._evaluated_at = -1
         self._last_call = None
         self._step_time = 0.0
@@ -259,6 +266,7 @@ class Progress:
         now = time.perf_counter()
         gap = max(cost / self.overhead, 0.1 * (now - self.start), 1e-3)
         self._next_eval = now + gap
+        self._next_eval_step = self.steps + max(1, math.ceil(0.1 * self.steps))
         if not math.isfinite(value):
             self.stop_reason = "non-finite training loss"
         return value
@@ -277,7 +285,8 @@ class Progress:
         self._calls += 1
         if self.stop_reason:
             return False
-        if self._calls == 1 or now >= self._next_eval:
+        due = self.steps >= self._next_eval_step if self.max_steps is not None else now >= self._next_eval
+        if self._calls == 1 or due:
             self.evaluate_now()
             now = time.perf_counter()
             if self.stop_reason:

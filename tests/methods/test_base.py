@@ -87,6 +87,31 @@ def test_progress_evaluations_are_spaced():
     assert p.stop_reason == "budget"
 
 
+@pytest.mark.parametrize("max_steps", [3, 20, 500])
+def test_a_step_limited_run_evaluates_the_same_steps_at_any_speed(monkeypatch, max_steps):
+    """Which states are compared must not depend on how fast the machine is,
+    or a seed's result changes with the load (seen on a busy machine)."""
+    import methods.base
+
+    def evaluated_steps(step_seconds):
+        clock = iter(np.cumsum(step_seconds)).__next__
+        monkeypatch.setattr(methods.base.time, "perf_counter", clock)
+        seen = []
+        p = Progress(1e9, evaluate=lambda: seen.append(p.steps) or 1.0 / (1 + p.steps), snapshot=lambda: None,
+                     max_steps=max_steps)
+        while p.step():
+            pass
+        p.finish()
+        return seen, p.best_step
+
+    rng = np.random.default_rng(0)
+    fast = evaluated_steps(np.full(10_000, 1e-4))
+    loaded = evaluated_steps(rng.exponential(0.05, 10_000))
+    assert fast == loaded
+    assert fast[0][-1] == max_steps and fast[1] == max_steps
+    assert len(fast[0]) < 60  # still spaced: geometric after the tenth step
+
+
 def test_fit_rejects_bad_calls(small_data):
     train, _ = small_data
     m = METHODS["mlp"](**METHODS["mlp"].smoke_config())
