@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.core.data import Dataset, add_noise, check_experiment, generate, write_csv
-from bench.core.effects import EFFECTS, add_effects, parse_effects
+from bench.core.effects import EFFECTS, LAWS, add_effects, parse_effects
 from bench.core.errors import UserError
 from bench.core.fileio import check_output, write_json
 from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preprocess, read_recording
@@ -194,9 +194,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
     d.add_argument("--effects", nargs="+", default=[], metavar="NAME=c1,...,cn",
                    help="add effects the system does not declare: one coefficient per joint for "
-                        f"{', '.join(n for n, e in EFFECTS.items() if e.arity == 1)} (e.g. viscous_friction=0.8,0.5); "
+                        f"{', '.join(n for n, e in EFFECTS.items() if e.arity == 1 and e.shaped is None)} "
+                        "(e.g. viscous_friction=0.8,0.5); "
                         f"i-j:c items for {', '.join(n for n, e in EFFECTS.items() if e.arity == 2)} on the "
-                        "difference of coordinates i and j (e.g. coupled_spring=1-2:3.0)")
+                        "difference of coordinates i and j (e.g. coupled_spring=1-2:3.0); "
+                        f"j:{','.join(LAWS['stribeck_friction'])} items for stribeck_friction, ';'-separated; "
+                        "one number for a planar chain's tip_payload (its mass) or gravity_tilt (radians)")
     d.add_argument("--noise", type=_noise_level, default=0.0,
                    help="Gaussian noise on tau as a fraction of each joint's torque std (default 0)")
 
@@ -361,7 +364,7 @@ def cmd_data(args) -> int:
     effects = parse_effects(args.effects, system.dof) if args.effects else {}
     data = generate(system, args.n, args.seed)
     if effects:
-        data = add_effects(data, effects)
+        data = add_effects(data, effects, system)
     if args.noise:
         data = add_noise(data, "indirect", args.noise, args.seed)
     write_csv(data, args.out)

@@ -140,6 +140,7 @@ def _samples(split: str, spec: FilterSpec, filter_torque: bool) -> dict[str, np.
 @SYSTEMS.add("dfki_double_pendulum", "measured", "external")
 class DfkiDoublePendulum(System):
     coordinates = ("q1", "q2_relative")
+    planar_chain = True  # its second link's length is not given: no tip payload
     Params = DfkiParams
     sysid_unknowns = ("m1", "m2", "r1", "r2", "I1", "I2")
     simulated = False

@@ -38,6 +38,8 @@ class DoublePendulumParams:
 class DoublePendulum(System):
     coordinates = ("theta1", "theta2")
     absolute_angles = True
+    planar_chain = True
+    link_lengths = ("l1", "l2")
     Params = DoublePendulumParams
     sysid_unknowns = ("m1", "l1", "m2", "l2")
 

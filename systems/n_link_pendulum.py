@@ -39,6 +39,8 @@ def n_link_pendulum(n: int) -> type[System]:
     class NLinkPendulum(System):
         coordinates = tuple(f"theta{i}" for i in range(1, n + 1))
         absolute_angles = True
+        planar_chain = True
+        link_lengths = tuple(f"l{i}" for i in range(1, n + 1))
         sysid_unknowns = tuple(f"m{i}" for i in range(1, n + 1)) + tuple(f"l{i}" for i in range(1, n + 1))
 
         def lagrangian_expr(self, q, qd, p):

@@ -24,6 +24,8 @@ class SinglePendulumParams:
 @SYSTEMS.add("single_pendulum", "simulated")
 class SinglePendulum(System):
     coordinates = ("theta",)
+    planar_chain = True
+    link_lengths = ("l",)
     Params = SinglePendulumParams
     sysid_unknowns = ("m", "l")
 

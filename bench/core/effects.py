@@ -41,10 +41,34 @@ which is physical with ``F_s >= F_c >= 0``, ``v_s > 0`` and ``b >= 0``.
 On absolute angles, ``q_i - q_j`` is the relative angle of the joint
 between links ``i`` and ``j``: an elbow spring or damper is one coupled
 effect with one coefficient, not a spring on each joint and cross terms.
+
+Two effects belong to a whole planar chain (:attr:`System.planar_chain
+<bench.core.system.System.planar_chain>`) and are built from the system's
+own geometry and declared Lagrangian, at its parameters:
+
+=================  ============  ===========================================================
+name               kind          term per unit coefficient
+=================  ============  ===========================================================
+``tip_payload``    conservative  ``L += |v_tip|^2 / 2 - g y_tip``: a point mass ``m`` at the
+                                 end of the last link (:meth:`System.tip_position`)
+``gravity_tilt``   conservative  ``L += -sum_j s_j dL/dq_j``: gravity turned by ``alpha``
+                                 in the plane, coefficient ``sin(alpha)`` (``s`` the base
+                                 rotation, :meth:`System.tilt_direction`)
+=================  ============  ===========================================================
+
+A payload is physical with ``m >= 0`` (its mass matrix, ``m J^T J``, is
+positive semi-definite). The tilt's term is what the residual loop fits:
+turning gravity by ``alpha`` changes each gravity term ``c cos(a)`` into
+``c cos(a - alpha) = c cos(alpha) cos(a) + c sin(alpha) sin(a)``, so the
+term's coefficient is ``sin(alpha)`` and the loop reports ``alpha``; the
+``cos(alpha)`` rescaling of the gravity terms is one a fitted model already
+has (a mass or a length). The data generator adds the exact tilt,
+``L(q - alpha s, qd) - L(q, qd)``.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -91,6 +115,33 @@ class Effect:
     #: for a shaped effect, ``numeric(q_j, qd_j, shape)``: its torque on its joint per unit
     #: coefficient, in numpy (a search over the shape evaluates it often; tested equal to the term's)
     numeric: Callable | None = None
+    #: for an effect of the whole system (``arity`` 0), ``on_system(system, q, qd)``: its term per
+    #: unit coefficient in the system's symbols; ``expr`` is then unused
+    on_system: Callable | None = None
+    #: where the linear coefficient is a function of the reported parameter
+    #: (a tilt's is ``sin(alpha)``): that function, of a sympy symbol
+    coefficient_of: Callable | None = None
+
+    def parameter_from(self, coefficient: float, stderr: float) -> tuple[float, float]:
+        """The reported parameter and its standard error, from the fitted
+        linear coefficient's (through :attr:`coefficient_of`, by the delta method)."""
+        if self.coefficient_of is None:
+            return coefficient, stderr
+        x = sympy.Symbol("x")
+        f = self.coefficient_of(x)
+        try:
+            value = float(sympy.nsolve(f - coefficient, x, 0.0))
+        except (ValueError, ZeroDivisionError):  # no parameter gives this coefficient (a sine above 1)
+            return math.nan, math.inf
+        slope = float(sympy.diff(f, x).subs(x, value))
+        return value, abs(stderr / slope) if slope else math.inf
+
+    def applies_to(self, system) -> bool:
+        """Whether the effect can be placed on ``system`` (a payload needs the
+        chain's link lengths); every per-joint effect can."""
+        if self.on_system is None:
+            return True
+        return system is not None and system.planar_chain and (self.name != "tip_payload" or bool(system.link_lengths))
 
     def admissible(self, coefficient: float) -> bool:
         """Whether ``coefficient`` is physical for this effect."""
@@ -108,9 +159,15 @@ class Effect:
         out[:, joint] = self.numeric(data.q[:, joint], data.qd[:, joint], shape)
         return out
 
-    def term(self, *joints: int, shape: float | None = None) -> Term:
-        """The effect on ``joints`` (0-based; two for a coupled effect) as a
-        term; ``shape`` is the value of its nonlinear parameter, if it has one."""
+    def term(self, *joints: int, shape: float | None = None, system=None) -> Term:
+        """The effect on ``joints`` (0-based; two for a coupled effect, none
+        for an effect of the whole ``system``) as a term; ``shape`` is the
+        value of its nonlinear parameter, if it has one."""
+        if self.on_system is not None:
+            if not self.applies_to(system):
+                raise ConfigError(f"{self.name} needs a planar chain that gives its geometry; "
+                                  f"{getattr(system, 'name', system)} does not")
+            return Term(sympy.expand(self.on_system(system, *system.symbols)), None, self.name)
         if len(joints) != self.arity or len(set(joints)) != len(joints):
             raise ValueError(f"{self.name} acts on {self.arity} distinct joint(s), got {joints}")
         if (shape is None) != (self.shaped is None) or (shape is not None and not shape > 0):
@@ -144,8 +201,44 @@ EFFECTS: dict[str, Effect] = {
         Effect("stribeck", lambda q, qd, v: v * sympy.sqrt(sympy.pi) / 2 * sympy.erf(sympy.Abs(qd[0]) / v), "dissipative",
                "dF", "dF·exp(−(qd/v_s)²)·sign(qd) (D = dF·v_s·√π/2·erf(|qd|/v_s))", shaped="v_s",
                numeric=lambda q, qd, v: np.exp(-((qd / v) ** 2)) * np.sign(qd)),
+        Effect("tip_payload", None, "conservative", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
+               arity=0, on_system=lambda system, q, qd: _payload(system, q, qd)),
+        Effect("gravity_tilt", None, "conservative", "alpha",
+               "gravity turned by alpha in the plane (L += sin(alpha)·(−Σ s_j·∂L/∂q_j))",
+               arity=0, nonnegative=False, on_system=lambda system, q, qd: _tilt(system, q, qd),
+               coefficient_of=sympy.sin),
     )
 }
+
+
+def _payload(system, q, qd) -> sympy.Expr:
+    """``|v_tip|^2 / 2 - g y_tip``: the Lagrangian of a unit point mass at the
+    chain's tip. With link angles ``a_j`` (the coordinates, or their running
+    sums for relative joints) and lengths ``l_j``,
+    ``|v_tip|^2 = sum_jk l_j l_k a_j' a_k' cos(a_j - a_k)``."""
+    absolute = system.absolute_angles
+    angles = list(q) if absolute else list(itertools.accumulate(q))
+    rates = list(qd) if absolute else list(itertools.accumulate(qd))
+    lengths = [sympy.Float(getattr(system.params, n)) for n in system.link_lengths]
+    n = len(angles)
+    speed2 = sum(lengths[j] * lengths[k] * rates[j] * rates[k] * (1 if j == k else sympy.cos(angles[j] - angles[k]))
+                 for j in range(n) for k in range(n))
+    return speed2 / 2 - sympy.Float(system.params.g) * system.tip_position(q)[1]
+
+
+def _tilt(system, q, qd) -> sympy.Expr:
+    """``-sum_j s_j dL/dq_j``: the first-order change of the declared ``L``
+    when gravity turns by a unit angle in the plane."""
+    return -sum(s * sympy.diff(system.lagrangian_sympy, a) for s, a in zip(system.tilt_direction(), q))
+
+
+def tilted(system, alpha: float) -> Term:
+    """The exact change of the declared Lagrangian when gravity turns by
+    ``alpha`` in the plane: ``L(q - alpha s, qd) - L(q, qd)`` (for the data generator)."""
+    q, _ = system.symbols
+    L = system.lagrangian_sympy
+    shifted = L.subs({a: a - sympy.Float(alpha) * s for a, s in zip(q, system.tilt_direction())}, simultaneous=True)
+    return Term(sympy.expand(shifted - L), None, "gravity_tilt")
 
 #: friction laws made of several effects on one joint: their parameters, in
 #: the order ``--effects NAME=j:p1,p2,...`` gives them
@@ -168,7 +261,8 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
     ``{"viscous_friction": {(0,): 0.8, (1,): 0.5}, "coupled_spring": {(0, 1): 3.0}}``.
 
     A one-joint effect takes one coefficient per joint; a coupled effect
-    takes ``i-j:c`` items (joints from 1), comma-separated. A clear
+    takes ``i-j:c`` items (joints from 1), comma-separated; an effect of the
+    whole system one number (``tip_payload=0.3``, ``gravity_tilt=0.05``). A clear
     :class:`ConfigError` otherwise."""
     out = {}
     for item in items:
@@ -181,6 +275,16 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
             raise ConfigError(f"{source}: unknown effect {name!r}; known: {', '.join(known)}")
         if name in LAWS:
             out[name] = _parse_law(name, values, dof, source)
+            continue
+        if EFFECTS[name].arity == 0:
+            try:
+                value = float(values)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value) or not EFFECTS[name].admissible(value):
+                raise ConfigError(f"{source}: {name} needs one finite number{' >= 0' if EFFECTS[name].nonnegative else ''} "
+                                  f"({EFFECTS[name].parameter}), got {values!r}")
+            out[name] = {(): value}
             continue
         if EFFECTS[name].arity == 1:
             try:
@@ -227,18 +331,25 @@ def _parse_law(name: str, values: str, dof: int, source: str) -> dict[tuple[int]
     return out
 
 
-def add_effects(data: Dataset, effects: dict) -> Dataset:
+def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
     """``data`` with the effects' torques added (and, for conservative effects,
     their terms added to ``L``); ``effects`` as :func:`parse_effects` gives
     them, or a one-joint effect's coefficients as a sequence, one per joint
-    (``{"viscous_friction": (0.8, 0.5)}``)."""
+    (``{"viscous_friction": (0.8, 0.5)}``). An effect of the whole system
+    (a payload, a tilt) needs ``system``, the data's system."""
     tau = data.tau.copy()
     L = None if data.L is None else data.L.copy()
     effects = {name: coefs if isinstance(coefs, dict) else {(j,): c for j, c in enumerate(coefs)}
                for name, coefs in effects.items()}
     for name, coefs in effects.items():
         for joints, c in coefs.items():
-            pairs = stribeck_terms(joints[0], *c) if name in LAWS else [(EFFECTS[name].term(*joints), c)]
+            if name == "gravity_tilt":
+                EFFECTS[name].term(system=system)  # the clear error where the system has no tilt
+                pairs = [(tilted(system, c), 1.0)]
+            elif name in LAWS:
+                pairs = stribeck_terms(joints[0], *c)
+            else:
+                pairs = [(EFFECTS[name].term(*joints, system=system), c)]
             for term, coef in pairs:
                 if coef == 0:
                     continue
@@ -251,5 +362,5 @@ def add_effects(data: Dataset, effects: dict) -> Dataset:
     text = ", ".join(f"{k}=" + ",".join(f"{'-'.join(str(j + 1) for j in js)}:{value(c)}" if len(js) > 1 or k in LAWS
                                         else value(c) for js, c in v.items()) for k, v in effects.items())
     return data.replace(tau=tau, L=L, source=f"{data.source} + undeclared {text}",
-                        meta={**data.meta, "effects": {k: {"-".join(str(j + 1) for j in js): c for js, c in v.items()}
+                        meta={**data.meta, "effects": {k: {"-".join(str(j + 1) for j in js) or "all": c for js, c in v.items()}
                                                        for k, v in effects.items()}})

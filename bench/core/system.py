@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import itertools
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -173,6 +174,15 @@ class System(abc.ABC):
     #: and a spring or damper there acts on that difference; joint angles that
     #: are already relative (a robot's, DFKI's ``q2_relative``) are not
     absolute_angles: ClassVar[bool] = False
+    #: whether the system is a planar chain of links hanging from a fixed pivot,
+    #: angles from the downward vertical, with gravity in its plane, so that a
+    #: gravity direction that is off (:meth:`tilt_direction`) and, given
+    #: :attr:`link_lengths`, a payload at its tip (:meth:`tip_position`) can be
+    #: placed on it (:mod:`bench.core.effects`)
+    planar_chain: ClassVar[bool] = False
+    #: the ``Params`` fields of a planar chain's link lengths, base first;
+    #: empty where they are not known
+    link_lengths: ClassVar[tuple[str, ...]] = ()
     Params: ClassVar[type] = type(None)
     sysid_unknowns: ClassVar[tuple[str, ...]] = ()
     default_domain: ClassVar[Domain] = Domain()
@@ -213,6 +223,24 @@ class System(abc.ABC):
         return None
 
     # -- derived -----------------------------------------------------------------
+    def tip_position(self, q: Sequence[sympy.Symbol]) -> tuple[sympy.Expr, sympy.Expr]:
+        """The end of a planar chain's last link, ``(x, y)`` with ``y`` up and
+        the pivot at the origin, at the system's link lengths."""
+        if not (self.planar_chain and self.link_lengths):
+            raise ValueError(f"{self.name} does not give a planar chain's link lengths")
+        angles = list(q) if self.absolute_angles else list(itertools.accumulate(q))
+        lengths = [sympy.Float(getattr(self.params, n)) for n in self.link_lengths]
+        return (sum(l * sympy.sin(a) for l, a in zip(lengths, angles)),
+                -sum(l * sympy.cos(a) for l, a in zip(lengths, angles)))
+
+    def tilt_direction(self) -> tuple[int, ...]:
+        """How the coordinates change when the whole planar chain turns about
+        its pivot by a unit angle: every absolute angle, or only the base
+        joint's where the others are relative."""
+        if not self.planar_chain:
+            raise ValueError(f"{self.name} is not a planar chain")
+        return (1,) * self.dof if self.absolute_angles else (1,) + (0,) * (self.dof - 1)
+
     @property
     def dof(self) -> int:
         return len(self.coordinates)

@@ -4,6 +4,9 @@
 * the named effects of :mod:`bench.core.effects` on every joint (viscous and
   Coulomb friction, armature, spring, offset) and the coupled ones on every
   pair of coordinates (a spring or damper on their difference);
+* on a planar chain, the general Lagrangian terms of the whole system that a
+  tip payload or a gravity direction that is off contributes, built from the
+  system's geometry and declared Lagrangian;
 * an open-ended library generated per joint ``j`` from the primitives
   ``q, qd, qdd, sign qd, |qd|, sin q, cos q`` of the joint and, per other
   joint ``k``, ``q_k, qd_k, qdd_k, sin(q_j - q_k), cos(q_j - q_k)``: every
@@ -81,14 +84,16 @@ def symbolic_terms(dof: int, j: int) -> TermLibrary:
 STRIBECK_GRID = (0.03, 0.1, 0.3, 1.0, 3.0)
 
 
-def candidates(dof: int, coupled: bool = True) -> TermLibrary:
+def candidates(dof: int, coupled: bool = True, system=None) -> TermLibrary:
     """Every candidate: the named effects on every joint (the coupled ones on
     every pair, where ``coupled``: the coordinates are absolute angles; the
-    shaped ones at each velocity of :data:`STRIBECK_GRID`), then the
-    open-ended terms."""
-    named = [effect.term(*joints, shape=v) for effect in EFFECTS.values() if coupled or effect.arity == 1
+    shaped ones at each velocity of :data:`STRIBECK_GRID`), the effects of
+    the whole ``system`` that apply to it (a tip payload and a gravity tilt
+    on a planar chain), then the open-ended terms."""
+    named = [effect.term(*joints, shape=v) for effect in EFFECTS.values() if effect.arity == 1 or (coupled and effect.arity == 2)
              for joints in _placements(effect.arity, dof) for v in (STRIBECK_GRID if effect.shaped else (None,))]
-    return TermLibrary(named + [t for j in range(dof) for t in symbolic_terms(dof, j)])
+    whole = [effect.term(system=system) for effect in EFFECTS.values() if effect.arity == 0 and effect.applies_to(system)]
+    return TermLibrary(named + whole + [t for j in range(dof) for t in symbolic_terms(dof, j)])
 
 
 def _placements(arity: int, dof: int) -> list[tuple[int, ...]]:
@@ -194,7 +199,11 @@ def describe(term: Term, coefficient: float, stderr: float) -> dict:
     term ``expression``."""
     named = is_named(term)
     parameter = EFFECTS[term.name].parameter if named else "c"
-    entry = {"name": term.name if named else "symbolic", "kind": kind(term), "law": _law(term, parameter),
+    law = _law(term, parameter)
+    if named and EFFECTS[term.name].coefficient_of is not None:  # a tilt's coefficient is sin(alpha): report alpha
+        coefficient, stderr = EFFECTS[term.name].parameter_from(coefficient, stderr)
+        law = law.replace(parameter, str(EFFECTS[term.name].coefficient_of(sympy.Symbol(parameter))), 1)
+    entry = {"name": term.name if named else "symbolic", "kind": kind(term), "law": law,
              "joints": [j + 1 for j in term.joints],
              "parameters": {parameter: {"value": float(coefficient), "stderr": float(stderr)}}}
     if len(term.joints) == 1:

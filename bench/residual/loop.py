@@ -39,7 +39,10 @@ Round 0 fits; each later round traces, adds, refits and keeps or undoes:
    name fewer than two); a round that does not lower that held-out error is
    undone and the loop ends, so the final model is never worse than the
    starting one on held-out recordings. Each round records the figure
-   (``heldout_mse``).
+   (``heldout_mse``). A round after which the mass matrix ``d^2 L / dqd^2``
+   of the model with its effects is no longer positive definite at the
+   training states (:data:`MASS_STATES` of them) is undone too; a fitted
+   model whose own mass matrix is not is reported as such.
 7. **Repeat** until a round accepts nothing, for at most :data:`MAX_ROUNDS`
    rounds.
 
@@ -70,7 +73,7 @@ import sympy
 from bench.core.data import Dataset, mse
 from bench.core.effects import EFFECTS
 from bench.core.errors import UserError
-from bench.core.models import ExpressionModel, FittedModel, LinearParametricModel, ParametricModel
+from bench.core.models import ExpressionModel, FittedModel, LinearParametricModel, ParametricModel, mass_and_bias
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
 from bench.residual.candidates import admissible, candidates, describe_all, label, structural
@@ -385,6 +388,19 @@ def _heldout(model: LoopModel, train: Dataset) -> float:
     return cv_mse(F, target.ravel(), row_folds(train))
 
 
+#: training states the mass matrix is checked at
+MASS_STATES = 256
+
+
+def _smallest_mass_eigenvalue(model: FittedModel, train: Dataset) -> float:
+    """The smallest eigenvalue of the model's mass matrix ``d^2 L / dqd^2``
+    (with its effects) over up to :data:`MASS_STATES` training states, evenly spread."""
+    rows = np.unique(np.linspace(0, len(train) - 1, min(MASS_STATES, len(train))).astype(int))
+    states = train.subset(rows)
+    M, _ = mass_and_bias(model, states.q, states.qd)
+    return float(np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))[:, 0].min())
+
+
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float = 60.0, seed: int = 0,
                   hyperparameters: dict | None = None, report: Report = print,
                   fitted: FittedModel | None = None) -> ResidualResult:
@@ -424,13 +440,18 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     first = model
     before = scores(model)
     heldout = _heldout(model, train)
+    mass = _smallest_mass_eigenvalue(model, train)
+    mass_before = mass
+    if not mass > 0:
+        report(f"round 0: {method}'s mass matrix is not positive definite on the training data "
+               f"(smallest eigenvalue {mass:.4g}): a finding about the fitted model")
     round0["mse"] = before
     round0["heldout_mse"] = heldout
     round0["seconds"] = round(time.perf_counter() - start, 3)
     rounds = [round0]
     findings: dict[str, dict] = {}  # structural findings, by the term's label
-    system = SYSTEMS[train.system] if train.system in SYSTEMS else None
-    pool = candidates(train.dof, coupled=bool(getattr(system, "absolute_angles", False)))
+    system = SYSTEMS[train.system]() if train.system in SYSTEMS else None
+    pool = candidates(train.dof, coupled=bool(getattr(system, "absolute_angles", False)), system=system)
     split = describe_validation(train)
     report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
            f"held out ({split}) {heldout:.4g}")
@@ -470,13 +491,22 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         held = _heldout(candidate, train)
         entry = {"round": k, "accepted": [label(c) for c in selection.accepted], "removed": removed,
                  "trace": selection.steps}
+        candidate_mass = _smallest_mass_eigenvalue(candidate, train)
+        if mass > 0 and not candidate_mass > 0:
+            rounds.append({**entry, "mse": scores(model), "heldout_mse": heldout, "candidate_heldout_mse": held,
+                           "stop": f"undone: with these effects the mass matrix is not positive definite on the "
+                                   f"training data (smallest eigenvalue {candidate_mass:.4g})",
+                           "seconds": round(time.perf_counter() - start, 3)})
+            report(f"round {k}: undone, the mass matrix would not be positive definite "
+                   f"(smallest eigenvalue {candidate_mass:.4g})")
+            break
         if not held < heldout:
             rounds.append({**entry, "mse": scores(model), "heldout_mse": heldout, "candidate_heldout_mse": held,
                            "stop": "undone: the refitted model does not lower the held-out error",
                            "seconds": round(time.perf_counter() - start, 3)})
             report(f"round {k}: undone, held-out MSE {held:.4g} is not below {heldout:.4g}")
             break
-        model, heldout = candidate, held
+        model, heldout, mass = candidate, held, candidate_mass
         s = scores(model)
         rounds.append({**entry, "mse": s, "heldout_mse": held, "seconds": round(time.perf_counter() - start, 3)})
         longest = max(longest, time.perf_counter() - began)
@@ -490,6 +520,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         system=train.system, method=method, mse_before=before, mse_after=after,
         effects=describe_all(model.effects, model.coef, model.stderr, _shape_stderr(model, train)) + list(findings.values()),
         rounds=rounds, validation=split,
+        mass_matrix={"smallest_eigenvalue_before": mass_before, "smallest_eigenvalue_after": mass,
+                     "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
         mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None,
         lagrangian=None if expr is None else str(expr),
         seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, fit_budget_s=fit_budget, seed=seed,

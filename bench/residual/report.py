@@ -58,6 +58,11 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         f"| after ÷ before | {ratio(a['train'], b['train'])} | {ratio(a['test'], b['test'])} |",
         "",
     ]
+    mass = result.mass_matrix
+    if mass and not mass["positive_definite"]:
+        lines += [f"The final model's mass matrix is not positive definite at the {mass['states']} training states "
+                  f"checked (smallest eigenvalue {mass['smallest_eigenvalue_after']:.4g}): the fitted Lagrangian "
+                  "is not a physical one there.", ""]
     if result.effects:
         lines += ["| effect | kind | law | joints | parameters (± std. error) |", "|---|---|---|---|---|"]
         for e in result.effects:

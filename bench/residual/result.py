@@ -16,6 +16,9 @@ class ResidualResult:
     ``validation`` says how held-out data were formed (:mod:`bench.residual.validation`);
     ``mse_heldout_recordings`` is the cross-validated torque MSE before and
     after the loop where the training data name two or more recordings.
+    ``mass_matrix`` gives the smallest eigenvalue of ``d^2 L / dqd^2`` over
+    the training states checked, before and after, and whether the final
+    model's is positive definite there.
     ``models`` holds the fitted models before and after the loop, for the
     report's residual plots; it is not part of the JSON.
     """
@@ -35,6 +38,7 @@ class ResidualResult:
     test_source: str | None
     validation: str = ""
     mse_heldout_recordings: dict | None = None
+    mass_matrix: dict | None = None
     provenance: dict = field(default_factory=dict)
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 

@@ -29,7 +29,8 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
     tau_extra = euler_lagrange_chunked(extra, t["q"], t["qd"], t["qdd"])[0].numpy()
     np.testing.assert_allclose(withfx.tau - clean.tau, tau_extra, atol=1e-12)
     assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset",
-                            "coupled_spring", "coupled_damper", "smooth_coulomb", "stribeck"}
+                            "coupled_spring", "coupled_damper", "smooth_coulomb", "stribeck", "tip_payload",
+                            "gravity_tilt"}
 
 
 @pytest.mark.parametrize(
@@ -49,11 +50,37 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
         (["stribeck_friction=1:2,1,0.5,0.1"], "not physical: it needs F_s >= F_c >= 0"),
         (["stribeck_friction=1:1,2,0,0.1"], "not physical"),
         (["stribeck=1,2"], "unknown effect 'stribeck'"),
+        (["tip_payload=-0.1"], "tip_payload needs one finite number >= 0"),
+        (["tip_payload=0.1,0.2"], "tip_payload needs one finite number"),
+        (["gravity_tilt=nan"], "gravity_tilt needs one finite number"),
+        (["gravity_tilt=1-2:0.1"], "gravity_tilt needs one finite number"),
     ],
 )
 def test_bad_effect_specs_are_refused(items, message):
     with pytest.raises(ConfigError, match=message):
         parse_effects(items, 2)
+
+
+@pytest.mark.parametrize("system_name", ["cart_pole", "spring_pendulum"])
+def test_a_payload_or_tilt_on_a_system_that_is_no_planar_chain_is_refused(system_name):
+    s = get_system(system_name)
+    for item in ("tip_payload=0.2", "gravity_tilt=0.1"):
+        with pytest.raises(ConfigError, match="needs a planar chain that gives its geometry"):
+            add_effects(generate(s, 20, 0), parse_effects([item], s.dof), s)
+
+
+def test_the_tilt_term_is_the_exact_tilt_with_sin_alpha_once_the_gravity_terms_are_rescaled():
+    # L(q - alpha, qd) = kinetic + cos(alpha) * gravity + sin(alpha) * the tilt term, exactly
+    s = get_system("triple_pendulum")
+    data = generate(s, 100, 0)
+    alpha = 0.3
+    gravity = sympy.Add(*[t for t in sympy.Add.make_args(s.lagrangian_sympy) if not t.free_symbols & set(s.symbols[1])])
+    tilt = EFFECTS["gravity_tilt"].term(system=s)
+    exact = add_effects(data, {"gravity_tilt": {(): alpha}}, s).L
+    from bench.core.terms import Term
+    rebuilt = data.L + (np.cos(alpha) - 1) * Term.lagrangian(gravity).value(data) + np.sin(alpha) * tilt.value(data)
+    np.testing.assert_allclose(exact, rebuilt, atol=1e-12)
+    assert EFFECTS["gravity_tilt"].parameter_from(np.sin(alpha), 1e-3) == pytest.approx((alpha, 1e-3 / np.cos(alpha)))
 
 
 def test_each_effect_is_a_term_on_its_joint():

@@ -71,28 +71,50 @@ def _with_force(data, term):
     return data.replace(tau=data.tau + term.torque(data))
 
 
-def test_a_tip_payload_under_the_rod_form_gives_no_impossible_parameter():
-    # a point mass at the tip of link 2: the rod form explains it exactly with a negative rotor inertia,
-    # which the loop reports as a structural finding instead of an armature of -0.24
-    import sympy
-
-    from bench.core.terms import Term
+def test_a_tip_payload_under_the_rod_form_is_found_as_one_payload_with_its_mass():
+    # a point mass at the tip of link 2: the rod form alone explains it only with a negative rotor
+    # inertia; the payload's own L-term explains it with one admissible parameter
+    from bench.core.effects import parse_effects
 
     s = get_system("double_pendulum")
-    p = s.params
-    q1, q2, v1, v2 = sympy.symbols("q_1 q_2 qd_1 qd_2", real=True)
-    m = 0.5
-    payload = Term.lagrangian(m / 2 * (p.l1**2 * v1**2 + p.l2**2 * v2**2 + 2 * p.l1 * p.l2 * sympy.cos(q1 - q2) * v1 * v2)
-                              + m * p.g * (p.l1 * sympy.cos(q1) + p.l2 * sympy.cos(q2)))
-    train, test = _with_force(generate(s, 3000, 0), payload), _with_force(generate(s, 1500, 1000), payload)
+    fx = parse_effects(["tip_payload=0.5"], 2)
+    train, test = add_effects(generate(s, 3000, 0), fx, s), add_effects(generate(s, 1500, 1000), fx, s)
+    out = residual_loop("sysid", train, test, budget_s=20, report=quiet)
+    (payload,) = out.effects
+    assert payload["name"] == "tip_payload" and payload["kind"] == "conservative" and payload["joints"] == [1, 2]
+    assert payload["parameters"]["m"]["value"] == pytest.approx(0.5, rel=0.02)
+    assert out.mse_after["test"] < 1e-6 * out.mse_before["test"]
+    assert out.mass_matrix["positive_definite"]
+
+
+def test_a_lighter_tip_than_the_rod_form_allows_is_a_structural_finding():
+    # a tapered second link (a uniform rod less a mass at its tip): only a negative inertia or
+    # payload explains it, so the loop names the missing freedom and adds nothing impossible
+    s = get_system("double_pendulum")
+    lighter = EFFECTS["tip_payload"].term(system=s)
+    train, test = (d.replace(tau=d.tau - 0.3 * lighter.torque(d)) for d in (generate(s, 3000, 0), generate(s, 1500, 1000)))
     out = residual_loop("sysid", train, test, budget_s=20, report=quiet)
     for e in out.effects:
         if e["kind"] != "structural":
             assert all(EFFECTS[e["name"]].admissible(v["value"]) for v in e["parameters"].values()), e
-    (finding,) = [e for e in out.effects if e["kind"] == "structural"]
-    assert finding["name"] == "armature" and finding["joints"] == [1] and finding["parameters"] == {}
-    assert "lacks this freedom" in finding["finding"] and "I = -0.23" in finding["finding"]
+    findings = [e for e in out.effects if e["kind"] == "structural"]
+    assert findings and all(f["parameters"] == {} and "lacks this freedom" in f["finding"] for f in findings)
+    assert findings[0]["name"] in ("armature", "tip_payload")
     assert out.mse_after["test"] <= out.mse_before["test"]
+
+
+@pytest.mark.parametrize("alpha", [0.05, -0.12])
+def test_a_gravity_tilt_is_found_as_one_tilt_with_its_angle(alpha):
+    from bench.core.effects import parse_effects
+
+    s = get_system("double_pendulum")
+    fx = parse_effects([f"gravity_tilt={alpha}"], 2)
+    train, test = add_effects(generate(s, 3000, 0), fx, s), add_effects(generate(s, 1500, 1000), fx, s)
+    out = residual_loop("sysid", train, test, budget_s=20, report=quiet)
+    (tilt,) = out.effects
+    assert tilt["name"] == "gravity_tilt" and tilt["law"].startswith("L += sin(alpha)*")
+    assert tilt["parameters"]["alpha"]["value"] == pytest.approx(alpha, rel=0.02)
+    assert out.mse_after["test"] < 1e-6 * out.mse_before["test"]
 
 
 @pytest.mark.parametrize("method", ["sparse", "sysid"])

@@ -112,3 +112,37 @@ def test_any_urdf_registers_in_one_line_and_a_bad_one_is_refused(tmp_path):
         register_urdf(f"urdf:{bad}")
     with pytest.raises(DataError, match="no such URDF file"):
         register_urdf(f"urdf:{tmp_path / 'none.urdf'}")
+
+
+@pytest.mark.parametrize("system_name", ["double_pendulum", "triple_pendulum"])
+def test_a_tip_payload_and_a_gravity_tilt_agree_with_pinocchio(system_name):
+    """``bench data --effects tip_payload=m`` and ``gravity_tilt=alpha`` against
+    RNEA on the same chain with a point mass at its tip, and with gravity
+    turned by alpha in the plane (equilibrium at q = alpha)."""
+    from bench.core.effects import add_effects, parse_effects
+
+    system = SYSTEMS[system_name]()
+    n = system.dof
+    p = system.param_dict()
+    masses, lengths = [p[f"m{i + 1}"] for i in range(n)], [p[f"l{i + 1}"] for i in range(n)]
+    data = generate(system, 200, 7)
+    m, alpha = 0.37, 0.08
+    A = np.tril(np.ones((n, n)))
+    Ainv = np.linalg.inv(A)
+
+    def rnea(model):
+        d = model.createData()
+        tau_phi = np.stack([pin.rnea(model, d, Ainv @ a, Ainv @ b, Ainv @ c) for a, b, c in zip(data.q, data.qd, data.qdd)])
+        return tau_phi @ Ainv
+
+    loaded = pinocchio_pendulum(n, masses, lengths, p["g"])
+    tip = loaded.getJointId(f"joint{n}")
+    loaded.appendBodyToJoint(tip, pin.Inertia(m, np.array([0.0, 0.0, -lengths[-1]]), np.zeros((3, 3))), pin.SE3.Identity())
+    ours = add_effects(data, parse_effects([f"tip_payload={m}"], n), system).tau
+    assert np.abs(ours - rnea(loaded)).max() <= 1e-10 * np.abs(ours).max()
+
+    tilted = pinocchio_pendulum(n, masses, lengths, p["g"])
+    tilted.gravity.linear = p["g"] * np.array([-np.sin(alpha), 0.0, -np.cos(alpha)])
+    ours = add_effects(data, parse_effects([f"gravity_tilt={alpha}"], n), system).tau
+    assert np.abs(ours - rnea(tilted)).max() <= 1e-10 * np.abs(ours).max()
+    assert np.abs(ours - data.tau).max() > 0.01 * np.abs(ours).max()  # the tilt is not lost in the comparison
