@@ -67,6 +67,19 @@ def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
     assert [r["heldout_mse"] for r in out.rounds] == [1.0, 1.0]
 
 
+def test_a_round_that_leaves_the_mass_matrix_not_positive_definite_is_undone(monkeypatch):
+    s = get_system("double_pendulum")
+    train = add_effects(generate(s, 2000, 0), {"viscous_friction": (0.8, 0.5)})
+    real = loop._smallest_mass_eigenvalue
+    # the rod pendulum's own mass matrix is positive definite; pretend the effects spoil it
+    monkeypatch.setattr(loop, "_smallest_mass_eigenvalue", lambda model, data: real(model, data) - 1e3 * bool(model.effects))
+    out = residual_loop("sparse", train, None, budget_s=20, report=quiet)
+    assert out.effects == [] and out.mass_matrix["positive_definite"]
+    assert out.mass_matrix["smallest_eigenvalue_before"] == out.mass_matrix["smallest_eigenvalue_after"] > 0
+    assert "mass matrix is not positive definite" in out.rounds[-1]["stop"]
+    assert real(out.models[1], train) == pytest.approx(out.mass_matrix["smallest_eigenvalue_after"])
+
+
 def _with_force(data, term):
     return data.replace(tau=data.tau + term.torque(data))
 
