@@ -48,8 +48,9 @@ Round 0 fits; each later round traces, adds, refits and keeps or undoes:
 
 ``budget_s`` bounds the whole loop: the method's fit has
 :data:`FIT_SHARE` of it, the polish stops starting new starts at
-:data:`POLISH_SHARE`, and a round starts only if the time it is expected to
-take (the longest round so far) still fits in the budget.
+:data:`POLISH_SHARE`, a round starts only if the time it is expected to
+take (the longest round so far) still fits in the budget, and tracing starts
+no new step after :data:`TRACE_SHARE` of it.
 
 :func:`residual_loop` runs the loop in this process and returns a
 :class:`ResidualResult`; :func:`run_residual` runs a :class:`ResidualJob`
@@ -103,6 +104,27 @@ POLISH_STARTS = 16
 FIT_SHARE = 0.5
 #: the polish starts no new start after this share of the loop's budget
 POLISH_SHARE = 0.75
+#: tracing starts no new step after this share of the loop's budget (the joint
+#: refit, pruning and the held-out check follow)
+TRACE_SHARE = 0.85
+
+
+#: the last rigid-model torques computed, ``(rigid, data, tau)`` (see :func:`_rigid_torque`)
+_TORQUES: list[tuple] = []
+
+
+def _rigid_torque(rigid: FittedModel, data: Dataset) -> np.ndarray:
+    """``rigid.predict_torque(data)`` as float64, remembered for the last few
+    ``(rigid, data)`` pairs: the loop asks for a model's torque on the
+    training data in every refit and pruning step, and a neural model's costs
+    a pass of automatic differentiation. Pairs are matched by identity."""
+    for r, d, tau in _TORQUES:
+        if r is rigid and d is data:
+            return tau
+    tau = np.asarray(rigid.predict_torque(data), dtype=np.float64)
+    _TORQUES.insert(0, (rigid, data, tau))
+    del _TORQUES[4:]
+    return tau
 
 
 class LoopModel(FittedModel):
@@ -116,7 +138,7 @@ class LoopModel(FittedModel):
         return TermLibrary(self.effects).design(data, "indirect")
 
     def predict_torque(self, data: Dataset) -> np.ndarray:
-        tau = np.asarray(self.rigid.predict_torque(data), dtype=np.float64)
+        tau = _rigid_torque(self.rigid, data)
         if self.effects:
             tau = tau + (self.columns(data) @ self.coef).reshape(tau.shape)
         return tau
@@ -229,7 +251,7 @@ def _refit(model: LoopModel, train: Dataset, effects: list[Term]) -> LoopModel:
     module docstring); the method is not fitted again."""
     y = train.tau.ravel()
     Phi = TermLibrary(effects).design(train, "indirect")
-    coef = fit_statistics(Phi, y - np.ravel(model.rigid.predict_torque(train)))[0]
+    coef = fit_statistics(Phi, y - np.ravel(_rigid_torque(model.rigid, train)))[0]
     if isinstance(model.rigid, ParametricModel):
         return _nonlinear_fit(model.rigid, train, effects, coef)
     if isinstance(model.rigid, LinearParametricModel):  # its base parameters and the effects, by least squares
@@ -240,7 +262,7 @@ def _refit(model: LoopModel, train: Dataset, effects: list[Term]) -> LoopModel:
     rigid = model.rigid
     lagrangian = _lagrangian_columns(rigid, train)
     if lagrangian is None:
-        coef, stderr, _ = fit_statistics(Phi, y - np.ravel(rigid.predict_torque(train)))
+        coef, stderr, _ = fit_statistics(Phi, y - np.ravel(_rigid_torque(rigid, train)))
         return LoopModel(rigid, effects, coef, stderr)
     basis, F_L = lagrangian
     coef, stderr, _ = fit_statistics(np.hstack([F_L, Phi]), y)
@@ -287,7 +309,7 @@ def _fit_problem(model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarr
     always in the fit, the model's freedom (:func:`_freedom`) then the accepted
     effects. A symbolic model's terms span its own torque, so the target is the
     torque itself; otherwise it is what the rigid model leaves."""
-    target = train.tau if _is_symbolic(model.rigid) else train.tau - np.asarray(model.rigid.predict_torque(train))
+    target = train.tau if _is_symbolic(model.rigid) else train.tau - _rigid_torque(model.rigid, train)
     return target, np.hstack([_freedom(model, train), model.columns(train)])
 
 
@@ -439,8 +461,18 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
                f"(train MSE {round0['method_mse']['train']:.4g} -> {scores(model)['train']:.4g})")
     first = model
     before = scores(model)
-    heldout = _heldout(model, train)
-    mass = _smallest_mass_eigenvalue(model, train)
+    statistics = 0.0  # seconds in selection, pruning and the held-out and mass-matrix checks
+
+    def timed(fn, *args, **kwargs):
+        nonlocal statistics
+        t0 = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            statistics += time.perf_counter() - t0
+
+    heldout = timed(_heldout, model, train)
+    mass = timed(_smallest_mass_eigenvalue, model, train)
     mass_before = mass
     if not mass > 0:
         report(f"round 0: {method}'s mass matrix is not positive definite on the training data "
@@ -469,7 +501,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         # round, then the joint refit moves it, so a large step is not followed by terms that
         # only mend the linearisation
         steps = 1 if isinstance(model.rigid, ParametricModel) else None
-        selection = trace(target, train, pool, fixed, exclude=model.effects, max_steps=steps)
+        selection = timed(trace, target, train, pool, fixed, exclude=model.effects, max_steps=steps,
+                          deadline=start + TRACE_SHARE * budget_s)
         findings = {}  # what is left unexplained where the loop ends
         for term, c, se in selection.structural:
             findings[label(term)] = structural(term, c, se)
@@ -482,16 +515,16 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         effects = model.effects + selection.accepted
         report(f"round {k}: adding {', '.join(label(c) for c in selection.accepted)}; refitting jointly")
         candidate = _refit(model, train, effects)
-        candidate, removed = _prune(candidate, train, report)
+        candidate, removed = timed(_prune, candidate, train, report)
         candidate = _refine_shapes(candidate, train, report)
         candidate, impossible = _drop_inadmissible(candidate, train, report)
         for term, c, se in impossible:
             findings[label(term)] = structural(term, c, se)
             removed.append(label(term))
-        held = _heldout(candidate, train)
+        held = timed(_heldout, candidate, train)
         entry = {"round": k, "accepted": [label(c) for c in selection.accepted], "removed": removed,
                  "trace": selection.steps}
-        candidate_mass = _smallest_mass_eigenvalue(candidate, train)
+        candidate_mass = timed(_smallest_mass_eigenvalue, candidate, train)
         if mass > 0 and not candidate_mass > 0:
             rounds.append({**entry, "mse": scores(model), "heldout_mse": heldout, "candidate_heldout_mse": held,
                            "stop": f"undone: with these effects the mass matrix is not positive definite on the "
@@ -518,13 +551,14 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     expr = model.expression() if _expression_small(model.rigid) else None
     return ResidualResult(
         system=train.system, method=method, mse_before=before, mse_after=after,
-        effects=describe_all(model.effects, model.coef, model.stderr, _shape_stderr(model, train)) + list(findings.values()),
+        effects=describe_all(model.effects, model.coef, model.stderr, timed(_shape_stderr, model, train))
+        + list(findings.values()),
         rounds=rounds, validation=split,
         mass_matrix={"smallest_eigenvalue_before": mass_before, "smallest_eigenvalue_after": mass,
                      "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
         mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None,
         lagrangian=None if expr is None else str(expr),
-        seconds=round(time.perf_counter() - start, 2), budget_s=budget_s, fit_budget_s=fit_budget, seed=seed,
+        seconds=round(time.perf_counter() - start, 2), statistics_seconds=round(statistics, 2), budget_s=budget_s, fit_budget_s=fit_budget, seed=seed,
         train_source=train.source, test_source=None if test is None else test.source,
         provenance=provenance(), models=(first, model),
     )

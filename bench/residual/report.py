@@ -49,7 +49,9 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         "",
         f"Training data: `{result.train_source}`; test data: `{result.test_source}`. "
         f"{result.budget_s:g} s for the loop ({result.fit_budget_s:g} s of it the method's fit), seed {result.seed}; "
-        f"{result.seconds:g} s in all. Held out: {result.validation}.",
+        f"{result.seconds:g} s in all"
+        + (f", {result.statistics_seconds:g} s of it the loop's statistics" if result.statistics_seconds is not None else "")
+        + f". Held out: {result.validation}.",
         "",
         "| torque MSE | train | test |",
         "|---|---:|---:|",

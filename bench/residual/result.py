@@ -18,7 +18,9 @@ class ResidualResult:
     after the loop where the training data name two or more recordings.
     ``mass_matrix`` gives the smallest eigenvalue of ``d^2 L / dqd^2`` over
     the training states checked, before and after, and whether the final
-    model's is positive definite there.
+    model's is positive definite there. ``statistics_seconds`` is the part of
+    ``seconds`` spent in the loop's statistics: selection, pruning (with its
+    refits), and the held-out, mass-matrix and standard-error checks.
     ``models`` holds the fitted models before and after the loop, for the
     report's residual plots; it is not part of the JSON.
     """
@@ -39,6 +41,7 @@ class ResidualResult:
     validation: str = ""
     mse_heldout_recordings: dict | None = None
     mass_matrix: dict | None = None
+    statistics_seconds: float | None = None
     provenance: dict = field(default_factory=dict)
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 

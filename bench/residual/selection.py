@@ -38,6 +38,7 @@ a linear form's dozens of base columns).
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -77,7 +78,7 @@ class Selection:
 
 
 def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
-          exclude: list[Term] = (), max_steps: int | None = None) -> Selection:
+          exclude: list[Term] = (), max_steps: int | None = None, deadline: float = math.inf) -> Selection:
     """Forward stepwise selection of candidates explaining ``target`` (``(n, dof)``).
 
     Each step tries the named effects first and the open-ended (symbolic)
@@ -86,7 +87,8 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     gravity absorbs ``sin q`` leaves ``c (q - sin q)``, which ``q^3`` also fits).
     ``fixed`` columns (the model's own terms and effects already accepted)
     stay in every fit, so a candidate that only repeats them gains nothing.
-    At most ``max_steps`` candidates (or laws) are accepted, where given.
+    At most ``max_steps`` candidates (or laws) are accepted, where given, and
+    no step starts after ``deadline`` (``time.perf_counter()``).
     Returns the newly accepted candidates, per step the statistics of the
     best candidate, accepted or not, and any structural finding.
     """
@@ -172,6 +174,9 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         rss_now = float(r @ r)
         if rss_now / n_rows <= floor:
             steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
+            break
+        if time.perf_counter() > deadline:
+            steps.append({"stop": "the loop's budget: no further step started"})
             break
         chosen = inadmissible = before = None
         for tier in tiers:
