@@ -35,17 +35,16 @@ rows per term) would exceed it is not applicable, with the reason.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 from typing import Annotated
 
 import numpy as np
 import sympy
 
-from bench.core import regression, symbolic
+from bench.core import regression
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
-from bench.core.terms import TermLibrary
+from bench.core.terms import TermLibrary, lagrangian_library, lagrangian_library_size
 from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
 
 
@@ -61,33 +60,6 @@ class SparseConfig(MethodConfig):
     threshold: Annotated[float, Range(0)] | None = None
 
 
-def library_size(dof: int, kinds: tuple[str, ...]) -> int:
-    """The number of terms of :func:`library`, without building it."""
-    n_angle = sum(k == "angle" for k in kinds)
-    n_linear = dof - n_angle
-    positions = 1 + 2 * n_angle + n_angle * (n_angle - 1) + n_linear * (2 + 2 * n_angle)
-    velocities = 1 + dof + dof * (dof + 1) // 2
-    return positions * velocities
-
-
-def library(dof: int, kinds: tuple[str, ...]) -> TermLibrary:
-    """The candidate library for coordinates of the given kinds, simplest first."""
-    q, qd = symbolic.coordinate_symbols(dof)
-    angles = [q[i] for i in range(dof) if kinds[i] == "angle"]
-    linear = [q[i] for i in range(dof) if kinds[i] == "linear"]
-    positions = [sympy.Integer(1)]
-    for a in angles:
-        positions += [sympy.sin(a), sympy.cos(a)]
-    for a, b in itertools.combinations(angles, 2):
-        positions += [sympy.sin(a - b), sympy.cos(a - b)]
-    for x in linear:
-        positions += [x, x**2]
-        for a in angles:
-            positions += [x * sympy.sin(a), x * sympy.cos(a)]
-    velocities = [sympy.Integer(1)] + list(qd) + [qd[i] * qd[j] for i in range(dof) for j in range(i, dof)]
-    return TermLibrary.of_lagrangian(v * p for v in velocities for p in positions)
-
-
 @METHODS.add("sparse", "symbolic", "library")
 class SparseLagrangian(ExpressionMethod):
     Config = SparseConfig
@@ -98,7 +70,7 @@ class SparseLagrangian(ExpressionMethod):
         reason = super().not_applicable_reason(experiment, system)
         if reason or system is None:
             return reason
-        terms = library_size(system.dof, system.kinds)
+        terms = lagrangian_library_size(system.dof, system.kinds)
         smallest = 2 * terms * terms * 8
         if smallest > MAX_DESIGN_BYTES:
             return (f"the library has {terms:,} terms for {system.dof} coordinates; even its smallest least-squares "
@@ -108,7 +80,7 @@ class SparseLagrangian(ExpressionMethod):
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         kinds = self.system.kinds if self.system is not None else ("angle",) * train.dof
-        self.library = library(train.dof, kinds)
+        self.library = lagrangian_library(train.dof, kinds)
         rows = 1 if experiment == "direct" else train.dof
         fits = max(1, MAX_DESIGN_BYTES // (8 * len(self.library) * rows))  # samples whose design fits in memory
         self.samples = min(len(train), self.config.samples, fits)

@@ -26,6 +26,7 @@ friction columns are all term libraries.
 from __future__ import annotations
 
 import functools
+import itertools
 import time
 from dataclasses import dataclass
 from typing import Iterable, Iterator, Sequence
@@ -217,3 +218,41 @@ class TermLibrary(Sequence[Term]):
         if len(coef) != len(self):
             raise ValueError(f"{len(coef)} coefficients for {len(self)} terms")
         return sympy.Add(*[sympy.Float(float(c)) * t.expr for c, t in zip(coef, self.terms) if c != 0.0 and not t.is_force])
+
+
+def lagrangian_library_size(dof: int, kinds: tuple[str, ...]) -> int:
+    """The number of terms of :func:`lagrangian_library`, without building it."""
+    n_angle = sum(k == "angle" for k in kinds)
+    n_linear = dof - n_angle
+    positions = 1 + 2 * n_angle + n_angle * (n_angle - 1) + n_linear * (2 + 2 * n_angle)
+    velocities = 1 + dof + dof * (dof + 1) // 2
+    return positions * velocities
+
+
+def _positions(dof: int, kinds: tuple[str, ...]) -> list[sympy.Expr]:
+    q, _ = symbolic.coordinate_symbols(dof)
+    angles = [q[i] for i in range(dof) if kinds[i] == "angle"]
+    linear = [q[i] for i in range(dof) if kinds[i] == "linear"]
+    positions = [sympy.Integer(1)]
+    for a in angles:
+        positions += [sympy.sin(a), sympy.cos(a)]
+    for a, b in itertools.combinations(angles, 2):
+        positions += [sympy.sin(a - b), sympy.cos(a - b)]
+    for x in linear:
+        positions += [x, x**2]
+        for a in angles:
+            positions += [x * sympy.sin(a), x * sympy.cos(a)]
+    return positions
+
+
+def lagrangian_library(dof: int, kinds: tuple[str, ...], velocity_degrees: tuple[int, ...] = (0, 1, 2)) -> TermLibrary:
+    """Lagrangian terms generic in coordinates of the given kinds, simplest first:
+    every product ``v * p`` of a position term ``p`` (1; ``sin q_i``,
+    ``cos q_i`` of every angle; ``sin(q_i - q_j)``, ``cos(q_i - q_j)`` of
+    every pair of angles; ``q_k``, ``q_k^2`` of every linear coordinate and
+    ``q_k sin q_i``, ``q_k cos q_i`` with an angle) and a velocity term ``v``
+    of a degree in ``velocity_degrees`` (1; ``qd_i``; ``qd_i qd_j``)."""
+    _, qd = symbolic.coordinate_symbols(dof)
+    by_degree = {0: [sympy.Integer(1)], 1: list(qd), 2: [qd[i] * qd[j] for i in range(dof) for j in range(i, dof)]}
+    velocities = [v for d in velocity_degrees for v in by_degree[d]]
+    return TermLibrary.of_lagrangian(v * p for v in velocities for p in _positions(dof, kinds))

@@ -35,7 +35,7 @@ from bench.runner.provenance import provenance
 from bench.runner.records import Record
 from bench.runner.spec import SEEDS, build_specs
 from methods import METHODS
-from methods.sparse import library_size
+from bench.core.terms import lagrangian_library_size as library_size
 from systems import SYSTEMS
 
 #: the pendulums' sizes (as in the plugin)

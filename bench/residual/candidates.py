@@ -1,5 +1,5 @@
 """The residual loop's candidates: terms of the suite's term library
-(:class:`~bench.core.terms.TermLibrary`) on one joint each.
+(:class:`~bench.core.terms.TermLibrary`), each one physical cause.
 
 * the named effects of :mod:`bench.core.effects` on every joint (viscous and
   Coulomb friction, armature, spring, offset) and the coupled ones on every
@@ -7,13 +7,25 @@
 * on a planar chain, the general Lagrangian terms of the whole system that a
   tip payload or a gravity direction that is off contributes, built from the
   system's geometry and declared Lagrangian;
-* an open-ended library generated per joint ``j`` from the primitives
-  ``q, qd, qdd, sign qd, |qd|, sin q, cos q`` of the joint and, per other
-  joint ``k``, ``q_k, qd_k, qdd_k, sin(q_j - q_k), cos(q_j - q_k)``: every
-  primitive that is not a named effect's own column, every product of two
-  primitives (less the degenerate ones), and ``q^3``, ``qd^3`` and
-  ``sign(qd) |q|``. These are generalized forces on joint ``j``, reported as
-  ``symbolic`` with their expression (the term's name).
+* an open-ended library in the space of ``L`` and ``D``, reported as
+  ``symbolic`` with their expression:
+
+  - terms of ``L``: sparse regression's library
+    (:func:`~bench.core.terms.lagrangian_library`) with velocity degree 0
+    (potentials ``p(q)``) and 2 (kinetic terms ``qd_i qd_j p(q)``), less the
+    constant and what a named effect already is; degree 1 is left out, its
+    terms being gyroscopic or, like ``qd_i cos q_i``, total derivatives with
+    no torque. Only while the library has at most :data:`MAX_OPEN_LAGRANGIAN`
+    terms (up to 4 angles): an arm's would be thousands, each needing its
+    Euler–Lagrange transform. The mass matrix of the model with such terms
+    is checked by the loop;
+  - terms of ``D`` on each joint, ``|qd_j|^3 / 3`` (torque ``qd_j |qd_j|``,
+    quadratic drag) and ``qd_j^4 / 4`` (torque ``qd_j^3``); being
+    non-negative, they are physical only with a coefficient >= 0.
+
+  Generalized forces that are neither (a product of ``sin q`` and ``qdd``,
+  say) are not candidates: on measured data they mended the fitted model's
+  own errors on its training recordings and made it worse on others.
 """
 
 from __future__ import annotations
@@ -23,61 +35,26 @@ import functools
 import sympy
 
 from bench.core.effects import EFFECTS
-from bench.core.terms import Term, TermLibrary
+from bench.core.symbolic import coordinate_symbols
+from bench.core.terms import Term, TermLibrary, lagrangian_library, lagrangian_library_size
 
 
-def _primitives(dof: int, j: int) -> list[tuple[str, sympy.Expr]]:
-    """The building blocks of the open-ended terms of joint ``j``, with their text."""
-    n = j + 1
-    q = sympy.symbols(f"q_1:{dof + 1}", real=True)
-    qd = sympy.symbols(f"qd_1:{dof + 1}", real=True)
-    qdd = sympy.symbols(f"qdd_1:{dof + 1}", real=True)
-    out = [
-        (f"q_{n}", q[j]),
-        (f"qd_{n}", qd[j]),
-        (f"qdd_{n}", qdd[j]),
-        (f"sign(qd_{n})", sympy.sign(qd[j])),
-        (f"Abs(qd_{n})", sympy.Abs(qd[j])),
-        (f"sin(q_{n})", sympy.sin(q[j])),
-        (f"cos(q_{n})", sympy.cos(q[j])),
-    ]
-    for k in range(dof):
-        if k != j:
-            m = k + 1
-            out += [
-                (f"q_{m}", q[k]),
-                (f"qd_{m}", qd[k]),
-                (f"qdd_{m}", qdd[k]),
-                (f"sin(q_{n} - q_{m})", sympy.sin(q[j] - q[k])),
-                (f"cos(q_{n} - q_{m})", sympy.cos(q[j] - q[k])),
-            ]
-    return out
-
-
-#: products of the joint's own sign(qd) and |qd| are not new terms: sign^2 = 1,
-#: sign(x) |x| = x, |x|^2 = x^2 (a square of a cosine, 1 - sin^2, and
-#: qd sign(qd) = |qd| are skipped too)
-_DEGENERATE = {("sign", "sign"), ("sign", "Abs"), ("Abs", "sign"), ("Abs", "Abs")}
+#: the most Lagrangian terms the open-ended library may have (see the module docstring)
+MAX_OPEN_LAGRANGIAN = 300
 
 
 @functools.lru_cache(maxsize=None)
-def symbolic_terms(dof: int, j: int) -> TermLibrary:
-    """The open-ended terms of joint ``j`` (see the module docstring), each a
-    generalized force named by its expression's text."""
-    n = j + 1
-    prims = _primitives(dof, j)
-    named = {f"q_{n}", f"qd_{n}", f"qdd_{n}", f"sign(qd_{n})"}  # spring, viscous, armature, Coulomb
-    terms = [(text, e) for text, e in prims if text not in named]
-    for a in range(len(prims)):
-        for b in range(a, len(prims)):
-            (ta, ea), (tb, eb) = prims[a], prims[b]
-            heads = (ta.split("(")[0], tb.split("(")[0])
-            if heads in _DEGENERATE or (ta == tb and heads[0] == "cos") or {ta, tb} == {f"qd_{n}", f"sign(qd_{n})"}:
-                continue
-            terms.append((f"{ta}**2" if ta == tb else f"{ta}*{tb}", ea * eb))
-    q, qd = prims[0][1], prims[1][1]
-    terms += [(f"q_{n}**3", q**3), (f"qd_{n}**3", qd**3), (f"sign(qd_{n})*Abs(q_{n})", sympy.sign(qd) * sympy.Abs(q))]
-    return TermLibrary(Term.force(e, j, text) for text, e in terms)
+def open_ended(dof: int, kinds: tuple[str, ...]) -> TermLibrary:
+    """The open-ended terms of ``L`` and ``D`` (see the module docstring), each
+    named by its expression's text."""
+    q, qd = coordinate_symbols(dof)
+    named = {sympy.Integer(1)} | {v**2 for v in qd} | {x**2 for x, k in zip(q, kinds) if k == "linear"}
+    terms = []
+    if lagrangian_library_size(dof, kinds) <= MAX_OPEN_LAGRANGIAN:
+        terms += [Term.lagrangian(t.expr, str(t.expr)) for t in lagrangian_library(dof, kinds, (0, 2)) if t.expr not in named]
+    for j, v in enumerate(qd):
+        terms += [Term.dissipation(sympy.Abs(v) ** 3 / 3, f"Abs({v})**3/3", j), Term.dissipation(v**4 / 4, f"{v}**4/4", j)]
+    return TermLibrary(terms)
 
 
 #: the Stribeck velocities (rad/s, or m/s) the candidates start from; the loop refines an accepted one
@@ -89,11 +66,12 @@ def candidates(dof: int, coupled: bool = True, system=None) -> TermLibrary:
     every pair, where ``coupled``: the coordinates are absolute angles; the
     shaped ones at each velocity of :data:`STRIBECK_GRID`), the effects of
     the whole ``system`` that apply to it (a tip payload and a gravity tilt
-    on a planar chain), then the open-ended terms."""
+    on a planar chain), then the open-ended terms of ``L`` and ``D``."""
     named = [effect.term(*joints, shape=v) for effect in EFFECTS.values() if effect.arity == 1 or (coupled and effect.arity == 2)
              for joints in _placements(effect.arity, dof) for v in (STRIBECK_GRID if effect.shaped else (None,))]
     whole = [effect.term(system=system) for effect in EFFECTS.values() if effect.arity == 0 and effect.applies_to(system)]
-    return TermLibrary(named + whole + [t for j in range(dof) for t in symbolic_terms(dof, j)])
+    kinds = system.kinds if system is not None else ("angle",) * dof
+    return TermLibrary(named + whole + list(open_ended(dof, tuple(kinds))))
 
 
 def _placements(arity: int, dof: int) -> list[tuple[int, ...]]:
@@ -108,22 +86,26 @@ def is_named(term: Term) -> bool:
 
 
 def admissible(term: Term, coefficient: float) -> bool:
-    """Whether a named effect's coefficient is physical (:meth:`Effect.admissible`);
-    an open-ended generalized force has no sign to keep."""
-    return EFFECTS[term.name].admissible(coefficient) if is_named(term) else True
+    """Whether a coefficient is physical: a named effect's by
+    :meth:`Effect.admissible`; an open-ended term of ``D`` (non-negative) needs
+    one >= 0; an open-ended term of ``L`` has no sign to keep (the loop
+    checks the mass matrix instead)."""
+    if is_named(term):
+        return EFFECTS[term.name].admissible(coefficient)
+    return coefficient >= 0 if term.rayleigh else True
 
 
 def structural(term: Term, coefficient: float, stderr: float) -> dict:
     """The JSON entry of a residual that only an inadmissible coefficient
     explains: the declared form lacks this freedom. It names the term and the
     coefficient that would be needed; the term is not added to the model."""
-    effect = EFFECTS[term.name]
-    law = _law(term, effect.parameter)
-    return {"name": term.name, "kind": "structural", "law": law, "joints": [j + 1 for j in term.joints],
-            "parameters": {},
+    parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
+    law = _law(term, parameter)
+    return {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,
+            "joints": [j + 1 for j in term.joints], "parameters": {},
             "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "
-                        f"{effect.parameter} = {coefficient:.4g} ± {stderr:.2g}, which is not physical "
-                        f"({effect.parameter} >= 0); the term is not added")}
+                        f"{parameter} = {coefficient:.4g} ± {stderr:.2g}, which is not physical "
+                        f"({parameter} >= 0); the term is not added")}
 
 
 def label(term: Term) -> str:

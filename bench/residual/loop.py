@@ -77,7 +77,7 @@ from bench.core.errors import UserError
 from bench.core.models import ExpressionModel, FittedModel, LinearParametricModel, ParametricModel, mass_and_bias
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
-from bench.residual.candidates import admissible, candidates, describe_all, label, structural
+from bench.residual.candidates import admissible, candidates, describe_all, is_named, label, structural
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, best_shape, bic, trace
@@ -425,7 +425,7 @@ def _smallest_mass_eigenvalue(model: FittedModel, train: Dataset) -> float:
 
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float = 60.0, seed: int = 0,
                   hyperparameters: dict | None = None, report: Report = print,
-                  fitted: FittedModel | None = None) -> ResidualResult:
+                  fitted: FittedModel | None = None, open_ended: bool | None = None) -> ResidualResult:
     """Run the loop in this process; see the module docstring.
 
     ``budget_s`` bounds the whole loop (its method's fit has
@@ -484,6 +484,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     findings: dict[str, dict] = {}  # structural findings, by the term's label
     system = SYSTEMS[train.system]() if train.system in SYSTEMS else None
     pool = candidates(train.dof, coupled=bool(getattr(system, "absolute_angles", False)), system=system)
+    if open_ended is False:
+        pool = TermLibrary([t for t in pool if is_named(t)])
     split = describe_validation(train)
     report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
            f"held out ({split}) {heldout:.4g}")

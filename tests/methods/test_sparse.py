@@ -11,7 +11,7 @@ from bench.core import symbolic
 from bench.core.data import generate, mse
 from bench.evaluation.recovery import judge
 from methods import METHODS
-from methods.sparse import library
+from bench.core.terms import lagrangian_library as library
 
 
 def test_library_is_built_from_the_coordinates():

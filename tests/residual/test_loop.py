@@ -189,17 +189,36 @@ def test_cli_bad_files_exit_2_in_one_line_and_write_nothing(tmp_path):
     assert not (tmp_path / "o.json").exists() and not (tmp_path / "o.md").exists()
 
 
-def test_open_ended_search_names_an_effect_outside_the_named_list():
-    # a velocity-dependent coupling: no named effect, one term of the generated library
+def test_open_ended_search_names_a_dissipation_outside_the_named_list():
+    # quadratic drag on joint 2, D = c |qd_2|^3 / 3: no named effect, one open-ended term of D
     s = get_system("double_pendulum")
     train, test = generate(s, 3000, 0), generate(s, 1500, 1000)
     for d in (train, test):
-        d.tau[:, 0] += 0.7 * d.qd[:, 0] * np.cos(d.q[:, 0] - d.q[:, 1])
+        d.tau[:, 1] += 0.4 * d.qd[:, 1] * np.abs(d.qd[:, 1])
     out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
     (e,) = out.effects
-    assert e["name"] == "symbolic" and e["joint"] == 1 and e["expression"] == "qd_1*cos(q_1 - q_2)"
-    assert e["coefficient"] == pytest.approx(0.7, rel=0.05)
+    assert e["name"] == "symbolic" and e["kind"] == "dissipative" and e["expression"] == "Abs(qd_2)**3/3"
+    assert e["joints"] == [2] and e["coefficient"] == pytest.approx(0.4, rel=0.02)
+    assert e["law"] == "D = c*qd_2**2*Abs(qd_2)/3"  # sympy writes |qd|^3 so
     assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
+
+
+def test_open_ended_search_names_a_lagrangian_term_the_declared_form_lacks():
+    # an inertia coupling the rod form has no freedom for: L += 0.3 qd_1^2 cos(q_2)
+    import sympy
+
+    from bench.core.terms import Term
+
+    q2, v1 = sympy.symbols("q_2 qd_1", real=True)
+    extra = Term.lagrangian(0.3 * v1**2 * sympy.cos(q2))
+    s = get_system("double_pendulum")
+    train, test = (d.replace(tau=d.tau + extra.torque(d)) for d in (generate(s, 3000, 0), generate(s, 1500, 1000)))
+    out = residual_loop("sysid", train, test, budget_s=20, report=quiet)
+    (e,) = out.effects
+    assert e["name"] == "symbolic" and e["kind"] == "conservative" and e["expression"] == "qd_1**2*cos(q_2)"
+    assert e["joints"] == [1, 2] and e["parameters"]["c"]["value"] == pytest.approx(0.3, rel=0.02)
+    assert out.mass_matrix["positive_definite"]
+    assert out.mse_after["test"] <= 1e-6 * out.mse_before["test"]
 
 
 def test_a_named_effect_is_preferred_to_an_open_ended_term_that_mimics_it():

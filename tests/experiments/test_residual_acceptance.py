@@ -1,0 +1,22 @@
+"""The residual acceptance script: what it expects matches what the loop names."""
+
+from __future__ import annotations
+
+from bench.core.effects import parse_effects
+from bench.experiments.residual_acceptance import CASES, expected, run_case
+
+
+def test_each_case_expects_its_effects_under_the_names_and_joints_the_loop_reports():
+    want = {case: expected(parse_effects(items, 2), 2) for case, items in CASES.items()}
+    assert want["armature"] == {("armature", (1,)): {"I": 0.3}}
+    assert want["elbow_spring"] == {("coupled_spring", (1, 2)): {"k": 3.0}}
+    assert want["stribeck"] == {("stribeck_friction", (1,)): {"F_c": 1.0, "F_s": 2.0, "v_s": 0.5, "b": 0.3}}
+    assert want["tip_payload"] == {("tip_payload", (1, 2)): {"m": 0.5}}
+    assert want["clean"] == {}
+
+
+def test_a_case_run_names_the_elbow_spring_and_its_stiffness():
+    row = run_case("elbow_spring", 0.0, "sysid", 1500, 500, 10.0)
+    assert row["named_right"] and row["found"] == ["coupled_spring j1-2"]
+    assert row["worst_coef_error"] < 0.02 and row["after"] < 1e-6 * row["before"]
+    assert 0 <= row["statistics_seconds"] <= row["seconds"]
