@@ -24,7 +24,7 @@ def cli(*args, cwd=None):
 
 
 COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "leaderboard",
-            "adaptation", "residual-acceptance", "overhead", "dfki-filter", "scaling")
+            "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling")
 
 
 def _subparsers():

@@ -1,0 +1,21 @@
+"""The DFKI residual measurement: its splits hold out whole recordings."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bench.experiments.residual_dfki import run_case, split
+
+
+def test_leaving_a_recording_out_trains_on_the_five_others_and_tests_on_it():
+    train, test = split("03")
+    assert test.recordings() == ["03"] and sorted(train.recordings()) == ["00", "01", "02", "04", "05"]
+    assert not np.isin(train.recording, test.recording).any()
+    suite_train, suite_test = split(None)
+    assert sorted(suite_test.recordings()) == ["03", "05"]
+
+
+def test_a_run_reports_before_after_and_its_time():
+    row = run_case("sparse", "05", 5.0)
+    assert row["held_out"] == "05" and row["after"] <= row["before"]
+    assert 0 <= row["statistics_seconds"] <= row["seconds"]
