@@ -123,6 +123,8 @@ class Term:
             out = np.zeros_like(data.tau)
             for j in range(data.dof):
                 dD = sympy.diff(self.expr, sympy.Symbol(f"qd_{j + 1}", real=True))
+                if dD.has(sympy.cosh):  # log cosh's derivative comes as sinh/cosh, which overflows: tanh
+                    dD = sympy.simplify(dD)
                 if dD != 0:
                     out[:, j] = _force_function(dD)(data)
             return out

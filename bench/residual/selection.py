@@ -98,6 +98,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     floor = ROUNDOFF * float(np.mean(data.tau**2))
     fixed = np.zeros((n_rows, 0)) if fixed is None else fixed
     F_all = {c: c.column(data, "indirect") for c in pool if c not in exclude}
+    F_all = {c: f for c, f in F_all.items() if np.isfinite(f).all()}  # a term not finite on the data is no candidate
     accepted, steps, structural = [], [], []
     taken = {slot(t) for t in exclude}
     steps_taken: list[dict] = []
@@ -135,7 +136,10 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
             return rr - float(rm @ column) ** 2 / cc if cc > 0 else rr
 
         refined = effect.term(c.joint, shape=best_shape(rss, c.shape))
-        F_all[refined] = refined.column(data, "indirect")
+        column = refined.column(data, "indirect")
+        if not np.isfinite(column).all():
+            return c
+        F_all[refined] = column
         return refined
 
     def stats(c: Term, k_now: int, rss_now: float) -> dict:
@@ -166,7 +170,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         return None
 
     # the named effects first; the open-ended terms only where no named effect passes
-    tiers = [[c for c in pool if is_named(c)], [c for c in pool if not is_named(c)]]
+    tiers = [[c for c in pool if is_named(c) and c in F_all], [c for c in pool if not is_named(c) and c in F_all]]
     while max_steps is None or len(steps_taken) < max_steps:
         k_now = fixed.shape[1] + len(nuisance) + len(accepted)
         Q = _basis(design(accepted))

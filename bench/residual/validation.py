@@ -49,15 +49,19 @@ def row_folds(data: Dataset) -> list[np.ndarray]:
     return [np.repeat(mask, data.dof) for mask in folds(data)]
 
 
+def cv_fold_mse(F: np.ndarray, y: np.ndarray, held: list[np.ndarray]) -> np.ndarray:
+    """The held-out mean squared residual of ``y ~ F`` in each fold of
+    ``held`` (row masks), scored by a fit on the other rows. No columns:
+    the mean of ``y**2`` in each fold."""
+    out = []
+    for mask in held:
+        r = y[mask] if F.shape[1] == 0 else y[mask] - F[mask] @ least_squares(F[~mask], y[~mask])
+        out.append(float(r @ r) / max(int(mask.sum()), 1))
+    return np.asarray(out)
+
+
 def cv_mse(F: np.ndarray, y: np.ndarray, held: list[np.ndarray]) -> float:
     """The held-out mean squared residual of ``y ~ F`` over the folds ``held``
-    (row masks): each fold scored by a fit on the other rows. No columns:
-    the mean of ``y**2``."""
-    sse = 0.0
-    for mask in held:
-        if F.shape[1] == 0:
-            r = y[mask]
-        else:
-            r = y[mask] - F[mask] @ least_squares(F[~mask], y[~mask])
-        sse += float(r @ r)
-    return sse / max(sum(int(m.sum()) for m in held), 1)
+    (:func:`cv_fold_mse`, weighted by the folds' sizes)."""
+    sizes = np.asarray([int(m.sum()) for m in held], dtype=np.float64)
+    return float(cv_fold_mse(F, y, held) @ sizes / max(sizes.sum(), 1.0))

@@ -138,3 +138,12 @@ def test_a_shaped_effects_numeric_torque_is_its_terms():
             for v in (0.05, 0.5, 3.0):
                 tau = effect.term(1, shape=v).torque(data)
                 np.testing.assert_allclose(effect.numeric(data.q[:, 1], data.qd[:, 1], v), tau[:, 1], rtol=1e-13, atol=1e-15)
+
+
+def test_a_sharp_smooth_coulomb_is_finite_at_any_speed():
+    # log cosh's derivative is sinh/cosh, which overflows past |qd / v_s| ~ 710: the torque must be tanh
+    data = generate(get_system("double_pendulum"), 100, 0)
+    data = data.replace(qd=100 * data.qd)
+    tau = EFFECTS["smooth_coulomb"].term(0, shape=0.0077).torque(data)
+    assert np.isfinite(tau).all()
+    np.testing.assert_allclose(tau[:, 0], np.tanh(data.qd[:, 0] / 0.0077), atol=1e-12)

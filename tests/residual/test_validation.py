@@ -165,3 +165,16 @@ def test_friction_outside_the_laws_is_never_reported_with_an_impossible_coeffici
         elif e["name"] in EFFECTS:
             assert all(EFFECTS[e["name"]].admissible(v["value"]) for v in e["parameters"].values()), e
     assert out.mse_after["test"] <= out.mse_before["test"]
+
+
+def test_with_a_kept_neural_fit_every_held_out_recording_must_gain(monkeypatch):
+    # the MLP's fit saw every training recording, so the mean held-out gain flatters; one recording
+    # that does not gain undoes the round
+    s = get_system("double_pendulum")
+    train = add_effects(generate(s, 1500, 0), {"viscous_friction": (0.8, 0.5)})
+    train = train.replace(recording=np.where(np.arange(len(train)) < 750, "a", "b"))
+    monkeypatch.setattr(loop, "_heldout_by_recording",
+                        lambda model, data: np.array([0.5, 2.0]) if model.effects else np.array([1.0, 1.0]))
+    out = residual_loop("mlp", train, None, budget_s=8, report=quiet, hyperparameters={"hidden": 16, "layers": 2})
+    assert [e for e in out.effects if e["kind"] != "structural"] == [] and out.mse_after == out.mse_before
+    assert "recording(s) b does not fall" in out.rounds[-1]["stop"]
