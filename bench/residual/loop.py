@@ -12,15 +12,17 @@ Round 0 fits; each later round traces, adds, refits and keeps or undoes:
 2. **Residual.** ``r = tau - g(L_hat) - Phi c`` on the training and test sets.
 3. **Trace.** Forward stepwise selection (:mod:`bench.residual.selection`)
    over the candidates of :mod:`bench.residual.candidates`: the named
-   effects on every joint and an open-ended library of generalized forces.
+   effects on every joint, those of the whole system (a payload, a gravity
+   tilt) and an open-ended library of terms of ``L`` and ``D``.
    The named effects are tried first at each step. Candidates are judged
    beside the model's own freedom: a symbolic model's terms, or a parametric
    model's parameter directions (its Jacobian), are refitted with them, so a
    candidate the model could already express gains nothing.
 4. **Add** the accepted effects: conservative ones to the Lagrangian
-   (armature ``+c qd^2/2``, spring ``-c q^2/2``), dissipative ones as
-   generalized forces (viscous friction from the Rayleigh function
-   ``c qd^2/2``, Coulomb friction, offsets, symbolic terms).
+   (armature ``+c qd^2/2``, spring ``-c q^2/2``, open-ended ``L`` terms),
+   dissipative ones through the Rayleigh function ``D`` (torque ``dD/dqd``:
+   viscous friction ``c qd^2/2``, Coulomb and Stribeck friction, drag), an
+   offset as a generalized force.
 5. **Refit jointly**, without fitting the method again. A parametric model
    (SysId: the system's declared form with unknown physical parameters) is
    refitted with the effects by nonlinear least squares over parameters and
@@ -38,8 +40,10 @@ Round 0 fits; each later round traces, adds, refits and keeps or undoes:
    leave one recording out, or contiguous blocks where the training data
    name fewer than two); a round that does not lower that held-out error is
    undone and the loop ends, so the final model is never worse than the
-   starting one on held-out recordings. Each round records the figure
-   (``heldout_mse``). A round after which the mass matrix ``d^2 L / dqd^2``
+   starting one on held-out recordings. Where the method keeps its own fit
+   (step 5), that fit saw every training recording and flatters the
+   held-out residual: each recording's held-out error must fall. Each
+   round records the figure (``heldout_mse``). A round after which the mass matrix ``d^2 L / dqd^2``
    of the model with its effects is no longer positive definite at the
    training states (:data:`MASS_STATES` of them) is undone too; a fitted
    model whose own mass matrix is not is reported as such.
