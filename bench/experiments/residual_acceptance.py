@@ -123,7 +123,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), help="effect cases (default: all)")
     parser.add_argument("--n-train", type=int, default=3000, help="training samples (default 3000)")
     parser.add_argument("--n-test", type=int, default=1500, help="test samples (default 1500)")
-    parser.add_argument("--budget", type=float, default=10.0, help="seconds for each loop, its fit included (default 10)")
+    parser.add_argument("--budget", type=float, default=30.0, help="seconds for each loop, its fit included (default 30)")
     parser.add_argument("--workers", type=int, default=2, help="cases at a time, one process each (default 2)")
     parser.add_argument("--out", type=Path, default=Path("results/residual/acceptance.md"),
                         help="the table to write (default results/residual/acceptance.md)")
