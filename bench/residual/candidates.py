@@ -101,11 +101,14 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     coefficient that would be needed; the term is not added to the model."""
     parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
     law = _law(term, parameter)
-    return {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,
-            "joints": [j + 1 for j in term.joints], "parameters": {},
-            "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "
-                        f"{parameter} = {coefficient:.4g} ± {stderr:.2g}, which is not physical "
-                        f"({parameter} >= 0); the term is not added")}
+    entry = {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,
+             "joints": [j + 1 for j in term.joints], "parameters": {},
+             "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "
+                         f"{parameter} = {coefficient:.4g} ± {stderr:.2g}, which is not physical "
+                         f"({parameter} >= 0); the term is not added")}
+    if not is_named(term):
+        entry["expression"] = term.name
+    return entry
 
 
 def label(term: Term) -> str:
