@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bench.core import symbolic
 from bench.core.data import generate
@@ -147,3 +149,21 @@ def test_a_sharp_smooth_coulomb_is_finite_at_any_speed():
     tau = EFFECTS["smooth_coulomb"].term(0, shape=0.0077).torque(data)
     assert np.isfinite(tau).all()
     np.testing.assert_allclose(tau[:, 0], np.tanh(data.qd[:, 0] / 0.0077), atol=1e-12)
+
+
+_NAMES = st.sampled_from(["viscous_friction", "coupled_spring", "stribeck_friction", "tip_payload", "gravity_tilt", "x"])
+_VALUES = st.text(alphabet="0123456789.,:;-+eEinfa ", max_size=24)
+
+
+@settings(max_examples=300, deadline=None)
+@given(name=_NAMES, sep=st.sampled_from(["=", "", "=="]), values=_VALUES, dof=st.integers(1, 4))
+def test_any_effect_spec_is_parsed_or_refused_with_a_config_error(name, sep, values, dof):
+    try:
+        parsed = parse_effects([f"{name}{sep}{values}"], dof)
+    except ConfigError as exc:
+        assert str(exc).startswith("--effects: ") and "\n" not in str(exc)
+        return
+    for placed in parsed.values():
+        for joints, c in placed.items():
+            assert all(0 <= j < dof for j in joints)
+            assert all(np.isfinite(np.atleast_1d(c)))
