@@ -68,7 +68,6 @@ has (a mass or a length). The data generator adds the exact tilt,
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -121,6 +120,11 @@ class Effect:
     #: where the linear coefficient is a function of the reported parameter
     #: (a tilt's is ``sin(alpha)``): that function, of a sympy symbol
     coefficient_of: Callable | None = None
+    #: whether an effect of the whole system needs the chain's link lengths (a payload does)
+    needs_link_lengths: bool = False
+    #: for the data generator, ``exact(system, value)``: the effect's exact term at ``value``
+    #: (coefficient 1), where the term the loop fits is only its part linear in a coefficient
+    exact: Callable | None = None
 
     def parameter_from(self, coefficient: float, stderr: float) -> tuple[float, float]:
         """The reported parameter and its standard error, from the fitted
@@ -141,7 +145,13 @@ class Effect:
         chain's link lengths); every per-joint effect can."""
         if self.on_system is None:
             return True
-        return system is not None and system.planar_chain and (self.name != "tip_payload" or bool(system.link_lengths))
+        return system is not None and system.planar_chain and (not self.needs_link_lengths or bool(system.link_lengths))
+
+    def require(self, system) -> None:
+        """A clear :class:`ConfigError` where the effect cannot be placed on ``system``."""
+        if not self.applies_to(system):
+            raise ConfigError(f"{self.name} needs a planar chain that gives its geometry; "
+                              f"{getattr(system, 'name', system)} does not")
 
     def admissible(self, coefficient: float) -> bool:
         """Whether ``coefficient`` is physical for this effect."""
@@ -164,9 +174,7 @@ class Effect:
         for an effect of the whole ``system``) as a term; ``shape`` is the
         value of its nonlinear parameter, if it has one."""
         if self.on_system is not None:
-            if not self.applies_to(system):
-                raise ConfigError(f"{self.name} needs a planar chain that gives its geometry; "
-                                  f"{getattr(system, 'name', system)} does not")
+            self.require(system)
             return Term(sympy.expand(self.on_system(system, *system.symbols)), None, self.name)
         if len(joints) != self.arity or len(set(joints)) != len(joints):
             raise ValueError(f"{self.name} acts on {self.arity} distinct joint(s), got {joints}")
@@ -202,11 +210,11 @@ EFFECTS: dict[str, Effect] = {
                "dF", "dF·exp(−(qd/v_s)²)·sign(qd) (D = dF·v_s·√π/2·erf(|qd|/v_s))", shaped="v_s",
                numeric=lambda q, qd, v: np.exp(-((qd / v) ** 2)) * np.sign(qd)),
         Effect("tip_payload", None, "conservative", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
-               arity=0, on_system=lambda system, q, qd: _payload(system, q, qd)),
+               arity=0, on_system=lambda system, q, qd: _payload(system, q, qd), needs_link_lengths=True),
         Effect("gravity_tilt", None, "conservative", "alpha",
                "gravity turned by alpha in the plane (L += sin(alpha)·(−Σ s_j·∂L/∂q_j))",
                arity=0, nonnegative=False, on_system=lambda system, q, qd: _tilt(system, q, qd),
-               coefficient_of=sympy.sin),
+               coefficient_of=sympy.sin, exact=lambda system, alpha: tilted(system, alpha)),
     )
 }
 
@@ -216,10 +224,7 @@ def _payload(system, q, qd) -> sympy.Expr:
     chain's tip. With link angles ``a_j`` (the coordinates, or their running
     sums for relative joints) and lengths ``l_j``,
     ``|v_tip|^2 = sum_jk l_j l_k a_j' a_k' cos(a_j - a_k)``."""
-    absolute = system.absolute_angles
-    angles = list(q) if absolute else list(itertools.accumulate(q))
-    rates = list(qd) if absolute else list(itertools.accumulate(qd))
-    lengths = [sympy.Float(getattr(system.params, n)) for n in system.link_lengths]
+    angles, rates, lengths = system.link_angles(q), system.link_angles(qd), system.link_length_values()
     n = len(angles)
     speed2 = sum(lengths[j] * lengths[k] * rates[j] * rates[k] * (1 if j == k else sympy.cos(angles[j] - angles[k]))
                  for j in range(n) for k in range(n))
@@ -343,11 +348,11 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
                for name, coefs in effects.items()}
     for name, coefs in effects.items():
         for joints, c in coefs.items():
-            if name == "gravity_tilt":
-                EFFECTS[name].term(system=system)  # the clear error where the system has no tilt
-                pairs = [(tilted(system, c), 1.0)]
-            elif name in LAWS:
+            if name in LAWS:
                 pairs = stribeck_terms(joints[0], *c)
+            elif EFFECTS[name].exact is not None:
+                EFFECTS[name].require(system)
+                pairs = [(EFFECTS[name].exact(system, c), 1.0)]
             else:
                 pairs = [(EFFECTS[name].term(*joints, system=system), c)]
             for term, coef in pairs:

@@ -223,13 +223,23 @@ class System(abc.ABC):
         return None
 
     # -- derived -----------------------------------------------------------------
+    def link_angles(self, q: Sequence) -> list:
+        """A planar chain's link angles from the vertical, given its
+        coordinates ``q``: the coordinates themselves where they are absolute
+        angles, else their running sums (the same map takes velocities to the
+        links' angular velocities)."""
+        return list(q) if self.absolute_angles else list(itertools.accumulate(q))
+
+    def link_length_values(self) -> list[sympy.Float]:
+        """A planar chain's link lengths (:attr:`link_lengths`) at the system's parameters."""
+        if not (self.planar_chain and self.link_lengths):
+            raise ValueError(f"{self.name} does not give a planar chain's link lengths")
+        return [sympy.Float(getattr(self.params, n)) for n in self.link_lengths]
+
     def tip_position(self, q: Sequence[sympy.Symbol]) -> tuple[sympy.Expr, sympy.Expr]:
         """The end of a planar chain's last link, ``(x, y)`` with ``y`` up and
         the pivot at the origin, at the system's link lengths."""
-        if not (self.planar_chain and self.link_lengths):
-            raise ValueError(f"{self.name} does not give a planar chain's link lengths")
-        angles = list(q) if self.absolute_angles else list(itertools.accumulate(q))
-        lengths = [sympy.Float(getattr(self.params, n)) for n in self.link_lengths]
+        lengths, angles = self.link_length_values(), self.link_angles(q)
         return (sum(l * sympy.sin(a) for l, a in zip(lengths, angles)),
                 -sum(l * sympy.cos(a) for l, a in zip(lengths, angles)))
 

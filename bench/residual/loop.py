@@ -543,32 +543,28 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         entry = {"round": k, "accepted": [label(c) for c in selection.accepted], "removed": removed,
                  "trace": selection.steps}
         candidate_mass = timed(_smallest_mass_eigenvalue, candidate, train)
+        undo = None  # why the round is undone: the JSON's words, then the progress line's
         if mass > 0 and not candidate_mass > 0:
-            rounds.append({**entry, "mse": scores(model), "heldout_mse": heldout, "candidate_heldout_mse": held,
-                           "stop": f"undone: with these effects the mass matrix is not positive definite on the "
-                                   f"training data (smallest eigenvalue {candidate_mass:.4g})",
-                           "seconds": round(time.perf_counter() - start, 3)})
-            report(f"round {k}: undone, the mass matrix would not be positive definite "
-                   f"(smallest eigenvalue {candidate_mass:.4g})")
-            break
-        if not held < heldout:
-            rounds.append({**entry, "mse": scores(model), "heldout_mse": heldout, "candidate_heldout_mse": held,
-                           "stop": "undone: the refitted model does not lower the held-out error",
-                           "seconds": round(time.perf_counter() - start, 3)})
-            report(f"round {k}: undone, held-out MSE {held:.4g} is not below {heldout:.4g}")
-            break
-        if _keeps_its_fit(model.rigid) and len(train.recordings()) >= 2:
+            undo = (f"with these effects the mass matrix is not positive definite on the training data "
+                    f"(smallest eigenvalue {candidate_mass:.4g})",
+                    f"the mass matrix would not be positive definite (smallest eigenvalue {candidate_mass:.4g})")
+        elif not held < heldout:
+            undo = ("the refitted model does not lower the held-out error",
+                    f"held-out MSE {held:.4g} is not below {heldout:.4g}")
+        elif _keeps_its_fit(model.rigid) and len(train.recordings()) >= 2:
             # the kept fit saw every training recording, which flatters a held-out recording's
             # residual: each recording must gain, not only their mean
             now, then = timed(_heldout_by_recording, candidate, train), timed(_heldout_by_recording, model, train)
-            worse = [name for name, a, b in zip(train.recordings(), now, then) if not a < b]
+            worse = ", ".join(name for name, a, b in zip(train.recordings(), now, then) if not a < b)
             if worse:
-                rounds.append({**entry, "mse": scores(model), "heldout_mse": heldout, "candidate_heldout_mse": held,
-                               "stop": f"undone: the held-out error of recording(s) {', '.join(worse)} does not fall "
-                                       f"(with {method}'s own fit kept, every held-out recording must gain)",
-                               "seconds": round(time.perf_counter() - start, 3)})
-                report(f"round {k}: undone, held-out recording(s) {', '.join(worse)} do not gain")
-                break
+                undo = (f"the held-out error of recording(s) {worse} does not fall "
+                        f"(with {method}'s own fit kept, every held-out recording must gain)",
+                        f"held-out recording(s) {worse} do not gain")
+        if undo is not None:
+            rounds.append({**entry, "mse": scores(model), "heldout_mse": heldout, "candidate_heldout_mse": held,
+                           "stop": f"undone: {undo[0]}", "seconds": round(time.perf_counter() - start, 3)})
+            report(f"round {k}: undone, {undo[1]}")
+            break
         model, heldout, mass = candidate, held, candidate_mass
         s = scores(model)
         rounds.append({**entry, "mse": s, "heldout_mse": held, "seconds": round(time.perf_counter() - start, 3)})
