@@ -143,6 +143,11 @@ def test_cli_refuses_bad_input_in_one_line(tmp_path):
             "--effects", "friction=1,2")
     assert r.returncode == 2 and "unknown effect 'friction'" in r.stderr and r.stderr.count("\n") == 1
     assert not (tmp_path / "x.csv").exists()
+    r = cli("data", "--system", "cart_pole", "--n", "10", "--seed", "0", "--out", str(tmp_path / "x.csv"),
+            "--effects", "gravity_tilt=0.1")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert "gravity_tilt needs a planar chain that gives its geometry; cart_pole does not" in r.stderr
+    assert not (tmp_path / "x.csv").exists()
     r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--json", str(tmp_path / "o.json"))
     assert r.returncode == 2 and "give --train" in r.stderr and not (tmp_path / "o.json").exists()
     r = cli("residual", "--system", "double_pendulum", "--method", "operon", "--train", "x.csv")
