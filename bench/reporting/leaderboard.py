@@ -7,7 +7,9 @@ sections they comment on (``## double_pendulum, direct``), plus an
 ``## Introduction`` that comes first; any other heading becomes a section of
 its own after the tables, in the file's order.
 Tables without a paragraph are listed on the console, so none goes
-unexplained by accident. Usage::
+unexplained by accident. After the tables, :func:`rank_summary` gives each
+method's mean rank across the sections and a Friedman test of whether the
+ranks differ (:func:`bench.reporting.significance.friedman`). Usage::
 
     python -m bench leaderboard results/leaderboard --commentary results/commentary.md --out results/README.md
 """
@@ -20,7 +22,8 @@ from pathlib import Path
 
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
-from bench.reporting.tables import build_tables, read_for_tables, write_plots
+from bench.reporting.significance import by_seed, friedman, section_medians
+from bench.reporting.tables import build_tables, read_for_tables, section_groups, write_plots
 
 
 def read_commentary(path: Path) -> dict[str, str]:
@@ -64,10 +67,39 @@ def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, li
         parts.append(chunk)
     intro = commentary.get("Introduction", "")
     text = "# Leaderboard\n\n" + (intro + "\n\n" if intro else "") + "".join(parts).rstrip() + "\n"
+    summary = rank_summary(records)
+    if summary:
+        text += f"\n## Ranks across systems\n\n{summary}\n"
     for heading, paragraph in commentary.items():
         if heading not in used:
             text += f"\n## {heading}\n\n{paragraph}\n"
     return text, missing
+
+
+def rank_summary(records) -> str:
+    """Mean ranks across the sections (system, experiment, noise), each
+    section ranking the methods by median test MSE over seeds, with a
+    Friedman test; empty where fewer than two methods ran in two sections.
+    Sections where fewer than two methods have results are left out."""
+    medians = {f"{system}, {experiment}, noise {noise:g}": section_medians(
+        {m: list(seeds.values()) for m, seeds in by_seed(recs).items()})
+        for (system, experiment, noise), recs in section_groups(records).items()}
+    # a section where no method could run (the direct experiment on measured data) ranks nothing
+    out = friedman({k: v for k, v in medians.items() if len(v) >= 2})
+    if out is None:
+        return ""
+    order = sorted(out.ranks, key=lambda m: (out.ranks[m], m))
+    text = (f"Each of the {out.sections} sections ranks the methods by their median test MSE over seeds "
+            f"(1 = best); the mean rank across them: " + ", ".join(f"{m} {out.ranks[m]:.2f}" for m in order) + ".")
+    if out.p is not None:
+        verdict = "differ" if out.p < 0.05 else "cannot be told apart"
+        text += (f" Friedman test over the {len(order)} methods: χ² = {out.statistic:.2f}, p = {out.p:.2g}; "
+                 f"at α = 0.05 the methods' ranks {verdict}. It says whether some methods rank differently, "
+                 "not which.")
+    if out.left_out:
+        text += (f" Left out, without a result in every section: {', '.join(out.left_out)} "
+                 "(a method's variants are its own runs, and are not ranked).")
+    return text
 
 
 def write_leaderboard(run_dir: Path, commentary: Path, out: Path) -> list[str]:

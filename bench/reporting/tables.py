@@ -9,7 +9,12 @@ method and the rows of Valle & Haddadin (2021), Tables 1 and 2:
 * **5 Worse**: mean (± std) over the 5 worst seeds;
 
 each split into train and test MSE, in the experiment's own target (``L``
-for direct, ``tau`` for indirect). The lowest mean of each row is bold.
+for direct, ``tau`` for indirect). The lowest mean of each row is bold; in
+the All 10 rows (:data:`TESTED_GROUP`, the only seeds not chosen by training
+MSE) so is every method whose seeds are not significantly different from
+that method's (:func:`bench.reporting.significance.ties_with_best`), and a
+method with too few seeds to test is marked †. Under each table, the methods'
+mean rank across seeds (:func:`~bench.reporting.significance.seed_ranks`).
 
 Definitions
 -----------
@@ -44,10 +49,14 @@ import numpy as np
 
 from bench.core.fileio import atomic_write
 from bench.reporting.plots import convergence_plot, plot_name
+from bench.reporting.significance import ALPHA, MIN_SEEDS, by_seed, seed_ranks, ties_with_best
 from bench.runner.records import MISSING, Record, missing_runs, quarantine, read_records
 from systems import SYSTEMS
 
 GROUPS = ("Best", "5 Best", "All 10", "5 Worse")
+#: the rows whose methods are compared for significance: the only group whose
+#: seeds are not chosen by their own training MSE
+TESTED_GROUP = "All 10"
 
 
 def fmt(value: float) -> str:
@@ -56,12 +65,9 @@ def fmt(value: float) -> str:
     return f"{value:.2e}"
 
 
-def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float | None]]]:
-    """``{group: {"train": (mean, std), "test": (mean, std)}}`` over ``ok`` records.
-
-    ``std`` is ``None`` for the single-run "Best" group; a split without test
-    data is absent.
-    """
+def group_members(records: list[Record]) -> dict[str, dict[str, list[float]]]:
+    """``{group: {split: values}}``: each group's seeds' MSE, over ``ok`` records
+    (a split without test data is absent)."""
     ok = sorted((r for r in records if r.status == "ok"), key=lambda r: (r.train_mse, r.seed))
     n = len(ok)
     if n == 0:
@@ -73,10 +79,21 @@ def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float
         out[group] = {}
         for split in ("train", "test"):
             vals = [getattr(r, f"{split}_mse") for r in runs]
-            if any(v is None for v in vals):
-                continue
-            arr = np.asarray(vals, dtype=np.float64)
-            out[group][split] = (float(arr.mean()), None if group == "Best" else float(arr.std()))
+            if not any(v is None for v in vals):
+                out[group][split] = [float(v) for v in vals]
+    return out
+
+
+def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float | None]]]:
+    """``{group: {"train": (mean, std), "test": (mean, std)}}`` over ``ok`` records.
+
+    ``std`` is ``None`` for the single-run "Best" group; a split without test
+    data is absent.
+    """
+    out = {}
+    for group, splits in group_members(records).items():
+        out[group] = {split: (float(np.mean(vals)), None if group == "Best" else float(np.std(vals)))
+                      for split, vals in splits.items()}
     return out
 
 
@@ -204,12 +221,13 @@ def build_table(records: list[Record]) -> str:
     for r in records:
         by_method[r.method].append(r)
     stats = {m: group_stats(by_method[m]) for m in methods}
+    members = {m: group_members(by_method[m]) for m in methods}
     lines = ["| Group | Split | " + " | ".join(methods) + " |", "|---|---|" + "---|" * len(methods)]
     for group in GROUPS:
         for split in ("train", "test"):
             means = {m: stats[m].get(group, {}).get(split) for m in methods}
-            finite = [v[0] for v in means.values() if v is not None and math.isfinite(v[0])]
-            best = min(finite) if finite else None
+            samples = {m: members[m].get(group, {}).get(split) for m in methods}
+            best, compared = ties_with_best({m: v for m, v in samples.items() if v is not None})
             cells = []
             for m in methods:
                 v = means[m]
@@ -217,13 +235,23 @@ def build_table(records: list[Record]) -> str:
                     cells.append("—")
                     continue
                 text = fmt(v[0]) + ("" if v[1] is None else f" (± {fmt(v[1])})")
-                cells.append(f"**{text}**" if best is not None and v[0] == best else text)
+                tested_row = group == TESTED_GROUP
+                if m == best or (tested_row and m in compared and compared[m].ties):
+                    text = f"**{text}**"
+                elif tested_row and m in compared and not compared[m].tested:
+                    text += " †"
+                cells.append(text)
             label = group if split == "train" else ""
             lines.append(f"| {label} | {split} | " + " | ".join(cells) + " |")
     lines.append("| Runs | | " + " | ".join(_runs_cell(by_method[m]) for m in methods) + " |")
     lines.append("| Exact | | " + " | ".join(_exact_cell(by_method[m]) for m in methods) + " |")
     if any(r.rollout for r in records):
         lines.append("| Rollout | q RMSE | " + " | ".join(_rollout_cell(by_method[m]) for m in methods) + " |")
+    ranks, seeds = seed_ranks(by_seed(records))
+    if ranks:
+        order = sorted(ranks, key=lambda m: (ranks[m], m))
+        lines += ["", f"Mean rank by test MSE over the {seeds} seed(s) every method completed (1 = best): "
+                  + ", ".join(f"{m} {ranks[m]:.1f}" for m in order) + "."]
     notes = []
     for m in methods:
         statuses = {r.status for r in by_method[m]}
@@ -294,7 +322,15 @@ _DEFINITIONS = (
     "Rows follow Tables 1 and 2 of Valle & Haddadin (2021). Seeds are ranked by training MSE; "
     "**Best** is the best seed, **5 Best** / **5 Worse** the mean (± population std) of the 5 best / worst, "
     "**All 10** of all seeds. With n < 10 successful runs, the groups take min(5, n) and n runs "
-    "(see the Runs row). The lowest mean of each row is bold. **Exact** counts the seeds whose equation is "
+    "(see the Runs row). The lowest mean of each row is bold. In the All 10 rows, so is every method whose "
+    f"seeds are not significantly different from that method's: two-sided Mann–Whitney U test, Holm's "
+    f"correction over the row, α = {ALPHA:g}; † marks a method not tested because it or the best has fewer "
+    f"than {MIN_SEEDS} seeds, and such a difference is never called significant. The other rows are not "
+    "tested: their seeds are chosen by training MSE, not drawn at random, and 5 against 5 seeds cannot reach "
+    "significance after Holm's correction over more than three methods (the smallest p is 0.0079). With 10 "
+    "seeds the test has little power (a shift of one standard deviation is found about half the time), so a "
+    "shared bold is no evidence that two methods are equal. Under each table, the methods' mean rank across "
+    "seeds. **Exact** counts the seeds whose equation is "
     "the true Lagrangian up to the experiment's gauge (a constant; indirectly also a total time derivative), "
     "with coefficients within 1e-6 of the largest true one. **Rollout** is the median over seeds of the RMS "
     "error of q when the model's forward dynamics are integrated for 1 s from 8 held-out states, unforced, "

@@ -27,3 +27,19 @@ def test_commentary_goes_under_its_table_and_missing_ones_are_named(tmp_path):
     assert (run_dir / "convergence_double_pendulum_direct.png").is_file()
     assert missing == ["single_pendulum, indirect"]
     assert text.rstrip().endswith("## More runs\n\nBye.")
+
+
+def test_the_methods_mean_ranks_across_sections_follow_the_tables(tmp_path):
+    run_dir = tmp_path / "results" / "lb"
+    for system in ("double_pendulum", "single_pendulum", "cart_pole"):
+        for offset, method in enumerate(("sparse", "mlp", "mggp")):  # sparse lowest everywhere, mggp highest
+            for seed in range(5):
+                spec = {"system": system, "method": method, "experiment": "indirect", "seed": seed, "budget_s": 5.0}
+                r = Record.new(spec, "ok", train_mse=1.0, test_mse=10.0 ** offset + seed)
+                write_record(record_path(run_dir, r.run_id), r)
+    notes = tmp_path / "commentary.md"
+    notes.write_text("## Introduction\nHi.\n\n## More runs\nBye.\n")
+    text, _ = build(run_dir, read_commentary(notes), tmp_path / "results" / "README.md")
+    summary = text.split("## Ranks across systems")[1].split("## More runs")[0]
+    assert "Each of the 3 sections" in summary and "sparse 1.00, mlp 2.00, mggp 3.00" in summary
+    assert "χ² = 6.00, p = 0.05; at α = 0.05 the methods' ranks differ" in summary  # p = exp(-3) = 0.0498
