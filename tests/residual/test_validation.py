@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from bench.core.data import generate
 from bench.core.effects import EFFECTS, add_effects
@@ -167,14 +168,68 @@ def test_friction_outside_the_laws_is_never_reported_with_an_impossible_coeffici
     assert out.mse_after["test"] <= out.mse_before["test"]
 
 
-def test_with_a_kept_neural_fit_every_held_out_recording_must_gain(monkeypatch):
-    # the MLP's fit saw every training recording, so the mean held-out gain flatters; one recording
-    # that does not gain undoes the round
+class _Memoriser:
+    """A method whose fit knows the rigid dynamics and, on the samples it was
+    fitted on, predicts their torque less ``bias`` on joint 1: an offset in
+    its training residual that no new sample has."""
+
+    bias = 0.0
+
+    def fit(self, train, experiment, seed, budget_s):
+        from bench.core.models import LagrangianFunction
+
+        system = get_system(train.system)
+        memory = {row.tobytes(): tau - [self.bias, 0.0] for row, tau in zip(train.q, train.tau)}
+
+        class Fit(LagrangianFunction):
+            def lagrangian(self, q, qd):
+                return system.lagrangian(q, qd)
+
+            def predict_torque(self, data):
+                tau = super().predict_torque(data)
+                return np.array([memory.get(row.tobytes(), t) for row, t in zip(data.q, tau)])
+
+        return Fit()
+
+
+class _Biased(_Memoriser):
+    bias = 0.5
+
+
+def test_an_effect_only_in_a_kept_fits_own_training_residual_is_undone_by_its_cross_fits(monkeypatch):
+    # the offset is in what the fit leaves on every training recording, so leaving one recording out
+    # cannot tell; the method fitted on half the recordings leaves nothing on the other half
+    monkeypatch.setattr(loop, "METHODS", {"biased": _Biased})
     s = get_system("double_pendulum")
-    train = add_effects(generate(s, 1500, 0), {"viscous_friction": (0.8, 0.5)})
-    train = train.replace(recording=np.where(np.arange(len(train)) < 750, "a", "b"))
-    monkeypatch.setattr(loop, "_heldout_by_recording",
-                        lambda model, data: np.array([0.5, 2.0]) if model.effects else np.array([1.0, 1.0]))
-    out = residual_loop("mlp", train, None, budget_s=8, report=quiet, hyperparameters={"hidden": 16, "layers": 2})
-    assert [e for e in out.effects if e["kind"] != "structural"] == [] and out.mse_after == out.mse_before
-    assert "recording(s) b does not fall" in out.rounds[-1]["stop"]
+    train = generate(s, 1200, 0).replace(recording=np.array(list("abcd"))[np.arange(1200) // 300])
+    test = generate(s, 600, 5000)
+    out = residual_loop("biased", train, test, budget_s=20, report=quiet, open_ended=False)
+    assert out.rounds[0]["cross_fit"]["in_sample_mse"] == pytest.approx(0.125)  # 0.5**2 on one of two joints
+    assert out.rounds[0]["cross_fit"]["out_of_fold_mse"] < 1e-20
+    assert out.rounds[1]["accepted"] == ["offset on joint 1"] and "for each half" in out.rounds[1]["stop"]
+    assert out.effects == [] and out.mse_after == out.mse_before
+    # given a fit made on other data, what it leaves here is out of sample: the loop neither cross-fits nor refuses
+    given = _Biased().fit(train, "indirect", 0, 1.0)
+    out = residual_loop("biased", train, test, budget_s=20, report=quiet, fitted=given, open_ended=False)
+    assert "cross_fit" not in out.rounds[0] and [e["name"] for e in out.effects] == ["offset"]
+
+
+def test_the_cross_fit_deals_the_recordings_into_two_halves_each_predicted_by_the_other():
+    s = get_system("double_pendulum")
+    train = generate(s, 800, 0).replace(recording=np.array(list("abcd"))[np.arange(800) // 200])
+    seen = []
+
+    class Fitter:
+        method, budget_s = "recorder", 1.0
+
+        def fit(self, data):
+            seen.append("".join(data.recordings()))
+            return _Biased().fit(data, "indirect", 0, 1.0)
+
+    full = _Biased().fit(train, "indirect", 0, 1.0)
+    cross, info = loop._cross_fit(Fitter(), full, train, quiet)
+    assert seen == ["bd", "ac"] and info["in_sample_mse"] == pytest.approx(0.125)
+    assert [np.flatnonzero(h)[[0, -1]].tolist() for h in cross.halves] == [[0, 599], [200, 799]]
+    rigid = s.torque(*(torch.from_numpy(a) for a in (train.q, train.qd, train.qdd)))[0].numpy()
+    np.testing.assert_allclose(cross.torque, rigid)  # each half predicted by the fit that did not see it
+    np.testing.assert_allclose(cross.predict_torque(train), rigid - [0.5, 0.0])  # it predicts as the fit on all
