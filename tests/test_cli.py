@@ -24,7 +24,8 @@ def cli(*args, cwd=None):
 
 
 COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "leaderboard",
-            "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling")
+            "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling",
+            "syrenets-speed")
 
 
 def _subparsers():

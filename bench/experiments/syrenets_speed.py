@@ -1,0 +1,138 @@
+"""SyReNets' training step, this tree against an earlier commit, in one run.
+
+Each commit's code runs in its own process (the earlier one exported with
+``git archive`` into a temporary folder and put first on ``PYTHONPATH``), one
+thread, on the same batch of the double pendulum. For each experiment
+(direct, indirect) and configuration, the two are timed in turn,
+``--rounds`` times each, so that a change in the machine's load falls on
+both; the table gives each one's median steps per second and their ratio.
+
+Configurations (those of ``tests/benchmarks/test_syrenets_speed.py``):
+
+* ``public``: the authors' public configuration, inputs ``(q, qd, qdd)``, a
+  batch of 32 plus 16 replayed samples;
+* ``default``: the suite's, inputs ``(q, qd)``, a batch of 32.
+
+Both with the default one-probe contractive penalty, float64. Usage::
+
+    python -m bench syrenets-speed --against REV [--rounds 5] [--seconds 3] [--out results/syrenets_speed.md]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from bench.core.errors import UserError
+from bench.core.fileio import atomic_write, check_output
+from bench.runner.provenance import provenance
+
+HELP = "time SyReNets' training step in this tree and in an earlier commit, in turn (results/syrenets_speed.md)"
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIGS = {
+    "public": {"hyperparameters": {"inputs": "q_qd_qdd", "replay": 16}, "batch": 48},
+    "default": {"hyperparameters": {}, "batch": 32},
+}
+EXPERIMENTS = ("direct", "indirect")
+
+#: run in the tree being timed: steps per second of one configuration
+WORKER = r"""
+import json, sys, time
+import torch
+torch.set_num_threads(1)
+job = json.loads(sys.argv[1])
+import methods
+assert methods.__file__.startswith(job["tree"]), (methods.__file__, job["tree"])
+from bench.core.data import generate
+from methods import METHODS
+from systems import get_system
+train = generate(get_system("double_pendulum"), 256, 0, cache=False)
+m = METHODS["syrenets"](**job["hyperparameters"])
+m.seed, m.dof = 0, train.dof
+m._setup(train)
+t = train.tensors()
+batch = {k: v[:job["batch"]] for k, v in t.items()}
+for _ in range(5):
+    m.train_step(batch, job["experiment"])
+steps, start = 0, time.perf_counter()
+while time.perf_counter() - start < job["seconds"]:
+    m.train_step(batch, job["experiment"])
+    steps += 1
+print(json.dumps({"steps_per_s": steps / (time.perf_counter() - start)}))
+"""
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--against", required=True, help="the earlier commit (any git revision)")
+    parser.add_argument("--rounds", type=int, default=5, help="timings of each tree per configuration (default 5)")
+    parser.add_argument("--seconds", type=float, default=3.0, help="seconds each timing runs (default 3)")
+    parser.add_argument("--out", type=Path, default=Path("results/syrenets_speed.md"),
+                        help="the table to write (default results/syrenets_speed.md)")
+
+
+def export(revision: str, into: Path) -> str:
+    """``revision``'s tree exported into ``into``; returns its full commit id."""
+    try:
+        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--verify", f"{revision}^{{commit}}"],
+                                capture_output=True, text=True, check=True).stdout.strip()
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit], capture_output=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError) as e:
+        raise UserError(f"--against {revision}: not a commit of {ROOT} ({getattr(e, 'stderr', e) or e})") from None
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    return commit
+
+
+def time_step(tree: Path, experiment: str, config: str, seconds: float) -> float:
+    """Steps per second of one configuration, in a fresh process running ``tree``'s code."""
+    job = {"tree": str(tree), "experiment": experiment, "seconds": seconds, **CONFIGS[config]}
+    env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", WORKER, json.dumps(job)], cwd=tree, env=env,
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        raise UserError(f"timing {experiment}/{config} in {tree} failed: {out.stderr.strip().splitlines()[-1:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])["steps_per_s"]
+
+
+def main(args) -> int:
+    check_output(args.out)
+    with tempfile.TemporaryDirectory(prefix="syrenets-speed-") as tmp:
+        old_tree = Path(tmp)
+        old = export(args.against, old_tree)
+        trees = {"before": old_tree, "after": ROOT}
+        rows = []
+        for experiment in EXPERIMENTS:
+            for config in CONFIGS:
+                figures = {name: [] for name in trees}
+                for k in range(args.rounds):
+                    for name, tree in trees.items():
+                        figures[name].append(time_step(tree, experiment, config, args.seconds))
+                    print(f"{experiment} {config} round {k + 1}/{args.rounds}: "
+                          f"before {figures['before'][-1]:.1f}, after {figures['after'][-1]:.1f} steps/s", flush=True)
+                before, after = (statistics.median(figures[n]) for n in ("before", "after"))
+                rows.append((experiment, config, before, after, figures))
+    prov = provenance()
+    lines = [
+        "# SyReNets' training step, before and after",
+        "",
+        f"Generated by `{args.invocation}`: before = commit {old[:10]}, after = commit "
+        f"{prov.get('commit', '?')[:10]}{' (dirty tree)' if prov.get('dirty') else ''}. "
+        f"One thread, float64, the double pendulum; each figure is the median of {args.rounds} timings of "
+        f"{args.seconds:g} s, the two trees timed in turn. Machine: {prov.get('cpu')} ({prov.get('cpu_count')} cores), "
+        f"torch {prov.get('packages', {}).get('torch')}; {prov.get('utc', '')[:10]}.",
+        "",
+        "| experiment | configuration | before (steps/s) | after (steps/s) | after ÷ before | timings before | timings after |",
+        "|---|---|---:|---:|---:|---|---|",
+    ]
+    for experiment, config, before, after, figures in rows:
+        lines.append(f"| {experiment} | {config} | {before:.1f} | {after:.1f} | {after / before:.2f}× | "
+                     f"{', '.join(f'{v:.1f}' for v in figures['before'])} | {', '.join(f'{v:.1f}' for v in figures['after'])} |")
+    text = "\n".join(lines) + "\n"
+    atomic_write(args.out, lambda f: f.write(text))
+    print(text)
+    return 0
