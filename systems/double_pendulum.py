@@ -42,6 +42,9 @@ class DoublePendulum(System):
     link_lengths = ("l1", "l2")
     Params = DoublePendulumParams
     sysid_unknowns = ("m1", "l1", "m2", "l2")
+    reference = ("Valle & Haddadin (2021), Tables 1 and 2: SyReNets' All 10 test MSE after 2000 s on an "
+                 "RTX 2080 Ti, with q, q̇, q̈ ~ U(−π/2, π/2), is 0.137 in the direct experiment (L) and 0.012 "
+                 "in the indirect one (τ).")
 
     def lagrangian_expr(self, q, qd, p):
         half = sympy.Rational(1, 2)
