@@ -102,7 +102,8 @@ def test_a_systems_published_reference_is_printed_above_its_table():
     text = build_tables([rec("sysid", 0, 1e-3, 2e-3, experiment="indirect", system="delan_characters")])
     section = text.split("## delan_characters, indirect")[1]
     assert "Reference: DeLaN's README reports a test torque MSE of 0.0004327" in section
-    assert "Reference" not in build_tables([rec("sysid", 0, 1.0, 1.0)])
+    assert "Reference" not in build_tables([rec("sysid", 0, 1.0, 1.0, system="single_pendulum")])
+    assert "Reference: Valle & Haddadin (2021)" in build_tables([rec("sysid", 0, 1.0, 1.0)])  # the paper's pendulum
 
 
 def test_rollout_row_gives_the_median_and_what_became_of_the_rest():
