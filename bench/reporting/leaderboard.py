@@ -22,7 +22,7 @@ from pathlib import Path
 
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
-from bench.reporting.significance import by_seed, friedman, section_medians
+from bench.reporting.significance import ALPHA, by_seed, friedman, section_medians
 from bench.reporting.tables import build_tables, read_for_tables, section_groups, write_plots
 
 
@@ -92,9 +92,9 @@ def rank_summary(records) -> str:
     text = (f"Each of the {out.sections} sections ranks the methods by their median test MSE over seeds "
             f"(1 = best); the mean rank across them: " + ", ".join(f"{m} {out.ranks[m]:.2f}" for m in order) + ".")
     if out.p is not None:
-        verdict = "differ" if out.p < 0.05 else "cannot be told apart"
+        verdict = "differ" if out.p < ALPHA else "cannot be told apart"
         text += (f" Friedman test over the {len(order)} methods: χ² = {out.statistic:.2f}, p = {out.p:.2g}; "
-                 f"at α = 0.05 the methods' ranks {verdict}. It says whether some methods rank differently, "
+                 f"at α = {ALPHA:g} the methods' ranks {verdict}. It says whether some methods rank differently, "
                  "not which.")
     if out.left_out:
         text += (f" Left out, without a result in every section: {', '.join(out.left_out)} "

@@ -61,11 +61,14 @@ def holm(p: list[float]) -> list[float]:
     return adjusted.tolist()
 
 
+def _finite(v) -> bool:
+    return v is not None and math.isfinite(v)
+
+
 @dataclass(frozen=True)
 class Comparison:
     """One method against the row's best: ``p`` is Holm-adjusted; ``None`` where untested."""
 
-    method: str
     p: float | None
 
     @property
@@ -83,7 +86,7 @@ def ties_with_best(samples: dict[str, list[float]]) -> tuple[str | None, dict[st
     and each other method's comparison with it; non-finite values are left out."""
     from scipy.stats import mannwhitneyu  # only tables need scipy.stats; keep it off the import path
 
-    clean = {m: [float(v) for v in vs if v is not None and math.isfinite(v)] for m, vs in samples.items()}
+    clean = {m: [float(v) for v in vs if _finite(v)] for m, vs in samples.items()}
     clean = {m: vs for m, vs in clean.items() if vs}
     if not clean:
         return None, {}
@@ -92,7 +95,7 @@ def ties_with_best(samples: dict[str, list[float]]) -> tuple[str | None, dict[st
     tested = [m for m in others if len(clean[m]) >= MIN_SEEDS and len(clean[best]) >= MIN_SEEDS]
     raw = [float(mannwhitneyu(clean[best], clean[m], alternative="two-sided").pvalue) for m in tested]
     adjusted = dict(zip(tested, holm(raw)))
-    return best, {m: Comparison(m, adjusted.get(m)) for m in others}
+    return best, {m: Comparison(adjusted.get(m)) for m in others}
 
 
 def _is_variant(method: str) -> bool:
@@ -110,7 +113,7 @@ def seed_ranks(test_mse: dict[str, dict[int, float]]) -> tuple[dict[str, float],
     if len(methods) < 2:
         return {}, 0
     seeds = sorted(set.intersection(*(
-        {s for s, v in test_mse[m].items() if v is not None and math.isfinite(v)} for m in methods)))
+        {s for s, v in test_mse[m].items() if _finite(v)} for m in methods)))
     if not seeds:
         return {}, 0
     ranks = np.array([rankdata([test_mse[m][s] for m in methods]) for s in seeds])
@@ -138,8 +141,7 @@ def friedman(medians: dict[str, dict[str, float]]) -> Friedman | None:
     sections = sorted(medians)
     every = set().union(*(medians[s] for s in sections)) if sections else set()
     every = {m for m in every if not _is_variant(m)}
-    methods = sorted(m for m in every if all(
-        medians[s].get(m) is not None and math.isfinite(medians[s][m]) for s in sections))
+    methods = sorted(m for m in every if all(_finite(medians[s].get(m)) for s in sections))
     if len(methods) < 2 or len(sections) < 2:
         return None
     table = np.array([[medians[s][m] for m in methods] for s in sections])
@@ -155,7 +157,7 @@ def section_medians(by_method: dict[str, list[float]]) -> dict[str, float]:
     """``{method: median}`` of the finite values of each method that has any."""
     out = {}
     for m, vals in by_method.items():
-        finite = [v for v in vals if v is not None and math.isfinite(v)]
+        finite = [v for v in vals if _finite(v)]
         if finite:
             out[m] = float(np.median(finite))
     return out

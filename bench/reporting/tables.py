@@ -90,11 +90,14 @@ def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float
     ``std`` is ``None`` for the single-run "Best" group; a split without test
     data is absent.
     """
-    out = {}
-    for group, splits in group_members(records).items():
-        out[group] = {split: (float(np.mean(vals)), None if group == "Best" else float(np.std(vals)))
-                      for split, vals in splits.items()}
-    return out
+    return _stats(group_members(records))
+
+
+def _stats(members: dict[str, dict[str, list[float]]]) -> dict[str, dict[str, tuple[float, float | None]]]:
+    """:func:`group_stats` from :func:`group_members`' values."""
+    return {group: {split: (float(np.mean(vals)), None if group == "Best" else float(np.std(vals)))
+                    for split, vals in splits.items()}
+            for group, splits in members.items()}
 
 
 def _runs_cell(records: list[Record]) -> str:
@@ -220,14 +223,15 @@ def build_table(records: list[Record]) -> str:
     by_method = defaultdict(list)
     for r in records:
         by_method[r.method].append(r)
-    stats = {m: group_stats(by_method[m]) for m in methods}
     members = {m: group_members(by_method[m]) for m in methods}
+    stats = {m: _stats(members[m]) for m in methods}
     lines = ["| Group | Split | " + " | ".join(methods) + " |", "|---|---|" + "---|" * len(methods)]
     for group in GROUPS:
         for split in ("train", "test"):
             means = {m: stats[m].get(group, {}).get(split) for m in methods}
             samples = {m: members[m].get(group, {}).get(split) for m in methods}
             best, compared = ties_with_best({m: v for m, v in samples.items() if v is not None})
+            tested_row = group == TESTED_GROUP
             cells = []
             for m in methods:
                 v = means[m]
@@ -235,7 +239,6 @@ def build_table(records: list[Record]) -> str:
                     cells.append("—")
                     continue
                 text = fmt(v[0]) + ("" if v[1] is None else f" (± {fmt(v[1])})")
-                tested_row = group == TESTED_GROUP
                 if m == best or (tested_row and m in compared and compared[m].ties):
                     text = f"**{text}**"
                 elif tested_row and m in compared and not compared[m].tested:
