@@ -7,7 +7,7 @@ thread, on the same batch of the double pendulum. For each experiment
 ``--rounds`` times each, so that a change in the machine's load falls on
 both; the table gives each one's median steps per second and their ratio.
 
-Configurations (those of ``tests/benchmarks/test_syrenets_speed.py``):
+Configurations (:data:`CONFIGS`, which ``tests/benchmarks/test_syrenets_speed.py`` uses too):
 
 * ``public``: the authors' public configuration, inputs ``(q, qd, qdd)``, a
   batch of 32 plus 16 replayed samples;

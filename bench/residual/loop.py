@@ -141,8 +141,8 @@ class CrossFitted(FittedModel):
     training data (:func:`_cross_fit`): ``torque[halves[k]]`` is predicted by
     the method fitted without ``halves[k]``. It predicts as the fit on all of it."""
 
-    def __init__(self, fit: FittedModel, train: Dataset, halves: list[np.ndarray], torque: np.ndarray):
-        self.fit, self.train, self.halves, self.torque = fit, train, halves, torque
+    def __init__(self, fit: FittedModel, halves: list[np.ndarray], torque: np.ndarray):
+        self.fit, self.halves, self.torque = fit, halves, torque
 
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         return self.fit.predict_lagrangian(data)
@@ -470,7 +470,8 @@ def _cross_fit(fitter: "_Fitter", fit: FittedModel, train: Dataset, report: Repo
     on the suite's test recordings).
     """
     t0 = time.perf_counter()
-    halves = [np.any(folds(train)[k::2], axis=0) for k in (0, 1)]
+    fold_masks = folds(train)
+    halves = [np.any(fold_masks[k::2], axis=0) for k in (0, 1)]
     torque = np.empty_like(train.tau)
     for held in halves:
         other = fitter.fit(train.subset(np.flatnonzero(~held)))
@@ -480,7 +481,7 @@ def _cross_fit(fitter: "_Fitter", fit: FittedModel, train: Dataset, report: Repo
     report(f"round 0: {fitter.method} cross-fitted on two halves of the training data ({fitter.budget_s:g} s each): "
            f"torque MSE {info['out_of_fold_mse']:.4g} on the half it did not see, "
            f"{info['in_sample_mse']:.4g} for the fit on all of it")
-    return CrossFitted(fit, train, halves, torque), info
+    return CrossFitted(fit, halves, torque), info
 
 
 def _cross_fitted_mse(model: LoopModel, train: Dataset) -> np.ndarray:

@@ -18,16 +18,13 @@ import pytest
 import torch
 
 from bench.core.data import generate
+from bench.experiments.syrenets_speed import CONFIGS
 from methods import METHODS
 from systems import get_system
 
 pytestmark = pytest.mark.benchmark
 
 PUBLIC_STEPS_PER_S = {"direct": 6.5, "indirect": 1.5}
-CONFIGS = {
-    "public": {"inputs": "q_qd_qdd", "replay": 16},
-    "default": {},
-}
 
 
 @pytest.fixture(scope="module")
@@ -41,13 +38,12 @@ def train():
 def test_training_step(benchmark, train, experiment, config, penalty):
     torch.set_num_threads(1)
     benchmark.group = f"syrenets-step-{experiment}"
-    cfg = dict(CONFIGS[config], contractive_probes=0 if penalty == "exact" else 1)
+    cfg = dict(CONFIGS[config]["hyperparameters"], contractive_probes=0 if penalty == "exact" else 1)
     m = METHODS["syrenets"](**cfg)
     m.seed, m.dof = 0, train.dof
     m._setup(train)
     t = train.tensors()
-    batch_size = 32 + cfg.get("replay", 0)
-    batch = {k: v[:batch_size] for k, v in t.items()}
+    batch = {k: v[:CONFIGS[config]["batch"]] for k, v in t.items()}
     for _ in range(3):
         m.train_step(batch, experiment)
     benchmark.pedantic(m.train_step, args=(batch, experiment), rounds=40, iterations=1, warmup_rounds=2)
