@@ -25,8 +25,10 @@ A fitted method is a :class:`~bench.core.models.FittedModel`: it predicts
 from __future__ import annotations
 
 import abc
+import contextlib
 import dataclasses
 import difflib
+import gc
 import math
 import random
 import time
@@ -316,6 +318,27 @@ class Progress:
 
 # -- the method base class ------------------------------------------------------------
 
+@contextlib.contextmanager
+def _gc_frozen():
+    """Python's cyclic garbage collector leaves alone the objects that exist
+    on entry (imported modules, data, the model) while the block runs.
+
+    A training step creates thousands of short-lived tensor wrappers, which
+    trigger collections; a full collection then walks every object of the
+    process (sympy's alone are hundreds of thousands). Objects made inside
+    the block are collected as usual. Left alone when something else froze
+    objects already.
+    """
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+
+
 def seed_everything(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed % 2**32)
@@ -418,7 +441,8 @@ class Method(FittedModel):
             snapshot=self._get_state,
             max_steps=self.config.max_steps,
         )
-        self._fit(train, experiment, progress)
+        with _gc_frozen():
+            self._fit(train, experiment, progress)
         progress.finish()
         if progress.best_state is not None:
             self._set_state(progress.best_state)

@@ -149,8 +149,14 @@ class SyReNetsConfig(TorchConfig):
     contractive_probes
         0: the exact closed-form contractive penalty; k > 0: Hutchinson's
         unbiased estimate with k Rademacher probes (cheaper, stochastic).
+    lr_schedule
+        ``"plateau"`` (the paper's): divide the learning rate by
+        ``1 / lr_factor`` after ``lr_patience`` steps without improvement of
+        the mini-batch loss, down to ``lr_min``. ``"cosine"``: anneal it from
+        ``lr`` to ``lr_min`` along half a cosine over the training time (over
+        the steps when ``max_steps`` is set).
     lr_patience, lr_factor, lr_min
-        Plateau schedule of the learning rate.
+        The plateau schedule; ``lr_min`` is the cosine's end too.
     replay
         Worst-fitted samples of the previous batch replayed each step
         (public code: 16; paper: 0).
@@ -171,6 +177,7 @@ class SyReNetsConfig(TorchConfig):
     lambda_entropy: Annotated[float, Range(0)] = 1e-3
     lambda_diversity: Annotated[float, Range(0)] = 1.0
     contractive_probes: Annotated[int, Range(0)] = 1
+    lr_schedule: typing.Literal["plateau", "cosine"] = "plateau"
     lr_patience: Annotated[int, Range(0)] = 1000
     lr_factor: Annotated[float, Range(0, 1, low_open=True, high_open=True)] = 0.1
     lr_min: Annotated[float, Range(0)] = 1e-5
@@ -420,9 +427,12 @@ class SyReNets(TorchLagrangianMethod):
             [{"params": other, "lr": cfg.lr}, {"params": scale_params, "lr": cfg.lr * C}],
             betas=cfg.betas, fused=True,
         )
-        self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
-            self.optimizer, mode="min", factor=cfg.lr_factor, patience=cfg.lr_patience, min_lr=[cfg.lr_min, cfg.lr_min * C]
-        )
+        if cfg.lr_schedule == "plateau":
+            self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
+                self.optimizer, mode="min", factor=cfg.lr_factor, patience=cfg.lr_patience, min_lr=[cfg.lr_min, cfg.lr_min * C]
+            )
+        else:
+            self.scheduler = _Cosine(self.optimizer, [cfg.lr_min, cfg.lr_min * C])
 
     def train_step(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
         """One optimisation step on ``batch``; returns each sample's squared error."""
@@ -460,6 +470,8 @@ class SyReNets(TorchLagrangianMethod):
             with torch.no_grad():
                 self.frozen = [w.detach() for w in self.model.select(self._inputs(t["q"][:bs], t["qd"][:bs], t["qdd"][:bs]))[1]]
         progress.reserve(cfg.post_fraction * progress.remaining())
+        if isinstance(self.scheduler, _Cosine):
+            self.scheduler.start(progress)
         while progress.step():
             if cursor + bs > n:
                 order, cursor = torch.randperm(n, generator=generator), 0
@@ -692,6 +704,33 @@ class SyReNets(TorchLagrangianMethod):
                 new_h.append(sympy.Add(*[sympy.Float(Wn[j, b]) * cands[b] for b in cols]))
             h = new_h
         return sympy.Add(*h)
+
+
+class _Cosine:
+    """Half a cosine from each group's learning rate to its minimum over the
+    training time that is left when :meth:`start` is called (over the steps
+    left when the run has a step limit). :meth:`step` sets the rate of the
+    next step, like the plateau schedule's."""
+
+    def __init__(self, optimizer: torch.optim.Optimizer, min_lrs: list[float]):
+        self.optimizer, self.min_lrs = optimizer, min_lrs
+        self.max_lrs = [g["lr"] for g in optimizer.param_groups]
+        self.fraction = lambda: 0.0
+
+    def start(self, progress) -> None:
+        if progress.max_steps is not None:
+            # called after a step's update: the fraction for the next step, so
+            # that the first step takes the highest rate and the last the lowest
+            first, total = progress.steps, max(progress.max_steps - progress.steps - 1, 1)
+            self.fraction = lambda: (progress.steps + 1 - first) / total
+        else:
+            begin, total = time.perf_counter(), max(progress.deadline - time.perf_counter(), 1e-9)
+            self.fraction = lambda: (time.perf_counter() - begin) / total
+
+    def step(self, loss: float) -> None:
+        f = min(max(self.fraction(), 0.0), 1.0)
+        for group, high, low in zip(self.optimizer.param_groups, self.max_lrs, self.min_lrs):
+            group["lr"] = low + (high - low) * 0.5 * (1 + math.cos(math.pi * f))
 
 
 def _round_inner_constants(f: sympy.Expr, tol: float = 1e-2) -> sympy.Expr:

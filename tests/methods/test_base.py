@@ -170,3 +170,16 @@ def test_every_methods_defaults_and_smoke_configuration_lie_in_their_ranges():
         cls()  # the defaults are checked too
         cls(**cls.smoke_config())
     assert METHODS["sparse"](threshold=None).config.threshold is None  # an optional range admits None
+
+
+def test_the_garbage_collector_skips_older_objects_only_during_the_loop(small_data):
+    import gc
+
+    class _Watching(_Scripted):
+        def _fit(self, train, experiment, progress):
+            self.frozen_inside = gc.get_freeze_count()
+            super()._fit(train, experiment, progress)
+
+    m = _Watching([1.0], max_steps=2).fit(small_data[0], "direct", 0, 10.0)
+    assert m.frozen_inside > 1000  # the objects that existed on entry
+    assert gc.get_freeze_count() == 0

@@ -155,3 +155,21 @@ def test_diversity_loss_matches_its_definition():
     entropy = sum(ce(p[j], p[j]) for j in range(4)) / 4
     cross = sum(ce(p[i], p[j]) for i in range(4) for j in range(4) if i != j) / 12
     torch.testing.assert_close(net._diversity(p), 1e-3 * entropy - 1.0 * cross)
+
+
+def test_cosine_schedule_anneals_from_lr_to_lr_min_over_the_steps(data):
+    m = METHODS["syrenets"](**SMALL, lr_schedule="cosine", lr=1e-2, lr_min=1e-4, max_steps=20, eval_samples=64,
+                            refine=False)
+    seen = []
+    step = m.train_step
+
+    def recording(batch, experiment):
+        seen.append(m.optimizer.param_groups[0]["lr"])
+        return step(batch, experiment)
+
+    m.train_step = recording
+    m.fit(data[0], "direct", 0, 60)
+    C = m.model.C
+    expected = [1e-4 + (1e-2 - 1e-4) * 0.5 * (1 + np.cos(np.pi * k / 19)) for k in range(20)]
+    np.testing.assert_allclose(seen, expected, rtol=1e-12)  # first step 1e-2, last 1e-4
+    assert m.optimizer.param_groups[1]["lr"] == pytest.approx(1e-4 * C)  # the scale keeps its C times
