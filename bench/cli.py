@@ -28,7 +28,7 @@ from bench.core.effects import EFFECTS, LAWS, add_effects, parse_effects
 from bench.core.errors import UserError
 from bench.core.fileio import check_output, write_json
 from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preprocess, read_recording
-from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, scaling, syrenets_speed
+from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, scaling, syrenets_profile, syrenets_speed
 from bench.reporting.leaderboard import write_leaderboard
 from bench.reporting.tables import write_tables
 from bench.residual.loop import FIT_SHARE, ResidualJob, run_residual
@@ -282,6 +282,7 @@ EXPERIMENTS = {
     "dfki-filter": dfki_filter,
     "scaling": scaling,
     "syrenets-speed": syrenets_speed,
+    "syrenets-profile": syrenets_profile,
 }
 
 

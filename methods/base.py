@@ -319,7 +319,7 @@ class Progress:
 # -- the method base class ------------------------------------------------------------
 
 @contextlib.contextmanager
-def _gc_frozen():
+def gc_frozen():
     """Python's cyclic garbage collector leaves alone the objects that exist
     on entry (imported modules, data, the model) while the block runs.
 
@@ -441,7 +441,7 @@ class Method(FittedModel):
             snapshot=self._get_state,
             max_steps=self.config.max_steps,
         )
-        with _gc_frozen():
+        with gc_frozen():
             self._fit(train, experiment, progress)
         progress.finish()
         if progress.best_state is not None:
