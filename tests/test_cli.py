@@ -25,7 +25,7 @@ def cli(*args, cwd=None):
 
 COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "leaderboard",
             "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling",
-            "syrenets-speed")
+            "syrenets-speed", "syrenets-profile")
 
 
 def _subparsers():
