@@ -148,6 +148,41 @@ def test_hutchinson_contractive_estimate_is_unbiased():
     assert estimate == pytest.approx(exact, rel=0.03)
 
 
+def test_grouped_contractive_estimate_gives_each_group_its_own_probes():
+    net = _net()
+    v = torch.randn(9, net.C, dtype=torch.float64)
+    _, a1, a2 = net.encode(v)
+    exact = net.contractive(a1, a2).item()
+    torch.manual_seed(1)
+    estimates = [net.contractive(a1, a2, probes=1, groups=3).item() for _ in range(2000)]
+    assert np.mean(estimates) == pytest.approx(exact, rel=0.03)
+    # the three groups' probes are drawn independently: one draw of the whole
+    # batch with a single shared probe has a larger spread
+    torch.manual_seed(1)
+    shared = [net.contractive(a1, a2, probes=1).item() for _ in range(2000)]
+    assert np.std(estimates) < 0.8 * np.std(shared)
+
+
+def test_the_training_pass_sums_each_layers_losses():
+    """The batched losses of :meth:`SyReNet.select` are the sums of each layer's own."""
+    net = SyReNet(4, SyReNetsConfig(**{**SMALL, "layers": 3}, contractive_probes=0)).double()
+    x = torch.randn(10, 4, dtype=torch.float64)
+    _, weights, aux = net.select(x)
+    expected, h = 0.0, x.new_zeros(10, SMALL["heads"])
+    prev = x.new_full((net.C,), (1.0 / SMALL["heads"]) ** SMALL["heads"])
+    for layer, W in enumerate(weights):
+        v = net.spec(torch.cat([x, h], dim=1))
+        vn = torch.nn.functional.layer_norm(v, v.shape[-1:])
+        z, a1, a2 = net.encode(vn)
+        zn = z / z.norm(dim=0, keepdim=True)
+        P, phi, _ = net.heads(layer, zn.T @ zn, prev)
+        p = phi.unsqueeze(1) * P
+        prev = p.prod(dim=0)
+        expected += torch.nn.functional.mse_loss(net.decode(z), vn) + net.contractive(a1, a2) + net._diversity(p)
+        h = v @ W.T
+    torch.testing.assert_close(aux, expected, rtol=1e-12, atol=1e-12)
+
+
 def test_diversity_loss_matches_its_definition():
     net = _net(heads=4)
     p = torch.softmax(torch.randn(4, net.C, dtype=torch.float64), -1) * torch.rand(4, 1, dtype=torch.float64)
