@@ -725,7 +725,8 @@ class _Cosine:
     """Half a cosine from each group's learning rate to its minimum over the
     training time that is left when :meth:`start` is called (over the steps
     left when the run has a step limit). :meth:`step` sets the rate of the
-    next step, like the plateau schedule's."""
+    next step, like the plateau schedule's. A warm start calls :meth:`start`
+    again, and the rate anneals anew from its highest value."""
 
     def __init__(self, optimizer: torch.optim.Optimizer, min_lrs: list[float]):
         self.optimizer, self.min_lrs = optimizer, min_lrs
