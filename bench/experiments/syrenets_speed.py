@@ -5,7 +5,8 @@ Each commit's code runs in its own process (the earlier one exported with
 thread, on the same batch of the double pendulum. For each experiment
 (direct, indirect) and configuration, the two are timed in turn,
 ``--rounds`` times each, so that a change in the machine's load falls on
-both; the table gives each one's median steps per second and their ratio.
+both; the table gives each one's median steps per second, their ratio, and
+the median of the rounds' paired ratios.
 
 Configurations (:data:`CONFIGS`, which ``tests/benchmarks/test_syrenets_speed.py`` uses too):
 
@@ -134,11 +135,16 @@ def main(args) -> int:
         f"{args.seconds:g} s, the two trees timed in turn. Machine: {prov.get('cpu')} ({prov.get('cpu_count')} cores), "
         f"torch {prov.get('packages', {}).get('torch')}; {prov.get('utc', '')[:10]}.",
         "",
-        "| experiment | configuration | before (steps/s) | after (steps/s) | after ÷ before | timings before | timings after |",
-        "|---|---|---:|---:|---:|---|---|",
+        "The paired ratio is the median over the rounds of each round's after ÷ before, the two timed one after",
+        "the other: it follows a change in the machine's load less than the ratio of the medians does.",
+        "",
+        "| experiment | configuration | before (steps/s) | after (steps/s) | after ÷ before | paired ratio "
+        "| timings before | timings after |",
+        "|---|---|---:|---:|---:|---:|---|---|",
     ]
     for experiment, config, before, after, figures in rows:
-        lines.append(f"| {experiment} | {config} | {before:.1f} | {after:.1f} | {after / before:.2f}× | "
+        paired = statistics.median(a / b for a, b in zip(figures["after"], figures["before"]))
+        lines.append(f"| {experiment} | {config} | {before:.1f} | {after:.1f} | {after / before:.2f}× | {paired:.2f}× | "
                      f"{', '.join(f'{v:.1f}' for v in figures['before'])} | {', '.join(f'{v:.1f}' for v in figures['after'])} |")
     text = "\n".join(lines) + "\n"
     atomic_write(args.out, lambda f: f.write(text))

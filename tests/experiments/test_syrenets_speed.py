@@ -27,3 +27,5 @@ def test_both_trees_are_timed_in_turn_and_the_table_gives_their_ratio(tmp_path):
         cells = [c.strip() for c in row.strip("|").split("|")]
         before, after, ratio = float(cells[2]), float(cells[3]), float(cells[4].rstrip("×"))
         assert before > 0 and after > 0 and ratio == pytest.approx(after / before, rel=0.03)
+        # one round: the paired ratio is that round's ratio
+        assert float(cells[5].rstrip("×")) == pytest.approx(float(cells[7]) / float(cells[6]), rel=0.03)
