@@ -487,12 +487,16 @@ class SyReNets(TorchLagrangianMethod):
         progress.reserve(cfg.post_fraction * progress.remaining())
         if isinstance(self.scheduler, _Cosine):
             self.scheduler.start(progress)
+        self._lr_drops, lr = [], self.optimizer.param_groups[0]["lr"]
         while progress.step():
             if cursor + bs > n:
                 order, cursor = torch.randperm(n, generator=generator), 0
             idx = torch.cat([order[cursor:cursor + bs], replay_idx])
             cursor += bs
             err = self.train_step({k: v[idx] for k, v in t.items()}, experiment)
+            if cfg.lr_schedule == "plateau" and self.optimizer.param_groups[0]["lr"] != lr:
+                lr = self.optimizer.param_groups[0]["lr"]
+                self._lr_drops.append([progress.steps + 1, round(progress.elapsed(), 2), lr])
             if cfg.replay:
                 replay_idx = idx[torch.argsort(err, descending=True)[: cfg.replay]]
 
@@ -685,6 +689,9 @@ class SyReNets(TorchLagrangianMethod):
 
     def record_details(self):
         notes = dict(getattr(self, "_notes", {}))
+        if self.config.lr_schedule == "plateau" and hasattr(self, "_lr_drops"):
+            # [step, seconds into the fit, new learning rate] for each cut of the plateau schedule
+            notes["lr_drops"] = self._lr_drops
         if notes.get("pruned_terms", 0) > MAX_READABLE_TERMS:
             notes["expression_omitted"] = f"the pruned equation keeps {notes['pruned_terms']} terms (> {MAX_READABLE_TERMS})"
         return notes

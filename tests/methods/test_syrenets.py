@@ -208,3 +208,18 @@ def test_cosine_schedule_anneals_from_lr_to_lr_min_over_the_steps(data):
     expected = [1e-4 + (1e-2 - 1e-4) * 0.5 * (1 + np.cos(np.pi * k / 19)) for k in range(20)]
     np.testing.assert_allclose(seen, expected, rtol=1e-12)  # first step 1e-2, last 1e-4
     assert m.optimizer.param_groups[1]["lr"] == pytest.approx(1e-4 * C)  # the scale keeps its C times
+
+
+def test_the_record_lists_when_the_plateau_schedule_cut_the_learning_rate(data):
+    m = METHODS["syrenets"](**SMALL, lr_patience=0, max_steps=30, eval_samples=64, refine=False)
+    m.fit(data[0], "direct", 0, 60)
+    drops = m.record_details()["lr_drops"]
+    assert drops, "with no patience the rate is cut at the first step without a new best"
+    steps, seconds, lrs = zip(*drops)
+    assert list(steps) == sorted(set(steps)) and all(0 < s <= 30 for s in steps)
+    assert list(seconds) == sorted(seconds)
+    expected = [1e-3 * 0.1 ** (k + 1) for k in range(len(lrs))]
+    np.testing.assert_allclose(lrs, [max(e, 1e-5) for e in expected][: len(lrs)])
+    assert lrs[-1] == m.optimizer.param_groups[0]["lr"]
+    cosine = METHODS["syrenets"](**SMALL, lr_schedule="cosine", max_steps=3, eval_samples=64, refine=False)
+    assert "lr_drops" not in cosine.fit(data[0], "direct", 0, 60).record_details()
