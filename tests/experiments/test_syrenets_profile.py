@@ -30,11 +30,13 @@ def test_a_short_run_writes_one_row_per_mode(tmp_path):
     out = tmp_path / "profile.md"
     args = argparse.Namespace(steps=2, rounds=1, out=out, invocation="python -m bench syrenets-profile")
     assert syrenets_profile.main(args) == 0
-    rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|").split("|")]
-            for line in out.read_text().splitlines() if line.startswith("| ") and not line.startswith("| mode")}
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in out.read_text().splitlines()
+             if line.startswith("| ")]
+    rows = {c[0]: c for c in cells if c[0] in syrenets_profile.MODES}
     assert set(rows) == set(syrenets_profile.MODES)
-    for mode, cells in rows.items():
-        assert float(cells[1]) > 0
-        assert (cells[2] == "") == (mode == "plain")
+    for mode, cells_ in rows.items():
+        assert float(cells_[1]) > 0 and float(cells_[4]) >= 0
+        assert (cells_[2] == "") == (mode == "plain")
+    assert [c[0] for c in cells if c[0].isdigit()] == ["1"]  # one row per round
     assert float(rows["profiler"][2]) > 0 and float(rows["timers"][2]) > 0
     assert not math.isnan(float(rows["timers"][2]))
