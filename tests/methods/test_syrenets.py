@@ -138,21 +138,22 @@ def test_six_input_variant_runs_and_is_flagged(data):
     assert "refinement needs inputs='q_qd'" in m.record_details()["refined"]
 
 
-def test_hutchinson_contractive_estimate_is_unbiased():
+def _encoder_pre_activations(rows: int):
+    """A small network, its encoder's two pre-activations on ``rows`` random candidate rows, and the exact penalty."""
     net = _net()
-    v = torch.randn(6, net.C, dtype=torch.float64)
-    _, a1, a2 = net.encode(v)
-    exact = net.contractive(a1, a2).item()
+    _, a1, a2 = net.encode(torch.randn(rows, net.C, dtype=torch.float64))
+    return net, a1, a2, net.contractive(a1, a2).item()
+
+
+def test_hutchinson_contractive_estimate_is_unbiased():
+    net, a1, a2, exact = _encoder_pre_activations(6)
     torch.manual_seed(1)
     estimate = np.mean([net.contractive(a1, a2, probes=8).item() for _ in range(400)])
     assert estimate == pytest.approx(exact, rel=0.03)
 
 
 def test_grouped_contractive_estimate_gives_each_group_its_own_probes():
-    net = _net()
-    v = torch.randn(9, net.C, dtype=torch.float64)
-    _, a1, a2 = net.encode(v)
-    exact = net.contractive(a1, a2).item()
+    net, a1, a2, exact = _encoder_pre_activations(9)
     torch.manual_seed(1)
     estimates = [net.contractive(a1, a2, probes=1, groups=3).item() for _ in range(2000)]
     assert np.mean(estimates) == pytest.approx(exact, rel=0.03)
