@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.core.arguments import nonnegative, positive, positive_int
 from bench.core.data import Dataset, add_noise, check_experiment, generate, write_csv
 from bench.core.effects import EFFECTS, LAWS, add_effects, parse_effects
 from bench.core.errors import UserError
@@ -83,20 +84,10 @@ def _seed_list(text: str) -> list[int]:
 
 
 def _n_seeds(text: str) -> int:
-    value = _positive_int(text)
+    value = positive_int(text)
     if value > len(SEEDS):
         raise argparse.ArgumentTypeError(f"at most {len(SEEDS)} (the tables' fixed seeds), got {value}; "
                                          f"give --seeds 0-{value - 1} for more")
-    return value
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}") from None
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return value
 
 
@@ -107,16 +98,6 @@ def _noise_level(text: str) -> float:
         raise argparse.ArgumentTypeError(f"a noise level is a number, got {text!r}") from None
     if not (0 <= value < 10 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"a noise level is a fraction of the target's std in [0, 10), got {text}")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
     return value
 
 
@@ -159,16 +140,16 @@ def build_parser() -> argparse.ArgumentParser:
     seeds = r.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=_seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
     seeds.add_argument("--n-seeds", type=_n_seeds, default=10, help="the first N of the ten fixed seeds (default 10)")
-    r.add_argument("--budget", type=_positive, default=60.0, help="wall-clock seconds per run (default 60)")
+    r.add_argument("--budget", type=positive, default=60.0, help="wall-clock seconds per run (default 60)")
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
-    r.add_argument("--workers", type=_positive_int, default=None, help="runs at a time (default: one per core)")
-    r.add_argument("--threads", type=_positive_int, default=1, help="torch/BLAS threads per run (default 1)")
+    r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
+    r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
     r.add_argument("--smoke", action="store_true", help="use each method's tiny smoke configuration")
     r.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
                    help="hyperparameter override for every method in the run (repeatable)")
-    r.add_argument("--n-train", type=_positive_int, default=N_TRAIN, help=f"training samples (default {N_TRAIN})")
-    r.add_argument("--n-test", type=_positive_int, default=N_TEST, help=f"test samples (default {N_TEST})")
-    r.add_argument("--domain-half-width", type=_positive, default=None,
+    r.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"training samples (default {N_TRAIN})")
+    r.add_argument("--n-test", type=positive_int, default=N_TEST, help=f"test samples (default {N_TEST})")
+    r.add_argument("--domain-half-width", type=positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain, "
                         "pi/2 for the paper; linear coordinates keep their ranges)")
     r.add_argument("--noise", type=_noise_level, nargs="+", default=[0.0], metavar="LEVEL",
@@ -187,10 +168,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("data", help="generate data in the suite's CSV format")
     d.add_argument("--system", required=True, help="a simulated system")
-    d.add_argument("--n", type=_positive_int, required=True, help="number of samples")
+    d.add_argument("--n", type=positive_int, required=True, help="number of samples")
     d.add_argument("--seed", type=_seed, required=True, help="the generator's seed (the same seed gives the same data)")
     d.add_argument("--out", type=Path, required=True, help="CSV file to write")
-    d.add_argument("--domain-half-width", type=_positive, default=None,
+    d.add_argument("--domain-half-width", type=positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
     d.add_argument("--effects", nargs="+", default=[], metavar="NAME=c1,...,cn",
                    help="add effects the system does not declare: one coefficient per joint for "
@@ -209,7 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--method", required=True, help="a method that fits torques (indirect experiment)")
     res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
-    res.add_argument("--budget", type=_positive, default=60.0,
+    res.add_argument("--budget", type=positive, default=60.0,
                      help=f"seconds for the whole loop (default 60): the method's fit has {FIT_SHARE:.0%} of it, no "
                           f"round starts that would end past it, and the loop's process is killed at "
                           f"{matrix.KILL_FACTOR} x it")
@@ -229,16 +210,16 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the log(s) (CSV, may be gzipped); each is one recording, named in the output's "
                          "trajectory column by its file name")
     cv.add_argument("--out", type=Path, required=True, help="CSV file to write")
-    cv.add_argument("--dt", type=_positive, default=DEFAULT_FILTER.dt,
+    cv.add_argument("--dt", type=positive, default=DEFAULT_FILTER.dt,
                     help=f"the uniform time step the log is resampled to, s (default {DEFAULT_FILTER.dt:g})")
-    cv.add_argument("--cutoff-hz", type=_positive, default=DEFAULT_FILTER.cutoff_hz,
+    cv.add_argument("--cutoff-hz", type=positive, default=DEFAULT_FILTER.cutoff_hz,
                     help=f"the zero-phase Butterworth low-pass's cut-off on q, qd and tau, Hz "
                          f"(default {DEFAULT_FILTER.cutoff_hz:g}, measured for the DFKI robot)")
-    cv.add_argument("--order", type=_positive_int, default=DEFAULT_FILTER.order,
+    cv.add_argument("--order", type=positive_int, default=DEFAULT_FILTER.order,
                     help=f"the low-pass's order (default {DEFAULT_FILTER.order})")
-    cv.add_argument("--trim", type=float, default=DEFAULT_FILTER.trim_s,
+    cv.add_argument("--trim", type=nonnegative, default=DEFAULT_FILTER.trim_s,
                     help=f"seconds cut from each end, the filter's start-up (default {DEFAULT_FILTER.trim_s:g})")
-    cv.add_argument("--decimate", type=_positive_int, default=DEFAULT_FILTER.decimate,
+    cv.add_argument("--decimate", type=positive_int, default=DEFAULT_FILTER.decimate,
                     help=f"keep every N-th sample (default {DEFAULT_FILTER.decimate})")
 
     f = sub.add_parser("fit", help="one run on your own CSV data or on generated data; prints a one-line summary")
@@ -249,14 +230,14 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--train", type=Path, default=None, help="training CSV (default: generated)")
     f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
     f.add_argument("--seed", type=_seed, default=0, help="the run's seed (default 0)")
-    f.add_argument("--budget", type=_positive, default=60.0, help="wall-clock seconds for the fit (default 60)")
+    f.add_argument("--budget", type=positive, default=60.0, help="wall-clock seconds for the fit (default 60)")
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
     f.add_argument("--smoke", action="store_true", help="use the method's tiny smoke configuration")
     f.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
                    help=_SET_HELP)
-    f.add_argument("--n-train", type=_positive_int, default=N_TRAIN, help=f"generated training samples (default {N_TRAIN})")
-    f.add_argument("--n-test", type=_positive_int, default=N_TEST, help=f"generated test samples (default {N_TEST})")
-    f.add_argument("--domain-half-width", type=_positive, default=None,
+    f.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"generated training samples (default {N_TRAIN})")
+    f.add_argument("--n-test", type=positive_int, default=N_TEST, help=f"generated test samples (default {N_TEST})")
+    f.add_argument("--domain-half-width", type=positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
     f.add_argument("--plugin", action="append", default=[], help=_PLUGIN_HELP)
 

@@ -282,3 +282,34 @@ def _with_huge_cell(text: str) -> str:
     cells = first.split(",")
     cells[1] = "1e308"
     return "\n".join([header, ",".join(cells), rest])
+
+
+def _numeric_options():
+    """(command, option, bad value) for every option typed as a count, a duration or a fraction."""
+    from bench.core.arguments import nonnegative, positive, positive_int
+
+    bad = {positive: "0", positive_int: "0", nonnegative: "-1"}
+    return [(name, action.option_strings[-1], bad[action.type])
+            for name, parser in _subparsers().choices.items() for action in parser._actions
+            if action.type in bad]
+
+
+def test_no_option_takes_an_unchecked_number():
+    sub = _subparsers()
+    bare = [f"{name} {a.option_strings[-1]}" for name, parser in sub.choices.items() for a in parser._actions
+            if a.type in (int, float)]
+    assert bare == []
+    commands = {name for name, _, _ in _numeric_options()}
+    assert {"syrenets-speed", "syrenets-profile", "overhead", "adaptation", "residual-acceptance", "residual-dfki",
+            "scaling", "run", "fit", "convert"} <= commands
+
+
+@pytest.mark.parametrize("command, option, value", _numeric_options())
+def test_a_bad_number_is_refused_in_one_line_naming_the_option(tmp_path, monkeypatch, capsys, command, option, value):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main([command, option, value])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2
+    assert f"argument {option}" in err and f"got {value}" in err and err.count("\n") == 1, err
+    assert list(tmp_path.iterdir()) == []

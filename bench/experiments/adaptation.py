@@ -47,6 +47,7 @@ import statistics
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from bench.core.arguments import positive, positive_int
 from bench.core.data import generate, mse
 from bench.core.effects import add_effects, parse_effects
 from bench.core.errors import ConfigError
@@ -230,13 +231,13 @@ def add_arguments(parser) -> None:
     parser.add_argument("--system", default=Setup.system, help=f"a simulated system (default {Setup.system})")
     parser.add_argument("--effects", nargs="+", default=list(Setup.effects), metavar="NAME=c1,...",
                         help="the undeclared effect(s) after the switch, one coefficient per joint (default: spring=5,0)")
-    parser.add_argument("--seeds", type=int, default=5, help="seeds 0..N-1 (default 5)")
-    parser.add_argument("--before", type=float, default=Setup.before_s, help="seconds of fitting before the switch (default 20)")
-    parser.add_argument("--checkpoints", type=float, nargs="+", default=list(Setup.checkpoints),
+    parser.add_argument("--seeds", type=positive_int, default=5, help="seeds 0..N-1 (default 5)")
+    parser.add_argument("--before", type=positive, default=Setup.before_s, help="seconds of fitting before the switch (default 20)")
+    parser.add_argument("--checkpoints", type=positive, nargs="+", default=list(Setup.checkpoints),
                         help="seconds of fitting after the switch at which the test MSE is measured, from 0")
-    parser.add_argument("--n-train", type=int, default=Setup.n_train, help=f"training samples per stream (default {Setup.n_train})")
-    parser.add_argument("--n-test", type=int, default=Setup.n_test, help=f"test samples (default {Setup.n_test})")
-    parser.add_argument("--workers", type=int, default=2, help="jobs at a time, one process each (default 2)")
+    parser.add_argument("--n-train", type=positive_int, default=Setup.n_train, help=f"training samples per stream (default {Setup.n_train})")
+    parser.add_argument("--n-test", type=positive_int, default=Setup.n_test, help=f"test samples (default {Setup.n_test})")
+    parser.add_argument("--workers", type=positive_int, default=2, help="jobs at a time, one process each (default 2)")
     parser.add_argument("--out", type=Path, default=Path("results/adaptation"), help="output folder (default results/adaptation)")
 
 

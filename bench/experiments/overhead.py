@@ -19,6 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench.core.arguments import positive, positive_int
 from bench.core.fileio import atomic_write, check_output
 from bench.runner.matrix import run_matrix
 from bench.runner.progress import quiet
@@ -54,9 +55,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--method", default="mlp", help="the method of every run (default mlp)")
     parser.add_argument("--system", default="double_pendulum", help="the system of every run (default double_pendulum)")
     parser.add_argument("--experiment", default="indirect", choices=["direct", "indirect"], help="default indirect")
-    parser.add_argument("--runs", type=int, default=8, help="runs (seeds) per matrix (default 8)")
-    parser.add_argument("--budget", type=float, default=30.0, help="seconds per run (default 30)")
-    parser.add_argument("--workers", type=int, nargs="+", default=[1, 2], help="worker counts to compare (default 1 2)")
+    parser.add_argument("--runs", type=positive_int, default=8, help="runs (seeds) per matrix (default 8)")
+    parser.add_argument("--budget", type=positive, default=30.0, help="seconds per run (default 30)")
+    parser.add_argument("--workers", type=positive_int, nargs="+", default=[1, 2], help="worker counts to compare (default 1 2)")
     parser.add_argument("--no-rollout", action="store_true", help="skip the runs' rollouts")
     parser.add_argument("--out", type=Path, default=Path("results/harness_overhead.md"),
                         help="the table to write (default results/harness_overhead.md)")

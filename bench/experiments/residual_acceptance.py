@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.core.arguments import nonnegative, positive, positive_int
 from bench.core.data import add_noise, generate
 from bench.core.effects import EFFECTS, LAWS, add_effects, parse_effects
 from bench.core.fileio import atomic_write, check_output
@@ -117,14 +118,14 @@ HELP = "measure the residual loop on data with known undeclared effects (results
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--noise", type=float, nargs="+", default=[0.0, 0.01, 0.1],
+    parser.add_argument("--noise", type=nonnegative, nargs="+", default=[0.0, 0.01, 0.1],
                         help="noise levels, fractions of each joint's torque std (default 0 0.01 0.1)")
     parser.add_argument("--methods", nargs="+", default=["sysid", "sparse"], help="methods the loop fits (default sysid sparse)")
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), help="effect cases (default: all)")
-    parser.add_argument("--n-train", type=int, default=3000, help="training samples (default 3000)")
-    parser.add_argument("--n-test", type=int, default=1500, help="test samples (default 1500)")
-    parser.add_argument("--budget", type=float, default=30.0, help="seconds for each loop, its fit included (default 30)")
-    parser.add_argument("--workers", type=int, default=2, help="cases at a time, one process each (default 2)")
+    parser.add_argument("--n-train", type=positive_int, default=3000, help="training samples (default 3000)")
+    parser.add_argument("--n-test", type=positive_int, default=1500, help="test samples (default 1500)")
+    parser.add_argument("--budget", type=positive, default=30.0, help="seconds for each loop, its fit included (default 30)")
+    parser.add_argument("--workers", type=positive_int, default=2, help="cases at a time, one process each (default 2)")
     parser.add_argument("--out", type=Path, default=Path("results/residual/acceptance.md"),
                         help="the table to write (default results/residual/acceptance.md)")
 

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.core.arguments import positive, positive_int
 from bench.core.fileio import atomic_write, check_output
 from bench.residual.loop import residual_loop
 from bench.runner.isolation import run_jobs
@@ -105,10 +106,10 @@ HELP = "measure the residual loop on the DFKI recordings: the suite's split and 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--methods", nargs="+", default=METHODS_DEFAULT, help=f"methods (default {' '.join(METHODS_DEFAULT)})")
-    parser.add_argument("--budget", type=float, default=60.0, help="seconds for each loop on the suite's split (default 60)")
-    parser.add_argument("--loro-budget", type=float, default=30.0,
+    parser.add_argument("--budget", type=positive, default=60.0, help="seconds for each loop on the suite's split (default 60)")
+    parser.add_argument("--loro-budget", type=positive, default=30.0,
                         help="seconds for each loop that leaves one recording out (default 30)")
-    parser.add_argument("--workers", type=int, default=2, help="leave-one-out loops at a time (default 2)")
+    parser.add_argument("--workers", type=positive_int, default=2, help="leave-one-out loops at a time (default 2)")
     parser.add_argument("--out", type=Path, default=Path("results/residual/dfki.md"),
                         help="the tables to write (default results/residual/dfki.md)")
 

@@ -27,6 +27,7 @@ import statistics
 from collections import defaultdict
 from pathlib import Path
 
+from bench.core.arguments import positive, positive_int
 from bench.core.fileio import atomic_write, check_output
 from bench.reporting.plots import line_plot
 from bench.runner.matrix import run_matrix
@@ -154,10 +155,10 @@ HELP = "measure how each method's time per step, memory and error grow with the 
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--budget", type=float, default=5.0, help="seconds per run (default 5)")
-    parser.add_argument("--seeds", type=int, default=5, help="the first N of the ten fixed seeds (default 5)")
+    parser.add_argument("--budget", type=positive, default=5.0, help="seconds per run (default 5)")
+    parser.add_argument("--seeds", type=positive_int, default=5, help="the first N of the ten fixed seeds (default 5)")
     parser.add_argument("--methods", nargs="+", default=None, help="methods (default: every available one)")
-    parser.add_argument("--workers", type=int, default=None, help="runs at a time (default: one per core)")
+    parser.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
     parser.add_argument("--out", type=Path, default=Path("results/scaling"), help="output folder (default results/scaling)")
 
 

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import torch
 
+from bench.core.arguments import positive_int
 from bench.core.data import generate
 from bench.core.fileio import atomic_write, check_output
 from bench.experiments import syrenets_speed
@@ -59,8 +60,8 @@ WARMUP = 3
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--steps", type=int, default=200, help="steps per mode and round (default 200)")
-    parser.add_argument("--rounds", type=int, default=3, help="rounds of the three modes (default 3)")
+    parser.add_argument("--steps", type=positive_int, default=200, help="steps per mode and round (default 200)")
+    parser.add_argument("--rounds", type=positive_int, default=3, help="rounds of the three modes (default 3)")
     parser.add_argument("--out", type=Path, default=Path("results/syrenets_profile.md"),
                         help="the table to write (default results/syrenets_profile.md)")
 

@@ -32,6 +32,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from bench.core.arguments import positive, positive_int
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, check_output
 from bench.runner.provenance import provenance
@@ -79,8 +80,8 @@ print(json.dumps({"steps_per_s": rate}))
 
 def add_arguments(parser) -> None:
     parser.add_argument("--against", required=True, help="the earlier commit (any git revision)")
-    parser.add_argument("--rounds", type=int, default=5, help="timings of each tree per configuration (default 5)")
-    parser.add_argument("--seconds", type=float, default=3.0, help="seconds each timing runs (default 3)")
+    parser.add_argument("--rounds", type=positive_int, default=5, help="timings of each tree per configuration (default 5)")
+    parser.add_argument("--seconds", type=positive, default=3.0, help="seconds each timing runs (default 3)")
     parser.add_argument("--out", type=Path, default=Path("results/syrenets_speed.md"),
                         help="the table to write (default results/syrenets_speed.md)")
 
