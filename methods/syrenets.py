@@ -38,6 +38,9 @@ Architecture (the paper's, with the public code's facts where the paper is open)
 * **Training**: Adam, lr 1e-3 divided by 10 after every 1000 steps without
   improvement of the mini-batch loss, down to 1e-5 (the paper's schedule; the
   public code waited 2000 steps); mini-batches of 32; float64; best state kept.
+  ``lr_smoothing=a`` lets the plateau schedule watch an exponential moving
+  average of the mini-batch loss instead of each batch's (the paper does not
+  say which; a single low batch otherwise starts the 1000-step count early).
   ``replay=16`` re-feeds the 16 worst-fitted samples of the previous batch at
   every step, as the public code did.
 * **Evaluation**: a fixed function; each layer's weights are frozen at the
@@ -164,6 +167,11 @@ class SyReNetsConfig(TorchConfig):
         the steps when ``max_steps`` is set).
     lr_patience, lr_factor, lr_min
         The plateau schedule; ``lr_min`` is the cosine's end too.
+    lr_smoothing
+        What the plateau schedule watches: 0 (the paper's) the loss of each
+        mini-batch; ``a`` in (0, 1) an exponential moving average of it,
+        ``a * previous + (1 - a) * batch`` (a window of about ``1 / (1 - a)``
+        steps), so that one lucky batch does not start the patience count.
     replay
         Worst-fitted samples of the previous batch replayed each step
         (public code: 16; paper: 0).
@@ -188,6 +196,7 @@ class SyReNetsConfig(TorchConfig):
     lr_patience: Annotated[int, Range(0)] = 1000
     lr_factor: Annotated[float, Range(0, 1, low_open=True, high_open=True)] = 0.1
     lr_min: Annotated[float, Range(0)] = 1e-5
+    lr_smoothing: Annotated[float, Range(0, 1, high_open=True)] = 0.0
     replay: Annotated[int, Range(0)] = 0
     refine: bool = True
     post_fraction: Annotated[float, Range(0, 1, high_open=True)] = 0.1
@@ -448,6 +457,7 @@ class SyReNets(TorchLagrangianMethod):
             )
         else:
             self.scheduler = _Cosine(self.optimizer, [cfg.lr_min, cfg.lr_min * C])
+        self._watched = None  # the loss the schedule watches (smoothed when lr_smoothing > 0)
 
     def train_step(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
         """One optimisation step on ``batch``; returns each sample's squared error."""
@@ -467,7 +477,9 @@ class SyReNets(TorchLagrangianMethod):
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
-        self.scheduler.step(err.mean().item())
+        batch_loss, a = err.mean().item(), self.config.lr_smoothing
+        self._watched = batch_loss if self._watched is None or not a else a * self._watched + (1 - a) * batch_loss
+        self.scheduler.step(self._watched)
         self.frozen = [w.detach() for w in weights]
         return err.detach()
 

@@ -211,6 +211,31 @@ def test_cosine_schedule_anneals_from_lr_to_lr_min_over_the_steps(data):
     assert m.optimizer.param_groups[1]["lr"] == pytest.approx(1e-4 * C)  # the scale keeps its C times
 
 
+def test_the_plateau_schedule_watches_a_moving_average_of_the_batch_loss(data):
+    for a in (0.0, 0.9):
+        m = METHODS["syrenets"](**SMALL, lr_smoothing=a, max_steps=12, eval_samples=64, refine=False)
+        batch_losses, watched = [], []
+        step = m.train_step
+
+        def recording(batch, experiment):
+            if not watched:  # the schedule exists from the first step on
+                plateau_step = m.scheduler.step
+                m.scheduler.step = lambda value: (watched.append(value), plateau_step(value))[1]
+            err = step(batch, experiment)
+            batch_losses.append(err.mean().item())
+            return err
+
+        m.train_step = recording
+        m.fit(data[0], "direct", 0, 60)
+        expected = [batch_losses[0]]
+        for loss in batch_losses[1:]:
+            expected.append(a * expected[-1] + (1 - a) * loss)
+        assert len(watched) == 12
+        np.testing.assert_allclose(watched, expected, rtol=1e-12)
+        if a == 0:
+            assert watched == batch_losses  # the paper's: each batch's own loss
+
+
 def test_the_record_lists_when_the_plateau_schedule_cut_the_learning_rate(data):
     m = METHODS["syrenets"](**SMALL, lr_patience=0, max_steps=30, eval_samples=64, refine=False)
     m.fit(data[0], "direct", 0, 60)
