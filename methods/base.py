@@ -252,6 +252,16 @@ class Progress:
         return self.deadline - time.perf_counter()
 
     def evaluate_now(self) -> float:
+        value = self.measure()
+        if not math.isfinite(value):
+            self.stop_reason = "non-finite training loss"
+        return value
+
+    def measure(self) -> float:
+        """The current state's training MSE, as one of the scheduled
+        evaluations (a new lowest value keeps the state), but a non-finite
+        value does not stop the loop: for a method that compares several
+        states and drops the ones that failed."""
         t0 = time.perf_counter()
         value = float(self._evaluate())
         cost = time.perf_counter() - t0
@@ -269,8 +279,6 @@ class Progress:
         gap = max(cost / self.overhead, 0.1 * (now - self.start), 1e-3)
         self._next_eval = now + gap
         self._next_eval_step = self.steps + max(1, math.ceil(0.1 * self.steps))
-        if not math.isfinite(value):
-            self.stop_reason = "non-finite training loss"
         return value
 
     def step(self) -> bool:
@@ -301,6 +309,12 @@ class Progress:
             self.stop_reason = "budget"
         self._last_call = time.perf_counter()
         return self.stop_reason is None
+
+    def fraction(self) -> float:
+        """How much of the loop is done: of ``max_steps`` when set, else of the time to the deadline."""
+        if self.max_steps is not None:
+            return self.steps / self.max_steps
+        return (time.perf_counter() - self.start) / max(self.deadline - self.start, 1e-9)
 
     def reserve(self, seconds: float) -> None:
         """Take ``seconds`` off the end of the budget (for work after the loop)."""

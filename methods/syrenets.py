@@ -92,6 +92,13 @@ Choices and deviations, each deliberate
 * The kept state is the one with the lowest training MSE on a fixed subset
   of the training data (see :class:`methods.base.Progress`), not the lowest
   mini-batch MSE, and the test set is not evaluated during training.
+* ``starts=k`` (beyond the paper; default 1) trains k networks from their own
+  initialisations in turns and keeps one by successive halving (Jamieson &
+  Talwalkar, 2016) on the training MSE, within ``start_share`` of the
+  training time. It is what the paper's "Best" row does across seeds, inside
+  one run's budget: in the indirect experiment a run either finds the
+  Lagrangian's structure within its first minutes or stays on a wrong one for
+  the rest of the run, whatever the learning-rate schedule.
 
 Readable equations and exact recovery (beyond the paper)
 --------------------------------------------------------
@@ -175,6 +182,10 @@ class SyReNetsConfig(TorchConfig):
     replay
         Worst-fitted samples of the previous batch replayed each step
         (public code: 16; paper: 0).
+    starts, start_share
+        ``starts`` k > 1 initialises k networks and keeps one by successive
+        halving within ``start_share`` of the training time (see
+        :meth:`SyReNets._halve`); 1 (the paper's) trains one network.
     refine
         Run the exact-recovery refinement at the end (a separate variant).
     post_fraction
@@ -198,6 +209,8 @@ class SyReNetsConfig(TorchConfig):
     lr_min: Annotated[float, Range(0)] = 1e-5
     lr_smoothing: Annotated[float, Range(0, 1, high_open=True)] = 0.0
     replay: Annotated[int, Range(0)] = 0
+    starts: Annotated[int, Range(1)] = 1
+    start_share: Annotated[float, Range(0, 1, low_open=True, high_open=True)] = 0.5
     refine: bool = True
     post_fraction: Annotated[float, Range(0, 1, high_open=True)] = 0.1
 
@@ -437,12 +450,15 @@ class SyReNets(TorchLagrangianMethod):
 
     def build_model(self, train):
         n_x = train.dof * (2 if self.config.inputs == "q_qd" else 3)
-        torch.manual_seed(self.seed)
+        torch.manual_seed(getattr(self, "_init_seed", self.seed))
         return SyReNet(n_x, self.config)
 
-    def _setup(self, train) -> None:
-        """Model, optimiser (the scale ``S`` at ``C`` times the learning rate) and schedule."""
+    def _setup(self, train, start: int = 0) -> None:
+        """Model, optimiser (the scale ``S`` at ``C`` times the learning rate)
+        and schedule; ``start`` k > 0 initialises the k-th network of a
+        multi-start fit from its own seed."""
         cfg = self.config
+        self._init_seed = self.seed if start == 0 else int(np.random.SeedSequence([self.seed, start]).generate_state(1)[0])
         self.model = self.build_model(train).to(self.dtype)
         C = self.model.C
         scale_params = list(self.model.S.parameters())
@@ -483,34 +499,96 @@ class SyReNets(TorchLagrangianMethod):
         self.frozen = [w.detach() for w in weights]
         return err.detach()
 
+    #: what one network of a multi-start fit carries between its turns
+    _SLOT = ("model", "optimizer", "scheduler", "frozen", "_watched", "_lr_drops")
+
     def _fit(self, train, experiment, progress):
         cfg = self.config
-        if not self.warm_start:
-            self._setup(train)
+        self._trained = False
         t = train.tensors(self.dtype)
         generator = torch.Generator().manual_seed(self.seed)
         n, bs = len(train), min(cfg.batch_size, len(train))
-        order, cursor = torch.randperm(n, generator=generator), 0
-        replay_idx = torch.empty(0, dtype=torch.long)
-        # frozen weights before the first step, from the first batch (a warm start keeps its own)
-        if not self.warm_start:
+        feed = {"order": torch.randperm(n, generator=generator), "cursor": 0, "generator": generator,
+                "replay": torch.empty(0, dtype=torch.long), "n": n, "bs": bs}
+        progress.reserve(cfg.post_fraction * progress.remaining())
+        self._starts = None
+        if self.warm_start:  # continue the network, its optimiser and its frozen weights
+            self.model.to(self.dtype)  # back to the training arithmetic, which the optimiser's state has
+            self.frozen = [w.to(self.dtype) for w in self.frozen]
+            self._lr_drops = []
+            if isinstance(self.scheduler, _Cosine):
+                self.scheduler.start(progress)
+            self._train(t, experiment, progress, feed)
+            return
+        slots = []
+        for k in range(cfg.starts):
+            self._setup(train, k)
+            # frozen weights before the first step, from the first batch
             with torch.no_grad():
                 self.frozen = [w.detach() for w in self.model.select(self._inputs(t["q"][:bs], t["qd"][:bs], t["qdd"][:bs]))[1]]
-        progress.reserve(cfg.post_fraction * progress.remaining())
-        if isinstance(self.scheduler, _Cosine):
-            self.scheduler.start(progress)
-        self._lr_drops, lr = [], self.optimizer.param_groups[0]["lr"]
-        while progress.step():
-            if cursor + bs > n:
-                order, cursor = torch.randperm(n, generator=generator), 0
-            idx = torch.cat([order[cursor:cursor + bs], replay_idx])
-            cursor += bs
+            if isinstance(self.scheduler, _Cosine):
+                self.scheduler.start(progress)
+            self._lr_drops = []
+            slots.append({name: getattr(self, name) for name in self._SLOT})
+        if cfg.starts > 1:
+            slots = [slots[self._halve(slots, t, experiment, progress, feed)]]
+        for name, value in slots[0].items():
+            setattr(self, name, value)
+        if progress.stop_reason is None:
+            self._train(t, experiment, progress, feed)
+
+    def _train(self, t, experiment, progress, feed, until: float = math.inf) -> bool:
+        """Steps until ``progress.fraction()`` reaches ``until``; ``False`` once the budget is spent."""
+        cfg, n, bs = self.config, feed["n"], feed["bs"]
+        lr = self.optimizer.param_groups[0]["lr"]
+        while progress.fraction() < until:
+            if not progress.step():
+                return False
+            if feed["cursor"] + bs > n:
+                feed["order"], feed["cursor"] = torch.randperm(n, generator=feed["generator"]), 0
+            idx = torch.cat([feed["order"][feed["cursor"]:feed["cursor"] + bs], feed["replay"]])
+            feed["cursor"] += bs
             err = self.train_step({k: v[idx] for k, v in t.items()}, experiment)
             if cfg.lr_schedule == "plateau" and self.optimizer.param_groups[0]["lr"] != lr:
                 lr = self.optimizer.param_groups[0]["lr"]
                 self._lr_drops.append([progress.steps + 1, round(progress.elapsed(), 2), lr])
             if cfg.replay:
-                replay_idx = idx[torch.argsort(err, descending=True)[: cfg.replay]]
+                feed["replay"] = idx[torch.argsort(err, descending=True)[: cfg.replay]]
+        return True
+
+    def _halve(self, slots, t, experiment, progress, feed) -> int:
+        """Successive halving over the networks of ``slots``; returns the survivor's index.
+
+        ``start_share`` of the loop is split into ceil(log2 k) rounds of equal
+        length; in each, the networks still in train in turns for equal
+        shares of the round, then the half with the higher training MSE (on
+        the evaluation subset, as the best-state tracking measures it) is
+        dropped. The replayed samples are each network's own.
+        """
+        alive, rounds = list(range(len(slots))), math.ceil(math.log2(len(slots)))
+        begin = progress.fraction()
+        length = self.config.start_share * (1 - begin) / rounds
+        self._starts = {"networks": len(slots), "rounds": []}
+        replay = {k: feed["replay"] for k in alive}
+        for r in range(rounds):
+            scores, turn = {}, length / len(alive)
+            for i, k in enumerate(alive):
+                for name, value in slots[k].items():
+                    setattr(self, name, value)
+                feed["replay"] = replay[k]
+                more = self._train(t, experiment, progress, feed, until=begin + r * length + (i + 1) * turn)
+                scores[k] = progress.measure()
+                slots[k], replay[k] = {name: getattr(self, name) for name in self._SLOT}, feed["replay"]
+                if not more:
+                    break
+            ranked = sorted(scores, key=lambda k: scores[k] if math.isfinite(scores[k]) else math.inf)
+            self._starts["rounds"].append([[k, scores[k]] for k in sorted(scores)])
+            alive = ranked[: max(1, math.ceil(len(alive) / 2))] if more else ranked[:1]
+            if len(alive) == 1:
+                break
+        self._starts["kept"] = alive[0]
+        feed["replay"] = replay[alive[0]]
+        return alive[0]
 
     def _get_state(self):
         return {"model": {k: v.detach().clone() for k, v in self.model.state_dict().items()},
@@ -554,8 +632,17 @@ class SyReNets(TorchLagrangianMethod):
             self.frozen = saved
 
     # -- pruning and refinement -----------------------------------------------------------
+    @property
+    def dtype(self) -> torch.dtype:
+        """``config.dtype`` while the network trains; float64 once the fit is
+        done, for evaluation, pruning and refinement."""
+        return torch.float64 if getattr(self, "_trained", False) else getattr(torch, self.config.dtype)
+
     def _post_fit(self, train, experiment, seconds_left):
         deadline = time.perf_counter() + seconds_left
+        self._trained = True  # the fitted function is evaluated in float64 from here on
+        self.model.to(torch.float64)
+        self.frozen = [w.to(torch.float64) for w in self.frozen]
         self._variants, self._notes = {}, {}
         rng = np.random.default_rng(self.seed)
         ref = train.subset(np.sort(rng.choice(len(train), min(len(train), 1024), replace=False)))
@@ -704,6 +791,9 @@ class SyReNets(TorchLagrangianMethod):
         if self.config.lr_schedule == "plateau" and hasattr(self, "_lr_drops"):
             # [step, seconds into the fit, new learning rate] for each cut of the plateau schedule
             notes["lr_drops"] = self._lr_drops
+        if getattr(self, "_starts", None):
+            # the multi-start fit: each round's [network, training MSE], and the network kept
+            notes["starts"] = self._starts
         if notes.get("pruned_terms", 0) > MAX_READABLE_TERMS:
             notes["expression_omitted"] = f"the pruned equation keeps {notes['pruned_terms']} terms (> {MAX_READABLE_TERMS})"
         return notes

@@ -236,6 +236,48 @@ def test_the_plateau_schedule_watches_a_moving_average_of_the_batch_loss(data):
             assert watched == batch_losses  # the paper's: each batch's own loss
 
 
+def test_a_multi_start_fit_keeps_the_network_with_the_lowest_training_mse(data):
+    m = METHODS["syrenets"](**SMALL, starts=4, start_share=0.5, max_steps=40, eval_samples=64, refine=False)
+    inits, setup = [], m._setup
+
+    def recording(train, start=0):
+        setup(train, start)
+        inits.append(torch.cat([p.detach().flatten() for p in m.model.parameters()]))
+
+    m._setup = recording
+    m.fit(data[0], "direct", 0, 60)
+    starts = m.record_details()["starts"]
+    assert starts["networks"] == 4 and len(inits) == 4
+    assert all(not torch.equal(inits[0], other) for other in inits[1:])  # each network its own initialisation
+    first, second = starts["rounds"]  # ceil(log2 4) rounds: 4 networks, then the better 2
+    assert [k for k, _ in first] == [0, 1, 2, 3]
+    better = sorted(first, key=lambda pair: pair[1])[:2]
+    assert sorted(k for k, _ in second) == sorted(k for k, _ in better)
+    assert starts["kept"] == min(second, key=lambda pair: pair[1])[0]
+    assert m.fit_info["steps"] == 40  # the rounds share the run's steps, they do not add to them
+    single = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], "direct", 0, 60)
+    assert "starts" not in single.record_details()
+
+
+def test_float32_training_is_evaluated_in_float64_and_can_continue(data):
+    train, test = data
+    m = METHODS["syrenets"](**SMALL, dtype="float32", max_steps=5, eval_samples=64, refine=False)
+    seen = []
+    step = m.train_step
+    m.train_step = lambda batch, experiment: (seen.append(batch["q"].dtype), step(batch, experiment))[1]
+    m.fit(train, "indirect", 0, 60)
+    assert set(seen) == {torch.float32}
+    assert all(p.dtype == torch.float64 for p in m.model.parameters())
+    assert all(w.dtype == torch.float64 for w in m.frozen)
+    # the prediction is the float64 evaluation of the trained weights, not a float32 one
+    t = test.tensors(torch.float64)
+    expected = euler_lagrange(m.lagrangian, t["q"], t["qd"], t["qdd"]).numpy()
+    np.testing.assert_array_equal(m.predict_torque(test), expected)
+    m.fit(train, "indirect", 0, 60, warm_start=True)  # continues in float32, with the optimiser's float32 state
+    assert seen[-1] == torch.float32 and len(seen) == 10
+    assert all(p.dtype == torch.float64 for p in m.model.parameters())
+
+
 def test_the_record_lists_when_the_plateau_schedule_cut_the_learning_rate(data):
     m = METHODS["syrenets"](**SMALL, lr_patience=0, max_steps=30, eval_samples=64, refine=False)
     m.fit(data[0], "direct", 0, 60)
