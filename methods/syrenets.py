@@ -92,6 +92,10 @@ Choices and deviations, each deliberate
 * The kept state is the one with the lowest training MSE on a fixed subset
   of the training data (see :class:`methods.base.Progress`), not the lowest
   mini-batch MSE, and the test set is not evaluated during training.
+* ``dtype="float32"`` trains in single precision (the paper's is float64);
+  the fitted function is then evaluated, pruned and refined in float64. On
+  this kind of CPU a step is about 1.7 times faster in the indirect
+  experiment (26,400 against 15,300 steps in 300 s, with ``replay=16``).
 * ``starts=k`` (beyond the paper; default 1) trains k networks from their own
   initialisations in turns and keeps one by successive halving (Jamieson &
   Talwalkar, 2016) on the training MSE, within ``start_share`` of the

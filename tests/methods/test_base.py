@@ -77,6 +77,25 @@ def test_non_finite_loss_stops_and_keeps_the_last_good_state(small_data):
     assert m.value == 2.0 and m.fit_info["stop_reason"] == "non-finite training loss"
 
 
+def test_measuring_a_failed_state_does_not_stop_the_loop_but_a_scheduled_evaluation_does():
+    values = iter([3.0, float("nan"), 1.0, float("nan")])
+    p = Progress(60.0, evaluate=lambda: next(values), snapshot=lambda: p.evaluations)
+    assert p.measure() == 3.0 and p.best_mse == 3.0
+    assert np.isnan(p.measure()) and p.stop_reason is None and p.best_mse == 3.0
+    assert p.measure() == 1.0 and p.best_mse == 1.0 and p.best_state == 3  # a new best keeps its state (the 3rd)
+    assert np.isnan(p.evaluate_now()) and p.stop_reason == "non-finite training loss"
+    assert p.evaluations == 4 and not p.step()
+
+
+def test_progress_fraction_counts_steps_when_limited_and_time_otherwise():
+    p = Progress(60.0, evaluate=lambda: 1.0, snapshot=lambda: None, max_steps=8)
+    for _ in range(3):
+        p.step()
+    assert p.fraction() == 2 / 8  # the first call counts no step
+    timed = Progress(1000.0, evaluate=lambda: 1.0, snapshot=lambda: None)
+    assert 0 <= timed.fraction() < 1e-3
+
+
 def test_progress_evaluations_are_spaced():
     calls = []
     p = Progress(0.3, evaluate=lambda: calls.append(1) or 1.0, snapshot=lambda: None)
