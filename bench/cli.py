@@ -38,7 +38,7 @@ from bench.runner.execute import given_data, make_system, method_config, preflig
 from bench.runner.isolation import CallFailed
 from bench.runner.plugins import import_plugins, system_plugins
 from bench.runner.records import Record
-from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, RunSpec, build_specs
+from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, RunSpec, build_specs, seed_count
 from methods import METHODS
 from systems import SYSTEMS
 from systems.dfki_double_pendulum import read_raw
@@ -81,14 +81,6 @@ def _seed_list(text: str) -> list[int]:
     if len(set(out)) != len(out):
         raise argparse.ArgumentTypeError(f"a seed is given twice in {text}")
     return out
-
-
-def _n_seeds(text: str) -> int:
-    value = positive_int(text)
-    if value > len(SEEDS):
-        raise argparse.ArgumentTypeError(f"at most {len(SEEDS)} (the tables' fixed seeds), got {value}; "
-                                         f"give --seeds 0-{value - 1} for more")
-    return value
 
 
 def _noise_level(text: str) -> float:
@@ -139,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--experiments", type=_csv_list, default=["direct", "indirect"], help="direct,indirect (default: both)")
     seeds = r.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=_seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
-    seeds.add_argument("--n-seeds", type=_n_seeds, default=10, help="the first N of the ten fixed seeds (default 10)")
+    seeds.add_argument("--n-seeds", type=seed_count, default=10, help="the first N of the ten fixed seeds (default 10)")
     r.add_argument("--budget", type=positive, default=60.0, help="wall-clock seconds per run (default 60)")
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
     r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")

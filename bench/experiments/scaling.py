@@ -34,7 +34,7 @@ from bench.runner.matrix import run_matrix
 from bench.runner.plugins import import_plugins
 from bench.runner.provenance import provenance
 from bench.runner.records import Record
-from bench.runner.spec import SEEDS, build_specs
+from bench.runner.spec import SEEDS, build_specs, seed_count
 from methods import METHODS
 from bench.core.terms import lagrangian_library_size as library_size
 from systems import SYSTEMS
@@ -156,7 +156,7 @@ HELP = "measure how each method's time per step, memory and error grow with the 
 
 def add_arguments(parser) -> None:
     parser.add_argument("--budget", type=positive, default=5.0, help="seconds per run (default 5)")
-    parser.add_argument("--seeds", type=positive_int, default=5, help="the first N of the ten fixed seeds (default 5)")
+    parser.add_argument("--seeds", type=seed_count, default=5, help="the first N of the ten fixed seeds (default 5)")
     parser.add_argument("--methods", nargs="+", default=None, help="methods (default: every available one)")
     parser.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
     parser.add_argument("--out", type=Path, default=Path("results/scaling"), help="output folder (default results/scaling)")

@@ -3,13 +3,24 @@ specs, :func:`build_specs`."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import re
 from dataclasses import dataclass, field
 from typing import Iterable
 
+from bench.core.arguments import positive_int
+
 #: The ten seeds of every table, written once.
 SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9)
+
+
+def seed_count(text: str) -> int:
+    """The command-line type of a number of the fixed seeds: 1 to ``len(SEEDS)``."""
+    value = positive_int(text)
+    if value > len(SEEDS):
+        raise argparse.ArgumentTypeError(f"at most {len(SEEDS)} (the tables' fixed seeds), got {value}")
+    return value
 #: Test data for seed ``s`` is generated with seed ``s + TEST_SEED_OFFSET``.
 TEST_SEED_OFFSET = 1000
 #: The paper's data sizes.
