@@ -102,7 +102,11 @@ Choices and deviations, each deliberate
   training time. It is what the paper's "Best" row does across seeds, inside
   one run's budget: in the indirect experiment a run either finds the
   Lagrangian's structure within its first minutes or stays on a wrong one for
-  the rest of the run, whatever the learning-rate schedule.
+  the rest of the run, whatever the learning-rate schedule. Each network
+  keeps its own optimiser and schedule; under the plateau schedule a
+  network's rate can already be cut to its floor during the selection, so
+  the cosine schedule, which keeps the rates high through it, suits
+  ``starts`` better (results/further.md, syrenets_300s_multistart_cosine).
 
 Readable equations and exact recovery (beyond the paper)
 --------------------------------------------------------
