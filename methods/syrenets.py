@@ -590,7 +590,8 @@ class SyReNets(TorchLagrangianMethod):
                 if not more:
                     break
             ranked = sorted(scores, key=lambda k: scores[k] if math.isfinite(scores[k]) else math.inf)
-            self._starts["rounds"].append([[k, scores[k]] for k in sorted(scores)])
+            # a network whose training MSE is not finite is listed with null and dropped first
+            self._starts["rounds"].append([[k, scores[k] if math.isfinite(scores[k]) else None] for k in sorted(scores)])
             alive = ranked[: max(1, math.ceil(len(alive) / 2))] if more else ranked[:1]
             if len(alive) == 1:
                 break
