@@ -537,11 +537,10 @@ class SyReNets(TorchLagrangianMethod):
             if isinstance(self.scheduler, _Cosine):
                 self.scheduler.start(progress)
             self._lr_drops = []
-            slots.append({name: getattr(self, name) for name in self._SLOT})
-        if cfg.starts > 1:
-            slots = [slots[self._halve(slots, t, experiment, progress, feed)]]
-        for name, value in slots[0].items():
-            setattr(self, name, value)
+            slots.append(self._slot(feed))
+        if cfg.starts > 1:  # otherwise the one network is in place
+            self._halve(slots, t, experiment, progress, feed)
+        del slots
         if progress.stop_reason is None:
             self._train(t, experiment, progress, feed)
 
@@ -564,8 +563,18 @@ class SyReNets(TorchLagrangianMethod):
                 feed["replay"] = idx[torch.argsort(err, descending=True)[: cfg.replay]]
         return True
 
-    def _halve(self, slots, t, experiment, progress, feed) -> int:
-        """Successive halving over the networks of ``slots``; returns the survivor's index.
+    def _slot(self, feed) -> dict:
+        """What the network in place carries between its turns, its replayed samples included."""
+        return {**{name: getattr(self, name) for name in self._SLOT}, "replay": feed["replay"]}
+
+    def _use(self, slot: dict, feed) -> None:
+        """Put a network from :meth:`_slot` in place."""
+        for name in self._SLOT:
+            setattr(self, name, slot[name])
+        feed["replay"] = slot["replay"]
+
+    def _halve(self, slots, t, experiment, progress, feed) -> None:
+        """Successive halving over the networks of ``slots``; leaves the survivor in place.
 
         ``start_share`` of the loop is split into ceil(log2 k) rounds of equal
         length; in each, the networks still in train in turns for equal
@@ -577,16 +586,13 @@ class SyReNets(TorchLagrangianMethod):
         begin = progress.fraction()
         length = self.config.start_share * (1 - begin) / rounds
         self._starts = {"networks": len(slots), "rounds": []}
-        replay = {k: feed["replay"] for k in alive}
         for r in range(rounds):
             scores, turn = {}, length / len(alive)
             for i, k in enumerate(alive):
-                for name, value in slots[k].items():
-                    setattr(self, name, value)
-                feed["replay"] = replay[k]
+                self._use(slots[k], feed)
                 more = self._train(t, experiment, progress, feed, until=begin + r * length + (i + 1) * turn)
                 scores[k] = progress.measure()
-                slots[k], replay[k] = {name: getattr(self, name) for name in self._SLOT}, feed["replay"]
+                slots[k] = self._slot(feed)
                 if not more:
                     break
             ranked = sorted(scores, key=lambda k: scores[k] if math.isfinite(scores[k]) else math.inf)
@@ -596,8 +602,7 @@ class SyReNets(TorchLagrangianMethod):
             if len(alive) == 1:
                 break
         self._starts["kept"] = alive[0]
-        feed["replay"] = replay[alive[0]]
-        return alive[0]
+        self._use(slots[alive[0]], feed)
 
     def _get_state(self):
         return {"model": {k: v.detach().clone() for k, v in self.model.state_dict().items()},
@@ -645,7 +650,7 @@ class SyReNets(TorchLagrangianMethod):
     def dtype(self) -> torch.dtype:
         """``config.dtype`` while the network trains; float64 once the fit is
         done, for evaluation, pruning and refinement."""
-        return torch.float64 if getattr(self, "_trained", False) else getattr(torch, self.config.dtype)
+        return torch.float64 if getattr(self, "_trained", False) else super().dtype
 
     def _post_fit(self, train, experiment, seconds_left):
         deadline = time.perf_counter() + seconds_left
