@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import ast
-import math
 import shlex
 import sys
 import tempfile
@@ -23,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.core.arguments import nonnegative, positive, positive_int
+from bench.core.arguments import noise_level, nonnegative, positive, positive_int
 from bench.core.data import Dataset, add_noise, check_experiment, generate, write_csv
 from bench.core.effects import EFFECTS, LAWS, add_effects, parse_effects
 from bench.core.errors import UserError
@@ -83,16 +82,6 @@ def _seed_list(text: str) -> list[int]:
     return out
 
 
-def _noise_level(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"a noise level is a number, got {text!r}") from None
-    if not (0 <= value < 10 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"a noise level is a fraction of the target's std in [0, 10), got {text}")
-    return value
-
-
 def _assignment(text: str) -> tuple[str, object]:
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
@@ -144,7 +133,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--domain-half-width", type=positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain, "
                         "pi/2 for the paper; linear coordinates keep their ranges)")
-    r.add_argument("--noise", type=_noise_level, nargs="+", default=[0.0], metavar="LEVEL",
+    r.add_argument("--noise", type=noise_level, nargs="+", default=[0.0], metavar="LEVEL",
                    help="Gaussian noise on the training targets as a fraction of their std; several levels "
                         "add a dimension to the matrix, e.g. --noise 0 0.01 0.1 (default 0)")
     r.add_argument("--cluster", default=None, metavar="local|ADDRESS",
@@ -173,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "difference of coordinates i and j (e.g. coupled_spring=1-2:3.0); "
                         f"j:{','.join(LAWS['stribeck_friction'])} items for stribeck_friction, ';'-separated; "
                         "one number for a planar chain's tip_payload (its mass) or gravity_tilt (radians)")
-    d.add_argument("--noise", type=_noise_level, default=0.0,
+    d.add_argument("--noise", type=noise_level, default=0.0,
                    help="Gaussian noise on tau as a fraction of each joint's torque std (default 0)")
 
     res = sub.add_parser("residual", help="fit, trace the torque residual to missing effects, add them, refit; "

@@ -42,3 +42,14 @@ def positive_int(text: str) -> int:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
     return value
+
+
+def noise_level(text: str) -> float:
+    """Gaussian noise on a target as a fraction of its standard deviation: in [0, 10)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a noise level is a number, got {text!r}") from None
+    if not (0 <= value < 10 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"a noise level is a fraction of the target's std in [0, 10), got {text}")
+    return value

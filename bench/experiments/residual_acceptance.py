@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.core.arguments import nonnegative, positive, positive_int
+from bench.core.arguments import noise_level, positive, positive_int
 from bench.core.data import add_noise, generate
 from bench.core.effects import EFFECTS, LAWS, add_effects, parse_effects
 from bench.core.fileio import atomic_write, check_output
@@ -118,7 +118,7 @@ HELP = "measure the residual loop on data with known undeclared effects (results
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--noise", type=nonnegative, nargs="+", default=[0.0, 0.01, 0.1],
+    parser.add_argument("--noise", type=noise_level, nargs="+", default=[0.0, 0.01, 0.1],
                         help="noise levels, fractions of each joint's torque std (default 0 0.01 0.1)")
     parser.add_argument("--methods", nargs="+", default=["sysid", "sparse"], help="methods the loop fits (default sysid sparse)")
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), help="effect cases (default: all)")

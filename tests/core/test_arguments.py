@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from bench.core.arguments import nonnegative, positive, positive_int
+from bench.core.arguments import noise_level, nonnegative, positive, positive_int
 
 _texts = st.one_of(
     st.text(max_size=12),
@@ -30,6 +30,12 @@ def test_each_type_returns_a_valid_value_or_refuses_the_text(text):
             assert "\n" not in str(exc) and str(exc).startswith("must be")
         else:
             assert ok(value), (kind.__name__, text, value)
+    try:
+        level = noise_level(text)
+    except argparse.ArgumentTypeError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith("a noise level is")
+    else:
+        assert 0 <= level < 10, (text, level)
 
 
 @pytest.mark.parametrize("kind, text", [(positive, "0"), (positive, "nan"), (positive, "inf"), (nonnegative, "-1e-9"),
