@@ -1,34 +1,42 @@
-"""The heads' product in SyReNets' training step, timed with and without torch.profiler.
+"""Where SyReNets' training step spends its time, and the heads' output layer in it.
 
 Each selection head ends in a layer over the candidates: ``W2`` of shape
-(heads, candidates, hidden units) multiplied by the hidden units and summed.
-torch.profiler attributes most of a step to these products (the ``aten::mul``
-calls on tensors of ``W2``'s shape, forward and backward). This command times
-the same calls in one process, three ways, and reports each per step:
+(heads, candidates, hidden units) applied to the hidden units
+(``methods.syrenets.HeadsOutput``, forward and backward). torch.profiler
+attributes a large and varying share of a step to it. This command times
+the same step in one process, three ways, and reports each per step:
 
 * ``plain``: the step with no instrumentation;
 * ``profiler``: under ``torch.profiler`` (CPU, with input shapes); the
-  product's figure is the self time of those ``aten::mul`` events;
-* ``timers``: wall-clock timers around the same calls, the forward product
-  caught by a ``TorchFunctionMode`` and the backward by hooks on the
-  product's autograd node. The node's time includes the reduction of the
-  hidden units' gradient, which the profiler's figure leaves out, so this
-  figure is an upper bound on the product's own time.
+  product's figure is the CPU time of its forward and backward events,
+  the operators they call included;
+* ``timers``: wall-clock timers around the product's own forward and
+  backward functions.
 
 Each mode also counts the process's minor page faults per step. Each
 product writes a temporary of ``W2``'s size (2.3 MB, 567 pages of 4 KB, in
 the public configuration); when the allocator hands it freshly mapped
 memory, every page faults on its first write.
 
-Each mode runs a few untimed steps, then ``--steps`` timed ones, the three in turn, ``--rounds`` times; the
-table gives medians. Configuration: the authors' public one (inputs
-``(q, qd, qdd)``, 32 samples plus 16 replayed), the direct experiment,
-float64, one thread, inside the garbage-collector context of the suite's fit
-loop. Usage::
+A second table says where a plain step's time goes. Every ATen operator of
+one step (forward, backward and the optimiser's update) is recorded at the
+dispatcher, then each is called again alone, on copies of its own
+arguments, and timed. The sum is what the step's arithmetic and memory
+traffic cost with no Python, autograd or allocation between the operators:
+a floor for any reordering of the same operators, and a generous one, since
+each operator timed alone finds its inputs in the cache. The operators are
+grouped into Adam's fused update, the heads' output layer (every operator
+with a tensor of ``W2``'s shape among its arguments or results), the matrix
+products (``mm``, ``addmm``, ``bmm``) and the rest.
+
+Each mode runs a few untimed steps, then ``--steps`` timed ones, the three in turn, ``--rounds`` times,
+and the operators are timed alone once per round; the tables give medians. Configuration: the authors' public
+one (inputs ``(q, qd, qdd)``, 32 samples plus 16 replayed), the direct experiment, float64, one thread, inside
+the garbage-collector context of the suite's fit loop. Usage::
 
     python -m bench syrenets-profile [--steps 200] [--rounds 3] [--out results/syrenets_profile.md]
 
-With 5 rounds of 200 steps it took 6 min 18 s and 6.3 GB of memory, most
+With 5 rounds of 200 steps it took about 6 min and 6 GB of memory, most
 of both for the profiler's records of each operator call and its shapes.
 """
 
@@ -40,6 +48,7 @@ import time
 from pathlib import Path
 
 import torch
+from torch.utils._python_dispatch import TorchDispatchMode
 
 from bench.core.arguments import positive_int
 from bench.core.data import generate
@@ -48,9 +57,11 @@ from bench.experiments import syrenets_speed
 from bench.runner.provenance import provenance
 from methods import METHODS
 from methods.base import gc_frozen
+from methods.syrenets import HeadsOutput
 from systems import get_system
 
-HELP = "time the SyReNets heads' product with and without torch.profiler (results/syrenets_profile.md)"
+HELP = ("where SyReNets' training step spends its time, and its heads' product with and without torch.profiler "
+        "(results/syrenets_profile.md)")
 
 #: the authors' public configuration, as bench syrenets-speed times it
 CONFIG = syrenets_speed.CONFIGS["public"]
@@ -66,34 +77,102 @@ def add_arguments(parser) -> None:
                         help="the table to write (default results/syrenets_profile.md)")
 
 
-class _ProductTimer(torch.overrides.TorchFunctionMode):
-    """Wall-clock time of every multiplication with an operand of ``shape``, forward and backward."""
+class _ProductTimer:
+    """Wall-clock time of the heads' output layer, forward and backward, while entered.
 
-    def __init__(self, shape: torch.Size):
-        super().__init__()
-        self.shape = shape
+    It wraps :class:`methods.syrenets.HeadsOutput`'s two functions and puts
+    them back on exit.
+    """
+
+    def __init__(self):
         self.reset()
 
     def reset(self) -> None:
         self.forward = self.backward = 0.0
 
-    def __torch_function__(self, func, types, args=(), kwargs=None):
+    def _timed(self, fn, field: str):
+        def timed(*args):
+            start = time.perf_counter()
+            out = fn(*args)
+            setattr(self, field, getattr(self, field) + time.perf_counter() - start)
+            return out
+        return staticmethod(timed)
+
+    def __enter__(self):
+        self._saved = HeadsOutput.__dict__["forward"], HeadsOutput.__dict__["backward"]
+        HeadsOutput.forward = self._timed(HeadsOutput.forward, "forward")
+        HeadsOutput.backward = self._timed(HeadsOutput.backward, "backward")
+        return self
+
+    def __exit__(self, *exc) -> None:
+        HeadsOutput.forward, HeadsOutput.backward = self._saved
+
+
+class _Recorder(TorchDispatchMode):
+    """Every ATen operator called while entered, with its arguments and results."""
+
+    def __init__(self):
+        super().__init__()
+        self.calls = []
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}
-        if func not in (torch.Tensor.mul, torch.Tensor.__mul__, torch.Tensor.__rmul__, torch.mul) or not any(
-            isinstance(a, torch.Tensor) and a.shape == self.shape for a in args
-        ):
-            return func(*args, **kwargs)
-        t0 = time.perf_counter()
         out = func(*args, **kwargs)
-        self.forward += time.perf_counter() - t0
-        if out.grad_fn is not None:
-            started = []
-            out.grad_fn.register_prehook(lambda grads: started.append(time.perf_counter()))
-            out.grad_fn.register_hook(lambda inputs, outputs: self._add_backward(started))
+        self.calls.append((func, args, kwargs, out))
         return out
 
-    def _add_backward(self, started: list) -> None:
-        self.backward += time.perf_counter() - started[-1]
+
+def _copy(a):
+    if isinstance(a, torch.Tensor):
+        return a.detach().clone()
+    if isinstance(a, (list, tuple)):
+        return type(a)(_copy(x) for x in a)
+    return a
+
+
+def _tensors(a):
+    if isinstance(a, torch.Tensor):
+        yield a
+    elif isinstance(a, (list, tuple)):
+        for x in a:
+            yield from _tensors(x)
+    elif isinstance(a, dict):
+        for x in a.values():
+            yield from _tensors(x)
+
+
+#: the groups of the operators timed alone, in the table's order
+PARTS = ("Adam's fused update", "heads' output layer", "matrix products", "other operators")
+
+
+def _part(func, args, kwargs, out, shape: torch.Size) -> str:
+    if func.overloadpacket is torch.ops.aten._fused_adam_:
+        return PARTS[0]
+    if any(t.shape == shape for t in _tensors((args, kwargs, out))):
+        return PARTS[1]
+    if func.overloadpacket in (torch.ops.aten.mm, torch.ops.aten.addmm, torch.ops.aten.bmm):
+        return PARTS[2]
+    return PARTS[3]
+
+
+def operators_alone(m, batch, repeat: int = 10) -> dict[str, tuple[float, int]]:
+    """One step's operators, each called ``repeat`` times alone on copies of
+    its arguments: per group of :data:`PARTS`, (ms per step, operator calls)."""
+    shape = m.model.W2[0].shape
+    recorder = _Recorder()
+    with recorder:
+        m.train_step(batch, "direct")
+    took = {part: [0.0, 0] for part in PARTS}
+    for func, args, kwargs, out in recorder.calls:
+        args, kwargs = _copy(args), _copy(kwargs)
+        func(*args, **kwargs)  # a first call, untimed
+        start = time.perf_counter()
+        for _ in range(repeat):
+            func(*args, **kwargs)
+        part = took[_part(func, args, kwargs, out, shape)]
+        part[0] += (time.perf_counter() - start) * 1e3 / repeat
+        part[1] += 1
+    return {part: (ms, n) for part, (ms, n) in took.items()}
 
 
 def _setup():
@@ -106,17 +185,18 @@ def _setup():
     return m, {k: v[:CONFIG["batch"]] for k, v in t.items()}
 
 
-def _product_events_ms(prof, shape: list[int]) -> float:
-    """Self CPU time (ms) of the ``aten::mul`` events with an input of ``shape``."""
-    return sum(e.self_cpu_time_total for e in prof.key_averages(group_by_input_shape=True)
-               if e.key == "aten::mul" and shape in list(e.input_shapes)) / 1e3
+def _product_events_ms(prof) -> float:
+    """CPU time (ms) of the heads' output layer's forward and backward events, their operators included."""
+    return sum(e.cpu_time_total for e in prof.key_averages()
+               if e.key in ("HeadsOutput", "HeadsOutputBackward")) / 1e3
 
 
 def measure(steps: int, rounds: int, report=print) -> dict[str, dict[str, list[float]]]:
-    """Per mode: the step's and the product's milliseconds and the minor page faults per step, one figure per round."""
+    """Per mode: the step's and the product's milliseconds and the minor page faults per step, one figure per
+    round; under ``"alone"``, per round, :func:`operators_alone`."""
     m, batch = _setup()
-    shape = m.model.W2[0].shape
     out = {mode: {"step_ms": [], "product_ms": [], "page_faults": []} for mode in MODES}
+    out["alone"] = []
 
     def record(mode, timed):
         out[mode]["step_ms"].append(timed[0])
@@ -147,25 +227,28 @@ def measure(steps: int, rounds: int, report=print) -> dict[str, dict[str, list[f
             with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU], record_shapes=True,
                                         schedule=schedule, acc_events=True) as prof:
                 record("profiler", run(after_step=prof.step))
-            out["profiler"]["product_ms"].append(_product_events_ms(prof, list(shape)) / steps)
-            timer = _ProductTimer(shape)
+            out["profiler"]["product_ms"].append(_product_events_ms(prof) / steps)
+            timer = _ProductTimer()
             with timer:
                 record("timers", run(before_timing=timer.reset))
             out["timers"]["product_ms"].append((timer.forward + timer.backward) * 1e3 / steps)
+            out["alone"].append(operators_alone(m, batch))
             steps_ms = ", ".join(f"{mode} step {out[mode]['step_ms'][-1]:.2f} ms "
                                  f"({out[mode]['page_faults'][-1]:.0f} page faults)" for mode in MODES)
             report(f"round {k + 1}/{rounds}: {steps_ms}; product: profiler {out['profiler']['product_ms'][-1]:.2f} ms, "
-                   f"timers {out['timers']['product_ms'][-1]:.2f} ms")
+                   f"timers {out['timers']['product_ms'][-1]:.2f} ms; operators alone "
+                   f"{sum(ms for ms, _ in out['alone'][-1].values()):.2f} ms")
     return out
 
 
 def main(args) -> int:
     check_output(args.out)
     figures = measure(args.steps, args.rounds)
+    alone = figures.pop("alone")
     med = {mode: {k: statistics.median(v) for k, v in f.items()} for mode, f in figures.items()}
     prov = provenance()
     lines = [
-        "# The heads' product in SyReNets' training step, with and without torch.profiler",
+        "# Where SyReNets' training step spends its time, and the heads' product in it",
         "",
         f"Generated by `{args.invocation}` at commit {prov.get('commit', '?')[:10]}"
         f"{' (dirty tree)' if prov.get('dirty') else ''}: the public configuration (inputs (q, qd, qdd), "
@@ -173,8 +256,8 @@ def main(args) -> int:
         f"the modes in turn. Machine: {prov.get('cpu')} ({prov.get('cpu_count')} cores), torch "
         f"{prov.get('packages', {}).get('torch')}; {prov.get('utc', '')[:10]}.",
         "",
-        "The product is `W2 * hidden` with `W2` of shape "
-        "(heads, candidates, hidden units), forward and backward, all layers.",
+        "The product is the heads' output layer, `W2` of shape (heads, candidates, hidden units) applied to the "
+        "hidden units, forward and backward, all layers.",
         "",
         "| mode | step (ms) | heads' product (ms per step) | product's share of the step | minor page faults per step |",
         "|---|---:|---:|---:|---:|",
@@ -198,6 +281,28 @@ def main(args) -> int:
             product = "–" if f["product_ms"][k] != f["product_ms"][k] else f"{f['product_ms'][k]:.2f}"
             cells.append(f"{f['step_ms'][k]:.2f}, {product}, {f['page_faults'][k]:.0f}")
         lines.append(f"| {k + 1} | " + " | ".join(cells) + " |")
+    step = med["plain"]["step_ms"]
+    total = statistics.median(sum(ms for ms, _ in r.values()) for r in alone)
+    lines += [
+        "",
+        "## Where a plain step's time goes",
+        "",
+        "Every ATen operator of one step (forward, backward, Adam's update), each called again alone on copies "
+        "of its arguments and timed; medians of the rounds. Each operator alone finds its inputs in the cache, so "
+        "the sum is a floor for what the same operators cost in any order. The rest of the plain step is the time "
+        "between the operators: Python, autograd's bookkeeping and memory allocation.",
+        "",
+        "| part | operator calls | ms per step | share of the plain step |",
+        "|---|---:|---:|---:|",
+    ]
+    for part in PARTS:
+        ms = statistics.median(r[part][0] for r in alone)
+        lines.append(f"| {part} | {alone[0][part][1]} | {ms:.2f} | {ms / step:.0%} |")
+    lines += [
+        f"| all operators, each alone | {sum(n for _, n in alone[0].values())} | {total:.2f} | {total / step:.0%} |",
+        f"| between the operators | | {step - total:.2f} | {(step - total) / step:.0%} |",
+        f"| plain step | | {step:.2f} | 100% |",
+    ]
     text = "\n".join(lines) + "\n"
     atomic_write(args.out, lambda f: f.write(text))
     print(text)

@@ -1,4 +1,4 @@
-"""The heads' product timed with and without torch.profiler."""
+"""Where SyReNets' step spends its time, and the heads' product with and without torch.profiler."""
 
 from __future__ import annotations
 
@@ -8,25 +8,57 @@ import math
 import pytest
 import torch
 
+from bench.core.data import generate
 from bench.experiments import syrenets_profile
+from methods import METHODS
+from methods.syrenets import HeadsOutput
+from systems import get_system
 
 
-def test_the_timers_catch_every_product_of_w2s_shape_forward_and_backward():
+def _small_method():
+    train = generate(get_system("double_pendulum"), 64, 0, cache=False)
+    m = METHODS["syrenets"](layers=2, heads=3, latent=4, ae_hidden=8, head_hidden=8)
+    m.seed, m.dof = 0, train.dof
+    m._setup(train)
+    return m, {k: v[:16] for k, v in train.tensors().items()}
+
+
+def test_the_timers_catch_the_heads_output_layer_forward_and_backward_and_put_it_back():
+    forward, backward = HeadsOutput.forward, HeadsOutput.backward
     W = torch.randn(3, 5, 4, dtype=torch.float64, requires_grad=True)
     h = torch.randn(3, 4, dtype=torch.float64, requires_grad=True)
     other = torch.randn(5, 4, dtype=torch.float64, requires_grad=True)
-    timer = syrenets_profile._ProductTimer(W.shape)
-    with timer:
-        (other * other).sum().backward()  # another shape: not timed
+    with syrenets_profile._ProductTimer() as timer:
+        (other * other).sum().backward()  # not the heads' layer: not timed
         assert timer.forward == 0.0 and timer.backward == 0.0
-        (W * h.unsqueeze(1)).sum().backward()
-    assert timer.forward > 0.0 and timer.backward > 0.0
-    # the product is unchanged by the timing
+        HeadsOutput.apply(W, h).sum().backward()
+        assert timer.forward > 0.0 and timer.backward > 0.0
+    # the layer is unchanged by the timing, and restored afterwards
     torch.testing.assert_close(W.grad, h.unsqueeze(1).expand_as(W).detach())
+    assert (HeadsOutput.forward, HeadsOutput.backward) == (forward, backward)
+
+
+def test_the_operators_timed_alone_are_those_of_one_step():
+    """The matrix products and Adam's updates timed alone are as many as
+    torch.profiler counts in a step (the heads' layer's batched products,
+    one a layer, counted with the layer), and every group takes some time."""
+    m, batch = _small_method()
+    m.train_step(batch, "direct")
+    alone = syrenets_profile.operators_alone(m, batch, repeat=1)
+    assert list(alone) == list(syrenets_profile.PARTS)
+    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU]) as prof:
+        m.train_step(batch, "direct")
+    counts = {e.key: e.count for e in prof.key_averages()}
+    assert alone["matrix products"][1] + 2 == sum(counts.get(f"aten::{op}", 0) for op in ("mm", "addmm", "bmm"))
+    assert alone["Adam's fused update"][1] == counts["aten::_fused_adam_"] == 2  # two parameter groups
+    # per layer, forward: a product and a sum; backward: a product and a
+    # batched product (and, where autograd copies the weights' gradient, that copy)
+    assert alone["heads' output layer"][1] >= 2 * (2 + 2)
+    assert all(ms > 0 for ms, _ in alone.values())
 
 
 @pytest.mark.slow
-def test_a_short_run_writes_one_row_per_mode(tmp_path):
+def test_a_short_run_writes_one_row_per_mode_and_where_the_time_goes(tmp_path):
     out = tmp_path / "profile.md"
     args = argparse.Namespace(steps=2, rounds=1, out=out, invocation="python -m bench syrenets-profile")
     assert syrenets_profile.main(args) == 0
@@ -40,3 +72,12 @@ def test_a_short_run_writes_one_row_per_mode(tmp_path):
     assert [c[0] for c in cells if c[0].isdigit()] == ["1"]  # one row per round
     assert float(rows["profiler"][2]) > 0 and float(rows["timers"][2]) > 0
     assert not math.isnan(float(rows["timers"][2]))
+    # where the plain step's time goes: the parts add up to the operators, and
+    # those and the time between them to the plain step
+    parts = {c[0]: c for c in cells if c[0] in syrenets_profile.PARTS}
+    assert set(parts) == set(syrenets_profile.PARTS)
+    total = next(c for c in cells if c[0] == "all operators, each alone")
+    assert sum(float(c[2]) for c in parts.values()) == pytest.approx(float(total[2]), abs=0.02)
+    assert sum(int(c[1]) for c in parts.values()) == int(total[1])
+    between = next(c for c in cells if c[0] == "between the operators")
+    assert float(total[2]) + float(between[2]) == pytest.approx(float(rows["plain"][1]), abs=0.02)

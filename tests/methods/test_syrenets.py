@@ -11,7 +11,7 @@ from bench.core import symbolic
 from bench.core.data import generate, mse
 from bench.core.dynamics import euler_lagrange
 from methods import METHODS
-from methods.syrenets import CandidateSpec, SyReNet, SyReNetsConfig, _round_inner_constants
+from methods.syrenets import CandidateSpec, SyReNet, SyReNetsConfig, Gram, HeadsOutput, _round_inner_constants
 
 SMALL = dict(layers=2, heads=3, latent=4, ae_hidden=8, head_hidden=8)
 
@@ -182,6 +182,24 @@ def test_the_training_pass_sums_each_layers_losses():
         expected += torch.nn.functional.mse_loss(net.decode(z), vn) + net.contractive(a1, a2) + net._diversity(p)
         h = v @ W.T
     torch.testing.assert_close(aux, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_the_hand_written_backward_passes_match_finite_differences():
+    """The heads' output layer and the Gram matrix of the contractive penalty
+    have their own backward; torch's gradcheck compares them with central
+    differences, and the forward with the plain expressions."""
+    torch.manual_seed(0)
+    W = torch.randn(3, 7, 5, dtype=torch.float64, requires_grad=True)
+    h = torch.randn(3, 5, dtype=torch.float64, requires_grad=True)
+    A = torch.randn(4, 9, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(HeadsOutput.apply, (W, h))
+    assert torch.autograd.gradcheck(Gram.apply, (A,))
+    torch.testing.assert_close(HeadsOutput.apply(W, h), (W * h.unsqueeze(1)).sum(-1), rtol=0, atol=0)
+    torch.testing.assert_close(Gram.apply(A), A @ A.T, rtol=0, atol=0)
+    # only the gradients asked for are formed
+    W.grad = None
+    HeadsOutput.apply(W.detach(), h).sum().backward()
+    assert W.grad is None and h.grad is not None
 
 
 def test_diversity_loss_matches_its_definition():
