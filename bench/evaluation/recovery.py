@@ -19,6 +19,7 @@ returned.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +28,7 @@ import torch
 
 from bench.core import symbolic
 from bench.core.dynamics import euler_lagrange
+from bench.core.timeouts import call_with_timeout
 
 #: relative size below which a coefficient of the difference counts as zero
 TOLERANCE = 1e-6
@@ -100,30 +102,36 @@ def _vanishes(diff: sympy.Expr, scale: float, tolerance: float, allow_constant: 
 
 def judge(L_hat: sympy.Expr, L_true: sympy.Expr, dof: int, experiment: str, *,
           tolerance: float = TOLERANCE, up_to_scale: bool = False,
-          domain=None, seed: int = 12345) -> Verdict:
+          domain=None, seed: int = 12345, symbolic_limit_s: float = math.inf) -> Verdict:
     """Is ``L_hat`` the true Lagrangian ``L_true`` up to the gauge of ``experiment``?
 
     ``up_to_scale=True`` also allows a global factor (for dynamics without
     torques, where nothing fixes the scale): ``L_hat`` is first rescaled by the
     least-squares factor of its torques onto the true ones. The numerical
     check runs first; the symbolic one only when it passes, so that a clear
-    miss costs no algebra.
+    miss costs no algebra. With a finite ``symbolic_limit_s`` the symbolic
+    check (pure sympy, which cannot be asked to stop) runs in a child
+    process, and :class:`~bench.core.timeouts.Timeout` is raised when it has
+    not ended in that time.
     """
     L_hat = _even_functions(symbolic.numeric_subexpressions_to_floats(sympy.sympify(L_hat)))
     if up_to_scale:
         L_hat = _best_scale(L_hat, L_true, dof, domain, seed) * L_hat
     if not _numerically_equal(L_hat, L_true, dof, experiment, tolerance, domain, seed):
         return Verdict(exact=False, symbolic=False, numeric=False, residual="differs numerically on fresh samples")
-    if experiment == "direct":
-        scale = max(_coefficients(_canonical(L_true)), default=1.0)
-        sym_ok, residual = _vanishes(L_hat - L_true, scale, tolerance, allow_constant=True)
-    else:
+
+    def symbolic_check() -> tuple[bool, str]:
+        if experiment == "direct":
+            scale = max(_coefficients(_canonical(L_true)), default=1.0)
+            ok, residual = _vanishes(L_hat - L_true, scale, tolerance, allow_constant=True)
+            return bool(ok), str(residual)
         tau_hat, tau_true = euler_lagrange_symbolic(L_hat, dof), euler_lagrange_symbolic(L_true, dof)
         scale = max((c for t in tau_true for c in _coefficients(_canonical(t))), default=1.0)
         checks = [_vanishes(a - b, scale, tolerance, allow_constant=False) for a, b in zip(tau_hat, tau_true)]
-        sym_ok = all(ok for ok, _ in checks)
-        residual = sympy.Tuple(*[r for _, r in checks])
-    return Verdict(exact=bool(sym_ok), symbolic=bool(sym_ok), numeric=True, residual=str(residual))
+        return all(ok for ok, _ in checks), str(sympy.Tuple(*[r for _, r in checks]))
+
+    sym_ok, residual = symbolic_check() if math.isinf(symbolic_limit_s) else call_with_timeout(symbolic_check, symbolic_limit_s)
+    return Verdict(exact=sym_ok, symbolic=sym_ok, numeric=True, residual=residual)
 
 
 def _samples(dof, domain, seed):

@@ -3,7 +3,8 @@
 * :func:`scores`: train and test MSE in the experiment's own target (``L``
   directly, ``tau`` indirectly), the readable expression (clipped at
   :data:`MAX_EXPRESSION_CHARS`), and whether it is exactly the true
-  Lagrangian (:mod:`bench.evaluation.recovery`);
+  Lagrangian (:mod:`bench.evaluation.recovery`), judged within
+  :data:`JUDGE_LIMIT_S`;
 * :func:`rollout_entry`: the rollout error (:mod:`bench.evaluation.rollout`),
   with a fault of the model's recorded rather than raised.
 """
@@ -13,18 +14,27 @@ from __future__ import annotations
 from bench.core.data import Dataset, mse
 from bench.core.models import FittedModel
 from bench.core.system import System
+from bench.core.timeouts import Timeout
 from bench.evaluation.recovery import judge
 from bench.evaluation.rollout import rollout_error
 
 #: longest expression text kept in a record
 MAX_EXPRESSION_CHARS = 20000
+#: seconds the symbolic half of the exact-recovery judgement of one expression
+#: may take: it expands the Euler–Lagrange images, which sympy cannot be asked
+#: to stop, and a run's evaluation has a time limit of its own
+JUDGE_LIMIT_S = 60.0
 
 
 def scores(model: FittedModel, experiment: str, train: Dataset, test: Dataset | None, system: System | None = None) -> dict:
     """``train_mse``, ``test_mse`` (``None`` without test data), ``expression``
     and ``exact`` (``None`` unless the model has an expression and the system
     is simulated with a closed-form Lagrangian, so that its truth is known;
-    :func:`not_judged` says why not)."""
+    :func:`not_judged` says why not).
+
+    The judgement's symbolic half runs in a child process, stopped after
+    :data:`JUDGE_LIMIT_S`; then ``exact`` is ``None`` and ``exact_timed_out``
+    holds the limit."""
     expr = model.readable_expression()
     out = {
         "train_mse": mse(model.predict(train, experiment), train.target(experiment)),
@@ -33,7 +43,11 @@ def scores(model: FittedModel, experiment: str, train: Dataset, test: Dataset | 
         "exact": None,
     }
     if expr is not None and system is not None and not_judged(system) is None:
-        out["exact"] = judge(expr, system.lagrangian_sympy, system.dof, experiment, domain=system.domain).exact
+        try:
+            out["exact"] = judge(expr, system.lagrangian_sympy, system.dof, experiment, domain=system.domain,
+                                 symbolic_limit_s=JUDGE_LIMIT_S).exact
+        except Timeout:
+            out["exact_timed_out"] = JUDGE_LIMIT_S
     return out
 
 

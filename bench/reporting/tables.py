@@ -113,10 +113,14 @@ def _runs_cell(records: list[Record]) -> str:
 
 def _exact_cell(records: list[Record]) -> str:
     judged = [r for r in records if r.exact is not None]
-    if not judged:
+    late = [r.details["exact_timed_out"] for r in records if r.details.get("exact_timed_out")]
+    if not judged and not late:
         reasons = {r.details.get("exact_not_judged") for r in records if r.details.get("exact_not_judged")}
         return "not judged: no closed-form Lagrangian" if reasons else "—"
-    return f"{sum(bool(r.exact) for r in judged)}/{len(records)} seeds exact"
+    text = f"{sum(bool(r.exact) for r in judged)}/{len(records)} seeds exact"
+    if late:
+        text += f" ({len(late)} not judged: the check ran past {max(late):g} s)"
+    return text
 
 
 def _rollout_cell(records: list[Record]) -> str:
@@ -274,7 +278,9 @@ def expand_variants(records: list[Record]) -> list[Record]:
         for name, scores in (r.details or {}).get("variants", {}).items():
             blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None,
                      "curve": [], "rollout": None}  # a variant has no training curve or rollout of its own
-            out.append(r.replace(**{**blank, "method": f"{r.method}+{name}", "status": "ok", **scores, "details": {}}))
+            fields = {k: v for k, v in scores.items() if k != "exact_timed_out"}
+            details = {k: v for k, v in scores.items() if k == "exact_timed_out"}
+            out.append(r.replace(**{**blank, "method": f"{r.method}+{name}", "status": "ok", **fields, "details": details}))
     return out
 
 

@@ -123,6 +123,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             on_phase("evaluate")
         clock = time.perf_counter()
         result = scores(method, spec.experiment, train, test, system)
+        timed_out = {"exact_timed_out": result.pop("exact_timed_out")} if "exact_timed_out" in result else {}
         info = method.fit_info
         variants = {
             name: {"status": "failed", "error": model} if isinstance(model, str)
@@ -147,6 +148,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
                 **method.record_details(),
                 "variants": variants,
                 **({"exact_not_judged": not_judged(system)} if not_judged(system) and system.simulated else {}),
+                **timed_out,
             },
         )
         if system.simulated and test is not None and spec.rollout:

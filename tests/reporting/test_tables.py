@@ -113,3 +113,13 @@ def test_rollout_row_gives_the_median_and_what_became_of_the_rest():
     row = [line for line in build_table(records).splitlines() if line.startswith("| Rollout")]
     assert row == ["| Rollout | q RMSE | 2.00e-01 (3/4; 1 indefinite) |"]
     assert "Rollout" not in build_table([rec("m", 0, 1.0, 1.0)])
+
+
+def test_a_judgement_stopped_at_its_limit_is_said_in_the_exact_row():
+    judged = rec("syrenets", 0, 1.0, 2.0).replace(exact=True)
+    late = rec("syrenets", 1, 1.5, 2.5).replace(details={"exact_timed_out": 60.0})
+    variant = {"status": "ok", "train_mse": 0.5, "test_mse": 0.6, "expression": "x", "exact": None, "exact_timed_out": 60.0}
+    judged = judged.replace(details={"variants": {"refined": variant}})
+    table = build_table(expand_variants([judged, late]))
+    assert "| Exact | | 1/2 seeds exact (1 not judged: the check ran past 60 s) | " in table
+    assert "| 0/1 seeds exact (1 not judged: the check ran past 60 s) |" in table  # one run has the variant
