@@ -128,7 +128,7 @@ def judge(L_hat: sympy.Expr, L_true: sympy.Expr, dof: int, experiment: str, *,
         tau_hat, tau_true = euler_lagrange_symbolic(L_hat, dof), euler_lagrange_symbolic(L_true, dof)
         scale = max((c for t in tau_true for c in _coefficients(_canonical(t))), default=1.0)
         checks = [_vanishes(a - b, scale, tolerance, allow_constant=False) for a, b in zip(tau_hat, tau_true)]
-        return all(ok for ok, _ in checks), str(sympy.Tuple(*[r for _, r in checks]))
+        return bool(all(ok for ok, _ in checks)), str(sympy.Tuple(*[r for _, r in checks]))
 
     sym_ok, residual = symbolic_check() if math.isinf(symbolic_limit_s) else call_with_timeout(symbolic_check, symbolic_limit_s)
     return Verdict(exact=sym_ok, symbolic=sym_ok, numeric=True, residual=residual)

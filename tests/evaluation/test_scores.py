@@ -10,6 +10,8 @@ from bench.core.data import generate
 from bench.core.models import ExpressionModel
 from bench.evaluation import recovery
 from bench.evaluation import scores as scores_module
+from bench.runner import execute
+from bench.runner.spec import build_specs
 from systems import get_system
 
 
@@ -28,3 +30,17 @@ def test_a_judgement_that_runs_past_its_limit_is_stopped_and_recorded(monkeypatc
     assert time.perf_counter() - start < 10
     assert out["exact"] is None and out["exact_timed_out"] == 0.5
     assert out["train_mse"] < 1e-20 and sympy.sympify(out["expression"]) is not None
+
+
+def test_a_run_whose_judgement_is_stopped_keeps_its_record(monkeypatch):
+    """Sparse regression recovers the single pendulum exactly; with the symbolic
+    check made to hang, the run still ends ok with its scores, ``exact`` unset
+    and the limit in its details."""
+    spec = build_specs(["single_pendulum"], ["sparse"], ["indirect"], [0], 5.0, n_train=256, n_test=64)[0]
+    assert execute.execute(spec).exact is True
+    monkeypatch.setattr(scores_module, "JUDGE_LIMIT_S", 0.5)
+    monkeypatch.setattr(recovery, "_vanishes", lambda *a, **k: time.sleep(30))
+    record = execute.execute(spec)
+    assert record.status == "ok", record.error
+    assert record.exact is None and record.details["exact_timed_out"] == 0.5
+    assert record.test_mse < 1e-12 and record.expression
