@@ -109,7 +109,12 @@ class _ProductTimer:
 
 
 class _Recorder(TorchDispatchMode):
-    """Every ATen operator called while entered, with its arguments and results."""
+    """Every ATen operator called while entered: copies of its arguments, taken
+    before the call, and the shapes of its results.
+
+    It keeps no reference to the step's own tensors: autograd hands a
+    parameter's gradient over without a copy only when nothing else holds it.
+    """
 
     def __init__(self):
         super().__init__()
@@ -117,8 +122,9 @@ class _Recorder(TorchDispatchMode):
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         kwargs = kwargs or {}
+        copies = _copy(args), _copy(kwargs)
         out = func(*args, **kwargs)
-        self.calls.append((func, args, kwargs, out))
+        self.calls.append((func, *copies, [t.shape for t in _tensors(out)]))
         return out
 
 
@@ -145,10 +151,10 @@ def _tensors(a):
 PARTS = ("Adam's fused update", "heads' output layer", "matrix products", "other operators")
 
 
-def _part(func, args, kwargs, out, shape: torch.Size) -> str:
+def _part(func, args, kwargs, out_shapes: list[torch.Size], shape: torch.Size) -> str:
     if func.overloadpacket is torch.ops.aten._fused_adam_:
         return PARTS[0]
-    if any(t.shape == shape for t in _tensors((args, kwargs, out))):
+    if shape in out_shapes or any(t.shape == shape for t in _tensors((args, kwargs))):
         return PARTS[1]
     if func.overloadpacket in (torch.ops.aten.mm, torch.ops.aten.addmm, torch.ops.aten.bmm):
         return PARTS[2]
@@ -163,13 +169,12 @@ def operators_alone(m, batch, repeat: int = 10) -> dict[str, tuple[float, int]]:
     with recorder:
         m.train_step(batch, "direct")
     took = {part: [0.0, 0] for part in PARTS}
-    for func, args, kwargs, out in recorder.calls:
-        args, kwargs = _copy(args), _copy(kwargs)
+    for func, args, kwargs, out_shapes in recorder.calls:
         func(*args, **kwargs)  # a first call, untimed
         start = time.perf_counter()
         for _ in range(repeat):
             func(*args, **kwargs)
-        part = took[_part(func, args, kwargs, out, shape)]
+        part = took[_part(func, args, kwargs, out_shapes, shape)]
         part[0] += (time.perf_counter() - start) * 1e3 / repeat
         part[1] += 1
     return {part: (ms, n) for part, (ms, n) in took.items()}

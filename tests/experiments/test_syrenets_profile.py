@@ -52,7 +52,7 @@ def test_the_operators_timed_alone_are_those_of_one_step():
     assert alone["matrix products"][1] + 2 == sum(counts.get(f"aten::{op}", 0) for op in ("mm", "addmm", "bmm"))
     assert alone["Adam's fused update"][1] == counts["aten::_fused_adam_"] == 2  # two parameter groups
     # per layer, forward: a product and a sum; backward: a product and a
-    # batched product (and, where autograd copies the weights' gradient, that copy)
+    # batched product (and the gradient's hand-over to the weights)
     assert alone["heads' output layer"][1] >= 2 * (2 + 2)
     assert all(ms > 0 for ms, _ in alone.values())
 
