@@ -133,6 +133,8 @@ def _copy(a):
         return a.detach().clone()
     if isinstance(a, (list, tuple)):
         return type(a)(_copy(x) for x in a)
+    if isinstance(a, dict):
+        return {k: _copy(v) for k, v in a.items()}
     return a
 
 
