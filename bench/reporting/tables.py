@@ -278,8 +278,8 @@ def expand_variants(records: list[Record]) -> list[Record]:
         for name, scores in (r.details or {}).get("variants", {}).items():
             blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None,
                      "curve": [], "rollout": None}  # a variant has no training curve or rollout of its own
-            fields = {k: v for k, v in scores.items() if k != "exact_timed_out"}
-            details = {k: v for k, v in scores.items() if k == "exact_timed_out"}
+            fields = dict(scores)  # a stopped exact check goes to details, as execute puts a run's own
+            details = {"exact_timed_out": fields.pop("exact_timed_out")} if "exact_timed_out" in fields else {}
             out.append(r.replace(**{**blank, "method": f"{r.method}+{name}", "status": "ok", **fields, "details": details}))
     return out
 
