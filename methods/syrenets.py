@@ -153,6 +153,7 @@ MAX_REFIT_TERMS = 2000
 MAX_READABLE_TERMS = 512
 UNARY = ("sin", "cos", "exp")
 EPS_LOG = 1e-5
+_COMPILED = None  # see _compiled_pass
 
 
 @dataclass(frozen=True)
@@ -194,6 +195,9 @@ class SyReNetsConfig(TorchConfig):
         ``starts`` k > 1 initialises k networks and keeps one by successive
         halving within ``start_share`` of the training time (see
         :meth:`SyReNets._halve`); 1 (the paper's) trains one network.
+    compile
+        Compile the training pass (selection, transform and loss) with
+        ``torch.compile``; see the module docstring.
     refine
         Run the exact-recovery refinement at the end (a separate variant).
     post_fraction
@@ -219,6 +223,7 @@ class SyReNetsConfig(TorchConfig):
     replay: Annotated[int, Range(0)] = 0
     starts: Annotated[int, Range(1)] = 1
     start_share: Annotated[float, Range(0, 1, low_open=True, high_open=True)] = 0.5
+    compile: bool = False
     refine: bool = True
     post_fraction: Annotated[float, Range(0, 1, high_open=True)] = 0.1
 
@@ -263,6 +268,8 @@ class CandidateSpec:
         self._cache: dict = {}
 
     def _matrix(self, op: str, like: torch.Tensor) -> torch.Tensor:
+        if torch.compiler.is_compiling():  # a constant of the graph; filling the cache would guard on it
+            return self._linear[op].to(dtype=like.dtype, device=like.device)
         key = (op, like.dtype, like.device)
         if key not in self._cache:
             self._cache[key] = self._linear[op].to(dtype=like.dtype, device=like.device)
@@ -283,6 +290,42 @@ class CandidateSpec:
             elif op == "exp":
                 parts.append(torch.exp(u))
         return torch.cat(parts, dim=1)
+
+    def tangent(self, X: torch.Tensor, w: torch.Tensor, k: int) -> torch.Tensor:
+        """The candidates with their derivatives, propagated forward.
+
+        ``X`` is ``(B, 1 + m + k, n)``: for each input, its value, its gradient
+        over ``m`` coordinates ``z``, and the derivative of its gradient's last
+        ``k`` components along the per-sample direction ``w`` (``(B, m)``), i.e.
+        those rows of ``Hess(u) w``. Returns the same rows for the candidates,
+        ``(B, 1 + m + k, size)``, by the product and chain rules: for
+        ``a b``, ``H w = a H_b w + b H_a w + grad a (grad b . w) + grad b (grad a . w)``;
+        for ``f(a)``, ``H w = f'(a) H_a w + f''(a) grad a (grad a . w)``.
+        """
+        m = X.shape[1] - 1 - k
+        U, G, T = X[:, :1], X[:, 1:1 + m], X[:, 1 + m:]
+        Gk = G[:, m - k:]                          # the gradients' last k components
+        d = torch.bmm(w.unsqueeze(1), G)          # (B, 1, n): each input's derivative along w
+        parts = []
+        for op in self.operators:
+            if op in ("sum", "diff"):
+                parts.append(X @ self._matrix(op, X))
+            elif op == "prod":
+                I, J = self.I, self.J
+                UI, UJ, GI, GJ, TI, TJ = U[..., I], U[..., J], G[..., I], G[..., J], T[..., I], T[..., J]
+                dI, dJ, GkI, GkJ = d[..., I], d[..., J], Gk[..., I], Gk[..., J]
+                parts.append(torch.cat([UI * UJ, UI * GJ + UJ * GI, UI * TJ + UJ * TI + GkI * dJ + GkJ * dI], 1))
+            else:  # f(a): f', f'' from the value
+                if op == "sin":
+                    f, f1 = torch.sin(U), torch.cos(U)
+                    f2 = -f
+                elif op == "cos":
+                    f, s = torch.cos(U), torch.sin(U)
+                    f1, f2 = -s, -f
+                else:  # exp
+                    f = f1 = f2 = torch.exp(U)
+                parts.append(torch.cat([f, f1 * G, f1 * T + f2 * Gk * d], 1))
+        return torch.cat(parts, dim=2)
 
     def symbolic(self, u: list) -> list:
         out = []
@@ -484,6 +527,20 @@ class SyReNet(torch.nn.Module):
             h = self.spec(torch.cat([x, h], dim=1)) @ W.T
         return h.sum(dim=1)
 
+    def evaluate_tangent(self, x: torch.Tensor, weights: list[torch.Tensor], w: torch.Tensor, k: int) -> torch.Tensor:
+        """:meth:`evaluate` with its derivatives (see :meth:`CandidateSpec.tangent`)
+        over the first ``m = w.shape[1]`` inputs; the others are constants.
+        Returns ``(B, 1 + m + k)``: the value, the gradient, and the last ``k``
+        rows of ``Hess w``."""
+        (B, n_x), m = x.shape, w.shape[1]
+        X = x.new_zeros(B, 1 + m + k, n_x)
+        X[:, 0] = x
+        X[:, 1:1 + m, :m] = torch.eye(m, dtype=x.dtype, device=x.device)
+        h = x.new_zeros(B, 1 + m + k, self.cfg.heads)
+        for W in weights:
+            h = self.spec.tangent(torch.cat([X, h], dim=2), w, k) @ W.T
+        return h.sum(dim=2)
+
 
 # -- the method ------------------------------------------------------------------------
 
@@ -495,9 +552,7 @@ class SyReNets(TorchLagrangianMethod):
 
     # -- model plumbing -------------------------------------------------------------
     def _inputs(self, q, qd, qdd=None):
-        if self.config.inputs == "q_qd":
-            return torch.cat([q, qd], dim=1)
-        return torch.cat([q, qd, qdd], dim=1)
+        return _inputs(q, qd, qdd, self.config.inputs)
 
     def build_model(self, train):
         n_x = train.dof * (2 if self.config.inputs == "q_qd" else 3)
@@ -528,27 +583,18 @@ class SyReNets(TorchLagrangianMethod):
 
     def train_step(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
         """One optimisation step on ``batch``; returns each sample's squared error."""
-        q, qd, qdd = batch["q"], batch["qd"], batch["qdd"]
-        out, weights, aux = self.model.select(self._inputs(q, qd, qdd))
-        if experiment == "direct":
-            err = (out - batch["L"]) ** 2
-        else:
-            # the torques of the fixed function the batch selected: gradients flow
-            # into the selection, not through the batch statistics
-            def lag(qq, qqd):
-                return self.model.evaluate(self._inputs(qq, qqd, qdd), weights)
-
-            tau = euler_lagrange(lag, q, qd, qdd, create_graph=True)
-            err = ((tau - batch["tau"]) ** 2).mean(dim=1)
-        loss = err.mean() + aux
+        cfg = self.config
+        target = batch["L"] if experiment == "direct" else batch["tau"]
+        loss, err, weights = (_compiled_pass() if cfg.compile else _training_pass)(
+            self.model, batch["q"], batch["qd"], batch["qdd"], target, experiment, cfg.inputs, cfg.compile)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
         batch_loss, a = err.mean().item(), self.config.lr_smoothing
         self._watched = batch_loss if self._watched is None or not a else a * self._watched + (1 - a) * batch_loss
         self.scheduler.step(self._watched)
-        self.frozen = [w.detach() for w in weights]
-        return err.detach()
+        self.frozen = weights
+        return err
 
     #: what one network of a multi-start fit carries between its turns
     _SLOT = ("model", "optimizer", "scheduler", "frozen", "_watched", "_lr_drops")
@@ -562,16 +608,21 @@ class SyReNets(TorchLagrangianMethod):
         feed = {"order": torch.randperm(n, generator=generator), "cursor": 0, "generator": generator,
                 "replay": torch.empty(0, dtype=torch.long), "n": n, "bs": bs}
         progress.reserve(cfg.post_fraction * progress.remaining())
-        self._starts = None
+        self._starts = self._compile_seconds = None
         if self.warm_start:  # continue the network, its optimiser and its frozen weights
             self.model.to(self.dtype)  # back to the training arithmetic, which the optimiser's state has
             self.frozen = [w.to(self.dtype) for w in self.frozen]
             self._lr_drops = []
+            if cfg.compile:
+                self._warm_compiled(t, experiment, feed)
             if isinstance(self.scheduler, _Cosine):
                 self.scheduler.start(progress)
             self._train(t, experiment, progress, feed)
             return
         slots = []
+        if cfg.compile:  # on a network of its own, set up the way the fit's first is
+            self._setup(train)
+            self._warm_compiled(t, experiment, feed)
         for k in range(cfg.starts):
             self._setup(train, k)
             # frozen weights before the first step, from the first batch
@@ -586,6 +637,22 @@ class SyReNets(TorchLagrangianMethod):
         del slots
         if progress.stop_reason is None:
             self._train(t, experiment, progress, feed)
+
+    def _warm_compiled(self, t, experiment, feed) -> None:
+        """Compile the training pass for the loop's batch sizes (with and
+        without the replayed samples) before the loop, so that its step-time
+        estimate does not include the compilation; the gradients of these
+        passes are discarded. The time it took, inside the budget, is in the
+        record's ``details.compile_seconds``."""
+        start, cfg, model = time.perf_counter(), self.config, self.model
+        for size in sorted({feed["bs"], feed["bs"] + cfg.replay}):
+            idx = torch.arange(size) % feed["n"]
+            batch = {k: v[idx] for k, v in t.items()}
+            target = batch["L"] if experiment == "direct" else batch["tau"]
+            loss = _compiled_pass()(model, batch["q"], batch["qd"], batch["qdd"], target, experiment, cfg.inputs, True)[0]
+            loss.backward()
+        model.zero_grad(set_to_none=True)
+        self._compile_seconds = round(time.perf_counter() - start, 2)
 
     def _train(self, t, experiment, progress, feed, until: float = math.inf) -> bool:
         """Steps until ``progress.fraction()`` reaches ``until``; ``False`` once the budget is spent."""
@@ -851,6 +918,8 @@ class SyReNets(TorchLagrangianMethod):
         if getattr(self, "_starts", None):
             # the multi-start fit: each round's [network, training MSE], and the network kept
             notes["starts"] = self._starts
+        if getattr(self, "_compile_seconds", None) is not None:
+            notes["compile_seconds"] = self._compile_seconds
         if notes.get("pruned_terms", 0) > MAX_READABLE_TERMS:
             notes["expression_omitted"] = f"the pruned equation keeps {notes['pruned_terms']} terms (> {MAX_READABLE_TERMS})"
         return notes
@@ -885,6 +954,52 @@ class SyReNets(TorchLagrangianMethod):
                 new_h.append(sympy.Add(*[sympy.Float(Wn[j, b]) * cands[b] for b in cols]))
             h = new_h
         return sympy.Add(*h)
+
+
+def _inputs(q, qd, qdd, inputs: str) -> torch.Tensor:
+    return torch.cat([q, qd] if inputs == "q_qd" else [q, qd, qdd], dim=1)
+
+
+def _training_pass(model: SyReNet, q, qd, qdd, target, experiment: str, inputs: str, tangent: bool):
+    """(loss, each sample's squared error, frozen weights) of one batch, the
+    last two detached; with ``tangent`` the indirect torques come from
+    derivatives propagated forward."""
+    out, weights, aux = model.select(_inputs(q, qd, qdd, inputs))
+    if experiment == "direct":
+        err = (out - target) ** 2
+    else:
+        # the torques of the fixed function the batch selected: gradients flow
+        # into the selection, not through the batch statistics
+        fixed = _Fixed(model, inputs, weights, qdd)
+        tau = euler_lagrange(fixed if tangent else fixed.__call__, q, qd, qdd, create_graph=True)
+        err = ((tau - target) ** 2).mean(dim=1)
+    return err.mean() + aux, err.detach(), [w.detach() for w in weights]
+
+
+def _compiled_pass():
+    """:func:`_training_pass` compiled, one for the process: the model is an
+    argument, so each new network reuses the compiled graphs."""
+    global _COMPILED
+    if _COMPILED is None:
+        _COMPILED = torch.compile(_training_pass, dynamic=False)
+    return _COMPILED
+
+
+class _Fixed:
+    """The fixed function of ``weights`` as a Lagrangian of ``(q, qd)``, with
+    its derivatives propagated forward (``qdd``, where it is an input, is held
+    constant, as the transform's reverse passes would hold it)."""
+
+    def __init__(self, model: SyReNet, inputs: str, weights: list[torch.Tensor], qdd: torch.Tensor):
+        self.model, self.inputs, self.weights, self.qdd = model, inputs, weights, qdd
+
+    def __call__(self, q, qd):
+        return self.model.evaluate(_inputs(q, qd, self.qdd, self.inputs), self.weights)
+
+    def tangent(self, q, qd, dq, dqd):
+        dof = q.shape[1]
+        out = self.model.evaluate_tangent(_inputs(q, qd, self.qdd, self.inputs), self.weights, torch.cat([dq, dqd], dim=1), dof)
+        return out[:, 0], out[:, 1:1 + dof], out[:, 1 + dof:1 + 2 * dof], out[:, 1 + 2 * dof:]
 
 
 class _Cosine:

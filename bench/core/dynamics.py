@@ -27,10 +27,20 @@ The direction must be *detached* inside that product: ``qd`` is both a
 variable of :math:`L` and a component of :math:`u`. Without the detach the
 second pass also differentiates :math:`u` and adds :math:`\partial L/\partial q`
 to the result, silently giving wrong torques.
+
+A Lagrangian may instead supply these derivatives itself, as a method
+``tangent(q, qd, dq, dqd)`` returning ``(L, dL/dq, dL/dqd, D)`` with ``D``
+the derivative of :math:`\partial L/\partial \dot q` along
+:math:`(dq, dqd)` (see :class:`TangentLagrangian`); the transform then calls it
+with :math:`u = (\dot q, \ddot q)` and takes no reverse pass. A model that
+propagates these derivatives forward through its own layers gets torques
+whose loss needs one ordinary backward pass instead of the backward of a
+second-order graph, which compilers can trace.
 """
 
 from __future__ import annotations
 
+import typing
 from typing import Callable
 
 import torch
@@ -38,11 +48,26 @@ import torch
 Lagrangian = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 
 
+class TangentLagrangian(typing.Protocol):
+    """A Lagrangian that gives its own first derivatives and the derivative
+    of ``dL/dqd`` along a direction, each of shape ``(batch, dof)``."""
+
+    def __call__(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor: ...
+
+    def tangent(self, q: torch.Tensor, qd: torch.Tensor, dq: torch.Tensor, dqd: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]: ...
+
+
 def _grad_or_zeros(out: torch.Tensor, inputs: tuple[torch.Tensor, ...], create_graph: bool):
     if not out.requires_grad:
         return tuple(torch.zeros_like(x) for x in inputs)
     grads = torch.autograd.grad(out, inputs, create_graph=create_graph, allow_unused=True)
     return tuple(torch.zeros_like(x) if g is None else g for g, x in zip(grads, inputs))
+
+
+def _check_shape(L: torch.Tensor, q: torch.Tensor) -> None:
+    if L.shape != q.shape[:1]:
+        raise ValueError(f"the Lagrangian returned shape {tuple(L.shape)}, expected ({q.shape[0]},)")
 
 
 def euler_lagrange(
@@ -59,7 +84,9 @@ def euler_lagrange(
     Parameters
     ----------
     lagrangian
-        ``L(q, qd) -> (batch,)``. It must treat samples independently.
+        ``L(q, qd) -> (batch,)``. It must treat samples independently. One
+        with a ``tangent`` method (:class:`TangentLagrangian`) gives its own
+        derivatives.
     q, qd, qdd
         Tensors of shape ``(batch, dof)``, float32 or float64.
     create_graph
@@ -79,14 +106,21 @@ def euler_lagrange(
             f"q, qd, qdd must share one (batch, dof) shape; got "
             f"{tuple(q.shape)}, {tuple(qd.shape)}, {tuple(qdd.shape)}"
         )
+    tangent = getattr(lagrangian, "tangent", None)  # a TangentLagrangian
+    if tangent is not None:
+        L, dL_dq, _, along = tangent(q, qd, qd.detach(), qdd.detach())
+        _check_shape(L, q)
+        tau = along - dL_dq
+        if not create_graph:
+            tau, L = tau.detach(), L.detach()
+        return (tau, L) if return_lagrangian else tau
     direction_qd = qd.detach()
     direction_qdd = qdd.detach()
     with torch.enable_grad():
         q = q.detach().requires_grad_(True)
         qd = qd.detach().requires_grad_(True)
         L = lagrangian(q, qd)
-        if L.shape != q.shape[:1]:
-            raise ValueError(f"the Lagrangian returned shape {tuple(L.shape)}, expected ({q.shape[0]},)")
+        _check_shape(L, q)
         dL_dq, dL_dqd = _grad_or_zeros(L.sum(), (q, qd), create_graph=True)
         directional = (dL_dq * direction_qd).sum() + (dL_dqd * direction_qdd).sum()
         (hvp_qd,) = _grad_or_zeros(directional, (qd,), create_graph=create_graph)
