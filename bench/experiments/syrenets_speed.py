@@ -14,12 +14,16 @@ Configurations (:data:`CONFIGS`, which ``tests/benchmarks/test_syrenets_speed.py
   batch of 32 plus 16 replayed samples;
 * ``default``: the suite's, inputs ``(q, qd)``, a batch of 32.
 
-Both with the default one-probe contractive penalty, float64. The steps run
+Both with the default one-probe contractive penalty, float64. With
+``--compiled``, each configuration is timed once more with the later tree's
+``compile=True`` (torch.compile of the training pass) against the earlier
+tree as it is; the compilation happens in the warm-up steps, which are not
+timed, and the table gives how long those took. The steps run
 inside the context that the tree's own ``Method.fit`` runs its loop in
 (``methods.base.gc_frozen`` where the tree has it), so that what the loop
 does around the step counts as well. Usage::
 
-    python -m bench syrenets-speed --against REV [--rounds 5] [--seconds 3] [--out results/syrenets_speed.md]
+    python -m bench syrenets-speed --against REV [--rounds 5] [--seconds 3] [--compiled] [--out results/syrenets_speed.md]
 """
 
 from __future__ import annotations
@@ -67,14 +71,16 @@ batch = {k: v[:job["batch"]] for k, v in t.items()}
 import contextlib, methods.base
 loop_context = getattr(methods.base, "gc_frozen", contextlib.nullcontext)
 with loop_context():
+    start = time.perf_counter()
     for _ in range(5):
         m.train_step(batch, job["experiment"])
+    warmup = time.perf_counter() - start
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < job["seconds"]:
         m.train_step(batch, job["experiment"])
         steps += 1
     rate = steps / (time.perf_counter() - start)
-print(json.dumps({"steps_per_s": rate}))
+print(json.dumps({"steps_per_s": rate, "warmup_s": warmup}))
 """
 
 
@@ -82,6 +88,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--against", required=True, help="the earlier commit (any git revision)")
     parser.add_argument("--rounds", type=positive_int, default=5, help="timings of each tree per configuration (default 5)")
     parser.add_argument("--seconds", type=positive, default=3.0, help="seconds each timing runs (default 3)")
+    parser.add_argument("--compiled", action="store_true",
+                        help="also time each configuration with the later tree's compile=True")
     parser.add_argument("--out", type=Path, default=Path("results/syrenets_speed.md"),
                         help="the table to write (default results/syrenets_speed.md)")
 
@@ -98,15 +106,17 @@ def export(revision: str, into: Path) -> str:
     return commit
 
 
-def time_step(tree: Path, experiment: str, config: str, seconds: float) -> float:
-    """Steps per second of one configuration, in a fresh process running ``tree``'s code."""
+def time_step(tree: Path, experiment: str, config: str, seconds: float, extra: dict | None = None) -> dict:
+    """``{"steps_per_s", "warmup_s"}`` of one configuration (its hyperparameters
+    updated with ``extra``), in a fresh process running ``tree``'s code."""
     job = {"tree": str(tree), "experiment": experiment, "seconds": seconds, **CONFIGS[config]}
+    job["hyperparameters"] = {**job["hyperparameters"], **(extra or {})}
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1"}
     out = subprocess.run([sys.executable, "-c", WORKER, json.dumps(job)], cwd=tree, env=env,
                          capture_output=True, text=True)
     if out.returncode != 0:
         raise UserError(f"timing {experiment}/{config} in {tree} failed: {out.stderr.strip().splitlines()[-1:]}")
-    return json.loads(out.stdout.strip().splitlines()[-1])["steps_per_s"]
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def main(args) -> int:
@@ -115,17 +125,24 @@ def main(args) -> int:
         old_tree = Path(tmp)
         old = export(args.against, old_tree)
         trees = {"before": old_tree, "after": ROOT}
-        rows = []
+        rows, warmups = [], []
+        variants = [(config, None) for config in CONFIGS]
+        if args.compiled:
+            variants += [(config, {"compile": True}) for config in CONFIGS]
         for experiment in EXPERIMENTS:
-            for config in CONFIGS:
+            for config, extra in variants:
+                label = config + (", compiled" if extra else "")
                 figures = {name: [] for name in trees}
                 for k in range(args.rounds):
                     for name, tree in trees.items():
-                        figures[name].append(time_step(tree, experiment, config, args.seconds))
-                    print(f"{experiment} {config} round {k + 1}/{args.rounds}: "
+                        timing = time_step(tree, experiment, config, args.seconds, extra if name == "after" else None)
+                        figures[name].append(timing["steps_per_s"])
+                        if extra and name == "after":
+                            warmups.append(timing["warmup_s"])
+                    print(f"{experiment} {label} round {k + 1}/{args.rounds}: "
                           f"before {figures['before'][-1]:.1f}, after {figures['after'][-1]:.1f} steps/s", flush=True)
                 before, after = (statistics.median(figures[n]) for n in ("before", "after"))
-                rows.append((experiment, config, before, after, figures))
+                rows.append((experiment, label, before, after, figures))
     prov = provenance()
     lines = [
         "# SyReNets' training step, before and after",
@@ -147,6 +164,11 @@ def main(args) -> int:
         paired = statistics.median(a / b for a, b in zip(figures["after"], figures["before"]))
         lines.append(f"| {experiment} | {config} | {before:.1f} | {after:.1f} | {after / before:.2f}× | {paired:.2f}× | "
                      f"{', '.join(f'{v:.1f}' for v in figures['before'])} | {', '.join(f'{v:.1f}' for v in figures['after'])} |")
+    if warmups:
+        lines += ["", f"In the rows marked compiled, the after tree ran with `compile=True` and the before tree as it "
+                      f"was. Their five untimed warm-up steps, which include the compilation (inductor's on-disk cache "
+                      f"as the earlier timings left it), took {statistics.median(warmups):.1f} s in the median "
+                      f"({min(warmups):.1f}–{max(warmups):.1f} s)."]
     text = "\n".join(lines) + "\n"
     atomic_write(args.out, lambda f: f.write(text))
     print(text)

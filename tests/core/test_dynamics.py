@@ -140,3 +140,40 @@ def test_numeric_function_calls_and_powers_compile():
     f = symbolic.to_torch(qd1**2 * sympy.sin(sympy.Rational(1, 2)) + sympy.cos(2) * q1 + sympy.sqrt(2) * sympy.sqrt(sympy.Abs(q1)), 2)
     x = torch.ones(3, 2, dtype=torch.float64)
     torch.testing.assert_close(f(x, x), torch.full((3,), np.sin(0.5) + np.cos(2.0) + np.sqrt(2), dtype=torch.float64))
+
+
+class _OwnDerivatives:
+    """``L = 1/2 qd^T M qd + k . cos q`` with its derivatives written out:
+    dL/dq = -k sin q, dL/dqd = M qd, and dL/dqd along (dq, dqd) is M dqd."""
+
+    M = torch.tensor([[2.0, 0.5], [0.5, 1.0]], dtype=torch.float64)
+    k = torch.tensor([3.0, 1.5], dtype=torch.float64)
+
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, q, qd):
+        return 0.5 * ((qd @ self.M) * qd).sum(-1) + (self.k * torch.cos(q)).sum(-1)
+
+    def tangent(self, q, qd, dq, dqd):
+        self.calls += 1
+        return self(q, qd), -self.k * torch.sin(q), qd @ self.M, dqd @ self.M
+
+
+def test_a_lagrangian_that_gives_its_own_derivatives_gets_the_same_torques():
+    q, qd, qdd = _random_states(32, 2, seed=7)
+    own = _OwnDerivatives()
+    tau, L = euler_lagrange(own, q, qd, qdd, return_lagrangian=True)
+    assert own.calls == 1  # the transform took the derivatives from the Lagrangian
+    torch.testing.assert_close(tau, qdd @ own.M + own.k * torch.sin(q))
+    torch.testing.assert_close(tau, euler_lagrange(own.__call__, q, qd, qdd))  # the reverse passes
+    torch.testing.assert_close(L, own(q, qd))
+    assert not tau.requires_grad
+
+
+def test_a_lagrangian_whose_own_derivatives_have_the_wrong_shape_is_refused():
+    q, qd, qdd = _random_states(4, 2, seed=8)
+    own = _OwnDerivatives()
+    own.tangent = lambda q, qd, dq, dqd: (torch.zeros(4, 1), q, qd, dqd)
+    with pytest.raises(ValueError, match="expected \\(4,\\)"):
+        euler_lagrange(own, q, qd, qdd)

@@ -19,7 +19,8 @@ def test_an_unknown_revision_is_one_clear_error(tmp_path):
 @pytest.mark.slow
 def test_both_trees_are_timed_in_turn_and_the_table_gives_their_ratio(tmp_path):
     out = tmp_path / "speed.md"
-    args = argparse.Namespace(against="HEAD", rounds=1, seconds=0.2, out=out, invocation="python -m bench syrenets-speed")
+    args = argparse.Namespace(against="HEAD", rounds=1, seconds=0.2, compiled=False, out=out,
+                              invocation="python -m bench syrenets-speed")
     assert syrenets_speed.main(args) == 0
     rows = [line for line in out.read_text().splitlines() if line.startswith("| direct") or line.startswith("| indirect")]
     assert len(rows) == 4
