@@ -235,6 +235,7 @@ class Progress:
         self.best_state: Any = None
         self.best_step = -1
         self.curve: list[tuple[float, float]] = []
+        self.measured: list[float] = []  # every evaluated training MSE, in order
         self.evaluations = 0
         self.eval_seconds = 0.0
         self._last_eval_cost = 0.0
@@ -268,6 +269,7 @@ class Progress:
         self._last_eval_cost = cost
         self.eval_seconds += cost
         self.evaluations += 1
+        self.measured.append(value)
         self._evaluated_at = self.steps
         if math.isfinite(value) and value < self.best_mse:
             self.best_mse = value

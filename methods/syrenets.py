@@ -107,6 +107,26 @@ Choices and deviations, each deliberate
   network's rate can already be cut to its floor during the selection, so
   the cosine schedule, which keeps the rates high through it, suits
   ``starts`` better (results/further.md, syrenets_300s_multistart_cosine).
+* ``compile=True`` (an engineering option; default off) compiles the
+  training pass (selection, torques and loss) with ``torch.compile``
+  (inductor), once per process: the model is an argument of the compiled
+  function, so the networks of a multi-start fit share it. The compilation
+  runs before the training loop, inside the budget, and the record gives its
+  time as ``details.compile_seconds`` (about 20 s with inductor's on-disk
+  cache warm, 40-50 s cold, on this kind of CPU). Compiled autograd cannot
+  take the backward of a backward, which the transform's reverse passes
+  need, so in a compiled pass the indirect torques come from derivatives
+  propagated *forward* through the frozen function
+  (:meth:`CandidateSpec.tangent`, the product and chain rules of
+  ``methods/jets.py`` applied to a layer's candidates at once, on tensors the
+  loss differentiates), which the one Euler–Lagrange transform takes from
+  :class:`_Fixed`'s ``tangent`` method. The two agree to rounding
+  (``test_derivatives_propagated_forward_match_the_reverse_passes``). Eager
+  passes keep the reverse passes: uncompiled, the forward propagation was
+  about 10 % slower. Measured on one core, the indirect step in float32 ran
+  at about 190 against 96 steps/s; the direct step of the public
+  configuration at about 1.25 times its eager rate
+  (``python -m bench syrenets-speed --compiled``).
 
 Readable equations and exact recovery (beyond the paper)
 --------------------------------------------------------
@@ -688,25 +708,37 @@ class SyReNets(TorchLagrangianMethod):
 
         ``start_share`` of the loop is split into ceil(log2 k) rounds of equal
         length; in each, the networks still in train in turns for equal
-        shares of the round, then the half with the higher training MSE (on
-        the evaluation subset, as the best-state tracking measures it) is
-        dropped. The replayed samples are each network's own.
+        shares of the round, then the half with the higher score is dropped.
+        A network's score is the lowest training MSE (on the evaluation
+        subset, as the best-state tracking measures it) of all its
+        evaluations so far, the scheduled ones during its turns and one at
+        the end of each turn: at the high learning rates of the selection,
+        the MSE of a network's current state swings by an order of
+        magnitude from one evaluation to the next, and a network that has
+        found the structure was dropped on such a swing (seed 5 of
+        results/syrenets_300s_compiled: 0.036 after the first round, 0.38
+        after the second). The replayed samples are each network's own.
         """
         alive, rounds = list(range(len(slots))), math.ceil(math.log2(len(slots)))
         begin = progress.fraction()
         length = self.config.start_share * (1 - begin) / rounds
         self._starts = {"networks": len(slots), "rounds": []}
+        best = {k: math.inf for k in alive}
         for r in range(rounds):
             scores, turn = {}, length / len(alive)
             for i, k in enumerate(alive):
                 self._use(slots[k], feed)
+                seen = len(progress.measured)
                 more = self._train(t, experiment, progress, feed, until=begin + r * length + (i + 1) * turn)
-                scores[k] = progress.measure()
+                if math.isfinite(progress.measure()):
+                    best[k] = scores[k] = min(v for v in [best[k], *progress.measured[seen:]] if not math.isnan(v))
+                else:  # a network whose state is no longer finite is dropped first
+                    best[k] = scores[k] = math.inf
                 slots[k] = self._slot(feed)
                 if not more:
                     break
             ranked = sorted(scores, key=lambda k: scores[k] if math.isfinite(scores[k]) else math.inf)
-            # a network whose training MSE is not finite is listed with null and dropped first
+            # a network whose current training MSE is not finite is listed with null and dropped first
             self._starts["rounds"].append([[k, scores[k] if math.isfinite(scores[k]) else None] for k in sorted(scores)])
             alive = ranked[: max(1, math.ceil(len(alive) / 2))] if more else ranked[:1]
             if len(alive) == 1:
@@ -981,6 +1013,9 @@ def _compiled_pass():
     argument, so each new network reuses the compiled graphs."""
     global _COMPILED
     if _COMPILED is None:
+        import torch._inductor.config
+
+        torch._inductor.config.compile_threads = 1  # a run has one core: no pool of compiling processes
         _COMPILED = torch.compile(_training_pass, dynamic=False)
     return _COMPILED
 

@@ -11,7 +11,7 @@ from bench.core import symbolic
 from bench.core.data import generate, mse
 from bench.core.dynamics import euler_lagrange
 from methods import METHODS
-from methods.syrenets import CandidateSpec, SyReNet, SyReNetsConfig, Gram, HeadsOutput, _round_inner_constants
+from methods.syrenets import CandidateSpec, SyReNet, SyReNetsConfig, Gram, HeadsOutput, _Fixed, _round_inner_constants, _training_pass
 
 SMALL = dict(layers=2, heads=3, latent=4, ae_hidden=8, head_hidden=8)
 
@@ -309,3 +309,103 @@ def test_the_record_lists_when_the_plateau_schedule_cut_the_learning_rate(data):
     assert lrs[-1] == m.optimizer.param_groups[0]["lr"]
     cosine = METHODS["syrenets"](**SMALL, lr_schedule="cosine", max_steps=3, eval_samples=64, refine=False)
     assert "lr_drops" not in cosine.fit(data[0], "direct", 0, 60).record_details()
+
+
+ALL_OPERATORS = ("sum", "prod", "diff", "sin", "cos", "exp")
+
+
+@pytest.mark.parametrize("hp", [{}, {"inputs": "q_qd_qdd"}, {"operators": ALL_OPERATORS}])
+def test_derivatives_propagated_forward_match_the_reverse_passes(data, hp):
+    """The torques of the fixed function from CandidateSpec.tangent equal
+    those of the transform's reverse passes, and so do their gradients with
+    respect to every parameter."""
+    m = METHODS["syrenets"](**hp)
+    m.seed, m.dof = 0, data[0].dof
+    m._setup(data[0])
+    b = {k: v[:40] for k, v in data[0].tensors().items()}
+    weights = m.model.select(m._inputs(b["q"], b["qd"], b["qdd"]))[1]
+    fixed = _Fixed(m.model, m.config.inputs, weights, b["qdd"])
+    forward = euler_lagrange(fixed, b["q"], b["qd"], b["qdd"], create_graph=True)
+    reverse = euler_lagrange(fixed.__call__, b["q"], b["qd"], b["qdd"], create_graph=True)
+    assert reverse.abs().max() > 1e-3
+    torch.testing.assert_close(forward, reverse, rtol=1e-10, atol=1e-13)
+    params = list(m.model.parameters())
+    g_forward = torch.autograd.grad((forward ** 2).sum(), params, retain_graph=True, allow_unused=True)
+    g_reverse = torch.autograd.grad((reverse ** 2).sum(), params, allow_unused=True)
+    assert sum(g is not None for g in g_reverse) > 10
+    for a, c in zip(g_forward, g_reverse):
+        assert (a is None) == (c is None)
+        if a is not None:
+            torch.testing.assert_close(a, c, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.slow  # each compilation takes about a minute on a cold cache
+@pytest.mark.parametrize("experiment", ["direct", "indirect"])
+def test_the_compiled_training_pass_equals_the_eager_one(data, experiment):
+    """torch.compile's pass (indirect: with the derivatives propagated
+    forward) against the eager pass on one batch: loss, errors and the
+    parameters' gradients. The exact contractive penalty draws no probes."""
+    m = METHODS["syrenets"](**SMALL, contractive_probes=0, compile=True)
+    m.seed, m.dof = 0, data[0].dof
+    m._setup(data[0])
+    b = {k: v[:32] for k, v in data[0].tensors().items()}
+    target = b["L"] if experiment == "direct" else b["tau"]
+    params = list(m.model.parameters())
+    results = []
+    for tangent in (False, True):
+        pass_ = torch.compile(_training_pass, dynamic=False) if tangent else _training_pass
+        loss, err, weights = pass_(m.model, b["q"], b["qd"], b["qdd"], target, experiment, "q_qd", tangent)
+        results.append((loss, err, weights, torch.autograd.grad(loss, params, allow_unused=True)))
+    (loss0, err0, w0, g0), (loss1, err1, w1, g1) = results
+    torch.testing.assert_close(loss1, loss0, rtol=1e-10, atol=0)
+    torch.testing.assert_close(err1, err0, rtol=1e-9, atol=1e-14)
+    for a, c in zip(w1, w0):
+        torch.testing.assert_close(a, c, rtol=1e-10, atol=1e-14)
+    for a, c in zip(g1, g0):
+        assert (a is None) == (c is None)
+        if a is not None:
+            torch.testing.assert_close(a, c, rtol=1e-8, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_a_compiled_fit_compiles_before_its_loop_and_says_how_long_it_took(data):
+    m = METHODS["syrenets"](**SMALL, compile=True, starts=2, replay=4, max_steps=20, eval_samples=64, refine=False)
+    m.fit(data[0], "indirect", 0, 120)
+    details = m.record_details()
+    assert details["compile_seconds"] > 0
+    assert m.fit_info["steps"] == 20
+    assert np.isfinite(m.fit_info["curve"][-1][1])
+    plain = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], "indirect", 0, 60)
+    assert "compile_seconds" not in plain.record_details()
+
+
+def test_the_selection_scores_each_network_by_its_lowest_evaluation_so_far():
+    """At the selection's learning rates a network's current MSE swings; the
+    halving ranks networks by the lowest of all their evaluations, so that
+    network 1, which reached 0.05 during its first turn, is kept although its
+    state at the end of each turn looks worse than network 0's."""
+    during = {0: [[0.9], [0.35]], 1: [[0.05], [0.04]], 2: [[0.5]], 3: [[0.7]]}  # scheduled evaluations, per turn
+    end = {0: [0.3, 0.2], 1: [0.6, 0.5], 2: [0.4], 3: [0.7]}                    # at the end of each turn
+    m = METHODS["syrenets"](**SMALL, starts=4)
+
+    class Scripted:
+        measured: list = []
+
+        def fraction(self):
+            return 0.0
+
+        def measure(self):
+            self.measured.append(end[m.model].pop(0))
+            return self.measured[-1]
+
+    def turn(t, experiment, progress, feed, until):
+        progress.measured.extend(during[m.model].pop(0))
+        return True
+
+    m._train = turn
+    slots = [{**{name: None for name in m._SLOT}, "model": k, "replay": None} for k in range(4)]
+    m._halve(slots, None, "direct", Scripted(), {"replay": None})
+    first, second = m._starts["rounds"]
+    assert first == [[0, 0.3], [1, 0.05], [2, 0.4], [3, 0.7]]
+    assert second == [[0, 0.2], [1, 0.04]]
+    assert m._starts["kept"] == 1 and m.model == 1
