@@ -948,7 +948,7 @@ class SyReNets(TorchLagrangianMethod):
             # [step, seconds into the fit, new learning rate] for each cut of the plateau schedule
             notes["lr_drops"] = self._lr_drops
         if getattr(self, "_starts", None):
-            # the multi-start fit: each round's [network, training MSE], and the network kept
+            # the multi-start fit: each round's [network, its lowest training MSE so far], and the network kept
             notes["starts"] = self._starts
         if getattr(self, "_compile_seconds", None) is not None:
             notes["compile_seconds"] = self._compile_seconds
