@@ -98,8 +98,8 @@ Choices and deviations, each deliberate
   experiment (26,400 against 15,300 steps in 300 s, with ``replay=16``).
 * ``starts=k`` (beyond the paper; default 1) trains k networks from their own
   initialisations in turns and keeps one by successive halving (Jamieson &
-  Talwalkar, 2016) on the training MSE, within ``start_share`` of the
-  training time. It is what the paper's "Best" row does across seeds, inside
+  Talwalkar, 2016) on each network's lowest training MSE so far, within
+  ``start_share`` of the training time. It is what the paper's "Best" row does across seeds, inside
   one run's budget: in the indirect experiment a run either finds the
   Lagrangian's structure within its first minutes or stays on a wrong one for
   the rest of the run, whatever the learning-rate schedule. Each network
@@ -112,10 +112,11 @@ Choices and deviations, each deliberate
   (inductor), once per process: the model is an argument of the compiled
   function, so the networks of a multi-start fit share it. The compilation
   runs before the training loop, inside the budget, and the record gives its
-  time as ``details.compile_seconds`` (about 20 s with inductor's on-disk
-  cache warm, 40-50 s cold, on this kind of CPU). Compiled autograd cannot
-  take the backward of a backward, which the transform's reverse passes
-  need, so in a compiled pass the indirect torques come from derivatives
+  time as ``details.compile_seconds`` (7.5-11.5 s in the published runs,
+  with inductor's on-disk cache warm; about 40-50 s the first time on a
+  machine). Compiled autograd cannot take the backward of a backward,
+  which the transform's reverse passes need, so in a compiled pass the
+  indirect torques come from derivatives
   propagated *forward* through the frozen function
   (:meth:`CandidateSpec.tangent`, the product and chain rules of
   ``methods/jets.py`` applied to a layer's candidates at once, on tensors the
@@ -123,10 +124,12 @@ Choices and deviations, each deliberate
   :class:`_Fixed`'s ``tangent`` method. The two agree to rounding
   (``test_derivatives_propagated_forward_match_the_reverse_passes``). Eager
   passes keep the reverse passes: uncompiled, the forward propagation was
-  about 10 % slower. Measured on one core, the indirect step in float32 ran
-  at about 190 against 96 steps/s; the direct step of the public
-  configuration at about 1.25 times its eager rate
-  (``python -m bench syrenets-speed --compiled``).
+  about 10 % slower. In float32 with replay, four starts and 300 s, an
+  indirect run did 40,800-47,500 steps compiled (results/
+  syrenets_300s_compiled_best) against 23,800-25,500 eagerly
+  (syrenets_300s_multistart_cosine_rerun); the float64 steps of the public
+  and default configurations are timed by
+  ``python -m bench syrenets-speed --compiled`` (results/syrenets_speed.md).
 
 Readable equations and exact recovery (beyond the paper)
 --------------------------------------------------------
