@@ -113,8 +113,8 @@ Choices and deviations, each deliberate
   function, so the networks of a multi-start fit share it. The compilation
   runs before the training loop, inside the budget, and the record gives its
   time as ``details.compile_seconds`` (7.5-11.5 s in the published runs,
-  with inductor's on-disk cache warm; about 40-50 s the first time on a
-  machine). Compiled autograd cannot take the backward of a backward,
+  with inductor's on-disk cache warm; 46 s where the graph was not yet
+  in it). Compiled autograd cannot take the backward of a backward,
   which the transform's reverse passes need, so in a compiled pass the
   indirect torques come from derivatives
   propagated *forward* through the frozen function
