@@ -236,7 +236,6 @@ class Progress:
         self.best_step = -1
         self.curve: list[tuple[float, float]] = []
         self.measured: list[float] = []  # every evaluated training MSE, in order
-        self.evaluations = 0
         self.eval_seconds = 0.0
         self._last_eval_cost = 0.0
         self._next_eval = self.start
@@ -245,6 +244,10 @@ class Progress:
         self._last_call = None
         self._step_time = 0.0
         self.stop_reason: str | None = None
+
+    @property
+    def evaluations(self) -> int:
+        return len(self.measured)
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.start
@@ -268,7 +271,6 @@ class Progress:
         cost = time.perf_counter() - t0
         self._last_eval_cost = cost
         self.eval_seconds += cost
-        self.evaluations += 1
         self.measured.append(value)
         self._evaluated_at = self.steps
         if math.isfinite(value) and value < self.best_mse:

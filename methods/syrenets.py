@@ -606,10 +606,7 @@ class SyReNets(TorchLagrangianMethod):
 
     def train_step(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
         """One optimisation step on ``batch``; returns each sample's squared error."""
-        cfg = self.config
-        target = batch["L"] if experiment == "direct" else batch["tau"]
-        loss, err, weights = (_compiled_pass() if cfg.compile else _training_pass)(
-            self.model, batch["q"], batch["qd"], batch["qdd"], target, experiment, cfg.inputs, cfg.compile)
+        loss, err, weights = self._pass(batch, experiment)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
@@ -618,6 +615,13 @@ class SyReNets(TorchLagrangianMethod):
         self.scheduler.step(self._watched)
         self.frozen = weights
         return err
+
+    def _pass(self, batch: dict[str, torch.Tensor], experiment: str):
+        """:func:`_training_pass` of the network in place, compiled with ``compile``."""
+        cfg = self.config
+        target = batch["L"] if experiment == "direct" else batch["tau"]
+        return (_compiled_pass() if cfg.compile else _training_pass)(
+            self.model, batch["q"], batch["qd"], batch["qdd"], target, experiment, cfg.inputs, cfg.compile)
 
     #: what one network of a multi-start fit carries between its turns
     _SLOT = ("model", "optimizer", "scheduler", "frozen", "_watched", "_lr_drops")
@@ -643,11 +647,10 @@ class SyReNets(TorchLagrangianMethod):
             self._train(t, experiment, progress, feed)
             return
         slots = []
-        if cfg.compile:  # on a network of its own, set up the way the fit's first is
-            self._setup(train)
-            self._warm_compiled(t, experiment, feed)
         for k in range(cfg.starts):
             self._setup(train, k)
+            if cfg.compile and k == 0:  # one compilation serves every network
+                self._warm_compiled(t, experiment, feed)
             # frozen weights before the first step, from the first batch
             with torch.no_grad():
                 self.frozen = [w.detach() for w in self.model.select(self._inputs(t["q"][:bs], t["qd"][:bs], t["qdd"][:bs]))[1]]
@@ -667,14 +670,11 @@ class SyReNets(TorchLagrangianMethod):
         estimate does not include the compilation; the gradients of these
         passes are discarded. The time it took, inside the budget, is in the
         record's ``details.compile_seconds``."""
-        start, cfg, model = time.perf_counter(), self.config, self.model
-        for size in sorted({feed["bs"], feed["bs"] + cfg.replay}):
+        start = time.perf_counter()
+        for size in sorted({feed["bs"], feed["bs"] + self.config.replay}):
             idx = torch.arange(size) % feed["n"]
-            batch = {k: v[idx] for k, v in t.items()}
-            target = batch["L"] if experiment == "direct" else batch["tau"]
-            loss = _compiled_pass()(model, batch["q"], batch["qd"], batch["qdd"], target, experiment, cfg.inputs, True)[0]
-            loss.backward()
-        model.zero_grad(set_to_none=True)
+            self._pass({k: v[idx] for k, v in t.items()}, experiment)[0].backward()
+        self.model.zero_grad(set_to_none=True)
         self._compile_seconds = round(time.perf_counter() - start, 2)
 
     def _train(self, t, experiment, progress, feed, until: float = math.inf) -> bool:
