@@ -36,12 +36,26 @@ the garbage-collector context of the suite's fit loop. Usage::
 
     python -m bench syrenets-profile [--steps 200] [--rounds 3] [--out results/syrenets_profile.md]
 
+With ``--compiled`` it profiles the step with ``compile=True`` instead
+(:func:`measure_compiled`, results/syrenets_profile_compiled.md): the
+compiled pass runs inductor's generated C++ kernels and calls ATen for the
+matrix products, so the operators cannot be called again alone. Each round
+times ``--steps`` plain steps, then ``--steps`` steps under
+``torch.profiler`` with each generated kernel recorded as an event of its
+own (inductor's ``cpp.enable_kernel_profile``); the table gives the
+profiled self time per step of Adam's update, the matrix products and the
+generated kernels, and what is left of the plain step: Python, dispatch,
+autograd and allocation. The compilation happens in untimed warm-up steps,
+and a first profiled session, in which the generated kernels took four
+times as long, is not counted.
+
 With 5 rounds of 200 steps it took about 6 min and 6 GB of memory, most
 of both for the profiler's records of each operator call and its shapes.
 """
 
 from __future__ import annotations
 
+import re
 import resource
 import statistics
 import time
@@ -73,8 +87,11 @@ WARMUP = 3
 def add_arguments(parser) -> None:
     parser.add_argument("--steps", type=positive_int, default=200, help="steps per mode and round (default 200)")
     parser.add_argument("--rounds", type=positive_int, default=3, help="rounds of the three modes (default 3)")
-    parser.add_argument("--out", type=Path, default=Path("results/syrenets_profile.md"),
-                        help="the table to write (default results/syrenets_profile.md)")
+    parser.add_argument("--compiled", action="store_true",
+                        help="profile the step with compile=True (torch.compile) instead: where its time goes")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="the table to write (default results/syrenets_profile.md, "
+                             "results/syrenets_profile_compiled.md with --compiled)")
 
 
 class _ProductTimer:
@@ -182,10 +199,10 @@ def operators_alone(m, batch, repeat: int = 10) -> dict[str, tuple[float, int]]:
     return {part: (ms, n) for part, (ms, n) in took.items()}
 
 
-def _setup():
+def _setup(**extra):
     torch.set_num_threads(1)
     train = generate(get_system("double_pendulum"), 256, 0, cache=False)
-    m = METHODS["syrenets"](**CONFIG["hyperparameters"])
+    m = METHODS["syrenets"](**CONFIG["hyperparameters"], **extra)
     m.seed, m.dof = 0, train.dof
     m._setup(train)
     t = train.tensors()
@@ -248,20 +265,136 @@ def measure(steps: int, rounds: int, report=print) -> dict[str, dict[str, list[f
     return out
 
 
+#: the groups of the compiled step's profiled time, in the table's order; the rest of the plain step follows them
+COMPILED_PARTS = ("Adam's fused update", "matrix products", "generated kernels")
+#: inductor's name for the profiler event of one of its generated C++ kernels
+_KERNEL = re.compile(r"graph_\d+_cpp_")
+
+
+def _compiled_part(key: str) -> str | None:
+    """The :data:`COMPILED_PARTS` group of a profiler event's name, or ``None``."""
+    if key == "aten::_fused_adam_":
+        return COMPILED_PARTS[0]
+    if key in ("aten::mm", "aten::addmm", "aten::bmm"):
+        return COMPILED_PARTS[1]
+    if _KERNEL.match(key):
+        return COMPILED_PARTS[2]
+    return None
+
+
+def compiled_parts(events, steps: int) -> tuple[dict[str, tuple[float, int]], list[tuple[float, int, str]]]:
+    """From the profiler's averaged ``events`` of ``steps`` steps: per group of
+    :data:`COMPILED_PARTS`, (self ms per step, calls per step); and the
+    generated kernels as (ms per step, calls per step, name), slowest first."""
+    parts = {part: [0.0, 0] for part in COMPILED_PARTS}
+    kernels = []
+    for e in events:
+        part = _compiled_part(e.key)
+        if part is None:
+            continue
+        ms = e.self_cpu_time_total / 1e3 / steps
+        parts[part][0] += ms
+        parts[part][1] += e.count
+        if part == COMPILED_PARTS[2]:
+            kernels.append((ms, e.count / steps, e.key))
+    return {part: (ms, n / steps) for part, (ms, n) in parts.items()}, sorted(kernels, reverse=True)
+
+
+def measure_compiled(steps: int, rounds: int, report=print) -> dict:
+    """Per round: the plain compiled step's milliseconds, and :func:`compiled_parts` of as many profiled steps."""
+    import torch._inductor.config as inductor
+
+    out = {"step_ms": [], "parts": [], "kernels": [], "warmup_s": None}
+    with inductor.patch({"cpp.enable_kernel_profile": True}):
+        m, batch = _setup(compile=True)
+        with gc_frozen():
+            start = time.perf_counter()
+            for _ in range(5):  # the first compiles
+                m.train_step(batch, "direct")
+            out["warmup_s"] = time.perf_counter() - start
+            # the profiler's first session is slower (its own buffers, first touched): it is not counted
+            with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU], acc_events=True):
+                for _ in range(steps):
+                    m.train_step(batch, "direct")
+            for k in range(rounds):
+                start = time.perf_counter()
+                for _ in range(steps):
+                    m.train_step(batch, "direct")
+                out["step_ms"].append((time.perf_counter() - start) * 1e3 / steps)
+                schedule = torch.profiler.schedule(wait=0, warmup=WARMUP, active=steps)
+                with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU], schedule=schedule,
+                                            acc_events=True) as prof:
+                    for _ in range(WARMUP + steps):
+                        m.train_step(batch, "direct")
+                        prof.step()
+                parts, kernels = compiled_parts(prof.key_averages(), steps)
+                out["parts"].append(parts)
+                out["kernels"].append(kernels)
+                report(f"round {k + 1}/{rounds}: step {out['step_ms'][-1]:.2f} ms; "
+                       + ", ".join(f"{part} {ms:.2f} ms" for part, (ms, _) in parts.items()))
+    return out
+
+
+def _header(args, what: str) -> list[str]:
+    prov = provenance()
+    return [
+        f"Generated by `{args.invocation}` at commit {prov.get('commit', '?')[:10]}"
+        f"{' (dirty tree)' if prov.get('dirty') else ''}: the public configuration (inputs (q, qd, qdd), "
+        f"{CONFIG['batch']} samples), direct, float64, one thread; {what}. Machine: {prov.get('cpu')} "
+        f"({prov.get('cpu_count')} cores), torch {prov.get('packages', {}).get('torch')}; {prov.get('utc', '')[:10]}.",
+    ]
+
+
+def main_compiled(args) -> int:
+    figures = measure_compiled(args.steps, args.rounds)
+    step = statistics.median(figures["step_ms"])
+    lines = [
+        "# Where SyReNets' compiled training step spends its time",
+        "",
+        *_header(args, f"`compile=True`; medians of {args.rounds} rounds of {args.steps} steps"),
+        "",
+        "Each generated kernel is a profiler event of its own. The first three rows are the profiled self time per "
+        "step; the last is what is left of the plain (unprofiled) step: Python, dispatch, autograd and allocation "
+        f"between them. The five warm-up steps, which compile, took {figures['warmup_s']:.1f} s.",
+        "",
+        "| part | calls per step | ms per step | share of the plain step |",
+        "|---|---:|---:|---:|",
+    ]
+    total = 0.0
+    for part in COMPILED_PARTS:
+        ms = statistics.median(r[part][0] for r in figures["parts"])
+        total += ms
+        lines.append(f"| {part} | {figures['parts'][0][part][1]:.0f} | {ms:.2f} | {ms / step:.0%} |")
+    lines += [
+        f"| everything else | | {step - total:.2f} | {(step - total) / step:.0%} |",
+        f"| plain step | | {step:.2f} | 100% |",
+        "",
+        "The slowest generated kernels (the last round; inductor names a kernel after the operators it fuses):",
+        "",
+        "| ms per step | calls per step | kernel |",
+        "|---:|---:|---|",
+    ]
+    for ms, calls, name in figures["kernels"][-1][:8]:
+        lines.append(f"| {ms:.3f} | {calls:g} | `{name[:120]}{'…' if len(name) > 120 else ''}` |")
+    text = "\n".join(lines) + "\n"
+    atomic_write(args.out, lambda f: f.write(text))
+    print(text)
+    return 0
+
+
 def main(args) -> int:
+    if args.out is None:
+        args.out = Path("results/syrenets_profile_compiled.md" if args.compiled else "results/syrenets_profile.md")
     check_output(args.out)
+    if args.compiled:
+        return main_compiled(args)
     figures = measure(args.steps, args.rounds)
     alone = figures.pop("alone")
     med = {mode: {k: statistics.median(v) for k, v in f.items()} for mode, f in figures.items()}
-    prov = provenance()
     lines = [
         "# Where SyReNets' training step spends its time, and the heads' product in it",
         "",
-        f"Generated by `{args.invocation}` at commit {prov.get('commit', '?')[:10]}"
-        f"{' (dirty tree)' if prov.get('dirty') else ''}: the public configuration (inputs (q, qd, qdd), "
-        f"{CONFIG['batch']} samples), direct, float64, one thread; medians of {args.rounds} rounds of {args.steps} steps per mode, "
-        f"the modes in turn. Machine: {prov.get('cpu')} ({prov.get('cpu_count')} cores), torch "
-        f"{prov.get('packages', {}).get('torch')}; {prov.get('utc', '')[:10]}.",
+        *_header(args, f"medians of {args.rounds} rounds of {args.steps} steps per mode, the modes in turn"),
         "",
         "The product is the heads' output layer, `W2` of shape (heads, candidates, hidden units) applied to the "
         "hidden units, forward and backward, all layers.",

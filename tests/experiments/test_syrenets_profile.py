@@ -60,7 +60,7 @@ def test_the_operators_timed_alone_are_those_of_one_step():
 @pytest.mark.slow
 def test_a_short_run_writes_one_row_per_mode_and_where_the_time_goes(tmp_path):
     out = tmp_path / "profile.md"
-    args = argparse.Namespace(steps=2, rounds=1, out=out, invocation="python -m bench syrenets-profile")
+    args = argparse.Namespace(steps=2, rounds=1, out=out, compiled=False, invocation="python -m bench syrenets-profile")
     assert syrenets_profile.main(args) == 0
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in out.read_text().splitlines()
              if line.startswith("| ")]
@@ -81,3 +81,41 @@ def test_a_short_run_writes_one_row_per_mode_and_where_the_time_goes(tmp_path):
     assert sum(int(c[1]) for c in parts.values()) == int(total[1])
     between = next(c for c in cells if c[0] == "between the operators")
     assert float(total[2]) + float(between[2]) == pytest.approx(float(rows["plain"][1]), abs=0.02)
+
+
+class _Event:
+    def __init__(self, key, self_us, count):
+        self.key, self.self_cpu_time_total, self.count = key, self_us, count
+
+
+def test_the_compiled_steps_profile_groups_adam_the_matrix_products_and_the_generated_kernels():
+    events = [
+        _Event("aten::_fused_adam_", 2400.0, 4),
+        _Event("aten::mm", 6000.0, 20), _Event("aten::addmm", 2000.0, 10), _Event("aten::bmm", 0.0, 0),
+        _Event("graph_0_cpp_fused_softplus_5", 600.0, 8), _Event("graph_1_cpp_fused_cat_2", 1400.0, 2),
+        _Event("## Call CompiledFxGraph abc ##", 9000.0, 2), _Event("aten::add_", 500.0, 66),
+        _Event("my_graph_0_cpp_fused_x", 100.0, 2),  # not a generated kernel's name
+    ]
+    parts, kernels = syrenets_profile.compiled_parts(events, steps=2)
+    assert list(parts) == list(syrenets_profile.COMPILED_PARTS)
+    assert parts["Adam's fused update"] == (1.2, 2)
+    assert parts["matrix products"] == (4.0, 15)
+    assert parts["generated kernels"] == (1.0, 5)
+    assert kernels == [(0.7, 1, "graph_1_cpp_fused_cat_2"), (0.3, 4, "graph_0_cpp_fused_softplus_5")]
+
+
+@pytest.mark.slow
+def test_a_short_compiled_profile_adds_up_to_the_plain_step(tmp_path):
+    out = tmp_path / "compiled.md"
+    args = argparse.Namespace(steps=3, rounds=1, out=out, compiled=True,
+                              invocation="python -m bench syrenets-profile --compiled")
+    assert syrenets_profile.main(args) == 0
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in out.read_text().splitlines()
+             if line.startswith("| ")]
+    rows = {c[0]: c for c in cells}
+    for part in syrenets_profile.COMPILED_PARTS:
+        assert float(rows[part][2]) > 0
+    assert float(rows["matrix products"][1]) > 0 and float(rows["generated kernels"][1]) > 0
+    parts = sum(float(rows[p][2]) for p in (*syrenets_profile.COMPILED_PARTS, "everything else"))
+    assert parts == pytest.approx(float(rows["plain step"][2]), abs=0.02)
+    assert any(c[2].startswith("`graph_") for c in cells if len(c) == 3)  # the slowest kernels are listed
