@@ -45,9 +45,10 @@ times ``--steps`` plain steps, then ``--steps`` steps under
 own (inductor's ``cpp.enable_kernel_profile``); the table gives the
 profiled self time per step of Adam's update, the matrix products and the
 generated kernels, and what is left of the plain step: Python, dispatch,
-autograd and allocation. The compilation happens in untimed warm-up steps,
-and a first profiled session, in which the generated kernels took four
-times as long, is not counted.
+autograd and allocation. The compilation happens in untimed warm-up steps.
+In the first round the generated kernels' events take two to five times as
+long as in the later ones, even after an uncounted profiled session of the
+same length; the tables give medians over the rounds.
 
 With 5 rounds of 200 steps it took about 6 min and 6 GB of memory, most
 of both for the profiler's records of each operator call and its shapes.
@@ -312,10 +313,6 @@ def measure_compiled(steps: int, rounds: int, report=print) -> dict:
             for _ in range(5):  # the first compiles
                 m.train_step(batch, "direct")
             out["warmup_s"] = time.perf_counter() - start
-            # the profiler's first session is slower (its own buffers, first touched): it is not counted
-            with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU], acc_events=True):
-                for _ in range(steps):
-                    m.train_step(batch, "direct")
             for k in range(rounds):
                 start = time.perf_counter()
                 for _ in range(steps):
