@@ -283,29 +283,33 @@ def _compiled_part(key: str) -> str | None:
     return None
 
 
-def compiled_parts(events, steps: int) -> tuple[dict[str, tuple[float, int]], list[tuple[float, int, str]]]:
+def compiled_parts(events, steps: int) -> tuple[dict[str, tuple[float, int]], list[tuple[float, int, str]], float]:
     """From the profiler's averaged ``events`` of ``steps`` steps: per group of
     :data:`COMPILED_PARTS`, (self ms per step, calls per step); and the
-    generated kernels as (ms per step, calls per step, name), slowest first."""
+    generated kernels as (ms per step, calls per step, name), slowest first;
+    and the matrix products' floating-point operations per step (where the
+    profiler counted them, ``with_flops``)."""
     parts = {part: [0.0, 0] for part in COMPILED_PARTS}
-    kernels = []
+    kernels, flops = [], 0
     for e in events:
         part = _compiled_part(e.key)
         if part is None:
             continue
+        if part == COMPILED_PARTS[1]:
+            flops += getattr(e, "flops", 0) or 0
         ms = e.self_cpu_time_total / 1e3 / steps
         parts[part][0] += ms
         parts[part][1] += e.count
         if part == COMPILED_PARTS[2]:
             kernels.append((ms, e.count / steps, e.key))
-    return {part: (ms, n / steps) for part, (ms, n) in parts.items()}, sorted(kernels, reverse=True)
+    return {part: (ms, n / steps) for part, (ms, n) in parts.items()}, sorted(kernels, reverse=True), flops / steps
 
 
 def measure_compiled(steps: int, rounds: int, report=print) -> dict:
     """Per round: the plain compiled step's milliseconds, and :func:`compiled_parts` of as many profiled steps."""
     import torch._inductor.config as inductor
 
-    out = {"step_ms": [], "parts": [], "kernels": [], "warmup_s": None}
+    out = {"step_ms": [], "parts": [], "kernels": [], "flops": [], "warmup_s": None}
     with inductor.patch({"cpp.enable_kernel_profile": True}):
         m, batch = _setup(compile=True)
         with gc_frozen():
@@ -320,13 +324,14 @@ def measure_compiled(steps: int, rounds: int, report=print) -> dict:
                 out["step_ms"].append((time.perf_counter() - start) * 1e3 / steps)
                 schedule = torch.profiler.schedule(wait=0, warmup=WARMUP, active=steps)
                 with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU], schedule=schedule,
-                                            acc_events=True) as prof:
+                                            acc_events=True, with_flops=True) as prof:
                     for _ in range(WARMUP + steps):
                         m.train_step(batch, "direct")
                         prof.step()
-                parts, kernels = compiled_parts(prof.key_averages(), steps)
+                parts, kernels, flops = compiled_parts(prof.key_averages(), steps)
                 out["parts"].append(parts)
                 out["kernels"].append(kernels)
+                out["flops"].append(flops)
                 report(f"round {k + 1}/{rounds}: step {out['step_ms'][-1]:.2f} ms; "
                        + ", ".join(f"{part} {ms:.2f} ms" for part, (ms, _) in parts.items()))
     return out
@@ -365,6 +370,10 @@ def main_compiled(args) -> int:
     lines += [
         f"| everything else | | {step - total:.2f} | {(step - total) / step:.0%} |",
         f"| plain step | | {step:.2f} | 100% |",
+        "",
+        f"The matrix products do {statistics.median(figures['flops']) / 1e6:.0f} MFLOP a step (the profiler's count), "
+        f"{statistics.median(f / r[COMPILED_PARTS[1]][0] / 1e6 for f, r in zip(figures['flops'], figures['parts'])):.1f} "
+        "GFLOP/s in the median round.",
         "",
         "The slowest generated kernels (the last round; inductor names a kernel after the operators it fuses):",
         "",

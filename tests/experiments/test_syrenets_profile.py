@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 
 import pytest
 import torch
@@ -84,24 +85,25 @@ def test_a_short_run_writes_one_row_per_mode_and_where_the_time_goes(tmp_path):
 
 
 class _Event:
-    def __init__(self, key, self_us, count):
-        self.key, self.self_cpu_time_total, self.count = key, self_us, count
+    def __init__(self, key, self_us, count, flops=0):
+        self.key, self.self_cpu_time_total, self.count, self.flops = key, self_us, count, flops
 
 
 def test_the_compiled_steps_profile_groups_adam_the_matrix_products_and_the_generated_kernels():
     events = [
         _Event("aten::_fused_adam_", 2400.0, 4),
-        _Event("aten::mm", 6000.0, 20), _Event("aten::addmm", 2000.0, 10), _Event("aten::bmm", 0.0, 0),
+        _Event("aten::mm", 6000.0, 20, 3e8), _Event("aten::addmm", 2000.0, 10, 1e8), _Event("aten::bmm", 0.0, 0),
         _Event("graph_0_cpp_fused_softplus_5", 600.0, 8), _Event("graph_1_cpp_fused_cat_2", 1400.0, 2),
         _Event("## Call CompiledFxGraph abc ##", 9000.0, 2), _Event("aten::add_", 500.0, 66),
         _Event("my_graph_0_cpp_fused_x", 100.0, 2),  # not a generated kernel's name
     ]
-    parts, kernels = syrenets_profile.compiled_parts(events, steps=2)
+    parts, kernels, flops = syrenets_profile.compiled_parts(events, steps=2)
     assert list(parts) == list(syrenets_profile.COMPILED_PARTS)
     assert parts["Adam's fused update"] == (1.2, 2)
     assert parts["matrix products"] == (4.0, 15)
     assert parts["generated kernels"] == (1.0, 5)
     assert kernels == [(0.7, 1, "graph_1_cpp_fused_cat_2"), (0.3, 4, "graph_0_cpp_fused_softplus_5")]
+    assert flops == 2e8  # the matrix products' only
 
 
 @pytest.mark.slow
@@ -119,3 +121,5 @@ def test_a_short_compiled_profile_adds_up_to_the_plain_step(tmp_path):
     parts = sum(float(rows[p][2]) for p in (*syrenets_profile.COMPILED_PARTS, "everything else"))
     assert parts == pytest.approx(float(rows["plain step"][2]), abs=0.02)
     assert any(c[2].startswith("`graph_") for c in cells if len(c) == 3)  # the slowest kernels are listed
+    gflops = re.search(r"do (\d+) MFLOP a step .*, ([\d.]+) GFLOP/s", out.read_text())
+    assert gflops and int(gflops[1]) > 0 and float(gflops[2]) > 0
