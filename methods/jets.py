@@ -3,6 +3,8 @@
 A Lagrangian term ``f(z)``, ``z = (q, qd)``, is evaluated together with its
 gradient ``G = df/dz`` and the Hessian-vector product ``Hu = (d2f/dz2) u``
 along ``u = (qd, qdd)``. Its Euler–Lagrange image follows without autograd:
+the suite's one transform (:func:`bench.core.dynamics.euler_lagrange`) takes
+``G`` and ``Hu`` from the jet (:meth:`JetAlgebra.torque`) and forms
 
     g(f)_i = Hu[qd_i] - G[q_i]
 
@@ -24,6 +26,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+import torch
+
+from bench.core.dynamics import euler_lagrange
 
 
 @dataclass
@@ -94,6 +99,8 @@ class JetAlgebra:
         self.m = 2 * self.dof
         self.order = order
         self.u = np.concatenate([qd, qdd], axis=1)
+        self.states = tuple(torch.from_numpy(np.ascontiguousarray(a, dtype=np.float64)) for a in (q, qd, qdd))
+        self.zero = torch.zeros(self.n, self.dof, dtype=torch.float64)  # a derivative that is zero
         z = np.concatenate([q, qd], axis=1)
         self.variables = []
         for k in range(self.m):
@@ -133,11 +140,32 @@ class JetAlgebra:
         return Jet(v, _scale(d1, a.G), Hu)
 
     def torque(self, f: Jet) -> np.ndarray:
-        """``g(f)`` of shape ``(N, dof)``: ``Hu[qd] - G[q]``."""
-        d = self.dof
-        tau = np.zeros((self.n, d))
-        if f.Hu is not None:
-            tau += f.Hu[:, d:]
-        if f.G is not None:
-            tau -= f.G[:, :d]
-        return tau
+        """``g(f)`` of shape ``(N, dof)``, by :func:`~bench.core.dynamics.euler_lagrange`
+        from the jet's own derivatives."""
+        return euler_lagrange(_JetLagrangian(self, f), *self.states).numpy()
+
+
+class _JetLagrangian:
+    """A jet of :class:`JetAlgebra` as a Lagrangian that gives its own
+    derivatives (:class:`bench.core.dynamics.TangentLagrangian`): known at
+    the algebra's states only, and along its direction ``u = (qd, qdd)``
+    only, which is the direction the transform asks for."""
+
+    def __init__(self, algebra: JetAlgebra, f: Jet):
+        self.algebra, self.f = algebra, f
+
+    def _check(self, tensors, expected) -> None:
+        if any(t.data_ptr() != e.data_ptr() for t, e in zip(tensors, expected)):
+            raise ValueError("a jet's derivatives are known at its algebra's states, along (qd, qdd), only")
+
+    def __call__(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        self._check((q, qd), self.algebra.states[:2])
+        return torch.from_numpy(self.f.v)
+
+    def tangent(self, q, qd, dq, dqd):
+        q0, qd0, qdd0 = self.algebra.states
+        self._check((q, qd, dq, dqd), (q0, qd0, qd0, qdd0))
+        d, zero = self.algebra.dof, self.algebra.zero
+        G, Hu = self.f.G, self.f.Hu
+        dL_dq, dL_dqd = (zero, zero) if G is None else (torch.from_numpy(G[:, :d]), torch.from_numpy(G[:, d:]))
+        return torch.from_numpy(self.f.v), dL_dq, dL_dqd, zero if Hu is None else torch.from_numpy(Hu[:, d:])

@@ -48,3 +48,21 @@ def test_values_only_mode_skips_derivatives():
     jet = A.mul(A.variables[2], A.unary("sin", A.variables[0]))
     assert jet.G is None and jet.Hu is None
     np.testing.assert_allclose(jet.v, qd[:, 0] * np.sin(q[:, 0]))
+
+
+def test_a_jets_torque_goes_through_the_one_transform_at_its_own_states_only():
+    """The transform takes the jet's derivatives (its ``tangent``), which hold
+    only at the algebra's states and along (qd, qdd): elsewhere it refuses."""
+    from methods.jets import _JetLagrangian
+
+    q, qd, qdd = _states()
+    A = JetAlgebra(q, qd, qdd)
+    jet = A.mul(A.variables[2], A.unary("sin", A.variables[0]))  # qd1 sin q1
+    L = _JetLagrangian(A, jet)
+    tau = euler_lagrange(L, *A.states).numpy()
+    np.testing.assert_allclose(tau, A.torque(jet), rtol=0, atol=0)
+    # d/dt (sin q1) - qd1 cos q1 = 0 for the first joint; nothing for the second
+    np.testing.assert_allclose(tau, 0.0, atol=1e-12)
+    other = [torch.from_numpy(a.copy()) for a in (q, qd, qdd)]
+    with pytest.raises(ValueError, match="algebra's states"):
+        euler_lagrange(L, *other)
