@@ -197,9 +197,15 @@ def test_the_hand_written_backward_passes_match_finite_differences():
     torch.testing.assert_close(HeadsOutput.apply(W, h), (W * h.unsqueeze(1)).sum(-1), rtol=0, atol=0)
     torch.testing.assert_close(Gram.apply(A), A @ A.T, rtol=0, atol=0)
     # only the gradients asked for are formed
-    W.grad = None
-    HeadsOutput.apply(W.detach(), h).sum().backward()
-    assert W.grad is None and h.grad is not None
+    class Ctx:
+        saved_tensors = (W.detach(), h.detach())
+
+    g = torch.randn(3, 7, dtype=torch.float64)
+    for asked in ((False, True), (True, False)):
+        Ctx.needs_input_grad = asked
+        formed = HeadsOutput.backward(Ctx(), g)
+        assert [x is not None for x in formed] == list(asked)
+    torch.testing.assert_close(formed[0], g.unsqueeze(-1) * h.detach().unsqueeze(1))
 
 
 def test_diversity_loss_matches_its_definition():
