@@ -122,7 +122,11 @@ Choices and deviations, each deliberate
   ``methods/jets.py`` applied to a layer's candidates at once, on tensors the
   loss differentiates), which the one Euler–Lagrange transform takes from
   :class:`_Fixed`'s ``tangent`` method. The two agree to rounding
-  (``test_derivatives_propagated_forward_match_the_reverse_passes``). Eager
+  (``test_derivatives_propagated_forward_match_the_reverse_passes``). A
+  compiling network stores its heads' output weights ``W2`` as (heads,
+  hidden units, candidates), the same numbers transposed, so that the
+  generated code sums the heads' products along the candidates instead of
+  across a vector register (see :class:`HeadsOutput`). Eager
   passes keep the reverse passes: uncompiled, the forward propagation was
   about 10 % slower. In float32 with replay, four starts and 300 s, an
   indirect run did 40,800-47,500 steps compiled (results/
@@ -376,7 +380,9 @@ def _layer_norm(x: torch.Tensor) -> torch.Tensor:
 
 class HeadsOutput(torch.autograd.Function):
     """``(W * h.unsqueeze(1)).sum(-1)`` for ``W`` (heads, C, k) and ``h``
-    (heads, k): every head's output layer over the candidates.
+    (heads, k): every head's output layer over the candidates. With
+    ``hidden_first``, ``W`` is stored as (heads, k, C) and the product is
+    ``(W * h.unsqueeze(-1)).sum(1)``, the same numbers.
 
     Autograd's backward of the broadcast product forms two tensors of ``W``'s
     size (2.3 MB in the public configuration): the weights' gradient, and
@@ -384,20 +390,38 @@ class HeadsOutput(torch.autograd.Function):
     first and gets ``h``'s gradient from one batched product, ``g^T W``.
     (The forward keeps the broadcast product: ``torch.bmm`` of a matrix and
     a vector was twice as slow on the CPU.)
+
+    The (heads, k, C) layout is for the compiled pass. Inductor's generated
+    code sums the (heads, C, k) product over its contiguous last axis, 64
+    numbers for each of the 4,536 outputs of a layer, and each such sum ends
+    in a horizontal reduction of a vector register, which took most of the
+    three forward kernels' time (0.23 ms a layer). Over the middle axis, the
+    sums are vertical, along C. Eagerly, ATen's kernels were about 2 % slower
+    with it, so the eager pass keeps (heads, C, k).
     """
 
     @staticmethod
-    def forward(ctx, W: torch.Tensor, h: torch.Tensor) -> torch.Tensor:
+    def forward(ctx, W: torch.Tensor, h: torch.Tensor, hidden_first: bool = False) -> torch.Tensor:
         ctx.save_for_backward(W, h)
-        return (W * h.unsqueeze(1)).sum(-1)
+        ctx.hidden_first = hidden_first
+        return (W * h.unsqueeze(-1)).sum(1) if hidden_first else (W * h.unsqueeze(1)).sum(-1)
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, g: torch.Tensor):
         W, h = ctx.saved_tensors
-        gW = g.unsqueeze(-1) * h.unsqueeze(1) if ctx.needs_input_grad[0] else None
-        gh = torch.bmm(g.unsqueeze(1), W).squeeze(1) if ctx.needs_input_grad[1] else None
-        return gW, gh
+        gW = gh = None
+        if ctx.hidden_first:
+            if ctx.needs_input_grad[0]:
+                gW = h.unsqueeze(-1) * g.unsqueeze(1)
+            if ctx.needs_input_grad[1]:
+                gh = (W * g.unsqueeze(1)).sum(-1)
+        else:
+            if ctx.needs_input_grad[0]:
+                gW = g.unsqueeze(-1) * h.unsqueeze(1)
+            if ctx.needs_input_grad[1]:
+                gh = torch.bmm(g.unsqueeze(1), W).squeeze(1)
+        return gW, gh, None
 
 
 class Gram(torch.autograd.Function):
@@ -444,6 +468,9 @@ class SyReNet(torch.nn.Module):
         self.Wq = per_layer((H, d), 1 / math.sqrt(d))           # weighted sum d x d -> d, per head
         self.W1 = per_layer((H, k, d), 1 / math.sqrt(d))        # head hidden layer
         self.W2 = per_layer((H, C, k), 1 / math.sqrt(k))        # head output over the candidates
+        if cfg.compile:  # the same weights, stored (H, k, C) for the compiled pass (see HeadsOutput)
+            for w in self.W2:
+                w.data = w.data.transpose(1, 2).contiguous()
         # scale: row sums of a C x C layer on a vector of ones (see the module docstring)
         self.S = per_layer((H, C, C), 1 / math.sqrt(C), reduce_last=True)
         # gate: sigmoid(g1 . P_j + g2 . prod of the previous layer's distributions)
@@ -493,7 +520,7 @@ class SyReNet(torch.nn.Module):
         # rows of G mapped by Q, then each head's weighted sum over them: Wq (G Q^T)^T
         a = (self.Wq[layer] @ self.Q[layer]) @ G.T                 # (H, d)
         hidden = F.softplus(_layer_norm((self.W1[layer] * a.unsqueeze(1)).sum(-1)))
-        logits = _layer_norm(HeadsOutput.apply(self.W2[layer], hidden))
+        logits = _layer_norm(HeadsOutput.apply(self.W2[layer], hidden, self.cfg.compile))
         P = torch.softmax(logits, dim=-1)                          # (H, C)
         phi = torch.sigmoid((self.G1[layer] * P).sum(-1) + self.G2[layer] @ prev_prod)  # (H,)
         return P, phi, phi.unsqueeze(1) * P * self.S[layer]

@@ -17,13 +17,14 @@ Configurations (:data:`CONFIGS`, which ``tests/benchmarks/test_syrenets_speed.py
 Both with the default one-probe contractive penalty, float64. With
 ``--compiled``, each configuration is timed once more with the later tree's
 ``compile=True`` (torch.compile of the training pass) against the earlier
-tree as it is; the compilation happens in the warm-up steps, which are not
+tree as it is, or, with ``--both-compiled`` too, against the earlier tree's
+``compile=True``; the compilation happens in the warm-up steps, which are not
 timed, and the table gives how long those took. The steps run
 inside the context that the tree's own ``Method.fit`` runs its loop in
 (``methods.base.gc_frozen`` where the tree has it), so that what the loop
 does around the step counts as well. Usage::
 
-    python -m bench syrenets-speed --against REV [--rounds 5] [--seconds 3] [--compiled] [--out results/syrenets_speed.md]
+    python -m bench syrenets-speed --against REV [--rounds 5] [--seconds 3] [--compiled [--both-compiled]] [--out results/syrenets_speed.md]
 """
 
 from __future__ import annotations
@@ -90,6 +91,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seconds", type=positive, default=3.0, help="seconds each timing runs (default 3)")
     parser.add_argument("--compiled", action="store_true",
                         help="also time each configuration with the later tree's compile=True")
+    parser.add_argument("--both-compiled", action="store_true",
+                        help="with --compiled: the earlier tree compiled too (it must have the option)")
     parser.add_argument("--out", type=Path, default=Path("results/syrenets_speed.md"),
                         help="the table to write (default results/syrenets_speed.md)")
 
@@ -120,6 +123,8 @@ def time_step(tree: Path, experiment: str, config: str, seconds: float, extra: d
 
 
 def main(args) -> int:
+    if args.both_compiled and not args.compiled:
+        raise UserError("--both-compiled: add --compiled, whose rows it changes")
     check_output(args.out)
     with tempfile.TemporaryDirectory(prefix="syrenets-speed-") as tmp:
         old_tree = Path(tmp)
@@ -135,9 +140,10 @@ def main(args) -> int:
                 figures = {name: [] for name in trees}
                 for k in range(args.rounds):
                     for name, tree in trees.items():
-                        timing = time_step(tree, experiment, config, args.seconds, extra if name == "after" else None)
+                        compiled = name == "after" or args.both_compiled
+                        timing = time_step(tree, experiment, config, args.seconds, extra if compiled else None)
                         figures[name].append(timing["steps_per_s"])
-                        if extra and name == "after":
+                        if extra and compiled:
                             warmups.append(timing["warmup_s"])
                     print(f"{experiment} {label} round {k + 1}/{args.rounds}: "
                           f"before {figures['before'][-1]:.1f}, after {figures['after'][-1]:.1f} steps/s", flush=True)
@@ -165,8 +171,10 @@ def main(args) -> int:
         lines.append(f"| {experiment} | {config} | {before:.1f} | {after:.1f} | {after / before:.2f}× | {paired:.2f}× | "
                      f"{', '.join(f'{v:.1f}' for v in figures['before'])} | {', '.join(f'{v:.1f}' for v in figures['after'])} |")
     if warmups:
-        lines += ["", f"In the rows marked compiled, the after tree ran with `compile=True` and the before tree as it "
-                      f"was. Their five untimed warm-up steps, which include the compilation (inductor's on-disk cache "
+        which = ("both trees ran with `compile=True`" if args.both_compiled
+                 else "the after tree ran with `compile=True` and the before tree as it was")
+        lines += ["", f"In the rows marked compiled, {which}. The compiled timings' five untimed warm-up steps, which "
+                      f"include the compilation (inductor's on-disk cache "
                       f"as the earlier timings left it), took {statistics.median(warmups):.1f} s in the median "
                       f"({min(warmups):.1f}–{max(warmups):.1f} s)."]
     text = "\n".join(lines) + "\n"

@@ -16,10 +16,18 @@ def test_an_unknown_revision_is_one_clear_error(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_both_compiled_without_compiled_is_one_clear_error(tmp_path):
+    args = argparse.Namespace(against="HEAD", rounds=1, seconds=0.2, compiled=False, both_compiled=True,
+                              out=tmp_path / "speed.md", invocation="python -m bench syrenets-speed --both-compiled")
+    with pytest.raises(UserError, match="--both-compiled: add --compiled"):
+        syrenets_speed.main(args)
+    assert not (tmp_path / "speed.md").exists()
+
+
 @pytest.mark.slow
 def test_both_trees_are_timed_in_turn_and_the_table_gives_their_ratio(tmp_path):
     out = tmp_path / "speed.md"
-    args = argparse.Namespace(against="HEAD", rounds=1, seconds=0.2, compiled=False, out=out,
+    args = argparse.Namespace(against="HEAD", rounds=1, seconds=0.2, compiled=False, both_compiled=False, out=out,
                               invocation="python -m bench syrenets-speed")
     assert syrenets_speed.main(args) == 0
     rows = [line for line in out.read_text().splitlines() if line.startswith("| direct") or line.startswith("| indirect")]

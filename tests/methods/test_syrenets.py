@@ -192,20 +192,42 @@ def test_the_hand_written_backward_passes_match_finite_differences():
     W = torch.randn(3, 7, 5, dtype=torch.float64, requires_grad=True)
     h = torch.randn(3, 5, dtype=torch.float64, requires_grad=True)
     A = torch.randn(4, 9, dtype=torch.float64, requires_grad=True)
+    Wt = W.detach().transpose(1, 2).contiguous().requires_grad_(True)  # stored (heads, k, C)
     assert torch.autograd.gradcheck(HeadsOutput.apply, (W, h))
+    assert torch.autograd.gradcheck(HeadsOutput.apply, (Wt, h, True))
     assert torch.autograd.gradcheck(Gram.apply, (A,))
     torch.testing.assert_close(HeadsOutput.apply(W, h), (W * h.unsqueeze(1)).sum(-1), rtol=0, atol=0)
+    torch.testing.assert_close(HeadsOutput.apply(Wt, h, True), HeadsOutput.apply(W, h), rtol=1e-14, atol=0)
     torch.testing.assert_close(Gram.apply(A), A @ A.T, rtol=0, atol=0)
-    # only the gradients asked for are formed
-    class Ctx:
-        saved_tensors = (W.detach(), h.detach())
-
+    # only the gradients asked for are formed, in either layout
     g = torch.randn(3, 7, dtype=torch.float64)
-    for asked in ((False, True), (True, False)):
-        Ctx.needs_input_grad = asked
-        formed = HeadsOutput.backward(Ctx(), g)
-        assert [x is not None for x in formed] == list(asked)
-    torch.testing.assert_close(formed[0], g.unsqueeze(-1) * h.detach().unsqueeze(1))
+    for weights, hidden_first in ((W, False), (Wt, True)):
+        class Ctx:
+            saved_tensors = (weights.detach(), h.detach())
+
+        Ctx.hidden_first = hidden_first
+        for asked in ((False, True), (True, False)):
+            Ctx.needs_input_grad = (*asked, False)
+            formed = HeadsOutput.backward(Ctx(), g)
+            assert [x is not None for x in formed] == [*asked, False]
+        expected = g.unsqueeze(-1) * h.detach().unsqueeze(1)
+        torch.testing.assert_close(formed[0], expected.transpose(1, 2) if hidden_first else expected)
+
+
+def test_a_compiling_network_stores_the_same_head_weights_hidden_units_first():
+    """(Its pass is then compiled; see HeadsOutput.) Same seed, same weights,
+    same outputs and losses."""
+    plain, compiling = _net(), _net(compile=True)
+    for a, b in zip(plain.W2, compiling.W2):
+        assert b.shape == (a.shape[0], a.shape[2], a.shape[1]) and b.is_contiguous()
+        torch.testing.assert_close(b, a.transpose(1, 2), rtol=0, atol=0)
+    x = torch.randn(16, 4, dtype=torch.float64)
+    torch.manual_seed(1)
+    out_plain = plain.select(x)
+    torch.manual_seed(1)  # the same Rademacher probe
+    out_compiling = compiling.select(x)
+    torch.testing.assert_close(out_compiling[0], out_plain[0], rtol=1e-12, atol=1e-14)
+    torch.testing.assert_close(out_compiling[2], out_plain[2], rtol=1e-12, atol=1e-14)
 
 
 def test_diversity_loss_matches_its_definition():
