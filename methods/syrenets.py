@@ -395,9 +395,10 @@ class HeadsOutput(torch.autograd.Function):
     code sums the (heads, C, k) product over its contiguous last axis, 64
     numbers for each of the 4,536 outputs of a layer, and each such sum ends
     in a horizontal reduction of a vector register, which took most of the
-    three forward kernels' time (0.23 ms a layer). Over the middle axis, the
-    sums are vertical, along C. Eagerly, ATen's kernels were about 2 % slower
-    with it, so the eager pass keeps (heads, C, k).
+    three forward kernels' time (0.23 ms a layer; 0.13 ms in the other
+    layout, ``python -m bench syrenets-profile --compiled``). Over the
+    middle axis, the sums are vertical, along C. Eagerly, ATen's kernels
+    were not faster with it, so the eager pass keeps (heads, C, k).
     """
 
     @staticmethod
