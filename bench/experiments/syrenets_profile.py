@@ -314,7 +314,7 @@ def measure_compiled(steps: int, rounds: int, report=print) -> dict:
     """Per round: the plain compiled step's milliseconds, and :func:`compiled_parts` of as many profiled steps."""
     import torch._inductor.config as inductor
 
-    out = {"step_ms": [], "parts": [], "kernels": [], "flops": [], "faults": [], "warmup_s": None}
+    out = {"step_ms": [], "parts": [], "kernels": [], "flops": [], "faults": [], "plain_faults": [], "warmup_s": None}
     with inductor.patch({"cpp.enable_kernel_profile": True}):
         m, batch = _setup(compile=True)
         with gc_frozen():
@@ -323,10 +323,11 @@ def measure_compiled(steps: int, rounds: int, report=print) -> dict:
                 m.train_step(batch, "direct")
             out["warmup_s"] = time.perf_counter() - start
             for k in range(rounds):
-                start = time.perf_counter()
+                faults, start = resource.getrusage(resource.RUSAGE_SELF).ru_minflt, time.perf_counter()
                 for _ in range(steps):
                     m.train_step(batch, "direct")
                 out["step_ms"].append((time.perf_counter() - start) * 1e3 / steps)
+                out["plain_faults"].append((resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults) / steps)
                 schedule = torch.profiler.schedule(wait=0, warmup=WARMUP, active=steps)
                 faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
                 with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU], schedule=schedule,
@@ -368,7 +369,8 @@ def main_compiled(args) -> int:
         "left of it: Python, dispatch, autograd and allocation between them. The five warm-up steps, which compile, "
         f"took {figures['warmup_s']:.1f} s. Each round's generated kernels, profiled (minor page faults a step): "
         + ", ".join(f"{r[COMPILED_PARTS[2]][0]:.2f} ms ({f:.0f})" for r, f in zip(figures["parts"], figures["faults"]))
-        + ".",
+        + "; the plain steps' minor page faults a step: "
+        + ", ".join(f"{f:.1f}" for f in figures["plain_faults"]) + ".",
         "",
         "| part | calls per step | ms per step | share of the plain step |",
         "|---|---:|---:|---:|",
