@@ -48,9 +48,10 @@ generated kernels, and what is left of the plain step: Python, dispatch,
 autograd and allocation. The compilation happens in untimed warm-up steps.
 In some rounds, erratically, the generated kernels' events take two to six
 times as long as in the others (an uncounted profiled session before the
-first did not prevent it), with hundreds of minor page faults a step where
-the plain steps have next to none: under the profiler, the weights' gradients (2.3 MB
-each) are written to freshly mapped memory, as in the eager profile above.
+first did not prevent it), with hundreds of minor page faults a step
+where the plain steps have next to none: under the profiler, the weights'
+gradients (2.3 MB each) are written to freshly mapped memory, as in the
+eager profile above.
 A profiler can only add to an event's time, so each part's figure is its
 lowest over the rounds, and the plain step's the median; the table lists
 each round's kernel time and page faults.
