@@ -63,6 +63,9 @@ def test_a_jets_torque_goes_through_the_one_transform_at_its_own_states_only():
     np.testing.assert_allclose(tau, A.torque(jet), rtol=0, atol=0)
     # d/dt (sin q1) - qd1 cos q1 = 0 for the first joint; nothing for the second
     np.testing.assert_allclose(tau, 0.0, atol=1e-12)
+    np.testing.assert_array_equal(L(*A.states[:2]).numpy(), jet.v)  # its value, as a Lagrangian
     other = [torch.from_numpy(a.copy()) for a in (q, qd, qdd)]
     with pytest.raises(ValueError, match="algebra's states"):
         euler_lagrange(L, *other)
+    with pytest.raises(ValueError, match="algebra's states"):
+        L(*other[:2])
