@@ -32,7 +32,7 @@ from bench.core.fileio import atomic_write, check_output
 from bench.reporting.plots import line_plot
 from bench.runner.matrix import run_matrix
 from bench.runner.plugins import import_plugins
-from bench.runner.provenance import provenance
+from bench.runner.provenance import machine, provenance
 from bench.runner.records import Record
 from bench.runner.spec import SEEDS, build_specs, seed_count
 from methods import METHODS
@@ -173,7 +173,7 @@ def main(args) -> int:
     images = plots(rows, args.out)
     ran = [r.provenance for r in records if r.status not in ("unavailable", "not_applicable")] or [provenance()]
     commits = sorted({p.get("commit", "?")[:10] + (", dirty tree" if p.get("dirty") else "") for p in ran})
-    cpus = sorted({str(p.get("cpu")) for p in ran})
+    cpus = sorted({machine(p) for p in ran})
     text = "\n".join([
         "# How cost and error grow with the degrees of freedom",
         "",

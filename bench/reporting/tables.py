@@ -50,6 +50,7 @@ import numpy as np
 from bench.core.fileio import atomic_write
 from bench.reporting.plots import convergence_plot, plot_name
 from bench.reporting.significance import ALPHA, MIN_SEEDS, by_seed, seed_ranks, ties_with_best
+from bench.runner.provenance import machine
 from bench.runner.records import MISSING, Record, missing_runs, quarantine, read_records
 from systems import SYSTEMS
 
@@ -200,7 +201,7 @@ def _header(records: list[Record]) -> list[str]:
     budgets = sorted({r.budget_s for r in records})
     seeds = sorted({r.seed for r in records})
     prov = [r.provenance for r in records]
-    cpus = sorted({f"{p['cpu']} ({p['cpu_count']} cores)" for p in prov})
+    cpus = sorted({machine(p) for p in prov})
     ran = [r.provenance for r in records if r.status not in ("unavailable", "not_applicable")]
     threads = sorted({str(p["threads"].get("torch_intra_op", "?")) for p in ran})
     per_run = f"{', '.join(threads)} thread(s) per run" if ran else "no run ran"
