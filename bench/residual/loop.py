@@ -6,9 +6,10 @@ Round 0 fits; each later round traces, adds, refits and keeps or undoes:
    experiment) with the system's declared model only. A parametric model's
    parameters (:meth:`~bench.core.models.FittedModel.parametric`) are then
    polished by nonlinear least squares (from the method's parameters and 16
-   random starts), so that an optimiser's shortfall is not taken for a
-   physical effect; ``mse_before`` is the polished model's, and round 0
-   records the method's own.
+   random starts, each on a subsample, the best then on all the samples), so
+   that an optimiser's shortfall is not taken for a physical effect;
+   ``mse_before`` is the polished model's, and round 0 records the method's
+   own.
 2. **Residual.** ``r = tau - g(L_hat) - Phi c`` on the training and test sets.
 3. **Trace.** Forward stepwise selection (:mod:`bench.residual.selection`)
    over the candidates of :mod:`bench.residual.candidates`: the named
@@ -86,7 +87,7 @@ from bench.core.terms import Term, TermLibrary
 from bench.residual.candidates import admissible, candidates, describe_all, is_named, label, structural
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
-from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, best_shape, bic, trace
+from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, ROUNDOFF, best_shape, bic, trace
 from bench.residual.validation import cv_mse, folds, row_folds
 from bench.residual.validation import describe as describe_validation
 from bench.runner.execute import given_data
@@ -106,6 +107,9 @@ MAX_SYMBOLIC_TERMS = 200
 MAX_SYMBOLIC_NODES = 50 * MAX_SYMBOLIC_TERMS
 #: random starts of the parametric polish, beside the method's own parameters
 POLISH_STARTS = 16
+#: training samples each start of the polish is fitted on (the best start is
+#: then refined on all of them)
+POLISH_SAMPLES = 256
 #: the share of the loop's budget its method's fit has
 FIT_SHARE = 0.5
 #: the polish starts no new start after this share of the loop's budget
@@ -224,23 +228,46 @@ def _nonlinear_fit(rigid: ParametricModel, train: Dataset, effects: list[Term], 
 
 def _polish(rigid: ParametricModel, train: Dataset, seed: int, deadline: float = math.inf) -> LoopModel:
     """Nonlinear least squares from the method's parameters and from
-    :data:`POLISH_STARTS` log-uniform starts in [0.01, 10]; the best fit is
-    kept. No start begins after ``deadline`` (``time.perf_counter()``) but the first."""
+    :data:`POLISH_STARTS` log-uniform starts in [0.01, 10], each fitted on
+    :data:`POLISH_SAMPLES` random training samples; the best of them is then
+    refitted on all of ``train``. No start begins after ``deadline``
+    (``time.perf_counter()``) but the first; the final refit always runs.
+
+    Screening the starts on a subsample makes each about ``len(train) /
+    POLISH_SAMPLES`` times cheaper. Fitted on all the samples, a start from
+    an optimiser's poor parameters (negative masses, say) could take the
+    whole polish's time on its own and leave the random starts, which find
+    the optimum, no time; then the loop took the optimiser's shortfall for
+    effects."""
     rng = np.random.default_rng([seed, 0x706F6C])
     starts = [rigid.theta] + [10 ** rng.uniform(-2, 1, len(rigid.theta)) for _ in range(POLISH_STARTS)]
+    screen = train
+    if len(train) > 2 * POLISH_SAMPLES:
+        screen = train.subset(np.sort(rng.choice(len(train), POLISH_SAMPLES, replace=False)))
+    best = _best_fit(rigid, starts, screen, deadline)
+    if best is None:
+        return LoopModel(rigid, [], np.zeros(0), np.zeros(0))
+    if screen is train:
+        return best
+    return _best_fit(rigid, [best.rigid.theta], train) or best
+
+
+def _best_fit(rigid: ParametricModel, starts: list, data: Dataset, deadline: float = math.inf) -> LoopModel | None:
+    """The lowest-RSS nonlinear fit of ``rigid`` on ``data`` from ``starts``
+    (``None`` if no start gave a finite one); no start but the first begins after ``deadline``."""
     best, best_rss = None, math.inf
     for i, theta in enumerate(starts):
         if i and time.perf_counter() > deadline:
             break
         try:
-            fit = _nonlinear_fit(rigid.with_parameters(theta), train, [], [])
+            fit = _nonlinear_fit(rigid.with_parameters(theta), data, [], [])
         except (ValueError, np.linalg.LinAlgError):  # a start where the form is not finite
             continue
-        r = fit.predict_torque(train) - train.tau
+        r = fit.predict_torque(data) - data.tau
         rss = float(np.sum(r * r))
         if math.isfinite(rss) and rss < best_rss:
             best, best_rss = fit, rss
-    return best if best is not None else LoopModel(rigid, [], np.zeros(0), np.zeros(0))
+    return best
 
 
 def _small(expr: sympy.Expr) -> bool:
@@ -600,7 +627,11 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         if not selection.accepted:
             rounds.append({"round": k, "mse": scores(model), "heldout_mse": heldout, "accepted": [],
                            "trace": selection.steps, "seconds": round(time.perf_counter() - start, 3)})
-            report(f"round {k}: nothing significant left")
+            if any(step.get("stop") == BUDGET_STOP for step in selection.steps):
+                report(f"round {k}: the loop's budget ran out before the trace found anything significant; "
+                       f"a larger budget may find more")
+            else:
+                report(f"round {k}: nothing significant left")
             break
         effects = model.effects + selection.accepted
         report(f"round {k}: adding {', '.join(label(c) for c in selection.accepted)}; refitting jointly")

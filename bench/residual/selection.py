@@ -63,6 +63,9 @@ MAX_TRIES = 8
 #: only if it removes at least this share of what that one removes
 AS_WELL = 0.9
 
+#: a trace's last step where the loop's time ran out before it ended
+BUDGET_STOP = "the loop's budget: no further step started"
+
 
 def bic(rss: float, n: int, k: int) -> float:
     """The Bayesian information criterion of a Gaussian fit with ``k`` columns to ``n`` rows."""
@@ -180,7 +183,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
             steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
             break
         if time.perf_counter() > deadline:
-            steps.append({"stop": "the loop's budget: no further step started"})
+            steps.append({"stop": BUDGET_STOP})
             break
         chosen = inadmissible = before = None
         for tier in tiers:
