@@ -249,7 +249,8 @@ def _polish(rigid: ParametricModel, train: Dataset, seed: int, deadline: float =
         return LoopModel(rigid, [], np.zeros(0), np.zeros(0))
     if screen is train:
         return best
-    return _best_fit(rigid, [best.rigid.theta], train) or best
+    refined = _best_fit(rigid, [best.rigid.theta], train)
+    return best if refined is None else refined
 
 
 def _best_fit(rigid: ParametricModel, starts: list, data: Dataset, deadline: float = math.inf) -> LoopModel | None:

@@ -20,6 +20,11 @@ from systems import get_system
 
 ROOT = Path(__file__).resolve().parents[2]
 
+#: the method's fit ends after this many steps (or at its share of the budget): SysId's
+#: parameters, polished by the loop anyway, then do not depend on the machine's speed, and on a
+#: slow machine the loop's tracing keeps its time
+STEPS = {"max_steps": 1000}
+
 
 def quiet(_line):
     pass
@@ -64,7 +69,7 @@ def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec
 
     effects = parse_effects([spec], 2)
     train, test = data_with(effects)
-    out = residual_loop(method, train, test, budget_s=20, report=quiet)
+    out = residual_loop(method, train, test, budget_s=20, hyperparameters=STEPS, report=quiet)
     (effect,) = out.effects
     (name, pairs), = effects.items()
     (value,) = pairs.values()
@@ -79,7 +84,7 @@ def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec
 def test_armature_is_found_by_sysid_whose_declared_form_cannot_absorb_it():
     # a generic library would absorb qd_1^2 / 2 into L; the declared form cannot
     train, test = data_with({"armature": (0.3, 0.0)}, n=1500)
-    out = residual_loop("sysid", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sysid", train, test, budget_s=20, hyperparameters=STEPS, report=quiet)
     assert [(e["name"], e["joint"]) for e in out.effects] == [("armature", 1)]
     assert out.effects[0]["coefficient"] == pytest.approx(0.3, rel=0.05)
     assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
@@ -218,7 +223,7 @@ def test_open_ended_search_names_a_lagrangian_term_the_declared_form_lacks():
     extra = Term.lagrangian(0.3 * v1**2 * sympy.cos(q2))
     s = get_system("double_pendulum")
     train, test = (d.replace(tau=d.tau + extra.torque(d)) for d in (generate(s, 3000, 0), generate(s, 1500, 1000)))
-    out = residual_loop("sysid", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sysid", train, test, budget_s=20, hyperparameters=STEPS, report=quiet)
     (e,) = out.effects
     assert e["name"] == "symbolic" and e["kind"] == "conservative" and e["expression"] == "qd_1**2*cos(q_2)"
     assert e["joints"] == [1, 2] and e["parameters"]["c"]["value"] == pytest.approx(0.3, rel=0.02)
@@ -230,7 +235,7 @@ def test_a_named_effect_is_preferred_to_an_open_ended_term_that_mimics_it():
     # SysId's gravity absorbs sin(q_1) of a spring on joint 1, leaving c (q_1 - sin q_1) ~ q_1^3;
     # the spring is tried first and named
     train, test = data_with({"spring": (2.0, 1.0)}, n=2000, noise=0.01)
-    out = residual_loop("sysid", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sysid", train, test, budget_s=20, hyperparameters=STEPS, report=quiet)
     assert sorted((e["name"], e["joint"]) for e in out.effects) == [("spring", 1), ("spring", 2)]
 
 
@@ -258,12 +263,14 @@ def test_a_neural_model_keeps_its_fit_and_only_the_effects_are_fitted(monkeypatc
     # times are measured by the residual command, not asserted here). The fits take 80 % of the
     # budget whatever the machine, and tracing may start steps until 85 %: on a machine twice as
     # slow, what comes between them took more than that second. Tracing gets until 95 % here, so
-    # that the test is of what the loop does, not of the machine's speed.
+    # that the test is of what the loop does, not of the machine's speed. For the same reason the
+    # MLP's progress is evaluated on 256 samples, not 2000: there, on such a machine, evaluations took
+    # 6 of the fit's 10 s and left it 167 steps.
     import bench.residual.loop as loop
 
     monkeypatch.setattr(loop, "TRACE_SHARE", 0.95)
     train, test = data_with({"viscous_friction": (0.8, 0.5), "coulomb_friction": (1.5, 0.7)}, n=2000)
-    out = residual_loop("mlp", train, test, budget_s=20, report=quiet)
+    out = residual_loop("mlp", train, test, budget_s=20, hyperparameters={"eval_samples": 256}, report=quiet)
     assert out.fit_budget_s == 10.0 and out.rounds[0]["cross_fit"]["fit_budget_s"] == 3.0
     first, last = out.models
     assert last.rigid is first.rigid  # the MLP was not fitted again
