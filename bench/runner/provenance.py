@@ -38,13 +38,29 @@ def git_state() -> dict:
 
 
 @functools.lru_cache(maxsize=1)
-def cpu_model() -> str:
+def _cpuinfo() -> str | None:
+    """The text of ``/proc/cpuinfo``, read once; ``None`` where it cannot be read."""
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+        return Path("/proc/cpuinfo").read_text(errors="replace")
     except OSError:
-        pass
+        return None
+
+
+def _fields(text: str) -> dict[str, str]:
+    """The ``key : value`` lines of ``/proc/cpuinfo`` text, the first value of each key."""
+    fields: dict[str, str] = {}
+    for line in text.splitlines():
+        key, sep, value = line.partition(":")
+        if sep:
+            fields.setdefault(key.strip(), value.strip())
+    return fields
+
+
+@functools.lru_cache(maxsize=1)
+def cpu_model() -> str:
+    fields = _fields(_cpuinfo() or "")
+    if "model name" in fields:
+        return fields["model name"]
     return platform.processor() or platform.machine()
 
 
@@ -57,19 +73,13 @@ def cpu_id() -> str:
     twofold; timings are comparable only where this matches. (The clock is
     left out: on a bare machine it changes from one reading to the next.)
     Empty where ``/proc/cpuinfo`` cannot be read."""
-    try:
-        return describe_cpu(Path("/proc/cpuinfo").read_text(errors="replace"))
-    except OSError:
-        return ""
+    text = _cpuinfo()
+    return "" if text is None else describe_cpu(text)
 
 
 def describe_cpu(text: str) -> str:
     """:func:`cpu_id` of the text of a ``/proc/cpuinfo`` (its first processor)."""
-    fields: dict[str, str] = {}
-    for line in text.split("\n\n", 1)[0].splitlines():
-        key, sep, value = line.partition(":")
-        if sep:
-            fields.setdefault(key.strip(), value.strip())
+    fields = _fields(text.split("\n\n", 1)[0])
     flags = set((fields.get("flags") or fields.get("Features", "")).split())  # Features: ARM's
     vector = next((name for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"), ("sse2", "SSE2"),
                                            ("asimd", "ASIMD")) if flag in flags), None)

@@ -13,15 +13,7 @@ from bench.core.terms import TermLibrary
 from bench.residual import loop, residual_loop, trace
 from bench.residual.validation import BLOCKS, cv_mse, describe, folds
 from systems import get_system
-
-#: the method's fit ends after this many steps (or at its share of the budget): SysId's
-#: parameters, polished by the loop anyway, then do not depend on the machine's speed, and on a
-#: slow machine the loop's tracing keeps its time
-STEPS = {"max_steps": 1000}
-
-
-def quiet(_line):
-    pass
+from tests.residual.test_loop import STEPS, quiet
 
 
 def test_folds_are_whole_recordings_where_the_data_name_them_and_blocks_otherwise():
