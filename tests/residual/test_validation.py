@@ -13,7 +13,7 @@ from bench.core.terms import TermLibrary
 from bench.residual import loop, residual_loop, trace
 from bench.residual.validation import BLOCKS, cv_mse, describe, folds
 from systems import get_system
-from tests.residual.test_loop import STEPS, quiet
+from tests.residual.test_loop import BUDGET, STEPS, quiet
 
 
 def test_folds_are_whole_recordings_where_the_data_name_them_and_blocks_otherwise():
@@ -90,7 +90,7 @@ def test_a_tip_payload_under_the_rod_form_is_found_as_one_payload_with_its_mass(
     s = get_system("double_pendulum")
     fx = parse_effects(["tip_payload=0.5"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx, s), add_effects(generate(s, 1500, 1000), fx, s)
-    out = residual_loop("sysid", train, test, budget_s=20, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
     (payload,) = out.effects
     assert payload["name"] == "tip_payload" and payload["kind"] == "conservative" and payload["joints"] == [1, 2]
     assert payload["parameters"]["m"]["value"] == pytest.approx(0.5, rel=0.02)
@@ -104,7 +104,7 @@ def test_a_lighter_tip_than_the_rod_form_allows_is_a_structural_finding():
     s = get_system("double_pendulum")
     lighter = EFFECTS["tip_payload"].term(system=s)
     train, test = (d.replace(tau=d.tau - 0.3 * lighter.torque(d)) for d in (generate(s, 3000, 0), generate(s, 1500, 1000)))
-    out = residual_loop("sysid", train, test, budget_s=20, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
     for e in out.effects:
         if e["kind"] != "structural":
             assert all(EFFECTS[e["name"]].admissible(v["value"]) for v in e["parameters"].values()), e
@@ -121,7 +121,7 @@ def test_a_gravity_tilt_is_found_as_one_tilt_with_its_angle(alpha):
     s = get_system("double_pendulum")
     fx = parse_effects([f"gravity_tilt={alpha}"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx, s), add_effects(generate(s, 1500, 1000), fx, s)
-    out = residual_loop("sysid", train, test, budget_s=20, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
     (tilt,) = out.effects
     assert tilt["name"] == "gravity_tilt" and tilt["law"].startswith("L += sin(alpha)*")
     assert tilt["parameters"]["alpha"]["value"] == pytest.approx(alpha, rel=0.02)
@@ -135,7 +135,7 @@ def test_stribeck_friction_is_found_as_its_law_with_its_four_parameters(method):
     s = get_system("double_pendulum")
     fx = parse_effects(["stribeck_friction=1:1.0,2.0,0.5,0.3"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx), add_effects(generate(s, 1500, 1000), fx)
-    out = residual_loop(method, train, test, budget_s=20, hyperparameters=STEPS, report=quiet)
+    out = residual_loop(method, train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
     (law,) = out.effects  # one entry, not a viscous term of the wrong sign and polynomials
     assert law["name"] == "stribeck_friction" and law["kind"] == "dissipative" and law["joints"] == [1]
     want = {"F_c": 1.0, "F_s": 2.0, "v_s": 0.5, "b": 0.3}
