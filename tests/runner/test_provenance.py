@@ -46,3 +46,29 @@ def test_machine_line_with_and_without_the_id():
     assert machine({"cpu": "AMD EPYC", "cpu_count": 2}) == "AMD EPYC (2 cores)"
     assert machine({"cpu": "AMD EPYC", "cpu_count": 2, "cpu_id": "family 25 model 1 stepping 1, AVX2"}) == (
         "AMD EPYC (family 25 model 1 stepping 1, AVX2; 2 cores)")
+
+
+def test_an_unreadable_cpuinfo_gives_no_id_and_the_platform_name(monkeypatch):
+    import platform
+
+    from bench.runner import provenance as prov
+
+    class Unreadable:
+        def __init__(self, *_):
+            pass
+
+        def read_text(self, **_):
+            raise PermissionError("/proc/cpuinfo")
+
+    caches = (prov._cpuinfo, prov.cpu_id, prov.cpu_model)
+    monkeypatch.setattr(prov, "Path", Unreadable)
+    for f in caches:
+        f.cache_clear()
+    try:
+        assert prov.cpu_id() == ""
+        assert prov.cpu_model() == (platform.processor() or platform.machine())
+        assert prov.machine(prov.provenance()).endswith(f"({prov.provenance()['cpu_count']} cores)")
+    finally:
+        monkeypatch.undo()
+        for f in caches:
+            f.cache_clear()
