@@ -172,7 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
     res.add_argument("--budget", type=positive, default=60.0,
-                     help=f"seconds for the whole loop (default 60): the method's fit has {FIT_SHARE:.0%} of it, no "
+                     help=f"seconds for the whole loop (default 60): the method's fit has {FIT_SHARE:.0%}% of it, no "
                           f"round starts that would end past it, and the loop's process is killed at "
                           f"{matrix.KILL_FACTOR} x it")
     res.add_argument("--seed", type=_seed, default=0, help="the method's seed (default 0)")

@@ -42,6 +42,16 @@ def test_help_lists_every_command():
     assert "--train" in fit_help and "--json" in fit_help
 
 
+@pytest.mark.parametrize("command", [None, *COMMANDS])
+def test_every_help_renders(command, capsys):
+    # argparse formats help texts with %: a stray "%" in one raises only when that help is printed
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"] if command is None else [command, "--help"])
+    assert exit_.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: python -m bench") and "--help" in out
+
+
 def test_every_option_of_every_command_has_a_help_text():
     sub = _subparsers()
     assert all(action.help for action in sub._choices_actions)
