@@ -6,7 +6,7 @@ stderr and exit code 2; nothing is half-written. Every option has a help
 text (``python -m bench COMMAND --help``).
 
 Commands: ``list``, ``run``, ``table``, ``data``, ``fit``, ``residual``,
-``convert``, ``leaderboard``, and the measurement scripts of
+``convert``, ``rerun``, ``leaderboard``, and the measurement scripts of
 :mod:`bench.experiments`: ``adaptation``, ``residual-acceptance``,
 ``overhead``, ``dfki-filter``.
 """
@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import ast
 import shlex
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -31,12 +32,13 @@ from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preproc
 from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, scaling, syrenets_profile, syrenets_speed
 from bench.reporting.leaderboard import write_leaderboard
 from bench.reporting.tables import write_tables
-from bench.residual.loop import FIT_SHARE, ResidualJob, run_residual
+from bench.residual.loop import FIT_SHARE, MAX_ROUNDS, ResidualJob, run_residual
 from bench.runner import matrix
 from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.isolation import CallFailed
 from bench.runner.plugins import import_plugins, system_plugins
-from bench.runner.records import Record
+from bench.runner.records import Record, read_record
+from bench.runner.replay import RELATIVE_TOLERANCE, compare, replay_spec
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, RunSpec, build_specs, seed_count
 from methods import METHODS
 from systems import SYSTEMS
@@ -101,6 +103,10 @@ class _Parser(argparse.ArgumentParser):
 
 
 _SET_HELP = "hyperparameter override, e.g. hidden=64 (repeatable)"
+_STEPS_HELP = ("bound each run by N steps of its method's work (gradient steps, GP generations, solves) instead of by "
+               "time: the run is then a pure function of its seed and gives the same numbers on any machine")
+#: seconds per run where neither --budget nor --steps is given
+DEFAULT_BUDGET_S = 60.0
 _PLUGIN_HELP = "a .py file or module that registers extra methods or systems (repeatable)"
 
 
@@ -121,7 +127,10 @@ def build_parser() -> argparse.ArgumentParser:
     seeds = r.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=_seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
     seeds.add_argument("--n-seeds", type=seed_count, default=10, help="the first N of the ten fixed seeds (default 10)")
-    r.add_argument("--budget", type=positive, default=60.0, help="wall-clock seconds per run (default 60)")
+    r.add_argument("--budget", type=positive, default=None,
+                   help="wall-clock seconds per run (default 60); with --steps, a ceiling past which a run is killed "
+                        "and recorded as timeout (default: none)")
+    r.add_argument("--steps", type=positive_int, default=None, help=_STEPS_HELP)
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
     r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
     r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
@@ -143,6 +152,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the rollout error of simulated systems (integrating each model's dynamics for 1 s)")
     r.add_argument("--plugin", action="append", default=[], help=_PLUGIN_HELP)
     r.add_argument("--no-resume", action="store_true", help="rerun runs that already have a record")
+    r.add_argument("--retry-failed", action="store_true",
+                   help="also redo runs whose record says failed or timeout (by default a resume keeps them, and "
+                        "redoes only runs whose record was made by other code or another configuration)")
 
     t = sub.add_parser("table", help="write DIR/tables.md from DIR's records and print it")
     t.add_argument("dir", type=Path, help="a run folder (with records/) or a folder of records")
@@ -171,10 +183,15 @@ def build_parser() -> argparse.ArgumentParser:
     res.add_argument("--method", required=True, help="a method that fits torques (indirect experiment)")
     res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
-    res.add_argument("--budget", type=positive, default=60.0,
+    res.add_argument("--budget", type=positive, default=None,
                      help=f"seconds for the whole loop (default 60): the method's fit has {FIT_SHARE:.0%}% of it, no "
                           f"round starts that would end past it, and the loop's process is killed at "
-                          f"{matrix.KILL_FACTOR} x it")
+                          f"{matrix.KILL_FACTOR} x it; with --steps, only a ceiling past which the loop is killed "
+                          f"(default: none)")
+    res.add_argument("--steps", type=positive_int, default=None,
+                     help="bound the loop by work instead of time: the method's fit (and each cross-fit) does N steps "
+                          "of its work, the polish all its starts, the trace until nothing is significant, and at most "
+                          f"{MAX_ROUNDS} rounds; the same command then gives the same effects and numbers on any machine")
     res.add_argument("--seed", type=_seed, default=0, help="the method's seed (default 0)")
     res.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
                      help=_SET_HELP)
@@ -211,7 +228,10 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--train", type=Path, default=None, help="training CSV (default: generated)")
     f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
     f.add_argument("--seed", type=_seed, default=0, help="the run's seed (default 0)")
-    f.add_argument("--budget", type=positive, default=60.0, help="wall-clock seconds for the fit (default 60)")
+    f.add_argument("--budget", type=positive, default=None,
+                   help="wall-clock seconds for the fit (default 60); with --steps, a ceiling past which the run is "
+                        "killed and recorded as timeout (default: none)")
+    f.add_argument("--steps", type=positive_int, default=None, help=_STEPS_HELP)
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
     f.add_argument("--smoke", action="store_true", help="use the method's tiny smoke configuration")
     f.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
@@ -221,6 +241,13 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--domain-half-width", type=positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
     f.add_argument("--plugin", action="append", default=[], help=_PLUGIN_HELP)
+
+    rr = sub.add_parser("rerun", help="replay a recorded run with the work it did and compare its train and test MSE")
+    rr.add_argument("record", type=Path, help="a run's record (OUT/records/<run id>.json, or a fit's --json)")
+    rr.add_argument("--budget", type=positive, default=None,
+                    help="a ceiling in seconds past which the replay is killed (default: none; a slower machine "
+                         "takes longer than the recorded budget to do the same work)")
+    rr.add_argument("--json", type=Path, default=None, help="write the replay's record here")
 
     lb = sub.add_parser("leaderboard", help="write the leaderboard from a run folder's records and a commentary")
     lb.add_argument("run_dir", type=Path, help="the run folder (default results/leaderboard)", nargs="?",
@@ -279,6 +306,14 @@ def _check_names(systems=(), methods=(), experiments=()) -> None:
         check_experiment(name)
 
 
+def _budget(args) -> tuple[float | None, int | None]:
+    """``(budget_s, steps)`` from ``--budget`` and ``--steps``: seconds
+    (default :data:`DEFAULT_BUDGET_S`), or steps with an optional ceiling."""
+    if args.steps is None:
+        return (args.budget if args.budget is not None else DEFAULT_BUDGET_S), None
+    return args.budget, args.steps
+
+
 def cmd_run(args) -> int:
     check_output(args.out, folder=True)
     import_plugins(args.plugin)
@@ -288,8 +323,9 @@ def cmd_run(args) -> int:
     args.systems, arms = system_plugins(args.systems)
     _check_names(args.systems, methods, args.experiments)
     seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
+    budget_s, steps = _budget(args)
     specs = build_specs(
-        args.systems, methods, args.experiments, seeds, args.budget, noises=args.noise,
+        args.systems, methods, args.experiments, seeds, budget_s, noises=args.noise, steps=steps,
         profile="smoke" if args.smoke else "default",
         hyperparameters=dict(args.overrides),
         n_train=args.n_train, n_test=args.n_test,
@@ -301,7 +337,8 @@ def cmd_run(args) -> int:
     for spec in specs:  # fail fast on a bad override, before any process starts
         if spec.method in METHODS and METHODS.entry(spec.method).available:
             METHODS[spec.method](**method_config(spec))
-    matrix.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume, cluster=args.cluster)
+    matrix.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume, cluster=args.cluster,
+                      retry_failed=args.retry_failed)
     text = write_tables(args.out)
     print(f"tables written to {args.out / 'tables.md'}")
     print(text)
@@ -361,7 +398,7 @@ def cmd_residual(args) -> int:
     job = ResidualJob(
         system=args.system, method=args.method,
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
-        budget_s=args.budget, seed=args.seed, hyperparameters=dict(args.overrides),
+        budget_s=_budget(args)[0], steps=args.steps, seed=args.seed, hyperparameters=dict(args.overrides),
         json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
         plugins=_plugin_paths(args.plugin) + arms,
     )
@@ -378,8 +415,8 @@ def cmd_residual(args) -> int:
     return 0
 
 
-def _maybe(x) -> str:
-    return "n/a" if x is None else f"{x:.4g}"
+def _maybe(x, spec: str = ".4g") -> str:
+    return "n/a" if x is None else format(x, spec)
 
 
 def cmd_convert(args) -> int:
@@ -420,7 +457,7 @@ def cmd_fit(args) -> int:
         raise UsageError("--test needs --train (generated training data comes with generated test data)")
     spec = RunSpec(
         system=args.system, method=args.method, experiment=args.experiment, seed=args.seed,
-        budget_s=args.budget, profile="smoke" if args.smoke else "default",
+        budget_s=_budget(args)[0], steps=args.steps, profile="smoke" if args.smoke else "default",
         hyperparameters=dict(args.overrides), n_train=args.n_train, n_test=args.n_test,
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
         domain_half_width=args.domain_half_width, plugins=_plugin_paths(args.plugin) + arms,
@@ -431,23 +468,60 @@ def cmd_fit(args) -> int:
     for part in given or ():
         if part is not None:
             part.target(args.experiment)  # bad files: exit 2 now, before the run's process starts
-    with tempfile.TemporaryDirectory(prefix="bench-fit-") as work:
-        record = matrix.run_isolated(spec, work)  # its own process, threads pinned, killed like any run
+    record, log = run_one(spec)
     if args.json:
         write_json(args.json, record.to_json())
-    print(summary_line(record))
+    print(summary_line(record, log))
     return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
 
 
-def summary_line(record: Record) -> str:
+def run_one(spec: RunSpec) -> tuple[Record, Path | None]:
+    """One run in its own process (threads pinned, killed like any run of a
+    matrix), in a scratch folder; returns its record and, where something
+    failed, the log that holds the traceback (the folder is then kept)."""
+    work = Path(tempfile.mkdtemp(prefix="bench-fit-"))
+    record = matrix.run_isolated(spec, work)
+    if record.status in ("failed", "timeout") or record.failed_stages:
+        return record, matrix.log_path(work, spec.run_id)
+    shutil.rmtree(work, ignore_errors=True)
+    return record, None
+
+
+def summary_line(record: Record, log: Path | None = None) -> str:
     head = f"{record.system} {record.method} {record.experiment} seed={record.seed}: {record.status}"
+    where = f"; traceback in {log}" if log else ""
     if record.status != "ok":
-        return f"{head} ({record.error})"
+        return f"{head} ({record.error}{where})"
     test = record.test_mse
+    failed = f" | failed after the fit: {', '.join(record.failed_stages)}{where}" if record.failed_stages else ""
     return (
         f"{head} | train MSE {record.train_mse:.4g} | test MSE {'n/a (no test data)' if test is None else f'{test:.4g}'}"
-        f" | {record.steps} steps in {record.fit_seconds:.1f} s ({record.stop_reason})"
+        f" | {record.steps} steps in {record.fit_seconds:.1f} s ({record.stop_reason}){failed}"
     )
+
+
+def cmd_rerun(args) -> int:
+    if args.json:
+        check_output(args.json)
+    recorded = read_record(args.record)
+    spec = replay_spec(recorded, str(args.record), ceiling_s=args.budget)
+    import_plugins(spec.plugins)
+    print(f"replaying {recorded.run_id}: {spec.budget.describe()} (recorded under {recorded.describe_budget()}, "
+          f"stopped by {recorded.stop_reason})", flush=True)
+    replayed, log = run_one(spec)
+    if args.json:
+        write_json(args.json, replayed.to_json())
+    if replayed.status != "ok":
+        print(summary_line(replayed, log))
+        return 1
+    rows = compare(recorded, replayed)
+    print(f"{'':10} {'recorded':>24} {'replayed':>24} {'relative difference':>20}")
+    for name, a, b, diff in rows:
+        print(f"{name:10} {_maybe(a, '.17g'):>24} {_maybe(b, '.17g'):>24} {diff:>20.3g}")
+    same = all(diff <= RELATIVE_TOLERANCE for *_, diff in rows)
+    print(f"{'the same' if same else 'DIFFERENT'} up to a relative {RELATIVE_TOLERANCE:g} "
+          f"({replayed.steps} steps; recorded {recorded.steps})")
+    return 0 if same else 1
 
 
 def cmd_leaderboard(args) -> int:
@@ -460,7 +534,7 @@ def cmd_leaderboard(args) -> int:
 
 
 COMMANDS = {"list": cmd_list, "run": cmd_run, "table": cmd_table, "data": cmd_data, "fit": cmd_fit,
-            "residual": cmd_residual, "convert": cmd_convert, "leaderboard": cmd_leaderboard,
+            "residual": cmd_residual, "convert": cmd_convert, "rerun": cmd_rerun, "leaderboard": cmd_leaderboard,
             **{name: module.main for name, module in EXPERIMENTS.items()}}
 
 

@@ -40,6 +40,7 @@ from typing import Annotated, Any, Callable, ClassVar
 import numpy as np
 import torch
 
+from bench.core.budget import Budget, Schedule
 from bench.core.data import EXPERIMENTS, Dataset, check_experiment, mse
 from bench.core.dynamics import euler_lagrange
 from bench.core.errors import ConfigError, DataError
@@ -198,16 +199,34 @@ class Progress:
     speed or load, so a step-limited run is a pure function of its seed
     (unless the budget ends it first).
 
+    **Replay.** Everything a method decides from the clock goes through
+    this object: whether to stop (:meth:`step`), when to evaluate, and how
+    much of the budget is spent (:meth:`fraction`). Under a time budget the
+    fraction is read from the wall clock only at the scheduled evaluations,
+    and between them it advances by the last pace per step (its
+    ``clock`` anchors); :meth:`schedule` returns the steps done, the
+    evaluations' steps and those anchors. Given that
+    :class:`~bench.core.budget.Schedule`, a fit with the same seed repeats
+    the same steps, evaluations and fractions without reading the clock,
+    and so ends with the same state: ``python -m bench rerun``.
+
     Parameters
     ----------
     budget_s
-        Wall-clock budget, counted from construction.
+        Wall-clock budget, counted from construction (``math.inf`` under a
+        work budget).
     evaluate
         Returns the current training MSE (on the evaluation subset).
     snapshot
         Returns a copy of the current state, to be restored later.
     max_steps
-        Optional step limit.
+        Optional step limit: the method's own ``max_steps`` or a work
+        budget, whichever is smaller. The fraction of the budget spent is
+        then the fraction of these steps done.
+    schedule
+        A time-budgeted fit's :class:`~bench.core.budget.Schedule` to
+        replay: it stops after the schedule's steps and evaluates where it
+        says.
     tolerance
         Stop once the best MSE falls to or below this value.
     """
@@ -219,6 +238,7 @@ class Progress:
         snapshot: Callable[[], Any],
         *,
         max_steps: int | None = None,
+        schedule: Schedule | None = None,
         tolerance: float = 0.0,
         overhead: float = 0.1,
     ):
@@ -226,7 +246,9 @@ class Progress:
         self.deadline = self.start + float(budget_s)
         self._evaluate = evaluate
         self._snapshot = snapshot
-        self.max_steps = max_steps
+        self.max_steps = max_steps  # the horizon of fraction()
+        #: the most steps the loop may take: ``max_steps`` or a replay's steps
+        self.work_limit = min((n for n in (max_steps, schedule and schedule.steps) if n is not None), default=None)
         self.tolerance = tolerance
         self.overhead = overhead
         self.steps = 0
@@ -236,6 +258,7 @@ class Progress:
         self.best_step = -1
         self.curve: list[tuple[float, float]] = []
         self.measured: list[float] = []  # every evaluated training MSE, in order
+        self.scheduled: list[int] = []  # the steps of the scheduled evaluations (from step())
         self.eval_seconds = 0.0
         self._last_eval_cost = 0.0
         self._next_eval = self.start
@@ -244,6 +267,14 @@ class Progress:
         self._last_call = None
         self._step_time = 0.0
         self.stop_reason: str | None = None
+        self._replayed = None if schedule is None else set(schedule.evaluations)
+        # (step, fraction, fraction per step): read from the clock live, or replayed
+        self._wall_clock = max_steps is None and schedule is None
+        # the first anchor stands for the time before the first call of step()
+        self.clock: list[tuple[int, float, float]] = [(-1, 0.0, 0.0)]
+        if schedule is not None and schedule.clock is not None and max_steps is None:
+            self.clock = [tuple(a) for a in schedule.clock]
+        self._anchor = 0
 
     @property
     def evaluations(self) -> int:
@@ -285,6 +316,13 @@ class Progress:
         self._next_eval_step = self.steps + max(1, math.ceil(0.1 * self.steps))
         return value
 
+    def _due(self, now: float) -> bool:
+        if self._calls == 1:
+            return True
+        if self._replayed is not None:
+            return self.steps in self._replayed
+        return self.steps >= self._next_eval_step if self.max_steps is not None else now >= self._next_eval
+
     def step(self) -> bool:
         """Count one finished step; ``True`` while the loop may do another.
 
@@ -299,30 +337,52 @@ class Progress:
         self._calls += 1
         if self.stop_reason:
             return False
-        due = self.steps >= self._next_eval_step if self.max_steps is not None else now >= self._next_eval
-        if self._calls == 1 or due:
+        if self._due(now):
+            self.scheduled.append(self.steps)
+            if self._wall_clock:
+                self._read_clock(now)
             self.evaluate_now()
             now = time.perf_counter()
             if self.stop_reason:
                 return False
         if self.best_mse <= self.tolerance:
             self.stop_reason = "converged"
-        elif self.max_steps is not None and self.steps >= self.max_steps:
+        elif self.work_limit is not None and self.steps >= self.work_limit:
             self.stop_reason = "max_steps"
         elif now + self._step_time + self._last_eval_cost >= self.deadline:
             self.stop_reason = "budget"
         self._last_call = time.perf_counter()
         return self.stop_reason is None
 
+    def _read_clock(self, now: float) -> None:
+        """Anchor :meth:`fraction` at the time spent now, with the pace since the last anchor."""
+        spent = (now - self.start) / max(self.deadline - self.start, 1e-9)
+        step, fraction, pace = self.clock[-1]
+        if step >= 0:  # the pace of the steps since the last anchor
+            pace = (spent - fraction) / (self.steps - step)
+        self.clock.append((self.steps, spent, pace))
+
     def fraction(self) -> float:
-        """How much of the loop is done: of ``max_steps`` when set, else of the time to the deadline."""
+        """How much of the loop is done: of ``max_steps`` when set, else of
+        the time to the deadline, as of the last scheduled evaluation and
+        advanced since by its pace per step (see the class docstring)."""
         if self.max_steps is not None:
             return self.steps / self.max_steps
-        return (time.perf_counter() - self.start) / max(self.deadline - self.start, 1e-9)
+        now = self.steps if self._calls else -1  # -1: before the first call of step()
+        while self._anchor + 1 < len(self.clock) and self.clock[self._anchor + 1][0] <= now:
+            self._anchor += 1
+        step, fraction, pace = self.clock[self._anchor]
+        return fraction + (now - step) * pace
+
+    def schedule(self) -> Schedule:
+        """What a replay of this fit needs (see the class docstring)."""
+        return Schedule(self.steps, tuple(self.scheduled), None if self.max_steps is not None else tuple(self.clock))
 
     def reserve(self, seconds: float) -> None:
-        """Take ``seconds`` off the end of the budget (for work after the loop)."""
-        self.deadline -= seconds
+        """Take ``seconds`` off the end of the budget (for work after the
+        loop); nothing where the budget has no deadline."""
+        if math.isfinite(seconds):
+            self.deadline -= seconds
 
     def stop(self, reason: str) -> None:
         """Ask the loop to end (a method that knows it is done)."""
@@ -362,6 +422,22 @@ def seed_everything(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed % 2**32)
     torch.manual_seed(seed)
+
+
+def as_budget(budget_s: "float | Budget | None", steps: int | None = None) -> Budget:
+    """A fit's budget from :meth:`Method.fit`'s arguments: seconds, a
+    :class:`~bench.core.budget.Budget`, or ``steps`` of work."""
+    if isinstance(budget_s, Budget):
+        if steps is not None:
+            raise ConfigError("give a Budget or steps, not both")
+        return budget_s
+    if steps is not None:
+        if budget_s is not None:
+            raise ConfigError("give budget_s (seconds) or steps (work), not both")
+        return Budget(steps=steps)
+    if budget_s is None or not (budget_s > 0):
+        raise ConfigError(f"budget_s must be positive, got {budget_s}")
+    return Budget(seconds=float(budget_s))
 
 
 class Method(FittedModel):
@@ -412,13 +488,23 @@ class Method(FittedModel):
         return dataclasses.asdict(self.config)
 
     # -- the protocol ----------------------------------------------------------
-    def fit(self, train: Dataset, experiment: str, seed: int, budget_s: float, *, warm_start: bool = False,
-            system: System | None = None) -> "Method":
-        """Learn from ``train`` within ``budget_s`` seconds of wall-clock time.
+    def fit(self, train: Dataset, experiment: str, seed: int, budget_s: "float | Budget | None" = None, *,
+            steps: int | None = None, warm_start: bool = False, system: System | None = None) -> "Method":
+        """Learn from ``train`` within ``budget_s`` seconds of wall-clock
+        time, or within ``steps`` steps of the method's work (gradient steps,
+        generations; see :mod:`bench.core.budget`).
+
+        ``budget_s`` may also be a :class:`~bench.core.budget.Budget`: a
+        work budget, or a time-budgeted fit's schedule to replay. Under a
+        work budget the fit has no wall-clock deadline.
 
         Keeps and restores the state with the lowest training MSE seen.
         Fills :attr:`fit_info` with the steps done, the best-so-far curve of
-        training MSE over wall-clock time, and why the loop stopped.
+        training MSE over wall-clock time, why the loop stopped, and the
+        :class:`~bench.core.budget.Schedule` that replays it.
+
+        One-time work that does not depend on the budget (compiling for the
+        data's shapes, :meth:`prepare`) is done first and not counted in it.
 
         ``warm_start=True`` continues from the state of the previous fit (its
         parameters and optimiser state), for methods with
@@ -428,7 +514,7 @@ class Method(FittedModel):
         ``system`` is the system the data belong to, for methods that read its
         declared form; by default the registered system named by ``train.system``.
         """
-        t0 = time.perf_counter()
+        budget = as_budget(budget_s, steps)
         if warm_start and not self.supports_warm_start:
             raise ConfigError(f"{self.name} cannot continue a fit (warm_start)")
         if warm_start and self.experiment is None:
@@ -444,39 +530,66 @@ class Method(FittedModel):
         if len(train) == 0:
             raise DataError(f"{train.source}: no samples to fit")
         train.target(experiment)  # raises a DataError naming what is missing
-        if not (budget_s > 0):
-            raise ConfigError(f"budget_s must be positive, got {budget_s}")
+        prepare_seconds = self.prepare(train, experiment)
+        t0 = time.perf_counter()
         self.experiment, self.seed, self.dof = experiment, int(seed), train.dof
         self.system = system if system is not None else self._resolve_system(train)
+        self.budget = budget
         seed_everything(self.seed)
 
         rng = np.random.default_rng(self.seed)
         n_eval = min(len(train), self.config.eval_samples)
         eval_set = train.subset(np.sort(rng.choice(len(train), n_eval, replace=False)))
         eval_target = eval_set.target(experiment)
+        limits = [n for n in (self.config.max_steps, budget.steps if budget.schedule is None else None) if n is not None]
         progress = Progress(
-            budget_s - (time.perf_counter() - t0),
+            budget.fit_seconds - (time.perf_counter() - t0),
             evaluate=lambda: mse(self.predict(eval_set, experiment), eval_target),
             snapshot=self._get_state,
-            max_steps=self.config.max_steps,
+            max_steps=min(limits, default=None),
+            schedule=budget.schedule,
         )
         with gc_frozen():
             self._fit(train, experiment, progress)
         progress.finish()
         if progress.best_state is not None:
             self._set_state(progress.best_state)
-        self._post_fit(train, experiment, budget_s - (time.perf_counter() - t0))
+        self._post_fit(train, experiment, budget.fit_seconds - (time.perf_counter() - t0))
         self.fit_info = {
-            "steps": progress.steps,
+            "steps": self._work_done(progress),
             "best_step": progress.best_step,
             "stop_reason": progress.stop_reason or "loop ended",
             "fit_seconds": time.perf_counter() - t0,
+            "prepare_seconds": prepare_seconds,
             "evaluations": progress.evaluations,
             "eval_seconds": progress.eval_seconds,
             "eval_samples": n_eval,
             "curve": progress.curve,
+            "schedule": self._replay_schedule(progress),
         }
         return self
+
+    def prepare(self, train: Dataset, experiment: str) -> float:
+        """One-time work for data of ``train``'s shape that must not eat into
+        a fit's budget (compiling the training step for its shapes); done
+        once per process, also when called again; returns the seconds it
+        took. :meth:`fit` calls it before its budget starts; the runner
+        calls it first, in a phase of its own, so that the fit's time limit
+        does not cover it."""
+        key = (experiment, train.dof)
+        if getattr(self, "_prepared", None) == key:
+            return 0.0
+        t0 = time.perf_counter()
+        self._prepare(train, experiment)
+        self._prepared = key
+        return round(time.perf_counter() - t0, 3)
+
+    def _replay_schedule(self, progress: Progress) -> dict:
+        """The record's replay entry: the fit's :class:`Schedule`, or why it cannot be replayed."""
+        reason = self.replay_unavailable_reason()
+        if reason:
+            return {"unavailable": reason}
+        return progress.schedule().to_json() | {"steps": self._work_done(progress)}
 
     @staticmethod
     def _resolve_system(train: Dataset) -> System | None:
@@ -498,7 +611,23 @@ class Method(FittedModel):
         """Restore a state from :meth:`_get_state`."""
 
     def _post_fit(self, train: Dataset, experiment: str, seconds_left: float) -> None:
-        """Work after the best state is restored, within what is left of the budget."""
+        """Work after the best state is restored, within what is left of the
+        budget (``math.inf`` under a work budget)."""
+
+    def _prepare(self, train: Dataset, experiment: str) -> None:
+        """One-time work before the budget starts (see :meth:`prepare`)."""
+
+    def _work_done(self, progress: Progress) -> int:
+        """The work the fit did, in the units a work budget counts: the
+        steps of its loop, unless the method counts its work itself (a
+        library's generations run inside one step)."""
+        return progress.steps
+
+    @classmethod
+    def replay_unavailable_reason(cls) -> str | None:
+        """Why a time-budgeted fit of this method cannot be replayed from the
+        work it did (``None``: it can, see :mod:`bench.core.budget`)."""
+        return None
 
     def variants(self) -> dict[str, "FittedModel | str"]:
         """Further fitted models derived from this one (for example a refined

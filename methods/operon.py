@@ -6,6 +6,9 @@ scikit-learn interface in the direct experiment: ``L = f(q, qd)``, with
 Operon's own nonlinear least-squares tuning of the constants, the operator
 set closest to the paper's (+ - x, sin, cos, square, sqrt|x|), population
 1000, one thread, and the run's wall-clock budget as Operon's time limit.
+Under a work budget its generations are the limit; a time-budgeted run
+records the generations it reached (``details.generations``), the work a
+replay repeats.
 
 Not applicable to the indirect experiment: Operon fits ``y = f(X)`` to
 samples of ``y``, and there are none of ``L`` there; the torque is the
@@ -28,6 +31,10 @@ from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
 from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
 
+#: Operon's time limit where the fit has none (its generations bound it)
+UNLIMITED_S = 10**7
+#: Operon's generations where only its time limit bounds it
+UNLIMITED_GENERATIONS = 10**6
 NOT_APPLICABLE = (
     "Operon fits y = f(X) to samples of y; the indirect experiment has no samples of L, only torques, "
     "which are a derivative (the Euler-Lagrange transform) of the model that Operon cannot put into its loss"
@@ -70,21 +77,31 @@ class Operon(ExpressionMethod):
         X, y = np.concatenate([sub.q, sub.qd], axis=1), sub.L
         self.names = [str(s) for s in sum(symbolic.coordinate_symbols(train.dof), ())]
         self.model = ExpressionModel(sympy.Float(float(np.mean(y))), train.dof)
+        self.generations = None
         while progress.step():
-            # Operon checks its time limit between generations; leave it a margin
-            seconds = max(1, math.floor(progress.remaining() * 0.9))
-            generations = 10**6 if cfg.max_steps is None else cfg.max_steps
+            # Operon checks its time limit between generations; leave it a margin. Under a work
+            # budget (or a replay) its generations are the limit and time none.
+            remaining = progress.remaining()
+            seconds = max(1, math.floor(remaining * 0.9)) if math.isfinite(remaining) else UNLIMITED_S
+            generations = progress.work_limit or UNLIMITED_GENERATIONS
             reg = SymbolicRegressor(
                 allowed_symbols=cfg.allowed_symbols, population_size=cfg.population_size,
                 max_length=cfg.max_length, generations=generations, max_time=seconds,
                 n_threads=1, random_state=self.seed,
             )
             reg.fit(X, y)
+            self.generations = int(reg.stats_["generations"])
             text = reg.get_model_string(reg.model_, 17, self.names)
             self.operon_string = text
             self.model = ExpressionModel(parse_operon(text, self.names), train.dof)
             progress.stop("solved")
 
+    def _work_done(self, progress: Progress) -> int:
+        """Operon's generations: its whole search runs inside one step of the loop."""
+        return self.generations if self.generations is not None else progress.steps
+
+    def record_details(self):
+        return {"generations": self.generations}
 
 
 def parse_operon(text: str, names: list[str]) -> sympy.Expr:

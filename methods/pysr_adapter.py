@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import math
 import os
 import subprocess
 import sys
@@ -103,6 +104,11 @@ class PySR(ExpressionMethod):
     def unavailable_reason(cls):
         return _probe()
 
+    @classmethod
+    def replay_unavailable_reason(cls):
+        return ("PySR's search ends at its time limit and does not report the iterations it reached; "
+                "run it with a work budget (--steps, its iterations) to repeat a run")
+
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         from pysr import PySRRegressor, TemplateExpressionSpec
 
@@ -114,11 +120,12 @@ class PySR(ExpressionMethod):
             binary_operators=BINARY, unary_operators=UNARY,
             extra_sympy_mappings={"sqrt_abs": lambda x: sympy.sqrt(sympy.Abs(x))},
             populations=cfg.populations, population_size=cfg.population_size, maxsize=cfg.maxsize,
-            niterations=10**6 if cfg.max_steps is None else cfg.max_steps, precision=64,
+            niterations=progress.work_limit or 10**6, precision=64,
             random_state=self.seed, deterministic=True, parallelism="serial", progress=False, verbosity=0,
         )
         while progress.step():
-            seconds = max(1.0, progress.remaining() * 0.9)
+            remaining = progress.remaining()  # under a work budget its iterations bound it, and time does not
+            seconds = max(1.0, remaining * 0.9) if math.isfinite(remaining) else None
             if experiment == "direct":
                 reg = PySRRegressor(timeout_in_seconds=seconds, **common)
                 reg.fit(np.concatenate([sub.q, sub.qd], axis=1), sub.L,

@@ -11,7 +11,9 @@ Architecture (the paper's, with the public code's facts where the paper is open)
   too, as the public code did. That variant is *physically inconsistent*: a
   Lagrangian depends on ``(q, qd)`` only, and with ``qdd`` as an input the
   Euler–Lagrange transform would need third derivatives, which it (like the
-  public code) silently drops by treating ``qdd`` as a constant.
+  public code) silently drops by treating ``qdd`` as a constant. Its
+  expression holds ``qdd``; the record keeps it, and exact recovery and the
+  rollout state that they do not apply (:meth:`SyReNets.not_a_lagrangian`).
 * **Candidates** of a layer with inputs ``u_1..u_n``, in this order: the
   pairwise sums over the upper triangle (row-major; the diagonal stands for
   ``u_i`` itself), the pairwise products over the upper triangle (squares
@@ -111,10 +113,10 @@ Choices and deviations, each deliberate
   training pass (selection, torques and loss) with ``torch.compile``
   (inductor), once per process: the model is an argument of the compiled
   function, so the networks of a multi-start fit share it. The compilation
-  runs before the training loop, inside the budget, and the record gives its
-  time as ``details.compile_seconds`` (7.5-11.5 s in the published runs,
-  with inductor's on-disk cache warm; 46 s where the graph was not yet
-  in it). Compiled autograd cannot take the backward of a backward,
+  runs on a network of the fit's shapes before the budget starts
+  (:meth:`methods.base.Method.prepare`), so that a machine whose compile
+  cache is empty leaves a run as much learning time as a warm one; the
+  record gives its time as ``details.compile_seconds``. Compiled autograd cannot take the backward of a backward,
   which the transform's reverse passes need, so in a compiled pass the
   indirect torques come from derivatives
   propagated *forward* through the frozen function
@@ -663,13 +665,11 @@ class SyReNets(TorchLagrangianMethod):
         feed = {"order": torch.randperm(n, generator=generator), "cursor": 0, "generator": generator,
                 "replay": torch.empty(0, dtype=torch.long), "n": n, "bs": bs}
         progress.reserve(cfg.post_fraction * progress.remaining())
-        self._starts = self._compile_seconds = None
+        self._starts = None
         if self.warm_start:  # continue the network, its optimiser and its frozen weights
             self.model.to(self.dtype)  # back to the training arithmetic, which the optimiser's state has
             self.frozen = [w.to(self.dtype) for w in self.frozen]
             self._lr_drops = []
-            if cfg.compile:
-                self._warm_compiled(t, experiment, feed)
             if isinstance(self.scheduler, _Cosine):
                 self.scheduler.start(progress)
             self._train(t, experiment, progress, feed)
@@ -677,8 +677,6 @@ class SyReNets(TorchLagrangianMethod):
         slots = []
         for k in range(cfg.starts):
             self._setup(train, k)
-            if cfg.compile and k == 0:  # one compilation serves every network
-                self._warm_compiled(t, experiment, feed)
             # frozen weights before the first step, from the first batch
             with torch.no_grad():
                 self.frozen = [w.detach() for w in self.model.select(self._inputs(t["q"][:bs], t["qd"][:bs], t["qdd"][:bs]))[1]]
@@ -692,17 +690,29 @@ class SyReNets(TorchLagrangianMethod):
         if progress.stop_reason is None:
             self._train(t, experiment, progress, feed)
 
-    def _warm_compiled(self, t, experiment, feed) -> None:
-        """Compile the training pass for the loop's batch sizes (with and
-        without the replayed samples) before the loop, so that its step-time
-        estimate does not include the compilation; the gradients of these
-        passes are discarded. The time it took, inside the budget, is in the
-        record's ``details.compile_seconds``."""
+    def _prepare(self, train, experiment) -> None:
+        """With ``compile``, compile the training pass for the loop's batch
+        sizes (with and without the replayed samples) on a network of the
+        fit's shapes, before the budget starts: the compiled pass takes the
+        network as an argument, so the fit's networks reuse it. A fresh
+        machine (an empty compile cache) then leaves a run the same learning
+        time as a warm one. The gradients are discarded; the time it took is
+        the record's ``details.compile_seconds``."""
+        self._compile_seconds = None
+        if not self.config.compile:
+            return
         start = time.perf_counter()
-        for size in sorted({feed["bs"], feed["bs"] + self.config.replay}):
-            idx = torch.arange(size) % feed["n"]
-            self._pass({k: v[idx] for k, v in t.items()}, experiment)[0].backward()
-        self.model.zero_grad(set_to_none=True)
+        cfg, dtype = self.config, getattr(torch, self.config.dtype)
+        with torch.random.fork_rng():
+            torch.manual_seed(0)
+            model = SyReNet(train.dof * (2 if cfg.inputs == "q_qd" else 3), cfg).to(dtype)
+            t = train.tensors(dtype)
+            bs = min(cfg.batch_size, len(train))
+            for size in sorted({bs, bs + cfg.replay}):
+                idx = torch.arange(size) % len(train)
+                b = {k: v[idx] for k, v in t.items()}
+                target = b["L"] if experiment == "direct" else b["tau"]
+                _compiled_pass()(model, b["q"], b["qd"], b["qdd"], target, experiment, cfg.inputs, True)[0].backward()
         self._compile_seconds = round(time.perf_counter() - start, 2)
 
     def _train(self, t, experiment, progress, feed, until: float = math.inf) -> bool:
@@ -810,6 +820,12 @@ class SyReNets(TorchLagrangianMethod):
 
     def lagrangian(self, q, qd):
         return self._frozen_lagrangian()(q, qd)
+
+    def not_a_lagrangian(self):
+        if self.config.inputs == "q_qd":
+            return None
+        return ("inputs='q_qd_qdd' feeds qdd into L (the public code's choice), so its torques are not affine in "
+                "qdd: no exact recovery or rollout")
 
     def _with_weights(self, weights, fn, *args):
         saved, self.frozen = self.frozen, weights
@@ -1070,8 +1086,9 @@ class _Fixed:
 
 class _Cosine:
     """Half a cosine from each group's learning rate to its minimum over the
-    training time that is left when :meth:`start` is called (over the steps
-    left when the run has a step limit). :meth:`step` sets the rate of the
+    share of the budget that is left when :meth:`start` is called
+    (:meth:`methods.base.Progress.fraction`: of the steps when the run has a
+    step limit, else of the time, as read at the fit's evaluations). :meth:`step` sets the rate of the
     next step, like the plateau schedule's. A warm start calls :meth:`start`
     again, and the rate anneals anew from its highest value."""
 
@@ -1086,9 +1103,9 @@ class _Cosine:
             # that the first step takes the highest rate and the last the lowest
             first, total = progress.steps, max(progress.max_steps - progress.steps - 1, 1)
             self.fraction = lambda: (progress.steps + 1 - first) / total
-        else:
-            begin, total = time.perf_counter(), max(progress.deadline - time.perf_counter(), 1e-9)
-            self.fraction = lambda: (time.perf_counter() - begin) / total
+        else:  # the share of the budget spent since, as the fit's progress reads it (so a replay repeats it)
+            begin = progress.fraction()
+            self.fraction = lambda: (progress.fraction() - begin) / max(1.0 - begin, 1e-9)
 
     def step(self, loss: float) -> None:
         f = min(max(self.fraction(), 0.0), 1.0)
@@ -1126,6 +1143,9 @@ class _FrozenVariant(FittedModel):
 
     def expression(self):
         return self.owner._push(self.weights, self.owner.model.spec, self.keep)
+
+    def not_a_lagrangian(self):
+        return self.owner.not_a_lagrangian()
 
     def readable_expression(self):
         """The equation, or ``None`` when it keeps more than :data:`MAX_READABLE_TERMS` weights."""

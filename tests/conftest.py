@@ -12,8 +12,16 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+# One BLAS and torch thread in each test process, set before numpy or torch is imported: the suite
+# runs on every core at once (pytest-xdist), and a process per core that also spreads its own
+# arithmetic over every core slows them all (runs pin their own threads in their own processes).
+from bench.runner.threads import pin_threads, pin_torch  # noqa: E402  (imports neither numpy nor torch)
+
+pin_threads(1)
+
 
 def pytest_configure(config):
+    pin_torch(1)
     # generated data goes to a cache private to this test session
     cache = Path(config.rootpath) / ".pytest_cache" / "data-cache"
     os.environ["SYRENETS_BENCH_CACHE"] = str(cache)

@@ -23,7 +23,7 @@ def cli(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=cwd or ROOT)
 
 
-COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "leaderboard",
+COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "rerun", "leaderboard",
             "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling",
             "syrenets-speed", "syrenets-profile")
 

@@ -11,7 +11,9 @@ the rest of the suite uses nothing else of them:
 * :meth:`~FittedModel.expression`: the Lagrangian as a sympy expression, or
   ``None`` for a model without one (a neural network);
 * :meth:`~FittedModel.parametric`: the model as a parametric form with
-  identified values (:class:`ParametricModel`), or ``None``.
+  identified values (:class:`ParametricModel`), or ``None``;
+* :meth:`~FittedModel.not_a_lagrangian`: why the model is not a Lagrangian
+  of ``(q, qd)`` alone, or ``None``.
 
 Models given by a batched torch function ``L(q, qd)`` subclass
 :class:`LagrangianFunction`, which owns their predictions (torques through
@@ -64,6 +66,14 @@ class FittedModel(abc.ABC):
 
     def parametric(self) -> "ParametricModel | None":
         """The model as a parametric form with identified values, if it is one."""
+        return None
+
+    def not_a_lagrangian(self) -> str | None:
+        """Why the model is not a Lagrangian of ``(q, qd)`` alone, or ``None``
+        where it is. A model that also takes ``qdd`` as an input (a
+        documented deviation of some configurations) has torques that are
+        not affine in ``qdd``: it has no forward dynamics to roll out, and
+        its expression cannot be judged against a Lagrangian."""
         return None
 
     def predict(self, data: Dataset, experiment: str) -> np.ndarray:

@@ -15,6 +15,7 @@ test set's noise floor (the mean square of the noise that was added), so that
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -63,8 +64,10 @@ def expected(effects: dict, dof: int) -> dict[tuple, dict[str, float]]:
     return out
 
 
-def run_case(case: str, noise: float, method: str, n_train: int, n_test: int, budget: float) -> dict:
-    """One case: the loop on the effect ``case`` at ``noise``, with ``method``."""
+def run_case(case: str, noise: float, method: str, n_train: int, n_test: int, budget: float | None,
+             steps: int | None = None) -> dict:
+    """One case: the loop on the effect ``case`` at ``noise``, with ``method``, within
+    ``budget`` seconds or, with ``steps``, that work budget (:func:`bench.residual.residual_loop`)."""
     system = SYSTEMS["double_pendulum"]()
     effects = parse_effects(CASES[case], system.dof)
     train = add_effects(generate(system, n_train, 0), effects, system)
@@ -73,7 +76,7 @@ def run_case(case: str, noise: float, method: str, n_train: int, n_test: int, bu
         train, test = add_noise(train, "indirect", noise, 0), add_noise(clean_test, "indirect", noise, 1)
     floor = float(np.mean((test.tau - clean_test.tau) ** 2))
     start = time.perf_counter()
-    out = residual_loop(method, train, test, budget_s=budget, report=quiet)
+    out = residual_loop(method, train, test, budget_s=budget, steps=steps, report=quiet)
     want = expected(effects, system.dof)
     found = {(e["name"], tuple(e["joints"])): {k: p["value"] for k, p in e["parameters"].items()}
              for e in out.effects if e["kind"] != "structural"}
@@ -124,7 +127,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), help="effect cases (default: all)")
     parser.add_argument("--n-train", type=positive_int, default=3000, help="training samples (default 3000)")
     parser.add_argument("--n-test", type=positive_int, default=1500, help="test samples (default 1500)")
-    parser.add_argument("--budget", type=positive, default=30.0, help="seconds for each loop, its fit included (default 30)")
+    parser.add_argument("--budget", type=positive, default=None,
+                        help="seconds for each loop, its fit included (default 30); with --steps, a ceiling past which "
+                             "a loop is killed (default: none)")
+    parser.add_argument("--steps", type=positive_int, default=None,
+                        help="bound each loop by N steps of its method's work instead of by time (--budget is then a "
+                             "ceiling): the same command gives the same effects on any machine")
     parser.add_argument("--workers", type=positive_int, default=2, help="cases at a time, one process each (default 2)")
     parser.add_argument("--out", type=Path, default=Path("results/residual/acceptance.md"),
                         help="the table to write (default results/residual/acceptance.md)")
@@ -132,19 +140,23 @@ def add_arguments(parser) -> None:
 
 def main(args) -> int:
     check_output(args.out)
+    if args.budget is None and args.steps is None:
+        args.budget = 30.0
     payloads = {f"{c} noise={z:g} {m}": {"case": c, "noise": z, "method": m, "n_train": args.n_train,
-                                          "n_test": args.n_test, "budget": args.budget}
+                                          "n_test": args.n_test, "budget": args.budget, "steps": args.steps}
                 for c in args.cases for z in args.noise for m in args.methods}
 
     def describe(r: dict) -> str:
         return f"named right {r['named_right']}, test MSE {r['before']:.3g} -> {r['after']:.3g} (floor {r['floor']:.3g})"
 
-    limit = KILL_FACTOR * args.budget
+    limit = KILL_FACTOR * args.budget if args.steps is None else (args.budget or math.inf)
     rows = list(run_jobs("bench.experiments.residual_acceptance:run_payload", payloads, limit, args.workers, describe,
                          print_now).values())
     order = {c: i for i, c in enumerate(args.cases)}
     rows.sort(key=lambda r: (order[r["case"]], r["noise"], args.methods.index(r["method"])))
     prov = provenance()
+    budget_words = (f"{args.budget:g} s for each loop, its method's fit included" if args.steps is None
+                    else f"{args.steps} steps of its method's work for each loop's fit")
     text = "\n".join([
         "# The residual loop on undeclared effects: acceptance figures",
         "",
@@ -155,7 +167,7 @@ def main(args) -> int:
         f"[bench/experiments/residual_acceptance.py]"
         f"(../../bench/experiments/residual_acceptance.py)); the worst coefficient error is over every parameter of "
         f"every effect found, and a structural finding is a finding, not an effect; noise on train and test torques as a fraction of each joint's "
-        f"torque standard deviation; {args.budget:g} s for each loop, its method's fit included. The noise floor is the test set's "
+        f"torque standard deviation; {budget_words}. The noise floor is the test set's "
         "mean squared noise: at \"after ÷ floor\" ≈ 1 everything but the noise is explained.",
         "",
         table(rows),

@@ -49,24 +49,37 @@ def split(held_out: str | None):
     return every.subset(np.flatnonzero(~out)), every.subset(np.flatnonzero(out))
 
 
-def run_case(method: str, held_out: str | None, budget: float, seed: int = 0) -> dict:
-    """One loop: ``method`` on the split that holds out ``held_out`` (``None``: the suite's)."""
+def run_case(method: str, held_out: str | None, budget: float | None, seed: int = 0, steps: int | None = None) -> dict:
+    """One loop: ``method`` on the split that holds out ``held_out`` (``None``: the suite's),
+    within ``budget`` seconds or, with ``steps``, that work budget (:func:`bench.residual.residual_loop`)."""
     train, test = split(held_out)
     start = time.perf_counter()
-    out = residual_loop(method, train, test, budget_s=budget, seed=seed, report=quiet)
+    out = residual_loop(method, train, test, budget_s=budget, steps=steps, seed=seed, report=quiet)
 
     def name(e):
         what = e["expression"] if e["name"] == "symbolic" else e["name"]
         return f"{what} j{'-'.join(map(str, e['joints']))}"
 
     return {
-        "method": method, "held_out": held_out, "budget": budget,
+        "method": method, "held_out": held_out, "budget": budget, "steps": steps,
+        "cut_short": sum(_cut_short(r) for r in out.rounds),
         "before": out.mse_before["test"], "after": out.mse_after["test"],
         "effects": [name(e) for e in out.effects if e["kind"] != "structural"],
         "findings": [name(e) for e in out.effects if e["kind"] == "structural"],
         "seconds": time.perf_counter() - start, "statistics_seconds": out.statistics_seconds,
         "mass_matrix_positive_definite": out.mass_matrix["positive_definite"],
     }
+
+
+def _limit(budget: float, steps: int | None) -> float:
+    """Seconds after which a loop's process is killed: 1.5 x a time budget, or the budget itself as a work budget's ceiling."""
+    return KILL_FACTOR * budget if steps is None else budget
+
+
+def _cut_short(entry: dict) -> bool:
+    """Whether a round of the loop's JSON was cut short by its time budget."""
+    stops = [entry.get("stop") or ""] + [step.get("stop") or "" for step in entry.get("trace", [])]
+    return any("budget" in stop for stop in stops)
 
 
 def run_payload(payload: dict, on_phase) -> dict:
@@ -78,14 +91,15 @@ def run_payload(payload: dict, on_phase) -> dict:
 def table(rows: list[dict]) -> str:
     lines = [
         "| held out | method | test MSE before | after | after ÷ before | effects added | structural findings "
-        "| seconds | of which statistics |",
-        "|---|---|---:|---:|---:|---|---|---:|---:|",
+        "| rounds cut short by the budget | seconds | of which statistics |",
+        "|---|---|---:|---:|---:|---|---|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
             f"| {r['held_out'] or '03, 05 (suite)'} | {r['method']} | {r['before']:.4g} | {r['after']:.4g} "
             f"| {r['after'] / r['before']:.3f} | {', '.join(r['effects']) or 'nothing'} "
-            f"| {', '.join(r['findings']) or '—'} | {r['seconds']:.1f} | {r['statistics_seconds']:.2f} |"
+            f"| {', '.join(r['findings']) or '—'} | {r.get('cut_short', '—')} | {r['seconds']:.1f} "
+            f"| {r['statistics_seconds']:.2f} |"
         )
     return "\n".join(lines)
 
@@ -109,6 +123,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--budget", type=positive, default=60.0, help="seconds for each loop on the suite's split (default 60)")
     parser.add_argument("--loro-budget", type=positive, default=30.0,
                         help="seconds for each loop that leaves one recording out (default 30)")
+    parser.add_argument("--steps", type=positive_int, default=None,
+                        help="bound each loop by N steps of its method's work instead of by time (the budgets are "
+                             "then ceilings): the same command gives the same effects on any machine")
     parser.add_argument("--workers", type=positive_int, default=2, help="leave-one-out loops at a time (default 2)")
     parser.add_argument("--out", type=Path, default=Path("results/residual/dfki.md"),
                         help="the tables to write (default results/residual/dfki.md)")
@@ -122,12 +139,13 @@ def main(args) -> int:
         return f"test MSE {r['before']:.4g} -> {r['after']:.4g} ({r['after'] / r['before']:.3f}x) in {r['seconds']:.1f} s"
 
     suite = run_jobs("bench.experiments.residual_dfki:run_payload",
-                     {f"suite split {m}": {"method": m, "held_out": None, "budget": args.budget} for m in args.methods},
-                     KILL_FACTOR * args.budget, 1, describe, print_now)
+                     {f"suite split {m}": {"method": m, "held_out": None, "budget": args.budget, "steps": args.steps}
+                      for m in args.methods},
+                     _limit(args.budget, args.steps), 1, describe, print_now)
     loro = run_jobs("bench.experiments.residual_dfki:run_payload",
-                    {f"held out {k} {m}": {"method": m, "held_out": k, "budget": args.loro_budget}
+                    {f"held out {k} {m}": {"method": m, "held_out": k, "budget": args.loro_budget, "steps": args.steps}
                      for k in recordings for m in args.methods},
-                    KILL_FACTOR * args.loro_budget, args.workers, describe, print_now)
+                    _limit(args.loro_budget, args.steps), args.workers, describe, print_now)
     suite_rows, loro_rows = list(suite.values()), list(loro.values())
     prov = provenance()
     sysid = next((r for r in suite_rows if r["method"] == "sysid"), None)

@@ -109,6 +109,9 @@ def _runs_cell(records: list[Record]) -> str:
         return "not applicable (see below)"
     text = f"{counts.get('ok', 0)}/{len(records)} ok"
     others = [f"{v} {k.replace('_', ' ')}" for k, v in sorted(counts.items()) if k != "ok"]
+    stages = Counter(stage for r in records if r.status == "ok" for stage in r.failed_stages)
+    if stages:  # ok runs whose fit counts, and a later stage of which failed
+        others.append("a stage after the fit failed: " + ", ".join(f"{s} in {n}" for s, n in sorted(stages.items())))
     return text + (f" ({', '.join(others)})" if others else "")
 
 
@@ -117,7 +120,11 @@ def _exact_cell(records: list[Record]) -> str:
     late = [r.details["exact_timed_out"] for r in records if r.details.get("exact_timed_out")]
     if not judged and not late:
         reasons = {r.details.get("exact_not_judged") for r in records if r.details.get("exact_not_judged")}
-        return "not judged: no closed-form Lagrangian" if reasons else "—"
+        if reasons:
+            return "not judged: no closed-form Lagrangian"
+        if any(r.details.get("exact_not_applicable") for r in records):
+            return "not applicable: L is no function of q, q̇ alone"
+        return "—"
     text = f"{sum(bool(r.exact) for r in judged)}/{len(records)} seeds exact"
     if late:
         text += f" ({len(late)} not judged: the check ran past {max(late):g} s)"
@@ -279,8 +286,8 @@ def expand_variants(records: list[Record]) -> list[Record]:
         for name, scores in (r.details or {}).get("variants", {}).items():
             blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None,
                      "curve": [], "rollout": None}  # a variant has no training curve or rollout of its own
-            fields = dict(scores)  # a stopped exact check goes to details, as execute puts a run's own
-            details = {"exact_timed_out": fields.pop("exact_timed_out")} if "exact_timed_out" in fields else {}
+            fields = dict(scores)  # a stopped or inapplicable exact check goes to details, as execute puts a run's own
+            details = {k: fields.pop(k) for k in list(fields) if k.startswith("exact_")}
             out.append(r.replace(**{**blank, "method": f"{r.method}+{name}", "status": "ok", **fields, "details": details}))
     return out
 

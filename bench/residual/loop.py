@@ -53,7 +53,8 @@ Round 0 fits; each later round traces, adds, refits and keeps or undoes:
 7. **Repeat** until a round accepts nothing, for at most :data:`MAX_ROUNDS`
    rounds.
 
-``budget_s`` bounds the whole loop: the method's fit has
+``budget_s`` bounds the whole loop (under a work budget, ``steps``, nothing
+below depends on time: see :func:`residual_loop`): the method's fit has
 :data:`FIT_SHARE` of it, each cross-fit of a kept fit :data:`CROSS_FIT_SHARE`, the polish stops starting new starts at
 :data:`POLISH_SHARE`, a round starts only if the time it is expected to
 take (the longest round so far) still fits in the budget, and tracing starts
@@ -78,6 +79,7 @@ from typing import Callable
 import numpy as np
 import sympy
 
+from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
 from bench.core.effects import EFFECTS
 from bench.core.errors import UserError
@@ -100,6 +102,8 @@ from methods import METHODS
 from systems import SYSTEMS
 
 MAX_ROUNDS = 6
+#: seconds for the whole loop where no budget is given
+DEFAULT_BUDGET_S = 60.0
 #: a symbolic model with more terms than this is refitted like a neural one
 #: (a least-squares refit of thousands of terms is neither fast nor meaningful)
 MAX_SYMBOLIC_TERMS = 200
@@ -195,11 +199,11 @@ class _Fitter:
 
     method: str
     seed: int
-    budget_s: float
+    budget: Budget
     hyperparameters: dict
 
     def fit(self, train: Dataset) -> FittedModel:
-        return METHODS[self.method](**self.hyperparameters).fit(train, "indirect", self.seed, self.budget_s)
+        return METHODS[self.method](**self.hyperparameters).fit(train, "indirect", self.seed, self.budget)
 
 
 def _nonlinear_fit(rigid: ParametricModel, train: Dataset, effects: list[Term], coef0) -> LoopModel:
@@ -505,8 +509,9 @@ def _cross_fit(fitter: "_Fitter", fit: FittedModel, train: Dataset, report: Repo
         other = fitter.fit(train.subset(np.flatnonzero(~held)))
         torque[held] = np.asarray(other.predict_torque(train.subset(np.flatnonzero(held))), dtype=np.float64)
     info = {"in_sample_mse": mse(_rigid_torque(fit, train), train.tau), "out_of_fold_mse": mse(torque, train.tau),
-            "fit_budget_s": fitter.budget_s, "seconds": round(time.perf_counter() - t0, 3)}
-    report(f"round 0: {fitter.method} cross-fitted on two halves of the training data ({fitter.budget_s:g} s each): "
+            "fit_budget_s": fitter.budget.seconds if fitter.budget.steps is None else None,
+            "fit_budget": fitter.budget.to_json(), "seconds": round(time.perf_counter() - t0, 3)}
+    report(f"round 0: {fitter.method} cross-fitted on two halves of the training data ({fitter.budget.describe()} each): "
            f"torque MSE {info['out_of_fold_mse']:.4g} on the half it did not see, "
            f"{info['in_sample_mse']:.4g} for the fit on all of it")
     return CrossFitted(fit, halves, torque), info
@@ -534,24 +539,35 @@ def _smallest_mass_eigenvalue(model: FittedModel, train: Dataset) -> float:
     return float(np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))[:, 0].min())
 
 
-def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float = 60.0, seed: int = 0,
-                  hyperparameters: dict | None = None, report: Report = print,
+def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float | None = None,
+                  steps: int | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
                   fitted: FittedModel | None = None, open_ended: bool | None = None) -> ResidualResult:
     """Run the loop in this process; see the module docstring.
 
     ``budget_s`` bounds the whole loop (its method's fit has
-    :data:`FIT_SHARE` of it). ``fitted`` is an already fitted instance of
+    :data:`FIT_SHARE` of it; default :data:`DEFAULT_BUDGET_S`). With
+    ``steps`` the loop is bounded by work instead, and ``budget_s`` is
+    only recorded, as the ceiling its caller kills it at: the fit
+    and each cross-fit do ``steps`` steps of the method's work, the polish
+    all its starts, the trace until nothing is significant, and at most
+    :data:`MAX_ROUNDS` rounds run, so that the result does not depend on
+    the machine's speed. ``fitted`` is an already fitted instance of
     ``method`` to start from instead of round 0's fit (for instance a model
     fitted before the system changed). Each round records ``seconds``, the
     time since the loop began.
     """
-    fit_budget = FIT_SHARE * budget_s
+    if budget_s is None and steps is None:
+        budget_s = DEFAULT_BUDGET_S
+    budget = Budget(seconds=budget_s, steps=steps)
+    horizon = budget.fit_seconds  # the loop's time (unlimited under a work budget)
+    fit_budget = budget.scaled(FIT_SHARE)
     fitter = _Fitter(method, seed, fit_budget, dict(hyperparameters or {}))
     start = time.perf_counter()
     given = fitted is not None  # a given fit was made on other data: what it leaves here is out of sample
     if fitted is None:
+        share = "" if steps else f" of the loop's {budget_s:g} s"
         report(f"round 0: fitting {method} on {len(train)} samples with the declared model only "
-               f"({fit_budget:g} s of the loop's {budget_s:g} s)")
+               f"({fit_budget.describe()}{share})")
         fitted = fitter.fit(train)
     else:
         report(f"round 0: starting from the given {method} fit")
@@ -566,13 +582,13 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     if isinstance(parametric, LinearParametricModel):  # least squares already reached its optimum
         model = LoopModel(parametric, [], np.zeros(0), np.zeros(0))
     elif parametric is None and not given and _keeps_its_fit(fitted):
-        cross, round0["cross_fit"] = _cross_fit(dataclasses.replace(fitter, budget_s=CROSS_FIT_SHARE * budget_s),
+        cross, round0["cross_fit"] = _cross_fit(dataclasses.replace(fitter, budget=budget.scaled(CROSS_FIT_SHARE)),
                                                 fitted, train, report)
         model = LoopModel(cross, [], np.zeros(0), np.zeros(0))
     elif parametric is not None:
         # polish the parameters, so that an optimiser's shortfall is not taken for an effect
         round0["method_mse"] = scores(model)
-        model = _polish(parametric, train, seed, deadline=start + POLISH_SHARE * budget_s)
+        model = _polish(parametric, train, seed, deadline=start + POLISH_SHARE * horizon)
         report(f"round 0: {method}'s parameters polished by nonlinear least squares "
                f"(train MSE {round0['method_mse']['train']:.4g} -> {scores(model)['train']:.4g})")
     first = model
@@ -608,7 +624,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     longest = 0.0  # the longest round so far
     for k in range(1, MAX_ROUNDS + 1):
         began = time.perf_counter()
-        if began - start + longest >= budget_s:
+        if began - start + longest >= horizon:
             rounds.append({"round": k, "mse": scores(model), "heldout_mse": heldout, "accepted": [], "trace": [],
                            "stop": f"the budget of {budget_s:g} s would be spent before a round ended",
                            "seconds": round(time.perf_counter() - start, 3)})
@@ -620,7 +636,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
         # only mend the linearisation
         steps = 1 if isinstance(model.rigid, ParametricModel) else None
         selection = timed(trace, target, train, pool, fixed, exclude=model.effects, max_steps=steps,
-                          deadline=start + TRACE_SHARE * budget_s)
+                          deadline=start + TRACE_SHARE * horizon)
         findings = {}  # what is left unexplained where the loop ends
         for term, c, se in selection.structural:
             findings[label(term)] = structural(term, c, se)
@@ -686,7 +702,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
                      "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
         mse_heldout_recordings={"before": rounds[0]["heldout_mse"], "after": heldout} if len(train.recordings()) >= 2 else None,
         lagrangian=None if expr is None else str(expr),
-        seconds=round(time.perf_counter() - start, 2), statistics_seconds=round(statistics, 2), budget_s=budget_s, fit_budget_s=fit_budget, seed=seed,
+        seconds=round(time.perf_counter() - start, 2), statistics_seconds=round(statistics, 2), budget_s=budget_s,
+        fit_budget_s=fit_budget.seconds if steps is None else None, budget=budget.to_json(), seed=seed,
         train_source=train.source, test_source=None if test is None else test.source,
         provenance=provenance(), models=(first, model),
     )
@@ -715,7 +732,8 @@ class ResidualJob:
     method: str
     train_path: str | None = None
     test_path: str | None = None
-    budget_s: float = 60.0
+    budget_s: float | None = DEFAULT_BUDGET_S
+    steps: int | None = None
     seed: int = 0
     hyperparameters: dict = field(default_factory=dict)
     json_path: str | None = None
@@ -732,7 +750,7 @@ class ResidualJob:
         """The loop in this process, with its outputs written."""
         import_plugins(self.plugins)
         train, test = self.data()
-        result = residual_loop(self.method, train, test, budget_s=self.budget_s, seed=self.seed,
+        result = residual_loop(self.method, train, test, budget_s=self.budget_s, steps=self.steps, seed=self.seed,
                                hyperparameters=self.hyperparameters, report=report)
         write_outputs(result, train, test, self.json_path, self.report_path)
         return result
@@ -753,14 +771,18 @@ def run_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
 def run_residual(job: ResidualJob, report: Report = print_now) -> ResidualResult:
     """Run ``job`` in its own process, forked from the runner's fork server,
     showing its progress lines through ``report``; the process is killed at
-    1.5 x the job's budget. Bad input raises :class:`UserError` with
-    the loop's one-line message."""
+    1.5 x the job's time budget, or at a work budget's ceiling. Bad input
+    raises :class:`UserError` with the loop's one-line message."""
+    if job.steps is None:
+        limit, what = KILL_FACTOR * job.budget_s, f"{KILL_FACTOR} x its budget of {job.budget_s:g} s"
+    else:
+        limit, what = (math.inf, "") if job.budget_s is None else (job.budget_s, f"its ceiling of {job.budget_s:g} s")
     with tempfile.TemporaryDirectory(prefix="bench-residual-") as work:
         result_file = Path(work) / "result.json"
         call = Call("bench.residual.loop:run_payload", dataclasses.asdict(job))
-        outcome = run_call(call, result_file, work, "residual", {"loop": KILL_FACTOR * job.budget_s}, echo=report)
+        outcome = run_call(call, result_file, work, "residual", {"loop": limit}, echo=report)
     if outcome.killed:
-        raise CallFailed(f"the residual loop was still running at {KILL_FACTOR} x its budget of {job.budget_s:g} s; killed")
+        raise CallFailed(f"the residual loop was still running at {what}; killed")
     if outcome.result is None:
         raise CallFailed(f"the residual loop's process exited with code {outcome.exit_code}: {outcome.log_tail}")
     if "user_error" in outcome.result:

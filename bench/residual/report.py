@@ -48,7 +48,7 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         f"# Residual loop: {result.system}, {result.method}",
         "",
         f"Training data: `{result.train_source}`; test data: `{result.test_source}`. "
-        f"{result.budget_s:g} s for the loop ({result.fit_budget_s:g} s of it the method's fit), seed {result.seed}; "
+        f"{_budget(result)}, seed {result.seed}; "
         f"{result.seconds:g} s in all"
         + (f", {result.statistics_seconds:g} s of it the loop's statistics" if result.statistics_seconds is not None else "")
         + f". Held out: {result.validation}.",
@@ -94,3 +94,10 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
     if result.lagrangian:
         lines += ["", "Final Lagrangian:", "", f"    {result.lagrangian}"]
     return "\n".join(lines) + "\n"
+
+
+def _budget(result: ResidualResult) -> str:
+    """The loop's budget in words: seconds with the fit's share, or steps of work."""
+    if (result.budget or {}).get("kind") == "steps":
+        return f"a work budget of {result.budget['steps']} steps for the method's fit (and each cross-fit)"
+    return f"{result.budget_s:g} s for the loop ({result.fit_budget_s:g} s of it the method's fit)"

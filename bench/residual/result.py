@@ -21,6 +21,9 @@ class ResidualResult:
     model's is positive definite there. ``statistics_seconds`` is the part of
     ``seconds`` spent in the loop's statistics: selection, pruning (with its
     refits), and the held-out, mass-matrix and standard-error checks.
+    ``budget`` is the loop's budget, seconds or steps of work
+    (:meth:`bench.core.budget.Budget.to_json`); under a work budget
+    ``budget_s`` is its ceiling (``None``: none) and ``fit_budget_s`` is ``None``.
     ``models`` holds the fitted models before and after the loop, for the
     report's residual plots; it is not part of the JSON.
     """
@@ -33,7 +36,7 @@ class ResidualResult:
     rounds: list[dict]
     lagrangian: str | None
     seconds: float
-    budget_s: float
+    budget_s: float | None
     fit_budget_s: float | None
     seed: int
     train_source: str
@@ -42,6 +45,7 @@ class ResidualResult:
     mse_heldout_recordings: dict | None = None
     mass_matrix: dict | None = None
     statistics_seconds: float | None = None
+    budget: dict | None = None
     provenance: dict = field(default_factory=dict)
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 

@@ -18,16 +18,20 @@ from typing import Callable
 
 import torch
 
+from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate, read_csv
 from bench.core.errors import ConfigError
 from bench.core.timeouts import Timeout
 from bench.core.system import System
-from bench.evaluation.scores import not_judged, rollout_entry, scores
+from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record
 from bench.runner.spec import TEST_SEED_OFFSET, RunSpec
 from methods import METHODS
 from systems import SYSTEMS
+
+#: seconds a rollout of a time-budgeted run may take (under a work budget only its count of evaluations bounds it)
+ROLLOUT_LIMIT_S = 120.0
 
 
 def method_config(spec: RunSpec) -> dict:
@@ -99,11 +103,22 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     Variants a method derives from its fit (:meth:`methods.base.Method.variants`)
     are scored on the same data and stored under ``details["variants"]``.
 
-    ``on_phase`` is called with ``"fit"`` when the fit starts and with
-    ``"evaluate"`` when it has ended (the budget covers the fit only).
-    ``data`` is an already loaded ``(train, test)`` pair, else it is loaded
-    from the spec.
+    ``on_phase`` is called with ``"prepare"`` before the method's one-time
+    work that its budget does not cover (:meth:`methods.base.Method.prepare`),
+    with ``"fit"`` when the fit starts and with ``"evaluate"`` when it has
+    ended. ``data`` is an already loaded ``(train, test)`` pair, else it is
+    loaded from the spec.
+
+    What follows the fit runs in stages (:class:`~bench.evaluation.scores.Stages`):
+    a stage that fails (the expression, exact recovery, a variant, the
+    rollout, the method's details) is named in ``failed_stages`` with its
+    error, its traceback goes to the run's log, and the run keeps its fit's
+    train and test MSE, steps and curve, with status ``ok``. A fit that
+    fails, or whose MSE cannot be computed, gives status ``failed``; its
+    traceback is printed too.
     """
+    phase = on_phase or (lambda name: None)
+    fields: dict = {}
     try:
         import_plugins(spec.plugins)
         early = preflight(spec)
@@ -116,57 +131,75 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         warm_up_torch()
         timing = {"load_s": time.perf_counter() - clock}
         memory = {"start_mb": resident_mb()}
-        if on_phase:
-            on_phase("fit")
-        method.fit(train, spec.experiment, spec.seed, spec.budget_s, system=system)
-        if on_phase:
-            on_phase("evaluate")
-        clock = time.perf_counter()
-        result = scores(method, spec.experiment, train, test, system)
-        timed_out = {"exact_timed_out": result.pop("exact_timed_out")} if "exact_timed_out" in result else {}
+        budget = spec.budget
+        phase("prepare")
+        prepared = method.prepare(train, spec.experiment)
+        phase("fit")
+        method.fit(train, spec.experiment, spec.seed, budget, system=system)
+        phase("evaluate")
         info = method.fit_info
-        variants = {
-            name: {"status": "failed", "error": model} if isinstance(model, str)
-            else {"status": "ok", **scores(model, spec.experiment, train, test, system)}
-            for name, model in method.variants().items()
-        }
-        timing["evaluate_s"] = time.perf_counter() - clock
-        fields = dict(
-            **result,
-            steps=info.get("steps"),
-            fit_seconds=info.get("fit_seconds"),
-            stop_reason=info.get("stop_reason"),
-            curve=_thin(info.get("curve", [])),
-            hyperparameters=method.hyperparameters(),
-            details={
-                "train_source": train.source,
-                "test_source": None if test is None else test.source,
-                "n_train": len(train),
-                "n_test": None if test is None else len(test),
-                "domain": dataclasses.asdict(system.domain),
-                **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason")},
-                **method.record_details(),
-                "variants": variants,
-                **({"exact_not_judged": not_judged(system)} if not_judged(system) and system.simulated else {}),
-                **timed_out,
-            },
+        fields.update(
+            steps=info.get("steps"), fit_seconds=info.get("fit_seconds"), stop_reason=info.get("stop_reason"),
+            curve=_thin(info.get("curve", [])), hyperparameters=method.hyperparameters(), replay=info.get("schedule"),
         )
+        clock = time.perf_counter()
+        fields.update(errors(method, spec.experiment, train, test))
+        stages = Stages()
+        fields["expression"] = stages.run("expression", expression_entry, method)
+        exact = stages.run("exact", exact_entry, method, spec.experiment, system, default={"exact": None})
+        fields["exact"] = exact.pop("exact")
+        variants = {}
+        for name, model in stages.run("variants", method.variants, default={}).items():
+            if isinstance(model, str):
+                variants[name] = {"status": "failed", "error": model}
+                continue
+            variant = Stages(prefix=f"variant {name}: ")
+            scored = variant.run("scores", scores, model, spec.experiment, train, test, system, variant)
+            variants[name] = {"status": "failed", "error": variant.failed[variant.prefix + "scores"]} if scored is None \
+                else {"status": "ok", **scored}
+            stages.failed.update(variant.failed)
+        timing["evaluate_s"] = time.perf_counter() - clock
+        fields["details"] = {
+            "train_source": train.source,
+            "test_source": None if test is None else test.source,
+            "n_train": len(train),
+            "n_test": None if test is None else len(test),
+            "domain": dataclasses.asdict(system.domain),
+            **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason", "schedule")},
+            "prepare_seconds": prepared or info.get("prepare_seconds", 0.0),
+            **stages.run("details", method.record_details, default={}),
+            "variants": variants,
+            **({"exact_not_judged": not_judged(system)} if not_judged(system) and system.simulated else {}),
+            **exact,
+        }
         if system.simulated and test is not None and spec.rollout:
             clock = time.perf_counter()
-            fields["rollout"] = rollout_entry(method, system, test)
+            limit = None if budget.kind == STEPS else ROLLOUT_LIMIT_S  # a work budget's results do not depend on time
+            fields["rollout"] = stages.run("rollout", rollout_entry, method, system, test, limit)
             timing["rollout_s"] = time.perf_counter() - clock
         fields["details"]["timing"] = {k: round(v, 3) for k, v in timing.items()}
         memory["peak_mb"] = peak_resident_mb()
         fields["details"]["memory"] = {k: round(v, 1) for k, v in memory.items()}
+        fields["failed_stages"] = stages.failed
         bad = [k for k in ("train_mse", "test_mse") if fields[k] is not None and not math.isfinite(fields[k])]
         if bad:
             return Record.new(spec, "failed", error=f"non-finite {' and '.join(bad)} (the model produced NaN or inf)", **fields)
         return Record.new(spec, "ok", **fields)
     except Timeout as exc:  # the method's own work ran out of its budget and stopped itself
-        return Record.new(spec, "timeout", error=f"out of budget: {exc}")
+        return Record.new(spec, "timeout", error=f"out of budget: {exc}", **_kept(fields))
     except Exception as exc:
+        traceback.print_exc()  # to the run's log
         tb = traceback.format_exc(limit=-6)
-        return Record.new(spec, "failed", error=f"{type(exc).__name__}: {exc}", details={"traceback": tb})
+        kept = _kept(fields)
+        kept["details"] = {**kept.get("details", {}), "traceback": tb}
+        return Record.new(spec, "failed", error=f"{type(exc).__name__}: {exc}", **kept)
+
+
+def _kept(fields: dict) -> dict:
+    """What a run that failed after its fit keeps of it: steps, curve and
+    whatever MSE was computed (a record of status ``failed`` or ``timeout``)."""
+    return {k: v for k, v in fields.items() if k in ("steps", "fit_seconds", "stop_reason", "curve", "hyperparameters",
+                                                      "replay", "train_mse", "test_mse", "details")}
 
 
 def run_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:

@@ -21,32 +21,54 @@
 from __future__ import annotations
 
 import fcntl
+import math
 import os
 import tempfile
 import time
 from pathlib import Path
 from typing import Iterable
 
+from bench.core.budget import SECONDS
 from bench.core.errors import UserError
 from bench.core.processes import process_alive
 from bench.evaluation.scores import MAX_EXPRESSION_CHARS  # noqa: F401  (a name of the old harness module)
 from bench.runner.execute import execute, load_data, make_system, method_config, preflight, warm_up_torch  # noqa: F401
+from bench.runner.code import code_hash
 from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, fork_server, map_interruptibly, run_call  # noqa: F401
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now, quiet  # noqa: F401
 from bench.runner.records import Record, RecordError, quarantine, read_record, record_path, write_record
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, TEST_SEED_OFFSET, RunSpec, build_specs  # noqa: F401
 
-#: A run's fit is killed at this multiple of its budget.
+#: A run's fit is killed at this multiple of its time budget.
 KILL_FACTOR = 1.5
 #: What follows a run's fit (evaluation on the full data, variants, exact
 #: recovery, rollout) may take its budget, and at least this many seconds.
 EVALUATION_MIN_S = 120.0
+#: The method's one-time work before its budget starts (compiling for the
+#: data's shapes, :meth:`methods.base.Method.prepare`) may take its budget,
+#: and at least this many seconds.
+PREPARE_MIN_S = 900.0
 
 
-def evaluation_limit(budget_s: float) -> float:
-    """Seconds a run may take after its fit: ``max(EVALUATION_MIN_S, budget_s)``."""
-    return max(EVALUATION_MIN_S, budget_s)
+def evaluation_limit(budget_s: float | None) -> float:
+    """Seconds a run may take after its fit: ``max(EVALUATION_MIN_S, budget_s)``
+    (no limit for a work budget without a ceiling)."""
+    return math.inf if budget_s is None else max(EVALUATION_MIN_S, budget_s)
+
+
+def phase_limits(spec: RunSpec) -> dict[str, float]:
+    """Seconds a run may spend in each phase: preparing, fitting (its time
+    budget times :data:`KILL_FACTOR`, or a work budget's ceiling) and after
+    the fit."""
+    budget = spec.budget
+    fit = KILL_FACTOR * budget.seconds if budget.kind == SECONDS else budget.ceiling_s
+    return {"prepare": max(PREPARE_MIN_S, spec.budget_s or 0.0), "fit": fit, "evaluate": evaluation_limit(spec.budget_s)}
+
+
+def log_path(out_dir: str | os.PathLike, rid: str) -> Path:
+    """Where a run's output goes: ``OUT/logs/<run id>.log`` (a failed run's traceback among it)."""
+    return Path(out_dir) / "logs" / f"{rid}.log"
 
 
 def run_isolated(spec: RunSpec, out_dir: str | os.PathLike, *, poll_s: float = 0.05, fresh: bool = False) -> Record:
@@ -61,24 +83,28 @@ def run_isolated(spec: RunSpec, out_dir: str | os.PathLike, *, poll_s: float = 0
     """
     out_dir = Path(out_dir)
     path = record_path(out_dir, spec.run_id)
-    limits = {"fit": KILL_FACTOR * spec.budget_s, "evaluate": evaluation_limit(spec.budget_s)}
+    limits = phase_limits(spec)
+    code = code_hash(spec.method, spec.system, spec.plugins)
     call = Call("bench.runner.execute:run_payload", spec.to_dict(), spec.threads)
     outcome = run_call(call, path, out_dir / "logs", spec.run_id, limits, fresh=fresh, poll_s=poll_s)
     if outcome.interrupted:  # no record: the resume runs it again
         raise KeyboardInterrupt(f"{spec.run_id} interrupted")
     if outcome.result is not None:
-        return Record.from_json(outcome.result, str(path))
-    if not outcome.killed:
+        record = Record.from_json(outcome.result, str(path)).replace(code=code)
+    elif not outcome.killed:
         error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
-        record = Record.new(spec, "failed", elsewhere=True, error=error)
+        record = Record.new(spec, "failed", elsewhere=True, error=error, code=code)
     elif outcome.phase == "fit":
+        what = (f"{KILL_FACTOR} x its {spec.budget_s:g} s budget" if spec.budget.kind == SECONDS
+                else f"its ceiling of {spec.budget_s:g} s")
+        record = Record.new(spec, "timeout", elsewhere=True, error=f"fit still running at {what}; killed", code=code)
+    elif outcome.phase in ("evaluate", "prepare"):
+        what = "evaluation after the fit" if outcome.phase == "evaluate" else "preparation before the fit (compiling)"
         record = Record.new(spec, "timeout", elsewhere=True,
-                            error=f"fit still running at {KILL_FACTOR} x its {spec.budget_s:g} s budget; killed")
-    elif outcome.phase == "evaluate":
-        record = Record.new(spec, "timeout", elsewhere=True,
-                            error=f"evaluation after the fit still running after {limits['evaluate']:g} s; killed")
+                            error=f"{what} still running after {limits[outcome.phase]:g} s; killed", code=code)
     else:
-        record = Record.new(spec, "failed", elsewhere=True, error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
+        record = Record.new(spec, "failed", elsewhere=True, error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed",
+                            code=code)
     write_record(path, record)
     return record
 
@@ -128,12 +154,17 @@ def run_matrix(
     resume: bool = True,
     report: Report | None = None,
     cluster=None,
+    retry_failed: bool = False,
 ) -> list[Record]:
     """Run every spec, ``workers`` at a time, each in its own process.
 
     Runs that already have a valid record in ``out_dir`` are skipped
-    (``resume``); a record file that is not valid is reported in one line,
-    moved to ``records/corrupt/`` and its run redone. Unavailable and
+    (``resume``), unless the record was made by other code (its ``code``
+    hash, :mod:`bench.runner.code`, differs from the code's now) or for
+    another configuration (its spec differs), or, with ``retry_failed``,
+    the run failed or timed out; each such run is redone, and the report
+    says how many and why. A record file that is not valid is reported in
+    one line, moved to ``records/corrupt/`` and its run redone. Unavailable and
     not-applicable runs are recorded without starting a process. Returns the
     records in the order of ``specs``. Holds :class:`FolderLock` on
     ``out_dir`` throughout; an interrupted matrix kills its running children.
@@ -151,53 +182,79 @@ def run_matrix(
     workers = workers or default_workers()
     out_dir = Path(out_dir)
     with FolderLock(out_dir):
-        return _run_matrix(specs, out_dir, workers, resume, report, cluster)
+        return _run_matrix(specs, out_dir, workers, resume, report, cluster, retry_failed)
 
 
-def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool, report: Report, cluster) -> list[Record]:
+def stale(record: Record, spec: RunSpec, retry_failed: bool = False) -> str | None:
+    """Why ``record`` does not stand for ``spec`` as it would run now (``None``: it does)."""
+    now = code_hash(spec.method, spec.system, spec.plugins)
+    if record.code is not None and now is not None and record.code.get("hash") != now["hash"]:
+        return "made by other code"
+    if record.spec and RunSpec.from_dict(record.spec).to_dict() != spec.to_dict():
+        return "made with another configuration"
+    if retry_failed and record.status in ("failed", "timeout"):
+        return record.status
+    return None
+
+
+def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool, report: Report, cluster,
+                retry_failed: bool) -> list[Record]:
     results: dict[str, Record] = {}
     todo: list[RunSpec] = []
     resumed = cannot_run = 0
+    redone: dict[str, int] = {}
     for spec in specs:
         path = record_path(out_dir, spec.run_id)
         if resume and path.exists():
             try:
-                results[spec.run_id] = read_record(path)
-                resumed += 1
-                continue
+                record = read_record(path)
             except RecordError as exc:
                 report(f"warning: {exc}; moved to {quarantine(path)}, and the run is redone")
+            else:
+                why = stale(record, spec, retry_failed)
+                if why is None:
+                    results[spec.run_id] = record
+                    resumed += 1
+                    continue
+                redone[why] = redone.get(why, 0) + 1
         early = preflight(spec)
         if early:
+            early = early.replace(code=code_hash(spec.method, spec.system, spec.plugins))
             write_record(path, early)
             results[spec.run_id] = early
             cannot_run += 1
             continue
         todo.append(spec)
+    if report and redone:
+        report("redoing " + ", ".join(f"{n} run(s) whose record was {why}" if why.startswith("made") else
+                                      f"{n} run(s) that {'failed' if why == 'failed' else 'timed out'}"
+                                      for why, n in sorted(redone.items())))
     if report and cannot_run:
         report(f"{cannot_run} run(s) recorded without running (method unavailable here or not applicable)")
     tracker = MatrixProgress(len(todo), resumed, workers, report)
 
-    def done(record: Record) -> Record:
-        tracker.done(record.status == "ok", _describe(record))
+    def done(record: Record, log: Path | None = None) -> Record:
+        tracker.done(record.status == "ok", _describe(record, log))
         return record
 
     if todo and cluster is not None:
         for record in _run_on_dask(todo, out_dir, cluster, workers):
             results[record.run_id] = done(record)
     elif todo:
-        for record in map_interruptibly(lambda s: done(run_isolated(s, out_dir)), todo, workers):
+        for record in map_interruptibly(lambda s: done(run_isolated(s, out_dir), log_path(out_dir, s.run_id)), todo, workers):
             results[record.run_id] = record
     tracker.summary()
     return [results[s.run_id] for s in specs]
 
 
-def _describe(record: Record) -> str:
+def _describe(record: Record, log: Path | None = None) -> str:
     if record.status == "ok":
         test = record.test_mse
         outcome = f"ok train {record.train_mse:.3g} test {'-' if test is None else f'{test:.3g}'}"
+        if record.failed_stages:
+            outcome += f" (failed after the fit: {', '.join(record.failed_stages)}{f'; log {log}' if log else ''})"
     else:
-        outcome = f"{record.status} ({record.error})"
+        outcome = f"{record.status} ({record.error}{f'; log {log}' if log else ''})"
     return f"{record.system} {record.method} {record.experiment} seed={record.seed}: {outcome}"
 
 

@@ -6,7 +6,18 @@ seed, budget, hyperparameters, data), its status (``ok``, ``failed``,
 test MSE in the experiment's own target (``L`` for direct, ``tau`` for
 indirect), the best-so-far curve of training MSE over wall-clock time, the
 number of steps, the learned expression where there is one, and provenance
-(:mod:`bench.runner.provenance`).
+(:mod:`bench.runner.provenance`). It also says:
+
+* ``budget``: the budget's kind, seconds or steps of work
+  (:meth:`bench.core.budget.Budget.to_json`);
+* ``replay``: what ``python -m bench rerun`` needs to repeat the run: the
+  work it did and its schedule (:class:`~bench.core.budget.Schedule`), or
+  ``{"unavailable": why}``;
+* ``code``: a hash of the code that ran (:mod:`bench.runner.code`), by
+  which a resumed matrix knows a run made by other code;
+* ``failed_stages``: the stages after the fit that failed
+  (``{"exact": "ValueError: ..."}``); the run keeps its fit's MSE and stays
+  ``ok``.
 
 On disk a record is the JSON object of :meth:`Record.to_json`, written
 atomically to ``OUT/records/<run id>.json``; :meth:`Record.from_json`
@@ -27,6 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from bench.core.budget import Budget
 from bench.core.data import EXPERIMENTS
 from bench.core.errors import UserError
 from bench.core.fileio import write_json
@@ -37,7 +49,8 @@ SCHEMA = "syrenets-bench/record/1"
 STATUSES = ("ok", "failed", "timeout", "unavailable", "not_applicable")
 #: fields added to the schema after records were first published, with the
 #: value a record written before them has
-ADDED_LATER = {"exact": None, "noise": 0.0, "rollout": None}
+ADDED_LATER = {"exact": None, "noise": 0.0, "rollout": None, "budget": None, "replay": None, "code": None,
+               "failed_stages": {}}
 #: the status of a run whose record file was corrupt (in memory only, never written)
 MISSING = "missing"
 #: where corrupt record files are moved, under ``OUT/records``
@@ -58,7 +71,7 @@ class Record:
     method: str
     experiment: str
     seed: int
-    budget_s: float
+    budget_s: float | None
     noise: float
     target: str
     spec: dict
@@ -76,6 +89,10 @@ class Record:
     hyperparameters: dict | None = None
     details: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
+    budget: dict | None = None
+    replay: dict | None = None
+    code: dict | None = None
+    failed_stages: dict = field(default_factory=dict)
 
     @classmethod
     def new(cls, spec: RunSpec | dict, status: str, *, elsewhere: bool = False, **fields) -> "Record":
@@ -85,6 +102,7 @@ class Record:
         if status not in STATUSES:
             raise ValueError(f"unknown status {status!r}")
         noise = spec.get("noise", 0.0)
+        fields.setdefault("budget", RunSpec.from_dict(spec).budget.to_json())
         return cls(
             schema=SCHEMA,
             run_id=run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], noise),
@@ -92,6 +110,17 @@ class Record:
             budget_s=spec["budget_s"], noise=noise, target="L" if spec["experiment"] == "direct" else "tau",
             spec=spec, status=status, provenance=provenance(spec.get("threads", 1) if elsewhere else None), **fields,
         )
+
+    @property
+    def budget_kind(self) -> str:
+        """``"seconds"`` or ``"steps"`` (a record written before budgets had kinds had seconds)."""
+        return (self.budget or {}).get("kind", "seconds")
+
+    def describe_budget(self) -> str:
+        """The budget in words: ``60 s`` or ``5000 steps``."""
+        if self.budget is None:
+            return f"{self.budget_s:g} s"
+        return Budget.from_json(self.budget).describe()
 
     @classmethod
     def missing(cls, rid: str, why: str) -> "Record | None":
@@ -139,12 +168,22 @@ class Record:
             raise bad("experiment", f"must be one of {', '.join(EXPERIMENTS)}")
         if not _is_int(obj["seed"]):
             raise bad("seed", "must be an integer")
-        for name in ("budget_s", "noise"):
-            if not _is_number(obj[name]):
-                raise bad(name, "must be a number")
-        for name, kind in (("spec", dict), ("details", dict), ("provenance", dict), ("curve", list)):
+        if not _is_number(obj["noise"]):
+            raise bad("noise", "must be a number")
+        if obj["budget_s"] is not None and not _is_number(obj["budget_s"]):
+            raise bad("budget_s", "must be a number or null")
+        for name, kind in (("spec", dict), ("details", dict), ("provenance", dict), ("curve", list),
+                           ("failed_stages", dict)):
             if not isinstance(obj[name], kind):
                 raise bad(name, f"must be a JSON {'object' if kind is dict else 'array'}")
+        for name in ("budget", "replay", "code"):
+            if obj[name] is not None and not isinstance(obj[name], dict):
+                raise bad(name, "must be a JSON object or null")
+        if obj["budget"] is not None:
+            try:
+                Budget.from_json(obj["budget"])
+            except UserError as exc:
+                raise bad("budget", f"is not a budget ({exc})") from None
         for name in ("train_mse", "test_mse", "fit_seconds"):
             if obj[name] is not None and not _is_number(obj[name]):
                 raise bad(name, "must be a number or null")

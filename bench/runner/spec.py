@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Iterable
 
 from bench.core.arguments import positive_int
+from bench.core.budget import Budget, Schedule
 
 #: The ten seeds of every table, written once.
 SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9)
@@ -76,13 +77,19 @@ class RunSpec:
     plugins
         Python files or modules to import before resolving names, for methods
         and systems registered outside the suite.
+    budget_s, steps, schedule
+        The budget (:mod:`bench.core.budget`): ``budget_s`` seconds of
+        wall-clock time; or, with ``steps``, that many steps of the method's
+        work, ``budget_s`` then being a ceiling past which the run is killed
+        (``None``: none); with ``schedule`` as well, the replay of a
+        time-budgeted run (:class:`~bench.core.budget.Schedule` as JSON).
     """
 
     system: str
     method: str
     experiment: str
     seed: int
-    budget_s: float
+    budget_s: float | None
     profile: str = "default"
     hyperparameters: dict = field(default_factory=dict)
     n_train: int = N_TRAIN
@@ -94,10 +101,21 @@ class RunSpec:
     threads: int = 1
     rollout: bool = True
     noise: float = 0.0
+    steps: int | None = None
+    schedule: dict | None = None
+
+    def __post_init__(self):
+        _ = self.budget  # a spec without a valid budget is refused where it is made (ConfigError)
 
     @property
     def run_id(self) -> str:
         return run_id(self.system, self.method, self.experiment, self.seed, self.noise)
+
+    @property
+    def budget(self) -> Budget:
+        if self.schedule is not None:
+            return Budget.replaying(Schedule.from_json(self.schedule), self.budget_s)
+        return Budget(seconds=self.budget_s, steps=self.steps)
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -116,11 +134,12 @@ def build_specs(
     methods: Iterable[str],
     experiments: Iterable[str],
     seeds: Iterable[int],
-    budget_s: float,
+    budget_s: float | None,
     noises: Iterable[float] = (0.0,),
     **common,
 ) -> list[RunSpec]:
-    """The matrix systems x methods x experiments x noise levels x seeds."""
+    """The matrix systems x methods x experiments x noise levels x seeds
+    (``steps=N`` in ``common`` for a work budget, ``budget_s`` then its ceiling)."""
     noises = list(noises)
     return [
         RunSpec(system=s, method=m, experiment=e, seed=k, budget_s=budget_s, noise=float(z), **common)

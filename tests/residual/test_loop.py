@@ -20,14 +20,17 @@ from systems import get_system
 
 ROOT = Path(__file__).resolve().parents[2]
 
-#: the method's fit ends after this many steps (or at its share of the budget): SysId's
-#: parameters, polished by the loop anyway, then do not depend on the machine's speed, and on a
-#: slow machine the loop's tracing keeps its time
-STEPS = {"max_steps": 1000}
-#: the budget of a loop whose fit is bounded by :data:`STEPS` (or solved, for a linear form): a
-#: ceiling, not what the loop takes, which is what its tracing needs. At 20 s, on a machine half
-#: as fast, tracing was cut short now and then (one run in three or four)
-BUDGET = 60
+#: every loop here is bounded by work, not time (``residual_loop(..., steps=N)``): the method's fit
+#: does N steps, the polish all its starts and the trace until nothing is significant, so what a
+#: test sees does not depend on the machine's speed or load. SysId's parameters are polished by the
+#: loop anyway; 1000 of its steps leave them far from the optimum on purpose now and then.
+SYSID = 1000
+#: a solved method (sparse regression, a linear form) does its work in one step
+SOLVED = 1
+#: the MLP's steps, and a smaller network than its default: enough that it learns the rigid dynamics
+#: well enough for the friction to stand out
+MLP = 300
+SMALL_MLP = {"hidden": 64, "layers": 3, "eval_samples": 256}
 
 
 def quiet(_line):
@@ -56,7 +59,7 @@ def data_with(effects, n=3000, noise=0.0, system="double_pendulum"):
 )
 def test_each_effect_is_named_on_its_joint_with_its_coefficient(effects):
     train, test = data_with(effects)
-    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     want = {(name, j + 1): c for name, coefs in effects.items() for j, c in enumerate(coefs) if c}
     found = {(e["name"], e["joint"]): e["coefficient"] for e in out.effects}
     assert set(found) == set(want)
@@ -73,7 +76,7 @@ def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec
 
     effects = parse_effects([spec], 2)
     train, test = data_with(effects)
-    out = residual_loop(method, train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
+    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
     (effect,) = out.effects
     (name, pairs), = effects.items()
     (value,) = pairs.values()
@@ -88,7 +91,7 @@ def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec
 def test_armature_is_found_by_sysid_whose_declared_form_cannot_absorb_it():
     # a generic library would absorb qd_1^2 / 2 into L; the declared form cannot
     train, test = data_with({"armature": (0.3, 0.0)}, n=1500)
-    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
     assert [(e["name"], e["joint"]) for e in out.effects] == [("armature", 1)]
     assert out.effects[0]["coefficient"] == pytest.approx(0.3, rel=0.05)
     assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
@@ -96,15 +99,15 @@ def test_armature_is_found_by_sysid_whose_declared_form_cannot_absorb_it():
 
 def test_clean_data_is_left_alone():
     train, test = data_with({})
-    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     assert out.effects == [] and out.mse_after == out.mse_before
 
 
 def test_noise_alone_produces_no_effect_and_noisy_effects_are_still_found():
     train, test = data_with({}, noise=0.05)
-    assert residual_loop("sparse", train, test, budget_s=20, report=quiet).effects == []
+    assert residual_loop("sparse", train, test, steps=SOLVED, report=quiet).effects == []
     train, test = data_with({"viscous_friction": (0.8, 0.5)}, noise=0.01)
-    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     found = {(e["name"], e["joint"]): e for e in out.effects}
     assert set(found) == {("viscous_friction", 1), ("viscous_friction", 2)}
     for (name, joint), c in {("viscous_friction", 1): 0.8, ("viscous_friction", 2): 0.5}.items():
@@ -130,7 +133,7 @@ def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
                 "--out", str(tmp_path / f"{name}.csv"), "--effects", "viscous_friction=0.8,0.5", "coulomb_friction=1.5,0.7")
         assert r.returncode == 0, r.stderr
     r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--train", str(tmp_path / "train.csv"),
-            "--test", str(tmp_path / "test.csv"), "--budget", "20", "--json", str(tmp_path / "out.json"),
+            "--test", str(tmp_path / "test.csv"), "--steps", "1", "--json", str(tmp_path / "out.json"),
             "--report", str(tmp_path / "report.md"))
     assert r.returncode == 0, r.stderr
     # the loop runs in its own process; its progress lines reach the terminal as they are printed
@@ -209,7 +212,7 @@ def test_open_ended_search_names_a_dissipation_outside_the_named_list():
     train, test = generate(s, 3000, 0), generate(s, 1500, 1000)
     for d in (train, test):
         d.tau[:, 1] += 0.4 * d.qd[:, 1] * np.abs(d.qd[:, 1])
-    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     (e,) = out.effects
     assert e["name"] == "symbolic" and e["kind"] == "dissipative" and e["expression"] == "Abs(qd_2)**3/3"
     assert e["joints"] == [2] and e["coefficient"] == pytest.approx(0.4, rel=0.02)
@@ -227,7 +230,7 @@ def test_open_ended_search_names_a_lagrangian_term_the_declared_form_lacks():
     extra = Term.lagrangian(0.3 * v1**2 * sympy.cos(q2))
     s = get_system("double_pendulum")
     train, test = (d.replace(tau=d.tau + extra.torque(d)) for d in (generate(s, 3000, 0), generate(s, 1500, 1000)))
-    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
     (e,) = out.effects
     assert e["name"] == "symbolic" and e["kind"] == "conservative" and e["expression"] == "qd_1**2*cos(q_2)"
     assert e["joints"] == [1, 2] and e["parameters"]["c"]["value"] == pytest.approx(0.3, rel=0.02)
@@ -239,7 +242,7 @@ def test_a_named_effect_is_preferred_to_an_open_ended_term_that_mimics_it():
     # SysId's gravity absorbs sin(q_1) of a spring on joint 1, leaving c (q_1 - sin q_1) ~ q_1^3;
     # the spring is tried first and named
     train, test = data_with({"spring": (2.0, 1.0)}, n=2000, noise=0.01)
-    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
     assert sorted((e["name"], e["joint"]) for e in out.effects) == [("spring", 1), ("spring", 2)]
 
 
@@ -256,26 +259,18 @@ def test_a_trace_cut_short_by_the_budget_says_so_rather_than_that_nothing_is_lef
     monkeypatch.setattr(loop, "TRACE_SHARE", 0.0)  # tracing's time is over as soon as it begins
     train, test = data_with({"viscous_friction": (0.8, 0.5)}, n=1000)
     lines = []
-    out = residual_loop("sparse", train, test, budget_s=20, report=lines.append)
+    out = residual_loop("sparse", train, test, budget_s=20, report=lines.append)  # a time budget, as it is of one
     assert out.effects == [] and out.rounds[1]["trace"][-1]["stop"] == "the loop's budget: no further step started"
     assert any("budget ran out before the trace found anything" in line for line in lines), lines
     assert not any("nothing significant left" in line for line in lines)
 
 
-def test_a_neural_model_keeps_its_fit_and_only_the_effects_are_fitted(monkeypatch):
-    # the budget is the whole loop's: the fit has half of it, each of the two cross-fits 15 % (wall
-    # times are measured by the residual command, not asserted here). The fits take 80 % of the
-    # budget whatever the machine, and tracing may start steps until 85 %: on a machine twice as
-    # slow, what comes between them took more than that second. Tracing gets until 95 % here, so
-    # that the test is of what the loop does, not of the machine's speed. For the same reason the
-    # MLP's progress is evaluated on 256 samples, not 2000: there, on such a machine, evaluations took
-    # 6 of the fit's 10 s and left it 167 steps.
-    import bench.residual.loop as loop
-
-    monkeypatch.setattr(loop, "TRACE_SHARE", 0.95)
+def test_a_neural_model_keeps_its_fit_and_only_the_effects_are_fitted():
+    # under a work budget the fit and each of the two cross-fits do the same steps
     train, test = data_with({"viscous_friction": (0.8, 0.5), "coulomb_friction": (1.5, 0.7)}, n=2000)
-    out = residual_loop("mlp", train, test, budget_s=20, hyperparameters={"eval_samples": 256}, report=quiet)
-    assert out.fit_budget_s == 10.0 and out.rounds[0]["cross_fit"]["fit_budget_s"] == 3.0
+    out = residual_loop("mlp", train, test, steps=MLP, hyperparameters=SMALL_MLP, report=quiet)
+    assert out.budget == {"kind": "steps", "steps": MLP, "ceiling_s": None} and out.fit_budget_s is None
+    assert out.rounds[0]["cross_fit"]["fit_budget"]["steps"] == MLP
     first, last = out.models
     assert last.rigid is first.rigid  # the MLP was not fitted again
     assert out.effects and out.mse_after["test"] < out.mse_before["test"]
@@ -283,7 +278,7 @@ def test_a_neural_model_keeps_its_fit_and_only_the_effects_are_fitted(monkeypatc
 
 def test_the_result_is_typed_and_its_json_is_plain():
     train, test = data_with({"offset": (0.5, 0.0)}, n=1000)
-    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     first, final = out.models
     assert final.predict_torque(test).shape == test.tau.shape and "models" not in out.to_json()
     assert json.loads(json.dumps(out.to_json())) == out.to_json()
@@ -295,7 +290,7 @@ def test_friction_on_every_joint_of_the_panda_is_found_beside_its_base_parameter
     effects = {"viscous_friction": tuple(0.1 + 0.05 * j for j in range(7)),
                "coulomb_friction": tuple(0.3 + 0.1 * j for j in range(7))}
     train, test = add_effects(generate(panda, 1000, 0), effects), add_effects(generate(panda, 500, 1000), effects)
-    out = residual_loop("sysid", train, test, budget_s=BUDGET, report=quiet)
+    out = residual_loop("sysid", train, test, steps=SOLVED, report=quiet)
     found = {(e["name"], e["joint"]): e["coefficient"] for e in out.effects}
     want = {(name, j + 1): c for name, coefs in effects.items() for j, c in enumerate(coefs)}
     assert set(found) == set(want)

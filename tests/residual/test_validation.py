@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 import torch
 
+from bench.core.budget import Budget
 from bench.core.data import generate
 from bench.core.effects import EFFECTS, add_effects
 from bench.core.terms import TermLibrary
 from bench.residual import loop, residual_loop, trace
 from bench.residual.validation import BLOCKS, cv_mse, describe, folds
 from systems import get_system
-from tests.residual.test_loop import BUDGET, STEPS, quiet
+from tests.residual.test_loop import SOLVED, SYSID, quiet
 
 
 def test_folds_are_whole_recordings_where_the_data_name_them_and_blocks_otherwise():
@@ -58,7 +59,7 @@ def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
     test = add_effects(generate(s, 1000, 1), {"viscous_friction": (0.8, 0.5)})
     calls = iter([1.0, 2.0])  # round 0, then the refitted round 1: worse
     monkeypatch.setattr(loop, "_heldout", lambda model, data: next(calls))
-    out = residual_loop("sparse", train, test, budget_s=20, report=quiet)
+    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     assert out.effects == [] and out.mse_after == out.mse_before
     last = out.rounds[-1]
     assert last["stop"].startswith("undone") and last["candidate_heldout_mse"] == 2.0 and last["heldout_mse"] == 1.0
@@ -71,7 +72,7 @@ def test_a_round_that_leaves_the_mass_matrix_not_positive_definite_is_undone(mon
     real = loop._smallest_mass_eigenvalue
     # the rod pendulum's own mass matrix is positive definite; pretend the effects spoil it
     monkeypatch.setattr(loop, "_smallest_mass_eigenvalue", lambda model, data: real(model, data) - 1e3 * bool(model.effects))
-    out = residual_loop("sparse", train, None, budget_s=20, report=quiet)
+    out = residual_loop("sparse", train, None, steps=SOLVED, report=quiet)
     assert out.effects == [] and out.mass_matrix["positive_definite"]
     assert out.mass_matrix["smallest_eigenvalue_before"] == out.mass_matrix["smallest_eigenvalue_after"] > 0
     assert "mass matrix is not positive definite" in out.rounds[-1]["stop"]
@@ -90,7 +91,7 @@ def test_a_tip_payload_under_the_rod_form_is_found_as_one_payload_with_its_mass(
     s = get_system("double_pendulum")
     fx = parse_effects(["tip_payload=0.5"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx, s), add_effects(generate(s, 1500, 1000), fx, s)
-    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
     (payload,) = out.effects
     assert payload["name"] == "tip_payload" and payload["kind"] == "conservative" and payload["joints"] == [1, 2]
     assert payload["parameters"]["m"]["value"] == pytest.approx(0.5, rel=0.02)
@@ -104,7 +105,7 @@ def test_a_lighter_tip_than_the_rod_form_allows_is_a_structural_finding():
     s = get_system("double_pendulum")
     lighter = EFFECTS["tip_payload"].term(system=s)
     train, test = (d.replace(tau=d.tau - 0.3 * lighter.torque(d)) for d in (generate(s, 3000, 0), generate(s, 1500, 1000)))
-    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
     for e in out.effects:
         if e["kind"] != "structural":
             assert all(EFFECTS[e["name"]].admissible(v["value"]) for v in e["parameters"].values()), e
@@ -121,7 +122,7 @@ def test_a_gravity_tilt_is_found_as_one_tilt_with_its_angle(alpha):
     s = get_system("double_pendulum")
     fx = parse_effects([f"gravity_tilt={alpha}"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx, s), add_effects(generate(s, 1500, 1000), fx, s)
-    out = residual_loop("sysid", train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
     (tilt,) = out.effects
     assert tilt["name"] == "gravity_tilt" and tilt["law"].startswith("L += sin(alpha)*")
     assert tilt["parameters"]["alpha"]["value"] == pytest.approx(alpha, rel=0.02)
@@ -135,7 +136,7 @@ def test_stribeck_friction_is_found_as_its_law_with_its_four_parameters(method):
     s = get_system("double_pendulum")
     fx = parse_effects(["stribeck_friction=1:1.0,2.0,0.5,0.3"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx), add_effects(generate(s, 1500, 1000), fx)
-    out = residual_loop(method, train, test, budget_s=BUDGET, hyperparameters=STEPS, report=quiet)
+    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
     (law,) = out.effects  # one entry, not a viscous term of the wrong sign and polynomials
     assert law["name"] == "stribeck_friction" and law["kind"] == "dissipative" and law["joints"] == [1]
     want = {"F_c": 1.0, "F_s": 2.0, "v_s": 0.5, "b": 0.3}
@@ -153,7 +154,7 @@ def test_friction_outside_the_laws_is_never_reported_with_an_impossible_coeffici
     rising = Term.force((1.5 - sympy.exp(-(qd / 0.5) ** 2)) * sympy.sign(qd) + 0.3 * qd, 0)
     s = get_system("double_pendulum")
     train, test = _with_force(generate(s, 3000, 0), rising), _with_force(generate(s, 1500, 1000), rising)
-    out = residual_loop("sparse", train, test, budget_s=10, report=quiet)
+    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     for e in out.effects:
         if e["kind"] == "structural":
             assert e["parameters"] == {} and "not physical" in e["finding"]
@@ -200,14 +201,14 @@ def test_an_effect_only_in_a_kept_fits_own_training_residual_is_undone_by_its_cr
     s = get_system("double_pendulum")
     train = generate(s, 1200, 0).replace(recording=np.array(list("abcd"))[np.arange(1200) // 300])
     test = generate(s, 600, 5000)
-    out = residual_loop("biased", train, test, budget_s=20, report=quiet, open_ended=False)
+    out = residual_loop("biased", train, test, steps=SOLVED, report=quiet, open_ended=False)
     assert out.rounds[0]["cross_fit"]["in_sample_mse"] == pytest.approx(0.125)  # 0.5**2 on one of two joints
     assert out.rounds[0]["cross_fit"]["out_of_fold_mse"] < 1e-20
     assert out.rounds[1]["accepted"] == ["offset on joint 1"] and "for each half" in out.rounds[1]["stop"]
     assert out.effects == [] and out.mse_after == out.mse_before
     # given a fit made on other data, what it leaves here is out of sample: the loop neither cross-fits nor refuses
     given = _Biased().fit(train, "indirect", 0, 1.0)
-    out = residual_loop("biased", train, test, budget_s=20, report=quiet, fitted=given, open_ended=False)
+    out = residual_loop("biased", train, test, steps=SOLVED, report=quiet, fitted=given, open_ended=False)
     assert "cross_fit" not in out.rounds[0] and [e["name"] for e in out.effects] == ["offset"]
 
 
@@ -217,7 +218,7 @@ def test_the_cross_fit_deals_the_recordings_into_two_halves_each_predicted_by_th
     seen = []
 
     class Fitter:
-        method, budget_s = "recorder", 1.0
+        method, budget = "recorder", Budget(seconds=1.0)
 
         def fit(self, data):
             seen.append("".join(data.recordings()))

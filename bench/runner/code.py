@@ -1,0 +1,76 @@
+"""What code made a run: a hash of the files that define its method and system.
+
+:func:`code_hash` hashes the source files of every class in the method's
+and the system's class hierarchies that the suite or a plugin defines
+(``methods/mlp.py`` and ``methods/base.py`` for the MLP;
+``systems/double_pendulum.py`` and ``bench/core/system.py`` for the double
+pendulum), and the plugin files and robot descriptions the run imports. A
+record carries it (``code``); a resumed matrix redoes a run whose record
+was made by other code (:func:`bench.runner.matrix.run_matrix`), so an
+edited plugin or method is run again instead of being reported from its old
+record. The rest of the suite (the transform, the data, the runner) is
+shared by every run and named by the record's commit (its provenance).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import os
+from pathlib import Path
+
+from bench.core.errors import UserError
+from bench.runner.plugins import URDF, import_plugins
+from bench.runner.provenance import PROJECT_ROOT
+from methods import METHODS
+from systems import SYSTEMS
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+
+
+def _class_files(cls: type) -> list[Path]:
+    """Source files of ``cls`` and its bases, outside the standard library and packages."""
+    files = []
+    for base in inspect.getmro(cls):
+        try:
+            path = Path(inspect.getsourcefile(base)).resolve()
+        except (TypeError, OSError):  # a built-in class
+            continue
+        if "site-packages" in path.parts or "dist-packages" in path.parts or path.is_relative_to(Path(os.__file__).parent):
+            continue
+        if path not in files:
+            files.append(path)
+    return files
+
+
+def _name(path: Path) -> str:
+    return str(path.relative_to(PROJECT_ROOT)) if path.is_relative_to(PROJECT_ROOT) else str(path)
+
+
+def code_files(method: str, system: str, plugins: tuple[str, ...] = ()) -> dict[str, str]:
+    """``{file: sha256 prefix}`` of the code that defines ``method`` and ``system``,
+    with the ``.py`` plugins and ``urdf:`` descriptions the run imports."""
+    paths = _class_files(METHODS[method]) + _class_files(SYSTEMS[system])
+    for plugin in plugins:
+        name = plugin[len(URDF):] if plugin.startswith(URDF) else plugin
+        if name.endswith((".py", ".urdf")) and Path(name).is_file():
+            paths.append(Path(name).resolve())
+    out = {}
+    for path in paths:
+        out.setdefault(_name(path), _digest(path))
+    return dict(sorted(out.items()))
+
+
+def code_hash(method: str, system: str, plugins: tuple[str, ...] = ()) -> dict | None:
+    """The record's ``code`` entry: ``{"hash": ..., "files": {file: digest}}``,
+    with the plugins imported first; ``None`` where a name does not resolve
+    (the run's own process then records why)."""
+    try:
+        import_plugins(plugins)
+        files = code_files(method, system, plugins)
+    except (UserError, OSError):
+        return None
+    joined = "\n".join(f"{k} {v}" for k, v in files.items())
+    return {"hash": hashlib.sha256(joined.encode()).hexdigest()[:16], "files": files}
