@@ -13,6 +13,7 @@ import sympy
 import torch
 
 from bench.core import symbolic
+from bench.core.budget import Budget, Schedule
 from bench.core.data import Dataset, generate
 from bench.core.models import mass_and_bias
 from systems import SYSTEMS, Domain
@@ -119,17 +120,19 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
     assert smoke, f"{cls.name} declares no smoke configuration"
     assert smoke.get("max_steps"), "a smoke configuration must bound its steps, so that a seed is reproducible"
 
-    def run(seed):
-        return cls(**smoke).fit(train, experiment, seed=seed, budget_s=60.0)
-
-    m = run(0)
+    m = cls(**smoke).fit(train, experiment, seed=0, steps=smoke["max_steps"])  # a work budget: no deadline
     L, tau = m.predict_lagrangian(test), m.predict_torque(test)
     assert L.shape == (len(test),) and tau.shape == (len(test), train.dof)
     assert np.isfinite(L).all() and np.isfinite(tau).all()
     info = m.fit_info
     assert 0 < info["steps"] <= smoke["max_steps"]
     assert info["curve"] and all(b <= a for (_, a), (_, b) in zip(info["curve"], info["curve"][1:]))
-    np.testing.assert_array_equal(run(0).predict(test), m.predict(test))  # same seed, same result
+    # the same seed and the work the fit recorded give the same result (what python -m bench rerun does)
+    replay = info["schedule"]
+    if "unavailable" not in replay:
+        again = cls(**smoke).fit(train, experiment, seed=0, budget_s=Budget.replaying(Schedule.from_json(replay)))
+        np.testing.assert_array_equal(again.predict(test), m.predict(test))
+        assert again.fit_info["steps"] == info["steps"]
     expr = m.expression()
     engine = train.system in SYSTEMS and not SYSTEMS[train.system].symbolic
     if "symbolic" in cls.tags and not (engine and "parametric" in cls.tags):  # SysId fits an engine's regressor

@@ -7,6 +7,7 @@ import time
 import numpy as np
 import pytest
 
+from bench.core.budget import Budget, Schedule
 from bench.core.errors import ConfigError
 from methods import METHODS, Method, MethodConfig, Progress
 
@@ -129,6 +130,60 @@ def test_a_step_limited_run_evaluates_the_same_steps_at_any_speed(monkeypatch, m
     assert fast == loaded
     assert fast[0][-1] == max_steps and fast[1] == max_steps
     assert len(fast[0]) < 60  # still spaced: geometric after the tenth step
+
+
+def _timed_loop(monkeypatch, step_seconds, budget_s=None, schedule=None):
+    """A loop under a scripted clock that reads the fraction of its budget at every step, as a
+    cosine schedule or a multi-start selection does; returns what it read, evaluated and did."""
+    import methods.base
+
+    clock = iter(np.cumsum(step_seconds)).__next__
+    monkeypatch.setattr(methods.base.time, "perf_counter", clock)
+    evaluated, read = [], []
+    p = Progress(np.inf if budget_s is None else budget_s, evaluate=lambda: evaluated.append(p.steps) or 1.0,
+                 snapshot=lambda: None, schedule=schedule)
+    read.append(p.fraction())  # before the first step, as a schedule's start reads it
+    while p.step():
+        read.append(p.fraction())
+    p.finish()
+    return evaluated, read, p
+
+
+def test_a_time_budgeted_loop_replays_step_for_step_from_its_schedule(monkeypatch):
+    """The clock decides when a time-budgeted loop stops, evaluates, and how far its schedule is;
+    its recorded schedule repeats all three on a machine of another speed, without a clock."""
+    rng = np.random.default_rng(0)
+    evaluated, read, live = _timed_loop(monkeypatch, rng.exponential(0.01, 100_000), budget_s=30.0)
+    assert live.stop_reason == "budget" and live.steps > 1000
+    assert 10 < len(evaluated) < 200 and read[0] == 0.0 and 0.9 < read[-1] <= 1.05
+    schedule = live.schedule()
+    assert schedule.steps == live.steps and schedule.evaluations == tuple(live.scheduled) and schedule.clock
+    # a replay on a slower and a faster machine: the same steps, evaluations and fractions
+    for seconds in (rng.exponential(0.05, 100_000), np.full(100_000, 1e-5)):
+        again = _timed_loop(monkeypatch, seconds, schedule=Schedule.from_json(schedule.to_json()))
+        assert again[0] == evaluated and again[1] == read
+        assert again[2].steps == live.steps and again[2].stop_reason == "max_steps"
+
+
+def test_a_time_budgeted_syrenets_fit_with_a_cosine_schedule_and_four_starts_replays_exactly(small_data):
+    # its learning rate and its choice between networks follow the fraction of the budget spent
+    train, test = small_data
+    hp = {"layers": 2, "heads": 3, "latent": 4, "ae_hidden": 8, "head_hidden": 8, "eval_samples": 64, "refine": False,
+          "lr_schedule": "cosine", "starts": 4}
+    live = METHODS["syrenets"](**hp).fit(train, "indirect", 0, 2.0)
+    assert live.fit_info["stop_reason"] == "budget" and live.record_details()["starts"]["networks"] == 4
+    replayed = METHODS["syrenets"](**hp).fit(train, "indirect", 0, Budget.replaying(Schedule.from_json(live.fit_info["schedule"])))
+    np.testing.assert_array_equal(replayed.predict(test), live.predict(test))
+    assert replayed.record_details()["starts"] == live.record_details()["starts"]
+
+
+def test_a_work_budget_has_no_deadline_and_is_counted_in_steps(small_data):
+    train, _ = small_data
+    m = _Scripted([4.0, 2.0, 1.0]).fit(train, "direct", 0, steps=7)
+    assert m.fit_info["steps"] == 7 and m.fit_info["stop_reason"] == "max_steps"
+    assert m.budget == Budget(steps=7) and m.fit_info["schedule"]["steps"] == 7
+    with pytest.raises(ConfigError, match="not both"):
+        m.fit(train, "direct", 0, 5.0, steps=7)
 
 
 def test_fit_rejects_bad_calls(small_data):
