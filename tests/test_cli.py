@@ -15,6 +15,9 @@ import numpy as np
 import pytest
 
 from bench.cli import build_parser, main
+from bench.core.fileio import write_json
+from bench.runner.records import Record
+from bench.runner.spec import RunSpec
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -87,6 +90,44 @@ def test_fit_without_test_data_reports_none(tmp_path, capsys):
     assert main(["fit", "--system", "double_pendulum", "--method", "mlp", "--experiment", "direct",
                  "--train", str(train), "--smoke"]) == 0
     assert "test MSE n/a (no test data)" in capsys.readouterr().out
+
+
+def test_rerun_replays_every_record_of_a_time_budgeted_matrix(tmp_path, capsys):
+    out = tmp_path / "m"
+    assert main(["run", "--methods", "mlp,mggp,sysid", "--experiments", "indirect", "--seeds", "0", "--budget", "1",
+                 "--n-train", "256", "--n-test", "64", "--no-rollout", "--out", str(out)]) == 0
+    records = sorted((out / "records").glob("*.json"))
+    assert len(records) == 3
+    for path in records:
+        capsys.readouterr()
+        assert main(["rerun", str(path)]) == 0, capsys.readouterr().out
+        text = capsys.readouterr().out
+        assert "the same up to a relative 1e-09" in text and "(recorded under 1 s, stopped by budget)" in text
+        assert text.count("relative difference") == 1 and "train_mse" in text and "test_mse" in text
+
+
+def test_rerun_refuses_in_one_line_what_it_cannot_replay(tmp_path, capsys):
+    record = Record.new(RunSpec("double_pendulum", "mlp", "indirect", 0, 5.0), "failed", error="it broke")
+    path = tmp_path / "failed.json"
+    write_json(path, record.to_json())
+    assert main(["rerun", str(path)]) == 2
+    assert capsys.readouterr().err == f"error: {path}: the run's status is failed; only an ok run has numbers to repeat\n"
+    write_json(path, record.replace(status="ok", train_mse=1.0).to_json())
+    assert main(["rerun", str(path)]) == 2
+    assert "written before runs recorded the work they did" in capsys.readouterr().err
+
+
+def test_the_public_configuration_with_qdd_as_an_input_keeps_its_fit(capsys, tmp_path):
+    # its expression holds qdd: exact recovery and the rollout do not apply, and say so
+    out = tmp_path / "run.json"
+    assert main(["fit", "--system", "double_pendulum", "--method", "syrenets", "--experiment", "direct", "--smoke",
+                 "--steps", "10", "--n-train", "256", "--n-test", "64", "--set", "inputs=q_qd_qdd",
+                 "--set", "refine=False", "--json", str(out)]) == 0
+    record = json.loads(out.read_text())
+    assert record["status"] == "ok" and record["test_mse"] > 0 and record["failed_stages"] == {}
+    assert record["exact"] is None
+    assert "qdd" in record["details"]["exact_not_applicable"] and record["rollout"]["status"] == "not_applicable"
+    assert record["budget"] == {"kind": "steps", "steps": 10, "ceiling_s": None}
 
 
 @pytest.mark.parametrize(

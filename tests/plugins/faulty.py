@@ -93,3 +93,26 @@ class ToySlowJudge(_Constant):
 
     def readable_expression(self):
         time.sleep(3600)
+
+
+@METHODS.add("toy_bad_expression", "toy")
+class ToyBadExpression(_Constant):
+    """Fits, then fails to give its expression: a stage after the fit."""
+
+    def readable_expression(self):
+        raise ValueError("no expression today")
+
+
+@METHODS.add("toy_prepared", "toy")
+class ToyPrepared(_Constant):
+    """Does one-time work before its budget (as compiling does), and says when."""
+
+    def _prepare(self, train, experiment):
+        self.prepared_at = time.perf_counter()
+
+    def _fit(self, train, experiment, progress):
+        self.fit_started_at = progress.start
+        super()._fit(train, experiment, progress)
+
+    def record_details(self):
+        return {"prepared_before_the_budget": self.prepared_at < self.fit_started_at}
