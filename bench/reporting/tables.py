@@ -29,7 +29,10 @@ Definitions
 * **Exact** counts the seeds whose expression is exactly the true Lagrangian
   up to the experiment's gauge (:mod:`bench.evaluation.recovery`); "—" for
   methods without an expression.
-* Above each table: the budget, seeds and configuration; the data (the
+* Any run can be replayed with the work it did (``python -m bench rerun``).
+* Above each table: the budget (seconds, or steps of each method's work),
+  seeds and configuration, and the time spent compiling before the budget
+  started where any run did; the data (the
   sampling ranges of generated data, or the files or recordings, and the
   noise on the training targets); the hyperparameters set beside each
   method's defaults; the machine and the commit.
@@ -205,7 +208,8 @@ def _header(records: list[Record]) -> list[str]:
     records = [r for r in records if r.status != MISSING]
     if not records:
         return ["Every run of this section is missing its record (see the Runs row)."]
-    budgets = sorted({r.budget_s for r in records})
+    budgets = sorted({r.describe_budget() for r in records}, key=lambda b: (len(b), b))
+    kinds = {r.budget_kind for r in records}
     seeds = sorted({r.seed for r in records})
     prov = [r.provenance for r in records]
     cpus = sorted({machine(p) for p in prov})
@@ -216,15 +220,39 @@ def _header(records: list[Record]) -> list[str]:
     torch_versions = sorted({str(p["packages"].get("torch")) for p in prov})
     dates = sorted(p["utc"][:10] for p in prov)
     profiles = sorted({r.spec.get("profile", "default") for r in records})
+    what = "of wall-clock per run" if kinds == {"seconds"} else \
+        "of each method's work per run (gradient steps, generations or solves)" if kinds == {"steps"} else "per run"
     lines = [
-        f"Budget: {', '.join(f'{b:g} s' for b in budgets)} of wall-clock per run; "
-        f"{len(seeds)} seed(s) ({', '.join(map(str, seeds))}); configuration: {', '.join(profiles)}.",
+        f"Budget: {', '.join(budgets)} {what}; "
+        f"{len(seeds)} seed(s) ({', '.join(map(str, seeds))}); configuration: {', '.join(profiles)}."
+        + _preparation(records),
         _data(records),
         _overrides(records),
         f"Machine: {'; '.join(cpus)}; {per_run}; torch {', '.join(torch_versions)}.",
         f"Commit: {', '.join(commits)}; run {dates[0]}{'' if dates[0] == dates[-1] else ' to ' + dates[-1]}.",
     ]
     return lines
+
+
+def _preparation(records: list[Record]) -> str:
+    """Compiling before each run's budget started, or, in records made before
+    it did, inside the budget; and whether the runs can be replayed."""
+    text = ""
+    before = [r.details["prepare_seconds"] for r in records if r.details.get("prepare_seconds")]
+    inside = [r.details["compile_seconds"] for r in records
+              if r.details.get("compile_seconds") and "prepare_seconds" not in r.details]
+    if before:
+        text += (f" Before its budget started, each of {len(before)} run(s) compiled its training step (not counted in "
+                 f"the budget): median {float(np.median(before)):.3g} s, at most {max(before):.3g} s.")
+    if inside:
+        text += (f" {len(inside)} run(s) compiled their training step inside the budget, which it shortened: "
+                 f"median {float(np.median(inside)):.3g} s, at most {max(inside):.3g} s.")
+    ran = [r for r in records if r.status == "ok"]
+    old = [r for r in ran if r.replay is None and r.budget_kind == "seconds"]
+    if old:
+        text += (f" {'These' if len(old) == len(ran) else f'{len(old)} of these'} records predate records of the "
+                 f"work a run did: their runs cannot be replayed.")
+    return text
 
 
 def build_table(records: list[Record]) -> str:
@@ -352,7 +380,10 @@ _DEFINITIONS = (
     "with coefficients within 1e-6 of the largest true one. **Rollout** is the median over seeds of the RMS "
     "error of q when the model's forward dynamics are integrated for 1 s from 8 held-out states, unforced, "
     "against the true system's motion (bench.rollout); in brackets how many seeds have a rollout and why "
-    "the others do not (an indefinite or singular d2L/dqd2 has no forward dynamics)."
+    "the others do not (an indefinite or singular d2L/dqd2 has no forward dynamics). "
+    "A run can be replayed with the work it did: `python -m bench rerun OUT/records/RUN.json` repeats its steps, "
+    "data, seed and configuration and prints the recorded and replayed train and test MSE side by side (records "
+    "written before runs recorded their work say so above their table)."
 )
 
 
