@@ -26,8 +26,9 @@ $(STAMP): pyproject.toml Makefile
 bench: $(STAMP)
 	$(BIN)/python -m bench run --systems double_pendulum --n-seeds 3 --budget 10 --out results/quick
 
+# the default tests on every core (pytest-xdist); each test process pins one BLAS and torch thread
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto
 
 benchmark: $(STAMP)
 	$(BIN)/python -m pytest tests/benchmarks -m benchmark --benchmark-only --benchmark-columns=min,mean,median,rounds

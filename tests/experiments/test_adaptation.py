@@ -60,8 +60,14 @@ SMALL = adaptation.Setup(before_s=1.0, checkpoints=(0.0, 0.5, 1.0), n_train=400,
 def test_continued_learner_records_a_curve_at_its_checkpoints():
     r = adaptation.run_learner("mlp", SMALL, seed=0)
     t = [p[0] for p in r["curve"]]
-    assert len(t) == 3 and t[0] == 0 and 0 < t[1] < t[2] <= 1.2
+    assert len(t) == 3 and t[0] == 0 and 0 < t[1] < t[2]
     assert all(np.isfinite(p[1]) for p in r["curve"]) and r["before"] > 0
+
+
+@pytest.mark.slow  # it times the machine
+def test_a_continued_learner_reaches_each_checkpoint_within_a_fifth_of_a_second():
+    t = [p[0] for p in adaptation.run_learner("mlp", SMALL, seed=0)["curve"]]
+    assert t[1] <= 0.5 + 0.2 and t[2] <= 1.0 + 0.2
 
 
 def test_residual_driven_sysid_names_the_new_spring_and_reaches_round_off():

@@ -65,11 +65,16 @@ def test_best_state_is_kept_and_restored(small_data):
 
 def test_deadline_is_honoured(small_data):
     train, _ = small_data
-    t0 = time.perf_counter()
     m = _Scripted([1.0], sleep=0.01).fit(train, "indirect", 0, 0.5)
-    elapsed = time.perf_counter() - t0
-    assert m.fit_info["stop_reason"] == "budget"
-    assert elapsed < 1.0
+    assert m.fit_info["stop_reason"] == "budget"  # the loop has no other end
+
+
+@pytest.mark.slow  # it times the machine
+def test_the_deadline_ends_the_fit_within_a_step_of_its_budget(small_data):
+    train, _ = small_data
+    t0 = time.perf_counter()
+    _Scripted([1.0], sleep=0.01).fit(train, "indirect", 0, 0.5)
+    assert time.perf_counter() - t0 < 1.0
 
 
 def test_non_finite_loss_stops_and_keeps_the_last_good_state(small_data):

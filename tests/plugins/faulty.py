@@ -23,7 +23,7 @@ class _Constant(Method):
         self.L0 = float(np.mean(train.L)) if train.L is not None else 0.0
         self.tau0 = train.tau.mean(axis=0)
         while progress.step():
-            pass
+            progress.stop("solved")
 
     def _get_state(self):
         return (self.L0, self.tau0)

@@ -42,9 +42,11 @@ def test_statuses_for_every_way_a_run_can_end(tmp_path):
 
 
 def test_record_holds_configuration_results_and_provenance(tmp_path):
-    (r,) = harness.run_matrix(specs(["sysid"], experiments=("direct",), profile="smoke"), tmp_path, workers=1, report=harness.quiet)
+    todo = specs(["sysid"], experiments=("direct",), profile="smoke", budget=None, steps=20)
+    (r,) = harness.run_matrix(todo, tmp_path, workers=1, report=harness.quiet)
     assert r.status == "ok", r.error
-    assert r.target == "L" and r.budget_s == 1.0 and r.seed == 0
+    assert r.target == "L" and r.budget == {"kind": "steps", "steps": 20, "ceiling_s": None} and r.seed == 0
+    assert r.budget_s is None and r.describe_budget() == "20 steps" and r.code["files"]["methods/sysid.py"]
     assert r.hyperparameters["max_steps"] == 20 and r.hyperparameters["lr"] == 1e-3
     assert r.steps == 20 and r.curve and r.expression.count("qd_1") >= 1
     assert r.details["n_train"] == 64 and r.details["test_source"].endswith("seed=1000")
@@ -116,13 +118,13 @@ def test_measured_systems_use_their_packaged_splits_and_skip_the_direct_experime
 
 def test_matrix_on_a_real_dask_local_cluster(tmp_path):
     pytest.importorskip("distributed")
-    todo = specs(["toy_constant", "toy_crasher"], seeds=(0, 1), budget=10.0, rollout=False)
+    todo = specs(["toy_constant", "toy_crasher"], budget=10.0, rollout=False)
     lines = []
     records = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
     assert [r.run_id for r in records] == [s.run_id for s in todo]
-    assert [r.status for r in records] == ["ok", "ok", "failed", "failed"]
-    assert records[2].error == "RuntimeError: the toy fell over"
-    assert len(read_records(tmp_path)) == 4 and any("4/4 done, 2 not ok" in line for line in lines)
+    assert [r.status for r in records] == ["ok", "failed"]
+    assert records[1].error == "RuntimeError: the toy fell over"
+    assert len(read_records(tmp_path)) == 2 and any("2/2 done, 1 not ok" in line for line in lines)
     again = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
     assert [r.provenance for r in again] == [r.provenance for r in records]  # resumed, not run again
 
@@ -145,10 +147,8 @@ def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatc
 
 def test_a_hang_after_the_fit_is_a_timeout_at_the_evaluation_limit(tmp_path, monkeypatch):
     monkeypatch.setattr(harness, "EVALUATION_MIN_S", 2.0)
-    t0 = time.monotonic()
     (r,) = harness.run_matrix(specs(["toy_slow_judge"]), tmp_path, workers=1, report=harness.quiet)
-    assert r.status == "timeout" and "evaluation after the fit still running after 2 s" in r.error
-    assert time.monotonic() - t0 < 30
+    assert r.status == "timeout" and "evaluation after the fit still running after 2 s" in r.error  # not an hour
     assert harness.evaluation_limit(60.0) == 60.0 and harness.evaluation_limit(1.0) == 2.0
 
 
