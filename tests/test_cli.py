@@ -17,12 +17,9 @@ from bench.cli import build_parser, main
 from bench.core.fileio import write_json
 from bench.runner.records import Record
 from bench.runner.spec import RunSpec
+from tests.commandline import cli
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=cwd or ROOT)
 
 
 COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "rerun", "leaderboard",
@@ -98,9 +95,9 @@ def test_rerun_replays_every_record_of_a_time_budgeted_matrix(tmp_path, capsys):
     records = sorted((out / "records").glob("*.json"))
     assert len(records) == 3
     for path in records:
-        capsys.readouterr()
-        assert main(["rerun", str(path)]) == 0, capsys.readouterr().out
-        text = capsys.readouterr().out
+        r = cli("rerun", path)
+        assert r.returncode == 0, (r.stdout, r.stderr)
+        text = r.stdout
         assert "the same up to a relative 1e-09" in text and "(recorded under 1 s, stopped by budget)" in text
         assert text.count("relative difference") == 1 and "train_mse" in text and "test_mse" in text
 

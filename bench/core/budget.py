@@ -85,8 +85,9 @@ class Budget:
             raise ConfigError("a budget needs seconds or steps")
         if self.seconds is not None and not (self.seconds > 0):
             raise ConfigError(f"a budget's seconds must be positive, got {self.seconds}")
-        if self.steps is not None and (isinstance(self.steps, bool) or not isinstance(self.steps, int) or self.steps < 1):
-            raise ConfigError(f"a budget's steps must be a whole number >= 1, got {self.steps!r}")
+        least = 0 if self.schedule is not None else 1  # a replayed fit may have ended before its first step
+        if self.steps is not None and (isinstance(self.steps, bool) or not isinstance(self.steps, int) or self.steps < least):
+            raise ConfigError(f"a budget's steps must be a whole number >= {least}, got {self.steps!r}")
         if self.schedule is not None and self.steps != self.schedule.steps:
             raise ConfigError("a replayed budget's steps are its schedule's")
 

@@ -182,6 +182,15 @@ def test_a_time_budgeted_syrenets_fit_with_a_cosine_schedule_and_four_starts_rep
     assert replayed.record_details()["starts"] == live.record_details()["starts"]
 
 
+def test_a_fit_whose_time_ran_out_before_its_first_step_replays(small_data):
+    # on a loaded machine a short budget can end at the first evaluation
+    train, _ = small_data
+    m = _Scripted([4.0, 2.0]).fit(train, "direct", 0, Budget.replaying(Schedule(0, (0,), ((-1, 0.0, 0.0),))))
+    assert m.fit_info["steps"] == 0 and m.value == 4.0
+    with pytest.raises(ConfigError, match=">= 1, got 0"):
+        Budget(steps=0)
+
+
 def test_a_work_budget_has_no_deadline_and_is_counted_in_steps(small_data):
     train, _ = small_data
     m = _Scripted([4.0, 2.0, 1.0]).fit(train, "direct", 0, steps=7)

@@ -4,9 +4,6 @@ leaves clean and noise-only data alone, and keeps its output contract."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +14,7 @@ from bench.core.effects import add_effects
 from bench.core.models import ExpressionModel
 from bench.residual import residual_loop, trace, candidates
 from systems import get_system
+from tests.commandline import cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -120,11 +118,6 @@ def test_pure_noise_residual_accepts_nothing():
     rng = np.random.default_rng(0)
     selection = trace(rng.normal(size=data.tau.shape), data, candidates(2))
     assert selection.accepted == [] and selection.steps[-1]["accepted"] is False
-
-
-def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "bench", *args], capture_output=True, text=True, cwd=cwd or ROOT,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
 
 
 def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
