@@ -102,6 +102,15 @@ def test_rerun_replays_every_record_of_a_time_budgeted_matrix(tmp_path, capsys):
         assert text.count("relative difference") == 1 and "train_mse" in text and "test_mse" in text
 
 
+def test_a_failed_fit_names_the_log_that_holds_its_traceback():
+    plugin = str(ROOT / "tests" / "plugins" / "faulty.py")
+    r = cli("fit", "--system", "double_pendulum", "--method", "toy_crasher", "--plugin", plugin, "--experiment",
+            "indirect", "--n-train", "64", "--n-test", "32", "--steps", "1")
+    assert r.returncode == 1 and "failed (RuntimeError: the toy fell over; traceback in " in r.stdout
+    log = Path(r.stdout.strip().rsplit("traceback in ", 1)[1].rstrip(")"))
+    assert "Traceback (most recent call last)" in log.read_text() and "the toy fell over" in log.read_text()
+
+
 def test_rerun_refuses_in_one_line_what_it_cannot_replay(tmp_path, capsys):
     record = Record.new(RunSpec("double_pendulum", "mlp", "indirect", 0, 5.0), "failed", error="it broke")
     path = tmp_path / "failed.json"

@@ -306,3 +306,27 @@ def test_the_polish_screens_its_starts_on_a_subsample_and_refines_the_best_on_al
     assert fitted_on == [loop.POLISH_SAMPLES] * (loop.POLISH_STARTS + 1) + [len(train)]
     assert model.rigid.theta == pytest.approx(form.true_values, rel=1e-6)
     assert np.mean((model.predict_torque(train) - train.tau) ** 2) < 1e-12
+
+
+def _without_timings(obj):
+    """The loop's JSON without what measures the machine: seconds, timing, provenance."""
+    if isinstance(obj, dict):
+        return {k: _without_timings(v) for k, v in obj.items()
+                if k not in ("seconds", "statistics_seconds", "provenance", "curve")}
+    if isinstance(obj, list):
+        return [_without_timings(v) for v in obj]
+    return obj
+
+
+def test_a_loop_bounded_by_work_gives_the_same_json_apart_from_its_timings():
+    # SysId stopped short of its optimum: the polish's starts, the trace and the rounds decide what is
+    # found, and under a time budget how many of them ran depended on the machine's load
+    from bench.core.effects import parse_effects
+
+    s = get_system("double_pendulum")
+    fx = parse_effects(["tip_payload=0.5"], 2)
+    train, test = add_effects(generate(s, 1000, 0), fx, s), add_effects(generate(s, 500, 1000), fx, s)
+    first, second = (residual_loop("sysid", train, test, steps=200, report=quiet).to_json() for _ in range(2))
+    assert first["budget"] == {"kind": "steps", "steps": 200, "ceiling_s": None}
+    assert [e["name"] for e in first["effects"]] == ["tip_payload"]
+    assert _without_timings(first) == _without_timings(second)
