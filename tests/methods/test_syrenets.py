@@ -396,11 +396,11 @@ def test_the_compiled_training_pass_equals_the_eager_one(data, experiment):
 
 
 @pytest.mark.slow
-def test_a_compiled_fit_compiles_before_its_loop_and_says_how_long_it_took(data):
-    m = METHODS["syrenets"](**SMALL, compile=True, starts=2, replay=4, max_steps=20, eval_samples=64, refine=False)
-    m.fit(data[0], "indirect", 0, 120)
+def test_a_compiled_fit_compiles_before_its_budget_and_says_how_long_it_took(data):
+    m = METHODS["syrenets"](**SMALL, compile=True, starts=2, replay=4, eval_samples=64, refine=False)
+    m.fit(data[0], "indirect", 0, steps=20)
     details = m.record_details()
-    assert details["compile_seconds"] > 0
+    assert 0 < details["compile_seconds"] <= m.fit_info["prepare_seconds"]  # before the budget's clock started
     assert m.fit_info["steps"] == 20
     assert np.isfinite(m.fit_info["curve"][-1][1])
     plain = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], "indirect", 0, 60)
