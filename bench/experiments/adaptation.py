@@ -79,6 +79,9 @@ class Setup:
     checkpoints: tuple[float, ...] = (0.0, 1.0, 2.0, 5.0, 10.0, 20.0, 40.0)
     n_train: int = 4000
     n_test: int = 2000
+    #: a work budget for the fit before the switch and for the residual loop, instead of
+    #: ``before_s`` and :data:`LOOP_BUDGET_S` (the checkpoints after the switch stay in seconds)
+    steps: int | None = None
 
     def check(self) -> None:
         system = SYSTEMS[self.system]()
@@ -110,7 +113,7 @@ def run_learner(learner: str, setup: Setup, seed: int) -> dict:
     train_a, test_a, train_b, test_b = streams(setup, seed)
     base = learner.split("+")[0]
     method = METHODS[base](**HYPERPARAMETERS.get(base, {}))
-    method.fit(train_a, "indirect", seed, setup.before_s)
+    method.fit(train_a, "indirect", seed, None if setup.steps else setup.before_s, steps=setup.steps)
 
     def error(data):
         return mse(method.predict_torque(data), data.tau)
@@ -119,7 +122,7 @@ def run_learner(learner: str, setup: Setup, seed: int) -> dict:
     curve = [[0.0, error(test_b)]]
     if learner == "sysid+residual":
         result = residual_loop(base, train_b, test_b, seed=seed, fitted=method, report=quiet,
-                               budget_s=LOOP_BUDGET_S)
+                               budget_s=None if setup.steps else LOOP_BUDGET_S, steps=setup.steps)
         curve += [[r["seconds"], r["mse"]["test"]] for r in result.rounds if "seconds" in r]
         out["effects"] = [{"name": e["name"], "joints": e["joints"], "law": e["law"], "parameters": e["parameters"]}
                           for e in result.effects]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -71,7 +73,7 @@ def test_a_continued_learner_reaches_each_checkpoint_within_a_fifth_of_a_second(
 
 
 def test_residual_driven_sysid_names_the_new_spring_and_reaches_round_off():
-    r = adaptation.run_learner("sysid+residual", SMALL, seed=0)
+    r = adaptation.run_learner("sysid+residual", dataclasses.replace(SMALL, steps=300), seed=0)
     (effect,) = r["effects"]
     assert effect["name"] == "spring" and effect["joints"] == [1]
     assert effect["parameters"]["k"]["value"] == pytest.approx(5.0, rel=0.05)
