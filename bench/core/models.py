@@ -25,6 +25,8 @@ given parameter values) are two of them.
 from __future__ import annotations
 
 import abc
+import functools
+import weakref
 from typing import Sequence
 
 import numpy as np
@@ -34,6 +36,7 @@ import torch
 from bench.core import symbolic
 from bench.core.data import Dataset, check_experiment
 from bench.core.dynamics import euler_lagrange_chunked
+from bench.core.terms import TermLibrary
 
 #: rows per call when a model's Lagrangian is evaluated on a large data set
 CHUNK = 8192
@@ -137,8 +140,25 @@ class ParametricModel(LagrangianFunction):
         """The parameter values, by name."""
         return {s.name: float(v) for s, v in zip(self.form.unknowns, self.theta)}
 
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        """``tau``: through the separated form (:func:`separate`) where there is one."""
+        sep = separate(self.form)
+        if sep is None:
+            return super().predict_torque(data)
+        return (sep.torque_columns(data) @ sep.coefficients(self.theta)).reshape(len(data), data.dof)
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        sep = separate(self.form)
+        if sep is None:
+            return super().predict_lagrangian(data)
+        return sep.value_columns(data) @ sep.coefficients(self.theta)
+
     def jacobian(self, data: Dataset) -> np.ndarray:
-        """``d tau / d theta``, flattened sample-major, by central differences."""
+        """``d tau / d theta``, flattened sample-major: exact through the
+        separated form (:func:`separate`), else by central differences."""
+        sep = separate(self.form)
+        if sep is not None:
+            return sep.torque_columns(data) @ sep.jacobian(self.theta)
         cols = []
         for i, value in enumerate(self.theta):
             h = 1e-6 * max(1.0, abs(value))
@@ -154,6 +174,62 @@ class ParametricModel(LagrangianFunction):
 
     def parametric(self) -> "ParametricModel":
         return self
+
+
+class Separation:
+    """A parametric form's Lagrangian written as ``sum_k c_k(theta) phi_k(q, qd)``.
+
+    Every rigid-body Lagrangian of the suite is linear in functions of its
+    unknowns (products of masses, lengths and inertias) times functions of
+    the coordinates. Since the Euler–Lagrange transform ``g`` is linear,
+    ``tau(theta) = sum_k c_k(theta) g(phi_k)``: the basis's torques are
+    computed once per data set (kept while the data set lives), and the
+    torque at any ``theta``, and its exact Jacobian ``sum_k dc_k/dtheta
+    g(phi_k)``, are matrix products. A nonlinear least-squares fit of the
+    parameters, which asks for both at every iteration, then needs no pass
+    of automatic differentiation.
+    """
+
+    def __init__(self, unknowns, coefficients: list[sympy.Expr], basis: list[sympy.Expr]):
+        self.basis = TermLibrary.of_lagrangian(basis)
+        self._c = sympy.lambdify([unknowns], coefficients, "numpy")
+        self._dc = sympy.lambdify([unknowns], [[sympy.diff(c, u) for u in unknowns] for c in coefficients], "numpy")
+        self._torque: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self._value: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    def coefficients(self, theta) -> np.ndarray:
+        return np.array([float(c) for c in self._c(list(theta))])
+
+    def jacobian(self, theta) -> np.ndarray:
+        """``dc / dtheta``, shape ``(K, p)``."""
+        return np.array([[float(v) for v in row] for row in self._dc(list(theta))])
+
+    def torque_columns(self, data: Dataset) -> np.ndarray:
+        """``g(phi_k)`` at the states of ``data``, flattened sample-major: ``(n * dof, K)``."""
+        if data not in self._torque:
+            self._torque[data] = self.basis.design(data, "indirect")
+        return self._torque[data]
+
+    def value_columns(self, data: Dataset) -> np.ndarray:
+        """``phi_k`` at the states of ``data``: ``(n, K)``."""
+        if data not in self._value:
+            self._value[data] = self.basis.design(data, "direct")
+        return self._value[data]
+
+
+@functools.lru_cache(maxsize=64)
+def separate(form) -> Separation | None:
+    """The form as a :class:`Separation`, or ``None`` where an unknown sits
+    inside a function of the coordinates (then the torch function serves)."""
+    q, qd = symbolic.coordinate_symbols(form.dof)
+    unknowns = set(form.unknowns)
+    groups: dict[sympy.Expr, sympy.Expr] = {}
+    for term in sympy.Add.make_args(sympy.expand(form.expr)):
+        coefficient, phi = term.as_independent(*q, *qd, as_Add=False)
+        if phi.free_symbols & unknowns or not coefficient.free_symbols <= unknowns:
+            return None
+        groups[phi] = groups.get(phi, sympy.Integer(0)) + coefficient
+    return Separation(form.unknowns, list(groups.values()), list(groups))
 
 
 class LinearParametricModel(FittedModel):

@@ -25,9 +25,11 @@ friction columns are all term libraries.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import itertools
 import time
+import weakref
 from dataclasses import dataclass
 from typing import Iterable, Iterator, Sequence
 
@@ -122,9 +124,7 @@ class Term:
         if self.rayleigh:
             out = np.zeros_like(data.tau)
             for j in range(data.dof):
-                dD = sympy.diff(self.expr, sympy.Symbol(f"qd_{j + 1}", real=True))
-                if dD.has(sympy.cosh):  # log cosh's derivative comes as sinh/cosh, which overflows: tanh
-                    dD = sympy.simplify(dD)
+                dD = _tanh(sympy.diff(self.expr, sympy.Symbol(f"qd_{j + 1}", real=True)))
                 if dD != 0:
                     out[:, j] = _force_function(dD)(data)
             return out
@@ -138,13 +138,50 @@ class Term:
 
     def column(self, data: Dataset, experiment: str) -> np.ndarray:
         """The term's column in ``experiment``'s target: ``L`` (``(n,)``) or
-        ``tau`` flattened sample-major (``(n * dof,)``)."""
+        ``tau`` flattened sample-major (``(n * dof,)``); computed once per
+        term and data set inside :func:`remembered_columns` (read-only then)."""
         check_experiment(experiment)
-        if experiment == "direct":
-            if self.is_force:
-                raise ValueError(f"{self.label} is a generalized force: it has no value in L (direct experiment)")
-            return self.value(data)
-        return self.torque(data).ravel()
+        if experiment == "direct" and self.is_force:
+            raise ValueError(f"{self.label} is a generalized force: it has no value in L (direct experiment)")
+        kept = _REMEMBERED.get(data)
+        if kept is not None and (self, experiment) in kept[1]:
+            return kept[1][(self, experiment)]
+        column = self.value(data) if experiment == "direct" else self.torque(data).ravel()
+        if kept is not None:
+            column.setflags(write=False)
+            kept[1][(self, experiment)] = column
+        return column
+
+
+#: the data sets whose term columns are kept: ``{data: [users, {(term, experiment): column}]}``
+_REMEMBERED: "weakref.WeakKeyDictionary[Dataset, list]" = weakref.WeakKeyDictionary()
+
+
+@contextlib.contextmanager
+def remembered_columns(*datasets: Dataset | None):
+    """Within the block, each term's column on each of ``datasets`` is
+    computed once (:meth:`Term.column`): the residual loop asks for the same
+    candidates' and effects' columns in every step of every round. Blocks may
+    nest; the columns are dropped when the outermost block of a data set ends."""
+    held = [d for d in datasets if d is not None]
+    for d in held:
+        _REMEMBERED.setdefault(d, [0, {}])[0] += 1
+    try:
+        yield
+    finally:
+        for d in held:
+            entry = _REMEMBERED.get(d)
+            if entry is not None:
+                entry[0] -= 1
+                if entry[0] <= 0:
+                    del _REMEMBERED[d]
+
+
+def _tanh(expr: sympy.Expr) -> sympy.Expr:
+    """``sinh(a)/cosh(a)`` as ``tanh(a)``: log cosh's derivative comes as the
+    quotient, which overflows at large ``a`` (each ``sinh(a)`` is written
+    ``tanh(a) cosh(a)``, and the ``cosh(a)`` cancel)."""
+    return expr.subs({s: sympy.tanh(s.args[0]) * sympy.cosh(s.args[0]) for s in expr.atoms(sympy.sinh)})
 
 
 @functools.lru_cache(maxsize=4096)

@@ -85,7 +85,7 @@ from bench.core.effects import EFFECTS
 from bench.core.errors import UserError
 from bench.core.models import ExpressionModel, FittedModel, LinearParametricModel, ParametricModel, mass_and_bias
 from bench.core.regression import fit_statistics
-from bench.core.terms import Term, TermLibrary
+from bench.core.terms import Term, TermLibrary, remembered_columns
 from bench.residual.candidates import admissible, candidates, describe_all, is_named, label, structural
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
@@ -556,6 +556,12 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     fitted before the system changed). Each round records ``seconds``, the
     time since the loop began.
     """
+    with remembered_columns(train, test):  # each candidate's and effect's columns once, for every round
+        return _residual_loop(method, train, test, budget_s=budget_s, steps=steps, seed=seed,
+                              hyperparameters=hyperparameters, report=report, fitted=fitted, open_ended=open_ended)
+
+
+def _residual_loop(method, train, test, *, budget_s, steps, seed, hyperparameters, report, fitted, open_ended):
     if budget_s is None and steps is None:
         budget_s = DEFAULT_BUDGET_S
     budget = Budget(seconds=budget_s, steps=steps)

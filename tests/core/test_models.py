@@ -77,3 +77,46 @@ def test_sysid_gives_its_fit_as_a_parametric_model():
     assert isinstance(model, ParametricModel) and model.parameters() == sysid.identified_parameters()
     np.testing.assert_allclose(model.predict_torque(data), sysid.predict_torque(data), rtol=1e-10, atol=1e-10)
     assert METHODS["mlp"](max_steps=1, hidden=4, layers=1).fit(data, "indirect", 0, 5.0).parametric() is None
+
+
+@pytest.mark.parametrize("name", ["double_pendulum", "dfki_double_pendulum", "cart_pole", "spring_pendulum", "delan_characters"])
+def test_a_separated_form_gives_the_torch_functions_torques_and_an_exact_jacobian(name):
+    """tau(theta) = sum_k c_k(theta) g(phi_k): against the form's torch function
+    through the transform, and the Jacobian against central differences of it."""
+    from bench.core.models import LagrangianFunction, separate
+
+    s = get_system(name)
+    form = s.parametric_form()
+    sep = separate(form)
+    assert sep is not None and len(sep.basis) <= 12
+    theta = np.random.default_rng(1).uniform(0.5, 2.0, len(form.unknowns))
+    model = ParametricModel(form, theta)
+    data = generate(s, 300, 0) if s.simulated else s.load("train").subset(np.arange(300))
+    direct = LagrangianFunction.predict_torque(model, data)  # the torch function, through the transform
+    np.testing.assert_allclose(model.predict_torque(data), direct, rtol=1e-12, atol=1e-12 * np.abs(direct).max())
+    np.testing.assert_allclose(model.predict_lagrangian(data), LagrangianFunction.predict_lagrangian(model, data),
+                               rtol=1e-12, atol=1e-12)
+    columns = []
+    for i, value in enumerate(theta):
+        h = 1e-6 * max(1.0, abs(value))
+        up, down = theta.copy(), theta.copy()
+        up[i] += h
+        down[i] -= h
+        columns.append((LagrangianFunction.predict_torque(model.with_parameters(up), data)
+                        - LagrangianFunction.predict_torque(model.with_parameters(down), data)).ravel() / (2 * h))
+    differences = np.stack(columns, axis=1)
+    np.testing.assert_allclose(model.jacobian(data), differences, rtol=1e-6, atol=1e-6 * np.abs(differences).max())
+
+
+def test_a_form_whose_unknown_sits_inside_a_function_of_the_coordinates_is_not_separated():
+    from bench.core.models import separate
+
+    (q,), (qd,) = symbolic.coordinate_symbols(1)
+    w = sympy.Symbol("w")
+    form = ParametricForm(qd**2 / 2 + sympy.cos(w * q), (w,), 1, (2.0,))
+    assert separate(form) is None
+    model = ParametricModel(form, [2.0])
+    data = generate(get_system("single_pendulum"), 50, 0)
+    np.testing.assert_allclose(model.predict_torque(data)[:, 0], data.qdd[:, 0] + 2.0 * np.sin(2.0 * data.q[:, 0]),
+                               rtol=1e-12, atol=1e-12)
+    assert model.jacobian(data).shape == (50, 1)  # central differences

@@ -57,3 +57,28 @@ def test_design_matrices_in_either_experiment(data):
     assert library.lagrangian([2.0, 0.0, 5.0]) == sympy.Float(2.0) * v1**2
     with pytest.raises(ValueError, match="2 coefficients for 3 terms"):
         library.lagrangian([1.0, 2.0])
+
+
+def test_remembered_columns_are_computed_once_read_only_and_dropped_with_the_outermost_block(data, monkeypatch):
+    from bench.core import terms
+
+    term = Term.lagrangian(sympy.Symbol("qd_1", real=True) ** 2 / 2)
+    calls = []
+    torque = Term.torque
+    monkeypatch.setattr(Term, "torque", lambda self, d: calls.append(1) or torque(self, d))
+    with terms.remembered_columns(data):
+        first = term.column(data, "indirect")
+        with terms.remembered_columns(data):
+            assert term.column(data, "indirect") is first
+        assert term.column(data, "indirect") is first and len(calls) == 1
+        with pytest.raises(ValueError, match="read-only"):
+            first[0] = 1.0
+    term.column(data, "indirect")
+    assert len(calls) == 2 and data not in terms._REMEMBERED
+
+
+def test_smoothed_coulomb_friction_stays_finite_far_beyond_its_velocity(data):
+    from bench.core.effects import EFFECTS
+
+    tau = EFFECTS["smooth_coulomb"].term(0, shape=1e-3).torque(data)  # qd / v_s up to about 1500: cosh overflows
+    np.testing.assert_allclose(tau[:, 0], np.tanh(data.qd[:, 0] / 1e-3), rtol=0, atol=1e-15)
