@@ -32,7 +32,8 @@ from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preproc
 from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, scaling, syrenets_profile, syrenets_speed
 from bench.reporting.leaderboard import write_leaderboard
 from bench.reporting.tables import write_tables
-from bench.residual.loop import FIT_SHARE, MAX_ROUNDS, ResidualJob, run_residual
+from bench.residual.job import ResidualJob, run_residual
+from bench.residual.loop import FIT_SHARE, MAX_ROUNDS
 from bench.runner import matrix
 from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.isolation import CallFailed

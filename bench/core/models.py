@@ -12,6 +12,9 @@ the rest of the suite uses nothing else of them:
   ``None`` for a model without one (a neural network);
 * :meth:`~FittedModel.parametric`: the model as a parametric form with
   identified values (:class:`ParametricModel`), or ``None``;
+* :meth:`~FittedModel.structure`: what kind of model it is (parametric,
+  linear in its parameters, an expression, or opaque), for code that treats
+  kinds differently;
 * :meth:`~FittedModel.not_a_lagrangian`: why the model is not a Lagrangian
   of ``(q, qd)`` alone, or ``None``.
 
@@ -70,6 +73,22 @@ class FittedModel(abc.ABC):
     def parametric(self) -> "ParametricModel | None":
         """The model as a parametric form with identified values, if it is one."""
         return None
+
+    def structure(self) -> str:
+        """What kind of model this is, for code that treats kinds differently
+        (the residual loop's refit strategies): ``"parametric"`` (a form with
+        nonlinear parameters, :class:`ParametricModel`), ``"linear"`` (linear
+        in its parameters, :class:`LinearParametricModel`), ``"expression"``
+        (an expression whose terms' coefficients can be refitted) or
+        ``"opaque"`` (a function only, a network). By default that of
+        :meth:`parametric` where the model gives one, else ``"expression"``
+        where it has an expression."""
+        parametric = self.parametric()
+        if parametric is not None and parametric is not self:
+            return parametric.structure()
+        if self.expression_terms_bound() is not None or self.expression() is not None:
+            return "expression"
+        return "opaque"
 
     def not_a_lagrangian(self) -> str | None:
         """Why the model is not a Lagrangian of ``(q, qd)`` alone, or ``None``
@@ -175,6 +194,9 @@ class ParametricModel(LagrangianFunction):
     def parametric(self) -> "ParametricModel":
         return self
 
+    def structure(self) -> str:
+        return "parametric"
+
 
 class Separation:
     """A parametric form's Lagrangian written as ``sum_k c_k(theta) phi_k(q, qd)``.
@@ -263,6 +285,12 @@ class LinearParametricModel(FittedModel):
     def parameters(self) -> dict[str, float]:
         """The fitted values, by name."""
         return dict(zip(self.names, self.coef.tolist()))
+
+    def parametric(self) -> "LinearParametricModel":
+        return self
+
+    def structure(self) -> str:
+        return "linear"
 
 
 def mass_and_bias(model: FittedModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

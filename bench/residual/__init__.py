@@ -4,14 +4,18 @@ add them, refit, and report the error before and after.
 * :mod:`~bench.residual.candidates`: the named effects and the open-ended
   library, as terms;
 * :mod:`~bench.residual.selection`: stepwise selection with its statistics;
-* :mod:`~bench.residual.loop`: the loop, in this process
-  (:func:`residual_loop`) or through the runner (:func:`run_residual`);
+* :mod:`~bench.residual.strategies`: how the loop refits each kind of model;
+* :mod:`~bench.residual.pruning`, :mod:`~bench.residual.checks`: what follows
+  a refit, and what keeps or undoes a round;
+* :mod:`~bench.residual.loop`: the loop, in this process (:func:`residual_loop`);
+* :mod:`~bench.residual.job`: the loop through the runner (:func:`run_residual`);
 * :mod:`~bench.residual.result`, :mod:`~bench.residual.report`: its typed
   result and its outputs.
 """
 
 from bench.residual.candidates import candidates
-from bench.residual.loop import ResidualJob, residual_loop, run_residual
+from bench.residual.job import ResidualJob, run_residual
+from bench.residual.loop import residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.residual.selection import trace

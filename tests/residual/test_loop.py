@@ -175,13 +175,15 @@ def test_a_huge_symbolic_model_is_refitted_like_a_neural_one():
     import sympy
 
     from bench.core.symbolic import coordinate_symbols
-    from bench.residual import loop
+    from bench.residual import strategies
 
     (q1, q2), (v1, v2) = coordinate_symbols(2)
-    huge = sympy.Add(*[sympy.cos(k * q1) * v1**2 for k in range(1, loop.MAX_SYMBOLIC_TERMS + 2)])
+    huge = sympy.Add(*[sympy.cos(k * q1) * v1**2 for k in range(1, strategies.MAX_SYMBOLIC_TERMS + 2)])
     model = ExpressionModel(huge, 2)
-    data = generate(get_system("double_pendulum"), 20, 0)
-    assert loop._lagrangian_columns(model, data) is None and not loop._is_symbolic(model)
+    assert model.structure() == "expression" and strategies.expression_terms(model) is None
+    assert isinstance(strategies.strategy_for(model), strategies.KeptFit)
+    small = ExpressionModel(sympy.Add(*[sympy.cos(k * q1) * v1**2 for k in range(1, 4)]), 2)
+    assert strategies.strategy_for(small).basis.expressions == list(strategies.expression_terms(small))
 
 
 def test_cli_bad_files_exit_2_in_one_line_and_write_nothing(tmp_path):
@@ -295,15 +297,15 @@ def test_friction_on_every_joint_of_the_panda_is_found_beside_its_base_parameter
 def test_the_polish_screens_its_starts_on_a_subsample_and_refines_the_best_on_all_samples(monkeypatch):
     # parameters an optimiser cut short once left (negative masses and lengths): fitted on all 3000
     # samples, this start alone took the whole polish's time and ended in a local minimum
-    import bench.residual.loop as loop
+    import bench.residual.strategies as strategies
     from bench.core.models import ParametricModel
 
     train, _ = data_with({})
     form = get_system("double_pendulum").parametric_form()
-    fitted_on, fit = [], loop._nonlinear_fit
-    monkeypatch.setattr(loop, "_nonlinear_fit", lambda rigid, data, *a: fitted_on.append(len(data)) or fit(rigid, data, *a))
-    model = loop._polish(ParametricModel(form, [-19.7, -0.307, -13.66, -0.186]), train, seed=0)
-    assert fitted_on == [loop.POLISH_SAMPLES] * (loop.POLISH_STARTS + 1) + [len(train)]
+    fitted_on, fit = [], strategies.nonlinear_fit
+    monkeypatch.setattr(strategies, "nonlinear_fit", lambda rigid, data, *a: fitted_on.append(len(data)) or fit(rigid, data, *a))
+    model = strategies.polish(ParametricModel(form, [-19.7, -0.307, -13.66, -0.186]), train, seed=0)
+    assert fitted_on == [strategies.POLISH_SAMPLES] * (strategies.POLISH_STARTS + 1) + [len(train)]
     assert model.rigid.theta == pytest.approx(form.true_values, rel=1e-6)
     assert np.mean((model.predict_torque(train) - train.tau) ** 2) < 1e-12
 

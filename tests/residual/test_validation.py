@@ -11,7 +11,8 @@ from bench.core.budget import Budget
 from bench.core.data import generate
 from bench.core.effects import EFFECTS, add_effects
 from bench.core.terms import TermLibrary
-from bench.residual import loop, residual_loop, trace
+from bench.residual import loop, residual_loop, strategies, trace
+from bench.residual import model as model_module
 from bench.residual.validation import BLOCKS, cv_mse, describe, folds
 from systems import get_system
 from tests.residual.test_loop import SOLVED, SYSID, quiet
@@ -58,7 +59,7 @@ def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
     train = add_effects(generate(s, 2000, 0), {"viscous_friction": (0.8, 0.5)})
     test = add_effects(generate(s, 1000, 1), {"viscous_friction": (0.8, 0.5)})
     calls = iter([1.0, 2.0])  # round 0, then the refitted round 1: worse
-    monkeypatch.setattr(loop, "_heldout", lambda model, data: next(calls))
+    monkeypatch.setattr(loop, "heldout", lambda strategy, model, data: next(calls))
     out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     assert out.effects == [] and out.mse_after == out.mse_before
     last = out.rounds[-1]
@@ -69,9 +70,9 @@ def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
 def test_a_round_that_leaves_the_mass_matrix_not_positive_definite_is_undone(monkeypatch):
     s = get_system("double_pendulum")
     train = add_effects(generate(s, 2000, 0), {"viscous_friction": (0.8, 0.5)})
-    real = loop._smallest_mass_eigenvalue
+    real = loop.smallest_mass_eigenvalue
     # the rod pendulum's own mass matrix is positive definite; pretend the effects spoil it
-    monkeypatch.setattr(loop, "_smallest_mass_eigenvalue", lambda model, data: real(model, data) - 1e3 * bool(model.effects))
+    monkeypatch.setattr(loop, "smallest_mass_eigenvalue", lambda model, data: real(model, data) - 1e3 * bool(model.effects))
     out = residual_loop("sparse", train, None, steps=SOLVED, report=quiet)
     assert out.effects == [] and out.mass_matrix["positive_definite"]
     assert out.mass_matrix["smallest_eigenvalue_before"] == out.mass_matrix["smallest_eigenvalue_after"] > 0
@@ -197,7 +198,7 @@ class _Biased(_Memoriser):
 def test_an_effect_only_in_a_kept_fits_own_training_residual_is_undone_by_its_cross_fits(monkeypatch):
     # the offset is in what the fit leaves on every training recording, so leaving one recording out
     # cannot tell; the method fitted on half the recordings leaves nothing on the other half
-    monkeypatch.setattr(loop, "METHODS", {"biased": _Biased})
+    monkeypatch.setattr(model_module, "METHODS", {"biased": _Biased})
     s = get_system("double_pendulum")
     train = generate(s, 1200, 0).replace(recording=np.array(list("abcd"))[np.arange(1200) // 300])
     test = generate(s, 600, 5000)
@@ -225,7 +226,7 @@ def test_the_cross_fit_deals_the_recordings_into_two_halves_each_predicted_by_th
             return _Biased().fit(data, "indirect", 0, 1.0)
 
     full = _Biased().fit(train, "indirect", 0, 1.0)
-    cross, info = loop._cross_fit(Fitter(), full, train, quiet)
+    cross, info = strategies.cross_fit(Fitter(), full, train, quiet)
     assert seen == ["bd", "ac"] and info["in_sample_mse"] == pytest.approx(0.125)
     assert [np.flatnonzero(h)[[0, -1]].tolist() for h in cross.halves] == [[0, 599], [200, 799]]
     rigid = s.torque(*(torch.from_numpy(a) for a in (train.q, train.qd, train.qdd)))[0].numpy()

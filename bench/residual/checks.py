@@ -1,0 +1,32 @@
+"""The checks that keep or undo a round of the loop: its model's error on
+held-out recordings, and whether its mass matrix is positive definite."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bench.core.data import Dataset
+from bench.core.models import FittedModel, mass_and_bias
+from bench.residual.model import LoopModel
+from bench.residual.strategies import Strategy
+from bench.residual.validation import cv_mse, row_folds
+
+#: training states the mass matrix is checked at
+MASS_STATES = 256
+
+
+def heldout(strategy: Strategy, model: LoopModel, train: Dataset) -> float:
+    """The model's torque MSE on held-out data: the linear problem that
+    tracing and pruning fit (:meth:`~bench.residual.strategies.Strategy.problem`),
+    cross-validated over whole recordings (:func:`bench.residual.validation.cv_mse`)."""
+    target, F = strategy.problem(model, train)
+    return cv_mse(F, target.ravel(), row_folds(train))
+
+
+def smallest_mass_eigenvalue(model: FittedModel, train: Dataset) -> float:
+    """The smallest eigenvalue of the model's mass matrix ``d^2 L / dqd^2``
+    (with its effects) over up to :data:`MASS_STATES` training states, evenly spread."""
+    rows = np.unique(np.linspace(0, len(train) - 1, min(MASS_STATES, len(train))).astype(int))
+    states = train.subset(rows)
+    M, _ = mass_and_bias(model, states.q, states.qd)
+    return float(np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))[:, 0].min())

@@ -1,0 +1,105 @@
+"""The residual loop's models: a fitted Lagrangian plus the effects accepted so far.
+
+* :class:`LoopModel`: ``tau_hat = g(L_hat) + Phi c``, the rigid model and
+  the effects' terms with their coefficients;
+* :class:`CrossFitted`: a kept fit with the torque of its cross-fits;
+* :class:`Fitter`: how the loop fits its method;
+* :func:`rigid_torque`: a rigid model's torque on a data set, remembered.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bench.core.budget import Budget
+from bench.core.data import Dataset
+from bench.core.models import FittedModel
+from bench.core.terms import Term, TermLibrary
+from methods import METHODS
+
+#: the last rigid-model torques computed, ``(rigid, data, tau)`` (see :func:`rigid_torque`)
+_TORQUES: list[tuple] = []
+
+
+def rigid_torque(rigid: FittedModel, data: Dataset) -> np.ndarray:
+    """``rigid.predict_torque(data)`` as float64, remembered for the last few
+    ``(rigid, data)`` pairs: the loop asks for a model's torque on the
+    training data in every refit and pruning step, and a neural model's costs
+    a pass of automatic differentiation. Pairs are matched by identity."""
+    for r, d, tau in _TORQUES:
+        if r is rigid and d is data:
+            return tau
+    tau = np.asarray(rigid.predict_torque(data), dtype=np.float64)
+    _TORQUES.insert(0, (rigid, data, tau))
+    del _TORQUES[4:]
+    return tau
+
+
+class CrossFitted(FittedModel):
+    """A kept fit with the cross-fits' torque on the training data
+    (:func:`bench.residual.strategies.cross_fit`): ``torque[halves[k]]`` is
+    predicted by the method fitted without ``halves[k]``. It predicts as the
+    fit on all of it."""
+
+    def __init__(self, fit: FittedModel, halves: list[np.ndarray], torque: np.ndarray):
+        self.fit, self.halves, self.torque = fit, halves, torque
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        return self.fit.predict_lagrangian(data)
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        return self.fit.predict_torque(data)
+
+    def expression(self):
+        return self.fit.expression()
+
+    def expression_terms_bound(self) -> int | None:
+        return self.fit.expression_terms_bound()
+
+    def readable_expression(self):
+        return self.fit.readable_expression()
+
+
+class LoopModel(FittedModel):
+    """``tau_hat = g(L_hat) + Phi c``: a fitted Lagrangian plus accepted effects."""
+
+    def __init__(self, rigid: FittedModel, effects: list[Term], coef, stderr):
+        self.rigid, self.effects = rigid, list(effects)
+        self.coef, self.stderr = np.asarray(coef, dtype=np.float64), np.asarray(stderr, dtype=np.float64)
+
+    @classmethod
+    def bare(cls, rigid: FittedModel) -> "LoopModel":
+        """``rigid`` with no effects."""
+        return cls(rigid, [], np.zeros(0), np.zeros(0))
+
+    def columns(self, data: Dataset) -> np.ndarray:
+        return TermLibrary(self.effects).design(data, "indirect")
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        tau = rigid_torque(self.rigid, data)
+        if self.effects:
+            tau = tau + (self.columns(data) @ self.coef).reshape(tau.shape)
+        return tau
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        """The rigid model's ``L`` plus the conservative effects' terms."""
+        L = np.asarray(self.rigid.predict_lagrangian(data), dtype=np.float64)
+        return L + sum((c * t.value(data) for c, t in zip(self.coef, self.effects)), np.zeros(len(data)))
+
+    def expression(self):
+        return self.rigid.expression()
+
+
+@dataclass(frozen=True)
+class Fitter:
+    """How the loop fits its method: by name, seed, budget and hyperparameters."""
+
+    method: str
+    seed: int
+    budget: Budget
+    hyperparameters: dict
+
+    def fit(self, train: Dataset) -> FittedModel:
+        return METHODS[self.method](**self.hyperparameters).fit(train, "indirect", self.seed, self.budget)

@@ -1,0 +1,400 @@
+"""How the residual loop treats each kind of fitted model: one refit strategy per kind.
+
+A fitted model declares its structure (:meth:`bench.core.models.FittedModel.structure`),
+and :func:`strategy_for` picks the strategy once, at the start of the loop.
+A strategy owns what differs between kinds of model:
+
+* :meth:`Strategy.start`: what the loop's round 0 does with the fit (a
+  parametric model's parameters are polished; a kept fit is cross-fitted);
+* :meth:`Strategy.freedom`: the columns of what the model can already
+  express, which every candidate is judged beside, so that one the model
+  could express gains nothing;
+* :meth:`Strategy.problem`: what tracing and pruning fit (the target and the
+  columns always in the fit);
+* :meth:`Strategy.refit`: the model's own freedom and the effects fitted
+  together, without fitting the method again;
+* :meth:`Strategy.check`: a strategy's own reason to undo a round.
+
+=====================  ================================  ==================================================
+strategy               models                            refit with effects
+=====================  ================================  ==================================================
+:class:`Parametric`    a form with nonlinear parameters  nonlinear least squares over the parameters and
+                       (SysId on a pendulum)             the effects' coefficients together; its columns
+                                                         are its parameters' directions where it stands
+:class:`Linear`        linear in its parameters          least squares over its base columns and the
+                       (SysId on an arm)                 effects' together
+:class:`Expression`    a sum of at most                  least squares over its terms' and the effects'
+                       :data:`MAX_SYMBOLIC_TERMS` terms  columns together (``g`` is linear in ``L``)
+                       (sparse regression, GP)
+:class:`KeptFit`       anything else (a network,         the effects only, fitted to what the fit
+                       SyReNets' full equation)          leaves; cross-fitted (:func:`cross_fit`)
+=====================  ================================  ==================================================
+"""
+
+from __future__ import annotations
+
+import abc
+import functools
+import math
+import time
+from typing import ClassVar
+
+import numpy as np
+import sympy
+
+from bench.core.data import Dataset, mse
+from bench.core.models import ExpressionModel, FittedModel, ParametricModel
+from bench.core.regression import fit_statistics
+from bench.core.terms import Term, TermLibrary
+from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
+from bench.residual.validation import folds
+from bench.runner.progress import Report
+
+#: a symbolic model with more terms than this is refitted like a neural one
+#: (a least-squares refit of thousands of terms is neither fast nor meaningful)
+MAX_SYMBOLIC_TERMS = 200
+#: an expression with more nodes than this is not expanded into terms at all
+MAX_SYMBOLIC_NODES = 50 * MAX_SYMBOLIC_TERMS
+#: random starts of the parametric polish, beside the method's own parameters
+POLISH_STARTS = 16
+#: training samples each start of the polish is fitted on (the best start is
+#: then refined on all of them)
+POLISH_SAMPLES = 256
+
+
+class Strategy(abc.ABC):
+    """How the loop refits one kind of model; see the module docstring."""
+
+    #: the strategy's name, as the loop's JSON gives it
+    name: ClassVar[str]
+    #: candidates a trace step may accept (``None``: as many as pass)
+    trace_steps: ClassVar[int | None] = None
+    #: whether the model's own columns span its torque, so that tracing fits the torque itself
+    spans_its_torque: ClassVar[bool] = False
+
+    def start(self, fitted: FittedModel, train: Dataset, context: "Start") -> tuple[LoopModel, dict]:
+        """Round 0: the loop's starting model, and what round 0 records of how it was made
+        (``method_model``: the method's own model, where the start changed it)."""
+        return LoopModel.bare(self.rigid_of(fitted)), {}
+
+    def rigid_of(self, fitted: FittedModel) -> FittedModel:
+        """The model the strategy refits: the parametric form a method gives, or the fit itself."""
+        return fitted
+
+    @abc.abstractmethod
+    def freedom(self, model: LoopModel, train: Dataset) -> np.ndarray:
+        """Columns for what the model can already express, ``(n * dof, k)``."""
+
+    def problem(self, model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarray]:
+        """What tracing and pruning fit: the target (``(n, dof)``) and the columns
+        always in the fit, the model's freedom then the accepted effects. Where the
+        model's columns span its own torque, the target is the torque itself;
+        otherwise it is what the rigid model leaves."""
+        target = train.tau if self.spans_its_torque else train.tau - rigid_torque(model.rigid, train)
+        return target, np.hstack([self.freedom(model, train), model.columns(train)])
+
+    @abc.abstractmethod
+    def refit(self, model: LoopModel, train: Dataset, effects: list[Term]) -> LoopModel:
+        """The model's own freedom and ``effects`` fitted together; the method is not fitted again."""
+
+    def check(self, candidate: LoopModel, model: LoopModel, train: Dataset) -> tuple[str, str] | None:
+        """A reason of the strategy's own to undo a round (the JSON's words, then the
+        progress line's), or ``None``."""
+        return None
+
+    def _effects_beside(self, model: LoopModel, train: Dataset, effects: list[Term]):
+        """The effects' columns and their least-squares coefficients on what the rigid model leaves."""
+        Phi = TermLibrary(effects).design(train, "indirect")
+        return Phi, fit_statistics(Phi, train.tau.ravel() - np.ravel(rigid_torque(model.rigid, train)))
+
+
+class Start:
+    """What a strategy's round 0 may use: the loop's seed, fitter, budgets and report."""
+
+    def __init__(self, seed: int, fitter: Fitter, cross_fitter: Fitter, given: bool, polish_deadline: float,
+                 report: Report):
+        self.seed, self.fitter, self.cross_fitter, self.given = seed, fitter, cross_fitter, given
+        self.polish_deadline, self.report = polish_deadline, report
+
+
+class Parametric(Strategy):
+    """A form with nonlinear parameters (:class:`~bench.core.models.ParametricModel`)."""
+
+    name = "parametric"
+    # its columns are its parameters' directions where it stands: one step a round, then the
+    # joint refit moves it, so that a large step is not followed by terms that only mend the
+    # linearisation
+    trace_steps = 1
+
+    def rigid_of(self, fitted):
+        return fitted.parametric()
+
+    def start(self, fitted, train, context):
+        rigid = self.rigid_of(fitted)
+        method = LoopModel.bare(rigid)
+        polished = polish(rigid, train, context.seed, deadline=context.polish_deadline)
+        before, after = mse(method.predict_torque(train), train.tau), mse(polished.predict_torque(train), train.tau)
+        context.report(f"round 0: {context.fitter.method}'s parameters polished by nonlinear least squares "
+                       f"(train MSE {before:.4g} -> {after:.4g})")
+        return polished, {"method_model": method}
+
+    def freedom(self, model, train):
+        return model.rigid.jacobian(train)
+
+    def refit(self, model, train, effects):
+        _, (coef, _, _) = self._effects_beside(model, train, effects)
+        return nonlinear_fit(model.rigid, train, effects, coef)
+
+
+class Linear(Strategy):
+    """A model linear in its parameters (:class:`~bench.core.models.LinearParametricModel`):
+    least squares has reached its optimum already, so round 0 keeps it."""
+
+    name = "linear"
+    spans_its_torque = True
+
+    def rigid_of(self, fitted):
+        return fitted.parametric()
+
+    def freedom(self, model, train):
+        return model.rigid.torque_columns(train)
+
+    def refit(self, model, train, effects):
+        Phi = TermLibrary(effects).design(train, "indirect")
+        F_L = model.rigid.torque_columns(train)
+        coef, stderr, _ = fit_statistics(np.hstack([F_L, Phi]), train.tau.ravel())
+        k = F_L.shape[1]
+        return LoopModel(model.rigid.with_coefficients(coef[:k]), effects, coef[k:], stderr[k:])
+
+
+class Expression(Strategy):
+    """A symbolic model of at most :data:`MAX_SYMBOLIC_TERMS` terms: its terms'
+    coefficients are refitted with the effects (``g`` is linear in ``L``)."""
+
+    name = "expression"
+    spans_its_torque = True
+
+    def __init__(self, basis: tuple[sympy.Expr, ...]):
+        self.basis = TermLibrary.of_lagrangian(basis)
+
+    def freedom(self, model, train):
+        return self.basis.design(train, "indirect")
+
+    def refit(self, model, train, effects):
+        Phi = TermLibrary(effects).design(train, "indirect")
+        F_L = self.freedom(model, train)
+        coef, stderr, _ = fit_statistics(np.hstack([F_L, Phi]), train.tau.ravel())
+        k = len(self.basis)
+        expr = sympy.Add(*[sympy.Float(a) * b for a, b in zip(coef[:k], self.basis.expressions)])
+        return LoopModel(ExpressionModel(expr, train.dof), effects, coef[k:], stderr[k:])
+
+
+class KeptFit(Strategy):
+    """A model the loop does not refit (a network, or SyReNets' full equation):
+    only the effects are fitted to what it leaves. Its own terms therefore
+    cannot grow to absorb noise in the refit. What it leaves on the samples it
+    was fitted on flatters it, so, unless it was fitted on other data (a
+    given fit), it is cross-fitted (:func:`cross_fit`) and a round must also
+    lower the error of each cross-fit on the half it did not see."""
+
+    name = "kept fit"
+
+    def __init__(self):
+        self.cross_fitted = False
+
+    def start(self, fitted, train, context):
+        if context.given:  # fitted on other data: what it leaves here is out of sample already
+            return LoopModel.bare(fitted), {}
+        cross, info = cross_fit(context.cross_fitter, fitted, train, context.report)
+        self.cross_fitted = True
+        return LoopModel.bare(cross), {"cross_fit": info}
+
+    def freedom(self, model, train):
+        return np.zeros((train.tau.size, 0))
+
+    def refit(self, model, train, effects):
+        _, (coef, stderr, _) = self._effects_beside(model, train, effects)
+        return LoopModel(model.rigid, effects, coef, stderr)
+
+    def check(self, candidate, model, train):
+        if not self.cross_fitted:  # a given fit has no cross-fits
+            return None
+        # the kept fit saw every training sample; its cross-fits did not see the half they predict
+        now, then = cross_fitted_mse(candidate, train), cross_fitted_mse(model, train)
+        if np.all(now < then):
+            return None
+        return (f"the effects do not lower the error of the method fitted on one half of the training "
+                f"data on the other half, for each half ({_fmt(now)} against {_fmt(then)})",
+                f"the cross-fitted error ({_fmt(now)}) is not below {_fmt(then)} on each half")
+
+
+def strategy_for(fitted: FittedModel) -> Strategy:
+    """The strategy for ``fitted``, chosen once from its declared structure
+    (:meth:`~bench.core.models.FittedModel.structure`); an expression too
+    large to expand into terms is kept like a network."""
+    structure = fitted.structure()
+    if structure == "parametric":
+        return Parametric()
+    if structure == "linear":
+        return Linear()
+    if structure == "expression":
+        basis = expression_terms(fitted)
+        if basis is not None:
+            return Expression(basis)
+    return KeptFit()
+
+
+def expression_terms(model: FittedModel) -> tuple[sympy.Expr, ...] | None:
+    """The coefficient-free terms of the model's expanded expression that act on
+    the torque; ``None`` where the model says its terms exceed
+    :data:`MAX_SYMBOLIC_TERMS` (without building it), where it has no
+    expression, or where its expression is too large to expand or has more terms."""
+    bound = model.expression_terms_bound()
+    if bound is not None and bound > MAX_SYMBOLIC_TERMS:
+        return None
+    expr = model.expression()
+    return None if expr is None else _terms(expr)
+
+
+def _small(expr: sympy.Expr) -> bool:
+    """Whether ``expr`` has at most :data:`MAX_SYMBOLIC_NODES` nodes, found
+    without expanding it (counting stops at the limit)."""
+    for i, _ in enumerate(sympy.preorder_traversal(expr)):
+        if i >= MAX_SYMBOLIC_NODES:
+            return False
+    return True
+
+
+@functools.lru_cache(maxsize=16)
+def _terms(expr: sympy.Expr) -> tuple[sympy.Expr, ...] | None:
+    if not _small(expr):
+        return None
+    out = []
+    for term in sympy.Add.make_args(sympy.expand(expr)):
+        _, rest = term.as_coeff_Mul()
+        if rest.free_symbols and rest not in out:
+            out.append(rest)
+    return tuple(out) if len(out) <= MAX_SYMBOLIC_TERMS else None
+
+
+# -- the parametric strategy's fits ------------------------------------------------------
+
+def nonlinear_fit(rigid: ParametricModel, train: Dataset, effects: list[Term], coef0) -> LoopModel:
+    """Parameters and effects' coefficients together, by nonlinear least squares
+    (trust-region reflective, analytic effect columns, the form's parameter
+    Jacobian, :meth:`~bench.core.models.ParametricModel.jacobian`)."""
+    from scipy.optimize import least_squares  # 0.7 s to import: only parametric models need it
+
+    Phi = TermLibrary(effects).design(train, "indirect")
+    y = train.tau.ravel()
+    p = len(rigid.theta)
+
+    def residual(x):
+        return rigid.with_parameters(x[:p]).predict_torque(train).ravel() + Phi @ x[p:] - y
+
+    def jac(x):
+        return np.hstack([rigid.with_parameters(x[:p]).jacobian(train), Phi])
+
+    x0 = np.concatenate([rigid.theta, np.asarray(coef0, dtype=np.float64)])
+    sol = least_squares(residual, x0, jac=jac, method="trf", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200)
+    J = sol.jac
+    rss = float(sol.fun @ sol.fun)
+    cov = np.linalg.pinv(J.T @ J) * (rss / max(len(y) - len(sol.x), 1))
+    stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return LoopModel(rigid.with_parameters(sol.x[:p]), effects, sol.x[p:], stderr[p:])
+
+
+def polish(rigid: ParametricModel, train: Dataset, seed: int, deadline: float = math.inf) -> LoopModel:
+    """Nonlinear least squares from the method's parameters and from
+    :data:`POLISH_STARTS` log-uniform starts in [0.01, 10], each fitted on
+    :data:`POLISH_SAMPLES` random training samples; the best of them is then
+    refitted on all of ``train``. No start begins after ``deadline``
+    (``time.perf_counter()``) but the first; the final refit always runs.
+
+    Screening the starts on a subsample makes each about ``len(train) /
+    POLISH_SAMPLES`` times cheaper. Fitted on all the samples, a start from
+    an optimiser's poor parameters (negative masses, say) could take the
+    whole polish's time on its own and leave the random starts, which find
+    the optimum, no time; then the loop took the optimiser's shortfall for
+    effects."""
+    rng = np.random.default_rng([seed, 0x706F6C])
+    starts = [rigid.theta] + [10 ** rng.uniform(-2, 1, len(rigid.theta)) for _ in range(POLISH_STARTS)]
+    screen = train
+    if len(train) > 2 * POLISH_SAMPLES:
+        screen = train.subset(np.sort(rng.choice(len(train), POLISH_SAMPLES, replace=False)))
+    best = _best_fit(rigid, starts, screen, deadline)
+    if best is None:
+        return LoopModel.bare(rigid)
+    if screen is train:
+        return best
+    refined = _best_fit(rigid, [best.rigid.theta], train)
+    return best if refined is None else refined
+
+
+def _best_fit(rigid: ParametricModel, starts: list, data: Dataset, deadline: float = math.inf) -> LoopModel | None:
+    """The lowest-RSS nonlinear fit of ``rigid`` on ``data`` from ``starts``
+    (``None`` if no start gave a finite one); no start but the first begins after ``deadline``."""
+    best, best_rss = None, math.inf
+    for i, theta in enumerate(starts):
+        if i and time.perf_counter() > deadline:
+            break
+        try:
+            fit = nonlinear_fit(rigid.with_parameters(theta), data, [], [])
+        except (ValueError, np.linalg.LinAlgError):  # a start where the form is not finite
+            continue
+        r = fit.predict_torque(data) - data.tau
+        rss = float(np.sum(r * r))
+        if math.isfinite(rss) and rss < best_rss:
+            best, best_rss = fit, rss
+    return best
+
+
+# -- the kept fit's cross-fits -------------------------------------------------------------
+
+def cross_fit(fitter: Fitter, fit: FittedModel, train: Dataset, report: Report) -> tuple[CrossFitted, dict]:
+    """A kept fit with cross-fits to check it by.
+
+    The fit saw every training sample, so what it leaves on them is smaller
+    than, and unlike, what it leaves on a recording it has not seen: an
+    effect can fit that residual, on every recording, and still not help on
+    a new one. The validation folds (:func:`bench.residual.validation.folds`:
+    the recordings, or contiguous blocks) are dealt alternately into two
+    halves; the method is fitted on each half, with ``fitter``'s budget, and
+    predicts the other (:func:`cross_fitted_mse`).
+
+    The effects are still fitted to what the fit on all the training data
+    leaves, because that fit is what the loop keeps: on the DFKI recordings,
+    an MLP fitted on half of them (two or three recordings) leaves 1.1 to 3.6
+    times (median 2.3) the error on the other half that the MLP fitted on
+    all of them leaves on the test recordings, and SyReNets up to 88 times,
+    so effects fitted to the cross-fits' residual would mend their
+    shortfall, not the kept fit's (fitted so, the MLP ended 1.19 times worse
+    on the suite's test recordings).
+    """
+    t0 = time.perf_counter()
+    fold_masks = folds(train)
+    halves = [np.any(fold_masks[k::2], axis=0) for k in (0, 1)]
+    torque = np.empty_like(train.tau)
+    for held in halves:
+        other = fitter.fit(train.subset(np.flatnonzero(~held)))
+        torque[held] = np.asarray(other.predict_torque(train.subset(np.flatnonzero(held))), dtype=np.float64)
+    info = {"in_sample_mse": mse(rigid_torque(fit, train), train.tau), "out_of_fold_mse": mse(torque, train.tau),
+            "fit_budget_s": fitter.budget.seconds if fitter.budget.steps is None else None,
+            "fit_budget": fitter.budget.to_json(), "seconds": round(time.perf_counter() - t0, 3)}
+    report(f"round 0: {fitter.method} cross-fitted on two halves of the training data ({fitter.budget.describe()} each): "
+           f"torque MSE {info['out_of_fold_mse']:.4g} on the half it did not see, "
+           f"{info['in_sample_mse']:.4g} for the fit on all of it")
+    return CrossFitted(fit, halves, torque), info
+
+
+def cross_fitted_mse(model: LoopModel, train: Dataset) -> np.ndarray:
+    """For each half of a :class:`CrossFitted` model's training data, the
+    torque MSE of the method fitted on the other half plus the model's
+    effects (their coefficients as fitted)."""
+    cross = model.rigid
+    tau = cross.torque + (model.columns(train) @ model.coef).reshape(cross.torque.shape) if model.effects else cross.torque
+    return np.asarray([mse(tau[held], train.tau[held]) for held in cross.halves])
+
+
+def _fmt(x) -> str:
+    return ", ".join(f"{v:.4g}" for v in np.atleast_1d(x))
