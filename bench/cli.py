@@ -25,7 +25,8 @@ import numpy as np
 
 from bench.core.arguments import noise_level, nonnegative, positive, positive_int
 from bench.core.data import Dataset, add_noise, check_experiment, generate, write_csv
-from bench.core.effects import EFFECTS, LAWS, add_effects, parse_effects
+from bench.core.effects import EFFECTS
+from bench.core.undeclared import GENERATOR_LAWS, add_effects, parse_effects
 from bench.core.errors import UserError
 from bench.core.fileio import check_output, write_json
 from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preprocess, read_recording
@@ -173,7 +174,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(e.g. viscous_friction=0.8,0.5); "
                         f"i-j:c items for {', '.join(n for n, e in EFFECTS.items() if e.arity == 2)} on the "
                         "difference of coordinates i and j (e.g. coupled_spring=1-2:3.0); "
-                        f"j:{','.join(LAWS['stribeck_friction'])} items for stribeck_friction, ';'-separated; "
+                        + "; ".join(f"j:{','.join(law.parameters)} items for {name}" for name, law in GENERATOR_LAWS.items())
+                        + ", ';'-separated (e.g. stribeck_friction=1:1.0,2.0,0.5,0.3); "
                         "one number for a planar chain's tip_payload (its mass) or gravity_tilt (radians)")
     d.add_argument("--noise", type=noise_level, default=0.0,
                    help="Gaussian noise on tau as a fraction of each joint's torque std (default 0)")

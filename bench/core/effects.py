@@ -4,14 +4,19 @@
 Each effect has one coefficient and acts on one joint or, for the coupled
 ones, on a pair of coordinates ``i, j`` through their difference. Its torque
 is *added* to the rigid-body torque ``g(L)``, so friction coefficients are
-positive. An effect is a :class:`~bench.core.terms.Term` of one of three kinds:
+positive. An effect is a :class:`~bench.core.terms.Term` in one of three
+places, which the loop's JSON names by the kind of effect:
 
-* **conservative**: a term of the Lagrangian, its torque through the
+* ``L``, **conservative**: a term of the Lagrangian, its torque through the
   Euler–Lagrange transform;
-* **dissipative**: a term of the Rayleigh dissipation function ``D``, its
-  torque ``dD/dqd``; physically admissible only with a coefficient >= 0;
-* **force**: a generalized force that is neither (a constant offset: a
+* ``D``, **dissipative**: a term of the Rayleigh dissipation function ``D``,
+  its torque ``dD/dqd``; physically admissible only with a coefficient >= 0;
+* ``force``: a generalized force that is neither (a constant offset: a
   sensor or cable bias).
+
+Effects are the parts of physical laws (:mod:`bench.core.laws`): a law is
+one effect, or several on one joint (Coulomb plus viscous friction; the
+Stribeck law).
 
 =====================  =============  ========================================  ===================================
 name                   kind           term per unit coefficient                 torque
@@ -24,15 +29,16 @@ name                   kind           term per unit coefficient                 
 ``coupled_spring``     conservative   ``L += -(q_i - q_j)^2 / 2``               ``k (q_i - q_j)`` on i, minus on j
 ``coupled_damper``     dissipative    ``D = (qd_i - qd_j)^2 / 2``               ``b (qd_i - qd_j)`` on i, minus on j
 ``smooth_coulomb``     dissipative    ``D = v_s log cosh(qd_j / v_s)``          ``F_c tanh(qd_j / v_s)``
-``stribeck``           dissipative    ``D = v_s sqrt(pi)/2 erf(|qd_j| / v_s)``  ``dF exp(-(qd_j/v_s)^2) sign(qd_j)``
+``stribeck_hump``      dissipative    ``D = v_s sqrt(pi)/2 erf(|qd_j| / v_s)``  ``dF exp(-(qd_j/v_s)^2) sign(qd_j)``
 =====================  =============  ========================================  ===================================
 
 ``smooth_coulomb`` is Coulomb friction that reaches its level over a
 velocity ``v_s`` (a recording's low-pass filter, or a real drive's
-compliance, rounds the sign function off); ``stribeck`` is the hump of Stribeck friction at low speed, its velocity
-``v_s`` fixed in the term (:attr:`~bench.core.terms.Term.shape`) and its
-coefficient ``dF = F_s - F_c``. With Coulomb and viscous friction on the same
-joint it makes the Stribeck law (:data:`LAWS`)::
+compliance, rounds the sign function off); ``stribeck_hump`` is the hump
+of Stribeck friction at low speed, its velocity ``v_s`` fixed in the term
+(:attr:`~bench.core.terms.Term.shape`) and its coefficient ``dF = F_s - F_c``.
+With Coulomb and viscous friction on the same joint it makes the Stribeck
+law (:data:`bench.core.laws.LAWS`)::
 
     tau = (F_c + (F_s - F_c) exp(-(qd / v_s)^2)) sign(qd) + b qd,
 
@@ -77,7 +83,7 @@ import sympy
 
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
-from bench.core.terms import Term
+from bench.core.terms import PLACES, Term
 
 
 @dataclass(frozen=True)
@@ -89,9 +95,10 @@ class Effect:
     expr
         ``expr(q, qd) -> sympy``: the term per unit coefficient, given the
         symbols of the effect's coordinates (one, or a pair ``i, j``).
-    kind
-        ``conservative`` (a term of ``L``), ``dissipative`` (a term of ``D``)
-        or ``force`` (a generalized force on the joint).
+    place
+        Where its term acts (:attr:`Term.place <bench.core.terms.Term.place>`):
+        ``L`` (conservative), ``D`` (dissipative) or ``force`` (a generalized
+        force on the joint).
     parameter
         The coefficient's name in reports (``b``, ``k``, ...).
     nonnegative
@@ -105,7 +112,7 @@ class Effect:
 
     name: str
     expr: Callable[[tuple, tuple], sympy.Expr]
-    kind: str
+    place: str
     parameter: str
     formula: str
     arity: int = 1
@@ -159,7 +166,12 @@ class Effect:
 
     @property
     def conservative(self) -> bool:
-        return self.kind == "conservative"
+        return self.place == "L"
+
+    @property
+    def kind(self) -> str:
+        """``conservative``, ``dissipative`` or ``force``: the JSON's word for its place."""
+        return PLACES[self.place]
 
     def numeric_torque(self, data: Dataset, joint: int, shape: float) -> np.ndarray:
         """A shaped effect's torque on ``joint`` per unit coefficient at
@@ -175,7 +187,7 @@ class Effect:
         value of its nonlinear parameter, if it has one."""
         if self.on_system is not None:
             self.require(system)
-            return Term(sympy.expand(self.on_system(system, *system.symbols)), None, self.name)
+            return Term.lagrangian(sympy.expand(self.on_system(system, *system.symbols)), self.name)
         if len(joints) != self.arity or len(set(joints)) != len(joints):
             raise ValueError(f"{self.name} acts on {self.arity} distinct joint(s), got {joints}")
         if (shape is None) != (self.shaped is None) or (shape is not None and not shape > 0):
@@ -184,34 +196,30 @@ class Effect:
         qd = tuple(sympy.Symbol(f"qd_{j + 1}", real=True) for j in joints)
         expr = sympy.sympify(self.expr(q, qd) if shape is None else self.expr(q, qd, sympy.Float(shape)))
         joint = joints[0] if self.arity == 1 else None
-        if self.kind == "conservative":
-            return Term(expr, None, self.name, joint, shape=shape)
-        if self.kind == "dissipative":
-            return Term.dissipation(expr, self.name, joint, shape)
-        return Term.force(expr, joints[0], self.name)
+        return Term(expr, self.place, self.name, joint, shape)
 
 
 EFFECTS: dict[str, Effect] = {
     e.name: e
     for e in (
-        Effect("viscous_friction", lambda q, qd: qd[0] ** 2 / 2, "dissipative", "b", "b·qd (D = b·qd²/2)"),
-        Effect("coulomb_friction", lambda q, qd: sympy.Abs(qd[0]), "dissipative", "F_c", "F_c·sign(qd) (D = F_c·|qd|)"),
-        Effect("armature", lambda q, qd: qd[0] ** 2 / 2, "conservative", "I", "I·qdd (L += I·qd²/2)"),
-        Effect("spring", lambda q, qd: -(q[0] ** 2) / 2, "conservative", "k", "k·q (L −= k·q²/2)"),
+        Effect("viscous_friction", lambda q, qd: qd[0] ** 2 / 2, "D", "b", "b·qd (D = b·qd²/2)"),
+        Effect("coulomb_friction", lambda q, qd: sympy.Abs(qd[0]), "D", "F_c", "F_c·sign(qd) (D = F_c·|qd|)"),
+        Effect("armature", lambda q, qd: qd[0] ** 2 / 2, "L", "I", "I·qdd (L += I·qd²/2)"),
+        Effect("spring", lambda q, qd: -(q[0] ** 2) / 2, "L", "k", "k·q (L −= k·q²/2)"),
         Effect("offset", lambda q, qd: sympy.Integer(1), "force", "tau_0", "tau_0", nonnegative=False),
-        Effect("coupled_spring", lambda q, qd: -((q[0] - q[1]) ** 2) / 2, "conservative", "k",
+        Effect("coupled_spring", lambda q, qd: -((q[0] - q[1]) ** 2) / 2, "L", "k",
                "k·(q_i − q_j) on i, −k·(q_i − q_j) on j (L −= k·(q_i − q_j)²/2)", 2),
-        Effect("coupled_damper", lambda q, qd: (qd[0] - qd[1]) ** 2 / 2, "dissipative", "b",
+        Effect("coupled_damper", lambda q, qd: (qd[0] - qd[1]) ** 2 / 2, "D", "b",
                "b·(qd_i − qd_j) on i, −b·(qd_i − qd_j) on j (D = b·(qd_i − qd_j)²/2)", 2),
-        Effect("smooth_coulomb", lambda q, qd, v: v * sympy.log(sympy.cosh(qd[0] / v)), "dissipative", "F_c",
+        Effect("smooth_coulomb", lambda q, qd, v: v * sympy.log(sympy.cosh(qd[0] / v)), "D", "F_c",
                "F_c·tanh(qd/v_s) (D = F_c·v_s·log cosh(qd/v_s))", shaped="v_s",
                numeric=lambda q, qd, v: np.tanh(qd / v)),
-        Effect("stribeck", lambda q, qd, v: v * sympy.sqrt(sympy.pi) / 2 * sympy.erf(sympy.Abs(qd[0]) / v), "dissipative",
+        Effect("stribeck_hump", lambda q, qd, v: v * sympy.sqrt(sympy.pi) / 2 * sympy.erf(sympy.Abs(qd[0]) / v), "D",
                "dF", "dF·exp(−(qd/v_s)²)·sign(qd) (D = dF·v_s·√π/2·erf(|qd|/v_s))", shaped="v_s",
                numeric=lambda q, qd, v: np.exp(-((qd / v) ** 2)) * np.sign(qd)),
-        Effect("tip_payload", None, "conservative", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
+        Effect("tip_payload", None, "L", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
                arity=0, on_system=lambda system, q, qd: _payload(system, q, qd), needs_link_lengths=True),
-        Effect("gravity_tilt", None, "conservative", "alpha",
+        Effect("gravity_tilt", None, "L", "alpha",
                "gravity turned by alpha in the plane (L += sin(alpha)·(−Σ s_j·∂L/∂q_j))",
                arity=0, nonnegative=False, on_system=lambda system, q, qd: _tilt(system, q, qd),
                coefficient_of=sympy.sin, exact=lambda system, alpha: tilted(system, alpha)),
@@ -243,129 +251,4 @@ def tilted(system, alpha: float) -> Term:
     q, _ = system.symbols
     L = system.lagrangian_sympy
     shifted = L.subs({a: a - sympy.Float(alpha) * s for a, s in zip(q, system.tilt_direction())}, simultaneous=True)
-    return Term(sympy.expand(shifted - L), None, "gravity_tilt")
-
-#: friction laws made of several effects on one joint: their parameters, in
-#: the order ``--effects NAME=j:p1,p2,...`` gives them
-LAWS = {"stribeck_friction": ("F_c", "F_s", "v_s", "b")}
-
-
-def stribeck_terms(joint: int, F_c: float, F_s: float, v_s: float, b: float) -> list[tuple[Term, float]]:
-    """The Stribeck law on ``joint`` as ``(term, coefficient)`` pairs: Coulomb,
-    the low-speed hump and viscous friction."""
-    return [(EFFECTS["coulomb_friction"].term(joint), F_c), (EFFECTS["stribeck"].term(joint, shape=v_s), F_s - F_c),
-            (EFFECTS["viscous_friction"].term(joint), b)]
-
-
-def stribeck_admissible(F_c: float, F_s: float, v_s: float, b: float) -> bool:
-    """``F_s >= F_c >= 0``, ``v_s > 0``, ``b >= 0``."""
-    return F_s >= F_c >= 0 and v_s > 0 and b >= 0
-
-def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict[str, dict[tuple[int, ...], float]]:
-    """``["viscous_friction=0.8,0.5", "coupled_spring=1-2:3.0"]`` ->
-    ``{"viscous_friction": {(0,): 0.8, (1,): 0.5}, "coupled_spring": {(0, 1): 3.0}}``.
-
-    A one-joint effect takes one coefficient per joint; a coupled effect
-    takes ``i-j:c`` items (joints from 1), comma-separated; an effect of the
-    whole system one number (``tip_payload=0.3``, ``gravity_tilt=0.05``). A clear
-    :class:`ConfigError` otherwise."""
-    out = {}
-    for item in items:
-        name, sep, values = item.partition("=")
-        name = name.strip()
-        if not sep:
-            raise ConfigError(f"{source}: expected NAME=c1,...,c{dof} or NAME=i-j:c, got {item!r}")
-        known = [n for n, e in EFFECTS.items() if e.shaped is None] + list(LAWS)
-        if name not in known:
-            raise ConfigError(f"{source}: unknown effect {name!r}; known: {', '.join(known)}")
-        if name in LAWS:
-            out[name] = _parse_law(name, values, dof, source)
-            continue
-        if EFFECTS[name].arity == 0:
-            try:
-                value = float(values)
-            except ValueError:
-                value = math.nan
-            if not math.isfinite(value) or not EFFECTS[name].admissible(value):
-                raise ConfigError(f"{source}: {name} needs one finite number{' >= 0' if EFFECTS[name].nonnegative else ''} "
-                                  f"({EFFECTS[name].parameter}), got {values!r}")
-            out[name] = {(): value}
-            continue
-        if EFFECTS[name].arity == 1:
-            try:
-                coefs = tuple(float(v) for v in values.split(","))
-            except ValueError:
-                raise ConfigError(f"{source}: {name} needs numbers, got {values!r}") from None
-            if len(coefs) != dof or not all(np.isfinite(coefs)):
-                raise ConfigError(f"{source}: {name} needs {dof} finite coefficient(s), one per joint, got {values!r}")
-            out[name] = {(j,): c for j, c in enumerate(coefs)}
-            continue
-        pairs = {}
-        for part in values.split(","):
-            joints, colon, value = part.partition(":")
-            i, dash, j = joints.partition("-")
-            try:
-                key, c = (int(i) - 1, int(j) - 1), float(value)
-            except ValueError:
-                key, c = None, math.nan
-            if not (colon and dash and key and math.isfinite(c)) or not (0 <= min(key) and max(key) < dof and key[0] != key[1]):
-                raise ConfigError(f"{source}: {name} needs i-j:c items with two distinct joints in 1..{dof} and a "
-                                  f"finite coefficient, got {part!r}")
-            pairs[key] = c
-        out[name] = pairs
-    return out
-
-
-def _parse_law(name: str, values: str, dof: int, source: str) -> dict[tuple[int], tuple[float, ...]]:
-    """``j:p1,...,pk;j:...`` -> ``{(j - 1,): (p1, ..., pk)}`` for a friction law."""
-    params = LAWS[name]
-    out = {}
-    for part in values.split(";"):
-        joint, colon, rest = part.partition(":")
-        try:
-            j, ps = int(joint) - 1, tuple(float(v) for v in rest.split(","))
-        except ValueError:
-            j, ps = -1, ()
-        if not colon or not 0 <= j < dof or len(ps) != len(params) or not all(map(math.isfinite, ps)):
-            raise ConfigError(f"{source}: {name} needs j:{','.join(params)} items (a joint in 1..{dof} and "
-                              f"{len(params)} finite numbers), ';'-separated, got {part!r}")
-        if not stribeck_admissible(*ps):
-            raise ConfigError(f"{source}: {name} on joint {j + 1} is not physical: it needs F_s >= F_c >= 0, "
-                              f"v_s > 0 and b >= 0, got {part!r}")
-        out[(j,)] = ps
-    return out
-
-
-def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
-    """``data`` with the effects' torques added (and, for conservative effects,
-    their terms added to ``L``); ``effects`` as :func:`parse_effects` gives
-    them, or a one-joint effect's coefficients as a sequence, one per joint
-    (``{"viscous_friction": (0.8, 0.5)}``). An effect of the whole system
-    (a payload, a tilt) needs ``system``, the data's system."""
-    tau = data.tau.copy()
-    L = None if data.L is None else data.L.copy()
-    effects = {name: coefs if isinstance(coefs, dict) else {(j,): c for j, c in enumerate(coefs)}
-               for name, coefs in effects.items()}
-    for name, coefs in effects.items():
-        for joints, c in coefs.items():
-            if name in LAWS:
-                pairs = stribeck_terms(joints[0], *c)
-            elif EFFECTS[name].exact is not None:
-                EFFECTS[name].require(system)
-                pairs = [(EFFECTS[name].exact(system, c), 1.0)]
-            else:
-                pairs = [(EFFECTS[name].term(*joints, system=system), c)]
-            for term, coef in pairs:
-                if coef == 0:
-                    continue
-                tau += coef * term.torque(data)
-                if L is not None and not term.is_force:
-                    L += coef * term.value(data)
-    def value(c):
-        return ",".join(f"{x:g}" for x in c) if isinstance(c, tuple) else f"{c:g}"
-
-    text = ", ".join(f"{k}=" + ",".join(f"{'-'.join(str(j + 1) for j in js)}:{value(c)}" if len(js) > 1 or k in LAWS
-                                        else value(c) for js, c in v.items()) for k, v in effects.items())
-    return data.replace(tau=tau, L=L, source=f"{data.source} + undeclared {text}",
-                        meta={**data.meta, "effects": {k: {"-".join(str(j + 1) for j in js) or "all": c for js, c in v.items()}
-                                                       for k, v in effects.items()}})
+    return Term.lagrangian(sympy.expand(shifted - L), "gravity_tilt")

@@ -42,67 +42,75 @@ from bench.core.dynamics import euler_lagrange_chunked
 from bench.core.timeouts import Timeout
 
 
+#: where a term acts, and what the loop's JSON calls that kind of term
+PLACES = {"L": "conservative", "D": "dissipative", "force": "force"}
+
+
 @dataclass(frozen=True)
 class Term:
-    """One column of a linear model.
+    """One column of a linear model: an expression and its place.
 
     Attributes
     ----------
     expr
         The term in the suite's symbols ``q_i, qd_i`` (and ``qdd_i`` for a
         generalized force).
-    force_on
-        ``None`` for a Lagrangian term; the joint (0-based) a generalized
-        force acts on.
+    place
+        ``"L"``: a piece of the Lagrangian; ``"D"``: a piece of the Rayleigh
+        dissipation function, its torque ``dD/dqd``; ``"force"``: a
+        generalized force on :attr:`joint`.
     name
         What reports call the term (an effect's name, say); ``str(expr)``
         when empty.
     joint
-        The joint a Lagrangian term belongs to, where it belongs to one (an
-        armature of joint ``j``); for a generalized force, ``force_on``.
-    rayleigh
-        ``expr`` is a piece of the dissipation function ``D``: its torque is
-        ``dD/dqd``.
+        The joint (0-based) a generalized force acts on, or the joint a term
+        of ``L`` or ``D`` belongs to, where it belongs to one (an armature of
+        joint ``j``).
     shape
         A nonlinear parameter fixed in ``expr`` (a Stribeck velocity), where
         the term has one; its coefficient stays linear.
     """
 
     expr: sympy.Expr
-    force_on: int | None = None
+    place: str = "L"
     name: str = ""
     joint: int | None = None
-    rayleigh: bool = False
     shape: float | None = None
 
     def __post_init__(self):
-        if self.force_on is not None and self.joint is None:
-            object.__setattr__(self, "joint", self.force_on)
+        if self.place not in PLACES:
+            raise ValueError(f"a term's place is one of {', '.join(PLACES)}, got {self.place!r}")
+        if self.place == "force" and self.joint is None:
+            raise ValueError("a generalized force needs the joint it acts on")
 
     @classmethod
-    def lagrangian(cls, expr, name: str = "", joint: int | None = None) -> "Term":
-        return cls(sympy.sympify(expr), None, name, joint)
+    def lagrangian(cls, expr, name: str = "", joint: int | None = None, shape: float | None = None) -> "Term":
+        return cls(sympy.sympify(expr), "L", name, joint, shape)
 
     @classmethod
     def force(cls, expr, joint: int, name: str = "") -> "Term":
-        return cls(sympy.sympify(expr), int(joint), name)
+        return cls(sympy.sympify(expr), "force", name, int(joint))
 
     @classmethod
     def dissipation(cls, expr, name: str = "", joint: int | None = None, shape: float | None = None) -> "Term":
         """A Rayleigh term ``D(q, qd)``: torque ``dD/dqd``."""
-        return cls(sympy.sympify(expr), None, name, joint, True, shape)
+        return cls(sympy.sympify(expr), "D", name, joint, shape)
 
     @property
-    def is_force(self) -> bool:
-        """Whether the term acts on the torque only (a Rayleigh term or a generalized force), not in ``L``."""
-        return self.force_on is not None or self.rayleigh
+    def in_lagrangian(self) -> bool:
+        """Whether the term is a piece of ``L`` (it has a value there); a term
+        of ``D`` or a generalized force acts on the torque only."""
+        return self.place == "L"
+
+    @property
+    def kind(self) -> str:
+        """``conservative``, ``dissipative`` or ``force``, by :attr:`place` (:data:`PLACES`)."""
+        return PLACES[self.place]
 
     @property
     def joints(self) -> tuple[int, ...]:
-        """The joints (0-based) the term acts on: a generalized force's joint,
-        the joint a term belongs to, or else every coordinate its expression uses."""
-        if self.force_on is not None:
-            return (self.force_on,)
+        """The joints (0-based) the term acts on: its :attr:`joint`, or else
+        every coordinate its expression uses."""
         if self.joint is not None:
             return (self.joint,)
         found = {int(str(s).rpartition("_")[2]) - 1 for s in self.expr.free_symbols}
@@ -114,23 +122,23 @@ class Term:
 
     def value(self, data: Dataset) -> np.ndarray:
         """The term's value in ``L`` at the states of ``data``, shape ``(n,)``
-        (zero for a generalized force)."""
-        if self.is_force:
+        (zero for a term of ``D`` or a generalized force)."""
+        if not self.in_lagrangian:
             return np.zeros(len(data))
         return np.broadcast_to(symbolic.to_numpy(self.expr, data.dof)(data.q, data.qd), (len(data),)).astype(np.float64)
 
     def torque(self, data: Dataset) -> np.ndarray:
         """The term's torque per unit coefficient, shape ``(n, dof)``."""
-        if self.rayleigh:
+        if self.place == "D":
             out = np.zeros_like(data.tau)
             for j in range(data.dof):
                 dD = _tanh(sympy.diff(self.expr, sympy.Symbol(f"qd_{j + 1}", real=True)))
                 if dD != 0:
                     out[:, j] = _force_function(dD)(data)
             return out
-        if self.is_force:
+        if self.place == "force":
             out = np.zeros_like(data.tau)
-            out[:, self.force_on] = _force_function(self.expr)(data)
+            out[:, self.joint] = _force_function(self.expr)(data)
             return out
         t = data.tensors()
         fn = symbolic.to_torch(self.expr, data.dof)
@@ -141,8 +149,8 @@ class Term:
         ``tau`` flattened sample-major (``(n * dof,)``); computed once per
         term and data set inside :func:`remembered_columns` (read-only then)."""
         check_experiment(experiment)
-        if experiment == "direct" and self.is_force:
-            raise ValueError(f"{self.label} is a generalized force: it has no value in L (direct experiment)")
+        if experiment == "direct" and not self.in_lagrangian:
+            raise ValueError(f"{self.label} acts on the torque only: it has no value in L (direct experiment)")
         kept = _REMEMBERED.get(data)
         if kept is not None and (self, experiment) in kept[1]:
             return kept[1][(self, experiment)]
@@ -256,7 +264,7 @@ class TermLibrary(Sequence[Term]):
         """``sum_k c_k f_k`` over the Lagrangian terms with a nonzero coefficient."""
         if len(coef) != len(self):
             raise ValueError(f"{len(coef)} coefficients for {len(self)} terms")
-        return sympy.Add(*[sympy.Float(float(c)) * t.expr for c, t in zip(coef, self.terms) if c != 0.0 and not t.is_force])
+        return sympy.Add(*[sympy.Float(float(c)) * t.expr for c, t in zip(coef, self.terms) if c != 0.0 and t.in_lagrangian])
 
 
 def lagrangian_library_size(dof: int, kinds: tuple[str, ...]) -> int:

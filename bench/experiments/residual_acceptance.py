@@ -23,7 +23,9 @@ import numpy as np
 
 from bench.core.arguments import noise_level, positive, positive_int
 from bench.core.data import add_noise, generate
-from bench.core.effects import EFFECTS, LAWS, add_effects, parse_effects
+from bench.core.effects import EFFECTS
+from bench.core.laws import FAMILIES, Part, group
+from bench.core.undeclared import GENERATOR_LAWS, add_effects, parse_effects
 from bench.core.fileio import atomic_write, check_output
 from bench.residual.loop import residual_loop
 from bench.runner.isolation import run_jobs
@@ -44,6 +46,10 @@ CASES = {
     "elbow_spring": ["coupled_spring=1-2:3.0"],
     "elbow_damper": ["coupled_damper=1-2:0.6"],
     "stribeck": ["stribeck_friction=1:1.0,2.0,0.5,0.3"],
+    "coulomb_viscous": ["viscous_friction=0.8,0.5", "coulomb_friction=1.5,0.7"],
+    # a low-pass filter's rounding of Coulomb friction, at a velocity well below the data's
+    "smooth_coulomb": ["smooth_coulomb=1:1.5,0.02;2:0.7,0.02"],
+    "offset_spring": ["offset_spring=2:2.0,0.3"],
     "tip_payload": ["tip_payload=0.5"],
     "gravity_tilt": ["gravity_tilt=0.05"],
     "clean": [],
@@ -52,15 +58,24 @@ CASES = {
 
 def expected(effects: dict, dof: int) -> dict[tuple, dict[str, float]]:
     """``{(name, joints from 1): {parameter: value}}`` of the effects added,
-    as the loop's JSON names them."""
-    out = {}
+    as the loop's JSON names them: the parts on one joint as their laws
+    (:func:`bench.core.laws.group`; Coulomb plus viscous friction is one law)."""
+    out, on_joint = {}, {}
     for name, placed in effects.items():
         for joints, c in placed.items():
-            where = tuple(j + 1 for j in joints) or tuple(range(1, dof + 1))
-            if name in LAWS:
-                out[(name, where)] = dict(zip(LAWS[name], c))
+            if name in GENERATOR_LAWS:
+                for part in GENERATOR_LAWS[name].parts(*c):
+                    if part.coefficient:
+                        on_joint.setdefault(joints[0], {})[part.name] = part
+            elif len(joints) == 1 and name in FAMILIES:
+                if c:
+                    on_joint.setdefault(joints[0], {})[name] = Part(name, c)
             elif c:
+                where = tuple(j + 1 for j in joints) or tuple(range(1, dof + 1))
                 out[(name, where)] = {EFFECTS[name].parameter: c}
+    for j, parts in on_joint.items():
+        for law, members in group(parts):
+            out[(law.name, (j + 1,))] = {k: v for k, (v, _) in law.parameters_of(members).items()}
     return out
 
 

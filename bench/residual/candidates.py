@@ -31,10 +31,12 @@
 from __future__ import annotations
 
 import functools
+import math
 
 import sympy
 
 from bench.core.effects import EFFECTS
+from bench.core.laws import FAMILIES, Part, group
 from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary, lagrangian_library, lagrangian_library_size
 
@@ -57,18 +59,19 @@ def open_ended(dof: int, kinds: tuple[str, ...]) -> TermLibrary:
     return TermLibrary(terms)
 
 
-#: the Stribeck velocities (rad/s, or m/s) the candidates start from; the loop refines an accepted one
-STRIBECK_GRID = (0.03, 0.1, 0.3, 1.0, 3.0)
+#: the velocities (rad/s, or m/s) of a shaped effect (a Stribeck hump, smoothed Coulomb friction)
+#: the candidates start from; the loop refines an accepted one
+SHAPE_GRID = (0.03, 0.1, 0.3, 1.0, 3.0)
 
 
 def candidates(dof: int, coupled: bool = True, system=None) -> TermLibrary:
     """Every candidate: the named effects on every joint (the coupled ones on
     every pair, where ``coupled``: the coordinates are absolute angles; the
-    shaped ones at each velocity of :data:`STRIBECK_GRID`), the effects of
+    shaped ones at each velocity of :data:`SHAPE_GRID`), the effects of
     the whole ``system`` that apply to it (a tip payload and a gravity tilt
     on a planar chain), then the open-ended terms of ``L`` and ``D``."""
     named = [effect.term(*joints, shape=v) for effect in EFFECTS.values() if effect.arity == 1 or (coupled and effect.arity == 2)
-             for joints in _placements(effect.arity, dof) for v in (STRIBECK_GRID if effect.shaped else (None,))]
+             for joints in _placements(effect.arity, dof) for v in (SHAPE_GRID if effect.shaped else (None,))]
     whole = [effect.term(system=system) for effect in EFFECTS.values() if effect.arity == 0 and effect.applies_to(system)]
     kinds = system.kinds if system is not None else ("angle",) * dof
     return TermLibrary(named + whole + list(open_ended(dof, tuple(kinds))))
@@ -92,7 +95,7 @@ def admissible(term: Term, coefficient: float) -> bool:
     checks the mass matrix instead)."""
     if is_named(term):
         return EFFECTS[term.name].admissible(coefficient)
-    return coefficient >= 0 if term.rayleigh else True
+    return coefficient >= 0 if term.place == "D" else True
 
 
 def structural(term: Term, coefficient: float, stderr: float) -> dict:
@@ -113,65 +116,56 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
 
 def label(term: Term) -> str:
     """``"<effect or expression> on joint <j>"`` or ``"... on joints <i>-<j>"``,
-    joints from 1, with a shaped effect's parameter (``stribeck (v_s=0.3)``)."""
+    joints from 1, with a shaped effect's parameter (``stribeck_hump (v_s=0.3)``)."""
     joints = [j + 1 for j in term.joints]
     where = f"joint {joints[0]}" if len(joints) == 1 else f"joints {'-'.join(map(str, joints))}"
     shape = f" ({EFFECTS[term.name].shaped}={term.shape:.4g})" if term.shape is not None else ""
     return f"{term.name}{shape} on {where}"
 
 
-def kind(term: Term) -> str:
-    """``conservative`` (a term of ``L``), ``dissipative`` (of ``D``) or
-    ``force`` (a generalized force: an offset or an open-ended term)."""
-    if term.rayleigh:
-        return "dissipative"
-    return "force" if term.is_force else "conservative"
-
-
 def _law(term: Term, parameter: str, expr: sympy.Expr | None = None) -> str:
     """The text of a term's law with its parameter: ``L += ...``, ``D = ...``
     or ``tau += ...``; ``expr`` in place of the term's own expression."""
-    where = {"conservative": "L += ", "dissipative": "D = "}.get(kind(term), "tau += ")
+    where = {"L": "L += ", "D": "D = "}.get(term.place, "tau += ")
     return f"{where}{sympy.Symbol(parameter) * (term.expr if expr is None else expr)}"
 
 
 def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float]) -> list[dict]:
-    """The JSON entries of the accepted effects: a Stribeck hump and the
-    Coulomb and viscous friction on its joint make one ``stribeck_friction``
-    entry with ``F_c, F_s, v_s, b`` (``F_s``'s error from those of ``F_c`` and
-    ``F_s - F_c`` as if independent; ``v_s``'s from ``shape_stderr``); every
-    other effect is one entry (:func:`describe`)."""
+    """The JSON entries of the accepted effects, one per law
+    (:func:`bench.core.laws.group`): the named effects on one joint that
+    make a law of several parts (Coulomb plus viscous friction; a Stribeck
+    hump with the Coulomb and viscous friction on its joint) or a shaped
+    one (smoothed Coulomb friction) are one entry with the law's parameters
+    and its ``parts`` (each as :func:`describe` gives it; a shape's error
+    from ``shape_stderr``); every other effect is one entry (:func:`describe`),
+    in the order the effects were accepted."""
     fits = {t: (float(c), float(s)) for t, c, s in zip(terms, coef, stderr)}
-    humps = {t.joint: t for t in terms if t.shape is not None and t.name == "stribeck"}
-    grouped = {t for t in terms if t.joint in humps and t.name in ("coulomb_friction", "viscous_friction", "stribeck")
-               and len(t.joints) == 1}
+    on_joint: dict[int, dict[str, Term]] = {}
+    for t in terms:
+        if is_named(t) and len(t.joints) == 1 and t.name in FAMILIES:
+            on_joint.setdefault(t.joint, {})[t.name] = t
+    laws = {}  # the first part of each law of several parts -> its entry; its other parts -> None
+    for j, named in on_joint.items():
+        parts = {n: Part(n, fits[t][0], t.shape, fits[t][1], float(shape_stderr.get(t, math.nan)))
+                 for n, t in named.items()}
+        for law, members in group(parts):
+            if not law.composite:
+                continue
+            mine = [named[n] for n in members]
+            entry = {"name": law.name, "kind": law.kind, "law": law.text(j), "joints": [j + 1], "joint": j + 1,
+                     "parameters": {k: {"value": float(v), "stderr": float(e)} for k, (v, e) in law.parameters_of(members).items()},
+                     "parts": [describe(t, *fits[t]) | ({"shape": {"name": EFFECTS[t.name].shaped, "value": float(t.shape),
+                                                                   "stderr": members[t.name].shape_stderr}}
+                                                        if t.shape is not None else {}) for t in mine]}
+            first = min(mine, key=terms.index)
+            laws.update({t: None for t in mine})
+            laws[first] = entry
     out = []
     for t in terms:
-        if t in grouped:
-            continue
-        entry = describe(t, *fits[t])
-        if t.shape is not None:  # a shaped law on its own: its shape is a parameter too, named in its law
-            effect = EFFECTS[t.name]
-            n = t.joint + 1
-            q, qd = (sympy.Symbol(f"q_{n}", real=True),), (sympy.Symbol(f"qd_{n}", real=True),)
-            entry["law"] = _law(t, effect.parameter, effect.expr(q, qd, sympy.Symbol(effect.shaped, positive=True)))
-            entry["parameters"][effect.shaped] = {"value": float(t.shape),
-                                                  "stderr": float(shape_stderr.get(t, float("nan")))}
-            for key in ("joint", "coefficient", "stderr"):
-                entry.pop(key, None)
-        out.append(entry)
-    for j, hump in sorted(humps.items()):
-        def part(name):
-            found = [t for t in grouped if t.name == name and t.joint == j]
-            return fits[found[0]] if found else (0.0, 0.0)
-        (F_c, se_c), (dF, se_d), (b, se_b) = part("coulomb_friction"), part("stribeck"), part("viscous_friction")
-        n = j + 1
-        law = (f"D = F_c*Abs(qd_{n}) + (F_s - F_c)*v_s*sqrt(pi)/2*erf(Abs(qd_{n})/v_s) + b*qd_{n}**2/2")
-        out.append({"name": "stribeck_friction", "kind": "dissipative", "law": law, "joints": [n],
-                    "parameters": {"F_c": {"value": F_c, "stderr": se_c},
-                                   "F_s": {"value": F_c + dF, "stderr": float((se_c**2 + se_d**2) ** 0.5)},
-                                   "v_s": {"value": float(hump.shape), "stderr": float(shape_stderr.get(hump, float("nan")))},
-                                   "b": {"value": b, "stderr": se_b}}})
+        if t not in laws:
+            out.append(describe(t, *fits[t]))
+        elif laws[t] is not None:
+            out.append(laws[t])
     return out
 
 
@@ -188,7 +182,7 @@ def describe(term: Term, coefficient: float, stderr: float) -> dict:
     if named and EFFECTS[term.name].coefficient_of is not None:  # a tilt's coefficient is sin(alpha): report alpha
         coefficient, stderr = EFFECTS[term.name].parameter_from(coefficient, stderr)
         law = law.replace(parameter, str(EFFECTS[term.name].coefficient_of(sympy.Symbol(parameter))), 1)
-    entry = {"name": term.name if named else "symbolic", "kind": kind(term), "law": law,
+    entry = {"name": term.name if named else "symbolic", "kind": term.kind, "law": law,
              "joints": [j + 1 for j in term.joints],
              "parameters": {parameter: {"value": float(coefficient), "stderr": float(stderr)}}}
     if len(term.joints) == 1:

@@ -30,7 +30,11 @@ can undo a round) is the model's refit strategy, chosen once from the model
    (:meth:`~bench.residual.strategies.Strategy.refit`). Effects made
    redundant by the refit are dropped again (backward elimination on the
    BIC, :func:`~bench.residual.pruning.prune`), shaped effects' parameters
-   refined, and effects the refit made impossible dropped.
+   refined, each law replaced by the simplest law it contains that the data
+   do not tell apart from it, with at most one law of each physical family
+   on a joint (:func:`~bench.residual.pruning.simplest_laws`), and effects
+   the refit made impossible dropped. The JSON reports the effects as laws
+   (:mod:`bench.core.laws`).
 6. **Keep the round only if it generalises.** The round's model is scored by
    cross-validation over whole recordings (:mod:`bench.residual.validation`:
    leave one recording out, or contiguous blocks where the training data
@@ -74,7 +78,7 @@ from bench.core.terms import TermLibrary, remembered_columns
 from bench.residual.candidates import candidates, describe_all, is_named, label, structural
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
-from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shape_stderr
+from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shape_stderr, simplest_laws
 from bench.residual.result import ResidualResult
 from bench.residual.selection import BUDGET_STOP, trace
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
@@ -103,7 +107,8 @@ class Round:
     """One round of the loop, as its JSON gives it (fields that are ``None`` are left out).
 
     ``accepted`` names the effects the trace added, ``removed`` those the
-    refit made redundant or impossible, ``trace`` the statistics of each step;
+    refit made redundant or impossible, ``simplified`` each law replaced by a
+    simpler one it contains, and why, ``trace`` the statistics of each step;
     ``stop`` says why the loop ended here (undone, not started, the budget);
     ``candidate_heldout_mse`` is an undone round's held-out error; round 0 has
     ``method_mse`` (the method's own model, before its strategy's start) and
@@ -120,6 +125,7 @@ class Round:
     candidate_heldout_mse: float | None = None
     method_mse: dict | None = None
     cross_fit: dict | None = None
+    simplified: list[str] | None = None
     seconds: float = 0.0
 
     def to_json(self) -> dict:
@@ -259,6 +265,7 @@ class _Loop:
             candidate = strategy.refit(model, train, model.effects + selection.accepted)
             candidate, removed = self.timed(prune, strategy, candidate, train, report)
             candidate = refine_shapes(strategy, candidate, train, report)
+            candidate, simplified = self.timed(simplest_laws, strategy, candidate, train, report)
             candidate, impossible = drop_inadmissible(strategy, candidate, train, report)
             for term, c, se in impossible:
                 findings[label(term)] = structural(term, c, se)
@@ -277,12 +284,13 @@ class _Loop:
                 undo = self.timed(strategy.check, candidate, model, train)
             if undo is not None:
                 rounds.append(Round(k, self.scores(model), held, accepted, selection.steps, removed, f"undone: {undo[0]}",
-                                    candidate_held, seconds=self.elapsed()))
+                                    candidate_held, simplified=simplified or None, seconds=self.elapsed()))
                 report(f"round {k}: undone, {undo[1]}")
                 break
             model, held, mass = candidate, candidate_held, candidate_mass
             s = self.scores(model)
-            rounds.append(Round(k, s, held, accepted, selection.steps, removed, seconds=self.elapsed()))
+            rounds.append(Round(k, s, held, accepted, selection.steps, removed, simplified=simplified or None,
+                                seconds=self.elapsed()))
             longest = max(longest, time.perf_counter() - began)
             if not set(accepted) - set(removed):
                 report(f"round {k}: every effect it added became redundant; stopping")

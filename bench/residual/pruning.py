@@ -1,6 +1,7 @@
 """What the loop does to its effects after each joint refit: drop the
-redundant ones, refine the shaped ones' nonlinear parameter, and drop the
-ones the refit made impossible. Each works through the model's refit
+redundant ones, refine the shaped ones' nonlinear parameter, replace a law
+by the simplest one the data identify, and drop the ones the refit made
+impossible. Each works through the model's refit
 strategy (:mod:`bench.residual.strategies`)."""
 
 from __future__ import annotations
@@ -11,11 +12,12 @@ import numpy as np
 
 from bench.core.data import Dataset
 from bench.core.effects import EFFECTS
+from bench.core.laws import FAMILIES, led_by, one_law_per_family
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term
 from bench.residual.candidates import admissible, label
 from bench.residual.model import LoopModel
-from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, best_shape, bic
+from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, at_limit, best_shape, bic
 from bench.residual.strategies import Strategy
 from bench.runner.progress import Report
 
@@ -107,3 +109,102 @@ def drop_inadmissible(strategy: Strategy, model: LoopModel, train: Dataset, repo
         dropped.append((model.effects[i], float(model.coef[i]), float(model.stderr[i])))
         report(f"  dropping {label(model.effects[i])}: the joint refit gives it an impossible coefficient {model.coef[i]:.4g}")
         model = strategy.refit(model, train, model.effects[:i] + model.effects[i + 1:])
+
+
+def simplest_laws(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) -> tuple[LoopModel, list[str]]:
+    """Each law replaced by the simplest law it contains that the data do not
+    tell apart from it, then at most one law of each physical family on a
+    joint; refitting after each change. Returns the model and, per change,
+    what was replaced by what and why.
+
+    A shaped part (a Stribeck hump, smoothed Coulomb friction) is replaced by
+    the parts its law's limits give (:attr:`bench.core.laws.Law.limits`; the
+    limit whose fit has the least BIC) where its shape's or its coefficient's
+    standard error is at least its value, where its shape sits at an end of
+    :data:`~bench.residual.selection.SHAPE_LIMITS`, or where that limit's BIC
+    is not above the law's by more than :data:`MIN_BIC_DROP` (the loop's own
+    criterion: a shape is a parameter). Then, where a joint's parts make two
+    laws of one family (smoothed Coulomb friction beside a Stribeck hump, say),
+    the part whose removal raises the BIC least goes, until one law is left.
+    """
+    changes = []
+    while (step := _simpler(strategy, model, train)) is not None:
+        effects, text = step
+        report(f"  {text}")
+        changes.append(text)
+        model = strategy.refit(model, train, effects)
+    while (step := _one_per_family(strategy, model, train)) is not None:
+        effects, text = step
+        report(f"  {text}")
+        changes.append(text)
+        model = strategy.refit(model, train, effects)
+    return model, changes
+
+
+class _Fits:
+    """The BIC of the model's linear problem (:meth:`Strategy.problem`) with
+    some effects' columns left out or others added."""
+
+    def __init__(self, strategy: Strategy, model: LoopModel, train: Dataset):
+        target, self.F = strategy.problem(model, train)
+        self.y, self.train, self.effects = target.ravel(), train, model.effects
+        self.first = self.F.shape[1] - len(model.effects)  # the effects' columns come last
+        self.shapes = sum(t.shape is not None for t in model.effects)
+        self.floor = ROUNDOFF * float(np.mean(train.tau**2)) * len(self.y)
+        self.now = self.bic()
+
+    def bic(self, without: tuple[int, ...] = (), added: list[Term] = ()) -> float:
+        F = np.delete(self.F, [self.first + i for i in without], axis=1)
+        if added:
+            F = np.hstack([F, np.column_stack([t.column(self.train, "indirect") for t in added])])
+        shapes = self.shapes - sum(self.effects[i].shape is not None for i in without)
+        rss = max(fit_statistics(F, self.y)[2], self.floor)
+        return bic(rss, len(self.y), F.shape[1] + shapes)
+
+
+def _simpler(strategy: Strategy, model: LoopModel, train: Dataset) -> tuple[list[Term], str] | None:
+    """The first shaped part to replace by a limit of its law, as the new
+    effects and the words for it; ``None`` where every one holds."""
+    shaped = [i for i, t in enumerate(model.effects) if t.shape is not None and led_by(t.name) is not None]
+    if not shaped:
+        return None
+    fits, errors = _Fits(strategy, model, train), shape_stderr(strategy, model, train)
+    for i in shaped:
+        term = model.effects[i]
+        law, effect = led_by(term.name), EFFECTS[term.name]
+        on_joint = {t.name for t in model.effects if t.joint == term.joint and len(t.joints) == 1}
+        limits = []
+        for parts in law.limits[term.name]:
+            added = [EFFECTS[p].term(term.joint) for p in parts if p not in on_joint]
+            limits.append((fits.bic((i,), added), parts, added))
+        best, parts, added = min(limits, key=lambda limit: limit[0])
+        why = []
+        if errors.get(term, 0.0) >= term.shape:
+            why.append(f"{effect.shaped}'s standard error {errors[term]:.2g} is at least its value")
+        if abs(model.coef[i]) <= model.stderr[i]:
+            why.append(f"{effect.parameter}'s standard error {model.stderr[i]:.2g} is at least its value "
+                       f"{model.coef[i]:.3g}")
+        if at_limit(term.shape):
+            why.append(f"{effect.shaped} = {term.shape:.4g} is at an end of its range")
+        if best - fits.now <= MIN_BIC_DROP:
+            why.append(f"the simpler law is no worse by BIC ({best - fits.now:+.3g})")
+        if why:
+            into = " + ".join(f"{p} on joint {term.joint + 1}" for p in parts) or "nothing"
+            text = f"{label(term)} replaced by {into}, the law's limit: {'; '.join(why)}"
+            return model.effects[:i] + model.effects[i + 1:] + added, text
+    return None
+
+
+def _one_per_family(strategy: Strategy, model: LoopModel, train: Dataset) -> tuple[list[Term], str] | None:
+    """The part to drop where a joint's parts make two laws of one family, as
+    the new effects and the words for it; ``None`` where no joint does."""
+    for joint in sorted({t.joint for t in model.effects if t.joint is not None and len(t.joints) == 1}):
+        mine = [i for i, t in enumerate(model.effects) if t.joint == joint and len(t.joints) == 1 and t.name in FAMILIES]
+        if one_law_per_family({model.effects[i].name for i in mine}):
+            continue
+        fits = _Fits(strategy, model, train)
+        i = min(mine, key=lambda i: fits.bic((i,)))
+        text = (f"{label(model.effects[i])} dropped: joint {joint + 1} would carry two laws of one family, and "
+                f"without it the BIC rises least ({fits.bic((i,)) - fits.now:+.3g})")
+        return model.effects[:i] + model.effects[i + 1:], text
+    return None

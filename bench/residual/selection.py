@@ -47,8 +47,9 @@ from bench.core.data import Dataset
 import scipy.linalg
 
 from bench.core.effects import EFFECTS
+from bench.core.laws import led_by
 from bench.core.terms import Term, TermLibrary
-from bench.residual.candidates import admissible, is_named, label
+from bench.residual.candidates import SHAPE_GRID, admissible, is_named, label
 from bench.residual.validation import cv_mse, row_folds
 
 MIN_BIC_DROP = 10.0
@@ -57,6 +58,9 @@ MIN_HELDOUT_GAIN = 0.01
 ROUNDOFF = 1e-20
 #: a shaped candidate's parameter is refined within this factor of its grid value
 SHAPE_RANGE = 4.0
+#: the range a shape is searched in: past the grid's ends by :data:`SHAPE_RANGE`;
+#: a shape at either end is not identified (:func:`at_limit`)
+SHAPE_LIMITS = (min(SHAPE_GRID) / SHAPE_RANGE, max(SHAPE_GRID) * SHAPE_RANGE)
 #: candidates tried a step, best first, past ones that fail on significance or held-out error
 MAX_TRIES = 8
 #: an admissible candidate replaces a better one with an impossible coefficient
@@ -113,12 +117,13 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         return np.column_stack([fixed] + [F_all[c][:, None] for c in cands]) if cands else fixed
 
     def group(c: Term) -> list[Term]:
-        """A candidate with the companions its law needs: a Stribeck hump
-        comes with Coulomb and viscous friction on its joint, where those are
-        not in the model yet."""
-        if c.name != "stribeck":
+        """A shaped candidate with the other parts of the law it leads
+        (:func:`bench.core.laws.led_by`; a Stribeck hump comes with Coulomb
+        and viscous friction on its joint), where those are not in the model yet."""
+        law = led_by(c.name) if c.shape is not None else None
+        if law is None or not law.optional:
             return [c]
-        mates = [EFFECTS[n].term(c.joint) for n in ("coulomb_friction", "viscous_friction")]
+        mates = [EFFECTS[n].term(c.joint) for n in law.optional]
         mates = [t for t in mates if slot(t) not in taken]
         for t in mates:
             if t not in F_all:
@@ -242,13 +247,22 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
 
 
 def best_shape(rss, shape: float) -> float:
-    """The value within a factor of :data:`SHAPE_RANGE` of ``shape`` where
-    ``rss(value)`` is least: a bounded scalar search in ``log(value)``."""
+    """The value within a factor of :data:`SHAPE_RANGE` of ``shape``, and
+    within :data:`SHAPE_LIMITS`, where ``rss(value)`` is least: a bounded
+    scalar search in ``log(value)``."""
     from scipy.optimize import minimize_scalar  # 0.3 s to import: only a shaped effect needs it
 
-    bounds = (math.log(shape / SHAPE_RANGE), math.log(shape * SHAPE_RANGE))
+    lo, hi = SHAPE_LIMITS
+    shape = min(max(shape, lo), hi)
+    bounds = (math.log(max(shape / SHAPE_RANGE, lo)), math.log(min(shape * SHAPE_RANGE, hi)))
     x = minimize_scalar(lambda x: rss(math.exp(x)), bounds=bounds, method="bounded", options={"xatol": 1e-10}).x
     return float(math.exp(x))
+
+
+def at_limit(shape: float) -> bool:
+    """Whether ``shape`` sits at an end of :data:`SHAPE_LIMITS` (within 1 %)."""
+    lo, hi = SHAPE_LIMITS
+    return shape <= lo * 1.01 or shape >= hi / 1.01
 
 
 def _basis(D: np.ndarray) -> np.ndarray:

@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from bench.core import symbolic
 from bench.core.data import generate
 from bench.core.dynamics import euler_lagrange_chunked
-from bench.core.effects import EFFECTS, add_effects, parse_effects
+from bench.core.effects import EFFECTS
+from bench.core.undeclared import add_effects, parse_effects
 from bench.core.errors import ConfigError
 from systems import get_system
 
@@ -31,7 +32,7 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
     tau_extra = euler_lagrange_chunked(extra, t["q"], t["qd"], t["qdd"])[0].numpy()
     np.testing.assert_allclose(withfx.tau - clean.tau, tau_extra, atol=1e-12)
     assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset",
-                            "coupled_spring", "coupled_damper", "smooth_coulomb", "stribeck", "tip_payload",
+                            "coupled_spring", "coupled_damper", "smooth_coulomb", "stribeck_hump", "tip_payload",
                             "gravity_tilt"}
 
 
@@ -51,7 +52,7 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
         (["stribeck_friction=3:1,2,0.5,0.1"], "a joint in 1..2"),
         (["stribeck_friction=1:2,1,0.5,0.1"], "not physical: it needs F_s >= F_c >= 0"),
         (["stribeck_friction=1:1,2,0,0.1"], "not physical"),
-        (["stribeck=1,2"], "unknown effect 'stribeck'"),
+        (["stribeck_hump=1,2"], "unknown effect 'stribeck_hump'"),
         (["tip_payload=-0.1"], "tip_payload needs one finite number >= 0"),
         (["tip_payload=0.1,0.2"], "tip_payload needs one finite number"),
         (["gravity_tilt=nan"], "gravity_tilt needs one finite number"),
@@ -93,7 +94,7 @@ def test_each_effect_is_a_term_on_its_joint():
         assert EFFECTS[name].arity == 1
         for j in range(2):
             term = EFFECTS[name].term(j)
-            assert term.name == name and term.joint == j and term.is_force == (not EFFECTS[name].conservative)
+            assert term.name == name and term.joint == j and term.in_lagrangian == EFFECTS[name].conservative
             tau = term.torque(data)
             np.testing.assert_array_equal(tau[:, j], columns[:, j])  # exact, through the transform too
             assert not tau[:, 1 - j].any()
@@ -108,7 +109,7 @@ def test_a_coupled_effect_acts_on_a_coordinate_difference_with_opposite_torques(
     tau = add_effects(data, {name: fx}).tau - data.tau
     np.testing.assert_allclose(tau, 2.5 * np.stack([diff, -diff], axis=1), rtol=1e-12, atol=1e-12)
     term = EFFECTS[name].term(0, 1)
-    assert term.joints == (0, 1) and term.rayleigh == (name == "coupled_damper")
+    assert term.joints == (0, 1) and (term.place == "D") == (name == "coupled_damper")
     with pytest.raises(ValueError, match="2 distinct joint"):
         EFFECTS[name].term(1, 1)
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from bench.core.effects import parse_effects
+from bench.core.undeclared import parse_effects
 from bench.experiments.residual_acceptance import CASES, expected, run_case
 
 
@@ -12,6 +12,10 @@ def test_each_case_expects_its_effects_under_the_names_and_joints_the_loop_repor
     assert want["elbow_spring"] == {("coupled_spring", (1, 2)): {"k": 3.0}}
     assert want["stribeck"] == {("stribeck_friction", (1,)): {"F_c": 1.0, "F_s": 2.0, "v_s": 0.5, "b": 0.3}}
     assert want["tip_payload"] == {("tip_payload", (1, 2)): {"m": 0.5}}
+    assert want["coulomb_viscous"] == {("coulomb_viscous_friction", (1,)): {"F_c": 1.5, "b": 0.8},
+                                       ("coulomb_viscous_friction", (2,)): {"F_c": 0.7, "b": 0.5}}
+    assert want["smooth_coulomb"][("smooth_coulomb", (2,))] == {"F_c": 0.7, "v_s": 0.02}
+    assert want["offset_spring"] == {("offset_spring", (2,)): {"k": 2.0, "q0": 0.3}}
     assert want["clean"] == {}
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bench.core.data import add_noise, generate
-from bench.core.effects import add_effects
+from bench.core.undeclared import add_effects
 from bench.core.models import ExpressionModel
 from bench.residual import residual_loop, trace, candidates
 from systems import get_system
@@ -44,6 +44,11 @@ def data_with(effects, n=3000, noise=0.0, system="double_pendulum"):
     return train, test
 
 
+def parts(effects: list[dict]) -> list[dict]:
+    """The JSON's entries with each law of several parts replaced by its parts."""
+    return [p for e in effects for p in e.get("parts", [e])]
+
+
 @pytest.mark.parametrize(
     "effects",
     [
@@ -70,7 +75,7 @@ def test_each_effect_is_named_on_its_joint_with_its_coefficient(effects):
 @pytest.mark.parametrize("spec", ["coupled_spring=1-2:3.0", "coupled_damper=1-2:0.6"], ids=["elbow spring", "elbow damper"])
 def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec):
     # absolute angles: the elbow's relative angle is q_1 - q_2, and its law is one term of L or D
-    from bench.core.effects import parse_effects
+    from bench.core.undeclared import parse_effects
 
     effects = parse_effects([spec], 2)
     train, test = data_with(effects)
@@ -135,9 +140,13 @@ def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
     assert {"system", "method", "mse_before", "mse_after", "effects", "rounds", "fit_budget_s", "provenance"} <= set(out)
     assert out["provenance"]["threads"]["torch_intra_op"] == 1  # the loop's process pins its threads like any run
     assert set(out["mse_before"]) == {"train", "test"}
+    # Coulomb and viscous friction on one joint are one law, with its parts
     assert sorted((e["name"], e["joint"]) for e in out["effects"]) == [
+        ("coulomb_viscous_friction", 1), ("coulomb_viscous_friction", 2)]
+    assert all(set(e["parameters"]) == {"F_c", "b"} for e in out["effects"])
+    assert sorted((p["name"], p["joint"]) for p in parts(out["effects"])) == [
         ("coulomb_friction", 1), ("coulomb_friction", 2), ("viscous_friction", 1), ("viscous_friction", 2)]
-    assert all({"name", "joint", "coefficient", "stderr"} <= set(e) for e in out["effects"])
+    assert all({"name", "joint", "coefficient", "stderr"} <= set(p) for p in parts(out["effects"]))
     report = (tmp_path / "report.md").read_text()
     assert "| before (declared model only) |" in report and "![residuals before and after](report_residuals.png)" in report
     assert (tmp_path / "report_residuals.png").read_bytes()[:4] == b"\x89PNG"
@@ -286,7 +295,9 @@ def test_friction_on_every_joint_of_the_panda_is_found_beside_its_base_parameter
                "coulomb_friction": tuple(0.3 + 0.1 * j for j in range(7))}
     train, test = add_effects(generate(panda, 1000, 0), effects), add_effects(generate(panda, 500, 1000), effects)
     out = residual_loop("sysid", train, test, steps=SOLVED, report=quiet)
-    found = {(e["name"], e["joint"]): e["coefficient"] for e in out.effects}
+    assert sorted(e["joint"] for e in out.effects) == list(range(1, 8))  # one friction law a joint
+    assert {e["name"] for e in out.effects} == {"coulomb_viscous_friction"}
+    found = {(e["name"], e["joint"]): e["coefficient"] for e in parts(out.effects)}
     want = {(name, j + 1): c for name, coefs in effects.items() for j, c in enumerate(coefs)}
     assert set(found) == set(want)
     for key, c in want.items():
@@ -323,7 +334,7 @@ def _without_timings(obj):
 def test_a_loop_bounded_by_work_gives_the_same_json_apart_from_its_timings():
     # SysId stopped short of its optimum: the polish's starts, the trace and the rounds decide what is
     # found, and under a time budget how many of them ran depended on the machine's load
-    from bench.core.effects import parse_effects
+    from bench.core.undeclared import parse_effects
 
     s = get_system("double_pendulum")
     fx = parse_effects(["tip_payload=0.5"], 2)

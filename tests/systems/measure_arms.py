@@ -8,7 +8,7 @@ sys.path.insert(0, ".")
 from tests.systems.test_urdf import pin, pinocchio_panda, pinocchio_pendulum
 from bench.core.data import generate, mse
 from bench.core.dynamics import euler_lagrange
-from bench.core.effects import add_effects
+from bench.core.undeclared import add_effects
 from bench.residual import residual_loop
 from methods import METHODS
 from systems import get_system

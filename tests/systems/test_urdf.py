@@ -119,7 +119,7 @@ def test_a_tip_payload_and_a_gravity_tilt_agree_with_pinocchio(system_name):
     """``bench data --effects tip_payload=m`` and ``gravity_tilt=alpha`` against
     RNEA on the same chain with a point mass at its tip, and with gravity
     turned by alpha in the plane (equilibrium at q = alpha)."""
-    from bench.core.effects import add_effects, parse_effects
+    from bench.core.undeclared import add_effects, parse_effects
 
     system = SYSTEMS[system_name]()
     n = system.dof

@@ -1,0 +1,214 @@
+r"""Physical laws on one joint, each made of the effects of
+:mod:`bench.core.effects` (its *parts*), with its parameters, its
+admissibility and the simpler laws it contains as limits.
+
+The data generator adds laws (``bench data --effects``); the residual loop
+reports what it found as laws, one per physical family and joint, and
+replaces a law by a simpler one it contains where the data do not identify
+the difference (:func:`bench.residual.pruning.simplest_laws`).
+
+======================================  ========  ====================  =====================================
+law                                     family    parameters            contains as limits
+======================================  ========  ====================  =====================================
+``viscous_friction``                    friction  ``b``
+``coulomb_friction``                    friction  ``F_c``
+``coulomb_viscous_friction``            friction  ``F_c, b``            Coulomb (``b = 0``), viscous
+                                                                        (``F_c = 0``)
+``stribeck_friction``                   friction  ``F_c, F_s, v_s, b``  Coulomb plus viscous (``F_s = F_c``,
+                                                                        or ``v_s -> 0``); as ``v_s -> inf``
+                                                                        the hump is Coulomb friction of
+                                                                        level ``F_s - F_c``
+``smooth_coulomb``                      friction  ``F_c, v_s``          Coulomb (``v_s -> 0``), viscous with
+                                                                        ``b = F_c / v_s`` (``v_s -> inf``)
+``smooth_coulomb_viscous_friction``     friction  ``F_c, v_s, b``       the same, beside viscous friction
+``armature``                            inertia   ``I``
+``spring``                              spring    ``k``
+``offset``                              offset    ``tau_0``
+``offset_spring``                       spring    ``k, q0``             a spring (``q0 = 0``); it is a spring
+                                                                        plus a torque offset ``-k q0``, which
+                                                                        torques cannot tell apart
+======================================  ========  ====================  =====================================
+
+A law's :attr:`~Law.limits` say, for each of its shaped parts (a Stribeck
+hump, a smoothed Coulomb term), which parts replace it in each limit; a part
+already on the joint is not added twice. The one-parameter laws are the
+named effects themselves, and what the loop's JSON reports for them is unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+from bench.core.effects import EFFECTS
+
+
+@dataclass(frozen=True)
+class Part:
+    """An effect of a law on its joint: the effect's name, its coefficient,
+    its shape (where the effect has one), and their standard errors."""
+
+    name: str
+    coefficient: float
+    shape: float | None = None
+    stderr: float = 0.0
+    shape_stderr: float = 0.0
+
+
+@dataclass(frozen=True)
+class Law:
+    """A named physical law on one joint; see the module docstring.
+
+    ``required`` parts must all be on the joint, ``optional`` ones may be;
+    ``parts(*parameters)`` gives the law's parts at its parameters (for the
+    data generator), ``parameters_of(parts)`` the parameters and their
+    standard errors from the fitted parts (``{name: Part}``, missing optional
+    parts counting as zero). ``law`` is the text of its ``D``, ``L`` or
+    torque, ``{n}`` standing for the joint's number.
+    """
+
+    name: str
+    family: str
+    parameters: tuple[str, ...]
+    law: str
+    kind: str
+    required: tuple[str, ...]
+    optional: tuple[str, ...] = ()
+    admissible: Callable[..., bool] = lambda *p: True
+    #: the admissibility condition in words
+    condition: str = ""
+    parts: Callable[..., list[Part]] | None = None
+    parameters_of: Callable[[dict], dict] | None = None
+    limits: dict[str, tuple[tuple[str, ...], ...]] = field(default_factory=dict)
+    simpler: tuple[str, ...] = ()
+
+    @property
+    def members(self) -> tuple[str, ...]:
+        return self.required + self.optional
+
+    @property
+    def composite(self) -> bool:
+        """Whether the law has more than one part, or a shaped one: its JSON
+        entry is then the law's, with its parts listed (a one-parameter law's
+        entry is its effect's)."""
+        return len(self.members) > 1 or bool(self.limits)
+
+    def text(self, joint: int) -> str:
+        """The law's text on ``joint`` (0-based)."""
+        return self.law.format(n=joint + 1)
+
+    def check(self, values: tuple[float, ...]) -> bool:
+        return len(values) == len(self.parameters) and all(map(math.isfinite, values)) and self.admissible(*values)
+
+
+def _value(part: Part | None) -> tuple[float, float]:
+    return (0.0, 0.0) if part is None else (part.coefficient, part.stderr)
+
+
+def _stribeck(parts: dict) -> dict:
+    (F_c, se_c), (dF, se_d), (b, se_b) = (_value(parts.get(n)) for n in
+                                          ("coulomb_friction", "stribeck_hump", "viscous_friction"))
+    hump = parts["stribeck_hump"]
+    return {"F_c": (F_c, se_c), "F_s": (F_c + dF, math.hypot(se_c, se_d)), "v_s": (hump.shape, hump.shape_stderr),
+            "b": (b, se_b)}
+
+
+def _smooth(parts: dict) -> dict:
+    s = parts["smooth_coulomb"]
+    out = {"F_c": (s.coefficient, s.stderr), "v_s": (s.shape, s.shape_stderr)}
+    if "viscous_friction" in parts:
+        out["b"] = _value(parts["viscous_friction"])
+    return out
+
+
+def _offset_spring(parts: dict) -> dict:
+    (k, se_k), (t, se_t) = _value(parts["spring"]), _value(parts["offset"])
+    q0 = -t / k if k else math.nan
+    # the delta method, the two coefficients taken as independent
+    se = math.hypot(se_t / k, t * se_k / k**2) if k else math.inf
+    return {"k": (k, se_k), "q0": (q0, se)}
+
+
+def _single(name: str, family: str) -> Law:
+    effect = EFFECTS[name]
+    return Law(name, family, (effect.parameter,), "", effect.kind, (name,),
+               admissible=lambda c: effect.admissible(c), condition=f"{effect.parameter} >= 0" if effect.nonnegative else "",
+               parts=lambda c: [Part(name, c)],
+               parameters_of=lambda parts: {effect.parameter: _value(parts[name])})
+
+
+LAWS: dict[str, Law] = {
+    law.name: law
+    for law in (
+        _single("viscous_friction", "friction"),
+        _single("coulomb_friction", "friction"),
+        Law("coulomb_viscous_friction", "friction", ("F_c", "b"), "D = F_c*Abs(qd_{n}) + b*qd_{n}**2/2", "dissipative",
+            ("coulomb_friction", "viscous_friction"), admissible=lambda F_c, b: F_c >= 0 and b >= 0, condition="F_c >= 0, b >= 0",
+            parts=lambda F_c, b: [Part("coulomb_friction", F_c), Part("viscous_friction", b)],
+            parameters_of=lambda p: {"F_c": _value(p["coulomb_friction"]), "b": _value(p["viscous_friction"])},
+            simpler=("coulomb_friction", "viscous_friction")),
+        Law("stribeck_friction", "friction", ("F_c", "F_s", "v_s", "b"),
+            "D = F_c*Abs(qd_{n}) + (F_s - F_c)*v_s*sqrt(pi)/2*erf(Abs(qd_{n})/v_s) + b*qd_{n}**2/2", "dissipative",
+            ("stribeck_hump",), ("coulomb_friction", "viscous_friction"),
+            admissible=lambda F_c, F_s, v_s, b: F_s >= F_c >= 0 and v_s > 0 and b >= 0,
+            condition="F_s >= F_c >= 0, v_s > 0, b >= 0",
+            parts=lambda F_c, F_s, v_s, b: [Part("coulomb_friction", F_c), Part("stribeck_hump", F_s - F_c, v_s),
+                                            Part("viscous_friction", b)],
+            parameters_of=_stribeck, limits={"stribeck_hump": ((), ("coulomb_friction",))},
+            simpler=("coulomb_viscous_friction",)),
+        Law("smooth_coulomb", "friction", ("F_c", "v_s"), "D = F_c*v_s*log(cosh(qd_{n}/v_s))", "dissipative",
+            ("smooth_coulomb",), admissible=lambda F_c, v_s: F_c >= 0 and v_s > 0, condition="F_c >= 0, v_s > 0",
+            parts=lambda F_c, v_s: [Part("smooth_coulomb", F_c, v_s)], parameters_of=_smooth,
+            limits={"smooth_coulomb": (("coulomb_friction",), ("viscous_friction",))},
+            simpler=("coulomb_friction", "viscous_friction")),
+        Law("smooth_coulomb_viscous_friction", "friction", ("F_c", "v_s", "b"),
+            "D = F_c*v_s*log(cosh(qd_{n}/v_s)) + b*qd_{n}**2/2", "dissipative", ("smooth_coulomb", "viscous_friction"),
+            admissible=lambda F_c, v_s, b: F_c >= 0 and v_s > 0 and b >= 0, condition="F_c >= 0, v_s > 0, b >= 0",
+            parts=lambda F_c, v_s, b: [Part("smooth_coulomb", F_c, v_s), Part("viscous_friction", b)],
+            parameters_of=_smooth, limits={"smooth_coulomb": (("coulomb_friction",), ("viscous_friction",))},
+            simpler=("coulomb_viscous_friction", "viscous_friction")),
+        _single("armature", "inertia"),
+        _single("spring", "spring"),
+        _single("offset", "offset"),
+        Law("offset_spring", "spring", ("k", "q0"), "L += -k*(q_{n} - q0)**2/2", "conservative", ("spring", "offset"),
+            admissible=lambda k, q0: k >= 0, condition="k >= 0", parts=lambda k, q0: [Part("spring", k), Part("offset", -k * q0)],
+            parameters_of=_offset_spring, simpler=("spring",)),
+    )
+}
+
+#: which parts belong to which physical family: a joint carries at most one law of each
+FAMILIES: dict[str, str] = {part: law.family for law in LAWS.values() for part in law.members if part != "offset"}
+FAMILIES["offset"] = "offset"
+
+
+def led_by(part: str) -> Law | None:
+    """The law whose one required part is the shaped ``part`` (a Stribeck hump
+    leads the Stribeck law), or ``None``."""
+    for law in LAWS.values():
+        if law.required == (part,) and part in law.limits:
+            return law
+    return None
+
+
+def group(parts: dict[str, Part]) -> list[tuple[Law, dict[str, Part]]]:
+    """One joint's parts as laws: repeatedly the law that takes the most of the
+    parts left, all of its required ones among them; a part no law takes is
+    its own one-parameter law (or, for a shaped part, the law it leads)."""
+    left, out = dict(parts), []
+    while left:
+        fits = [(len(set(law.members) & set(left)), law) for law in LAWS.values() if set(law.required) <= set(left)]
+        if not fits:
+            name = next(iter(left))
+            law = led_by(name) or LAWS[name]
+            out.append((law, {name: left.pop(name)}))
+            continue
+        _, law = max(fits, key=lambda f: f[0])
+        out.append((law, {n: left.pop(n) for n in law.members if n in left}))
+    return out
+
+
+def one_law_per_family(names: set[str]) -> bool:
+    """Whether the parts ``names`` on one joint make at most one law of each family."""
+    families = [law.family for law, _ in group({n: Part(n, 1.0) for n in names})]
+    return len(families) == len(set(families))

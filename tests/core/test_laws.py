@@ -1,0 +1,83 @@
+import math
+
+import numpy as np
+import pytest
+
+from bench.core.data import generate
+from bench.core.effects import EFFECTS
+from bench.core.errors import ConfigError
+from bench.core.laws import FAMILIES, LAWS, Part, group, led_by, one_law_per_family
+from bench.core.undeclared import GENERATOR_LAWS, add_effects, parse_effects
+from systems import get_system
+
+
+def test_every_law_is_made_of_named_effects_and_its_simpler_laws_exist():
+    for law in LAWS.values():
+        assert set(law.members) <= set(EFFECTS), law.name
+        assert set(law.simpler) <= set(LAWS), law.name
+        for part, limits in law.limits.items():
+            assert EFFECTS[part].shaped and part in law.required
+            assert all(set(limit) <= set(EFFECTS) for limit in limits)
+    assert set(FAMILIES.values()) == {"friction", "inertia", "spring", "offset"}
+
+
+def test_only_the_stribeck_law_names_stribeck():
+    named = [n for n in list(LAWS) + list(EFFECTS) if "stribeck" in n]
+    assert named == ["stribeck_friction", "stribeck_hump"]
+    assert led_by("stribeck_hump") is LAWS["stribeck_friction"] and led_by("coulomb_friction") is None
+
+
+@pytest.mark.parametrize(
+    "parts, laws",
+    [
+        ({"coulomb_friction", "viscous_friction"}, ["coulomb_viscous_friction"]),
+        ({"coulomb_friction", "viscous_friction", "stribeck_hump"}, ["stribeck_friction"]),
+        ({"stribeck_hump"}, ["stribeck_friction"]),
+        ({"smooth_coulomb", "viscous_friction"}, ["smooth_coulomb_viscous_friction"]),
+        ({"spring", "offset", "armature"}, ["offset_spring", "armature"]),
+        ({"coulomb_friction"}, ["coulomb_friction"]),
+    ],
+)
+def test_a_joints_parts_make_the_laws_a_physicist_would_write(parts, laws):
+    found = group({n: Part(n, 1.0, 0.3 if EFFECTS[n].shaped else None) for n in sorted(parts)})
+    assert sorted(law.name for law, _ in found) == sorted(laws)
+    assert sum(len(members) for _, members in found) == len(parts)
+    assert one_law_per_family(parts)
+
+
+def test_two_friction_laws_on_one_joint_are_flagged():
+    assert not one_law_per_family({"smooth_coulomb", "stribeck_hump"})
+    assert not one_law_per_family({"smooth_coulomb", "coulomb_friction"})
+
+
+def test_the_reported_parameters_come_from_the_parts():
+    stribeck = LAWS["stribeck_friction"].parameters_of({
+        "coulomb_friction": Part("coulomb_friction", 1.0, stderr=0.03), "stribeck_hump": Part("stribeck_hump", 1.0, 0.5, 0.04, 0.01)})
+    assert stribeck["F_s"] == (2.0, pytest.approx(0.05)) and stribeck["b"] == (0.0, 0.0) and stribeck["v_s"] == (0.5, 0.01)
+    spring = LAWS["offset_spring"].parameters_of({"spring": Part("spring", 2.0, stderr=0.1), "offset": Part("offset", -0.6)})
+    assert spring["k"] == (2.0, 0.1) and spring["q0"][0] == pytest.approx(0.3)
+    assert spring["q0"][1] == pytest.approx(math.hypot(0, 0.6 * 0.1 / 4))
+
+
+def test_the_generator_adds_a_smoothed_coulomb_law_and_a_spring_at_its_rest_angle():
+    data = generate(get_system("double_pendulum"), 300, 0)
+    fx = parse_effects(["smooth_coulomb=2:0.7,0.05", "offset_spring=1:2.0,0.3"], 2)
+    assert fx == {"smooth_coulomb": {(1,): (0.7, 0.05)}, "offset_spring": {(0,): (2.0, 0.3)}}
+    tau = add_effects(data, fx).tau - data.tau
+    np.testing.assert_allclose(tau[:, 1], 0.7 * np.tanh(data.qd[:, 1] / 0.05), atol=1e-12)
+    np.testing.assert_allclose(tau[:, 0], 2.0 * (data.q[:, 0] - 0.3), atol=1e-12)
+    assert set(GENERATOR_LAWS) >= {"stribeck_friction", "smooth_coulomb", "offset_spring", "coulomb_viscous_friction"}
+
+
+@pytest.mark.parametrize(
+    "items, message",
+    [
+        (["smooth_coulomb=1:0.7,0"], "not physical: it needs F_c >= 0, v_s > 0"),
+        (["smooth_coulomb=1:0.7"], "needs j:F_c,v_s items"),
+        (["offset_spring=1:-1,0.2"], "not physical: it needs k >= 0"),
+        (["coulomb_viscous_friction=2:1,nan"], "finite numbers"),
+    ],
+)
+def test_a_law_with_wrong_parameters_is_refused_with_one_line(items, message):
+    with pytest.raises(ConfigError, match=message):
+        parse_effects(items, 2)
