@@ -30,7 +30,8 @@ from bench.core.undeclared import GENERATOR_LAWS, add_effects, parse_effects
 from bench.core.errors import UserError
 from bench.core.fileio import check_output, write_json
 from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preprocess, read_recording
-from bench.experiments import adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, scaling, syrenets_profile, syrenets_speed
+from bench.experiments import (adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, robot_log, scaling,
+                               syrenets_profile, syrenets_speed)
 from bench.reporting.leaderboard import write_leaderboard
 from bench.reporting.tables import write_tables
 from bench.residual.job import ResidualJob, run_residual
@@ -270,6 +271,7 @@ EXPERIMENTS = {
     "adaptation": adaptation,
     "residual-acceptance": residual_acceptance,
     "residual-dfki": residual_dfki,
+    "robot-log": robot_log,
     "overhead": overhead,
     "dfki-filter": dfki_filter,
     "scaling": scaling,

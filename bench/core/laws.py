@@ -18,9 +18,9 @@ law                                     family    parameters            contains
                                                                         or ``v_s -> 0``); as ``v_s -> inf``
                                                                         the hump is Coulomb friction of
                                                                         level ``F_s - F_c``
-``smooth_coulomb``                      friction  ``F_c, v_s``          Coulomb (``v_s -> 0``), viscous with
-                                                                        ``b = F_c / v_s`` (``v_s -> inf``)
-``smooth_coulomb_viscous_friction``     friction  ``F_c, v_s, b``       the same, beside viscous friction
+``smooth_coulomb``                      friction  ``F_c, v_s, b``       Coulomb plus viscous (``v_s -> 0``),
+                                                                        viscous with ``b + F_c / v_s``
+                                                                        (``v_s -> inf``)
 ``armature``                            inertia   ``I``
 ``spring``                              spring    ``k``
 ``offset``                              offset    ``tau_0``
@@ -116,10 +116,7 @@ def _stribeck(parts: dict) -> dict:
 
 def _smooth(parts: dict) -> dict:
     s = parts["smooth_coulomb"]
-    out = {"F_c": (s.coefficient, s.stderr), "v_s": (s.shape, s.shape_stderr)}
-    if "viscous_friction" in parts:
-        out["b"] = _value(parts["viscous_friction"])
-    return out
+    return {"F_c": (s.coefficient, s.stderr), "v_s": (s.shape, s.shape_stderr), "b": _value(parts.get("viscous_friction"))}
 
 
 def _offset_spring(parts: dict) -> dict:
@@ -157,13 +154,8 @@ LAWS: dict[str, Law] = {
                                             Part("viscous_friction", b)],
             parameters_of=_stribeck, limits={"stribeck_hump": ((), ("coulomb_friction",))},
             simpler=("coulomb_viscous_friction",)),
-        Law("smooth_coulomb", "friction", ("F_c", "v_s"), "D = F_c*v_s*log(cosh(qd_{n}/v_s))", "dissipative",
-            ("smooth_coulomb",), admissible=lambda F_c, v_s: F_c >= 0 and v_s > 0, condition="F_c >= 0, v_s > 0",
-            parts=lambda F_c, v_s: [Part("smooth_coulomb", F_c, v_s)], parameters_of=_smooth,
-            limits={"smooth_coulomb": (("coulomb_friction",), ("viscous_friction",))},
-            simpler=("coulomb_friction", "viscous_friction")),
-        Law("smooth_coulomb_viscous_friction", "friction", ("F_c", "v_s", "b"),
-            "D = F_c*v_s*log(cosh(qd_{n}/v_s)) + b*qd_{n}**2/2", "dissipative", ("smooth_coulomb", "viscous_friction"),
+        Law("smooth_coulomb", "friction", ("F_c", "v_s", "b"), "D = F_c*v_s*log(cosh(qd_{n}/v_s)) + b*qd_{n}**2/2",
+            "dissipative", ("smooth_coulomb",), ("viscous_friction",),
             admissible=lambda F_c, v_s, b: F_c >= 0 and v_s > 0 and b >= 0, condition="F_c >= 0, v_s > 0, b >= 0",
             parts=lambda F_c, v_s, b: [Part("smooth_coulomb", F_c, v_s), Part("viscous_friction", b)],
             parameters_of=_smooth, limits={"smooth_coulomb": (("coulomb_friction",), ("viscous_friction",))},

@@ -254,6 +254,24 @@ def separate(form) -> Separation | None:
     return Separation(form.unknowns, list(groups.values()), list(groups))
 
 
+#: each linear form's torque regressor on each data set, ``{data: {form: (n, dof, p)}}``; an
+#: entry goes with its data set
+_REGRESSORS: "weakref.WeakKeyDictionary[Dataset, dict]" = weakref.WeakKeyDictionary()
+
+
+def torque_regressor(form, data: Dataset) -> np.ndarray:
+    """``form.torque_regressor`` at the states of ``data``, computed once per form
+    and data set (read-only): the residual loop refits a linear model's
+    coefficients many times on the same data, and an arm's regressor costs
+    a pass of its rigid-body algorithm per sample."""
+    kept = _REGRESSORS.setdefault(data, {})
+    if form not in kept:
+        Y = np.asarray(form.torque_regressor(data.q, data.qd, data.qdd), dtype=np.float64)
+        Y.setflags(write=False)
+        kept[form] = Y
+    return kept[form]
+
+
 class LinearParametricModel(FittedModel):
     """A :class:`~bench.core.system.LinearForm` at fitted values of some of its
     columns (its base parameters): ``tau = Y[:, :, columns] @ coef`` and
@@ -269,9 +287,9 @@ class LinearParametricModel(FittedModel):
         self.names = tuple(names) if names is not None else tuple(form.names[i] for i in self.columns)
 
     def torque_columns(self, data: Dataset) -> np.ndarray:
-        """The model's columns in torque space, flattened sample-major: ``(n * dof, k)``."""
-        Y = self.form.torque_regressor(data.q, data.qd, data.qdd)[:, :, self.columns]
-        return Y.reshape(-1, len(self.columns))
+        """The model's columns in torque space, flattened sample-major: ``(n * dof, k)``
+        (the form's regressor on ``data`` is computed once, :func:`torque_regressor`)."""
+        return torque_regressor(self.form, data)[:, :, self.columns].reshape(-1, len(self.columns))
 
     def predict_torque(self, data: Dataset) -> np.ndarray:
         return (self.torque_columns(data) @ self.coef).reshape(len(data), data.dof)

@@ -45,6 +45,46 @@ def least_squares(F: np.ndarray, y: np.ndarray) -> np.ndarray:
     return coef / scale
 
 
+class Compressed:
+    """The least-squares problem ``y ~ F`` kept as the triangular factor ``R``
+    of ``[F | y]`` (Householder QR, backward stable column by column), so
+    that the fit of ``y`` on any subset of ``F``'s columns costs a problem of
+    ``F.shape[1] + 1`` rows: ``[F | y] = Q R`` with ``Q`` orthonormal, so
+    ``|y - F_S c| = |R_y - R_S c|`` for every subset ``S`` and every ``c``.
+
+    Row blocks stack: the factor of ``[F | y]`` over several blocks of rows
+    is that of their factors stacked (:meth:`stacked`), which is how the
+    residual loop refits without one recording at the cost of one QR.
+    """
+
+    def __init__(self, F: np.ndarray, y: np.ndarray):
+        A = np.column_stack([F, y])
+        self.columns = F.shape[1]
+        self.R = np.linalg.qr(A, mode="r") if A.shape[0] > A.shape[1] else A
+
+    @classmethod
+    def stacked(cls, parts: list["Compressed"]) -> "Compressed":
+        R = np.vstack([p.R for p in parts])
+        return cls(R[:, :-1], R[:, -1])
+
+    def coef(self, columns=None) -> np.ndarray:
+        """:func:`least_squares` on the columns ``columns`` (all by default)."""
+        X = self.R[:, : self.columns] if columns is None else self.R[:, list(columns)]
+        return least_squares(X, self.R[:, -1])
+
+    def residual_norm2(self, coef: np.ndarray, columns=None) -> float:
+        """``|y - F_S coef|^2`` over this problem's rows."""
+        X = self.R[:, : self.columns] if columns is None else self.R[:, list(columns)]
+        r = self.R[:, -1] - X @ coef
+        return float(r @ r)
+
+    def rss(self, columns=None) -> float:
+        """The residual sum of squares of the least-squares fit on ``columns``."""
+        if columns is not None and len(columns) == 0:
+            return float(self.R[:, -1] @ self.R[:, -1])
+        return self.residual_norm2(self.coef(columns), columns)
+
+
 def fit_statistics(F: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """:func:`least_squares` coefficients, their standard errors, and the
     residual sum of squares (the errors from ``pinv(F^T F) * RSS / (rows - columns)``)."""

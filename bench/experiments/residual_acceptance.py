@@ -48,7 +48,7 @@ CASES = {
     "stribeck": ["stribeck_friction=1:1.0,2.0,0.5,0.3"],
     "coulomb_viscous": ["viscous_friction=0.8,0.5", "coulomb_friction=1.5,0.7"],
     # a low-pass filter's rounding of Coulomb friction, at a velocity well below the data's
-    "smooth_coulomb": ["smooth_coulomb=1:1.5,0.02;2:0.7,0.02"],
+    "smooth_coulomb": ["smooth_coulomb=1:1.5,0.02,0;2:0.7,0.02,0"],
     "offset_spring": ["offset_spring=2:2.0,0.3"],
     "tip_payload": ["tip_payload=0.5"],
     "gravity_tilt": ["gravity_tilt=0.05"],

@@ -13,11 +13,12 @@ import numpy as np
 from bench.core.data import Dataset
 from bench.core.effects import EFFECTS
 from bench.core.laws import FAMILIES, led_by, one_law_per_family
-from bench.core.regression import fit_statistics
+from bench.core.regression import Compressed
 from bench.core.terms import Term
 from bench.residual.candidates import admissible, label
 from bench.residual.model import LoopModel
-from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, at_limit, best_shape, bic
+from bench.residual.selection import (MIN_BIC_DROP, ROUNDOFF, at_limit, bic, orthonormal_basis, refined_shape,
+                                      shape_rss)
 from bench.residual.strategies import Strategy
 from bench.runner.progress import Report
 
@@ -25,7 +26,9 @@ from bench.runner.progress import Report
 def prune(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) -> tuple[LoopModel, list[str]]:
     """Backward elimination after a joint refit: drop an effect whose removal
     raises the BIC by less than :data:`MIN_BIC_DROP` (it became redundant with
-    the refitted model), then refit; repeat until every effect holds."""
+    the refitted model), then refit; repeat until every effect holds. Each
+    pass compresses the linear problem once (:class:`~bench.core.regression.Compressed`)
+    and fits it without each effect from that."""
     removed = []
     while model.effects:
         target, F = strategy.problem(model, train)
@@ -34,10 +37,11 @@ def prune(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) 
         first = k - len(model.effects)  # the effects' columns come last
         # residual sums below round-off are equal: their ratios are floating-point noise
         floor = ROUNDOFF * float(np.mean(train.tau**2)) * n
-        rss_all = max(fit_statistics(F, y)[2], floor)
+        problem = Compressed(F, y)
+        rss_all = max(problem.rss(), floor)
         weakest, weakest_gain = None, math.inf
         for i in range(len(model.effects)):
-            rss_without = max(fit_statistics(np.delete(F, first + i, axis=1), y)[2], floor)
+            rss_without = max(problem.rss([c for c in range(k) if c != first + i]), floor)
             gain = bic(rss_without, n, k - 1) - bic(rss_all, n, k)
             if gain < weakest_gain:
                 weakest, weakest_gain = i, gain
@@ -50,30 +54,27 @@ def prune(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) 
     return model, removed
 
 
-def _shape_rss(strategy: Strategy, model: LoopModel, train: Dataset, index: int):
-    """``rss(v)``: the residual sum of squares of the linear problem
-    (:meth:`Strategy.problem`) with effect ``index``'s nonlinear parameter at ``v``."""
+def _shape_problem(strategy: Strategy, model: LoopModel, train: Dataset, index: int):
+    """The linear problem (:meth:`Strategy.problem`) without effect ``index``'s
+    column: the others' orthonormal basis, the residual, and the problem's
+    rows and columns (the effect's included)."""
     target, F = strategy.problem(model, train)
     y = target.ravel()
     column = F.shape[1] - len(model.effects) + index
-    term = model.effects[index]
-
-    def rss(v: float) -> float:
-        F[:, column] = EFFECTS[term.name].numeric_torque(train, term.joint, v).ravel()
-        return fit_statistics(F, y)[2]
-
-    return rss, len(y), F.shape[1]
+    Q = orthonormal_basis(np.delete(F, column, axis=1))
+    return Q, y - Q @ (Q.T @ y), len(y), F.shape[1]
 
 
 def refine_shapes(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) -> LoopModel:
     """Each shaped effect's nonlinear parameter (a Stribeck velocity) by a
     bounded scalar search of the residual sum of squares, the linear
     coefficients refitted at each value (variable projection), near where it
-    stands (:func:`~bench.residual.selection.best_shape`); then a joint refit."""
+    stands (:func:`~bench.residual.selection.refined_shape`); then a joint refit."""
     for i, term in enumerate(model.effects):
         if term.shape is None:
             continue
-        v = best_shape(_shape_rss(strategy, model, train, i)[0], term.shape)
+        Q, r, _, _ = _shape_problem(strategy, model, train, i)
+        v = refined_shape(Q, r, term, train)
         refined = EFFECTS[term.name].term(term.joint, shape=v)
         report(f"  {label(term)}: {EFFECTS[term.name].shaped} refined to {v:.5g}")
         model = strategy.refit(model, train, model.effects[:i] + [refined] + model.effects[i + 1:])
@@ -87,7 +88,8 @@ def shape_stderr(strategy: Strategy, model: LoopModel, train: Dataset) -> dict[T
     for i, term in enumerate(model.effects):
         if term.shape is None:
             continue
-        rss, n, k = _shape_rss(strategy, model, train, i)
+        Q, r, n, k = _shape_problem(strategy, model, train, i)
+        rss = shape_rss(Q, r, term, train, exact=True)  # a curvature from differences: every row projected
         v, h = term.shape, 1e-3 * term.shape
         r0 = rss(v)
         curvature = (rss(v + h) - 2 * r0 + rss(v - h)) / h**2
@@ -143,23 +145,27 @@ def simplest_laws(strategy: Strategy, model: LoopModel, train: Dataset, report: 
 
 class _Fits:
     """The BIC of the model's linear problem (:meth:`Strategy.problem`) with
-    some effects' columns left out or others added."""
+    some effects' columns left out or some of ``extra`` added, from one
+    compressed problem (:class:`~bench.core.regression.Compressed`)."""
 
-    def __init__(self, strategy: Strategy, model: LoopModel, train: Dataset):
-        target, self.F = strategy.problem(model, train)
-        self.y, self.train, self.effects = target.ravel(), train, model.effects
-        self.first = self.F.shape[1] - len(model.effects)  # the effects' columns come last
+    def __init__(self, strategy: Strategy, model: LoopModel, train: Dataset, extra: list[Term] = ()):
+        target, F = strategy.problem(model, train)
+        self.extra = list(dict.fromkeys(extra))
+        columns = [F] + [t.column(train, "indirect")[:, None] for t in self.extra]
+        y = target.ravel()
+        self.k, self.n, self.effects = F.shape[1], len(y), model.effects
+        self.problem = Compressed(np.hstack(columns), y)
+        self.first = self.k - len(model.effects)  # the effects' columns come last
         self.shapes = sum(t.shape is not None for t in model.effects)
-        self.floor = ROUNDOFF * float(np.mean(train.tau**2)) * len(self.y)
+        self.floor = ROUNDOFF * float(np.mean(train.tau**2)) * self.n
         self.now = self.bic()
 
     def bic(self, without: tuple[int, ...] = (), added: list[Term] = ()) -> float:
-        F = np.delete(self.F, [self.first + i for i in without], axis=1)
-        if added:
-            F = np.hstack([F, np.column_stack([t.column(self.train, "indirect") for t in added])])
+        gone = {self.first + i for i in without}
+        columns = [c for c in range(self.k) if c not in gone] + [self.k + self.extra.index(t) for t in added]
         shapes = self.shapes - sum(self.effects[i].shape is not None for i in without)
-        rss = max(fit_statistics(F, self.y)[2], self.floor)
-        return bic(rss, len(self.y), F.shape[1] + shapes)
+        rss = max(self.problem.rss(columns), self.floor)
+        return bic(rss, self.n, len(columns) + shapes)
 
 
 def _simpler(strategy: Strategy, model: LoopModel, train: Dataset) -> tuple[list[Term], str] | None:
@@ -168,15 +174,17 @@ def _simpler(strategy: Strategy, model: LoopModel, train: Dataset) -> tuple[list
     shaped = [i for i, t in enumerate(model.effects) if t.shape is not None and led_by(t.name) is not None]
     if not shaped:
         return None
-    fits, errors = _Fits(strategy, model, train), shape_stderr(strategy, model, train)
+    options = {}  # per shaped part: each limit's parts and the effects it would add
     for i in shaped:
         term = model.effects[i]
-        law, effect = led_by(term.name), EFFECTS[term.name]
         on_joint = {t.name for t in model.effects if t.joint == term.joint and len(t.joints) == 1}
-        limits = []
-        for parts in law.limits[term.name]:
-            added = [EFFECTS[p].term(term.joint) for p in parts if p not in on_joint]
-            limits.append((fits.bic((i,), added), parts, added))
+        options[i] = [(parts, [EFFECTS[p].term(term.joint) for p in parts if p not in on_joint])
+                      for parts in led_by(term.name).limits[term.name]]
+    fits = _Fits(strategy, model, train, [t for limits in options.values() for _, added in limits for t in added])
+    errors = shape_stderr(strategy, model, train)
+    for i in shaped:
+        term, effect = model.effects[i], EFFECTS[model.effects[i].name]
+        limits = [(fits.bic((i,), added), parts, added) for parts, added in options[i]]
         best, parts, added = min(limits, key=lambda limit: limit[0])
         why = []
         if errors.get(term, 0.0) >= term.shape:

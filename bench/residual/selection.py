@@ -67,6 +67,9 @@ MAX_TRIES = 8
 #: only if it removes at least this share of what that one removes
 AS_WELL = 0.9
 
+#: a fit that leaves less than this share of its residual sum of squares is near round-off
+#: (:func:`refined_shape`)
+NEAR_EXACT = 1e-8
 #: a trace's last step where the loop's time ran out before it ended
 BUDGET_STOP = "the loop's budget: no further step started"
 
@@ -134,37 +137,42 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         """``c`` with its shape at the least residual beside the accepted columns and its companions."""
         effect = EFFECTS[c.name]
         mates = group(c)[:-1]
-        Qm = Q if not mates else np.hstack([Q, _basis(_off(Q, np.column_stack([F_all[t] for t in mates])))])
-        rm = y - Qm @ (Qm.T @ y)
-        rr = float(rm @ rm)
-
-        def rss(v: float) -> float:
-            column = _off(Qm, effect.numeric_torque(data, c.joint, v).ravel())
-            cc = float(column @ column)
-            return rr - float(rm @ column) ** 2 / cc if cc > 0 else rr
-
-        refined = effect.term(c.joint, shape=best_shape(rss, c.shape))
+        Qm = Q if not mates else np.hstack([Q, orthonormal_basis(project_off(Q, np.column_stack([F_all[t] for t in mates])))])
+        refined = effect.term(c.joint, shape=refined_shape(Qm, y - Qm @ (Qm.T @ y), c, data))
         column = refined.column(data, "indirect")
         if not np.isfinite(column).all():
             return c
         F_all[refined] = column
         return refined
 
+    off: dict[Term, np.ndarray] = {}  # this step's candidate columns projected off the design
+
+    def project(terms) -> None:
+        """Project the columns of ``terms`` not yet projected this step, in one product."""
+        new = [t for t in dict.fromkeys(terms) if t not in off]
+        if new:
+            P = project_off(Q, np.column_stack([F_all[t] for t in new]))
+            off.update({t: P[:, i] for i, t in enumerate(new)})
+
+    def beside(terms: list[Term], k: int):
+        project(terms)
+        return _fit_beside(r, np.column_stack([off[t] for t in terms]), k)
+
     def stats(c: Term, k_now: int, rss_now: float) -> dict:
         # Frisch-Waugh-Lovell: the group's coefficients, errors and residual are those of its
         # columns' part orthogonal to the design, fitted to the design's residual
         g = group(c)
-        coef, stderr, rss = _fit_beside(Q, r, np.column_stack([F_all[t] for t in g]), k_now)
+        coef, stderr, rss = beside(g, k_now)
         if len(g) > 1:  # companions the data do not support leave the law (a Stribeck law without viscous friction)
             weak = [t for t, a, e in zip(g[:-1], coef, stderr) if not abs(a) >= MIN_T * e]
             if weak:
                 g = [t for t in g if t not in weak]
-                coef, stderr, rss = _fit_beside(Q, r, np.column_stack([F_all[t] for t in g]), k_now)
+                coef, stderr, rss = beside(g, k_now)
         k_new = k_now + len(g) + (c.shape is not None)  # a shape is a parameter too
         drop = bic(rss_now, n_rows, k_now) - bic(rss, n_rows, k_new)
         if len(g) > 1:
             # a law is judged by what it adds to its companions: they compete on their own as well
-            rss_mates = _fit_beside(Q, r, np.column_stack([F_all[t] for t in g[:-1]]), k_now)[2]
+            rss_mates = beside(g[:-1], k_now)[2]
             extra = bic(rss_mates, n_rows, k_new - 2) - bic(rss, n_rows, k_new)
             drop = drop if extra > MIN_BIC_DROP else -math.inf
         return {"candidate": c, "group": g, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]),
@@ -181,9 +189,10 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     tiers = [[c for c in pool if is_named(c) and c in F_all], [c for c in pool if not is_named(c) and c in F_all]]
     while max_steps is None or len(steps_taken) < max_steps:
         k_now = fixed.shape[1] + len(nuisance) + len(accepted)
-        Q = _basis(design(accepted))
+        Q = orthonormal_basis(design(accepted))
         r = y - Q @ (Q.T @ y)
         rss_now = float(r @ r)
+        off.clear()
         if rss_now / n_rows <= floor:
             steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
             break
@@ -194,6 +203,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         for tier in tiers:
             # a shaped candidate (a Stribeck velocity from a grid) stands for its best shape: the
             # best of its slot (a physical one first) is refined, the others of that slot dropped
+            project(t for c in tier if slot(c) not in taken for t in group(c))  # all at once: one matrix product
             ranked = sorted((stats(c, k_now, rss_now) for c in tier if slot(c) not in taken),
                             key=lambda b: (physical(b) is not None, -b["bic_drop"]))
             seen, unique = set(), []
@@ -246,17 +256,60 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     return Selection(accepted, steps, structural)
 
 
-def best_shape(rss, shape: float) -> float:
-    """The value within a factor of :data:`SHAPE_RANGE` of ``shape``, and
-    within :data:`SHAPE_LIMITS`, where ``rss(value)`` is least: a bounded
-    scalar search in ``log(value)``."""
+def best_shape(rss, shape: float, factor: float = SHAPE_RANGE) -> float:
+    """The value within ``factor`` of ``shape``, and within
+    :data:`SHAPE_LIMITS`, where ``rss(value)`` is least: a bounded scalar
+    search in ``log(value)``."""
     from scipy.optimize import minimize_scalar  # 0.3 s to import: only a shaped effect needs it
 
     lo, hi = SHAPE_LIMITS
     shape = min(max(shape, lo), hi)
-    bounds = (math.log(max(shape / SHAPE_RANGE, lo)), math.log(min(shape * SHAPE_RANGE, hi)))
+    bounds = (math.log(max(shape / factor, lo)), math.log(min(shape * factor, hi)))
     x = minimize_scalar(lambda x: rss(math.exp(x)), bounds=bounds, method="bounded", options={"xatol": 1e-10}).x
     return float(math.exp(x))
+
+
+def shape_rss(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset, exact: bool = False):
+    """``rss(v)``: the residual sum of squares when the shaped ``term``'s column
+    at shape ``v`` joins a design with orthonormal basis ``Q`` (rows of
+    ``tau.ravel()``) and residual ``r``.
+
+    The column lives on its joint's rows only, and ``r`` is orthogonal to
+    ``Q``, so by default each value costs a product of those rows of ``Q``
+    with it: ``rss = |r|^2 - (r.g)^2 / (|g|^2 - |Q^T g|^2)``. Its round-off
+    is that of ``|r|^2``; ``exact`` projects the column off ``Q`` on every row
+    instead (twice), for a fit near round-off (:func:`refined_shape`)."""
+    effect, joint = EFFECTS[term.name], term.joint
+    rows = slice(joint, None, data.dof)
+    Qj, rj = np.ascontiguousarray(Q[rows]), r[rows]
+    rr = float(r @ r)
+
+    def rss(v: float) -> float:
+        g = effect.numeric(data.q[:, joint], data.qd[:, joint], v)
+        if exact:
+            column = np.zeros(len(r))
+            column[rows] = g
+            column = project_off(Q, column)
+            cc = float(column @ column)
+            return max(rr - float(r @ column) ** 2 / cc, 0.0) if cc > 0 else rr
+        a = Qj.T @ g
+        gg, part = float(g @ g), float(g @ g) - float(a @ a)
+        if not part > 1e-12 * gg:  # (nearly) in the design already: it explains nothing more
+            return rr
+        return max(rr - float(rj @ g) ** 2 / part, 0.0)
+
+    return rss
+
+
+def refined_shape(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset) -> float:
+    """The shape of ``term`` where its column fits ``r`` best beside ``Q``
+    (:func:`best_shape` on :func:`shape_rss`); where that fit leaves less than
+    :data:`NEAR_EXACT` of ``|r|^2``, the shape is refined again near it with
+    every row projected, so that round-off does not decide it."""
+    v = best_shape(shape_rss(Q, r, term, data), term.shape)
+    if shape_rss(Q, r, term, data)(v) <= NEAR_EXACT * float(r @ r):
+        v = best_shape(shape_rss(Q, r, term, data, exact=True), v, factor=1.01)
+    return v
 
 
 def at_limit(shape: float) -> bool:
@@ -265,7 +318,7 @@ def at_limit(shape: float) -> bool:
     return shape <= lo * 1.01 or shape >= hi / 1.01
 
 
-def _basis(D: np.ndarray) -> np.ndarray:
+def orthonormal_basis(D: np.ndarray) -> np.ndarray:
     """An orthonormal basis of the columns of ``D`` (pivoted QR of the
     column-scaled matrix; columns dependent to 1e-10 left out)."""
     if D.shape[1] == 0:
@@ -277,17 +330,16 @@ def _basis(D: np.ndarray) -> np.ndarray:
     return Q[:, d > 1e-10 * d[0]] if d[0] > 0 else Q[:, :0]
 
 
-def _off(Q: np.ndarray, G: np.ndarray) -> np.ndarray:
+def project_off(Q: np.ndarray, G: np.ndarray) -> np.ndarray:
     """``G`` less its projection on the orthonormal columns ``Q`` (twice, for accuracy)."""
     G = G - Q @ (Q.T @ G)
     return G - Q @ (Q.T @ G)
 
 
-def _fit_beside(Q: np.ndarray, r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """Coefficients, standard errors and residual sum of squares of the
-    columns ``G`` added to a design with orthonormal basis ``Q``, residual
-    ``r`` and ``k`` columns: the fit of ``r`` on ``G``'s part orthogonal to ``Q``."""
-    G = _off(Q, G)
+def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Coefficients, standard errors and residual sum of squares of columns
+    added to a design with residual ``r`` and ``k`` columns, given their part
+    ``G`` orthogonal to the design (:func:`project_off`): the fit of ``r`` on ``G``."""
     coef, *_ = np.linalg.lstsq(G, r, rcond=None)
     res = r - G @ coef
     rss = float(res @ res)

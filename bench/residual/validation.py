@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.regression import least_squares
+from bench.core.regression import Compressed, least_squares
 
 #: contiguous blocks where the data name fewer than two recordings
 BLOCKS = 4
@@ -52,11 +52,26 @@ def row_folds(data: Dataset) -> list[np.ndarray]:
 def cv_fold_mse(F: np.ndarray, y: np.ndarray, held: list[np.ndarray]) -> np.ndarray:
     """The held-out mean squared residual of ``y ~ F`` in each fold of
     ``held`` (row masks), scored by a fit on the other rows. No columns:
-    the mean of ``y**2`` in each fold."""
+    the mean of ``y**2`` in each fold.
+
+    Where the folds split the rows (each row in one fold, as :func:`folds`
+    gives them), each fold's rows are compressed once
+    (:class:`~bench.core.regression.Compressed`) and the fit without a fold
+    is that of the others' factors stacked: one QR of the whole problem in
+    all, not one per fold, with the same fits."""
+    if F.shape[1] == 0:
+        return np.asarray([float(y[m] @ y[m]) / max(int(m.sum()), 1) for m in held])
+    if not np.array_equal(np.sum(held, axis=0), np.ones(len(y))):
+        out = []
+        for mask in held:
+            r = y[mask] - F[mask] @ least_squares(F[~mask], y[~mask])
+            out.append(float(r @ r) / max(int(mask.sum()), 1))
+        return np.asarray(out)
+    blocks = [Compressed(F[m], y[m]) for m in held]
     out = []
-    for mask in held:
-        r = y[mask] if F.shape[1] == 0 else y[mask] - F[mask] @ least_squares(F[~mask], y[~mask])
-        out.append(float(r @ r) / max(int(mask.sum()), 1))
+    for i, mask in enumerate(held):
+        fit = Compressed.stacked([b for j, b in enumerate(blocks) if j != i]).coef()
+        out.append(blocks[i].residual_norm2(fit) / max(int(mask.sum()), 1))
     return np.asarray(out)
 
 

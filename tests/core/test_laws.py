@@ -33,7 +33,7 @@ def test_only_the_stribeck_law_names_stribeck():
         ({"coulomb_friction", "viscous_friction"}, ["coulomb_viscous_friction"]),
         ({"coulomb_friction", "viscous_friction", "stribeck_hump"}, ["stribeck_friction"]),
         ({"stribeck_hump"}, ["stribeck_friction"]),
-        ({"smooth_coulomb", "viscous_friction"}, ["smooth_coulomb_viscous_friction"]),
+        ({"smooth_coulomb", "viscous_friction"}, ["smooth_coulomb"]),
         ({"spring", "offset", "armature"}, ["offset_spring", "armature"]),
         ({"coulomb_friction"}, ["coulomb_friction"]),
     ],
@@ -61,10 +61,10 @@ def test_the_reported_parameters_come_from_the_parts():
 
 def test_the_generator_adds_a_smoothed_coulomb_law_and_a_spring_at_its_rest_angle():
     data = generate(get_system("double_pendulum"), 300, 0)
-    fx = parse_effects(["smooth_coulomb=2:0.7,0.05", "offset_spring=1:2.0,0.3"], 2)
-    assert fx == {"smooth_coulomb": {(1,): (0.7, 0.05)}, "offset_spring": {(0,): (2.0, 0.3)}}
+    fx = parse_effects(["smooth_coulomb=2:0.7,0.05,0.2", "offset_spring=1:2.0,0.3"], 2)
+    assert fx == {"smooth_coulomb": {(1,): (0.7, 0.05, 0.2)}, "offset_spring": {(0,): (2.0, 0.3)}}
     tau = add_effects(data, fx).tau - data.tau
-    np.testing.assert_allclose(tau[:, 1], 0.7 * np.tanh(data.qd[:, 1] / 0.05), atol=1e-12)
+    np.testing.assert_allclose(tau[:, 1], 0.7 * np.tanh(data.qd[:, 1] / 0.05) + 0.2 * data.qd[:, 1], atol=1e-12)
     np.testing.assert_allclose(tau[:, 0], 2.0 * (data.q[:, 0] - 0.3), atol=1e-12)
     assert set(GENERATOR_LAWS) >= {"stribeck_friction", "smooth_coulomb", "offset_spring", "coulomb_viscous_friction"}
 
@@ -72,8 +72,8 @@ def test_the_generator_adds_a_smoothed_coulomb_law_and_a_spring_at_its_rest_angl
 @pytest.mark.parametrize(
     "items, message",
     [
-        (["smooth_coulomb=1:0.7,0"], "not physical: it needs F_c >= 0, v_s > 0"),
-        (["smooth_coulomb=1:0.7"], "needs j:F_c,v_s items"),
+        (["smooth_coulomb=1:0.7,0,0"], "not physical: it needs F_c >= 0, v_s > 0"),
+        (["smooth_coulomb=1:0.7,0.1"], "needs j:F_c,v_s,b items"),
         (["offset_spring=1:-1,0.2"], "not physical: it needs k >= 0"),
         (["coulomb_viscous_friction=2:1,nan"], "finite numbers"),
     ],
