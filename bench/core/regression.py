@@ -87,13 +87,15 @@ class Compressed:
 
 def fit_statistics(F: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """:func:`least_squares` coefficients, their standard errors, and the
-    residual sum of squares (the errors from ``pinv(F^T F) * RSS / (rows - columns)``)."""
-    coef = least_squares(F, y)
-    resid = y - F @ coef
-    rss = float(resid @ resid)
+    residual sum of squares (the errors from ``pinv(F^T F) * RSS / (rows - columns)``),
+    from one QR of ``[F | y]`` (:class:`Compressed`)."""
+    problem = Compressed(F, y)  # one QR; the solve and F^T F = R^T R are then small
+    coef = problem.coef()
+    rss = problem.residual_norm2(coef)
     dof = max(len(y) - F.shape[1], 1)
     try:
-        cov = np.linalg.pinv(F.T @ F) * (rss / dof)
+        R = problem.R[:, :-1]
+        cov = np.linalg.pinv(R.T @ R) * (rss / dof)
         stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
     except np.linalg.LinAlgError:
         stderr = np.full(F.shape[1], np.inf)

@@ -17,8 +17,7 @@ from bench.core.regression import Compressed
 from bench.core.terms import Term
 from bench.residual.candidates import admissible, label
 from bench.residual.model import LoopModel
-from bench.residual.selection import (MIN_BIC_DROP, ROUNDOFF, at_limit, bic, orthonormal_basis, refined_shape,
-                                      shape_rss)
+from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, at_limit, bic, extend_basis, refined_shape, shape_rss
 from bench.residual.strategies import Strategy
 from bench.runner.progress import Report
 
@@ -60,8 +59,10 @@ def _shape_problem(strategy: Strategy, model: LoopModel, train: Dataset, index: 
     rows and columns (the effect's included)."""
     target, F = strategy.problem(model, train)
     y = target.ravel()
-    column = F.shape[1] - len(model.effects) + index
-    Q = orthonormal_basis(np.delete(F, column, axis=1))
+    first = F.shape[1] - len(model.effects)  # the effects' columns come last
+    others = np.delete(F[:, first:], index, axis=1)
+    Q = strategy.freedom_basis(model, train)
+    Q = extend_basis(Q, others) if others.shape[1] else Q
     return Q, y - Q @ (Q.T @ y), len(y), F.shape[1]
 
 

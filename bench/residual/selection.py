@@ -50,7 +50,7 @@ from bench.core.effects import EFFECTS
 from bench.core.laws import led_by
 from bench.core.terms import Term, TermLibrary
 from bench.residual.candidates import SHAPE_GRID, admissible, is_named, label
-from bench.residual.validation import cv_mse, row_folds
+from bench.residual.validation import FoldFits, row_folds
 
 MIN_BIC_DROP = 10.0
 MIN_T = 5.0
@@ -185,11 +185,15 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                 return t, a, e
         return None
 
+    # the design's orthonormal basis, extended by each step's new columns
+    Q, in_basis = orthonormal_basis(fixed), set()
     # the named effects first; the open-ended terms only where no named effect passes
     tiers = [[c for c in pool if is_named(c) and c in F_all], [c for c in pool if not is_named(c) and c in F_all]]
     while max_steps is None or len(steps_taken) < max_steps:
         k_now = fixed.shape[1] + len(nuisance) + len(accepted)
-        Q = orthonormal_basis(design(accepted))
+        new = [t for t in nuisance + accepted if t not in in_basis]
+        Q = extend_basis(Q, np.column_stack([F_all[t] for t in new])) if new else Q
+        in_basis.update(new)
         r = y - Q @ (Q.T @ y)
         rss_now = float(r @ r)
         off.clear()
@@ -220,8 +224,9 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                 if inadmissible is not None and rss_now - best["rss"] < AS_WELL * (rss_now - inadmissible["rss"]):
                     break
                 if before is None:
-                    before = cv_mse(design(accepted), y, held)
-                ok, info = _passes(best, before, design, accepted, y, held)
+                    held_fits = FoldFits(design(accepted), y, held)
+                    before = held_fits.cv()
+                ok, info = _passes(best, before, lambda g: held_fits.cv(np.column_stack([F_all[t] for t in g])))
                 impossible = physical(best)
                 if ok and impossible is None:
                     steps.append({**info, "accepted": True})
@@ -330,6 +335,23 @@ def orthonormal_basis(D: np.ndarray) -> np.ndarray:
     return Q[:, d > 1e-10 * d[0]] if d[0] > 0 else Q[:, :0]
 
 
+def extend_basis(Q: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """``Q`` (orthonormal columns) with an orthonormal basis of what the
+    columns ``G`` add to it: their parts off ``Q`` (projected twice) that keep
+    more than 1e-10 of their norm, by pivoted QR. The span is that of
+    :func:`orthonormal_basis` of ``[Q | G]``, at the cost of a projection."""
+    scale = np.sqrt(np.einsum("ij,ij->j", G, G))
+    G = project_off(Q, G[:, scale > 0] / scale[scale > 0])
+    kept = np.sqrt(np.einsum("ij,ij->j", G, G)) > 1e-10
+    if not kept.any():
+        return Q
+    P, R, _ = scipy.linalg.qr(G[:, kept], mode="economic", pivoting=True)
+    P = P[:, np.abs(np.diag(R)) > 1e-10]
+    P = project_off(Q, P)  # orthogonal to Q to round-off again
+    P /= np.sqrt(np.einsum("ij,ij->j", P, P))
+    return np.hstack([Q, P])
+
+
 def project_off(Q: np.ndarray, G: np.ndarray) -> np.ndarray:
     """``G`` less its projection on the orthonormal columns ``Q`` (twice, for accuracy)."""
     G = G - Q @ (Q.T @ G)
@@ -340,6 +362,14 @@ def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.nd
     """Coefficients, standard errors and residual sum of squares of columns
     added to a design with residual ``r`` and ``k`` columns, given their part
     ``G`` orthogonal to the design (:func:`project_off`): the fit of ``r`` on ``G``."""
+    if G.shape[1] == 1:  # one column: the fit in closed form
+        g = G[:, 0]
+        gg = float(g @ g)
+        c = float(g @ r) / gg if gg > 0 else 0.0
+        res = r - c * g
+        rss = float(res @ res)
+        se = math.sqrt(rss / max(len(r) - k - 1, 1) / gg) if gg > 0 else math.inf
+        return np.array([c]), np.array([se]), rss
     coef, *_ = np.linalg.lstsq(G, r, rcond=None)
     res = r - G @ coef
     rss = float(res @ res)
@@ -353,14 +383,14 @@ def slot(term: Term):
     return (term.name, term.joints) if term.shape is not None else term
 
 
-def _passes(best: dict, before: float, design, accepted: list[Term], y: np.ndarray,
-            held: list[np.ndarray]) -> tuple[bool, dict]:
+def _passes(best: dict, before: float, heldout) -> tuple[bool, dict]:
     """Whether ``best`` passes the BIC, significance and held-out tests (``before``:
-    the design's held-out error without it), with its statistics."""
+    the design's held-out error without it; ``heldout(group)``: with the group's
+    columns added), with its statistics."""
     if not (best["bic_drop"] > MIN_BIC_DROP):  # the cheap test first
         return False, {"candidate": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
                        "coefficient": best["coef"], "accepted": False}
-    after = cv_mse(design(accepted + best["group"]), y, held)
+    after = heldout(best["group"])
     gain = (before - after) / before if before > 0 else 0.0
     t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
     ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= MIN_HELDOUT_GAIN

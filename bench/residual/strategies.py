@@ -47,6 +47,7 @@ from bench.core.models import ExpressionModel, FittedModel, ParametricModel
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term, TermLibrary
 from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
+from bench.residual.selection import orthonormal_basis
 from bench.residual.validation import folds
 from bench.runner.progress import Report
 
@@ -71,6 +72,15 @@ class Strategy(abc.ABC):
     trace_steps: ClassVar[int | None] = None
     #: whether the model's own columns span its torque, so that tracing fits the torque itself
     spans_its_torque: ClassVar[bool] = False
+    #: whether the model's own columns stay the same through its refits (those of a form linear
+    #: in its parameters do; a parametric form's directions move with its parameters)
+    fixed_freedom: ClassVar[bool] = True
+
+    @property
+    def _bases(self) -> dict:
+        if "_kept_bases" not in self.__dict__:
+            self.__dict__["_kept_bases"] = {}
+        return self.__dict__["_kept_bases"]
 
     def start(self, fitted: FittedModel, train: Dataset, context: "Start") -> tuple[LoopModel, dict]:
         """Round 0: the loop's starting model, and what round 0 records of how it was made
@@ -84,6 +94,15 @@ class Strategy(abc.ABC):
     @abc.abstractmethod
     def freedom(self, model: LoopModel, train: Dataset) -> np.ndarray:
         """Columns for what the model can already express, ``(n * dof, k)``."""
+
+    def freedom_basis(self, model: LoopModel, train: Dataset) -> np.ndarray:
+        """An orthonormal basis of :meth:`freedom`'s columns; kept per data set
+        where the freedom does not move with a refit (:attr:`fixed_freedom`)."""
+        if not self.fixed_freedom:
+            return orthonormal_basis(self.freedom(model, train))
+        if id(train) not in self._bases:
+            self._bases[id(train)] = (train, orthonormal_basis(self.freedom(model, train)))
+        return self._bases[id(train)][1]
 
     def problem(self, model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarray]:
         """What tracing and pruning fit: the target (``(n, dof)``) and the columns
@@ -121,6 +140,7 @@ class Parametric(Strategy):
     """A form with nonlinear parameters (:class:`~bench.core.models.ParametricModel`)."""
 
     name = "parametric"
+    fixed_freedom = False
     # its columns are its parameters' directions where it stands: one step a round, then the
     # joint refit moves it, so that a large step is not followed by terms that only mend the
     # linearisation

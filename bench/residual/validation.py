@@ -80,3 +80,43 @@ def cv_mse(F: np.ndarray, y: np.ndarray, held: list[np.ndarray]) -> float:
     (:func:`cv_fold_mse`, weighted by the folds' sizes)."""
     sizes = np.asarray([int(m.sum()) for m in held], dtype=np.float64)
     return float(cv_fold_mse(F, y, held) @ sizes / max(sizes.sum(), 1.0))
+
+
+class FoldFits:
+    """:func:`cv_mse` of ``y ~ [D | G]`` for one design ``D`` and any added
+    columns ``G``, where the folds split the rows: each fold's QR of
+    ``[D | y]`` is kept, and added columns cost their projection on it,
+    ``[D G y] = [Q Q_G] [[R_D, Q^T G, R_y], [0, R_G, 0]]``, rather than a QR of
+    the whole design (:class:`~bench.core.regression.Compressed` then stacks
+    the folds' factors)."""
+
+    def __init__(self, D: np.ndarray, y: np.ndarray, held: list[np.ndarray]):
+        self.y, self.held, self.k = y, held, D.shape[1]
+        self.D = D
+        self.split = np.array_equal(np.sum(held, axis=0), np.ones(len(y)))
+        self.folds = [np.linalg.qr(np.column_stack([D[m], y[m]])) for m in held] if self.split else None
+
+    def cv(self, G: np.ndarray | None = None) -> float:
+        """The held-out mean squared residual of ``y ~ [D | G]`` over the folds."""
+        g = 0 if G is None else G.shape[1]
+        if not self.split or self.k + g == 0:
+            return cv_mse(self.D if G is None else np.hstack([self.D, G]), self.y, self.held)
+        blocks = []
+        for m, (Q, R) in zip(self.held, self.folds):
+            if g == 0:
+                blocks.append(Compressed(R[:, :-1], R[:, -1]))
+                continue
+            Gm = G[m]
+            C = Q.T @ Gm
+            rest = Gm - Q @ C
+            RG = np.linalg.qr(rest, mode="r") if rest.shape[0] > g else rest
+            top = np.hstack([R[:, :-1], C, R[:, -1:]])
+            bottom = np.hstack([np.zeros((RG.shape[0], self.k)), RG, np.zeros((RG.shape[0], 1))])
+            M = np.vstack([top, bottom])
+            blocks.append(Compressed(M[:, :-1], M[:, -1]))
+        sizes = np.asarray([int(m.sum()) for m in self.held], dtype=np.float64)
+        errors = []
+        for i in range(len(blocks)):
+            fit = Compressed.stacked([b for j, b in enumerate(blocks) if j != i]).coef()
+            errors.append(blocks[i].residual_norm2(fit))
+        return float(np.sum(errors) / max(sizes.sum(), 1.0))
