@@ -76,12 +76,6 @@ class Strategy(abc.ABC):
     #: in its parameters do; a parametric form's directions move with its parameters)
     fixed_freedom: ClassVar[bool] = True
 
-    @property
-    def _bases(self) -> dict:
-        if "_kept_bases" not in self.__dict__:
-            self.__dict__["_kept_bases"] = {}
-        return self.__dict__["_kept_bases"]
-
     def start(self, fitted: FittedModel, train: Dataset, context: "Start") -> tuple[LoopModel, dict]:
         """Round 0: the loop's starting model, and what round 0 records of how it was made
         (``method_model``: the method's own model, where the start changed it)."""
@@ -100,9 +94,10 @@ class Strategy(abc.ABC):
         where the freedom does not move with a refit (:attr:`fixed_freedom`)."""
         if not self.fixed_freedom:
             return orthonormal_basis(self.freedom(model, train))
-        if id(train) not in self._bases:
-            self._bases[id(train)] = (train, orthonormal_basis(self.freedom(model, train)))
-        return self._bases[id(train)][1]
+        kept = getattr(self, "_kept_basis", None)  # (data, basis) of the last data set asked for
+        if kept is None or kept[0] is not train:
+            kept = self._kept_basis = (train, orthonormal_basis(self.freedom(model, train)))
+        return kept[1]
 
     def problem(self, model: LoopModel, train: Dataset) -> tuple[np.ndarray, np.ndarray]:
         """What tracing and pruning fit: the target (``(n, dof)``) and the columns

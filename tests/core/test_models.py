@@ -120,3 +120,28 @@ def test_a_form_whose_unknown_sits_inside_a_function_of_the_coordinates_is_not_s
     np.testing.assert_allclose(model.predict_torque(data)[:, 0], data.qdd[:, 0] + 2.0 * np.sin(2.0 * data.q[:, 0]),
                                rtol=1e-12, atol=1e-12)
     assert model.jacobian(data).shape == (50, 1)  # central differences
+
+
+def test_a_linear_models_regressor_is_computed_once_per_data_set():
+    import dataclasses
+
+    from bench.core.data import generate
+    from bench.core.models import LinearParametricModel
+    from bench.core.system import LinearForm
+
+    calls = []
+
+    def regressor(q, qd, qdd):
+        calls.append(len(q))
+        return np.stack([qdd, np.sin(q), qd], axis=2)
+
+    form = LinearForm(("I", "g", "b"), 2, regressor, lambda q, qd: np.zeros((len(q), 3)))
+    data = generate(get_system("double_pendulum"), 50, 0)
+    model = LinearParametricModel(form, [0, 2], [1.0, 0.5])
+    first = model.torque_columns(data)
+    again = model.with_coefficients([2.0, 0.1]).torque_columns(data)
+    np.testing.assert_array_equal(first, again)
+    np.testing.assert_allclose(model.predict_torque(data), data.qdd + 0.5 * data.qd)
+    assert calls == [50]
+    model.torque_columns(dataclasses.replace(data))  # another data set: computed for it
+    assert calls == [50, 50]

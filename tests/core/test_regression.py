@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import sympy
 
 from bench.core import regression, symbolic
@@ -56,3 +57,29 @@ def test_independent_columns_drop_gauge_duplicates(double_pendulum):
     F = TermLibrary.of_lagrangian(basis).design(data, "indirect")
     # the constant and d/dt sin(q1) have no torque; 2 qd1^2 repeats qd1^2
     assert regression.independent_columns(F).tolist() == [0, 4, 5]
+
+
+def test_a_compressed_problem_fits_any_subset_of_columns_and_stacks_by_rows():
+    from hypothesis import given, settings, strategies as st
+
+    from bench.core.regression import Compressed, least_squares
+
+    @settings(max_examples=40, deadline=None)
+    @given(seed=st.integers(0, 10_000), n=st.integers(3, 60), k=st.integers(1, 6), dependent=st.booleans())
+    def check(seed, n, k, dependent):
+        rng = np.random.default_rng(seed)
+        F = rng.normal(size=(n, k)) * np.logspace(-3, 3, k)
+        if dependent and k > 1:
+            F[:, -1] = 2 * F[:, 0]  # a rank-deficient design takes the same minimum-norm fit
+        y = rng.normal(size=n)
+        problem = Compressed(F, y)
+        for columns in ([0], list(range(k)), list(range(0, k, 2))):
+            c = least_squares(F[:, columns], y)
+            direct = float(np.sum((y - F[:, columns] @ c) ** 2))
+            assert problem.rss(columns) == pytest.approx(direct, rel=1e-8, abs=1e-10)
+        half = n // 2
+        if half >= 1 and n - half >= 1:
+            stacked = Compressed.stacked([Compressed(F[:half], y[:half]), Compressed(F[half:], y[half:])])
+            np.testing.assert_allclose(stacked.coef(), least_squares(F, y), rtol=1e-7, atol=1e-9)
+
+    check()

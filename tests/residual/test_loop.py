@@ -343,3 +343,51 @@ def test_a_loop_bounded_by_work_gives_the_same_json_apart_from_its_timings():
     assert first["budget"] == {"kind": "steps", "steps": 200, "ceiling_s": None}
     assert [e["name"] for e in first["effects"]] == ["tip_payload"]
     assert _without_timings(first) == _without_timings(second)
+
+
+@pytest.mark.parametrize("method", ["sysid", "sparse"])
+def test_noisy_coulomb_and_viscous_friction_is_that_law_never_a_stribeck_hump(method):
+    # with 5 % noise a hump at a large velocity fits nearly as well as Coulomb friction; the loop
+    # reports the simpler law the data identify, one friction law a joint, with its parameters
+    train, test = data_with({"viscous_friction": (0.8, 0.5), "coulomb_friction": (1.5, 0.7)}, n=3000, noise=0.05)
+    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
+    friction = [e for e in out.effects if e["kind"] == "dissipative"]
+    assert sorted((e["name"], e["joint"]) for e in friction) == [("coulomb_viscous_friction", 1),
+                                                                  ("coulomb_viscous_friction", 2)]
+    assert not any("stribeck" in e["name"] for e in out.effects)
+    for e, (F_c, b) in zip(sorted(friction, key=lambda e: e["joint"]), ((1.5, 0.8), (0.7, 0.5))):
+        for name, true in (("F_c", F_c), ("b", b)):
+            p = e["parameters"][name]
+            assert abs(p["value"] - true) < 4 * p["stderr"], (e, name)
+
+
+def test_a_hump_the_data_cannot_tell_from_coulomb_friction_is_replaced_by_it():
+    # a Stribeck hump whose velocity is far above every speed in the data is Coulomb friction
+    from bench.core.budget import Budget
+    from bench.core.effects import EFFECTS
+    from bench.residual.model import LoopModel
+    from bench.residual.pruning import simplest_laws
+    from bench.residual.strategies import strategy_for
+    from methods import METHODS
+
+    train, _ = data_with({"coulomb_friction": (0.0, 0.7)}, n=1500, noise=0.02)
+    rigid = METHODS["sparse"]().fit(train, "indirect", 0, Budget(steps=1))
+    hump = EFFECTS["stribeck_hump"].term(1, shape=11.9)
+    strategy = strategy_for(rigid)
+    model = strategy.refit(LoopModel.bare(strategy.rigid_of(rigid)), train, [hump])
+    lines = []
+    simpler, changes = simplest_laws(strategy, model, train, lines.append)
+    assert [t.name for t in simpler.effects] == ["coulomb_friction"] and len(changes) == 1
+    assert "replaced by coulomb_friction on joint 2" in changes[0] and "at an end of its range" in changes[0]
+    assert simpler.coef[0] == pytest.approx(0.7, rel=0.05)
+
+
+def test_a_spring_with_a_rest_angle_is_one_law_with_its_stiffness_and_rest_angle():
+    from bench.core.undeclared import parse_effects
+
+    train, test = data_with(parse_effects(["offset_spring=2:2.0,0.3"], 2))
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    (spring,) = out.effects
+    assert spring["name"] == "offset_spring" and spring["joints"] == [2]
+    assert {k: p["value"] for k, p in spring["parameters"].items()} == pytest.approx({"k": 2.0, "q0": 0.3}, rel=1e-6)
+    assert sorted(p["name"] for p in spring["parts"]) == ["offset", "spring"]

@@ -231,3 +231,30 @@ def test_the_cross_fit_deals_the_recordings_into_two_halves_each_predicted_by_th
     rigid = s.torque(*(torch.from_numpy(a) for a in (train.q, train.qd, train.qdd)))[0].numpy()
     np.testing.assert_allclose(cross.torque, rigid)  # each half predicted by the fit that did not see it
     np.testing.assert_allclose(cross.predict_torque(train), rigid - [0.5, 0.0])  # it predicts as the fit on all
+
+
+def test_held_out_fits_with_added_columns_equal_refitting_without_each_fold():
+    from bench.residual.validation import FoldFits, cv_mse
+
+    rng = np.random.default_rng(3)
+    D, G = rng.normal(size=(600, 5)) * np.logspace(-2, 2, 5), rng.normal(size=(600, 2))
+    y = D @ rng.normal(size=5) + G @ [0.5, -1.0] + rng.normal(size=600)
+    held = [np.arange(600) * 3 // 600 == k for k in range(3)]
+    fits = FoldFits(D, y, held)
+    assert fits.cv() == pytest.approx(cv_mse(D, y, held), rel=1e-10)
+    assert fits.cv(G) == pytest.approx(cv_mse(np.hstack([D, G]), y, held), rel=1e-10)
+    overlapping = [np.arange(600) < 400, np.arange(600) >= 200]  # not a split: refitted fold by fold
+    assert FoldFits(D, y, overlapping).cv(G) == pytest.approx(cv_mse(np.hstack([D, G]), y, overlapping), rel=1e-12)
+
+
+def test_an_extended_basis_spans_what_a_fresh_one_spans():
+    from bench.residual.selection import extend_basis, orthonormal_basis
+
+    rng = np.random.default_rng(4)
+    A, B = rng.normal(size=(300, 4)), rng.normal(size=(300, 3))
+    B[:, 2] = A[:, 0] - B[:, 1]  # adds nothing new
+    Q = extend_basis(orthonormal_basis(A), B)
+    assert Q.shape[1] == 6
+    np.testing.assert_allclose(Q.T @ Q, np.eye(6), atol=1e-12)
+    fresh = orthonormal_basis(np.hstack([A, B]))
+    np.testing.assert_allclose(Q @ (Q.T @ fresh), fresh, atol=1e-10)

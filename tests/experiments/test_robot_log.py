@@ -1,0 +1,45 @@
+"""The simulated robot log: exact derivatives, the system's range, and a log that bench convert reads."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.core.data import read_csv
+from bench.core.errors import ConfigError
+from bench.experiments.robot_log import columns, simulate
+from systems import get_system
+from tests.commandline import cli
+
+
+def test_a_trajectory_has_exact_derivatives_and_stays_in_the_systems_range():
+    time, data = simulate("double_pendulum", 10.0, 500.0, 0.1, [], 0.0, 3)
+    dt = time[1] - time[0]
+    np.testing.assert_allclose(np.gradient(data.q, dt, axis=0)[1:-1], data.qd[1:-1], atol=1e-4)
+    np.testing.assert_allclose(np.gradient(data.qd, dt, axis=0)[1:-1], data.qdd[1:-1], atol=1e-3)
+    system = get_system("double_pendulum")
+    for kind, x in (("q", data.q), ("qd", data.qd)):
+        lo, hi = system.domain.bounds(kind, system.dof)
+        assert (x >= lo).all() and (x <= hi).all(), kind
+
+
+def test_effects_and_noise_are_added_and_a_measured_system_is_refused():
+    _, clean = simulate("double_pendulum", 2.0, 200.0, 0.1, [], 0.0, 0)
+    _, rubbed = simulate("double_pendulum", 2.0, 200.0, 0.1, ["viscous_friction=0.8,0.5"], 0.0, 0)
+    np.testing.assert_allclose(rubbed.tau - clean.tau, clean.qd * [0.8, 0.5], atol=1e-12)
+    _, noisy = simulate("double_pendulum", 2.0, 200.0, 0.1, [], 0.05, 0)
+    assert 0 < np.std(noisy.tau - clean.tau) < 0.1 * np.std(clean.tau)
+    with pytest.raises(ConfigError, match="measured"):
+        simulate("dfki_double_pendulum", 2.0, 200.0, 0.1, [], 0.0, 0)
+
+
+def test_the_logs_convert_into_the_suites_format_with_one_recording_each(tmp_path):
+    r = cli("robot-log", "--system", "double_pendulum", "--recordings", "2", "--seconds", "4", "--effects",
+            "coulomb_friction=1.5,0.7", "--out", str(tmp_path / "logs"))
+    assert r.returncode == 0, r.stderr
+    assert f"--columns {columns(2)}" in r.stdout
+    logs = sorted(str(p) for p in (tmp_path / "logs").glob("recording_*.csv"))
+    r = cli("convert", "--columns", columns(2), "--out", str(tmp_path / "train.csv"), *logs)
+    assert r.returncode == 0, r.stderr
+    data = read_csv(tmp_path / "train.csv", system="double_pendulum")
+    assert data.recordings() == ["recording_0", "recording_1"] and len(data) > 500
