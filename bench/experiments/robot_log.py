@@ -117,10 +117,10 @@ def add_arguments(parser) -> None:
 
 
 def main(args) -> int:
-    args.out.mkdir(parents=True, exist_ok=True)
     dof = None
     for k in range(args.recordings):
         time, data = simulate(args.system, args.seconds, args.rate_hz, args.base_hz, args.effects, args.noise, args.seed + k)
+        args.out.mkdir(parents=True, exist_ok=True)  # once the system and the effects are known to be good
         path = args.out / f"recording_{k}.csv"
         write_log(path, time, data)
         dof = data.dof
