@@ -30,8 +30,9 @@ law                                     family    parameters            contains
 ======================================  ========  ====================  =====================================
 
 A law's :attr:`~Law.limits` say, for each of its shaped parts (a Stribeck
-hump, a smoothed Coulomb term), which parts replace it in each limit; a part
-already on the joint is not added twice. The one-parameter laws are the
+hump, a smoothed Coulomb term), which parts replace it in each limit, the
+shape going to zero first and to infinity second; a part already on the
+joint is not added twice. The one-parameter laws are the
 named effects themselves, and what the loop's JSON reports for them is unchanged.
 """
 
@@ -82,6 +83,9 @@ class Law:
     parameters_of: Callable[[dict], dict] | None = None
     limits: dict[str, tuple[tuple[str, ...], ...]] = field(default_factory=dict)
     simpler: tuple[str, ...] = ()
+    #: optional parts without which the law is not itself: a Stribeck law without its Coulomb
+    #: level is a hump on its own, whose parameter F_c = 0 the data did not identify
+    essential: tuple[str, ...] = ()
 
     @property
     def members(self) -> tuple[str, ...]:
@@ -153,7 +157,7 @@ LAWS: dict[str, Law] = {
             parts=lambda F_c, F_s, v_s, b: [Part("coulomb_friction", F_c), Part("stribeck_hump", F_s - F_c, v_s),
                                             Part("viscous_friction", b)],
             parameters_of=_stribeck, limits={"stribeck_hump": ((), ("coulomb_friction",))},
-            simpler=("coulomb_viscous_friction",)),
+            simpler=("coulomb_viscous_friction",), essential=("coulomb_friction",)),
         Law("smooth_coulomb", "friction", ("F_c", "v_s", "b"), "D = F_c*v_s*log(cosh(qd_{n}/v_s)) + b*qd_{n}**2/2",
             "dissipative", ("smooth_coulomb",), ("viscous_friction",),
             admissible=lambda F_c, v_s, b: F_c >= 0 and v_s > 0 and b >= 0, condition="F_c >= 0, v_s > 0, b >= 0",

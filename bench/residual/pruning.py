@@ -123,7 +123,9 @@ def simplest_laws(strategy: Strategy, model: LoopModel, train: Dataset, report: 
     A shaped part (a Stribeck hump, smoothed Coulomb friction) is replaced by
     the parts its law's limits give (:attr:`bench.core.laws.Law.limits`; the
     limit whose fit has the least BIC) where its shape's or its coefficient's
-    standard error is at least its value, where its shape sits at an end of
+    standard error is at least its value, where an essential part of its law
+    is missing (:attr:`~bench.core.laws.Law.essential`: a Stribeck law's
+    Coulomb level, then ``0 ± 0``), where its shape sits at an end of
     :data:`~bench.residual.selection.SHAPE_LIMITS`, or where that limit's BIC
     is not above the law's by more than :data:`MIN_BIC_DROP` (the loop's own
     criterion: a shape is a parameter). Then, where a joint's parts make two
@@ -187,7 +189,9 @@ def _simpler(strategy: Strategy, model: LoopModel, train: Dataset) -> tuple[list
         term, effect = model.effects[i], EFFECTS[model.effects[i].name]
         limits = [(fits.bic((i,), added), parts, added) for parts, added in options[i]]
         best, parts, added = min(limits, key=lambda limit: limit[0])
-        why = []
+        law = led_by(term.name)
+        why = [f"{law.name}'s {part} is not on joint {term.joint + 1}: its parameter is 0 ± 0, not identified"
+               for part in law.essential if part not in {t.name for t in model.effects if t.joint == term.joint}]
         if errors.get(term, 0.0) >= term.shape:
             why.append(f"{effect.shaped}'s standard error {errors[term]:.2g} is at least its value")
         if abs(model.coef[i]) <= model.stderr[i]:

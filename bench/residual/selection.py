@@ -158,10 +158,10 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         project(terms)
         return _fit_beside(r, np.column_stack([off[t] for t in terms]), k)
 
-    def stats(c: Term, k_now: int, rss_now: float) -> dict:
+    def stats(c: Term, k_now: int, rss_now: float, g: list[Term] | None = None) -> dict:
         # Frisch-Waugh-Lovell: the group's coefficients, errors and residual are those of its
         # columns' part orthogonal to the design, fitted to the design's residual
-        g = group(c)
+        g = group(c) if g is None else g
         coef, stderr, rss = beside(g, k_now)
         if len(g) > 1:  # companions the data do not support leave the law (a Stribeck law without viscous friction)
             weak = [t for t, a, e in zip(g[:-1], coef, stderr) if not abs(a) >= MIN_T * e]
@@ -177,6 +177,19 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
             drop = drop if extra > MIN_BIC_DROP else -math.inf
         return {"candidate": c, "group": g, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]),
                 "coefs": [float(v) for v in coef[-len(g):]], "stderrs": [float(v) for v in stderr[-len(g):]], "rss": rss}
+
+    def limit(c: Term, k_now: int, rss_now: float) -> dict | None:
+        """The statistics of the limit law a shaped candidate at an end of its
+        range stands for (:attr:`bench.core.laws.Law.limits`: the first at the
+        low end, the second at the high end) with the companions of the law it
+        leads; ``None`` where that limit adds nothing new."""
+        law = led_by(c.name)
+        parts = law.limits[c.name][0 if c.shape < math.sqrt(SHAPE_LIMITS[0] * SHAPE_LIMITS[1]) else 1]
+        new = [t for t in (EFFECTS[p].term(c.joint) for p in parts) if slot(t) not in taken and t in F_all]
+        if not new:
+            return None
+        mates = [t for t in group(c)[:-1] if t not in new]
+        return stats(new[-1], k_now, rss_now, mates + new)
 
     def physical(best: dict) -> tuple[Term, float, float] | None:
         """The first member of the candidate's group with an impossible coefficient, or ``None``."""
@@ -216,7 +229,13 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                     continue
                 seen.add(slot(best["candidate"]))
                 if best["candidate"].shape is not None and best["bic_drop"] > MIN_BIC_DROP:
-                    best = stats(refine(best["candidate"]), k_now, rss_now)
+                    refined = refine(best["candidate"])
+                    if at_limit(refined.shape):  # there it is the simpler law it contains: that law stands instead
+                        best = limit(refined, k_now, rss_now)
+                        if best is None:
+                            continue
+                    else:
+                        best = stats(refined, k_now, rss_now)
                 unique.append(best)
             ranked = sorted(unique, key=lambda b: -b["bic_drop"])
             tried = 0
