@@ -233,6 +233,21 @@ class _Loop:
         pool = candidates(train.dof, coupled=bool(getattr(system, "absolute_angles", False)), system=system)
         return TermLibrary([t for t in pool if is_named(t)]) if self.open_ended is False else pool
 
+    def settle(self, model: LoopModel):
+        """Each law its simplest (:func:`~bench.residual.pruning.simplest_laws`), then
+        no impossible coefficient (:func:`~bench.residual.pruning.drop_inadmissible`),
+        again until neither changes anything: dropping a law's impossible part can
+        leave a law that is not itself (a Stribeck hump without its Coulomb level).
+        Returns the model, the replacements and the dropped ``(term, coefficient, stderr)``."""
+        simplified, impossible = [], []
+        while True:
+            model, more = simplest_laws(self.strategy, model, self.train, self.report)
+            simplified += more
+            model, dropped = drop_inadmissible(self.strategy, model, self.train, self.report)
+            impossible += dropped
+            if not dropped:
+                return model, simplified, impossible
+
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
         """Rounds 1 to :data:`MAX_ROUNDS`; returns the final model, its held-out
         error and mass-matrix eigenvalue, and the structural findings."""
@@ -265,8 +280,7 @@ class _Loop:
             candidate = strategy.refit(model, train, model.effects + selection.accepted)
             candidate, removed = self.timed(prune, strategy, candidate, train, report)
             candidate = refine_shapes(strategy, candidate, train, report)
-            candidate, simplified = self.timed(simplest_laws, strategy, candidate, train, report)
-            candidate, impossible = drop_inadmissible(strategy, candidate, train, report)
+            candidate, simplified, impossible = self.timed(self.settle, candidate)
             for term, c, se in impossible:
                 findings[label(term)] = structural(term, c, se)
                 removed.append(label(term))
