@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.core.arguments import noise_level, nonnegative, positive, positive_int
+from bench.core.arguments import noise_level, nonnegative, positive, positive_int, seed
 from bench.core.data import Dataset, add_noise, check_experiment, generate, write_csv
 from bench.core.effects import EFFECTS
 from bench.core.undeclared import GENERATOR_LAWS, add_effects, parse_effects
@@ -61,27 +61,17 @@ def _csv_list(text: str) -> list[str]:
     return items
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text}")
-    return value
-
-
 def _seed_list(text: str) -> list[int]:
     out = []
     for part in _csv_list(text):
         lo, dash, hi = part.partition("-")
         if dash and lo:
-            first, last = _seed(lo), _seed(hi)
+            first, last = seed(lo), seed(hi)
             if last < first:
                 raise argparse.ArgumentTypeError(f"the seed range {part} is empty (write it low-high)")
             out += list(range(first, last + 1))
         else:
-            out.append(_seed(part))
+            out.append(seed(part))
     if len(set(out)) != len(out):
         raise argparse.ArgumentTypeError(f"a seed is given twice in {text}")
     return out
@@ -165,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("data", help="generate data in the suite's CSV format")
     d.add_argument("--system", required=True, help="a simulated system")
     d.add_argument("--n", type=positive_int, required=True, help="number of samples")
-    d.add_argument("--seed", type=_seed, required=True, help="the generator's seed (the same seed gives the same data)")
+    d.add_argument("--seed", type=seed, required=True, help="the generator's seed (the same seed gives the same data)")
     d.add_argument("--out", type=Path, required=True, help="CSV file to write")
     d.add_argument("--domain-half-width", type=positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
@@ -196,7 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="bound the loop by work instead of time: the method's fit (and each cross-fit) does N steps "
                           "of its work, the polish all its starts, the trace until nothing is significant, and at most "
                           f"{MAX_ROUNDS} rounds; the same command then gives the same effects and numbers on any machine")
-    res.add_argument("--seed", type=_seed, default=0, help="the method's seed (default 0)")
+    res.add_argument("--seed", type=seed, default=0, help="the method's seed (default 0)")
     res.add_argument("--set", dest="overrides", type=_assignment, action="append", default=[], metavar="NAME=VALUE",
                      help=_SET_HELP)
     res.add_argument("--json", type=Path, default=None, help="write the result here (see the README for its keys)")
@@ -231,7 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="learn from samples of L (direct) or from torques (indirect)")
     f.add_argument("--train", type=Path, default=None, help="training CSV (default: generated)")
     f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
-    f.add_argument("--seed", type=_seed, default=0, help="the run's seed (default 0)")
+    f.add_argument("--seed", type=seed, default=0, help="the run's seed (default 0)")
     f.add_argument("--budget", type=positive, default=None,
                    help="wall-clock seconds for the fit (default 60); with --steps, a ceiling past which the run is "
                         "killed and recorded as timeout (default: none)")

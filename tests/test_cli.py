@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "rerun", "leaderboard",
-            "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling",
+            "adaptation", "residual-acceptance", "residual-dfki", "robot-log", "overhead", "dfki-filter", "scaling",
             "syrenets-speed", "syrenets-profile")
 
 

@@ -53,3 +53,14 @@ def noise_level(text: str) -> float:
     if not (0 <= value < 10 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"a noise level is a fraction of the target's std in [0, 10), got {text}")
     return value
+
+
+def seed(text: str) -> int:
+    """A generator's seed: a whole number >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text}")
+    return value

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bench.core.arguments import noise_level, positive, positive_int
+from bench.core.arguments import noise_level, positive, positive_int, seed
 from bench.core.data import Dataset, add_noise
 from bench.core.errors import ConfigError
 from bench.core.fileio import atomic_write
@@ -112,7 +112,7 @@ def add_arguments(parser) -> None:
                         help="undeclared effects, as bench data --effects takes them")
     parser.add_argument("--noise", type=noise_level, default=0.0,
                         help="Gaussian noise on the torque, a fraction of each joint's torque std (default 0)")
-    parser.add_argument("--seed", type=int, default=0, help="recording k uses seed + k (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="recording k uses seed + k (default 0)")
     parser.add_argument("--out", type=Path, required=True, help="the folder to write recording_<k>.csv into")
 
 
