@@ -123,11 +123,11 @@ def label(term: Term) -> str:
     return f"{term.name}{shape} on {where}"
 
 
-def _law(term: Term, parameter: str, expr: sympy.Expr | None = None) -> str:
+def _law(term: Term, parameter: str) -> str:
     """The text of a term's law with its parameter: ``L += ...``, ``D = ...``
-    or ``tau += ...``; ``expr`` in place of the term's own expression."""
+    or ``tau += ...``."""
     where = {"L": "L += ", "D": "D = "}.get(term.place, "tau += ")
-    return f"{where}{sympy.Symbol(parameter) * (term.expr if expr is None else expr)}"
+    return f"{where}{sympy.Symbol(parameter) * term.expr}"
 
 
 def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float]) -> list[dict]:
@@ -142,7 +142,7 @@ def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float
     fits = {t: (float(c), float(s)) for t, c, s in zip(terms, coef, stderr)}
     on_joint: dict[int, dict[str, Term]] = {}
     for t in terms:
-        if is_named(t) and len(t.joints) == 1 and t.name in FAMILIES:
+        if len(t.joints) == 1 and t.name in FAMILIES:  # a named effect on one joint
             on_joint.setdefault(t.joint, {})[t.name] = t
     laws = {}  # the first part of each law of several parts -> its entry; its other parts -> None
     for j, named in on_joint.items():

@@ -177,21 +177,21 @@ def _simpler(strategy: Strategy, model: LoopModel, train: Dataset) -> tuple[list
     shaped = [i for i, t in enumerate(model.effects) if t.shape is not None and led_by(t.name) is not None]
     if not shaped:
         return None
+    on_joint = {i: {t.name for t in model.effects if t.joint == model.effects[i].joint and len(t.joints) == 1}
+                for i in shaped}
     options = {}  # per shaped part: each limit's parts and the effects it would add
     for i in shaped:
         term = model.effects[i]
-        on_joint = {t.name for t in model.effects if t.joint == term.joint and len(t.joints) == 1}
-        options[i] = [(parts, [EFFECTS[p].term(term.joint) for p in parts if p not in on_joint])
+        options[i] = [(parts, [EFFECTS[p].term(term.joint) for p in parts if p not in on_joint[i]])
                       for parts in led_by(term.name).limits[term.name]]
     fits = _Fits(strategy, model, train, [t for limits in options.values() for _, added in limits for t in added])
     errors = shape_stderr(strategy, model, train)
     for i in shaped:
-        term, effect = model.effects[i], EFFECTS[model.effects[i].name]
+        term, effect, law = model.effects[i], EFFECTS[model.effects[i].name], led_by(model.effects[i].name)
         limits = [(fits.bic((i,), added), parts, added) for parts, added in options[i]]
         best, parts, added = min(limits, key=lambda limit: limit[0])
-        law = led_by(term.name)
         why = [f"{law.name}'s {part} is not on joint {term.joint + 1}: its parameter is 0 ± 0, not identified"
-               for part in law.essential if part not in {t.name for t in model.effects if t.joint == term.joint}]
+               for part in law.essential if part not in on_joint[i]]
         if errors.get(term, 0.0) >= term.shape:
             why.append(f"{effect.shaped}'s standard error {errors[term]:.2g} is at least its value")
         if abs(model.coef[i]) <= model.stderr[i]:

@@ -330,8 +330,9 @@ def refined_shape(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset) -> fl
     (:func:`best_shape` on :func:`shape_rss`); where that fit leaves less than
     :data:`NEAR_EXACT` of ``|r|^2``, the shape is refined again near it with
     every row projected, so that round-off does not decide it."""
-    v = best_shape(shape_rss(Q, r, term, data), term.shape)
-    if shape_rss(Q, r, term, data)(v) <= NEAR_EXACT * float(r @ r):
+    rss = shape_rss(Q, r, term, data)
+    v = best_shape(rss, term.shape)
+    if rss(v) <= NEAR_EXACT * float(r @ r):
         v = best_shape(shape_rss(Q, r, term, data, exact=True), v, factor=1.01)
     return v
 

@@ -59,20 +59,28 @@ def cv_fold_mse(F: np.ndarray, y: np.ndarray, held: list[np.ndarray]) -> np.ndar
     (:class:`~bench.core.regression.Compressed`) and the fit without a fold
     is that of the others' factors stacked: one QR of the whole problem in
     all, not one per fold, with the same fits."""
+    sizes = np.asarray([max(int(m.sum()), 1) for m in held], dtype=np.float64)
     if F.shape[1] == 0:
-        return np.asarray([float(y[m] @ y[m]) / max(int(m.sum()), 1) for m in held])
-    if not np.array_equal(np.sum(held, axis=0), np.ones(len(y))):
+        return np.asarray([float(y[m] @ y[m]) for m in held]) / sizes
+    if not _splits(held, len(y)):
         out = []
         for mask in held:
             r = y[mask] - F[mask] @ least_squares(F[~mask], y[~mask])
-            out.append(float(r @ r) / max(int(mask.sum()), 1))
-        return np.asarray(out)
-    blocks = [Compressed(F[m], y[m]) for m in held]
-    out = []
-    for i, mask in enumerate(held):
-        fit = Compressed.stacked([b for j, b in enumerate(blocks) if j != i]).coef()
-        out.append(blocks[i].residual_norm2(fit) / max(int(mask.sum()), 1))
-    return np.asarray(out)
+            out.append(float(r @ r))
+        return np.asarray(out) / sizes
+    return _held_out_rss([Compressed(F[m], y[m]) for m in held]) / sizes
+
+
+def _splits(held: list[np.ndarray], rows: int) -> bool:
+    """Whether the folds ``held`` split the rows: each row in exactly one."""
+    return np.array_equal(np.sum(held, axis=0), np.ones(rows))
+
+
+def _held_out_rss(blocks: list[Compressed]) -> np.ndarray:
+    """Each fold's residual sum of squares under the fit to the other folds,
+    from their compressed problems stacked."""
+    return np.asarray([block.residual_norm2(Compressed.stacked(blocks[:i] + blocks[i + 1:]).coef())
+                       for i, block in enumerate(blocks)])
 
 
 def cv_mse(F: np.ndarray, y: np.ndarray, held: list[np.ndarray]) -> float:
@@ -93,7 +101,7 @@ class FoldFits:
     def __init__(self, D: np.ndarray, y: np.ndarray, held: list[np.ndarray]):
         self.y, self.held, self.k = y, held, D.shape[1]
         self.D = D
-        self.split = np.array_equal(np.sum(held, axis=0), np.ones(len(y)))
+        self.split = _splits(held, len(y))
         self.folds = [np.linalg.qr(np.column_stack([D[m], y[m]])) for m in held] if self.split else None
 
     def cv(self, G: np.ndarray | None = None) -> float:
@@ -114,9 +122,5 @@ class FoldFits:
             bottom = np.hstack([np.zeros((RG.shape[0], self.k)), RG, np.zeros((RG.shape[0], 1))])
             M = np.vstack([top, bottom])
             blocks.append(Compressed(M[:, :-1], M[:, -1]))
-        sizes = np.asarray([int(m.sum()) for m in self.held], dtype=np.float64)
-        errors = []
-        for i in range(len(blocks)):
-            fit = Compressed.stacked([b for j, b in enumerate(blocks) if j != i]).coef()
-            errors.append(blocks[i].residual_norm2(fit))
-        return float(np.sum(errors) / max(sizes.sum(), 1.0))
+        rows = sum(int(m.sum()) for m in self.held)
+        return float(_held_out_rss(blocks).sum() / max(rows, 1))
