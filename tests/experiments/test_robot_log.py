@@ -43,3 +43,13 @@ def test_the_logs_convert_into_the_suites_format_with_one_recording_each(tmp_pat
     assert r.returncode == 0, r.stderr
     data = read_csv(tmp_path / "train.csv", system="double_pendulum")
     assert data.recordings() == ["recording_0", "recording_1"] and len(data) > 500
+
+
+def test_a_measured_system_is_refused_in_one_line_and_nothing_is_written(tmp_path):
+    r = cli("robot-log", "--system", "dfki_double_pendulum", "--out", str(tmp_path / "logs"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip().splitlines() == ["error: dfki_double_pendulum is measured; a log can be simulated for a "
+                                             "simulated system only"]
+    assert not (tmp_path / "logs").exists()
+    r = cli("robot-log", "--system", "double_pendulum", "--effects", "smooth_coulomb=1:0.7", "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and "needs j:F_c,v_s,b items" in r.stderr and not (tmp_path / "x").exists()
