@@ -12,7 +12,8 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from bench.cli import _assignment, main
+from bench.cli import main
+from bench.core.arguments import assignment
 from bench.core.data import MAX_ABS_VALUE, DataError, read_csv
 from bench.core.errors import UserError
 from bench.runner.records import Record, RecordError, read_records, record_path, write_record
@@ -152,7 +153,7 @@ def test_a_record_file_is_read_whole_or_set_aside_in_one_line(tmp_path, content)
                        st.sampled_from(["true", "No", "(0.9, 0.99)", "[1, 2]", "None", "'float32'", "1e400", "nan"])))
 def test_a_set_value_is_taken_or_refused_in_one_line(name, value):
     try:
-        key, parsed = _assignment(f"{name}={value}")
+        key, parsed = assignment(f"{name}={value}")
         model = METHODS["mlp"](**{key: parsed})
     except UserError as exc:
         assert "\n" not in str(exc)

@@ -10,6 +10,7 @@ and exit code 2 instead of a traceback from deep inside the run.
 from __future__ import annotations
 
 import argparse
+import ast
 import math
 
 
@@ -64,3 +65,42 @@ def seed(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text}")
     return value
+
+
+def csv_list(text: str) -> list[str]:
+    """A comma-separated list of names, at least one."""
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError("expected a comma-separated list")
+    return items
+
+
+def seed_list(text: str) -> list[int]:
+    """Seeds as a comma-separated list of seeds and ``low-high`` ranges, none twice."""
+    out = []
+    for part in csv_list(text):
+        lo, dash, hi = part.partition("-")
+        if dash and lo:
+            first, last = seed(lo), seed(hi)
+            if last < first:
+                raise argparse.ArgumentTypeError(f"the seed range {part} is empty (write it low-high)")
+            out += list(range(first, last + 1))
+        else:
+            out.append(seed(part))
+    if len(set(out)) != len(out):
+        raise argparse.ArgumentTypeError(f"a seed is given twice in {text}")
+    return out
+
+
+def assignment(text: str) -> tuple[str, object]:
+    """``NAME=VALUE`` (or ``METHOD.NAME=VALUE``): the value as a Python
+    literal where it parses as one (``64``, ``1e-3``, ``True``, ``[8, 8]``),
+    else as text."""
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    key, raw = text.split("=", 1)
+    try:
+        value = ast.literal_eval(raw)
+    except (ValueError, SyntaxError):
+        value = raw
+    return key.strip(), value

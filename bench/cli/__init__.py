@@ -1,0 +1,66 @@
+"""The suite's one command line: ``python -m bench COMMAND``.
+
+A thin layer over the library: every command calls functions that are also
+usable from Python. Bad input ends with a one-line ``error:`` message on
+stderr and exit code 2; nothing is half-written. Every option has a help
+text (``python -m bench COMMAND --help``).
+
+Each command is one module with ``HELP``, ``add_arguments(parser)`` and
+``main(args) -> exit code``: the core commands here, in :data:`COMMANDS`,
+and the measurement scripts of :mod:`bench.experiments`. What several
+commands share (``--set``, ``--plugin``, ``--budget`` with ``--steps``) is in
+:mod:`bench.cli.options`; the option values' types are in
+:mod:`bench.core.arguments`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+
+from bench.cli import convert, data, fit, leaderboard, listing, rerun, residual, run, table
+from bench.cli.options import Parser
+from bench.core.errors import UserError
+from bench.experiments import (adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, robot_log, scaling,
+                               syrenets_profile, syrenets_speed)
+from bench.runner.isolation import CallFailed
+
+EXIT_USAGE = 2
+
+#: the commands, by name: the core ones, then the measurement scripts
+COMMANDS = {
+    "list": listing, "run": run, "table": table, "data": data, "fit": fit, "residual": residual,
+    "convert": convert, "rerun": rerun, "leaderboard": leaderboard,
+    "adaptation": adaptation, "residual-acceptance": residual_acceptance, "residual-dfki": residual_dfki,
+    "robot-log": robot_log, "overhead": overhead, "dfki-filter": dfki_filter, "scaling": scaling,
+    "syrenets-speed": syrenets_speed, "syrenets-profile": syrenets_profile,
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = Parser(
+        prog="python -m bench",
+        description="Benchmark suite for learning Lagrangians of physical systems, symbolically and neurally.",
+    )
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=Parser)
+    for name, module in COMMANDS.items():
+        module.add_arguments(sub.add_parser(name, help=module.HELP))
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(argv)
+    args.invocation = "python -m bench " + shlex.join(argv)
+    try:
+        return COMMANDS[args.command].main(args)
+    except (UserError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except CallFailed as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted; finished runs keep their records, rerun the same command to resume", file=sys.stderr)
+        return 130

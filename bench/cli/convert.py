@@ -1,0 +1,67 @@
+"""``python -m bench convert``: a robot's logs in the suite's CSV format,
+resampled, low-passed and differentiated (:mod:`bench.core.recordings`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from bench.cli.options import UsageError
+from bench.core.arguments import nonnegative, positive, positive_int
+from bench.core.data import Dataset, write_csv
+from bench.core.fileio import check_output
+from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preprocess, read_recording
+from systems.dfki_double_pendulum import read_raw
+
+HELP = "turn a robot's log into the suite's CSV format: resample, low-pass, differentiate"
+
+
+def add_arguments(cv) -> None:
+    layout = cv.add_mutually_exclusive_group(required=True)
+    layout.add_argument("--format", choices=["dfki"], help="a DFKI double pendulum recording, in either of the lab's layouts")
+    layout.add_argument("--columns", metavar="time=T,q_1=C,qd_1=C,tau_1=C,...",
+                        help="any log: which columns hold the time (s) and each joint's q, qd and tau")
+    cv.add_argument("raw", type=Path, nargs="+",
+                    help="the log(s) (CSV, may be gzipped); each is one recording, named in the output's "
+                         "trajectory column by its file name")
+    cv.add_argument("--out", type=Path, required=True, help="CSV file to write")
+    cv.add_argument("--dt", type=positive, default=DEFAULT_FILTER.dt,
+                    help=f"the uniform time step the log is resampled to, s (default {DEFAULT_FILTER.dt:g})")
+    cv.add_argument("--cutoff-hz", type=positive, default=DEFAULT_FILTER.cutoff_hz,
+                    help=f"the zero-phase Butterworth low-pass's cut-off on q, qd and tau, Hz "
+                         f"(default {DEFAULT_FILTER.cutoff_hz:g}, measured for the DFKI robot)")
+    cv.add_argument("--order", type=positive_int, default=DEFAULT_FILTER.order,
+                    help=f"the low-pass's order (default {DEFAULT_FILTER.order})")
+    cv.add_argument("--trim", type=nonnegative, default=DEFAULT_FILTER.trim_s,
+                    help=f"seconds cut from each end, the filter's start-up (default {DEFAULT_FILTER.trim_s:g})")
+    cv.add_argument("--decimate", type=positive_int, default=DEFAULT_FILTER.decimate,
+                    help=f"keep every N-th sample (default {DEFAULT_FILTER.decimate})")
+
+
+def main(args) -> int:
+    check_output(args.out)
+    spec = FilterSpec(dt=args.dt, cutoff_hz=args.cutoff_hz, order=args.order, trim_s=args.trim, decimate=args.decimate)
+    names = [recording_name(p) for p in args.raw]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise UsageError(f"two logs would be the same recording {repeated[0]!r}: give files with distinct names")
+    # one column map for every log, so they share their joints; each is read and checked before anything is written
+    columns = ColumnMap.parse(args.columns) if args.columns else None
+    system = None if columns else "dfki_double_pendulum"
+    parts = [preprocess(read_recording(path, columns) if columns else read_raw(path), spec) for path in args.raw]
+    arrays = {k: np.concatenate([p[k] for p in parts]) for k in ("q", "qd", "qdd", "tau")}
+    labels = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
+    source = ", ".join(map(str, args.raw))
+    write_csv(Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], None, system, source, recording=labels), args.out)
+    print(f"wrote {len(labels)} samples of {arrays['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
+          f"({spec.describe()})")
+    return 0
+
+
+def recording_name(path: Path) -> str:
+    """A log's recording name: its file name without the .csv and compression suffixes."""
+    name = path.name
+    for suffix in (".gz", ".bz2", ".xz", ".zip", ".csv"):
+        name = name.removesuffix(suffix)
+    return name or path.name

@@ -1,0 +1,95 @@
+"""``python -m bench fit``: one run, isolated like a matrix's, on the user's
+CSV data or on generated data, summarised in one line."""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+
+from bench.cli.options import (STEPS_HELP, UsageError, add_plugin, add_set, budget, check_names, hyperparameters,
+                               load_plugins)
+from bench.core.arguments import positive, positive_int, seed
+from bench.core.fileio import check_output, write_json
+from bench.runner import matrix
+from bench.runner.execute import given_data, make_system, method_config, preflight
+from bench.runner.records import Record
+from bench.runner.spec import N_TEST, N_TRAIN, RunSpec
+from methods import METHODS
+
+HELP = "one run on your own CSV data or on generated data; prints a one-line summary"
+
+
+def add_arguments(f) -> None:
+    f.add_argument("--system", required=True, help="the data's system")
+    f.add_argument("--method", required=True, help="the method to fit")
+    f.add_argument("--experiment", required=True, choices=["direct", "indirect"],
+                   help="learn from samples of L (direct) or from torques (indirect)")
+    f.add_argument("--train", type=Path, default=None, help="training CSV (default: generated)")
+    f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
+    f.add_argument("--seed", type=seed, default=0, help="the run's seed (default 0)")
+    f.add_argument("--budget", type=positive, default=None,
+                   help="wall-clock seconds for the fit (default 60); with --steps, a ceiling past which the run is "
+                        "killed and recorded as timeout (default: none)")
+    f.add_argument("--steps", type=positive_int, default=None, help=STEPS_HELP)
+    f.add_argument("--json", type=Path, default=None, help="write the run's record here")
+    f.add_argument("--smoke", action="store_true", help="use the method's tiny smoke configuration")
+    add_set(f)
+    f.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"generated training samples (default {N_TRAIN})")
+    f.add_argument("--n-test", type=positive_int, default=N_TEST, help=f"generated test samples (default {N_TEST})")
+    f.add_argument("--domain-half-width", type=positive, default=None,
+                   help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
+    add_plugin(f)
+
+
+def main(args) -> int:
+    if args.json:
+        check_output(args.json)
+    (name,), plugins = load_plugins(args, [args.system])
+    check_names(args, [name], [args.method], [args.experiment])
+    if args.test and not args.train:
+        raise UsageError("--test needs --train (generated training data comes with generated test data)")
+    spec = RunSpec(
+        system=name, method=args.method, experiment=args.experiment, seed=args.seed,
+        budget_s=budget(args)[0], steps=args.steps, profile="smoke" if args.smoke else "default",
+        hyperparameters=hyperparameters(args.overrides, args.method, [args.method]),
+        n_train=args.n_train, n_test=args.n_test,
+        train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
+        domain_half_width=args.domain_half_width, plugins=plugins,
+    )
+    if METHODS.entry(args.method).available:
+        METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now
+    given = given_data(make_system(spec), spec.train_path, spec.test_path) if preflight(spec) is None else None
+    for part in given or ():
+        if part is not None:
+            part.target(args.experiment)  # bad files: exit 2 now, before the run's process starts
+    record, log = run_one(spec)
+    if args.json:
+        write_json(args.json, record.to_json())
+    print(summary_line(record, log))
+    return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
+
+
+def run_one(spec: RunSpec) -> tuple[Record, Path | None]:
+    """One run in its own process (threads pinned, killed like any run of a
+    matrix), in a scratch folder; returns its record and, where something
+    failed, the log that holds the traceback (the folder is then kept)."""
+    work = Path(tempfile.mkdtemp(prefix="bench-fit-"))
+    record = matrix.run_isolated(spec, work)
+    if record.status in ("failed", "timeout") or record.failed_stages:
+        return record, matrix.log_path(work, spec.run_id)
+    shutil.rmtree(work, ignore_errors=True)
+    return record, None
+
+
+def summary_line(record: Record, log: Path | None = None) -> str:
+    head = f"{record.system} {record.method} {record.experiment} seed={record.seed}: {record.status}"
+    where = f"; traceback in {log}" if log else ""
+    if record.status != "ok":
+        return f"{head} ({record.error}{where})"
+    test = record.test_mse
+    failed = f" | failed after the fit: {', '.join(record.failed_stages)}{where}" if record.failed_stages else ""
+    return (
+        f"{head} | train MSE {record.train_mse:.4g} | test MSE {'n/a (no test data)' if test is None else f'{test:.4g}'}"
+        f" | {record.steps} steps in {record.fit_seconds:.1f} s ({record.stop_reason}){failed}"
+    )

@@ -1,0 +1,30 @@
+"""``python -m bench list``: the systems and methods, with availability."""
+
+from __future__ import annotations
+
+from bench.cli.options import add_plugin, load_plugins
+from methods import METHODS
+from systems import SYSTEMS
+
+HELP = "list systems and methods, with availability"
+
+
+def add_arguments(parser) -> None:
+    add_plugin(parser)
+
+
+def main(args) -> int:
+    load_plugins(args)
+    print("Systems:")
+    for entry in SYSTEMS.entries():
+        sys_obj = entry.obj()
+        kind = "simulated" if sys_obj.simulated else "measured"
+        print(f"  {entry.name:<20} dof={sys_obj.dof}  {kind:<9}  coordinates={','.join(sys_obj.coordinates)}  "
+              f"tags={','.join(sorted(entry.tags))}")
+    print("Methods:")
+    for entry in METHODS.entries():
+        reason = entry.unavailable_reason()
+        state = "available" if reason is None else f"unavailable: {reason}"
+        exps = ",".join(entry.obj.experiments)
+        print(f"  {entry.name:<20} {state}  experiments={exps}  tags={','.join(sorted(entry.tags))}")
+    return 0

@@ -1,0 +1,114 @@
+"""What the commands share: their parser, their one-line usage error, and the
+options several of them take (``--set``, ``--plugin``, ``--budget`` with
+``--steps``), with what the commands do with them.
+
+The option values' types (seeds, counts, fractions, ``NAME=VALUE``) are in
+:mod:`bench.core.arguments`, shared with the measurement scripts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+from bench.core.arguments import assignment
+from bench.core.data import check_experiment
+from bench.core.errors import UserError
+from bench.core.registry import RegistryError
+from bench.runner.plugins import import_plugins, system_plugins
+from methods import METHODS
+from systems import SYSTEMS
+
+#: seconds per run where neither --budget nor --steps is given
+DEFAULT_BUDGET_S = 60.0
+STEPS_HELP = ("bound each run by N steps of its method's work (gradient steps, GP generations, solves) instead of by "
+              "time: the run is then a pure function of its seed and gives the same numbers on any machine")
+PLUGIN_HELP = "a .py file or module that registers extra methods or systems (repeatable)"
+
+
+class UsageError(UserError):
+    """A bad command line; reported in one line with exit code 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """Argument errors in one line (``--help`` still shows the usage)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def add_set(parser, what: str = "the method") -> None:
+    """``--set NAME=VALUE`` and ``--set METHOD.NAME=VALUE``, repeatable."""
+    parser.add_argument("--set", dest="overrides", type=assignment, action="append", default=[],
+                        metavar="[METHOD.]NAME=VALUE",
+                        help=f"a hyperparameter of {what}, e.g. hidden=64; METHOD.NAME=VALUE sets it for that method "
+                             "only, e.g. mlp.hidden=64 (repeatable)")
+
+
+def add_plugin(parser) -> None:
+    parser.add_argument("--plugin", action="append", default=[], help=PLUGIN_HELP)
+
+
+def budget(args) -> tuple[float | None, int | None]:
+    """``(budget_s, steps)`` from ``--budget`` and ``--steps``: seconds
+    (default :data:`DEFAULT_BUDGET_S`), or steps with an optional ceiling."""
+    if args.steps is None:
+        return (args.budget if args.budget is not None else DEFAULT_BUDGET_S), None
+    return args.budget, args.steps
+
+
+def hyperparameters(overrides: list[tuple[str, object]], method: str, methods: list[str]) -> dict:
+    """The ``--set`` values for ``method`` among the command's ``methods``:
+    every ``NAME=VALUE``, then every ``METHOD.NAME=VALUE`` of this method,
+    which wins. A ``METHOD.`` that names none of ``methods`` is an error."""
+    common, own = {}, {}
+    for key, value in overrides:
+        target, dot, name = key.rpartition(".")
+        if not dot:
+            common[key] = value
+            continue
+        if target not in methods:
+            raise UsageError(f"--set {key}: {target!r} is not a method of this command "
+                             f"(methods: {', '.join(methods)})")
+        if target == method:
+            own[name] = value
+    return {**common, **own}
+
+
+def load_plugins(args, systems: list[str] = ()) -> tuple[list[str], tuple[str, ...]]:
+    """Import ``--plugin`` files and register any ``urdf:PATH`` system; returns
+    the systems' names and the plugins a run's own process needs."""
+    import_plugins(args.plugin)
+    names, arms = system_plugins(systems)
+    return names, plugin_paths(args.plugin) + arms
+
+
+def plugin_paths(plugins: list[str]) -> tuple[str, ...]:
+    """Plugin files as absolute paths (runs import them in their own processes); module names as given."""
+    return tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)
+
+
+def check_names(args, systems=(), methods=(), experiments=()) -> None:
+    """Every name known; an unknown one that a ``.py`` file in the working
+    folder registers, while no ``--plugin`` gave it, says so."""
+    for registry, names in ((SYSTEMS, systems), (METHODS, methods)):
+        for name in names:
+            try:
+                registry.entry(name)
+            except RegistryError as exc:
+                raise UsageError(f"{exc}{_plugin_hint(name, getattr(args, 'plugin', []))}") from None
+    for name in experiments:
+        check_experiment(name)
+
+
+def _plugin_hint(name: str, plugins: list[str]) -> str:
+    quoted = re.compile(rf"""["']{re.escape(name)}["']""")
+    given = {Path(p).resolve() for p in plugins if p.endswith(".py")}
+    for path in sorted(Path.cwd().glob("*.py")):
+        try:
+            if path.resolve() not in given and quoted.search(path.read_text(errors="replace")):
+                return f"; {path.name} names it: add --plugin {path.name}"
+        except OSError:
+            continue
+    return "; one from your own file needs --plugin FILE.py" if not plugins else ""

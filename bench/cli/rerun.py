@@ -1,0 +1,51 @@
+"""``python -m bench rerun RECORD``: replay a recorded run with the work it
+did and compare its errors with the record's."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bench.cli.fit import run_one, summary_line
+from bench.core.arguments import positive
+from bench.core.fileio import check_output, write_json
+from bench.runner.plugins import import_plugins
+from bench.runner.records import read_record
+from bench.runner.replay import RELATIVE_TOLERANCE, compare, replay_spec
+
+HELP = "replay a recorded run with the work it did and compare its train and test MSE"
+
+
+def add_arguments(rr) -> None:
+    rr.add_argument("record", type=Path, help="a run's record (OUT/records/<run id>.json, or a fit's --json)")
+    rr.add_argument("--budget", type=positive, default=None,
+                    help="a ceiling in seconds past which the replay is killed (default: none; a slower machine "
+                         "takes longer than the recorded budget to do the same work)")
+    rr.add_argument("--json", type=Path, default=None, help="write the replay's record here")
+
+
+def main(args) -> int:
+    if args.json:
+        check_output(args.json)
+    recorded = read_record(args.record)
+    spec = replay_spec(recorded, str(args.record), ceiling_s=args.budget)
+    import_plugins(spec.plugins)
+    print(f"replaying {recorded.run_id}: {spec.budget.describe()} (recorded under {recorded.describe_budget()}, "
+          f"stopped by {recorded.stop_reason})", flush=True)
+    replayed, log = run_one(spec)
+    if args.json:
+        write_json(args.json, replayed.to_json())
+    if replayed.status != "ok":
+        print(summary_line(replayed, log))
+        return 1
+    rows = compare(recorded, replayed)
+    print(f"{'':10} {'recorded':>24} {'replayed':>24} {'relative difference':>20}")
+    for name, a, b, diff in rows:
+        print(f"{name:10} {_maybe(a):>24} {_maybe(b):>24} {diff:>20.3g}")
+    same = all(diff <= RELATIVE_TOLERANCE for *_, diff in rows)
+    print(f"{'the same' if same else 'DIFFERENT'} up to a relative {RELATIVE_TOLERANCE:g} "
+          f"({replayed.steps} steps; recorded {recorded.steps})")
+    return 0 if same else 1
+
+
+def _maybe(x) -> str:
+    return "n/a" if x is None else format(x, ".17g")

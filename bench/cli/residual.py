@@ -1,0 +1,81 @@
+"""``python -m bench residual``: fit, trace the torque residual to missing
+effects, add them, refit, and report the error before and after."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bench.cli.options import UsageError, add_plugin, add_set, budget, check_names, hyperparameters, load_plugins
+from bench.core.arguments import positive, positive_int, seed
+from bench.core.fileio import check_output
+from bench.residual.job import ResidualJob, run_residual
+from bench.residual.loop import FIT_SHARE, MAX_ROUNDS
+from bench.runner import matrix
+from methods import METHODS
+from systems import SYSTEMS
+
+HELP = "fit, trace the torque residual to missing effects, add them, refit; report the error before and after"
+
+
+def add_arguments(res) -> None:
+    res.add_argument("--system", required=True, help="the system whose declared model the method fits")
+    res.add_argument("--method", required=True, help="a method that fits torques (indirect experiment)")
+    res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
+    res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
+    res.add_argument("--budget", type=positive, default=None,
+                     help=f"seconds for the whole loop (default 60): the method's fit has {FIT_SHARE:.0%}% of it, no "
+                          f"round starts that would end past it, and the loop's process is killed at "
+                          f"{matrix.KILL_FACTOR} x it; with --steps, only a ceiling past which the loop is killed "
+                          f"(default: none)")
+    res.add_argument("--steps", type=positive_int, default=None,
+                     help="bound the loop by work instead of time: the method's fit (and each cross-fit) does N steps "
+                          "of its work, the polish all its starts, the trace until nothing is significant, and at most "
+                          f"{MAX_ROUNDS} rounds; the same command then gives the same effects and numbers on any machine")
+    res.add_argument("--seed", type=seed, default=0, help="the method's seed (default 0)")
+    add_set(res)
+    res.add_argument("--json", type=Path, default=None, help="write the result here (see the README for its keys)")
+    res.add_argument("--report", type=Path, default=None, help="write a markdown report with residual plots here")
+    add_plugin(res)
+
+
+def main(args) -> int:
+    for path in (args.json, args.report):
+        if path is not None:
+            check_output(path)
+    (name,), plugins = load_plugins(args, [args.system])
+    check_names(args, [name], [args.method])
+    system = SYSTEMS[name]()
+    entry = METHODS.entry(args.method)
+    if not entry.available:
+        raise UsageError(f"method {args.method} is unavailable: {entry.unavailable_reason()}")
+    reason = entry.obj.not_applicable_reason("indirect")
+    if reason:
+        raise UsageError(f"method {args.method} cannot run the loop, which fits torques: {reason}")
+    settings = hyperparameters(args.overrides, args.method, [args.method])
+    METHODS[args.method](**settings)  # bad hyperparameters: exit 2 now
+    if not args.train and system.simulated:
+        raise UsageError(f"{name} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
+    if args.json is None and args.report is None:
+        print("note: neither --json nor --report given; the result is only printed")
+    job = ResidualJob(
+        system=name, method=args.method,
+        train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
+        budget_s=budget(args)[0], steps=args.steps, seed=args.seed, hyperparameters=settings,
+        json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
+        plugins=plugins,
+    )
+    result = run_residual(job)
+    b, a = result.mse_before, result.mse_after
+    print(f"torque MSE before: train {b['train']:.4g}, test {_maybe(b['test'])}; after: train {a['train']:.4g}, test {_maybe(a['test'])}")
+    for e in result.effects:
+        what = e.get("expression") or e["name"]
+        where = f"joint{'s' if len(e['joints']) > 1 else ''} {'-'.join(map(str, e['joints']))}"
+        params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items())
+        print(f"  {what} ({e['kind']}) on {where}: {params}")
+    if not result.effects:
+        print("  no effect added: nothing significant in the residual")
+    return 0
+
+
+def _maybe(x) -> str:
+    return "n/a" if x is None else format(x, ".4g")

@@ -1,0 +1,84 @@
+"""``python -m bench run``: a matrix of systems x methods x experiments x
+noise levels x seeds, each run isolated and budgeted, then its tables."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from bench.cli.options import STEPS_HELP, add_plugin, add_set, budget, check_names, hyperparameters, load_plugins
+from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
+from bench.core.fileio import check_output
+from bench.reporting.tables import write_tables
+from bench.runner import matrix
+from bench.runner.execute import method_config
+from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, build_specs, seed_count
+from methods import METHODS
+from systems import SYSTEMS
+
+HELP = "run a matrix of systems x methods x experiments x seeds and write tables"
+
+
+def add_arguments(r) -> None:
+    r.add_argument("--systems", type=csv_list, default=["double_pendulum"],
+                   help="comma-separated, or 'all'; urdf:PATH for any arm's URDF (default: double_pendulum)")
+    r.add_argument("--methods", type=csv_list, default=None, help="comma-separated (default: all registered)")
+    r.add_argument("--experiments", type=csv_list, default=["direct", "indirect"], help="direct,indirect (default: both)")
+    seeds = r.add_mutually_exclusive_group()
+    seeds.add_argument("--seeds", type=seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
+    seeds.add_argument("--n-seeds", type=seed_count, default=10, help="the first N of the ten fixed seeds (default 10)")
+    r.add_argument("--budget", type=positive, default=None,
+                   help="wall-clock seconds per run (default 60); with --steps, a ceiling past which a run is killed "
+                        "and recorded as timeout (default: none)")
+    r.add_argument("--steps", type=positive_int, default=None, help=STEPS_HELP)
+    r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
+    r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
+    r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
+    r.add_argument("--smoke", action="store_true", help="use each method's tiny smoke configuration")
+    add_set(r, "every method in the run")
+    r.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"training samples (default {N_TRAIN})")
+    r.add_argument("--n-test", type=positive_int, default=N_TEST, help=f"test samples (default {N_TEST})")
+    r.add_argument("--domain-half-width", type=positive, default=None,
+                   help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain, "
+                        "pi/2 for the paper; linear coordinates keep their ranges)")
+    r.add_argument("--noise", type=noise_level, nargs="+", default=[0.0], metavar="LEVEL",
+                   help="Gaussian noise on the training targets as a fraction of their std; several levels "
+                        "add a dimension to the matrix, e.g. --noise 0 0.01 0.1 (default 0)")
+    r.add_argument("--cluster", default=None, metavar="local|ADDRESS",
+                   help="run on Dask distributed: 'local' starts a LocalCluster of --workers processes; "
+                        "tcp://host:8786 uses a running scheduler (needs the 'dask' extra)")
+    r.add_argument("--no-rollout", action="store_true",
+                   help="skip the rollout error of simulated systems (integrating each model's dynamics for 1 s)")
+    add_plugin(r)
+    r.add_argument("--no-resume", action="store_true", help="rerun runs that already have a record")
+    r.add_argument("--retry-failed", action="store_true",
+                   help="also redo runs whose record says failed or timeout (by default a resume keeps them, and "
+                        "redoes only runs whose record was made by other code or another configuration)")
+
+
+def main(args) -> int:
+    check_output(args.out, folder=True)
+    systems, plugins = load_plugins(args, SYSTEMS.names() if args.systems == ["all"] else args.systems)
+    methods = args.methods or METHODS.names()
+    check_names(args, systems, methods, args.experiments)
+    seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
+    budget_s, steps = budget(args)
+    specs = build_specs(
+        systems, methods, args.experiments, seeds, budget_s, noises=args.noise, steps=steps,
+        profile="smoke" if args.smoke else "default",
+        n_train=args.n_train, n_test=args.n_test,
+        domain_half_width=args.domain_half_width,
+        plugins=plugins,
+        threads=args.threads,
+        rollout=not args.no_rollout,
+    )
+    specs = [dataclasses.replace(s, hyperparameters=hyperparameters(args.overrides, s.method, methods)) for s in specs]
+    for spec in specs:  # fail fast on a bad override, before any process starts
+        if spec.method in METHODS and METHODS.entry(spec.method).available:
+            METHODS[spec.method](**method_config(spec))
+    matrix.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume, cluster=args.cluster,
+                      retry_failed=args.retry_failed)
+    text = write_tables(args.out)
+    print(f"tables written to {args.out / 'tables.md'}")
+    print(text)
+    return 0
