@@ -35,7 +35,7 @@ benchmark: $(STAMP)
 
 # The published double pendulum tables: every method, 10 seeds, 60 s per run.
 paper: $(STAMP)
-	$(BIN)/python -m bench run --systems double_pendulum --n-seeds 10 --budget 60 --workers 2 --out results/double_pendulum_60s
+	$(BIN)/python -m bench run --systems double_pendulum --n-seeds 10 --budget 60 --workers 2 --out results/paper/double_pendulum_60s
 
 # The leaderboard (results/README.md, from the records in results/leaderboard): every system and method, both
 # experiments where they apply, 10 seeds. About 870 runs: at 8 s each plus

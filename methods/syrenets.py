@@ -108,7 +108,7 @@ Choices and deviations, each deliberate
   keeps its own optimiser and schedule; under the plateau schedule a
   network's rate can already be cut to its floor during the selection, so
   the cosine schedule, which keeps the rates high through it, suits
-  ``starts`` better (results/further.md, syrenets_300s_multistart_cosine).
+  ``starts`` better (results/further.md).
 * ``compile=True`` (an engineering option; default off) compiles the
   training pass (selection, torques and loss) with ``torch.compile``
   (inductor), once per process: the model is an argument of the compiled
@@ -130,12 +130,8 @@ Choices and deviations, each deliberate
   generated code sums the heads' products along the candidates instead of
   across a vector register (see :class:`HeadsOutput`). Eager
   passes keep the reverse passes: uncompiled, the forward propagation was
-  about 10 % slower. In float32 with replay, four starts and 300 s, an
-  indirect run did 40,800-47,500 steps compiled (results/
-  syrenets_300s_compiled_best) against 23,800-25,500 eagerly
-  (syrenets_300s_multistart_cosine_rerun); the float64 steps of the public
-  and default configurations are timed by
-  ``python -m bench syrenets-speed --compiled`` (results/syrenets_speed.md).
+  about 10 % slower. The steps each does in a budget are measured in
+  results/syrenets/ (listed in results/index.md).
 
 Readable equations and exact recovery (beyond the paper)
 --------------------------------------------------------
@@ -757,7 +753,7 @@ class SyReNets(TorchLagrangianMethod):
         the MSE of a network's current state swings by an order of
         magnitude from one evaluation to the next, and a network that has
         found the structure was dropped on such a swing (seed 5 of
-        results/syrenets_300s_compiled: 0.036 after the first round, 0.38
+        results/syrenets/studies/syrenets_300s_compiled: 0.036 after the first round, 0.38
         after the second). The replayed samples are each network's own.
         """
         alive, rounds = list(range(len(slots))), math.ceil(math.log2(len(slots)))

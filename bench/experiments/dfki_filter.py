@@ -15,7 +15,7 @@ by smoothing its own target; the MSE against the filtered torque is printed
 beside it. Both models are term libraries (:class:`~bench.core.terms.TermLibrary`).
 Usage::
 
-    python -m bench dfki-filter [--out results/dfki_filter.md]
+    python -m bench dfki-filter [--out results/measured/dfki_filter.md]
 """
 
 from __future__ import annotations
@@ -126,12 +126,12 @@ def report(rows: list[dict], spec: FilterSpec) -> str:
 
 
 #: the subcommand's one-line help
-HELP = "measure how the DFKI filter's cut-off changes the identified model (results/dfki_filter.md)"
+HELP = "measure how the DFKI filter's cut-off changes the identified model (results/measured/dfki_filter.md)"
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--out", type=Path, default=Path("results/dfki_filter.md"),
-                        help="the table to write (default results/dfki_filter.md)")
+    parser.add_argument("--out", type=Path, default=Path("results/measured/dfki_filter.md"),
+                        help="the table to write (default results/measured/dfki_filter.md)")
 
 
 def main(args) -> int:

@@ -9,7 +9,7 @@ the model's own evaluation (train and test MSE on the full data, variants,
 rollout, timed inside each run): what is left is the harness's share.
 Usage::
 
-    python -m bench overhead [--budget 30] [--runs 8] [--workers 1 2] [--out results/harness_overhead.md]
+    python -m bench overhead [--budget 30] [--runs 8] [--workers 1 2] [--out results/harness/overhead.md]
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ def measure(method: str, system: str, experiment: str, runs: int, budget: float,
 
 
 #: the subcommand's one-line help
-HELP = "measure the harness's overhead and its speed-up from 1 to more workers (results/harness_overhead.md)"
+HELP = "measure the harness's overhead and its speed-up from 1 to more workers (results/harness/overhead.md)"
 
 
 def add_arguments(parser) -> None:
@@ -59,8 +59,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--budget", type=positive, default=30.0, help="seconds per run (default 30)")
     parser.add_argument("--workers", type=positive_int, nargs="+", default=[1, 2], help="worker counts to compare (default 1 2)")
     parser.add_argument("--no-rollout", action="store_true", help="skip the runs' rollouts")
-    parser.add_argument("--out", type=Path, default=Path("results/harness_overhead.md"),
-                        help="the table to write (default results/harness_overhead.md)")
+    parser.add_argument("--out", type=Path, default=Path("results/harness/overhead.md"),
+                        help="the table to write (default results/harness/overhead.md)")
 
 
 def main(args) -> int:

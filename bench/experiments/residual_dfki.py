@@ -35,7 +35,7 @@ from systems import SYSTEMS
 
 SYSTEM = "dfki_double_pendulum"
 METHODS_DEFAULT = ["sysid", "sparse", "mlp", "syrenets", "mggp"]
-#: the lab's identified model's test torque MSE on the suite's split (results/dfki_filter.md)
+#: the lab's identified model's test torque MSE on the suite's split (results/measured/dfki_filter.md)
 LAB_MSE = 0.0177
 
 

@@ -34,10 +34,10 @@ and the operators are timed alone once per round; the tables give medians. Confi
 one (inputs ``(q, qd, qdd)``, 32 samples plus 16 replayed), the direct experiment, float64, one thread, inside
 the garbage-collector context of the suite's fit loop. Usage::
 
-    python -m bench syrenets-profile [--steps 200] [--rounds 3] [--out results/syrenets_profile.md]
+    python -m bench syrenets-profile [--steps 200] [--rounds 3] [--out results/syrenets/speed/syrenets_profile.md]
 
 With ``--compiled`` it profiles the step with ``compile=True`` instead
-(:func:`measure_compiled`, results/syrenets_profile_compiled.md): the
+(:func:`measure_compiled`, results/syrenets/speed/syrenets_profile_compiled.md): the
 compiled pass runs inductor's generated C++ kernels and calls ATen for the
 matrix products, so the operators cannot be called again alone. Each round
 times ``--steps`` plain steps, then ``--steps`` steps under
@@ -82,7 +82,7 @@ from methods.syrenets import HeadsOutput
 from systems import get_system
 
 HELP = ("where SyReNets' training step spends its time, and its heads' product with and without torch.profiler "
-        "(results/syrenets_profile.md)")
+        "(results/syrenets/speed/syrenets_profile.md)")
 
 #: the authors' public configuration, as bench syrenets-speed times it
 CONFIG = syrenets_speed.CONFIGS["public"]
@@ -97,8 +97,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--compiled", action="store_true",
                         help="profile the step with compile=True (torch.compile) instead: where its time goes")
     parser.add_argument("--out", type=Path, default=None,
-                        help="the table to write (default results/syrenets_profile.md, "
-                             "results/syrenets_profile_compiled.md with --compiled)")
+                        help="the table to write (default results/syrenets/speed/syrenets_profile.md, "
+                             "results/syrenets/speed/syrenets_profile_compiled.md with --compiled)")
 
 
 class _ProductTimer:
@@ -407,7 +407,7 @@ def main_compiled(args) -> int:
 
 def main(args) -> int:
     if args.out is None:
-        args.out = Path("results/syrenets_profile_compiled.md" if args.compiled else "results/syrenets_profile.md")
+        args.out = Path("results/syrenets/speed/syrenets_profile_compiled.md" if args.compiled else "results/syrenets/speed/syrenets_profile.md")
     check_output(args.out)
     if args.compiled:
         return main_compiled(args)

@@ -24,7 +24,7 @@ inside the context that the tree's own ``Method.fit`` runs its loop in
 (``methods.base.gc_frozen`` where the tree has it), so that what the loop
 does around the step counts as well. Usage::
 
-    python -m bench syrenets-speed --against REV [--rounds 5] [--seconds 3] [--compiled [--both-compiled]] [--out results/syrenets_speed.md]
+    python -m bench syrenets-speed --against REV [--rounds 5] [--seconds 3] [--compiled [--both-compiled]] [--out results/syrenets/speed/syrenets_speed.md]
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, check_output
 from bench.runner.provenance import machine, provenance
 
-HELP = "time SyReNets' training step in this tree and in an earlier commit, in turn (results/syrenets_speed.md)"
+HELP = "time SyReNets' training step in this tree and in an earlier commit, in turn (results/syrenets/speed/syrenets_speed.md)"
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = {
@@ -93,8 +93,8 @@ def add_arguments(parser) -> None:
                         help="also time each configuration with the later tree's compile=True")
     parser.add_argument("--both-compiled", action="store_true",
                         help="with --compiled: the earlier tree compiled too (it must have the option)")
-    parser.add_argument("--out", type=Path, default=Path("results/syrenets_speed.md"),
-                        help="the table to write (default results/syrenets_speed.md)")
+    parser.add_argument("--out", type=Path, default=Path("results/syrenets/speed/syrenets_speed.md"),
+                        help="the table to write (default results/syrenets/speed/syrenets_speed.md)")
 
 
 def export(revision: str, into: Path) -> str:

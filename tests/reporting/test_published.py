@@ -1,5 +1,5 @@
 """The published tables are a pure function of their records: rebuilt from
-the records of results/double_pendulum_60s, they are the published text,
+the records of results/paper/double_pendulum_60s, they are the published text,
 apart from the Machine and Commit lines (which describe the runs' machine and
 code, not the tables)."""
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 from bench.reporting.tables import write_tables
 
-PUBLISHED = Path(__file__).resolve().parents[2] / "results" / "double_pendulum_60s"
+PUBLISHED = Path(__file__).resolve().parents[2] / "results" / "paper" / "double_pendulum_60s"
 
 
 def _comparable(text: str) -> list[str]:
