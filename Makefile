@@ -45,6 +45,7 @@ LEADERBOARD_BUDGET ?= 8
 leaderboard: $(STAMP)
 	$(BIN)/python -m bench run --systems all --n-seeds 10 --budget $(LEADERBOARD_BUDGET) --workers 2 --out results/leaderboard
 	$(BIN)/python -m bench leaderboard results/leaderboard --commentary results/commentary.md --out results/README.md
+	$(BIN)/python -m bench index
 
 clean-venv:
 	rm -rf $(VENV)

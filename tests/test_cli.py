@@ -22,7 +22,7 @@ from tests.commandline import cli
 ROOT = Path(__file__).resolve().parent.parent
 
 
-COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "rerun", "leaderboard",
+COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "rerun", "leaderboard", "index",
             "adaptation", "residual-acceptance", "residual-dfki", "robot-log", "overhead", "dfki-filter", "scaling",
             "syrenets-speed", "syrenets-profile")
 

@@ -19,7 +19,7 @@ import argparse
 import shlex
 import sys
 
-from bench.cli import convert, data, fit, leaderboard, listing, rerun, residual, run, table
+from bench.cli import convert, data, fit, index, leaderboard, listing, rerun, residual, run, table
 from bench.cli.options import Parser
 from bench.core.errors import UserError
 from bench.experiments import (adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, robot_log, scaling,
@@ -31,7 +31,7 @@ EXIT_USAGE = 2
 #: the commands, by name: the core ones, then the measurement scripts
 COMMANDS = {
     "list": listing, "run": run, "table": table, "data": data, "fit": fit, "residual": residual,
-    "convert": convert, "rerun": rerun, "leaderboard": leaderboard,
+    "convert": convert, "rerun": rerun, "leaderboard": leaderboard, "index": index,
     "adaptation": adaptation, "residual-acceptance": residual_acceptance, "residual-dfki": residual_dfki,
     "robot-log": robot_log, "overhead": overhead, "dfki-filter": dfki_filter, "scaling": scaling,
     "syrenets-speed": syrenets_speed, "syrenets-profile": syrenets_profile,

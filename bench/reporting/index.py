@@ -1,0 +1,203 @@
+"""results/index.md: every published result, from results/manifest.toml and
+the records.
+
+The manifest lists each result once (a folder or a page, with the files that
+belong to it), its group, whether it is current or superseded (and by
+what), the command that made it, and its headline figures. A figure is
+computed, never typed: from a folder's records (one system, experiment and
+method, a group of seeds and a split, as in the tables) or from a key of a
+JSON file. The commit is the records' (the most common, and how many
+there are) or, for a page without records, the manifest's.
+
+A figure also has a name. Wherever a page (README.md, or any page under
+results/) marks a number as ``<!-- figure NAME -->0.0081<!-- /figure -->``,
+:func:`write_index` rewrites it from the records, and :func:`stale_figures`
+lists the marks that disagree with them.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import tomllib
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bench.core.errors import UserError
+from bench.core.fileio import atomic_write
+from bench.reporting.tables import group_stats
+from bench.runner.records import read_records
+
+MANIFEST = "manifest.toml"
+INDEX = "index.md"
+STATUSES = ("current", "superseded")
+MARK = re.compile(r"<!-- figure (?P<name>[\w.-]+) -->(?P<value>.*?)<!-- /figure -->")
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One headline number: ``records`` (system, experiment, method, and
+    optionally group, split and noise) or ``json`` (a file and a dotted key)."""
+
+    name: str
+    label: str
+    format: str = ".2g"
+    records: dict | None = None
+    json: dict | None = None
+
+
+@dataclass(frozen=True)
+class Entry:
+    path: str
+    group: str
+    title: str
+    status: str
+    command: str
+    also: tuple[str, ...] = ()
+    superseded_by: str | None = None
+    commit: str | None = None
+    figures: tuple[Figure, ...] = field(default_factory=tuple)
+
+    def paths(self) -> tuple[str, ...]:
+        return (self.path, *self.also)
+
+
+def read_manifest(root: Path) -> list[Entry]:
+    """The manifest's entries; a bad one ends in one line naming the field."""
+    path = Path(root) / MANIFEST
+    try:
+        raw = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise UserError(f"{path}: {exc}") from None
+    entries = []
+    for i, item in enumerate(raw.get("result", [])):
+        where = f"{path}: result {i + 1} ({item.get('path', '?')})"
+        for key in ("path", "group", "title", "status", "command"):
+            if not isinstance(item.get(key), str):
+                raise UserError(f"{where}: '{key}' must be a string")
+        if item["status"] not in STATUSES:
+            raise UserError(f"{where}: 'status' must be one of {', '.join(STATUSES)}, got {item['status']!r}")
+        if item["status"] == "superseded" and not item.get("superseded_by"):
+            raise UserError(f"{where}: a superseded result names what supersedes it in 'superseded_by'")
+        figures = []
+        for f in item.get("figure", []):
+            if not isinstance(f.get("name"), str) or not isinstance(f.get("label"), str):
+                raise UserError(f"{where}: a figure needs a 'name' and a 'label'")
+            if ("records" in f) == ("json" in f):
+                raise UserError(f"{where}: figure {f['name']} takes its value from 'records' or from 'json'")
+            figures.append(Figure(f["name"], f["label"], f.get("format", ".2g"), f.get("records"), f.get("json")))
+        entries.append(Entry(item["path"], item["group"], item["title"], item["status"], item["command"],
+                             tuple(item.get("also", ())), item.get("superseded_by"), item.get("commit"), tuple(figures)))
+    names = Counter(f.name for e in entries for f in e.figures)
+    twice = sorted(n for n, k in names.items() if k > 1)
+    if twice:
+        raise UserError(f"{path}: the figure name {twice[0]!r} is used twice")
+    return entries
+
+
+def figure_value(root: Path, entry: Entry, figure: Figure) -> float:
+    """A figure's value, from the entry's records or from its JSON file."""
+    if figure.json is not None:
+        value = json.loads((Path(root) / figure.json["file"]).read_text())
+        for key in figure.json["key"].split("."):
+            value = value[key]
+        return float(value)
+    want = figure.records
+    records = [r for r in read_records(Path(root) / entry.path)
+               if (r.system, r.experiment, r.method, r.noise) == (want["system"], want["experiment"], want["method"],
+                                                                  float(want.get("noise", 0.0)))]
+    if not records:
+        raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: no records of {want} in {entry.path}")
+    stats = group_stats(records)
+    return stats[want.get("group", "All 10")][want.get("split", "test")][0]
+
+
+def commit_of(root: Path, entry: Entry) -> str:
+    """The commit of a result's records (the most common; how many there are), or the manifest's."""
+    folder = Path(root) / entry.path
+    if (folder / "records").is_dir():
+        commits = Counter(r.provenance.get("commit", "")[:10] for r in read_records(folder))
+        top, _ = commits.most_common(1)[0]
+        return top if len(commits) == 1 else f"{top} and {len(commits) - 1} more"
+    return entry.commit or "—"
+
+
+def figures(root: Path, entries: list[Entry] | None = None) -> dict[str, str]:
+    """Every named figure, formatted as pages show it."""
+    entries = read_manifest(root) if entries is None else entries
+    return {f.name: format(figure_value(root, e, f), f.format) for e in entries for f in e.figures}
+
+
+def build_index(root: Path, entries: list[Entry] | None = None) -> str:
+    entries = read_manifest(root) if entries is None else entries
+    values = figures(root, entries)
+    lines = ["# Results index", "",
+             f"Generated by `python -m bench index` from [{MANIFEST}]({MANIFEST}) and the records; do not edit. "
+             "Each result's figures are computed from its records (All 10 is the mean over the seeds, as in the "
+             "tables); a superseded result is kept because a current page cites it.", ""]
+    for group in dict.fromkeys(e.group for e in entries):
+        lines += [f"## {group}", "", "| result | status | headline | command | commit |", "|---|---|---|---|---|"]
+        for e in (e for e in entries if e.group == group):
+            status = e.status if e.superseded_by is None else f"superseded by [{e.superseded_by}]({e.superseded_by})"
+            headline = "; ".join(f"{f.label} {values[f.name]}" for f in e.figures) or "—"
+            lines.append(f"| [{e.path}]({e.path}): {e.title} | {status} | {headline} | {_command(e.command)} | {commit_of(root, e)} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def unlisted(root: Path, entries: list[Entry] | None = None) -> list[str]:
+    """Files under ``root`` that no entry covers (an entry's folder covers what it holds)."""
+    entries = read_manifest(root) if entries is None else entries
+    covered = [Path(root) / p for e in entries for p in e.paths()]
+    out = []
+    for path in sorted(Path(root).rglob("*")):
+        if not path.is_file() or path.name in (MANIFEST, INDEX) or path.parent == Path(root) / "quick":
+            continue
+        if not any(path == c or c in path.parents for c in covered):
+            out.append(str(path.relative_to(root)))
+    return out
+
+
+def _pages(root: Path) -> list[Path]:
+    top = Path(root).resolve().parent / "README.md"
+    pages = [p for p in Path(root).rglob("*.md") if "records" not in p.parts and p.name != INDEX]
+    return ([top] if top.is_file() else []) + sorted(pages)
+
+
+def stale_figures(root: Path) -> list[str]:
+    """``page: name shows X, records give Y`` for each marked figure that disagrees (or has no entry)."""
+    values, out = figures(root), []
+    for page in _pages(root):
+        for m in MARK.finditer(page.read_text()):
+            want = values.get(m["name"])
+            if want != m["value"]:
+                out.append(f"{page}: {m['name']} shows {m['value']}, the records give {want or 'no such figure'}")
+    return out
+
+
+def write_index(root: Path) -> tuple[Path, list[Path]]:
+    """Write ``root/index.md`` and rewrite every marked figure; returns the index and the pages changed."""
+    root = Path(root)
+    entries = read_manifest(root)
+    missing = unlisted(root, entries)
+    if missing:
+        raise UserError(f"{root / MANIFEST}: {missing[0]} is in no result (list it, or remove it)"
+                        + (f"; {len(missing) - 1} more" if len(missing) > 1 else ""))
+    values = figures(root, entries)
+    changed = []
+    for page in _pages(root):
+        text = page.read_text()
+        new = MARK.sub(lambda m: f"<!-- figure {m['name']} -->{values.get(m['name'], m['value'])}<!-- /figure -->", text)
+        if new != text:
+            atomic_write(page, lambda f, t=new: f.write(t))
+            changed.append(page)
+    index = root / INDEX
+    text = build_index(root, entries) + "\n"
+    atomic_write(index, lambda f: f.write(text))
+    return index, changed
+
+
+def _command(command: str) -> str:
+    """A command in code type; a note about one (in brackets) as text."""
+    return command if command.startswith("(") else f"`{command}`"

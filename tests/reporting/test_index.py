@@ -1,0 +1,92 @@
+"""results/index.md and the figures pages show: every published file is in
+the manifest, the index is what the manifest and the records give, and no
+page's marked figure disagrees with its records."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from bench.core.errors import UserError
+from bench.reporting.index import INDEX, build_index, read_manifest, stale_figures, unlisted, write_index
+from tests.commandline import cli
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "results"
+STUDY = "syrenets/studies/syrenets_300s_compiled_best"
+
+
+def test_every_published_file_is_in_the_manifest():
+    assert unlisted(RESULTS) == []
+
+
+def test_the_index_is_what_the_manifest_and_the_records_give():
+    assert (RESULTS / INDEX).read_text() == build_index(RESULTS) + "\n"
+
+
+def test_no_page_shows_a_figure_its_records_do_not_give():
+    assert stale_figures(RESULTS) == []
+    assert len(re.findall(r"<!-- figure ", (ROOT / "README.md").read_text())) >= 3
+
+
+def test_every_link_in_the_readme_and_the_results_resolves():
+    link = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
+    pages = [ROOT / "README.md"] + [p for p in RESULTS.rglob("*.md") if "records" not in p.parts]
+    broken = [f"{p.relative_to(ROOT)}: {t}" for p in pages for t in link.findall(p.read_text())
+              if "://" not in t and not (p.parent / t).exists()]
+    assert broken == []
+
+
+def _small_results(tmp_path: Path, figure_text: str) -> Path:
+    root = tmp_path / "results"
+    shutil.copytree(RESULTS / STUDY, root / "study", ignore=shutil.ignore_patterns("*.png"))
+    (root / "manifest.toml").write_text(
+        '[[result]]\npath = "study"\ngroup = "syrenets"\ntitle = "a study"\nstatus = "current"\ncommand = "make it"\n'
+        '[[result.figure]]\nname = "study.indirect"\nlabel = "All 10"\n'
+        'records = { system = "double_pendulum", experiment = "indirect", method = "syrenets" }\n')
+    (tmp_path / "README.md").write_text(f"SyReNets reaches <!-- figure study.indirect -->{figure_text}<!-- /figure -->.\n")
+    return root
+
+
+def test_a_figure_typed_by_hand_is_found_and_rewritten_from_the_records(tmp_path):
+    root = _small_results(tmp_path, "0.001")
+    (stale,) = stale_figures(root)
+    assert "study.indirect shows 0.001, the records give 0.0081" in stale
+    r = cli("index", root)
+    assert r.returncode == 0, r.stderr
+    assert "<!-- figure study.indirect -->0.0081<!-- /figure -->" in (tmp_path / "README.md").read_text()
+    assert stale_figures(root) == []
+    assert "| [study](study): a study | current | All 10 0.0081 | `make it` | 50baa511b5 |" in (root / INDEX).read_text()
+
+
+def test_a_file_in_no_result_stops_the_index_in_one_line(tmp_path):
+    root = _small_results(tmp_path, "0.0081")
+    (root / "stray.md").write_text("# a result nobody listed\n")
+    r = cli("index", root)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert "stray.md is in no result" in r.stderr
+    assert not (root / INDEX).exists()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda s: s.replace('status = "current"', 'status = "old"'), "'status' must be one of current, superseded"),
+    (lambda s: s.replace('status = "current"', 'status = "superseded"'), "names what supersedes it"),
+    (lambda s: s.replace('title = "a study"\n', ''), "'title' must be a string"),
+    (lambda s: s.replace('records = {', 'json = { file = "x", key = "y" }\nrecords = {'), "from 'records' or from 'json'"),
+    (lambda s: s + "[[result\n", "manifest.toml"),
+])
+def test_a_bad_manifest_is_one_line_naming_the_field(tmp_path, edit, message):
+    root = _small_results(tmp_path, "0.0081")
+    manifest = root / "manifest.toml"
+    manifest.write_text(edit(manifest.read_text()))
+    with pytest.raises(UserError, match=re.escape(message)):
+        write_index(root)
+    assert not (root / INDEX).exists()
+
+
+def test_the_manifest_lists_each_result_once():
+    paths = [p for e in read_manifest(RESULTS) for p in e.paths()]
+    assert len(paths) == len(set(paths))
