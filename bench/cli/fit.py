@@ -7,7 +7,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from bench.cli.options import (STEPS_HELP, UsageError, add_plugin, add_set, budget, check_names, hyperparameters,
+from bench.cli.options import (UsageError, add_budget, add_plugin, add_set, budget, check_names, hyperparameters,
                                load_plugins)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
@@ -28,10 +28,7 @@ def add_arguments(f) -> None:
     f.add_argument("--train", type=Path, default=None, help="training CSV (default: generated)")
     f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
     f.add_argument("--seed", type=seed, default=0, help="the run's seed (default 0)")
-    f.add_argument("--budget", type=positive, default=None,
-                   help="wall-clock seconds for the fit (default 60); with --steps, a ceiling past which the run is "
-                        "killed and recorded as timeout (default: none)")
-    f.add_argument("--steps", type=positive_int, default=None, help=STEPS_HELP)
+    add_budget(f, "for the fit")
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
     f.add_argument("--smoke", action="store_true", help="use the method's tiny smoke configuration")
     add_set(f)

@@ -12,7 +12,7 @@ import argparse
 import re
 from pathlib import Path
 
-from bench.core.arguments import assignment
+from bench.core.arguments import assignment, positive, positive_int
 from bench.core.data import check_experiment
 from bench.core.errors import UserError
 from bench.core.registry import RegistryError
@@ -48,6 +48,14 @@ def add_set(parser, what: str = "the method") -> None:
 
 def add_plugin(parser) -> None:
     parser.add_argument("--plugin", action="append", default=[], help=PLUGIN_HELP)
+
+
+def add_budget(parser, what: str) -> None:
+    """``--budget SECONDS`` and ``--steps N``, for ``what`` ("per run", "for the fit")."""
+    parser.add_argument("--budget", type=positive, default=None,
+                        help=f"wall-clock seconds {what} (default {DEFAULT_BUDGET_S:g}); with --steps, a ceiling past "
+                             "which a run is killed and recorded as timeout (default: none)")
+    parser.add_argument("--steps", type=positive_int, default=None, help=STEPS_HELP)
 
 
 def budget(args) -> tuple[float | None, int | None]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from bench.cli.options import STEPS_HELP, add_plugin, add_set, budget, check_names, hyperparameters, load_plugins
+from bench.cli.options import add_budget, add_plugin, add_set, budget, check_names, hyperparameters, load_plugins
 from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
@@ -27,10 +27,7 @@ def add_arguments(r) -> None:
     seeds = r.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
     seeds.add_argument("--n-seeds", type=seed_count, default=10, help="the first N of the ten fixed seeds (default 10)")
-    r.add_argument("--budget", type=positive, default=None,
-                   help="wall-clock seconds per run (default 60); with --steps, a ceiling past which a run is killed "
-                        "and recorded as timeout (default: none)")
-    r.add_argument("--steps", type=positive_int, default=None, help=STEPS_HELP)
+    add_budget(r, "per run")
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
     r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
     r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
