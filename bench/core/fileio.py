@@ -62,6 +62,11 @@ def _umask() -> int:
     return mask
 
 
+def link(target: str | os.PathLike, page: str | os.PathLike) -> str:
+    """``target`` as a relative markdown link from the page at ``page``, wherever the page is written."""
+    return Path(os.path.relpath(Path(target).resolve(), Path(page).resolve().parent)).as_posix()
+
+
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     atomic_write(path, lambda f: (json.dump(obj, f, indent=1, allow_nan=True), f.write("\n")))
 

@@ -26,7 +26,7 @@ from bench.core.data import add_noise, generate
 from bench.core.effects import EFFECTS
 from bench.core.laws import FAMILIES, Part, group
 from bench.core.undeclared import GENERATOR_LAWS, add_effects, parse_effects
-from bench.core.fileio import atomic_write, check_output
+from bench.core.fileio import atomic_write, check_output, link
 from bench.residual.loop import residual_loop
 from bench.runner.isolation import run_jobs
 from bench.runner.matrix import KILL_FACTOR
@@ -180,7 +180,7 @@ def main(args) -> int:
         f"test samples; each effect as `bench data --effects` takes it (the cases, and why the armature is on "
         f"joint 1 only, in "
         f"[bench/experiments/residual_acceptance.py]"
-        f"(../../bench/experiments/residual_acceptance.py)); the worst coefficient error is over every parameter of "
+        f"({link(__file__, args.out)})); the worst coefficient error is over every parameter of "
         f"every effect found, and a structural finding is a finding, not an effect; noise on train and test torques as a fraction of each joint's "
         f"torque standard deviation; {budget_words}. The noise floor is the test set's "
         "mean squared noise: at \"after ÷ floor\" ≈ 1 everything but the noise is explained.",
