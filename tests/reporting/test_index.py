@@ -90,3 +90,13 @@ def test_a_bad_manifest_is_one_line_naming_the_field(tmp_path, edit, message):
 def test_the_manifest_lists_each_result_once():
     paths = [p for e in read_manifest(RESULTS) for p in e.paths()]
     assert len(paths) == len(set(paths))
+
+
+def test_the_scratch_folder_of_make_bench_is_no_result_and_no_page(tmp_path):
+    root = _small_results(tmp_path, "0.0081")
+    (root / "quick" / "records").mkdir(parents=True)
+    (root / "quick" / "records" / "run.json").write_text("{}")
+    (root / "quick" / "tables.md").write_text("<!-- figure study.indirect -->9<!-- /figure -->\n")
+    assert unlisted(root) == [] and stale_figures(root) == []
+    assert cli("index", root).returncode == 0
+    assert "-->9<!--" in (root / "quick" / "tables.md").read_text()
