@@ -66,6 +66,11 @@ def budget(args) -> tuple[float | None, int | None]:
     return args.budget, args.steps
 
 
+def number(x: float | None, spec: str = ".4g") -> str:
+    """A figure as a command prints it; ``n/a`` where there is none (no test data)."""
+    return "n/a" if x is None else format(x, spec)
+
+
 def hyperparameters(overrides: list[tuple[str, object]], method: str, methods: list[str]) -> dict:
     """The ``--set`` values for ``method`` among the command's ``methods``:
     every ``NAME=VALUE``, then every ``METHOD.NAME=VALUE`` of this method,
@@ -105,7 +110,7 @@ def check_names(args, systems=(), methods=(), experiments=()) -> None:
             try:
                 registry.entry(name)
             except RegistryError as exc:
-                raise UsageError(f"{exc}{_plugin_hint(name, getattr(args, 'plugin', []))}") from None
+                raise UsageError(f"{exc}{_plugin_hint(name, args.plugin)}") from None
     for name in experiments:
         check_experiment(name)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bench.cli.fit import run_one, summary_line
+from bench.cli.options import number
 from bench.core.arguments import positive
 from bench.core.fileio import check_output, write_json
 from bench.runner.plugins import import_plugins
@@ -40,12 +41,8 @@ def main(args) -> int:
     rows = compare(recorded, replayed)
     print(f"{'':10} {'recorded':>24} {'replayed':>24} {'relative difference':>20}")
     for name, a, b, diff in rows:
-        print(f"{name:10} {_maybe(a):>24} {_maybe(b):>24} {diff:>20.3g}")
+        print(f"{name:10} {number(a, '.17g'):>24} {number(b, '.17g'):>24} {diff:>20.3g}")
     same = all(diff <= RELATIVE_TOLERANCE for *_, diff in rows)
     print(f"{'the same' if same else 'DIFFERENT'} up to a relative {RELATIVE_TOLERANCE:g} "
           f"({replayed.steps} steps; recorded {recorded.steps})")
     return 0 if same else 1
-
-
-def _maybe(x) -> str:
-    return "n/a" if x is None else format(x, ".17g")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.cli.options import UsageError, add_plugin, add_set, budget, check_names, hyperparameters, load_plugins
+from bench.cli.options import UsageError, add_plugin, add_set, budget, check_names, hyperparameters, load_plugins, number
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
 from bench.residual.job import ResidualJob, run_residual
@@ -66,7 +66,7 @@ def main(args) -> int:
     )
     result = run_residual(job)
     b, a = result.mse_before, result.mse_after
-    print(f"torque MSE before: train {b['train']:.4g}, test {_maybe(b['test'])}; after: train {a['train']:.4g}, test {_maybe(a['test'])}")
+    print(f"torque MSE before: train {b['train']:.4g}, test {number(b['test'])}; after: train {a['train']:.4g}, test {number(a['test'])}")
     for e in result.effects:
         what = e.get("expression") or e["name"]
         where = f"joint{'s' if len(e['joints']) > 1 else ''} {'-'.join(map(str, e['joints']))}"
@@ -75,7 +75,3 @@ def main(args) -> int:
     if not result.effects:
         print("  no effect added: nothing significant in the residual")
     return 0
-
-
-def _maybe(x) -> str:
-    return "n/a" if x is None else format(x, ".4g")
