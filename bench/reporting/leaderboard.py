@@ -48,7 +48,7 @@ def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, li
         raise UserError(f"{run_dir}: no records found")
     rel = Path(os.path.relpath(run_dir, out.parent))
     plots = {k: str(rel / v) for k, v in write_plots(records, run_dir).items()}
-    tables = build_tables(records, plots)
+    tables = build_tables(records, plots, out)
     body = tables.split("\n", 1)[1]  # drop the "# Results" title
     parts, missing, used = [], [], {"Introduction"}
     for chunk in re.split(r"(?m)^(?=## )", body):

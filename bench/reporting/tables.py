@@ -50,9 +50,9 @@ from typing import Callable
 
 import numpy as np
 
-from bench.core.fileio import atomic_write
+from bench.core.fileio import atomic_write, link
 from bench.reporting.plots import convergence_plot, plot_name
-from bench.reporting.significance import ALPHA, MIN_SEEDS, by_seed, seed_ranks, ties_with_best
+from bench.reporting.significance import by_seed, seed_ranks, ties_with_best
 from bench.runner.provenance import machine
 from bench.runner.records import MISSING, Record, missing_runs, quarantine, read_records
 from systems import SYSTEMS
@@ -328,18 +328,19 @@ def section_groups(records: list[Record]) -> dict[tuple, list[Record]]:
     return groups
 
 
-def build_tables(records: list[Record], plots: dict[tuple, str] | None = None) -> str:
+def build_tables(records: list[Record], plots: dict[tuple, str] | None = None, page: str | Path = "tables.md") -> str:
     """All tables, one section per (system, experiment, noise level), as one
     markdown document.
 
     A method's variants (such as a refined equation) get columns of their own,
     named ``<method>+<variant>``. ``plots`` maps a section's key to an image
-    file (relative to the document) embedded under its table.
+    file (relative to the document) embedded under its table; ``page`` is
+    where the document will be written, for its link to :data:`GUIDE`.
     """
     plots = plots or {}
     groups = section_groups(records)
     order = {"direct": 0, "indirect": 1}
-    parts = ["# Results", "", _DEFINITIONS, ""]
+    parts = ["# Results", "", guide_line(page), ""]
     for (system, experiment, noise) in sorted(groups, key=lambda k: (k[0], order.get(k[1], 9), k[1], k[2])):
         recs = groups[(system, experiment, noise)]
         target = "L" if experiment == "direct" else "τ"
@@ -363,28 +364,13 @@ def _reference(system: str) -> str:
         return ""
 
 
-_DEFINITIONS = (
-    "Rows follow Tables 1 and 2 of Valle & Haddadin (2021). Seeds are ranked by training MSE; "
-    "**Best** is the best seed, **5 Best** / **5 Worse** the mean (± population std) of the 5 best / worst, "
-    "**All 10** of all seeds. With n < 10 successful runs, the groups take min(5, n) and n runs "
-    "(see the Runs row). The lowest mean of each row is bold. In the All 10 rows, so is every method whose "
-    f"seeds are not significantly different from that method's: two-sided Mann–Whitney U test, Holm's "
-    f"correction over the row, α = {ALPHA:g}; † marks a method not tested because it or the best has fewer "
-    f"than {MIN_SEEDS} seeds, and such a difference is never called significant. The other rows are not "
-    "tested: their seeds are chosen by training MSE, not drawn at random (and with 5 seeds against 5 the "
-    "smallest p the test can give, 0.0079, exceeds 0.05 after Holm's correction over seven comparisons). With 10 "
-    "seeds the test has little power (a shift of one standard deviation is found about half the time), so a "
-    "shared bold is no evidence that two methods are equal. Under each table, the methods' mean rank across "
-    "seeds. **Exact** counts the seeds whose equation is "
-    "the true Lagrangian up to the experiment's gauge (a constant; indirectly also a total time derivative), "
-    "with coefficients within 1e-6 of the largest true one. **Rollout** is the median over seeds of the RMS "
-    "error of q when the model's forward dynamics are integrated for 1 s from 8 held-out states, unforced, "
-    "against the true system's motion (bench.rollout); in brackets how many seeds have a rollout and why "
-    "the others do not (an indefinite or singular d2L/dqd2 has no forward dynamics). "
-    "A run can be replayed with the work it did: `python -m bench rerun OUT/records/RUN.json` repeats its steps, "
-    "data, seed and configuration and prints the recorded and replayed train and test MSE side by side (records "
-    "written before runs recorded their work say so above their table)."
-)
+#: the page that says how to read a table: its header, rows, marks and columns
+GUIDE = Path(__file__).resolve().parents[2] / "docs" / "reading_tables.md"
+
+
+def guide_line(page: str | Path) -> str:
+    """The tables' opening line: a link to :data:`GUIDE` from the page at ``page``."""
+    return f"How to read these tables: [{GUIDE.name}]({link(GUIDE, page)})."
 
 
 def write_plots(records: list[Record], out_dir: str | Path) -> dict[tuple, str]:
@@ -421,6 +407,7 @@ def write_tables(out_dir: str | Path, filename: str = "tables.md", plots: bool =
     records = read_for_tables(out_dir, report)
     if not records:
         raise FileNotFoundError(f"{out_dir}: no records found (expected {Path(out_dir) / 'records' / '*.json'})")
-    text = build_tables(records, write_plots(records, out_dir) if plots else None)
+    page = Path(out_dir) / filename
+    text = build_tables(records, write_plots(records, out_dir) if plots else None, page)
     atomic_write(Path(out_dir) / filename, lambda f: f.write(text))
     return text

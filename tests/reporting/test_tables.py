@@ -65,7 +65,7 @@ def test_unavailable_and_not_applicable_columns():
 
 def test_document_has_one_section_per_system_and_experiment_with_header(tmp_path):
     records = [rec("a", 0, 1.0, 1.0), rec("a", 0, 2.0, 2.0, experiment="indirect")]
-    text = build_tables(records)
+    text = build_tables(records, page=tmp_path / "tables.md")
     assert text.index("## double_pendulum, direct") < text.index("## double_pendulum, indirect")
     assert "Budget: 60 s of wall-clock per run; 1 seed(s) (0)" in text
     assert "Machine: " in text and "Commit: " in text
@@ -123,3 +123,18 @@ def test_a_judgement_stopped_at_its_limit_is_said_in_the_exact_row():
     table = build_table(expand_variants([judged, late]))
     assert "| Exact | | 1/2 seeds exact (1 not judged: the check ran past 60 s) | " in table
     assert "| 0/1 seeds exact (1 not judged: the check ran past 60 s) |" in table  # one run has the variant
+
+
+def test_tables_open_with_a_link_to_the_guide_that_resolves_and_matches_the_test_they_run(tmp_path):
+    from bench.reporting.significance import ALPHA, MIN_SEEDS
+    from bench.reporting.tables import GUIDE
+
+    out = tmp_path / "deep" / "run"
+    for seed in range(2):
+        r = rec("sysid", seed, 1.0, 1.0)
+        write_record(record_path(out, r.run_id), r)
+    text = write_tables(out, plots=False)
+    target = text.splitlines()[2].split("](")[1].rstrip(").")
+    assert (out / target).resolve() == GUIDE.resolve() and GUIDE.is_file()
+    guide = GUIDE.read_text()
+    assert f"α = {ALPHA:g}" in guide and f"fewer than {MIN_SEEDS} seeds" in guide
