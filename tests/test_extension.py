@@ -13,11 +13,14 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-# the README's imports, unchanged since bench/ was split into layers
-from bench import harness, symbolic
-from bench.data import generate
-from bench.dynamics import euler_lagrange
+# the README's imports
+from bench.core import symbolic
+from bench.core.data import generate
+from bench.core.dynamics import euler_lagrange
 from bench.reporting.tables import write_tables
+from bench.runner.matrix import run_matrix
+from bench.runner.progress import quiet
+from bench.runner.spec import build_specs
 from methods import METHODS, Method, MethodConfig
 from systems import SYSTEMS, System
 from tests.contract import check_method, check_system
@@ -108,11 +111,11 @@ def test_toy_system_and_method_pass_the_contracts():
 
 
 def test_toy_runs_through_the_harness_and_the_tables(tmp_path):
-    specs = harness.build_specs(
+    specs = build_specs(
         ["toy_mass_spring", "double_pendulum"], ["toy_quadratic", "sysid"], ["direct", "indirect"], [0, 1], 2.0,
         profile="smoke", n_train=128, n_test=64, plugins=(str(Path(__file__).resolve()),),
     )
-    records = harness.run_matrix(specs, tmp_path, workers=2, report=harness.quiet)
+    records = run_matrix(specs, tmp_path, workers=2, report=quiet)
     assert all(r.status == "ok" for r in records), [r.error for r in records if r.status != "ok"]
     exact = [r for r in records if r.system == "toy_mass_spring" and r.method == "toy_quadratic"]
     assert len(exact) == 4 and all(r.test_mse < 1e-20 for r in exact)

@@ -13,9 +13,6 @@
   re-running it resumes. A corrupt record is moved aside
   (:func:`~bench.runner.records.quarantine`) and its run redone. One matrix
   at a time may write into a folder (:class:`FolderLock`).
-
-``from bench import harness`` gives this module: it also offers the names of
-:mod:`bench.runner.spec` and :mod:`bench.runner.execute` that scripts use.
 """
 
 from __future__ import annotations
@@ -31,14 +28,13 @@ from typing import Iterable
 from bench.core.budget import SECONDS
 from bench.core.errors import UserError
 from bench.core.processes import process_alive
-from bench.evaluation.scores import MAX_EXPRESSION_CHARS  # noqa: F401  (a name of the old harness module)
-from bench.runner.execute import execute, load_data, make_system, method_config, preflight, warm_up_torch  # noqa: F401
+from bench.runner.execute import preflight
 from bench.runner.code import code_hash
-from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, fork_server, map_interruptibly, run_call  # noqa: F401
+from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, map_interruptibly, run_call
 from bench.runner.plugins import import_plugins
-from bench.runner.progress import MatrixProgress, Report, print_now, quiet  # noqa: F401
+from bench.runner.progress import MatrixProgress, Report, print_now
 from bench.runner.records import Record, RecordError, quarantine, read_record, record_path, write_record
-from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, TEST_SEED_OFFSET, RunSpec, build_specs  # noqa: F401
+from bench.runner.spec import RunSpec
 
 #: A run's fit is killed at this multiple of its time budget.
 KILL_FACTOR = 1.5

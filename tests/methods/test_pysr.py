@@ -86,11 +86,13 @@ def test_not_installed_is_a_reason_too(monkeypatch):
 
 def test_matrix_records_pysr_as_unavailable_not_failed(tmp_path, monkeypatch):
     from bench.runner import matrix
+    from bench.runner.progress import quiet
+    from bench.runner.spec import build_specs
 
     pysr_adapter._probe.cache_clear()
     monkeypatch.setattr(pysr_adapter, "_probe", lambda: "no Julia runtime here")
-    specs = matrix.build_specs(["double_pendulum"], ["pysr"], ["direct", "indirect"], [0], 5.0, n_train=32, n_test=16)
-    records = matrix.run_matrix(specs, tmp_path, workers=1, report=matrix.quiet)
+    specs = build_specs(["double_pendulum"], ["pysr"], ["direct", "indirect"], [0], 5.0, n_train=32, n_test=16)
+    records = matrix.run_matrix(specs, tmp_path, workers=1, report=quiet)
     assert [r.status for r in records] == ["unavailable", "unavailable"]
     assert records[0].error == "no Julia runtime here"
 

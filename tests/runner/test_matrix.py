@@ -9,7 +9,11 @@ from pathlib import Path
 import pytest
 
 from bench.evaluation.scores import MAX_EXPRESSION_CHARS, clip
-from bench.runner import matrix as harness
+from bench.runner import matrix
+from bench.runner.execute import execute, load_data, make_system, preflight
+from bench.runner.isolation import fork_server
+from bench.runner.progress import print_now, quiet
+from bench.runner.spec import build_specs
 from bench.runner.records import SCHEMA, read_records
 
 PLUGIN = str(Path(__file__).resolve().parents[1] / "plugins" / "faulty.py")
@@ -18,12 +22,12 @@ PLUGIN = str(Path(__file__).resolve().parents[1] / "plugins" / "faulty.py")
 def specs(methods, experiments=("indirect",), seeds=(0,), budget=1.0, **kw):
     kw.setdefault("n_train", 64)
     kw.setdefault("n_test", 32)
-    return harness.build_specs(["double_pendulum"], methods, experiments, seeds, budget, plugins=(PLUGIN,), **kw)
+    return build_specs(["double_pendulum"], methods, experiments, seeds, budget, plugins=(PLUGIN,), **kw)
 
 
 def test_statuses_for_every_way_a_run_can_end(tmp_path):
     todo = specs(["toy_constant", "toy_sleeper", "toy_crasher", "toy_exit", "toy_nan", "toy_unavailable", "toy_direct_only"])
-    records = {r.method: r for r in harness.run_matrix(todo, tmp_path, workers=2, report=harness.quiet)}
+    records = {r.method: r for r in matrix.run_matrix(todo, tmp_path, workers=2, report=quiet)}
     assert records["toy_constant"].status == "ok"
     assert records["toy_constant"].train_mse > 0 and records["toy_constant"].test_mse > 0
     assert records["toy_sleeper"].status == "timeout"
@@ -43,7 +47,7 @@ def test_statuses_for_every_way_a_run_can_end(tmp_path):
 
 def test_record_holds_configuration_results_and_provenance(tmp_path):
     todo = specs(["sysid"], experiments=("direct",), profile="smoke", budget=None, steps=20)
-    (r,) = harness.run_matrix(todo, tmp_path, workers=1, report=harness.quiet)
+    (r,) = matrix.run_matrix(todo, tmp_path, workers=1, report=quiet)
     assert r.status == "ok", r.error
     assert r.target == "L" and r.budget == {"kind": "steps", "steps": 20, "ceiling_s": None} and r.seed == 0
     assert r.budget_s is None and r.describe_budget() == "20 steps" and r.code["files"]["methods/sysid.py"]
@@ -58,11 +62,11 @@ def test_record_holds_configuration_results_and_provenance(tmp_path):
 
 def test_resume_skips_finished_runs(tmp_path):
     todo = specs(["toy_constant"], seeds=(0, 1))
-    harness.run_matrix(todo, tmp_path, workers=1, report=harness.quiet)
+    matrix.run_matrix(todo, tmp_path, workers=1, report=quiet)
     paths = sorted((tmp_path / "records").glob("*.json"))
     stamps = [p.stat().st_mtime_ns for p in paths]
     lines = []
-    harness.run_matrix(todo + specs(["toy_constant"], seeds=(2,)), tmp_path, workers=1, report=lines.append)
+    matrix.run_matrix(todo + specs(["toy_constant"], seeds=(2,)), tmp_path, workers=1, report=lines.append)
     assert [p.stat().st_mtime_ns for p in paths] == stamps
     assert any("2 run(s) already have records" in line for line in lines)
     assert len(list((tmp_path / "records").glob("*.json"))) == 3
@@ -70,7 +74,7 @@ def test_resume_skips_finished_runs(tmp_path):
 
 def test_progress_lines_count_and_estimate(tmp_path):
     lines = []
-    harness.run_matrix(specs(["toy_constant", "toy_crasher"]), tmp_path, workers=1, report=lines.append)
+    matrix.run_matrix(specs(["toy_constant", "toy_crasher"]), tmp_path, workers=1, report=lines.append)
     assert lines[0] == "2 run(s) to do on 1 worker(s)"
     assert lines[1].startswith("[##########..........] 1/2 done, 0 not ok, 1 left, ~")
     assert lines[2].startswith("[####################] 2/2 done, 1 not ok, 0 left, ~")
@@ -80,14 +84,14 @@ def test_progress_lines_count_and_estimate(tmp_path):
 
 def test_progress_bar_on_a_terminal(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr("sys.stderr.isatty", lambda: True)
-    harness.run_matrix(specs(["toy_constant", "toy_crasher"]), tmp_path, workers=1, report=harness.print_now)
+    matrix.run_matrix(specs(["toy_constant", "toy_crasher"]), tmp_path, workers=1, report=print_now)
     err = capsys.readouterr().err
     assert "2/2" in err and "failed=1" in err  # tqdm's bar, with the failed count
 
 
 def test_execute_in_process_matches_the_record_format(tmp_path):
     spec = specs(["toy_constant"])[0]
-    record = harness.execute(spec)
+    record = execute(spec)
     assert record.status == "ok" and record.schema == SCHEMA
     json.dumps(record.to_json())  # serialisable
 
@@ -100,19 +104,19 @@ def test_long_expressions_are_clipped_in_records():
 
 def test_progress_tells_resumed_from_unrunnable_runs(tmp_path):
     lines = []
-    harness.run_matrix(specs(["toy_unavailable", "toy_constant"]), tmp_path, workers=1, report=lines.append)
+    matrix.run_matrix(specs(["toy_unavailable", "toy_constant"]), tmp_path, workers=1, report=lines.append)
     assert lines[0] == "1 run(s) recorded without running (method unavailable here or not applicable)"
     lines.clear()
-    harness.run_matrix(specs(["toy_constant"]), tmp_path, workers=1, report=lines.append)
+    matrix.run_matrix(specs(["toy_constant"]), tmp_path, workers=1, report=lines.append)
     assert lines[0] == "resuming: 1 run(s) already have records"
 
 
 def test_measured_systems_use_their_packaged_splits_and_skip_the_direct_experiment():
-    direct, indirect = harness.build_specs(["delan_characters"], ["sparse"], ["direct", "indirect"], [0], 5.0)
-    record = harness.preflight(direct)
+    direct, indirect = build_specs(["delan_characters"], ["sparse"], ["direct", "indirect"], [0], 5.0)
+    record = preflight(direct)
     assert record.status == "not_applicable" and "only the indirect experiment applies" in record.error
-    assert harness.preflight(indirect) is None
-    train, test = harness.load_data(indirect, harness.make_system(indirect))
+    assert preflight(indirect) is None
+    train, test = load_data(indirect, make_system(indirect))
     assert len(train) == 2459 and len(test) == 454 and "characters eqv" in test.source
 
 
@@ -120,12 +124,12 @@ def test_matrix_on_a_real_dask_local_cluster(tmp_path):
     pytest.importorskip("distributed")
     todo = specs(["toy_constant", "toy_crasher"], budget=10.0, rollout=False)
     lines = []
-    records = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
+    records = matrix.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
     assert [r.run_id for r in records] == [s.run_id for s in todo]
     assert [r.status for r in records] == ["ok", "failed"]
     assert records[1].error == "RuntimeError: the toy fell over"
     assert len(read_records(tmp_path)) == 2 and any("2/2 done, 1 not ok" in line for line in lines)
-    again = harness.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
+    again = matrix.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
     assert [r.provenance for r in again] == [r.provenance for r in records]  # resumed, not run again
 
 
@@ -137,19 +141,19 @@ def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatc
     write_csv(data, tmp_path / "train.csv")
     monkeypatch.chdir(tmp_path)  # relative paths are the caller's, not the fork server's
     (spec,) = specs(["toy_constant"], train_path="train.csv", test_path="train.csv")
-    (r,) = harness.run_matrix([spec], "out", workers=1, report=harness.quiet)
+    (r,) = matrix.run_matrix([spec], "out", workers=1, report=quiet)
     assert r.status == "ok", r.error
     assert r.details["train_source"].endswith("train.csv")
-    assert harness.fork_server() is not None
-    fresh = harness.run_isolated(spec, "fresh", fresh=True)
+    assert fork_server() is not None
+    fresh = matrix.run_isolated(spec, "fresh", fresh=True)
     assert fresh.status == "ok" and fresh.train_mse == r.train_mse
 
 
 def test_a_hang_after_the_fit_is_a_timeout_at_the_evaluation_limit(tmp_path, monkeypatch):
-    monkeypatch.setattr(harness, "EVALUATION_MIN_S", 2.0)
-    (r,) = harness.run_matrix(specs(["toy_slow_judge"]), tmp_path, workers=1, report=harness.quiet)
+    monkeypatch.setattr(matrix, "EVALUATION_MIN_S", 2.0)
+    (r,) = matrix.run_matrix(specs(["toy_slow_judge"]), tmp_path, workers=1, report=quiet)
     assert r.status == "timeout" and "evaluation after the fit still running after 2 s" in r.error  # not an hour
-    assert harness.evaluation_limit(60.0) == 60.0 and harness.evaluation_limit(1.0) == 2.0
+    assert matrix.evaluation_limit(60.0) == 60.0 and matrix.evaluation_limit(1.0) == 2.0
 
 
 def test_records_made_outside_a_run_state_the_runs_threads(tmp_path):
@@ -158,14 +162,14 @@ def test_records_made_outside_a_run_state_the_runs_threads(tmp_path):
     threads = torch.get_num_threads()
     torch.set_num_threads(2)  # this process's setting must not reach the records it writes for runs
     try:
-        records = harness.run_matrix(specs(["toy_sleeper", "toy_unavailable"], budget=0.5), tmp_path, workers=2,
-                                     report=harness.quiet)
+        records = matrix.run_matrix(specs(["toy_sleeper", "toy_unavailable"], budget=0.5), tmp_path, workers=2,
+                                     report=quiet)
     finally:
         torch.set_num_threads(threads)
     assert [r.status for r in records] == ["timeout", "unavailable"]
     for r in records:
         assert r.provenance["threads"]["torch_intra_op"] == 1 and r.provenance["threads"]["OMP_NUM_THREADS"] == "1"
-    harness.run_matrix(specs(["toy_constant"]), tmp_path, workers=1, report=harness.quiet)
+    matrix.run_matrix(specs(["toy_constant"]), tmp_path, workers=1, report=quiet)
     from bench.reporting.tables import write_tables
 
     assert "; 1 thread(s) per run;" in write_tables(tmp_path, plots=False)
@@ -174,11 +178,11 @@ def test_records_made_outside_a_run_state_the_runs_threads(tmp_path):
 @pytest.mark.parametrize("content", ["x", "{}", '{"schema": "syrenets-bench/record/1", "status": "ok"}'])
 def test_a_corrupt_record_is_moved_aside_and_its_run_redone(tmp_path, content):
     todo = specs(["toy_constant"], seeds=(0, 1))
-    harness.run_matrix(todo, tmp_path, workers=1, report=harness.quiet)
+    matrix.run_matrix(todo, tmp_path, workers=1, report=quiet)
     broken = tmp_path / "records" / f"{todo[1].run_id}.json"
     broken.write_text(content)
     lines = []
-    records = harness.run_matrix(todo, tmp_path, workers=1, report=lines.append)
+    records = matrix.run_matrix(todo, tmp_path, workers=1, report=lines.append)
     assert [r.status for r in records] == ["ok", "ok"]
     (warning,) = [line for line in lines if line.startswith("warning: ")]
     assert str(broken) in warning and "the run is redone" in warning
@@ -205,22 +209,22 @@ def test_a_second_matrix_on_the_same_folder_is_refused_until_the_first_ends(tmp_
         while not any("fit" in p.read_text() for p in (out / "logs").glob("*.phase")) and time.monotonic() < deadline:
             time.sleep(0.1)
         with pytest.raises(UserError, match=f"another matrix is writing here \\(process {first.pid}, started "):
-            harness.run_matrix(specs(["toy_constant"]), out, workers=1, report=harness.quiet)
+            matrix.run_matrix(specs(["toy_constant"]), out, workers=1, report=quiet)
     finally:
         os.kill(first.pid, signal.SIGKILL)
         first.wait()
     # the killed matrix's lock went with it
-    (r,) = harness.run_matrix(specs(["toy_constant"]), out, workers=1, report=harness.quiet)
+    (r,) = matrix.run_matrix(specs(["toy_constant"]), out, workers=1, report=quiet)
     assert r.status == "ok"
 
 
 def test_a_stage_after_the_fit_that_fails_keeps_the_fit_and_names_the_stage(tmp_path):
     lines = []
-    (r,) = harness.run_matrix(specs(["toy_bad_expression"]), tmp_path, workers=1, report=lines.append)
+    (r,) = matrix.run_matrix(specs(["toy_bad_expression"]), tmp_path, workers=1, report=lines.append)
     assert r.status == "ok" and r.train_mse > 0 and r.test_mse > 0 and r.steps > 0 and r.curve
     assert r.failed_stages == {"expression": "ValueError: no expression today",
                                "exact": "ValueError: no expression today"} and r.expression is None
-    log = harness.log_path(tmp_path, r.run_id)
+    log = matrix.log_path(tmp_path, r.run_id)
     assert any("failed after the fit: expression, exact" in line and str(log) in line for line in lines), lines
     assert "Traceback" in log.read_text() and "no expression today" in log.read_text()
     from bench.reporting.tables import build_tables
@@ -229,7 +233,7 @@ def test_a_stage_after_the_fit_that_fails_keeps_the_fit_and_names_the_stage(tmp_
 
 
 def test_the_method_prepares_before_its_budget_starts(tmp_path):
-    (r,) = harness.run_matrix(specs(["toy_prepared"]), tmp_path, workers=1, report=harness.quiet)
+    (r,) = matrix.run_matrix(specs(["toy_prepared"]), tmp_path, workers=1, report=quiet)
     assert r.status == "ok" and r.details["prepared_before_the_budget"] is True
     assert r.details["prepare_seconds"] >= 0
 
@@ -267,31 +271,31 @@ class ToyFixable(Method):
 def test_a_failed_run_names_its_log_and_is_redone_once_its_plugin_is_fixed(tmp_path):
     plugin = tmp_path / "fixable.py"
     plugin.write_text(PLUGIN_THAT_FAILS.format(body='raise KeyError("a typo in the plugin")'))
-    todo = harness.build_specs(["double_pendulum"], ["toy_fixable"], ["indirect"], [0], 5.0, plugins=(str(plugin),),
+    todo = build_specs(["double_pendulum"], ["toy_fixable"], ["indirect"], [0], 5.0, plugins=(str(plugin),),
                                n_train=64, n_test=32)
     lines = []
-    (r,) = harness.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)
-    log = harness.log_path(tmp_path / "out", r.run_id)
+    (r,) = matrix.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)
+    log = matrix.log_path(tmp_path / "out", r.run_id)
     assert r.status == "failed" and "a typo in the plugin" in r.error and r.code["files"][str(plugin)]
     assert any(f"log {log}" in line for line in lines), lines
     assert "Traceback" in log.read_text() and "KeyError: 'a typo in the plugin'" in log.read_text()
     lines.clear()
-    (again,) = harness.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)  # the same code: kept
+    (again,) = matrix.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)  # the same code: kept
     assert again.status == "failed" and "resuming: 1 run(s) already have records" in lines
     plugin.write_text(PLUGIN_THAT_FAILS.format(body="pass"))
     lines.clear()
-    (fixed,) = harness.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)
+    (fixed,) = matrix.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)
     assert fixed.status == "ok" and fixed.code["hash"] != r.code["hash"]
     assert "redoing 1 run(s) whose record was made by other code" in lines
 
 
 def test_a_resume_redoes_runs_of_another_configuration_and_on_request_the_failed_ones(tmp_path):
     out = tmp_path / "out"
-    harness.run_matrix(specs(["toy_constant", "toy_crasher"]), out, workers=1, report=harness.quiet)
+    matrix.run_matrix(specs(["toy_constant", "toy_crasher"]), out, workers=1, report=quiet)
     lines = []
-    harness.run_matrix(specs(["toy_constant", "toy_crasher"], budget=2.0), out, workers=1, report=lines.append)
+    matrix.run_matrix(specs(["toy_constant", "toy_crasher"], budget=2.0), out, workers=1, report=lines.append)
     assert "redoing 2 run(s) whose record was made with another configuration" in lines
     lines.clear()
-    records = harness.run_matrix(specs(["toy_constant", "toy_crasher"], budget=2.0), out, workers=1,
+    records = matrix.run_matrix(specs(["toy_constant", "toy_crasher"], budget=2.0), out, workers=1,
                                  report=lines.append, retry_failed=True)
     assert "redoing 1 run(s) that failed" in lines and [r.status for r in records] == ["ok", "failed"]
