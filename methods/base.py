@@ -5,8 +5,8 @@ A method learns a Lagrangian from a :class:`~bench.core.data.Dataset`, directly
 Euler–Lagrange transform). The base class owns the protocol:
 
 * hyperparameters are typed keywords, validated at construction against the
-  method's ``Config`` dataclass ("did you mean" for unknown names); what the
-  user passed is never mutated;
+  method's ``Config`` dataclass (:mod:`methods.config`; "did you mean" for
+  unknown names); what the user passed is never mutated;
 * :meth:`Method.fit` checks the data, seeds ``random``, numpy and torch,
   starts the wall-clock deadline, evaluates the training MSE on a schedule,
   keeps the best state seen, and restores it at the end;
@@ -19,7 +19,10 @@ Euler–Lagrange transform). The base class owns the protocol:
 
 Each method declares a tiny ``smoke`` configuration next to its real one.
 A fitted method is a :class:`~bench.core.models.FittedModel`: it predicts
-``L`` and ``tau`` and, where it has one, gives its expression.
+``L`` and ``tau`` and, where it has one, gives its expression. Every hook a
+method writes or may write, and what uses it, is listed in docs/extending.md.
+:mod:`methods.torch_method` is the base of methods whose model is a torch
+module; :class:`ExpressionMethod` (here) of those whose model is one expression.
 """
 
 from __future__ import annotations
@@ -27,160 +30,22 @@ from __future__ import annotations
 import abc
 import contextlib
 import dataclasses
-import difflib
 import gc
-import math
 import random
 import time
-import types
-import typing
-from dataclasses import dataclass
-from typing import Annotated, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
 
 from bench.core.budget import Budget
 from bench.core.data import EXPERIMENTS, Dataset, check_experiment, mse
-from bench.core.dynamics import euler_lagrange
 from bench.core.errors import ConfigError, DataError
-from bench.core.models import ExpressionModel, FittedModel, LagrangianFunction
+from bench.core.models import ExpressionModel, FittedModel
 from bench.core.registry import Registry
 from bench.core.system import SYSTEMS, System
+from methods.config import MethodConfig, build_config
 from methods.progress import Progress
-
-
-# -- hyperparameters --------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Range:
-    """The values a numeric hyperparameter may take, declared next to its type::
-
-        batch_size: Annotated[int, Range(1)] = 32           # at least 1
-        lr: Annotated[float, Range(0, low_open=True)] = 1e-3  # positive
-        post_fraction: Annotated[float, Range(0, 1, high_open=True)] = 0.1
-
-    For a tuple, every item must lie in the range.
-    """
-
-    low: float | None = None
-    high: float | None = None
-    low_open: bool = False
-    high_open: bool = False
-
-    def __contains__(self, value) -> bool:
-        if self.low is not None and not (value > self.low if self.low_open else value >= self.low):
-            return False
-        return self.high is None or (value < self.high if self.high_open else value <= self.high)
-
-    def __str__(self) -> str:
-        if self.high is None:
-            return f"{'greater than' if self.low_open else 'at least'} {self.low:g}"
-        if self.low is None:
-            return f"{'less than' if self.high_open else 'at most'} {self.high:g}"
-        return f"in {'(' if self.low_open else '['}{self.low:g}, {self.high:g}{')' if self.high_open else ']'}"
-
-
-#: a positive number
-POSITIVE = Range(0, low_open=True)
-#: a probability or a fraction
-FRACTION = Range(0, 1)
-
-_BOOLEANS = {"true": True, "yes": True, "1": True, "false": False, "no": False, "0": False}
-
-
-@dataclass(frozen=True)
-class MethodConfig:
-    """Hyperparameters every method has.
-
-    Attributes
-    ----------
-    max_steps
-        Stop after this many optimisation steps (or generations), even with
-        budget left. ``None``: only the budget stops the run. Smoke
-        configurations set it, so that a run is deterministic for its seed.
-    eval_samples
-        Size of the fixed random subset of the training data on which the
-        training MSE is measured during the fit, to pick the best state.
-    """
-
-    max_steps: Annotated[int, Range(1)] | None = None
-    eval_samples: Annotated[int, Range(1)] = 2048
-
-
-def _check_value(owner: str, name: str, value: Any, hint: Any) -> Any:
-    origin = typing.get_origin(hint)
-    args = typing.get_args(hint)
-    if origin is Annotated:
-        value = _check_value(owner, name, value, args[0])
-        for bound in (a for a in args[1:] if isinstance(a, Range)):
-            if any(v not in bound for v in (value if isinstance(value, tuple) else (value,))):
-                raise ConfigError(f"{owner}: {name} must be {bound}{' (each item)' if isinstance(value, tuple) else ''}, got {value!r}")
-        return value
-    if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        inner = [a for a in args if a is not type(None)]
-        if len(inner) == 1:
-            return _check_value(owner, name, value, inner[0])
-        return value
-    if origin is typing.Literal:
-        if value not in args:
-            raise ConfigError(f"{owner}: {name} must be one of {', '.join(map(repr, args))}, got {value!r}")
-        return value
-    if origin is tuple or hint is tuple:
-        if not isinstance(value, (tuple, list)):
-            raise ConfigError(f"{owner}: {name} must be a tuple, got {type(value).__name__}")
-        if args and args[-1] is not Ellipsis and len(args) != len(value):
-            raise ConfigError(f"{owner}: {name} must have {len(args)} items, got {len(value)}")
-        if args:
-            items = args[:1] * len(value) if args[-1] is Ellipsis else args
-            return tuple(_check_value(owner, name, v, h) for v, h in zip(value, items))
-        return tuple(value)
-    if hint is bool:
-        if isinstance(value, str) and value.strip().lower() in _BOOLEANS:
-            return _BOOLEANS[value.strip().lower()]
-        if isinstance(value, (int, np.integer)) and value in (0, 1):
-            return bool(value)
-        if not isinstance(value, bool):
-            raise ConfigError(f"{owner}: {name} must be true or false (or yes/no, 1/0), got {value!r}")
-        return value
-    if hint is int:
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise ConfigError(f"{owner}: {name} must be an integer, got {value!r}")
-        return int(value)
-    if hint is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not math.isfinite(value):
-            raise ConfigError(f"{owner}: {name} must be a finite number, got {value!r}")
-        return float(value)
-    if hint is str and not isinstance(value, str):
-        raise ConfigError(f"{owner}: {name} must be a string, got {value!r}")
-    return value
-
-
-def build_config(config_cls: type, overrides: dict, owner: str):
-    """Validate ``overrides`` against ``config_cls`` and return a new config.
-
-    Unknown names get a "did you mean"; values are type-checked against the
-    dataclass annotations, ranges included (:class:`Range`), and so are the
-    defaults. ``overrides`` itself is not modified.
-    """
-    fields = {f.name: f for f in dataclasses.fields(config_cls)}
-    hints = typing.get_type_hints(config_cls, include_extras=True)
-    clean = {}
-    for key, value in overrides.items():
-        if key not in fields:
-            close = difflib.get_close_matches(key, list(fields), n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise ConfigError(f"{owner}: unknown hyperparameter {key!r}{hint} (known: {', '.join(sorted(fields))})")
-        clean[key] = _check_value(owner, key, value, hints[key])
-    for key in fields.keys() - clean.keys():
-        if fields[key].default is not dataclasses.MISSING:
-            _check_value(owner, key, fields[key].default, hints[key])
-    config = config_cls(**clean)
-    if hasattr(config, "validate"):
-        config.validate()
-    return config
 
 
 # -- the method base class ------------------------------------------------------------
@@ -435,108 +300,6 @@ class Method(FittedModel):
     def predict(self, data: Dataset, experiment: str | None = None) -> np.ndarray:
         """The prediction in the experiment's own target (L or tau), by default the fitted one's."""
         return super().predict(data, experiment or self.experiment)
-
-
-# -- torch methods that learn L(q, qd) by mini-batch gradient descent ------------------
-
-@dataclass(frozen=True)
-class TorchConfig(MethodConfig):
-    """Hyperparameters shared by mini-batch torch methods.
-
-    Attributes
-    ----------
-    lr
-        Adam learning rate.
-    betas
-        Adam's moment coefficients.
-    batch_size
-        Mini-batch size; batches are drawn without replacement, reshuffled
-        every epoch.
-    dtype
-        ``"float64"`` or ``"float32"``.
-    """
-
-    lr: Annotated[float, POSITIVE] = 1e-3
-    betas: Annotated[tuple[float, float], Range(0, 1, high_open=True)] = (0.9, 0.999)
-    batch_size: Annotated[int, Range(1)] = 32
-    dtype: typing.Literal["float64", "float32"] = "float64"
-
-
-class TorchLagrangianMethod(Method, LagrangianFunction):
-    """A method whose model is a ``torch.nn.Module`` mapping ``(q, qd) -> L``.
-
-    The loop is mini-batch Adam on the direct loss ``MSE(L_hat, L)`` or the
-    indirect loss ``MSE(g(L_hat), tau)``; subclasses write :meth:`build_model`
-    and optionally :meth:`make_scheduler` and :meth:`extra_loss`.
-    """
-
-    Config: ClassVar[type] = TorchConfig
-    supports_warm_start: ClassVar[bool] = True
-    model: torch.nn.Module
-
-    @abc.abstractmethod
-    def build_model(self, train: Dataset) -> torch.nn.Module:
-        """The network, for data of ``train``'s shape."""
-
-    def make_scheduler(self, optimizer: torch.optim.Optimizer):
-        """Return an object with ``step(loss: float)``, or ``None``."""
-        return None
-
-    def extra_loss(self) -> torch.Tensor | float:
-        return 0.0
-
-    @property
-    def dtype(self) -> torch.dtype:
-        return getattr(torch, self.config.dtype)
-
-    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
-        return self.model(q, qd)
-
-    def batch_loss(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
-        if experiment == "direct":
-            pred, target = self.lagrangian(batch["q"], batch["qd"]), batch["L"]
-        else:
-            pred = euler_lagrange(self.lagrangian, batch["q"], batch["qd"], batch["qdd"], create_graph=True)
-            target = batch["tau"]
-        return torch.mean((pred - target) ** 2) + self.extra_loss()
-
-    def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        if not self.warm_start:
-            self.model = self.build_model(train).to(self.dtype)
-            self._optimizer = torch.optim.Adam(
-                self.model.parameters(), lr=self.config.lr, betas=self.config.betas,
-                **({"fused": True} if _fused_adam_ok(self.dtype) else {}),
-            )
-            self._scheduler = self.make_scheduler(self._optimizer)
-        optimizer, scheduler = self._optimizer, self._scheduler
-        tensors = train.tensors(self.dtype)
-        generator = torch.Generator().manual_seed(self.seed)
-        n, bs = len(train), min(self.config.batch_size, len(train))
-        order, cursor = torch.randperm(n, generator=generator), 0
-        while progress.step():
-            if cursor + bs > n:
-                order, cursor = torch.randperm(n, generator=generator), 0
-            idx = order[cursor:cursor + bs]
-            cursor += bs
-            batch = {k: v[idx] for k, v in tensors.items()}
-            loss = self.batch_loss(batch, experiment)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            if scheduler is not None:
-                scheduler.step(loss.item())
-
-    def _get_state(self):
-        return {k: v.detach().clone() for k, v in self.model.state_dict().items()}
-
-    def _set_state(self, state) -> None:
-        self.model.load_state_dict(state)
-
-
-def _fused_adam_ok(dtype: torch.dtype) -> bool:
-    # fused Adam on CPU exists from torch 2.4 and is ~3x faster for a 5x300 MLP
-    major, minor = (int(x) for x in torch.__version__.split(".")[:2])
-    return (major, minor) >= (2, 4) and dtype in (torch.float32, torch.float64)
 
 
 METHODS: Registry[type[Method]] = Registry("method")

@@ -70,7 +70,9 @@ from bench.core import regression, symbolic
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
 from bench.core.models import ExpressionModel
-from methods.base import FRACTION, METHODS, ExpressionMethod, MethodConfig, Progress, Range
+from methods.base import METHODS, ExpressionMethod
+from methods.config import FRACTION, MethodConfig, Range
+from methods.progress import Progress
 from methods.jets import UNARY, JetAlgebra
 
 BINARY_OPS = {"add": operator.add, "sub": operator.sub, "mul": operator.mul}

@@ -12,7 +12,7 @@ Choices the paper leaves open
   ``ReduceLROnPlateau`` (relative threshold 1e-4), stepped once per step.
 * The kept state is the one with the lowest training MSE measured on a fixed
   subset of the training data (``eval_samples``), on the schedule of
-  :class:`methods.base.Progress`.
+  :class:`methods.progress.Progress`.
 * float64, like the other methods, so that every row of a table is computed
   at the same precision.
 """
@@ -24,7 +24,9 @@ from typing import Annotated
 
 import torch
 
-from methods.base import METHODS, Range, TorchConfig, TorchLagrangianMethod
+from methods.base import METHODS
+from methods.config import Range
+from methods.torch_method import TorchConfig, TorchLagrangianMethod
 
 
 @dataclass(frozen=True)

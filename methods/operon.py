@@ -29,7 +29,9 @@ import sympy
 from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
-from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
+from methods.base import METHODS, ExpressionMethod
+from methods.config import MethodConfig, Range
+from methods.progress import Progress
 
 #: Operon's time limit where the fit has none (its generations bound it)
 UNLIMITED_S = 10**7

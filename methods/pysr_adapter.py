@@ -37,7 +37,9 @@ import sympy
 from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
-from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
+from methods.base import METHODS, ExpressionMethod
+from methods.config import MethodConfig, Range
+from methods.progress import Progress
 
 PROBE_TIMEOUT_S = 120
 

@@ -45,7 +45,9 @@ from bench.core import regression
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
 from bench.core.terms import TermLibrary, lagrangian_library, lagrangian_library_size
-from methods.base import METHODS, ExpressionMethod, MethodConfig, Progress, Range
+from methods.base import METHODS, ExpressionMethod
+from methods.config import MethodConfig, Range
+from methods.progress import Progress
 
 
 #: the most memory the design matrix may take

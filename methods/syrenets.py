@@ -92,7 +92,7 @@ Choices and deviations, each deliberate
   differentiated through the batch statistics as well, which makes each
   sample's torque depend on the other samples of its batch.
 * The kept state is the one with the lowest training MSE on a fixed subset
-  of the training data (see :class:`methods.base.Progress`), not the lowest
+  of the training data (see :class:`methods.progress.Progress`), not the lowest
   mini-batch MSE, and the test set is not evaluated during training.
 * ``dtype="float32"`` trains in single precision (the paper's is float64);
   the fitted function is then evaluated, pruned and refined in float64. On
@@ -167,7 +167,9 @@ from bench.core.dynamics import euler_lagrange
 from bench.core.errors import ConfigError
 from bench.core.models import ExpressionModel, FittedModel
 from bench.core.timeouts import Timeout, call_with_timeout
-from methods.base import METHODS, Range, TorchConfig, TorchLagrangianMethod
+from methods.base import METHODS
+from methods.config import Range
+from methods.torch_method import TorchConfig, TorchLagrangianMethod, fused_adam_ok
 
 BINARY = ("sum", "prod", "diff")
 #: the refinement gives up on pruned equations that expand into more terms
@@ -620,7 +622,7 @@ class SyReNets(TorchLagrangianMethod):
         other = [p for n, p in self.model.named_parameters() if not n.startswith("S.")]
         self.optimizer = torch.optim.Adam(
             [{"params": other, "lr": cfg.lr}, {"params": scale_params, "lr": cfg.lr * C}],
-            betas=cfg.betas, fused=True,
+            betas=cfg.betas, **({"fused": True} if fused_adam_ok(self.dtype) else {}),
         )
         if cfg.lr_schedule == "plateau":
             self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
@@ -1083,7 +1085,7 @@ class _Fixed:
 class _Cosine:
     """Half a cosine from each group's learning rate to its minimum over the
     share of the budget that is left when :meth:`start` is called
-    (:meth:`methods.base.Progress.fraction`: of the steps when the run has a
+    (:meth:`methods.progress.Progress.fraction`: of the steps when the run has a
     step limit, else of the time, as read at the fit's evaluations). :meth:`step` sets the rate of the
     next step, like the plateau schedule's. A warm start calls :meth:`start`
     again, and the rate anneals anew from its highest value."""

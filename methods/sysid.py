@@ -44,7 +44,9 @@ from bench.core.errors import DataError
 from bench.core.models import LinearParametricModel, ParametricModel, mass_and_bias
 from bench.core.regression import base_columns, least_squares
 from bench.core.system import LinearForm
-from methods.base import METHODS, Range, TorchConfig, TorchLagrangianMethod
+from methods.base import METHODS
+from methods.config import Range
+from methods.torch_method import TorchConfig, TorchLagrangianMethod
 
 
 @dataclass(frozen=True)
