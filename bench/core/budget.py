@@ -5,7 +5,7 @@ methods by: each gets the same wall-clock time, and what it reaches in it
 depends on the machine and its load. A **work budget** (``Budget(steps=N)``)
 bounds a run by the work its method does instead: gradient steps, GP
 generations, solves, whatever the method counts as one step of its loop
-(:class:`methods.base.Progress`). A run under a work budget has no
+(:class:`methods.progress.Progress`). A run under a work budget has no
 wall-clock deadline and is a pure function of its seed and configuration,
 so it gives the same numbers on any machine; its ``seconds``, where given,
 is only a ceiling past which the run is killed and recorded as a time-out,
@@ -44,7 +44,7 @@ class Schedule:
         ``(step, fraction, fraction per step)`` anchors: at each scheduled
         evaluation, the share of the fit's time spent and the pace since
         the previous one. Between anchors the fraction of the budget that a
-        method reads (:meth:`methods.base.Progress.fraction`) advances by
+        method reads (:meth:`methods.progress.Progress.fraction`) advances by
         the anchor's pace per step, so it is a function of the step count
         that a replay can repeat. ``None`` where the fit read its fraction
         from a step limit instead.

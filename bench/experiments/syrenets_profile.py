@@ -2,7 +2,7 @@
 
 Each selection head ends in a layer over the candidates: ``W2`` of shape
 (heads, candidates, hidden units) applied to the hidden units
-(``methods.syrenets.HeadsOutput``, forward and backward). torch.profiler
+(``methods.syrenets.network.HeadsOutput``, forward and backward). torch.profiler
 attributes a large and varying share of a step to it. This command times
 the same step in one process, three ways, and reports each per step:
 
@@ -78,7 +78,7 @@ from bench.experiments import syrenets_speed
 from bench.runner.provenance import machine, provenance
 from methods import METHODS
 from methods.base import gc_frozen
-from methods.syrenets import HeadsOutput
+from methods.syrenets.network import HeadsOutput
 from systems import get_system
 
 HELP = ("where SyReNets' training step spends its time, and its heads' product with and without torch.profiler "
@@ -104,7 +104,7 @@ def add_arguments(parser) -> None:
 class _ProductTimer:
     """Wall-clock time of the heads' output layer, forward and backward, while entered.
 
-    It wraps :class:`methods.syrenets.HeadsOutput`'s two functions and puts
+    It wraps :class:`methods.syrenets.network.HeadsOutput`'s two functions and puts
     them back on exit.
     """
 

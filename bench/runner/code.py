@@ -2,7 +2,8 @@
 
 :func:`code_hash` hashes the source files of every class in the method's
 and the system's class hierarchies that the suite or a plugin defines
-(``methods/mlp.py`` and ``methods/base.py`` for the MLP;
+(``methods/mlp.py``, ``methods/torch_method.py`` and ``methods/base.py`` for the MLP;
+every module of ``methods/syrenets/`` for SyReNets;
 ``systems/double_pendulum.py`` and ``bench/core/system.py`` for the double
 pendulum), and the plugin files and robot descriptions the run imports. A
 record carries it (``code``); a resumed matrix redoes a run whose record
@@ -31,7 +32,9 @@ def _digest(path: Path) -> str:
 
 
 def _class_files(cls: type) -> list[Path]:
-    """Source files of ``cls`` and its bases, outside the standard library and packages."""
+    """Source files of ``cls`` and its bases, outside the standard library and
+    installed packages; for a class of a method or system that is a package of
+    its own (``methods/syrenets/``), every module of that package."""
     files = []
     for base in inspect.getmro(cls):
         try:
@@ -40,8 +43,9 @@ def _class_files(cls: type) -> list[Path]:
             continue
         if "site-packages" in path.parts or "dist-packages" in path.parts or path.is_relative_to(Path(os.__file__).parent):
             continue
-        if path not in files:
-            files.append(path)
+        parts = base.__module__.split(".")
+        siblings = sorted(path.parent.glob("*.py")) if len(parts) > 2 and parts[0] in ("methods", "systems") else [path]
+        files += [p for p in siblings if p not in files]
     return files
 
 

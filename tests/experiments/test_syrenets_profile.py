@@ -12,7 +12,7 @@ import torch
 from bench.core.data import generate
 from bench.experiments import syrenets_profile
 from methods import METHODS
-from methods.syrenets import HeadsOutput
+from methods.syrenets.network import HeadsOutput
 from systems import get_system
 
 

@@ -11,7 +11,12 @@ from bench.core import symbolic
 from bench.core.data import generate, mse
 from bench.core.dynamics import euler_lagrange
 from methods import METHODS
-from methods.syrenets import CandidateSpec, SyReNet, SyReNetsConfig, Gram, HeadsOutput, _Fixed, _round_inner_constants, _training_pass
+from methods.syrenets.candidates import CandidateSpec
+from methods.syrenets.config import SyReNetsConfig
+from methods.syrenets.equations import round_inner_constants
+from methods.syrenets.multistart import halve
+from methods.syrenets.network import Gram, HeadsOutput, SyReNet
+from methods.syrenets.training import Fixed, Network, training_pass
 
 SMALL = dict(layers=2, heads=3, latent=4, ae_hidden=8, head_hidden=8)
 
@@ -108,7 +113,7 @@ def test_pruned_variant_keeps_few_terms_within_tolerance(data):
 def test_round_inner_constants():
     q1, q2 = sympy.symbols("q_1 q_2", real=True)
     f = sympy.cos(1.0004 * q1 - 0.9991 * q2 + 0.003) * sympy.sin(0.4999 * q1 + 0.3)
-    assert _round_inner_constants(f) == sympy.cos(q1 - q2) * sympy.sin(q1 / 2 + sympy.Float(0.3))
+    assert round_inner_constants(f) == sympy.cos(q1 - q2) * sympy.sin(q1 / 2 + sympy.Float(0.3))
 
 
 @pytest.mark.parametrize("experiment", ["direct", "indirect"])
@@ -284,13 +289,14 @@ def test_the_plateau_schedule_watches_a_moving_average_of_the_batch_loss(data):
 
 def test_a_multi_start_fit_keeps_the_network_with_the_lowest_training_mse(data):
     m = METHODS["syrenets"](**SMALL, starts=4, start_share=0.5, max_steps=40, eval_samples=64, refine=False)
-    inits, setup = [], m._setup
+    inits, network = [], m._network
 
     def recording(train, start=0):
-        setup(train, start)
-        inits.append(torch.cat([p.detach().flatten() for p in m.model.parameters()]))
+        net = network(train, start)
+        inits.append(torch.cat([p.detach().flatten() for p in net.model.parameters()]))
+        return net
 
-    m._setup = recording
+    m._network = recording
     m.fit(data[0], "direct", 0, 60)
     starts = m.record_details()["starts"]
     assert starts["networks"] == 4 and len(inits) == 4
@@ -352,7 +358,7 @@ def test_derivatives_propagated_forward_match_the_reverse_passes(data, hp):
     m._setup(data[0])
     b = {k: v[:40] for k, v in data[0].tensors().items()}
     weights = m.model.select(m._inputs(b["q"], b["qd"], b["qdd"]))[1]
-    fixed = _Fixed(m.model, m.config.inputs, weights, b["qdd"])
+    fixed = Fixed(m.model, m.config.inputs, weights, b["qdd"])
     forward = euler_lagrange(fixed, b["q"], b["qd"], b["qdd"], create_graph=True)
     reverse = euler_lagrange(fixed.__call__, b["q"], b["qd"], b["qdd"], create_graph=True)
     assert reverse.abs().max() > 1e-3
@@ -381,7 +387,7 @@ def test_the_compiled_training_pass_equals_the_eager_one(data, experiment):
     params = list(m.model.parameters())
     results = []
     for tangent in (False, True):
-        pass_ = torch.compile(_training_pass, dynamic=False) if tangent else _training_pass
+        pass_ = torch.compile(training_pass, dynamic=False) if tangent else training_pass
         loss, err, weights = pass_(m.model, b["q"], b["qd"], b["qdd"], target, experiment, "q_qd", tangent)
         results.append((loss, err, weights, torch.autograd.grad(loss, params, allow_unused=True)))
     (loss0, err0, w0, g0), (loss1, err1, w1, g1) = results
@@ -431,9 +437,9 @@ def test_the_selection_scores_each_network_by_its_lowest_evaluation_so_far():
         return True
 
     m._train = turn
-    slots = [{**{name: None for name in m._SLOT}, "model": k, "replay": None} for k in range(4)]
-    m._halve(slots, None, "direct", Scripted(), {"replay": None})
-    first, second = m._starts["rounds"]
+    networks = [Network(model=k, optimizer=None, scheduler=None, frozen=[]) for k in range(4)]
+    starts = halve(m, networks, None, "direct", Scripted(), feed=None)
+    first, second = starts["rounds"]
     assert first == [[0, 0.3], [1, 0.05], [2, 0.4], [3, 0.7]]
     assert second == [[0, 0.2], [1, 0.04]]
-    assert m._starts["kept"] == 1 and m.model == 1
+    assert starts["kept"] == 1 and m.net is networks[1] and m.model == 1

@@ -1,0 +1,274 @@
+"""The SyReNets method: one network (or several, :mod:`~methods.syrenets.multistart`)
+trained within the run's budget, then its frozen function, evaluated in
+float64, and its equations (:mod:`~methods.syrenets.equations`). The package
+docstring describes the method and every deviation from the paper."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import torch
+
+from bench.core.dynamics import euler_lagrange
+from methods.base import METHODS
+from methods.syrenets.config import SyReNetsConfig
+from methods.syrenets.equations import MAX_READABLE_TERMS, Equations
+from methods.syrenets.multistart import halve
+from methods.syrenets.network import SyReNet
+from methods.syrenets.training import Cosine, Feed, Network, compiled_pass, inputs_of, training_pass
+from methods.torch_method import TorchLagrangianMethod, fused_adam_ok
+
+
+@METHODS.add("syrenets", "neural", "symbolic", "paper")
+class SyReNets(Equations, TorchLagrangianMethod):
+    """SyReNets (Valle & Haddadin, 2021); see the package docstring.
+
+    The network being trained, and what it carries between steps, is
+    :attr:`net`, a :class:`~methods.syrenets.training.Network`; ``model``,
+    ``frozen``, ``optimizer`` and ``scheduler`` read it.
+    """
+
+    Config = SyReNetsConfig
+    smoke = {"layers": 2, "heads": 3, "latent": 4, "ae_hidden": 8, "head_hidden": 8, "max_steps": 10,
+             "eval_samples": 128, "refine": False}
+    net: Network | None = None
+
+    # -- the network in place -------------------------------------------------------
+    @property
+    def model(self) -> SyReNet:
+        return self.net.model
+
+    @property
+    def frozen(self) -> list[torch.Tensor]:
+        return self.net.frozen
+
+    @frozen.setter
+    def frozen(self, weights: list[torch.Tensor]) -> None:
+        self.net.frozen = weights
+
+    @property
+    def optimizer(self) -> torch.optim.Optimizer:
+        return self.net.optimizer
+
+    @property
+    def scheduler(self):
+        return self.net.scheduler
+
+    def _inputs(self, q, qd, qdd=None):
+        return inputs_of(q, qd, qdd, self.config.inputs)
+
+    def build_model(self, train, seed: int | None = None):
+        """A network for ``train``'s shape, initialised from ``seed`` (the fit's by default)."""
+        n_x = train.dof * (2 if self.config.inputs == "q_qd" else 3)
+        torch.manual_seed(self.seed if seed is None else seed)
+        return SyReNet(n_x, self.config)
+
+    def _network(self, train, start: int = 0) -> Network:
+        """A new network with its optimiser (the scale ``S`` at ``C`` times the
+        learning rate) and schedule; ``start`` k > 0 initialises the k-th
+        network of a multi-start fit from its own seed. Its frozen weights
+        come from the first batch, before its first step."""
+        cfg = self.config
+        seed = self.seed if start == 0 else int(np.random.SeedSequence([self.seed, start]).generate_state(1)[0])
+        model = self.build_model(train, seed).to(self.dtype)
+        C = model.C
+        scale_params = list(model.S.parameters())
+        other = [p for n, p in model.named_parameters() if not n.startswith("S.")]
+        optimizer = torch.optim.Adam(
+            [{"params": other, "lr": cfg.lr}, {"params": scale_params, "lr": cfg.lr * C}],
+            betas=cfg.betas, **({"fused": True} if fused_adam_ok(self.dtype) else {}),
+        )
+        if cfg.lr_schedule == "plateau":
+            scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
+                optimizer, mode="min", factor=cfg.lr_factor, patience=cfg.lr_patience, min_lr=[cfg.lr_min, cfg.lr_min * C]
+            )
+        else:
+            scheduler = Cosine(optimizer, [cfg.lr_min, cfg.lr_min * C])
+        return Network(model, optimizer, scheduler, frozen=[])
+
+    def _setup(self, train, start: int = 0) -> None:
+        """Put a new network (:meth:`_network`) in place."""
+        self.net = self._network(train, start)
+
+    def train_step(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
+        """One optimisation step of the network in place on ``batch``; returns each sample's squared error."""
+        net = self.net
+        loss, err, weights = self._pass(batch, experiment)
+        net.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        net.optimizer.step()
+        batch_loss, a = err.mean().item(), self.config.lr_smoothing
+        net.watched = batch_loss if net.watched is None or not a else a * net.watched + (1 - a) * batch_loss
+        net.scheduler.step(net.watched)
+        net.frozen = weights
+        return err
+
+    def _pass(self, batch: dict[str, torch.Tensor], experiment: str):
+        """:func:`~methods.syrenets.training.training_pass` of the network in place, compiled with ``compile``."""
+        cfg = self.config
+        target = batch["L"] if experiment == "direct" else batch["tau"]
+        return (compiled_pass() if cfg.compile else training_pass)(
+            self.model, batch["q"], batch["qd"], batch["qdd"], target, experiment, cfg.inputs, cfg.compile)
+
+    # -- the fit --------------------------------------------------------------------
+    def _fit(self, train, experiment, progress):
+        cfg = self.config
+        self._trained = False
+        t = train.tensors(self.dtype)
+        n, bs = len(train), min(cfg.batch_size, len(train))
+        feed = Feed.start(n, bs, self.seed)
+        progress.reserve(cfg.post_fraction * progress.remaining())
+        self._starts = None
+        if self.warm_start:  # continue the network, its optimiser and its frozen weights
+            self.model.to(self.dtype)  # back to the training arithmetic, which the optimiser's state has
+            self.frozen = [w.to(self.dtype) for w in self.frozen]
+            self.net.lr_drops, self.net.replay = [], torch.empty(0, dtype=torch.long)
+            if isinstance(self.scheduler, Cosine):
+                self.scheduler.start(progress)
+            self._train(t, experiment, progress, feed)
+            return
+        networks = []
+        for k in range(cfg.starts):
+            net = self._network(train, k)
+            with torch.no_grad():
+                net.frozen = [w.detach() for w in net.model.select(self._inputs(t["q"][:bs], t["qd"][:bs], t["qdd"][:bs]))[1]]
+            if isinstance(net.scheduler, Cosine):
+                net.scheduler.start(progress)
+            networks.append(net)
+        self.net = networks[0]
+        if cfg.starts > 1:
+            self._starts = halve(self, networks, t, experiment, progress, feed)
+        del networks
+        if progress.stop_reason is None:
+            self._train(t, experiment, progress, feed)
+
+    def _prepare(self, train, experiment) -> None:
+        """With ``compile``, compile the training pass for the loop's batch
+        sizes (with and without the replayed samples) on a network of the
+        fit's shapes, before the budget starts: the compiled pass takes the
+        network as an argument, so the fit's networks reuse it. A fresh
+        machine (an empty compile cache) then leaves a run the same learning
+        time as a warm one. The gradients are discarded; the time it took is
+        the record's ``details.compile_seconds``."""
+        self._compile_seconds = None
+        if not self.config.compile:
+            return
+        start = time.perf_counter()
+        cfg, dtype = self.config, getattr(torch, self.config.dtype)
+        with torch.random.fork_rng():
+            torch.manual_seed(0)
+            model = SyReNet(train.dof * (2 if cfg.inputs == "q_qd" else 3), cfg).to(dtype)
+            t = train.tensors(dtype)
+            bs = min(cfg.batch_size, len(train))
+            for size in sorted({bs, bs + cfg.replay}):
+                idx = torch.arange(size) % len(train)
+                b = {k: v[idx] for k, v in t.items()}
+                target = b["L"] if experiment == "direct" else b["tau"]
+                compiled_pass()(model, b["q"], b["qd"], b["qdd"], target, experiment, cfg.inputs, True)[0].backward()
+        self._compile_seconds = round(time.perf_counter() - start, 2)
+
+    def _train(self, t, experiment, progress, feed: Feed, until: float = math.inf) -> bool:
+        """Steps of the network in place until ``progress.fraction()`` reaches
+        ``until``; ``False`` once the budget is spent."""
+        cfg, net = self.config, self.net
+        lr = net.optimizer.param_groups[0]["lr"]
+        while progress.fraction() < until:
+            if not progress.step():
+                return False
+            idx = torch.cat([feed.next(), net.replay])
+            err = self.train_step({k: v[idx] for k, v in t.items()}, experiment)
+            if cfg.lr_schedule == "plateau" and net.optimizer.param_groups[0]["lr"] != lr:
+                lr = net.optimizer.param_groups[0]["lr"]
+                net.lr_drops.append([progress.steps + 1, round(progress.elapsed(), 2), lr])
+            if cfg.replay:
+                net.replay = idx[torch.argsort(err, descending=True)[: cfg.replay]]
+        return True
+
+    def _get_state(self):
+        return {"model": {k: v.detach().clone() for k, v in self.model.state_dict().items()},
+                "frozen": [w.clone() for w in self.frozen]}
+
+    def _set_state(self, state):
+        self.model.load_state_dict(state["model"])
+        self.frozen = [w.clone() for w in state["frozen"]]
+
+    def _frozen_lagrangian(self, qdd=None):
+        def lag(q, qd):
+            return self.model.evaluate(self._inputs(q, qd, qdd), self.frozen)
+        return lag
+
+    def predict_lagrangian(self, data):
+        t = data.tensors(self.dtype)
+        with torch.no_grad():
+            out = self.model.evaluate(self._inputs(t["q"], t["qd"], t["qdd"]), self.frozen)
+        return out.double().numpy()
+
+    def predict_torque(self, data):
+        if self.config.inputs == "q_qd":
+            return super().predict_torque(data)
+        # qdd is an input too: each chunk's Lagrangian sees its own accelerations
+        t = data.tensors(self.dtype)
+        taus = []
+        for sl in range(0, len(data), 8192):
+            part = slice(sl, sl + 8192)
+            taus.append(euler_lagrange(self._frozen_lagrangian(t["qdd"][part]), t["q"][part], t["qd"][part], t["qdd"][part]))
+        return torch.cat(taus).double().numpy()
+
+    def lagrangian(self, q, qd):
+        return self._frozen_lagrangian()(q, qd)
+
+    def not_a_lagrangian(self):
+        if self.config.inputs == "q_qd":
+            return None
+        return ("inputs='q_qd_qdd' feeds qdd into L (the public code's choice), so its torques are not affine in "
+                "qdd: no exact recovery or rollout")
+
+    def _with_weights(self, weights, fn, *args):
+        saved, self.frozen = self.frozen, weights
+        try:
+            return fn(*args)
+        finally:
+            self.frozen = saved
+
+    # -- evaluation, pruning and refinement ----------------------------------------------
+    @property
+    def dtype(self) -> torch.dtype:
+        """``config.dtype`` while the network trains; float64 once the fit is
+        done, for evaluation, pruning and refinement."""
+        return torch.float64 if getattr(self, "_trained", False) else super().dtype
+
+    def _post_fit(self, train, experiment, seconds_left):
+        deadline = time.perf_counter() + seconds_left
+        self._trained = True  # the fitted function is evaluated in float64 from here on
+        self.model.to(torch.float64)
+        self.frozen = [w.to(torch.float64) for w in self.frozen]
+        self._variants, self._notes = {}, {}
+        rng = np.random.default_rng(self.seed)
+        ref = train.subset(np.sort(rng.choice(len(train), min(len(train), 1024), replace=False)))
+        self._pruned = self._prune(ref, experiment)
+        self._variants["pruned"] = self._pruned
+        if not self.config.refine:
+            return
+        if self.config.inputs != "q_qd":
+            refined = "refinement needs inputs='q_qd' (a Lagrangian of q and qd)"
+        else:
+            refined = self._refine(train, experiment, deadline)
+        self._variants["refined"] = refined
+        if isinstance(refined, str):
+            self._notes["refined"] = refined
+
+    def record_details(self):
+        notes = dict(getattr(self, "_notes", {}))
+        if self.config.lr_schedule == "plateau" and getattr(self, "net", None) is not None:
+            # [step, seconds into the fit, new learning rate] for each cut of the plateau schedule
+            notes["lr_drops"] = self.net.lr_drops
+        if getattr(self, "_starts", None):
+            # the multi-start fit: each round's [network, its lowest training MSE so far], and the network kept
+            notes["starts"] = self._starts
+        if getattr(self, "_compile_seconds", None) is not None:
+            notes["compile_seconds"] = self._compile_seconds
+        if notes.get("pruned_terms", 0) > MAX_READABLE_TERMS:
+            notes["expression_omitted"] = f"the pruned equation keeps {notes['pruned_terms']} terms (> {MAX_READABLE_TERMS})"
+        return notes
