@@ -1,7 +1,7 @@
 """The README's examples as a newcomer meets them: its two code blocks under
 "Adding a method" and "Adding a system" saved as files of one's own, listed and
-run in a matrix with ``--plugin``, exactly as the README's commands do, and
-every link in the README and docs/ resolves."""
+run in a matrix with ``--plugin``, exactly as the README's commands do
+(every link in the README and docs/ resolves: tests/reporting/test_index.py)."""
 
 from __future__ import annotations
 
@@ -43,15 +43,3 @@ def test_the_readmes_method_and_system_run_as_plugins_in_a_matrix(tmp_path):
     assert all(r["test_mse"] < 1e-20 for r in records)  # L = m qd^2/2 - k q^2/2 lies in the toy's basis
     assert "## toy_mass_spring, indirect experiment" in (tmp_path / "out" / "tables.md").read_text()
 
-
-def test_every_link_in_the_readme_and_docs_resolves():
-    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-    broken = []
-    for page in pages:
-        for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
-            if re.match(r"[a-z]+:", target):
-                continue
-            path = target.split("#", 1)[0]
-            if path and not (page.parent / path).exists():
-                broken.append(f"{page.relative_to(ROOT)}: {target}")
-    assert broken == []

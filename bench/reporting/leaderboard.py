@@ -16,12 +16,11 @@ ranks differ (:func:`bench.reporting.significance.friedman`). Usage::
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 from bench.core.errors import UserError
-from bench.core.fileio import atomic_write
+from bench.core.fileio import atomic_write, link
 from bench.reporting.significance import ALPHA, by_seed, friedman, section_medians
 from bench.reporting.tables import build_tables, read_for_tables, section_groups, write_plots
 
@@ -46,8 +45,7 @@ def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, li
     records = read_for_tables(run_dir)
     if not records:
         raise UserError(f"{run_dir}: no records found")
-    rel = Path(os.path.relpath(run_dir, out.parent))
-    plots = {k: str(rel / v) for k, v in write_plots(records, run_dir).items()}
+    plots = {k: link(Path(run_dir) / v, out) for k, v in write_plots(records, run_dir).items()}
     tables = build_tables(records, plots, out)
     body = tables.split("\n", 1)[1]  # drop the "# Results" title
     parts, missing, used = [], [], {"Introduction"}

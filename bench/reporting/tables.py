@@ -53,7 +53,7 @@ import numpy as np
 from bench.core.fileio import atomic_write, link
 from bench.reporting.plots import convergence_plot, plot_name
 from bench.reporting.significance import by_seed, seed_ranks, ties_with_best
-from bench.runner.provenance import machine
+from bench.runner.provenance import PROJECT_ROOT, machine
 from bench.runner.records import MISSING, Record, missing_runs, quarantine, read_records
 from systems import SYSTEMS
 
@@ -365,7 +365,7 @@ def _reference(system: str) -> str:
 
 
 #: the page that says how to read a table: its header, rows, marks and columns
-GUIDE = Path(__file__).resolve().parents[2] / "docs" / "reading_tables.md"
+GUIDE = PROJECT_ROOT / "docs" / "reading_tables.md"
 
 
 def guide_line(page: str | Path) -> str:

@@ -32,9 +32,10 @@ def test_no_page_shows_a_figure_its_records_do_not_give():
     assert len(re.findall(r"<!-- figure ", (ROOT / "README.md").read_text())) >= 3
 
 
-def test_every_link_in_the_readme_and_the_results_resolves():
+def test_every_link_in_the_readme_the_docs_and_the_results_resolves():
     link = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
-    pages = [ROOT / "README.md"] + [p for p in RESULTS.rglob("*.md") if "records" not in p.parts]
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    pages += [p for p in RESULTS.rglob("*.md") if "records" not in p.parts]
     broken = [f"{p.relative_to(ROOT)}: {t}" for p in pages for t in link.findall(p.read_text())
               if "://" not in t and not (p.parent / t).exists()]
     assert broken == []
