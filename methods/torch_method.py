@@ -46,6 +46,32 @@ class TorchConfig(MethodConfig):
     dtype: typing.Literal["float64", "float32"] = "float64"
 
 
+@dataclass
+class Feed:
+    """A fit's mini-batches of ``bs`` of the ``n`` samples: a random order
+    from the fit's seed, drawn without replacement and reshuffled when fewer
+    than ``bs`` are left (SyReNets' networks of a multi-start fit share one)."""
+
+    n: int
+    bs: int
+    generator: torch.Generator
+    order: torch.Tensor
+    cursor: int = 0
+
+    @classmethod
+    def start(cls, n: int, bs: int, seed: int) -> "Feed":
+        generator = torch.Generator().manual_seed(seed)
+        return cls(n, bs, generator, torch.randperm(n, generator=generator))
+
+    def next(self) -> torch.Tensor:
+        """The next batch's sample indices."""
+        if self.cursor + self.bs > self.n:
+            self.order, self.cursor = torch.randperm(self.n, generator=self.generator), 0
+        idx = self.order[self.cursor:self.cursor + self.bs]
+        self.cursor += self.bs
+        return idx
+
+
 class TorchLagrangianMethod(Method, LagrangianFunction):
     """A method whose model is a ``torch.nn.Module`` mapping ``(q, qd) -> L``.
 
@@ -94,14 +120,9 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
             self._scheduler = self.make_scheduler(self._optimizer)
         optimizer, scheduler = self._optimizer, self._scheduler
         tensors = train.tensors(self.dtype)
-        generator = torch.Generator().manual_seed(self.seed)
-        n, bs = len(train), min(self.config.batch_size, len(train))
-        order, cursor = torch.randperm(n, generator=generator), 0
+        feed = Feed.start(len(train), min(self.config.batch_size, len(train)), self.seed)
         while progress.step():
-            if cursor + bs > n:
-                order, cursor = torch.randperm(n, generator=generator), 0
-            idx = order[cursor:cursor + bs]
-            cursor += bs
+            idx = feed.next()
             batch = {k: v[idx] for k, v in tensors.items()}
             loss = self.batch_loss(batch, experiment)
             optimizer.zero_grad(set_to_none=True)

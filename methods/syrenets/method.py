@@ -17,8 +17,8 @@ from methods.syrenets.config import SyReNetsConfig
 from methods.syrenets.equations import MAX_READABLE_TERMS, Equations
 from methods.syrenets.multistart import halve
 from methods.syrenets.network import SyReNet
-from methods.syrenets.training import Cosine, Feed, Network, compiled_pass, inputs_of, training_pass
-from methods.torch_method import TorchLagrangianMethod, fused_adam_ok
+from methods.syrenets.training import Cosine, Network, compiled_pass, inputs_of, training_pass
+from methods.torch_method import Feed, TorchLagrangianMethod, fused_adam_ok
 
 
 @METHODS.add("syrenets", "neural", "symbolic", "paper")

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import math
 
-from methods.syrenets.training import Feed, Network
+from methods.syrenets.training import Network
+from methods.torch_method import Feed
 
 
 def halve(method, networks: list[Network], t, experiment: str, progress, feed: Feed) -> dict:

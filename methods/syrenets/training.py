@@ -1,5 +1,5 @@
 """One SyReNets network's training: its state between steps
-(:class:`Network`), the data feed (:class:`Feed`), the training pass
+(:class:`Network`), the training pass
 (:func:`training_pass`, compiled by :func:`compiled_pass`), the frozen
 function a batch selects (:class:`Fixed`) and the cosine schedule
 (:class:`Cosine`)."""
@@ -33,31 +33,6 @@ class Network:
     watched: float | None = None
     lr_drops: list = field(default_factory=list)
     replay: torch.Tensor = field(default_factory=lambda: torch.empty(0, dtype=torch.long))
-
-
-@dataclass
-class Feed:
-    """The fit's mini-batches: a random order of the ``n`` samples, reshuffled
-    when fewer than ``bs`` are left, shared by the networks of a multi-start fit."""
-
-    n: int
-    bs: int
-    generator: torch.Generator
-    order: torch.Tensor
-    cursor: int = 0
-
-    @classmethod
-    def start(cls, n: int, bs: int, seed: int) -> "Feed":
-        generator = torch.Generator().manual_seed(seed)
-        return cls(n, bs, generator, torch.randperm(n, generator=generator))
-
-    def next(self) -> torch.Tensor:
-        """The next batch's sample indices."""
-        if self.cursor + self.bs > self.n:
-            self.order, self.cursor = torch.randperm(self.n, generator=self.generator), 0
-        idx = self.order[self.cursor:self.cursor + self.bs]
-        self.cursor += self.bs
-        return idx
 
 
 def inputs_of(q, qd, qdd, inputs: str) -> torch.Tensor:
