@@ -175,4 +175,4 @@ class DfkiDoublePendulum(System):
         source = f"dfki_trajectory_{{{','.join(names)}}}.csv.gz:{split}"
         meta = {"filter": asdict(spec), "torque_filtered": filter_torque}
         return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,
-                       recording=s["recording"].copy())
+                       recording=s["recording"].copy(), sign_qd=s["sign_qd"].copy())

@@ -50,10 +50,11 @@ def main(args) -> int:
     columns = ColumnMap.parse(args.columns) if args.columns else None
     system = None if columns else "dfki_double_pendulum"
     parts = [preprocess(read_recording(path, columns) if columns else read_raw(path), spec) for path in args.raw]
-    arrays = {k: np.concatenate([p[k] for p in parts]) for k in ("q", "qd", "qdd", "tau")}
+    arrays = {k: np.concatenate([p[k] for p in parts]) for k in ("q", "qd", "qdd", "tau", "sign_qd")}
     labels = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
     source = ", ".join(map(str, args.raw))
-    write_csv(Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], None, system, source, recording=labels), args.out)
+    write_csv(Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], None, system, source,
+                      recording=labels, sign_qd=arrays["sign_qd"]), args.out)
     print(f"wrote {len(labels)} samples of {arrays['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
           f"({spec.describe()})")
     return 0

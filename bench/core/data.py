@@ -5,13 +5,23 @@ In memory, a :class:`Dataset` holds float64 arrays ``q, qd, qdd, tau`` of shape
 
 On disk it is a CSV file with the columns::
 
-    q_1..q_n, qd_1..qd_n, qdd_1..qdd_n, tau_1..tau_n[, L][, trajectory]
+    q_1..q_n, qd_1..qd_n, qdd_1..qdd_n, tau_1..tau_n[, L][, trajectory][, sign_qd_1..sign_qd_n]
 
 ``trajectory`` is optional: the recording each sample comes from (any
 non-empty text). Measured data come in recordings, and neighbouring samples
 of one recording are near copies, so whatever is validated on held-out data
 holds out whole recordings where the data name them. Generated samples are
 independent and have no recording.
+
+``sign_qd_i`` is optional too: the sign of joint i's velocity as the
+torque's low-pass saw it. Where a recording's torque was filtered
+(:func:`bench.core.recordings.preprocess`), Coulomb friction's jump at
+``qd = 0`` reaches the samples rounded off over the filter's span, and a
+model whose friction column is ``sign(qd)`` fits that rounding with a
+steeper viscous slope. The converter therefore puts ``sign(qd)`` through the
+same filter at the full rate (parallel filtering) and writes it here; every
+term's torque that contains ``sign(qd_i)`` uses it
+(:meth:`Dataset.velocity_sign`). Without these columns it is ``sign(qd)``.
 
 Further columns (time stamps, labels) are allowed and ignored. The same
 format serves generated and measured data, so any method can be given
@@ -61,6 +71,10 @@ class Dataset:
     recording
         Array of shape ``(n,)`` of text labels: the recording (trajectory)
         each sample comes from, or ``None`` for independent samples.
+    sign_qd
+        Array of shape ``(n, dof)``: the sign of each velocity as the
+        torque's filter saw it (see the module docstring), or ``None`` where
+        the torque was not filtered (then ``sign(qd)``).
     """
 
     q: np.ndarray
@@ -72,6 +86,7 @@ class Dataset:
     source: str = "memory"
     meta: dict = field(default_factory=dict)
     recording: np.ndarray | None = None
+    sign_qd: np.ndarray | None = None
 
     def __post_init__(self):
         shapes = {a.shape for a in (self.q, self.qd, self.qdd, self.tau)}
@@ -84,6 +99,8 @@ class Dataset:
             if labels.shape != (self.q.shape[0],):
                 raise DataError(f"{self.source}: recording must have shape ({self.q.shape[0]},), got {labels.shape}")
             object.__setattr__(self, "recording", labels)
+        if self.sign_qd is not None and self.sign_qd.shape != self.q.shape:
+            raise DataError(f"{self.source}: sign_qd must have the shape of q, {self.q.shape}, got {self.sign_qd.shape}")
 
     def __len__(self) -> int:
         return self.q.shape[0]
@@ -106,11 +123,16 @@ class Dataset:
             self.q[index], self.qd[index], self.qdd[index], self.tau[index],
             None if self.L is None else self.L[index], self.system, self.source, dict(self.meta),
             None if self.recording is None else self.recording[index],
+            None if self.sign_qd is None else self.sign_qd[index],
         )
 
     def replace(self, **changes) -> "Dataset":
         """A copy with the given fields changed (the rest, recordings included, kept)."""
         return dataclasses.replace(self, **changes)
+
+    def velocity_sign(self) -> np.ndarray:
+        """``(n, dof)``: :attr:`sign_qd` where the data carry it, else ``sign(qd)``."""
+        return np.sign(self.qd) if self.sign_qd is None else self.sign_qd
 
     def recordings(self) -> list[str]:
         """The recordings' labels in order of first appearance; ``[]`` for independent samples."""
@@ -175,6 +197,8 @@ def generate(system, n: int, seed: int, *, cache: bool = True) -> Dataset:
 _COLUMN = re.compile(r"^(q|qd|qdd|tau)_(\d+)$")
 #: the optional column naming each sample's recording
 RECORDING = "trajectory"
+#: the optional columns ``sign_qd_1..sign_qd_n`` (:attr:`Dataset.sign_qd`)
+SIGN = "sign_qd"
 
 
 def columns(dof: int, with_L: bool) -> list[str]:
@@ -194,6 +218,9 @@ def write_csv(data: Dataset, path: str | os.PathLike) -> None:
         arrays["L"] = data.L
     if data.recording is not None:
         arrays[RECORDING] = data.recording
+    if data.sign_qd is not None:
+        for i in range(data.dof):
+            arrays[f"{SIGN}_{i + 1}"] = data.sign_qd[:, i]
     frame = pd.DataFrame(arrays)
     atomic_write(Path(path), lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
 
@@ -286,7 +313,14 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
     arrays = {k: np.stack([numeric(f"{k}_{i}") for i in range(1, file_dof + 1)], axis=1) for k in found}
     L = numeric("L") if "L" in frame.columns else None
     recording = label_column(frame, RECORDING, path) if RECORDING in frame.columns else None
-    return Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], L, system, str(path), recording=recording)
+    signs = [f"{SIGN}_{i}" for i in range(1, file_dof + 1)]
+    present = [c for c in signs if c in frame.columns]
+    if present and len(present) < len(signs):
+        raise DataError(f"{path}: has {', '.join(present)} but not {', '.join(c for c in signs if c not in present)} "
+                        f"(the filtered velocity signs come for every joint or for none)")
+    sign_qd = np.stack([numeric(c) for c in signs], axis=1) if present else None
+    return Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], L, system, str(path), recording=recording,
+                   sign_qd=sign_qd)
 
 
 def label_column(frame, col: str, path: Path) -> np.ndarray:

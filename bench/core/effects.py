@@ -118,8 +118,10 @@ class Effect:
     arity: int = 1
     nonnegative: bool = True
     shaped: str | None = None
-    #: for a shaped effect, ``numeric(q_j, qd_j, shape)``: its torque on its joint per unit
-    #: coefficient, in numpy (a search over the shape evaluates it often; tested equal to the term's)
+    #: for a shaped effect, ``numeric(q_j, qd_j, shape, sign_j)``: its torque on its joint per unit
+    #: coefficient, in numpy, with ``sign_j`` the data's sign of ``qd_j``
+    #: (:meth:`~bench.core.data.Dataset.velocity_sign`; a search over the shape evaluates it often;
+    #: tested equal to the term's)
     numeric: Callable | None = None
     #: for an effect of the whole system (``arity`` 0), ``on_system(system, q, qd)``: its term per
     #: unit coefficient in the system's symbols; ``expr`` is then unused
@@ -178,7 +180,7 @@ class Effect:
         ``shape``, ``(n, dof)``, by :attr:`numeric` (what :meth:`term`'s
         torque is, without building and compiling a term for each value)."""
         out = np.zeros((len(data), data.dof))
-        out[:, joint] = self.numeric(data.q[:, joint], data.qd[:, joint], shape)
+        out[:, joint] = self.numeric(data.q[:, joint], data.qd[:, joint], shape, data.velocity_sign()[:, joint])
         return out
 
     def term(self, *joints: int, shape: float | None = None, system=None) -> Term:
@@ -213,10 +215,10 @@ EFFECTS: dict[str, Effect] = {
                "b·(qd_i − qd_j) on i, −b·(qd_i − qd_j) on j (D = b·(qd_i − qd_j)²/2)", 2),
         Effect("smooth_coulomb", lambda q, qd, v: v * sympy.log(sympy.cosh(qd[0] / v)), "D", "F_c",
                "F_c·tanh(qd/v_s) (D = F_c·v_s·log cosh(qd/v_s))", shaped="v_s",
-               numeric=lambda q, qd, v: np.tanh(qd / v)),
+               numeric=lambda q, qd, v, sign: np.tanh(qd / v)),
         Effect("stribeck_hump", lambda q, qd, v: v * sympy.sqrt(sympy.pi) / 2 * sympy.erf(sympy.Abs(qd[0]) / v), "D",
                "dF", "dF·exp(−(qd/v_s)²)·sign(qd) (D = dF·v_s·√π/2·erf(|qd|/v_s))", shaped="v_s",
-               numeric=lambda q, qd, v: np.exp(-((qd / v) ** 2)) * np.sign(qd)),
+               numeric=lambda q, qd, v, sign: np.exp(-((qd / v) ** 2)) * sign),
         Effect("tip_payload", None, "L", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
                arity=0, on_system=lambda system, q, qd: _payload(system, q, qd), needs_link_lengths=True),
         Effect("gravity_tilt", None, "L", "alpha",

@@ -14,6 +14,14 @@ clean, so :func:`preprocess` turns a recording into samples in four steps:
 4. ``trim_s`` cut from both ends (the filter's start-up), then every
    ``decimate``-th sample kept.
 
+Beside them it gives ``sign_qd``, the sign of the filtered velocity put
+through the same low-pass at the full rate (parallel filtering,
+:attr:`bench.core.data.Dataset.sign_qd`): the filter rounds Coulomb
+friction's jump in the torque over its span, and the same rounding in the
+friction column keeps a fitted viscous coefficient from absorbing it. The
+rest of a model's columns are smooth functions of the filtered state, which
+the low-pass passes as they are.
+
 The defaults (:data:`DEFAULT_FILTER`) are those measured for the DFKI
 double pendulum (``python -m bench dfki-filter``); a robot of its own wants
 its own cut-off, chosen the same way.
@@ -141,9 +149,10 @@ def read_recording(path: str | Path, columns: ColumnMap) -> Recording:
 
 
 def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> dict[str, np.ndarray]:
-    """Samples ``q, qd, qdd, tau`` (each ``(n, dof)``) of one recording; see
-    the module docstring for the steps. ``filter_torque=False`` keeps the
-    measured torque unfiltered (it is still resampled), for judging a filter."""
+    """Samples ``q, qd, qdd, tau`` and ``sign_qd`` (each ``(n, dof)``) of one
+    recording; see the module docstring for the steps. ``filter_torque=False``
+    keeps the measured torque unfiltered (it is still resampled), for judging
+    a filter; ``sign_qd`` is then ``sign(qd)``."""
     from scipy.signal import butter, sosfiltfilt  # 0.3 s to import: only conversions need it
 
     t = recording.time
@@ -165,8 +174,10 @@ def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filte
     q = sosfiltfilt(sos, resampled(recording.q), axis=0)
     qd = sosfiltfilt(sos, resampled(recording.qd), axis=0)
     tau = resampled(recording.tau)
+    sign_qd = np.sign(qd)
     if filter_torque:
         tau = sosfiltfilt(sos, tau, axis=0)
+        sign_qd = sosfiltfilt(sos, sign_qd, axis=0)
     qdd = np.gradient(qd, spec.dt, axis=0)
     keep = slice(trim, len(grid) - trim, spec.decimate)
-    return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep]}
+    return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep], "sign_qd": sign_qd[keep]}

@@ -195,18 +195,23 @@ def _tanh(expr: sympy.Expr) -> sympy.Expr:
 @functools.lru_cache(maxsize=4096)
 def _force_function(expr: sympy.Expr):
     """``f(data) -> (n,)`` for a generalized force, compiled once per expression
-    over the symbols it uses (``q_i``, ``qd_i``, ``qdd_i``)."""
+    over the symbols it uses (``q_i``, ``qd_i``, ``qdd_i``). Each
+    ``sign(qd_i)`` is the data's :meth:`~bench.core.data.Dataset.velocity_sign`:
+    on filtered recordings, the sign as the torque's low-pass saw it."""
+    signs = {a: sympy.Symbol(f"sign_{a.args[0]}") for a in expr.atoms(sympy.sign)
+             if a.args[0].is_Symbol and str(a.args[0]).startswith("qd_")}
+    expr = expr.xreplace(signs)
     symbols = sorted(expr.free_symbols, key=str)
     columns = []
     for s in symbols:
         kind, _, index = str(s).rpartition("_")
-        if kind not in ("q", "qd", "qdd") or not index.isdigit():
+        if kind not in ("q", "qd", "qdd", "sign_qd") or not index.isdigit():
             raise ValueError(f"a generalized force may use q_i, qd_i and qdd_i only, got {s}")
         columns.append((kind, int(index) - 1))
     raw = sympy.lambdify(symbols, expr, modules="numpy")
 
     def f(data: Dataset) -> np.ndarray:
-        out = raw(*[getattr(data, kind)[:, i] for kind, i in columns])
+        out = raw(*[(data.velocity_sign() if kind == "sign_qd" else getattr(data, kind))[:, i] for kind, i in columns])
         return np.broadcast_to(np.asarray(out, dtype=np.float64), (len(data),))
 
     return f

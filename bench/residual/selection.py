@@ -306,10 +306,11 @@ def shape_rss(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset, exact: bo
     effect, joint = EFFECTS[term.name], term.joint
     rows = slice(joint, None, data.dof)
     Qj, rj = np.ascontiguousarray(Q[rows]), r[rows]
+    sign = data.velocity_sign()[:, joint]
     rr = float(r @ r)
 
     def rss(v: float) -> float:
-        g = effect.numeric(data.q[:, joint], data.qd[:, joint], v)
+        g = effect.numeric(data.q[:, joint], data.qd[:, joint], v, sign)
         if exact:
             column = np.zeros(len(r))
             column[rows] = g

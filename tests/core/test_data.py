@@ -174,3 +174,21 @@ def test_an_empty_recording_label_is_refused_naming_the_row(tmp_path, cell):
                     .replace("0.8\n", f"0.8,{cell}\n", 1).replace("0.8\n", "0.8,b\n"))
     with pytest.raises(DataError, match=f"{path}: column trajectory has an empty value in data row 2"):
         read_csv(path, dof=2)
+
+
+def test_filtered_velocity_signs_travel_through_csv_and_subsets(small_data, tmp_path):
+    train = small_data[0]
+    np.testing.assert_array_equal(train.velocity_sign(), np.sign(train.qd))  # no filter: the sign itself
+    data = train.replace(sign_qd=np.tanh(train.qd / 0.1))
+    path = tmp_path / "s.csv"
+    write_csv(data, path)
+    back = read_csv(path, dof=2)
+    np.testing.assert_array_equal(back.velocity_sign(), data.sign_qd)
+    np.testing.assert_array_equal(back.subset(slice(2, 5)).velocity_sign(), data.sign_qd[2:5])
+
+
+def test_a_filtered_sign_for_some_joints_only_is_refused(tmp_path):
+    path = tmp_path / "s.csv"
+    path.write_text(GOOD.replace("tau_2\n", "tau_2,sign_qd_1\n").replace("0.8\n", "0.8,1\n"))
+    with pytest.raises(DataError, match=f"{path}: has sign_qd_1 but not sign_qd_2"):
+        read_csv(path, dof=2)

@@ -135,12 +135,24 @@ def test_the_stribeck_law_adds_its_torque_on_its_joint():
 
 
 def test_a_shaped_effects_numeric_torque_is_its_terms():
-    data = generate(get_system("double_pendulum"), 300, 0)
-    for name, effect in EFFECTS.items():
-        if effect.shaped:
-            for v in (0.05, 0.5, 3.0):
-                tau = effect.term(1, shape=v).torque(data)
-                np.testing.assert_allclose(effect.numeric(data.q[:, 1], data.qd[:, 1], v), tau[:, 1], rtol=1e-13, atol=1e-15)
+    plain = generate(get_system("double_pendulum"), 300, 0)
+    filtered = plain.replace(sign_qd=np.tanh(plain.qd / 0.2))  # a filtered recording's rounded signs
+    for data in (plain, filtered):
+        for name, effect in EFFECTS.items():
+            if effect.shaped:
+                for v in (0.05, 0.5, 3.0):
+                    tau = effect.term(1, shape=v).torque(data)
+                    numeric = effect.numeric(data.q[:, 1], data.qd[:, 1], v, data.velocity_sign()[:, 1])
+                    np.testing.assert_allclose(numeric, tau[:, 1], rtol=1e-13, atol=1e-15)
+
+
+def test_coulomb_friction_uses_the_datas_filtered_velocity_sign():
+    data = generate(get_system("double_pendulum"), 200, 0)
+    rounded = np.tanh(data.qd / 0.3)
+    term = EFFECTS["coulomb_friction"].term(1)
+    np.testing.assert_array_equal(term.torque(data)[:, 1], np.sign(data.qd[:, 1]))
+    np.testing.assert_array_equal(term.torque(data.replace(sign_qd=rounded))[:, 1], rounded[:, 1])
+    assert not term.torque(data.replace(sign_qd=rounded))[:, 0].any()
 
 
 def test_a_sharp_smooth_coulomb_is_finite_at_any_speed():
