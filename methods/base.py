@@ -44,7 +44,7 @@ from bench.core.errors import ConfigError, DataError
 from bench.core.models import ExpressionModel, FittedModel
 from bench.core.registry import Registry
 from bench.core.system import SYSTEMS, System
-from methods.config import MethodConfig, build_config
+from methods.config import MethodConfig, Named, build_config
 from methods.progress import Progress
 
 
@@ -106,6 +106,8 @@ class Method(FittedModel):
     Config: ClassVar[type] = MethodConfig
     #: overrides of ``Config`` for a tiny CI run; each method declares its own
     smoke: ClassVar[dict] = {"max_steps": 5}
+    #: named configurations beside the defaults (:class:`~methods.config.Named`), chosen by ``--config NAME``
+    configurations: ClassVar[dict[str, Named]] = {}
     #: the experiments the method applies to
     experiments: ClassVar[tuple[str, ...]] = EXPERIMENTS
     #: whether ``fit(..., warm_start=True)`` can continue from the current state
@@ -137,6 +139,23 @@ class Method(FittedModel):
     @classmethod
     def smoke_config(cls) -> dict:
         return dict(cls.smoke)
+
+    @classmethod
+    def configuration_names(cls) -> list[str]:
+        """``default``, ``smoke`` and the method's own named configurations."""
+        return ["default", "smoke", *cls.configurations]
+
+    @classmethod
+    def configuration(cls, name: str) -> dict:
+        """The hyperparameters of the configuration ``name`` (``{}`` for the defaults);
+        a :class:`ConfigError` naming the ones there are otherwise."""
+        if name == "default":
+            return {}
+        if name == "smoke":
+            return cls.smoke_config()
+        if name not in cls.configurations:
+            raise ConfigError(f"{cls.name} has no configuration {name!r}; it offers {', '.join(cls.configuration_names())}")
+        return dict(cls.configurations[name].values)
 
     def hyperparameters(self) -> dict:
         return dataclasses.asdict(self.config)

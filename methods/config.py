@@ -5,6 +5,10 @@ ranged, validated when the method is built.
 type and, with :class:`Range`, its allowed values. :func:`build_config`
 checks what a user passed (``--set``), and the defaults too, and refuses a
 bad value in one line naming the method and the field.
+
+Beside its defaults a method may offer :class:`Named` configurations (the
+authors' code's settings, say), which a user picks with ``--config NAME`` and
+can still ``--set`` on top of.
 """
 
 from __future__ import annotations
@@ -55,6 +59,14 @@ class Range:
 POSITIVE = Range(0, low_open=True)
 #: a probability or a fraction
 FRACTION = Range(0, 1)
+
+@dataclass(frozen=True)
+class Named:
+    """A named configuration: ``values`` set beside the defaults, and what it is, in a line."""
+
+    summary: str
+    values: dict
+
 
 _BOOLEANS = {"true": True, "yes": True, "1": True, "false": False, "no": False, "0": False}
 

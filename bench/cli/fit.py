@@ -7,8 +7,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_budget, add_plugin, add_set, budget, check_names, hyperparameters,
-                               load_plugins)
+from bench.cli.options import (UsageError, add_budget, add_config, add_plugin, add_set, budget, check_names,
+                               configurations, hyperparameters, load_plugins)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
 from bench.runner import matrix
@@ -30,7 +30,7 @@ def add_arguments(f) -> None:
     f.add_argument("--seed", type=seed, default=0, help="the run's seed (default 0)")
     add_budget(f, "for the fit")
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
-    f.add_argument("--smoke", action="store_true", help="use the method's tiny smoke configuration")
+    add_config(f)
     add_set(f)
     f.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"generated training samples (default {N_TRAIN})")
     f.add_argument("--n-test", type=positive_int, default=N_TEST, help=f"generated test samples (default {N_TEST})")
@@ -48,7 +48,7 @@ def main(args) -> int:
         raise UsageError("--test needs --train (generated training data comes with generated test data)")
     spec = RunSpec(
         system=name, method=args.method, experiment=args.experiment, seed=args.seed,
-        budget_s=budget(args)[0], steps=args.steps, profile="smoke" if args.smoke else "default",
+        budget_s=budget(args)[0], steps=args.steps, profile=_configuration(args),
         hyperparameters=hyperparameters(args.overrides, args.method, [args.method]),
         n_train=args.n_train, n_test=args.n_test,
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
@@ -65,6 +65,13 @@ def main(args) -> int:
         write_json(args.json, record.to_json())
     print(summary_line(record, log))
     return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
+
+
+def _configuration(args) -> str:
+    """The method's configuration by name (an unavailable method cannot be asked for its names: its default)."""
+    if not METHODS.entry(args.method).available:
+        return "smoke" if args.smoke else "default"
+    return configurations(args, [args.method])[args.method]
 
 
 def run_one(spec: RunSpec) -> tuple[Record, Path | None]:

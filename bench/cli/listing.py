@@ -27,4 +27,6 @@ def main(args) -> int:
         state = "available" if reason is None else f"unavailable: {reason}"
         exps = ",".join(entry.obj.experiments)
         print(f"  {entry.name:<20} {state}  experiments={exps}  tags={','.join(sorted(entry.tags))}")
+        for name, named in entry.obj.configurations.items():
+            print(f"  {'':<20} --config {name}: {named.summary}")
     return 0

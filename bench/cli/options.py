@@ -46,6 +46,38 @@ def add_set(parser, what: str = "the method") -> None:
                              "only, e.g. mlp.hidden=64 (repeatable)")
 
 
+def add_config(parser, what: str = "the method") -> None:
+    """``--config NAME`` and ``--config METHOD=NAME``, repeatable, with ``--smoke`` for ``--config smoke``."""
+    parser.add_argument("--config", dest="configs", action="append", default=[], metavar="[METHOD=]NAME",
+                        help=f"a named configuration of {what} (python -m bench list names them), e.g. paper; "
+                             "METHOD=NAME picks it for that method only, e.g. syrenets=best-300s; --set applies on "
+                             "top of it (repeatable)")
+    parser.add_argument("--smoke", action="store_true", help=f"the tiny smoke configuration of {what} (--config smoke)")
+
+
+def configurations(args, methods: list[str]) -> dict[str, str]:
+    """Each method's configuration by name from ``--smoke`` and ``--config``:
+    ``default`` (or ``smoke``), then every ``NAME`` given alone for the
+    methods that offer it, then every ``METHOD=NAME``, which wins. A name
+    that none of ``methods`` offers, or that its method does not, is an error."""
+    chosen = {m: "smoke" if args.smoke else "default" for m in methods}
+    given = [(*c.partition("=")[::2],) if "=" in c else ("", c) for c in args.configs]
+    for method, name in sorted(given, key=lambda g: bool(g[0])):  # a method's own choice last
+        method, name = method.strip(), name.strip()
+        if method and method not in methods:
+            raise UsageError(f"--config {method}={name}: {method!r} is not a method of this command "
+                             f"(methods: {', '.join(methods)})")
+        targets = [method] if method else [m for m in methods if name in METHODS[m].configuration_names()]
+        if not targets:
+            offered = sorted({n for m in methods for n in METHODS[m].configuration_names()})
+            raise UsageError(f"--config {name}: no method of this command offers it (they offer {', '.join(offered)})")
+        for m in targets:
+            if name not in METHODS[m].configuration_names():
+                raise UsageError(f"--config {method}={name}: {m} offers {', '.join(METHODS[m].configuration_names())}")
+            chosen[m] = name
+    return chosen
+
+
 def add_plugin(parser) -> None:
     parser.add_argument("--plugin", action="append", default=[], help=PLUGIN_HELP)
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.cli.options import UsageError, add_plugin, add_set, budget, check_names, hyperparameters, load_plugins, number
+from bench.cli.options import (UsageError, add_config, add_plugin, add_set, budget, check_names, configurations,
+                               hyperparameters, load_plugins, number)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
 from bench.residual.job import ResidualJob, run_residual
@@ -32,6 +33,7 @@ def add_arguments(res) -> None:
                           "of its work, the polish all its starts, the trace until nothing is significant, and at most "
                           f"{MAX_ROUNDS} rounds; the same command then gives the same effects and numbers on any machine")
     res.add_argument("--seed", type=seed, default=0, help="the method's seed (default 0)")
+    add_config(res)
     add_set(res)
     res.add_argument("--json", type=Path, default=None, help="write the result here (see the README for its keys)")
     res.add_argument("--report", type=Path, default=None, help="write a markdown report with residual plots here")
@@ -51,7 +53,8 @@ def main(args) -> int:
     reason = entry.obj.not_applicable_reason("indirect")
     if reason:
         raise UsageError(f"method {args.method} cannot run the loop, which fits torques: {reason}")
-    settings = hyperparameters(args.overrides, args.method, [args.method])
+    named = METHODS[args.method].configuration(configurations(args, [args.method])[args.method])
+    settings = {**named, **hyperparameters(args.overrides, args.method, [args.method])}
     METHODS[args.method](**settings)  # bad hyperparameters: exit 2 now
     if not args.train and system.simulated:
         raise UsageError(f"{name} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")

@@ -6,7 +6,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from bench.cli.options import add_budget, add_plugin, add_set, budget, check_names, hyperparameters, load_plugins
+from bench.cli.options import (add_budget, add_config, add_plugin, add_set, budget, check_names, configurations,
+                               hyperparameters, load_plugins)
 from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
@@ -31,7 +32,7 @@ def add_arguments(r) -> None:
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
     r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
     r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
-    r.add_argument("--smoke", action="store_true", help="use each method's tiny smoke configuration")
+    add_config(r, "each method in the run that offers it")
     add_set(r, "every method in the run")
     r.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"training samples (default {N_TRAIN})")
     r.add_argument("--n-test", type=positive_int, default=N_TEST, help=f"test samples (default {N_TEST})")
@@ -60,16 +61,17 @@ def main(args) -> int:
     check_names(args, systems, methods, args.experiments)
     seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
     budget_s, steps = budget(args)
+    chosen = configurations(args, [m for m in methods if METHODS.entry(m).available])
     specs = build_specs(
         systems, methods, args.experiments, seeds, budget_s, noises=args.noise, steps=steps,
-        profile="smoke" if args.smoke else "default",
         n_train=args.n_train, n_test=args.n_test,
         domain_half_width=args.domain_half_width,
         plugins=plugins,
         threads=args.threads,
         rollout=not args.no_rollout,
     )
-    specs = [dataclasses.replace(s, hyperparameters=hyperparameters(args.overrides, s.method, methods)) for s in specs]
+    specs = [dataclasses.replace(s, profile=chosen.get(s.method, "smoke" if args.smoke else "default"),
+                                 hyperparameters=hyperparameters(args.overrides, s.method, methods)) for s in specs]
     for spec in specs:  # fail fast on a bad override, before any process starts
         if spec.method in METHODS and METHODS.entry(spec.method).available:
             METHODS[spec.method](**method_config(spec))

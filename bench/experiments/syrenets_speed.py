@@ -10,8 +10,8 @@ the median of the rounds' paired ratios.
 
 Configurations (:data:`CONFIGS`, which ``tests/benchmarks/test_syrenets_speed.py`` uses too):
 
-* ``public``: the authors' public configuration, inputs ``(q, qd, qdd)``, a
-  batch of 32 plus 16 replayed samples;
+* ``public``: SyReNets' configuration of that name (``--config public``, the
+  authors' code), inputs ``(q, qd, qdd)``, a batch of 32 plus 16 replayed samples;
 * ``default``: the suite's, inputs ``(q, qd)``, a batch of 32.
 
 Both with the default one-probe contractive penalty, float64. With
@@ -41,12 +41,13 @@ from bench.core.arguments import positive, positive_int
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, check_output
 from bench.runner.provenance import machine, provenance
+from methods import METHODS
 
 HELP = "time SyReNets' training step in this tree and in an earlier commit, in turn (results/syrenets/speed/syrenets_speed.md)"
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = {
-    "public": {"hyperparameters": {"inputs": "q_qd_qdd", "replay": 16}, "batch": 48},
+    "public": {"hyperparameters": METHODS["syrenets"].configuration("public"), "batch": 48},
     "default": {"hyperparameters": {}, "batch": 32},
 }
 EXPERIMENTS = ("direct", "indirect")

@@ -31,7 +31,7 @@ Definitions
   methods without an expression.
 * Any run can be replayed with the work it did (``python -m bench rerun``).
 * Above each table: the budget (seconds, or steps of each method's work),
-  seeds and configuration, and the time spent compiling before the budget
+  seeds and each method's named configuration, and the time spent compiling before the budget
   started where any run did; the data (the
   sampling ranges of generated data, or the files or recordings, and the
   noise on the training targets); the hyperparameters set beside each
@@ -204,6 +204,20 @@ def _overrides(records: list[Record]) -> str:
     return f"Hyperparameters set beside each method's own: {'; '.join(parts)}."
 
 
+def _configurations(records: list[Record]) -> str:
+    """The methods' named configurations: ``default`` where every run used its
+    method's defaults, else the named ones by method (``default; syrenets: best-300s``)."""
+    by_method = defaultdict(set)
+    for r in records:
+        by_method[r.method.split("+")[0]].add(r.spec.get("profile", "default"))
+    names = {n for v in by_method.values() for n in v}
+    if len(names) == 1:
+        return names.pop()
+    others = sorted(m for m, v in by_method.items() if v == {"default"})
+    named = [f"{m}: {', '.join(sorted(v))}" for m, v in sorted(by_method.items()) if v != {"default"}]
+    return "; ".join((["default"] if others else []) + named)
+
+
 def _header(records: list[Record]) -> list[str]:
     records = [r for r in records if r.status != MISSING]
     if not records:
@@ -219,12 +233,12 @@ def _header(records: list[Record]) -> list[str]:
     commits = sorted({f"{p['commit'][:10]}{' (dirty)' if p.get('dirty') else ''}" for p in prov})
     torch_versions = sorted({str(p["packages"].get("torch")) for p in prov})
     dates = sorted(p["utc"][:10] for p in prov)
-    profiles = sorted({r.spec.get("profile", "default") for r in records})
+    profiles = _configurations(records)
     what = "of wall-clock per run" if kinds == {"seconds"} else \
         "of each method's work per run (gradient steps, generations or solves)" if kinds == {"steps"} else "per run"
     lines = [
         f"Budget: {', '.join(budgets)} {what}; "
-        f"{len(seeds)} seed(s) ({', '.join(map(str, seeds))}); configuration: {', '.join(profiles)}."
+        f"{len(seeds)} seed(s) ({', '.join(map(str, seeds))}); configuration: {profiles}."
         + _preparation(records),
         _data(records),
         _overrides(records),

@@ -20,7 +20,6 @@ import torch
 
 from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate, read_csv
-from bench.core.errors import ConfigError
 from bench.core.timeouts import Timeout
 from bench.core.system import System
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
@@ -35,11 +34,9 @@ ROLLOUT_LIMIT_S = 120.0
 
 
 def method_config(spec: RunSpec) -> dict:
-    """The method's hyperparameters for ``spec``: its profile, then the spec's overrides."""
-    cls = METHODS[spec.method]
-    if spec.profile not in ("default", "smoke"):
-        raise ConfigError(f"unknown profile {spec.profile!r}; choose default or smoke")
-    config = cls.smoke_config() if spec.profile == "smoke" else {}
+    """The method's hyperparameters for ``spec``: its named configuration
+    (:attr:`RunSpec.profile`), then the spec's overrides."""
+    config = METHODS[spec.method].configuration(spec.profile)
     config.update(spec.hyperparameters)
     return config
 

@@ -58,8 +58,9 @@ class RunSpec:
     Attributes
     ----------
     profile
-        ``"default"`` (the method's real configuration) or ``"smoke"`` (its
-        tiny CI configuration).
+        The method's configuration by name: ``"default"``, ``"smoke"`` (its
+        tiny CI configuration) or one it names itself
+        (:meth:`methods.base.Method.configuration`; ``--config``).
     hyperparameters
         Overrides on top of the profile.
     train_path, test_path

@@ -13,6 +13,7 @@ import torch
 
 from bench.core.dynamics import euler_lagrange
 from methods.base import METHODS
+from methods.config import Named
 from methods.syrenets.config import SyReNetsConfig
 from methods.syrenets.equations import MAX_READABLE_TERMS, Equations
 from methods.syrenets.multistart import halve
@@ -33,6 +34,15 @@ class SyReNets(Equations, TorchLagrangianMethod):
     Config = SyReNetsConfig
     smoke = {"layers": 2, "heads": 3, "latent": 4, "ae_hidden": 8, "head_hidden": 8, "max_steps": 10,
              "eval_samples": 128, "refine": False}
+    configurations = {
+        "paper": Named("the paper's text: the defaults with the contractive penalty exact, not estimated",
+                       {"contractive_probes": 0}),
+        "public": Named("the authors' public code: q, q̇ and q̈ as inputs, 16 worst-fitted samples replayed a step",
+                        {"inputs": "q_qd_qdd", "replay": 16}),
+        "best-300s": Named("the paper's indirect accuracy within 300 s on one core (results/syrenets/studies/"
+                           "syrenets_300s_compiled_best): float32, replay, four starts, cosine schedule, compiled",
+                           {"replay": 16, "dtype": "float32", "starts": 4, "lr_schedule": "cosine", "compile": True}),
+    }
     net: Network | None = None
 
     # -- the network in place -------------------------------------------------------
