@@ -62,7 +62,7 @@ import numpy as np
 import sympy
 
 from bench.core.data import DataError, Dataset, read_frame
-from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, Recording, preprocess
+from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, Recording, joined, preprocess
 from systems.base import SYSTEMS, System
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -131,10 +131,7 @@ def trajectory_path(name: str) -> Path:
 @functools.lru_cache(maxsize=8)
 def _samples(split: str, spec: FilterSpec, filter_torque: bool) -> dict[str, np.ndarray]:
     names = SPLITS[split]
-    parts = [preprocess(read_raw(trajectory_path(n)), spec, filter_torque=filter_torque) for n in names]
-    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    out["recording"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
-    return out
+    return joined([preprocess(read_raw(trajectory_path(n)), spec, filter_torque=filter_torque) for n in names], names)
 
 
 @SYSTEMS.add("dfki_double_pendulum", "measured", "external")

@@ -39,6 +39,7 @@ def test_a_name_alone_picks_it_for_the_methods_that_offer_it_and_a_method_prefix
     assert configurations(_args("paper"), methods) == {"syrenets": "paper", "mlp": "default"}
     assert configurations(_args("syrenets=public", "paper"), methods) == {"syrenets": "public", "mlp": "default"}
     assert configurations(_args("syrenets=public", smoke=True), methods) == {"syrenets": "public", "mlp": "smoke"}
+    assert configurations(_args("smoke"), ["pysr"]) == {"pysr": "smoke"}  # an unavailable method still names its own
 
 
 @pytest.mark.parametrize("given, message", [

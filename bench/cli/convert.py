@@ -5,13 +5,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from bench.cli.options import UsageError
 from bench.core.arguments import nonnegative, positive, positive_int
 from bench.core.data import Dataset, write_csv
 from bench.core.fileio import check_output
-from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, preprocess, read_recording
+from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, joined, preprocess, read_recording
 from systems.dfki_double_pendulum import read_raw
 
 HELP = "turn a robot's log into the suite's CSV format: resample, low-pass, differentiate"
@@ -50,12 +48,11 @@ def main(args) -> int:
     columns = ColumnMap.parse(args.columns) if args.columns else None
     system = None if columns else "dfki_double_pendulum"
     parts = [preprocess(read_recording(path, columns) if columns else read_raw(path), spec) for path in args.raw]
-    arrays = {k: np.concatenate([p[k] for p in parts]) for k in ("q", "qd", "qdd", "tau", "sign_qd")}
-    labels = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
+    s = joined(parts, names)
     source = ", ".join(map(str, args.raw))
-    write_csv(Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], None, system, source,
-                      recording=labels, sign_qd=arrays["sign_qd"]), args.out)
-    print(f"wrote {len(labels)} samples of {arrays['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
+    write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, system, source, recording=s["recording"],
+                      sign_qd=s["sign_qd"]), args.out)
+    print(f"wrote {len(s['q'])} samples of {s['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
           f"({spec.describe()})")
     return 0
 

@@ -48,7 +48,7 @@ def main(args) -> int:
         raise UsageError("--test needs --train (generated training data comes with generated test data)")
     spec = RunSpec(
         system=name, method=args.method, experiment=args.experiment, seed=args.seed,
-        budget_s=budget(args)[0], steps=args.steps, profile=_configuration(args),
+        budget_s=budget(args)[0], steps=args.steps, profile=configurations(args, [args.method])[args.method],
         hyperparameters=hyperparameters(args.overrides, args.method, [args.method]),
         n_train=args.n_train, n_test=args.n_test,
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
@@ -65,13 +65,6 @@ def main(args) -> int:
         write_json(args.json, record.to_json())
     print(summary_line(record, log))
     return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
-
-
-def _configuration(args) -> str:
-    """The method's configuration by name (an unavailable method cannot be asked for its names: its default)."""
-    if not METHODS.entry(args.method).available:
-        return "smoke" if args.smoke else "default"
-    return configurations(args, [args.method])[args.method]
 
 
 def run_one(spec: RunSpec) -> tuple[Record, Path | None]:

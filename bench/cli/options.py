@@ -61,9 +61,8 @@ def configurations(args, methods: list[str]) -> dict[str, str]:
     methods that offer it, then every ``METHOD=NAME``, which wins. A name
     that none of ``methods`` offers, or that its method does not, is an error."""
     chosen = {m: "smoke" if args.smoke else "default" for m in methods}
-    given = [(*c.partition("=")[::2],) if "=" in c else ("", c) for c in args.configs]
+    given = [(method.strip(), name.strip()) for method, _, name in (c.rpartition("=") for c in args.configs)]
     for method, name in sorted(given, key=lambda g: bool(g[0])):  # a method's own choice last
-        method, name = method.strip(), name.strip()
         if method and method not in methods:
             raise UsageError(f"--config {method}={name}: {method!r} is not a method of this command "
                              f"(methods: {', '.join(methods)})")

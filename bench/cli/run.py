@@ -61,7 +61,7 @@ def main(args) -> int:
     check_names(args, systems, methods, args.experiments)
     seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
     budget_s, steps = budget(args)
-    chosen = configurations(args, [m for m in methods if METHODS.entry(m).available])
+    chosen = configurations(args, methods)
     specs = build_specs(
         systems, methods, args.experiments, seeds, budget_s, noises=args.noise, steps=steps,
         n_train=args.n_train, n_test=args.n_test,
@@ -70,7 +70,7 @@ def main(args) -> int:
         threads=args.threads,
         rollout=not args.no_rollout,
     )
-    specs = [dataclasses.replace(s, profile=chosen.get(s.method, "smoke" if args.smoke else "default"),
+    specs = [dataclasses.replace(s, profile=chosen[s.method],
                                  hyperparameters=hyperparameters(args.overrides, s.method, methods)) for s in specs]
     for spec in specs:  # fail fast on a bad override, before any process starts
         if spec.method in METHODS and METHODS.entry(spec.method).available:

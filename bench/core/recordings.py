@@ -181,3 +181,11 @@ def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filte
     qdd = np.gradient(qd, spec.dt, axis=0)
     keep = slice(trim, len(grid) - trim, spec.decimate)
     return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep], "sign_qd": sign_qd[keep]}
+
+
+def joined(parts: list[dict[str, np.ndarray]], names: list[str]) -> dict[str, np.ndarray]:
+    """The samples of several recordings (:func:`preprocess` of each) one after
+    another, with ``recording``: each sample's recording name from ``names``."""
+    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    out["recording"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
+    return out
