@@ -77,7 +77,8 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
 
     The loop is mini-batch Adam on the direct loss ``MSE(L_hat, L)`` or the
     indirect loss ``MSE(g(L_hat), tau)``; subclasses write :meth:`build_model`
-    and optionally :meth:`make_scheduler` and :meth:`extra_loss`.
+    and optionally :meth:`make_scheduler`, :meth:`extra_loss` and
+    :meth:`optimizer_options`.
     """
 
     Config: ClassVar[type] = TorchConfig
@@ -95,12 +96,20 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
     def extra_loss(self) -> torch.Tensor | float:
         return 0.0
 
+    def optimizer_options(self) -> dict:
+        """Further keywords of ``torch.optim.Adam`` (``weight_decay``, ``amsgrad``)."""
+        return {}
+
     @property
     def dtype(self) -> torch.dtype:
         return getattr(torch, self.config.dtype)
 
-    def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
-        return self.model(q, qd)
+    @property
+    def lagrangian(self):
+        """The model: a module ``(q, qd) -> L``. One with a ``tangent`` method
+        (:class:`bench.core.dynamics.TangentLagrangian`) gives the
+        Euler–Lagrange transform its own derivatives."""
+        return self.model
 
     def batch_loss(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
         if experiment == "direct":
@@ -114,7 +123,7 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
         if not self.warm_start:
             self.model = self.build_model(train).to(self.dtype)
             self._optimizer = torch.optim.Adam(
-                self.model.parameters(), lr=self.config.lr, betas=self.config.betas,
+                self.model.parameters(), lr=self.config.lr, betas=self.config.betas, **self.optimizer_options(),
                 **({"fused": True} if fused_adam_ok(self.dtype) else {}),
             )
             self._scheduler = self.make_scheduler(self._optimizer)

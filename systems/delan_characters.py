@@ -59,6 +59,12 @@ def _frame():
     return read_frame(DATA)
 
 
+def _columns(frame, names: tuple[str, ...]) -> np.ndarray:
+    """The columns ``NAME_1, NAME_2`` of each name, side by side: ``(n, 2 * len(names))``."""
+    return np.concatenate([np.stack([numeric_column(frame, f"{k}_{i}", DATA) for i in (1, 2)], axis=1) for k in names],
+                          axis=1)
+
+
 @SYSTEMS.add("delan_characters", "measured", "external")
 class DelanCharacters(System):
     coordinates = ("q1", "q2_relative")
@@ -77,6 +83,18 @@ class DelanCharacters(System):
         potential = p.b1 * sympy.cos(q1) + p.b2 * sympy.sin(q1) + p.b3 * sympy.cos(q1 + q2) + p.b4 * sympy.sin(q1 + q2)
         return kinetic - potential
 
+    def forces(self, data: Dataset) -> dict[str, np.ndarray] | None:
+        """The parts of the torque the data ship (``tau_inertial``,
+        ``tau_coriolis``, ``tau_gravity``), at the samples of ``data`` that
+        are rows of the packaged file; ``None`` if any is not."""
+        frame = _frame()
+        index = {row.tobytes(): i for i, row in enumerate(_columns(frame, ("q", "qd", "qdd")))}
+        rows = [index.get(row.tobytes()) for row in np.concatenate([data.q, data.qd, data.qdd], axis=1)]
+        if any(i is None for i in rows):
+            return None
+        parts = {"inertial": "tau_inertial", "coriolis": "tau_coriolis", "gravity": "tau_gravity"}
+        return {part: _columns(frame, (column,))[rows] for part, column in parts.items()}
+
     def load(self, split: str) -> Dataset:
         """The published ``train`` or ``test`` split."""
         frame = _frame()
@@ -84,7 +102,7 @@ class DelanCharacters(System):
         if split not in ("train", "test"):
             raise ValueError(f"split must be 'train' or 'test', got {split!r}")
         part = frame[test if split == "test" else ~test]
-        cols = {k: np.stack([numeric_column(part, f"{k}_{i}", DATA) for i in (1, 2)], axis=1) for k in ("q", "qd", "qdd", "tau")}
+        cols = {k: _columns(part, (k,)) for k in ("q", "qd", "qdd", "tau")}
         chars = "".join(sorted(part["character"].unique()))
         return Dataset(cols["q"], cols["qd"], cols["qdd"], cols["tau"], None, self.name,
                        f"{DATA.name}:{split} (characters {chars})", recording=part["character"].astype(str).to_numpy())

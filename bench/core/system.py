@@ -47,6 +47,9 @@ from bench.core import symbolic
 from bench.core.dynamics import euler_lagrange_chunked
 from bench.core.registry import Registry
 
+#: the parts of a Lagrangian's torque, as :meth:`System.forces` gives them
+FORCES = ("inertial", "coriolis", "gravity")
+
 HALF_PI = math.pi / 2
 
 
@@ -297,6 +300,27 @@ class System(abc.ABC):
         tau, L = euler_lagrange_chunked(self.lagrangian, q, qd, qdd)
         extra = self.nonconservative_torque(q, qd, qdd)
         return (tau if extra is None else tau + extra), L
+
+    def forces(self, data) -> dict[str, np.ndarray] | None:
+        """The parts of the true Lagrangian's torque at the states of ``data``
+        (a :class:`~bench.core.data.Dataset`): ``inertial`` ``M(q) qdd``,
+        ``coriolis`` ``c(q, qd)`` and ``gravity`` ``g(q)``, each ``(n, dof)``
+        (:data:`FORCES`); ``None`` where they are not known (a measured
+        system that does not ship them). Non-conservative forces are in
+        none of them."""
+        if not self.simulated:
+            return None
+
+        def conservative(qd, qdd):
+            q, qd, qdd = (torch.from_numpy(np.ascontiguousarray(x, dtype=np.float64)) for x in (data.q, qd, qdd))
+            tau, _ = self.torque(q, qd, qdd)
+            extra = self.nonconservative_torque(q, qd, qdd)
+            return (tau if extra is None else tau - extra).numpy()
+
+        zero = np.zeros_like(data.q)
+        gravity = conservative(zero, zero)
+        return {"inertial": conservative(zero, data.qdd) - gravity, "coriolis": conservative(data.qd, zero) - gravity,
+                "gravity": gravity}
 
     def forward_dynamics(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """Unforced accelerations ``(n, dof)`` from an engine-backed system's own

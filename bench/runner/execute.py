@@ -22,6 +22,7 @@ from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate, read_csv
 from bench.core.timeouts import Timeout
 from bench.core.system import System
+from bench.evaluation.forces import forces_entry
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record
@@ -29,6 +30,8 @@ from bench.runner.spec import TEST_SEED_OFFSET, RunSpec
 from methods import METHODS
 from systems import SYSTEMS
 
+#: test samples the force decomposition is scored on (:mod:`bench.evaluation.forces`)
+FORCES_SAMPLES = 2000
 #: seconds a rollout of a time-budgeted run may take (under a work budget only its count of evaluations bounds it)
 ROLLOUT_LIMIT_S = 120.0
 
@@ -108,8 +111,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
 
     What follows the fit runs in stages (:class:`~bench.evaluation.scores.Stages`):
     a stage that fails (the expression, exact recovery, a variant, the
-    rollout, the method's details) is named in ``failed_stages`` with its
-    error, its traceback goes to the run's log, and the run keeps its fit's
+    rollout, the force decomposition (:mod:`bench.evaluation.forces`), the
+    method's details) is named in ``failed_stages`` with its error, its traceback goes to the run's log, and the run keeps its fit's
     train and test MSE, steps and curve, with status ``ok``. A fit that
     fails, or whose MSE cannot be computed, gives status ``failed``; its
     traceback is printed too.
@@ -174,6 +177,13 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             limit = None if budget.kind == STEPS else ROLLOUT_LIMIT_S  # a work budget's results do not depend on time
             fields["rollout"] = stages.run("rollout", rollout_entry, method, system, test, limit)
             timing["rollout_s"] = time.perf_counter() - clock
+        if test is not None:
+            clock = time.perf_counter()
+            part = test.subset(slice(0, FORCES_SAMPLES))
+            forces = stages.run("forces", forces_entry, method, system, part)
+            if forces is not None:
+                fields["details"]["forces"] = {"n": len(part), **forces}
+            timing["forces_s"] = time.perf_counter() - clock
         fields["details"]["timing"] = {k: round(v, 3) for k, v in timing.items()}
         memory["peak_mb"] = peak_resident_mb()
         fields["details"]["memory"] = {k: round(v, 1) for k, v in memory.items()}
