@@ -9,7 +9,7 @@ The Lagrangian has the structure of rigid-body dynamics built in,
 
 with :math:`\Lambda(q)` lower-triangular. One network of ``q`` (``layers``
 hidden layers of ``hidden`` units) feeds three linear heads: the diagonal of
-:math:`\Lambda` through a ReLU (non-negative), its strictly lower part, and
+:math:`\Lambda` through a softplus (positive), its strictly lower part, and
 the potential :math:`V`. :math:`H` is positive definite at every ``q`` by
 construction, so the learned model always has forward dynamics.
 
@@ -25,16 +25,23 @@ Hyperparameters
 The paper leaves sizes and initialisation to its code; they follow the
 authors' public example (``example_DeLaN.py``): 2 hidden layers of 64
 softplus units, :math:`\epsilon = 0.01`, biases initialised to 1e-4 and the
-diagonal head's to 1e-3, Xavier-normal weights with gain :math:`\sqrt 2`,
-Adam with AMSGrad at a learning rate of 5e-4 and weight decay 1e-5, batches
+diagonal head's to 1e-3, Xavier-normal weights with gain :math:`\sqrt 2`
+(0.125 for the potential head), Adam with AMSGrad at a learning rate of 5e-4 and weight decay 1e-5, batches
 of 512, in float32. The loss is DeLaN's: the squared torque error summed over joints and
 averaged over the batch (``MSE`` times the DoF; the tables report the MSE).
+The gains are those the public model applies: it reads them from a key the
+example does not set (``g_hidden``), so the example's ``gain_output`` of 0.1
+never takes effect and the potential head gets the model's default 0.125,
+the factor's heads the hidden gain.
 
 Deviations from the public code, each deliberate
 -------------------------------------------------
-* The output heads are initialised with gain 0.1 as the example's
-  ``gain_output`` intends; the public model reads that gain from the
-  ``g_hidden`` key by mistake and so uses :math:`\sqrt 2` for them.
+* The diagonal of :math:`\Lambda` goes through a softplus, as in the
+  authors' later JAX code (there with a shift of 2, here none), not the
+  ReLU of their torch code: with the ReLU the diagonal dies on 6 of 10
+  seeds of the characters (every output of the head negative, so no
+  gradient), and their test MSE stays at 0.22. ``diagonal="relu"``
+  restores it.
 * The public loop adds the power-conservation loss of the *previous* epoch as
   a number, which carries no gradient; it is left out.
 * The best state seen is kept, as for every method of the suite; the public
@@ -62,7 +69,9 @@ class DeLaNConfig(TorchConfig):
     ``activation`` of its layers; ``epsilon`` added to the mass matrix's
     diagonal; ``weight_decay`` and ``amsgrad`` of Adam; the initial biases
     ``bias_init`` (every layer) and ``diagonal_bias_init`` (the diagonal
-    head); Xavier-normal gains ``hidden_gain`` and ``output_gain``."""
+    head); the diagonal's activation ``diagonal`` and the shift
+    ``diagonal_shift`` added before it; Xavier-normal gains ``hidden_gain`` (hidden layers and the
+    factor's heads) and ``output_gain`` (the potential's head)."""
 
     lr: Annotated[float, POSITIVE] = 5e-4
     batch_size: Annotated[int, Range(1)] = 512
@@ -75,8 +84,10 @@ class DeLaNConfig(TorchConfig):
     amsgrad: bool = True
     bias_init: float = 1e-4
     diagonal_bias_init: float = 1e-3
+    diagonal: typing.Literal["relu", "softplus"] = "softplus"
+    diagonal_shift: float = 0.0
     hidden_gain: Annotated[float, POSITIVE] = math.sqrt(2.0)
-    output_gain: Annotated[float, POSITIVE] = 0.1
+    output_gain: Annotated[float, POSITIVE] = 0.125
 
 
 #: each activation and its derivative
@@ -95,6 +106,8 @@ class DeepLagrangian(torch.nn.Module):
         c = config
         self.dof, self.epsilon = dof, c.epsilon
         self.act, self.act_prime = ACTIVATIONS[c.activation]
+        self.diag_act, self.diag_prime = ACTIVATIONS[c.diagonal]
+        self.shift = c.diagonal_shift if c.diagonal == "softplus" else 0.0
         widths = [dof] + [c.hidden] * c.layers
         self.trunk = torch.nn.ModuleList(torch.nn.Linear(a, b) for a, b in zip(widths, widths[1:]))
         self.diagonal = torch.nn.Linear(c.hidden, dof)
@@ -102,8 +115,8 @@ class DeepLagrangian(torch.nn.Module):
         self.potential = torch.nn.Linear(c.hidden, 1)
         for layer in self.trunk:
             _init(layer, c.hidden_gain, c.bias_init)
-        _init(self.diagonal, c.output_gain, c.diagonal_bias_init)
-        _init(self.lower, c.output_gain, c.bias_init)
+        _init(self.diagonal, c.hidden_gain, c.diagonal_bias_init)
+        _init(self.lower, c.hidden_gain, c.bias_init)
         _init(self.potential, c.output_gain, c.bias_init)
         rows, cols = np.tril_indices(dof, -1)
         place = np.zeros((len(rows), dof * dof))  # the lower head's outputs to their places in Lambda
@@ -122,7 +135,7 @@ class DeepLagrangian(torch.nn.Module):
         h = q
         for layer in self.trunk:
             h = self.act(layer(h))
-        factor = self._factor(torch.relu(self.diagonal(h)), self.lower(h))
+        factor = self._factor(self.diag_act(self.diagonal(h) + self.shift), self.lower(h))
         eye = torch.eye(self.dof, dtype=q.dtype, device=q.device)
         return factor @ factor.transpose(1, 2) + self.epsilon * eye, self.potential(h).squeeze(-1)
 
@@ -143,11 +156,11 @@ class DeepLagrangian(torch.nn.Module):
             slope = self.act_prime(a)[:, None, :]
             jac = slope * (layer.weight.T.expand(n, dof, -1) if jac is None else jac @ layer.weight.T)
             h = self.act(a)
-        a_diag = self.diagonal(h)
-        d_diag = (a_diag > 0).to(q.dtype)[:, None, :] * (jac @ self.diagonal.weight.T)  # (n, k, dof): d diag / d q_k
+        a_diag = self.diagonal(h) + self.shift
+        d_diag = self.diag_prime(a_diag)[:, None, :] * (jac @ self.diagonal.weight.T)  # (n, k, dof): d diag / d q_k
         d_lower = jac @ self.lower.weight.T  # (n, k, m)
         dV = (jac @ self.potential.weight.T)[..., 0]  # (n, dof)
-        factor = self._factor(torch.relu(a_diag), self.lower(h))
+        factor = self._factor(self.diag_act(a_diag), self.lower(h))
         u = (factor.transpose(1, 2) @ qd[:, :, None])[..., 0]  # Lambda^T qd
         L = 0.5 * (u * u).sum(1) + 0.5 * self.epsilon * (qd * qd).sum(1) - self.potential(h).squeeze(-1)
         # qd^T (dH/dq_k) qd / 2 = qd^T (dLambda/dq_k) u, entry by entry of Lambda

@@ -32,6 +32,7 @@ data can decide (the individual parameters are not identifiable).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -41,8 +42,9 @@ import torch
 
 from bench.core.data import Dataset
 from bench.core.errors import DataError
-from bench.core.models import LinearParametricModel, ParametricModel, mass_and_bias
-from bench.core.regression import base_columns, least_squares
+from bench.core.models import FeasibleSet, LinearParametricModel, ParametricModel, mass_and_bias
+from bench.core.feasible import Feasibility, feasible_fit, nearest_completion
+from bench.core.regression import Compressed, base_columns, least_squares
 from bench.core.system import LinearForm
 from methods.base import METHODS
 from methods.config import Range
@@ -52,24 +54,39 @@ from methods.torch_method import TorchConfig, TorchLagrangianMethod
 @dataclass(frozen=True)
 class SysIdConfig(TorchConfig):
     """Attributes: ``hidden`` softplus units of the parameter network;
-    ``linear_samples`` training samples a linear form is fitted on."""
+    ``linear_samples`` training samples a linear form is fitted on;
+    ``feasible``: a rigid-body form's parameters identified with each body's
+    pseudo-inertia positive semidefinite, pulled toward the form's prior
+    (the URDF) with weight ``regularisation`` (:mod:`bench.core.feasible`)."""
 
     hidden: Annotated[int, Range(1)] = 64
     linear_samples: Annotated[int, Range(1)] = 8192
+    feasible: bool = False
+    regularisation: Annotated[float, Range(0)] = 1e-6
 
 
-def fit_linear_form(form: LinearForm, data: Dataset, experiment: str) -> tuple[LinearParametricModel, dict]:
+def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: bool = False,
+                    regularisation: float = 1e-6) -> tuple[LinearParametricModel, dict]:
     """The base parameters of ``form`` fitted on ``data`` by least squares,
     and facts for the record: how many there are and, where the true
-    parameters are known, their relative error."""
+    parameters are known, their relative error.
+
+    With ``feasible`` (a form of rigid bodies with a prior), every
+    parameter instead, each body's pseudo-inertia held positive
+    semidefinite (:func:`bench.core.feasible.feasible_fit`). Either way the
+    facts say whether the identified set is a rigid body's (``feasibility``):
+    the least-squares base parameters are judged by the full set nearest
+    the prior that has them (:func:`~bench.core.feasible.nearest_completion`)."""
     if experiment == "direct":
         W = np.column_stack([form.lagrangian_regressor(data.q, data.qd), np.ones(len(data))])  # L up to a constant
         y = data.target(experiment)
     else:
         W = form.torque_regressor(data.q, data.qd, data.qdd).reshape(len(data) * data.dof, -1)
         y = data.tau.ravel()
+    start = time.perf_counter()
     independent, dependent, beta = base_columns(W)
     coef = least_squares(W[:, independent], y)
+    ls_seconds = time.perf_counter() - start
     constant = len(form.names)  # the direct experiment's constant column, not a parameter
     keep = independent != constant
     offset = float(coef[~keep][0]) if (~keep).any() else 0.0
@@ -80,6 +97,27 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str) -> tuple[L
         true = np.asarray(form.true_values + (0.0,))  # the constant's true value is unknown: 0 is not used below
         base_true = (true[independent] + beta @ true[dependent])[keep]
         facts["parameter_error"] = float(np.linalg.norm(model.coef - base_true) / np.linalg.norm(base_true))
+    if form.bodies and form.prior is not None and experiment == "indirect":
+        prior = np.asarray(form.prior)
+        ls_full = nearest_completion(coef, independent, dependent, beta, prior)
+        problem = Compressed(W, y)
+        ls_rss = problem.residual_norm2(ls_full)
+        report = {"least_squares": {**Feasibility.of(ls_full, form.bodies).as_dict(), "seconds": round(ls_seconds, 3)}}
+        if feasible:
+            start = time.perf_counter()
+            full, solve = feasible_fit(problem, form.bodies, prior, regularisation)
+            base = full[independent] + beta @ full[dependent]
+            model = LinearParametricModel(form, np.arange(len(form.names)), full, form.names,
+                                          feasible=FeasibleSet(form.bodies, form.prior, regularisation))
+            report["feasible"] = {
+                **Feasibility.of(full, form.bodies).as_dict(), **solve,
+                "seconds": round(time.perf_counter() - start, 3),
+                "distance_to_least_squares": float(np.linalg.norm(base - coef) / np.linalg.norm(coef)),
+                "training_error_ratio": problem.residual_norm2(full) / max(ls_rss, 1e-300),
+            }
+            if form.true_values is not None:
+                facts["parameter_error"] = float(np.linalg.norm(base[keep] - base_true) / np.linalg.norm(base_true))
+        facts["feasibility"] = report
     return model, facts
 
 
@@ -113,7 +151,8 @@ class SysId(TorchLagrangianMethod):
             return super()._fit(train, experiment, progress)
         rng = np.random.default_rng(self.seed)
         sub = train.subset(np.sort(rng.choice(len(train), min(len(train), self.config.linear_samples), replace=False)))
-        self.linear, self._facts = fit_linear_form(form, sub, experiment)
+        self.linear, self._facts = fit_linear_form(form, sub, experiment, self.config.feasible,
+                                                   self.config.regularisation)
         while progress.step():
             progress.stop("solved")
 

@@ -196,7 +196,8 @@ class UrdfArm(System):
             return self._each(one, q, qd).reshape(len(q), 10 * dof)
 
         names = tuple(f"{p}_{i}" for i in range(1, dof + 1) for p in INERTIAL)
-        return LinearForm(names, dof, torque_regressor, lagrangian_regressor, tuple(self.inertial_parameters()))
+        urdf = tuple(self.inertial_parameters())
+        return LinearForm(names, dof, torque_regressor, lagrangian_regressor, urdf, bodies=dof, prior=urdf)
 
     # -- description ----------------------------------------------------------------
     def scaled_domain(self, half_width: float) -> Domain:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import abc
 import functools
 import weakref
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -281,10 +282,12 @@ class LinearParametricModel(FittedModel):
     plus the combination of those that act only together with it).
     """
 
-    def __init__(self, form, columns, coef, names: Sequence[str] | None = None, offset: float = 0.0):
+    def __init__(self, form, columns, coef, names: Sequence[str] | None = None, offset: float = 0.0,
+                 feasible: "FeasibleSet | None" = None):
         self.form, self.columns = form, np.asarray(columns, dtype=int)
         self.coef, self.offset = np.asarray(coef, dtype=np.float64), float(offset)
         self.names = tuple(names) if names is not None else tuple(form.names[i] for i in self.columns)
+        self.feasible = feasible
 
     def torque_columns(self, data: Dataset) -> np.ndarray:
         """The model's columns in torque space, flattened sample-major: ``(n * dof, k)``
@@ -298,7 +301,7 @@ class LinearParametricModel(FittedModel):
         return self.form.lagrangian_regressor(data.q, data.qd)[:, self.columns] @ self.coef + self.offset
 
     def with_coefficients(self, coef) -> "LinearParametricModel":
-        return LinearParametricModel(self.form, self.columns, coef, self.names, self.offset)
+        return LinearParametricModel(self.form, self.columns, coef, self.names, self.offset, self.feasible)
 
     def parameters(self) -> dict[str, float]:
         """The fitted values, by name."""
@@ -308,7 +311,20 @@ class LinearParametricModel(FittedModel):
         return self
 
     def structure(self) -> str:
-        return "linear"
+        """``"feasible"`` for a model whose parameters are held physically
+        feasible (:attr:`feasible`), ``"linear"`` otherwise."""
+        return "linear" if self.feasible is None else "feasible"
+
+
+@dataclass(frozen=True)
+class FeasibleSet:
+    """How a linear model's parameters are held feasible (:func:`bench.core.feasible.feasible_fit`):
+    its first ``bodies`` blocks of 10 columns are rigid bodies', pulled toward
+    ``prior`` with weight ``regularisation``."""
+
+    bodies: int
+    prior: tuple[float, ...]
+    regularisation: float
 
 
 def mass_and_bias(model: FittedModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

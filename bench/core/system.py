@@ -141,6 +141,13 @@ class LinearForm:
         ``(q, qd) -> (n, p)``.
     true_values
         The parameters of the simulated system (``None`` where unknown).
+    bodies
+        How many rigid bodies' 10 inertial parameters (Pinocchio's order,
+        :mod:`bench.core.feasible`) are the first columns; ``0`` for a form
+        whose parameters are not a rigid body's.
+    prior
+        The parameters' nominal values (an arm's URDF), which a feasible fit
+        falls back on where the data do not decide; ``None`` where none are known.
     """
 
     names: tuple[str, ...]
@@ -148,6 +155,8 @@ class LinearForm:
     torque_regressor: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
     lagrangian_regressor: Callable[[np.ndarray, np.ndarray], np.ndarray]
     true_values: tuple[float, ...] | None = None
+    bodies: int = 0
+    prior: tuple[float, ...] | None = None
 
 
 class System(abc.ABC):
