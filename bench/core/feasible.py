@@ -31,6 +31,7 @@ pseudo-inertias say whether that fit is a rigid body's.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -122,7 +123,9 @@ def feasible_fit(problem: Compressed, bodies: int, prior: np.ndarray, regularisa
     start = time.perf_counter()
     program = cp.Problem(cp.Minimize(objective), constraints)
     try:
-        program.solve(solver=cp.CLARABEL)
+        with warnings.catch_warnings():  # an inaccurate solution is named in the facts' status
+            warnings.simplefilter("ignore", UserWarning)
+            program.solve(solver=cp.CLARABEL)
     except cp.SolverError as exc:
         raise DataError(f"the feasible fit's solver failed: {exc}") from None
     if program.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or step.value is None:
@@ -178,3 +181,30 @@ def nearest_completion(base: np.ndarray, independent: np.ndarray, dependent: np.
     K[:, dependent] += beta
     step, *_ = np.linalg.lstsq(K, base - K @ prior, rcond=None)
     return prior + step
+
+
+def feasibility_of(model, data) -> dict | None:
+    """Whether a :class:`~bench.core.models.LinearParametricModel` of rigid
+    bodies is a rigid body's (:meth:`Feasibility.as_dict`): its parameters
+    where it holds all of them, else the full set nearest its form's prior
+    with its base parameters (their columns found again on ``data``, as the
+    fit found them). ``None`` for a form without bodies or prior, or where
+    the base columns found differ from the model's."""
+    form = model.form
+    if not form.bodies or form.prior is None:
+        return None
+    prior = np.asarray(form.prior)
+    if len(model.columns) == len(prior):
+        full = np.zeros(len(prior))
+        full[model.columns] = model.coef
+        return Feasibility.of(full, form.bodies).as_dict()
+    from bench.core.models import torque_regressor
+    from bench.core.regression import base_columns
+
+    W = torque_regressor(form, data)
+    independent, dependent, beta = base_columns(W.reshape(-1, W.shape[-1]))
+    if sorted(independent) != sorted(model.columns):
+        return None
+    order = {c: i for i, c in enumerate(model.columns)}
+    base = model.coef[[order[c] for c in independent]]
+    return Feasibility.of(nearest_completion(base, independent, dependent, beta, prior), form.bodies).as_dict()

@@ -208,8 +208,10 @@ class _Loop:
         split = describe_validation(train)
         report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
                f"held out ({split}) {held:.4g}")
+        feasible_before = strategy.feasibility(model, train)
         model, held, mass, findings = self.rounds(model, held, mass, rounds)
         after = self.scores(model)
+        feasible_after = strategy.feasibility(model, train)
         bound = model.rigid.expression_terms_bound()  # SyReNets' full equation is never built
         expr = model.expression() if bound is None or bound <= MAX_SYMBOLIC_TERMS else None
         return ResidualResult(
@@ -225,6 +227,7 @@ class _Loop:
             budget_s=budget.seconds, fit_budget_s=self.fitter.budget.seconds if budget.kind == "seconds" else None,
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
             test_source=None if self.test is None else self.test.source, provenance=provenance(), models=(first, model),
+            feasibility=None if feasible_before is None else {"before": feasible_before, "after": feasible_after},
         )
 
     def candidates(self) -> TermLibrary:

@@ -65,6 +65,16 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         lines += [f"The final model's mass matrix is not positive definite at the {mass['states']} training states "
                   f"checked (smallest eigenvalue {mass['smallest_eigenvalue_after']:.4g}): the fitted Lagrangian "
                   "is not a physical one there.", ""]
+    feasible = result.feasibility
+    if feasible:
+        def eigen(part):
+            return ", ".join(f"{x:.3g}" for x in feasible[part]["smallest_eigenvalues"])
+
+        lines += [f"The rigid bodies' inertial parameters {'are' if feasible['after']['feasible'] else 'are not'} "
+                  f"physically feasible after the loop ({'were' if feasible['before']['feasible'] else 'were not'} "
+                  f"before). Smallest pseudo-inertia eigenvalue of each body, before: {eigen('before')}; "
+                  f"after: {eigen('after')}. Masses after: "
+                  + ", ".join(f"{m:.4g}" for m in feasible["after"]["masses"]) + ".", ""]
     if result.effects:
         lines += ["| effect | kind | law | joints | parameters (± std. error) |", "|---|---|---|---|---|"]
         for e in result.effects:

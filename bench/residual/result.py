@@ -24,6 +24,10 @@ class ResidualResult:
     ``budget`` is the loop's budget, seconds or steps of work
     (:meth:`bench.core.budget.Budget.to_json`); under a work budget
     ``budget_s`` is its ceiling (``None``: none) and ``fit_budget_s`` is ``None``.
+    ``feasibility`` says, for a model of rigid bodies (SysId on an arm),
+    whether its inertial parameters are a rigid body's before and after the
+    loop (:func:`bench.core.feasible.feasibility_of`): the masses and each
+    body's smallest pseudo-inertia eigenvalue; ``None`` for other models.
     ``models`` holds the fitted models before and after the loop, for the
     report's residual plots; it is not part of the JSON.
     """
@@ -47,6 +51,7 @@ class ResidualResult:
     statistics_seconds: float | None = None
     budget: dict | None = None
     provenance: dict = field(default_factory=dict)
+    feasibility: dict | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:

@@ -23,6 +23,8 @@ strategy               models                            refit with effects
                                                          are its parameters' directions where it stands
 :class:`Linear`        linear in its parameters          least squares over its base columns and the
                        (SysId on an arm)                 effects' together
+:class:`Feasible`      linear, held physically feasible  the same under each body's pseudo-inertia held
+                       (SysId with ``feasible=true``)    positive semidefinite (a semidefinite program)
 :class:`Expression`    a sum of at most                  least squares over its terms' and the effects'
                        :data:`MAX_SYMBOLIC_TERMS` terms  columns together (``g`` is linear in ``L``)
                        (sparse regression, GP)
@@ -44,7 +46,8 @@ import sympy
 
 from bench.core.data import Dataset, mse
 from bench.core.models import ExpressionModel, FittedModel, ParametricModel
-from bench.core.regression import fit_statistics
+from bench.core.feasible import feasibility_of, feasible_fit
+from bench.core.regression import Compressed, fit_statistics
 from bench.core.terms import Term, TermLibrary
 from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
 from bench.residual.selection import orthonormal_basis
@@ -116,6 +119,11 @@ class Strategy(abc.ABC):
         progress line's), or ``None``."""
         return None
 
+    def feasibility(self, model: LoopModel, train: Dataset) -> dict | None:
+        """Whether the model's inertial parameters are a rigid body's
+        (:func:`bench.core.feasible.feasibility_of`), for a model of rigid bodies; else ``None``."""
+        return None
+
     def _effects_beside(self, model: LoopModel, train: Dataset, effects: list[Term]):
         """The effects' columns and their least-squares coefficients on what the rigid model leaves."""
         Phi = TermLibrary(effects).design(train, "indirect")
@@ -178,6 +186,31 @@ class Linear(Strategy):
         Phi = TermLibrary(effects).design(train, "indirect")
         F_L = model.rigid.torque_columns(train)
         coef, stderr, _ = fit_statistics(np.hstack([F_L, Phi]), train.tau.ravel())
+        k = F_L.shape[1]
+        return LoopModel(model.rigid.with_coefficients(coef[:k]), effects, coef[k:], stderr[k:])
+
+    def feasibility(self, model, train):
+        return feasibility_of(model.rigid, train)
+
+
+class Feasible(Linear):
+    """A model linear in its parameters held physically feasible
+    (:class:`~bench.core.models.FeasibleSet`): refitted with the effects
+    under the same constraints (:func:`bench.core.feasible.feasible_fit`),
+    so that the effects are not judged beside a rigid model no rigid body
+    has. Tracing, pruning and the held-out checks judge candidates by
+    unconstrained least squares, as for :class:`Linear`; the effects'
+    standard errors are least squares' too."""
+
+    name = "feasible"
+
+    def refit(self, model, train, effects):
+        Phi = TermLibrary(effects).design(train, "indirect")
+        F_L = model.rigid.torque_columns(train)
+        A, y = np.hstack([F_L, Phi]), train.tau.ravel()
+        held = model.rigid.feasible
+        coef, _ = feasible_fit(Compressed(A, y), held.bodies, np.asarray(held.prior), held.regularisation)
+        _, stderr, _ = fit_statistics(A, y)
         k = F_L.shape[1]
         return LoopModel(model.rigid.with_coefficients(coef[:k]), effects, coef[k:], stderr[k:])
 
@@ -252,6 +285,8 @@ def strategy_for(fitted: FittedModel) -> Strategy:
         return Parametric()
     if structure == "linear":
         return Linear()
+    if structure == "feasible":
+        return Feasible()
     if structure == "expression":
         basis = expression_terms(fitted)
         if basis is not None:

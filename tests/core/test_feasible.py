@@ -1,0 +1,77 @@
+"""Physically feasible identification: the pseudo-inertia, and the fit on a noisy arm."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bench.core.data import add_noise, generate, mse
+from bench.core.feasible import (Feasibility, feasible_fit, from_pseudo_inertia, project, pseudo_inertia,
+                                 smallest_eigenvalues)
+from bench.core.regression import Compressed
+from methods import METHODS
+from systems import get_system
+
+finite = st.floats(-10, 10, allow_nan=False)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(finite, min_size=10, max_size=10))
+def test_the_pseudo_inertia_and_its_inverse_agree(p):
+    np.testing.assert_allclose(from_pseudo_inertia(pseudo_inertia(np.array(p))), p, atol=1e-9)
+
+
+def test_feasible_bodies_and_infeasible_ones():
+    # a point mass of 2 kg at c: J = m [c; 1][c; 1]^T, positive semidefinite of rank one
+    c, m = np.array([0.1, -0.2, 0.3]), 2.0
+    point = np.array([m, *(m * c), m * (c[1] ** 2 + c[2] ** 2), -m * c[0] * c[1], m * (c[0] ** 2 + c[2] ** 2),
+                      -m * c[0] * c[2], -m * c[1] * c[2], m * (c[0] ** 2 + c[1] ** 2)])
+    assert abs(smallest_eigenvalues(point, 1)[0]) < 1e-12
+    box = np.array([1.0, 0, 0, 0, 0.02, 0, 0.03, 0, 0, 0.04])  # a box's inertia about its centre
+    assert Feasibility.of(box, 1).feasible
+    negative_mass = box * np.array([-1, 1, 1, 1, 1, 1, 1, 1, 1, 1])
+    triangle = box.copy()
+    triangle[4] = 0.08  # Ixx > Iyy + Izz: no mass distribution has it
+    for bad in (negative_mass, triangle):
+        assert not Feasibility.of(bad, 1).feasible
+        assert smallest_eigenvalues(project(bad, 1), 1)[0] >= 0.0
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return get_system("panda")
+
+
+def test_on_noise_free_data_the_feasible_fit_is_least_squares(panda):
+    train, test = generate(panda, 768, 0), generate(panda, 256, 1000)
+    ls = METHODS["sysid"]().fit(train, "indirect", 0, steps=1)
+    feasible = METHODS["sysid"](feasible=True).fit(train, "indirect", 0, steps=1)
+    facts = feasible.record_details()["feasibility"]
+    assert facts["least_squares"]["feasible"] and facts["feasible"]["feasible"]
+    assert mse(feasible.predict(test), test.tau) < 1e-12 * np.var(test.tau)
+    assert mse(ls.predict(test), test.tau) < 1e-20 * np.var(test.tau)
+
+
+def test_on_noisy_data_least_squares_is_infeasible_and_the_feasible_fit_is_not(panda):
+    train = add_noise(generate(panda, 768, 0), "indirect", 0.05, 0)
+    test = generate(panda, 512, 1000)
+    ls = METHODS["sysid"]().fit(train, "indirect", 0, steps=1)
+    feasible = METHODS["sysid"](feasible=True).fit(train, "indirect", 0, steps=1)
+    facts = feasible.record_details()["feasibility"]
+    assert not facts["least_squares"]["feasible"]  # some body's pseudo-inertia has a negative eigenvalue
+    assert facts["feasible"]["feasible"] and min(facts["feasible"]["smallest_eigenvalues"]) >= 0.0
+    assert 1.0 <= facts["feasible"]["training_error_ratio"] < 1.05
+    assert mse(feasible.predict(test), test.tau) < 1.05 * mse(ls.predict(test), test.tau)
+
+
+def test_free_columns_beside_the_bodies_are_fitted_without_constraint(panda):
+    form = panda.linear_form()
+    data = generate(panda, 256, 0)
+    W = form.torque_regressor(data.q, data.qd, data.qdd).reshape(-1, len(form.names))
+    offset = np.tile(np.eye(7), (len(data), 1))  # a constant torque per joint
+    y = data.tau.ravel() + offset @ np.arange(1.0, 8.0)
+    coef, facts = feasible_fit(Compressed(np.hstack([W, offset]), y), 7, np.asarray(form.prior), 1e-6)
+    np.testing.assert_allclose(coef[-7:], np.arange(1.0, 8.0), atol=1e-6)
+    assert min(smallest_eigenvalues(coef[:70], 7)) >= 0.0 and facts["status"].startswith("optimal")

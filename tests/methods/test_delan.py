@@ -1,0 +1,45 @@
+"""DeLaN: its structure, its own derivatives against autograd, and that it learns."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from bench.core.data import generate, mse
+from bench.core.dynamics import euler_lagrange
+from bench.evaluation.forces import decomposition
+from methods import METHODS
+from methods.delan import DeepLagrangian, DeLaNConfig
+
+
+@pytest.mark.parametrize("activation", ["softplus", "tanh", "relu"])
+@pytest.mark.parametrize("diagonal", ["softplus", "relu"])
+@pytest.mark.parametrize("dof", [1, 2, 4])
+def test_its_own_derivatives_give_the_torques_autograd_gives(activation, diagonal, dof):
+    torch.manual_seed(dof)
+    config = DeLaNConfig(activation=activation, diagonal=diagonal, diagonal_bias_init=0.3, output_gain=1.0)
+    net = DeepLagrangian(dof, config).double()
+    q, qd, qdd = (torch.randn(64, dof, dtype=torch.float64) for _ in range(3))
+    own = euler_lagrange(net, q, qd, qdd)  # the model's tangent
+    generic = euler_lagrange(net.forward, q, qd, qdd)  # two reverse passes
+    assert torch.allclose(own, generic, rtol=1e-10, atol=1e-10)
+    assert generic.abs().max() > 0.1  # not a vacuous match
+
+
+def test_the_mass_matrix_is_positive_definite_by_construction():
+    torch.manual_seed(0)
+    net = DeepLagrangian(3, DeLaNConfig(output_gain=3.0, hidden_gain=3.0)).double()
+    H, _ = net.parts(torch.randn(500, 3, dtype=torch.float64) * 5)
+    assert torch.linalg.eigvalsh(H)[:, 0].min() >= 0.01 - 1e-12  # at least epsilon
+
+
+def test_delan_learns_the_double_pendulum_from_torques(double_pendulum):
+    train, test = generate(double_pendulum, 2048, 0), generate(double_pendulum, 512, 1000)
+    m = METHODS["delan"](eval_samples=512).fit(train, "indirect", 0, steps=1500)
+    assert mse(m.predict(test), test.tau) / np.var(test.tau) < 0.01
+    # its learned parts add up to its torque, and its mass matrix is the model's H
+    parts = decomposition(m, test)
+    np.testing.assert_allclose(sum(parts.values()), m.predict(test), rtol=1e-5, atol=1e-4)
+    H = m.mass_matrix(test.q[:16])
+    np.testing.assert_allclose(np.einsum("bij,bj->bi", H, test.qdd[:16]), parts["inertial"][:16], rtol=1e-4, atol=1e-4)
