@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.core.errors import DataError
+from bench.core.models import torque_regressor
 from bench.core.regression import Compressed
 
 #: parameters per rigid body
@@ -187,9 +188,8 @@ def feasibility_of(model, data) -> dict | None:
     """Whether a :class:`~bench.core.models.LinearParametricModel` of rigid
     bodies is a rigid body's (:meth:`Feasibility.as_dict`): its parameters
     where it holds all of them, else the full set nearest its form's prior
-    with its base parameters (their columns found again on ``data``, as the
-    fit found them). ``None`` for a form without bodies or prior, or where
-    the base columns found differ from the model's."""
+    that gives the same torques at the states of ``data`` (its base
+    parameters completed); ``None`` for a form without bodies or prior."""
     form = model.form
     if not form.bodies or form.prior is None:
         return None
@@ -198,13 +198,7 @@ def feasibility_of(model, data) -> dict | None:
         full = np.zeros(len(prior))
         full[model.columns] = model.coef
         return Feasibility.of(full, form.bodies).as_dict()
-    from bench.core.models import torque_regressor
-    from bench.core.regression import base_columns
-
     W = torque_regressor(form, data)
-    independent, dependent, beta = base_columns(W.reshape(-1, W.shape[-1]))
-    if sorted(independent) != sorted(model.columns):
-        return None
-    order = {c: i for i, c in enumerate(model.columns)}
-    base = model.coef[[order[c] for c in independent]]
-    return Feasibility.of(nearest_completion(base, independent, dependent, beta, prior), form.bodies).as_dict()
+    W = W.reshape(-1, W.shape[-1])
+    step, *_ = np.linalg.lstsq(W, W[:, model.columns] @ model.coef - W @ prior, rcond=None)
+    return Feasibility.of(prior + step, form.bodies).as_dict()

@@ -13,6 +13,7 @@ from bench.core.feasible import (Feasibility, feasible_fit, from_pseudo_inertia,
 from bench.core.regression import Compressed
 from methods import METHODS
 from systems import get_system
+from systems.urdf_arm import physically_consistent
 
 finite = st.floats(-10, 10, allow_nan=False)
 
@@ -46,9 +47,10 @@ def panda():
 
 def test_on_noise_free_data_the_feasible_fit_is_least_squares(panda):
     train, test = generate(panda, 768, 0), generate(panda, 256, 1000)
-    ls = METHODS["sysid"]().fit(train, "indirect", 0, steps=1)
-    feasible = METHODS["sysid"](feasible=True).fit(train, "indirect", 0, steps=1)
+    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, steps=1)
+    feasible = METHODS["sysid"]().fit(train, "indirect", 0, steps=1)  # the default on an arm
     facts = feasible.record_details()["feasibility"]
+    assert "feasible" not in ls.record_details()["feasibility"]
     assert facts["least_squares"]["feasible"] and facts["feasible"]["feasible"]
     assert mse(feasible.predict(test), test.tau) < 1e-12 * np.var(test.tau)
     assert mse(ls.predict(test), test.tau) < 1e-20 * np.var(test.tau)
@@ -57,12 +59,15 @@ def test_on_noise_free_data_the_feasible_fit_is_least_squares(panda):
 def test_on_noisy_data_least_squares_is_infeasible_and_the_feasible_fit_is_not(panda):
     train = add_noise(generate(panda, 768, 0), "indirect", 0.05, 0)
     test = generate(panda, 512, 1000)
-    ls = METHODS["sysid"]().fit(train, "indirect", 0, steps=1)
+    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, steps=1)
     feasible = METHODS["sysid"](feasible=True).fit(train, "indirect", 0, steps=1)
     facts = feasible.record_details()["feasibility"]
     assert not facts["least_squares"]["feasible"]  # some body's pseudo-inertia has a negative eigenvalue
     assert facts["feasible"]["feasible"] and min(facts["feasible"]["smallest_eigenvalues"]) >= 0.0
     assert 1.0 <= facts["feasible"]["training_error_ratio"] < 1.05
+    # Pinocchio's own reading of the parameters agrees: a positive mass, and an inertia about the
+    # centre of mass that is positive definite and keeps the triangle inequalities, on every link
+    assert physically_consistent(feasible.linear.coef) == []
     assert mse(feasible.predict(test), test.tau) < 1.05 * mse(ls.predict(test), test.tau)
 
 
@@ -75,3 +80,22 @@ def test_free_columns_beside_the_bodies_are_fitted_without_constraint(panda):
     coef, facts = feasible_fit(Compressed(np.hstack([W, offset]), y), 7, np.asarray(form.prior), 1e-6)
     np.testing.assert_allclose(coef[-7:], np.arange(1.0, 8.0), atol=1e-6)
     assert min(smallest_eigenvalues(coef[:70], 7)) >= 0.0 and facts["status"].startswith("optimal")
+
+
+def test_the_residual_loop_refits_a_feasible_fit_under_its_constraints(panda):
+    from bench.residual.candidates import candidates
+    from bench.residual.model import LoopModel
+    from bench.residual.strategies import Feasible, Linear, strategy_for
+
+    train = add_noise(generate(panda, 512, 0), "indirect", 0.05, 0)
+    feasible = METHODS["sysid"]().fit(train, "indirect", 0, steps=1)
+    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, steps=1)
+    assert type(strategy_for(ls)) is Linear and type(strategy_for(feasible)) is Feasible
+    strategy = strategy_for(feasible)
+    offsets = [t for t in candidates(train.dof) if t.name == "offset"]
+    assert len(offsets) == 7
+    refitted = strategy.refit(LoopModel.bare(feasible.linear), train, offsets)
+    after = strategy.feasibility(refitted, train)
+    assert after["feasible"] and min(after["smallest_eigenvalues"]) >= 0.0
+    before = Linear().feasibility(LoopModel.bare(ls.linear), train)
+    assert not before["feasible"]
