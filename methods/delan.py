@@ -26,10 +26,10 @@ The paper leaves sizes and initialisation to its code; they follow the
 authors' public example (``example_DeLaN.py``): 2 hidden layers of 64
 softplus units, :math:`\epsilon = 0.01`, biases initialised to 1e-4 and the
 diagonal head's to 1e-3, Xavier-normal weights with gain :math:`\sqrt 2`
-(0.125 for the potential head), Adam with AMSGrad at a learning rate of 5e-4 and weight decay 1e-5, batches
-of 512, in float32. The loss is DeLaN's: the squared torque error summed over joints and
-averaged over the batch (``MSE`` times the DoF; the tables report the MSE).
-The gains are those the public model applies: it reads them from a key the
+(0.125 for the potential head), Adam with AMSGrad at a learning rate of
+5e-4 and weight decay 1e-5, batches of 512, in float32. The loss is DeLaN's:
+the squared torque error summed over joints and averaged over the batch
+(``MSE`` times the DoF; the tables report the MSE). The gains are those the public model applies: it reads them from a key the
 example does not set (``g_hidden``), so the example's ``gain_output`` of 0.1
 never takes effect and the potential head gets the model's default 0.125,
 the factor's heads the hidden gain.
@@ -71,8 +71,9 @@ class DeLaNConfig(TorchConfig):
     diagonal; ``weight_decay`` and ``amsgrad`` of Adam; the initial biases
     ``bias_init`` (every layer) and ``diagonal_bias_init`` (the diagonal
     head); the diagonal's activation ``diagonal`` and the shift
-    ``diagonal_shift`` added before it; Xavier-normal gains ``hidden_gain`` (hidden layers and the
-    factor's heads) and ``output_gain`` (the potential's head)."""
+    ``diagonal_shift`` added before it; Xavier-normal gains ``hidden_gain``
+    (hidden layers and the factor's heads) and ``output_gain`` (the
+    potential's head)."""
 
     lr: Annotated[float, POSITIVE] = 5e-4
     batch_size: Annotated[int, Range(1)] = 512
