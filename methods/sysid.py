@@ -88,7 +88,7 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
     semidefinite (:func:`bench.core.feasible.feasible_fit`). Either way the
     facts say whether the identified set is a rigid body's (``feasibility``):
     the least-squares base parameters are judged by the full set nearest
-    the prior that has them (:func:`~bench.core.feasible.nearest_completion`)."""
+    the prior with their torques (:func:`~bench.core.feasible.nearest_completion`)."""
     if experiment == "direct":
         W = np.column_stack([form.lagrangian_regressor(data.q, data.qd), np.ones(len(data))])  # L up to a constant
         y = data.target(experiment)
@@ -111,12 +111,11 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
         facts["parameter_error"] = float(np.linalg.norm(model.coef - base_true) / np.linalg.norm(base_true))
     if form.bodies and form.prior is not None and experiment == "indirect":
         prior = np.asarray(form.prior)
-        ls_full = nearest_completion(coef, independent, dependent, beta, prior)
-        problem = Compressed(W, y)
-        ls_rss = problem.residual_norm2(ls_full)
+        ls_full = nearest_completion(W, independent, coef, prior)
         report = {"least_squares": {**Feasibility.of(ls_full, form.bodies).as_dict(), "seconds": round(ls_seconds, 3)}}
         if feasible:
             start = time.perf_counter()
+            problem = Compressed(W, y)
             full, solve = feasible_fit(problem, form.bodies, prior, regularisation)
             base = full[independent] + beta @ full[dependent]
             model = LinearParametricModel(form, np.arange(len(form.names)), full, form.names,
@@ -125,7 +124,7 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
                 **Feasibility.of(full, form.bodies).as_dict(), **solve,
                 "seconds": round(time.perf_counter() - start, 3),
                 "distance_to_least_squares": float(np.linalg.norm(base - coef) / np.linalg.norm(coef)),
-                "training_error_ratio": problem.residual_norm2(full) / max(ls_rss, 1e-300),
+                "training_error_ratio": problem.residual_norm2(full) / max(problem.residual_norm2(ls_full), 1e-300),
             }
             if form.true_values is not None:
                 facts["parameter_error"] = float(np.linalg.norm(base[keep] - base_true) / np.linalg.norm(base_true))

@@ -23,8 +23,8 @@ parameters than parameters), and only those; it is ``regularisation`` times
 the mean squared column norm of the problem, so that its size is relative
 to the data's.
 
-:func:`nearest_completion` gives the full parameter set that a set of base
-parameters (a least-squares fit) implies nearest the prior, whose
+:func:`nearest_completion` gives the full parameter set nearest the prior
+with the torques of a fit of base parameters (least squares'), whose
 pseudo-inertias say whether that fit is a rigid body's.
 """
 
@@ -172,15 +172,12 @@ def _pseudo_inertia(p):
     ])
 
 
-def nearest_completion(base: np.ndarray, independent: np.ndarray, dependent: np.ndarray, beta: np.ndarray,
-                       prior: np.ndarray) -> np.ndarray:
-    """The full parameter set nearest ``prior`` whose base parameters
-    (``p[independent] + beta @ p[dependent]``, :func:`bench.core.regression.base_columns`)
-    are ``base``."""
-    K = np.zeros((len(independent), len(prior)))
-    K[np.arange(len(independent)), independent] = 1.0
-    K[:, dependent] += beta
-    step, *_ = np.linalg.lstsq(K, base - K @ prior, rcond=None)
+def nearest_completion(W: np.ndarray, columns: np.ndarray, coef: np.ndarray, prior: np.ndarray) -> np.ndarray:
+    """The full parameter set nearest ``prior`` that gives the same torques
+    as ``coef`` on the columns ``columns`` of the regressor ``W`` (rows of
+    samples and joints): a fit of base parameters completed. The directions
+    ``W`` does not see are the prior's."""
+    step, *_ = np.linalg.lstsq(W, W[:, columns] @ coef - W @ prior, rcond=None)
     return prior + step
 
 
@@ -188,8 +185,8 @@ def feasibility_of(model, data) -> dict | None:
     """Whether a :class:`~bench.core.models.LinearParametricModel` of rigid
     bodies is a rigid body's (:meth:`Feasibility.as_dict`): its parameters
     where it holds all of them, else the full set nearest its form's prior
-    that gives the same torques at the states of ``data`` (its base
-    parameters completed); ``None`` for a form without bodies or prior."""
+    that gives the same torques at the states of ``data``
+    (:func:`nearest_completion`); ``None`` for a form without bodies or prior."""
     form = model.form
     if not form.bodies or form.prior is None:
         return None
@@ -199,6 +196,5 @@ def feasibility_of(model, data) -> dict | None:
         full[model.columns] = model.coef
         return Feasibility.of(full, form.bodies).as_dict()
     W = torque_regressor(form, data)
-    W = W.reshape(-1, W.shape[-1])
-    step, *_ = np.linalg.lstsq(W, W[:, model.columns] @ model.coef - W @ prior, rcond=None)
-    return Feasibility.of(prior + step, form.bodies).as_dict()
+    full = nearest_completion(W.reshape(-1, W.shape[-1]), model.columns, model.coef, prior)
+    return Feasibility.of(full, form.bodies).as_dict()

@@ -85,11 +85,12 @@ class Compressed:
         return self.residual_norm2(self.coef(columns), columns)
 
 
-def fit_statistics(F: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def fit_statistics(F: np.ndarray, y: np.ndarray, problem: "Compressed | None" = None
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """:func:`least_squares` coefficients, their standard errors, and the
     residual sum of squares (the errors from ``pinv(F^T F) * RSS / (rows - columns)``),
-    from one QR of ``[F | y]`` (:class:`Compressed`)."""
-    problem = Compressed(F, y)  # one QR; the solve and F^T F = R^T R are then small
+    from one QR of ``[F | y]`` (:class:`Compressed`; ``problem`` where the caller has it already)."""
+    problem = problem if problem is not None else Compressed(F, y)  # one QR; the solve and F^T F = R^T R are small
     coef = problem.coef()
     rss = problem.residual_norm2(coef)
     dof = max(len(y) - F.shape[1], 1)

@@ -209,8 +209,9 @@ class Feasible(Linear):
         F_L = model.rigid.torque_columns(train)
         A, y = np.hstack([F_L, Phi]), train.tau.ravel()
         held = model.rigid.feasible
-        coef, _ = feasible_fit(Compressed(A, y), held.bodies, np.asarray(held.prior), held.regularisation)
-        _, stderr, _ = fit_statistics(A, y)
+        problem = Compressed(A, y)
+        coef, _ = feasible_fit(problem, held.bodies, np.asarray(held.prior), held.regularisation)
+        _, stderr, _ = fit_statistics(A, y, problem)
         k = F_L.shape[1]
         return LoopModel(model.rigid.with_coefficients(coef[:k]), effects, coef[k:], stderr[k:])
 

@@ -112,8 +112,9 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     What follows the fit runs in stages (:class:`~bench.evaluation.scores.Stages`):
     a stage that fails (the expression, exact recovery, a variant, the
     rollout, the force decomposition (:mod:`bench.evaluation.forces`), the
-    method's details) is named in ``failed_stages`` with its error, its traceback goes to the run's log, and the run keeps its fit's
-    train and test MSE, steps and curve, with status ``ok``. A fit that
+    method's details) is named in ``failed_stages`` with its error, its
+    traceback goes to the run's log, and the run keeps its fit's train and
+    test MSE, steps and curve, with status ``ok``. A fit that
     fails, or whose MSE cannot be computed, gives status ``failed``; its
     traceback is printed too.
     """
