@@ -32,7 +32,7 @@ By default (``feasible=True``) the arm's parameters are then identified
 under the constraint that each link's pseudo-inertia is positive
 semidefinite (Wensing, Kim & Slotine 2017; :func:`bench.core.feasible.feasible_fit`),
 which is least squares' optimum wherever that is a rigid body's. On the
-generated Panda this cost about 1.4 s more per fit and was never worse on
+generated Panda this cost about 1.3 s more per fit and was never worse on
 held-out data (results/arms/README.md); with 5 % torque noise least
 squares' parameters were no rigid body's. The record's ``feasibility``
 gives, for both fits, the masses and each link's smallest pseudo-inertia
