@@ -72,6 +72,26 @@ class Feed:
         return idx
 
 
+class Warmup:
+    """The learning rate of each group raised linearly over the first
+    ``steps`` steps, from ``1/steps`` of its value to its value, then held.
+    It counts steps, not time, so a replay repeats it."""
+
+    def __init__(self, optimizer: torch.optim.Optimizer, steps: int):
+        self.optimizer, self.steps, self.done = optimizer, max(int(steps), 1), 0
+        self.lrs = [g["lr"] for g in optimizer.param_groups]
+        self._set()
+
+    def _set(self) -> None:
+        scale = min(1.0, (self.done + 1) / self.steps)
+        for group, lr in zip(self.optimizer.param_groups, self.lrs):
+            group["lr"] = lr * scale
+
+    def step(self, loss: float) -> None:
+        self.done += 1
+        self._set()
+
+
 class TorchLagrangianMethod(Method, LagrangianFunction):
     """A method whose model is a ``torch.nn.Module`` mapping ``(q, qd) -> L``.
 
