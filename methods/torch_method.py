@@ -122,7 +122,11 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
 
     @property
     def dtype(self) -> torch.dtype:
-        return getattr(torch, self.config.dtype)
+        """``config.dtype`` while the network trains; float64 once the fit is
+        done. A float32 network's torques carry rounding noise that an
+        adaptive integrator takes for stiffness: a rollout evaluated in
+        float32 needs many times the right-hand sides."""
+        return torch.float64 if getattr(self, "_trained", False) else getattr(torch, self.config.dtype)
 
     @property
     def lagrangian(self):
@@ -140,7 +144,10 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
         return torch.mean((pred - target) ** 2) + self.extra_loss()
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        if not self.warm_start:
+        self._trained = False
+        if self.warm_start:  # back to the training arithmetic, which the optimiser's state has
+            self.model.to(self.dtype)
+        else:
             self.model = self.build_model(train).to(self.dtype)
             self._optimizer = torch.optim.Adam(
                 self.model.parameters(), lr=self.config.lr, betas=self.config.betas, **self.optimizer_options(),
@@ -159,6 +166,10 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
             optimizer.step()
             if scheduler is not None:
                 scheduler.step(loss.item())
+
+    def _post_fit(self, train: Dataset, experiment: str, seconds_left: float) -> None:
+        self._trained = True  # the fitted function is evaluated in float64 from here on
+        self.model.to(torch.float64)
 
     def _get_state(self):
         return {k: v.detach().clone() for k, v in self.model.state_dict().items()}

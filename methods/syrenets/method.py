@@ -243,16 +243,9 @@ class SyReNets(Equations, TorchLagrangianMethod):
             self.frozen = saved
 
     # -- evaluation, pruning and refinement ----------------------------------------------
-    @property
-    def dtype(self) -> torch.dtype:
-        """``config.dtype`` while the network trains; float64 once the fit is
-        done, for evaluation, pruning and refinement."""
-        return torch.float64 if getattr(self, "_trained", False) else super().dtype
-
     def _post_fit(self, train, experiment, seconds_left):
         deadline = time.perf_counter() + seconds_left
-        self._trained = True  # the fitted function is evaluated in float64 from here on
-        self.model.to(torch.float64)
+        super()._post_fit(train, experiment, seconds_left)  # float64 from here on, for pruning and refinement
         self.frozen = [w.to(torch.float64) for w in self.frozen]
         self._variants, self._notes = {}, {}
         rng = np.random.default_rng(self.seed)

@@ -43,3 +43,21 @@ def test_delan_learns_the_double_pendulum_from_torques(double_pendulum):
     np.testing.assert_allclose(sum(parts.values()), m.predict(test), rtol=1e-5, atol=1e-4)
     H = m.mass_matrix(test.q[:16])
     np.testing.assert_allclose(np.einsum("bij,bj->bi", H, test.qdd[:16]), parts["inertial"][:16], rtol=1e-4, atol=1e-4)
+
+
+def test_the_warm_up_raises_the_rate_linearly_then_holds_it():
+    from methods.torch_method import Warmup
+
+    optimizer = torch.optim.Adam([torch.nn.Parameter(torch.zeros(2))], lr=1e-2)
+    warmup, rates = Warmup(optimizer, 4), []
+    for _ in range(6):
+        rates.append(optimizer.param_groups[0]["lr"])
+        warmup.step(0.0)
+    assert rates == pytest.approx([2.5e-3, 5e-3, 7.5e-3, 1e-2, 1e-2, 1e-2])
+
+
+def test_the_public_configuration_is_the_authors_optimiser():
+    method = METHODS["delan"](**METHODS["delan"].configuration("public"))
+    h = method.hyperparameters()
+    assert (h["lr"], h["amsgrad"], h["batch_size"], h["warmup"]) == (5e-4, True, 512, 0)
+    assert method.make_scheduler(torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))], lr=5e-4)) is None
