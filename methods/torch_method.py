@@ -143,11 +143,16 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
             target = batch["tau"]
         return torch.mean((pred - target) ** 2) + self.extra_loss()
 
-    def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
+    def _start_training(self) -> None:
+        """Back to ``config.dtype`` for a fit: a warm start's network returns
+        to the arithmetic its optimiser's state has."""
         self._trained = False
-        if self.warm_start:  # back to the training arithmetic, which the optimiser's state has
+        if self.warm_start:
             self.model.to(self.dtype)
-        else:
+
+    def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
+        self._start_training()
+        if not self.warm_start:
             self.model = self.build_model(train).to(self.dtype)
             self._optimizer = torch.optim.Adam(
                 self.model.parameters(), lr=self.config.lr, betas=self.config.betas, **self.optimizer_options(),

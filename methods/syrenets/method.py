@@ -125,14 +125,13 @@ class SyReNets(Equations, TorchLagrangianMethod):
     # -- the fit --------------------------------------------------------------------
     def _fit(self, train, experiment, progress):
         cfg = self.config
-        self._trained = False
+        self._start_training()
         t = train.tensors(self.dtype)
         n, bs = len(train), min(cfg.batch_size, len(train))
         feed = Feed.start(n, bs, self.seed)
         progress.reserve(cfg.post_fraction * progress.remaining())
         self._starts = None
         if self.warm_start:  # continue the network, its optimiser and its frozen weights
-            self.model.to(self.dtype)  # back to the training arithmetic, which the optimiser's state has
             self.frozen = [w.to(self.dtype) for w in self.frozen]
             self.net.lr_drops, self.net.replay = [], torch.empty(0, dtype=torch.long)
             if isinstance(self.scheduler, Cosine):

@@ -61,3 +61,13 @@ def test_the_public_configuration_is_the_authors_optimiser():
     h = method.hyperparameters()
     assert (h["lr"], h["amsgrad"], h["batch_size"], h["warmup"]) == (5e-4, True, 512, 0)
     assert method.make_scheduler(torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))], lr=5e-4)) is None
+
+
+def test_a_fitted_network_is_evaluated_in_float64_and_a_warm_start_trains_in_float32(double_pendulum):
+    train = generate(double_pendulum, 256, 0)
+    m = METHODS["delan"](**METHODS["delan"].smoke_config()).fit(train, "indirect", 0, steps=5)
+    assert m.dtype == torch.float64 and all(p.dtype == torch.float64 for p in m.model.parameters())
+    before = m.predict(train)
+    m.fit(train, "indirect", 0, steps=5, warm_start=True)  # Adam's float32 state would refuse float64 weights
+    assert all(p.dtype == torch.float64 for p in m.model.parameters())
+    assert not np.allclose(m.predict(train), before)  # it trained on
