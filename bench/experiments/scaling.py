@@ -16,6 +16,10 @@ status and reason. Usage::
 
     python -m bench scaling [--budget 5] [--seeds 5] [--out results/scaling]
 
+The table covers every method recorded in the folder at the same budget and
+seeds, so ``--methods delan`` adds a method's rows to a study already there
+without running the others again.
+
 The pendulums are registered as ``pendulum_<n>link`` by the plugin
 :mod:`bench.experiments.scaling_systems`, which the study and its runs'
 processes import, so that the rest of the suite does not list them.
@@ -33,7 +37,7 @@ from bench.reporting.plots import line_plot
 from bench.runner.matrix import run_matrix
 from bench.runner.plugins import import_plugins
 from bench.runner.provenance import machine, provenance
-from bench.runner.records import Record
+from bench.runner.records import Record, read_records
 from bench.runner.spec import SEEDS, build_specs, seed_count
 from methods import METHODS
 from bench.core.terms import lagrangian_library_size as library_size
@@ -52,6 +56,16 @@ def pendulum_name(n: int) -> str:
 
 def studied_systems() -> list[str]:
     return [pendulum_name(n) for n in LINKS] + list(ARMS)
+
+
+def with_earlier(records: list[Record], folder: Path, budget: float, seeds: tuple[int, ...]) -> list[Record]:
+    """``records`` and the records already in ``folder`` of the other runs of
+    the study (other methods) at the same ``budget`` and ``seeds``."""
+    mine = {r.run_id for r in records}
+    studied = set(studied_systems())
+    earlier = [r for r in read_records(folder, on_bad=lambda path, exc: None)
+               if r.run_id not in mine and r.system in studied and r.budget_s == budget and r.seed in seeds]
+    return records + earlier
 
 
 def summarize(records: list[Record]) -> list[dict]:
@@ -168,7 +182,8 @@ def main(args) -> int:
     methods = args.methods or [m for m in METHODS.names() if METHODS.entry(m).available]
     specs = build_specs(studied_systems(), methods, ["direct", "indirect"], SEEDS[: args.seeds], args.budget,
                         plugins=(PLUGIN,), rollout=False)
-    records = run_matrix(specs, args.out, workers=args.workers)
+    records = with_earlier(run_matrix(specs, args.out, workers=args.workers), args.out, args.budget,
+                           tuple(SEEDS[: args.seeds]))
     rows = summarize(records)
     images = plots(rows, args.out)
     ran = [r.provenance for r in records if r.status not in ("unavailable", "not_applicable")] or [provenance()]

@@ -58,3 +58,19 @@ def test_growth_divides_the_largest_pendulum_by_the_smallest():
     text = scaling.growth(scaling.summarize(records))
     assert "| mlp | indirect | 1–4 DoF | 4× | 4× |" in text
     assert "sparse" not in text  # one pendulum ran: nothing to divide
+
+
+def test_a_study_of_one_method_keeps_the_others_rows_at_its_budget_and_seeds(tmp_path):
+    from bench.runner.records import record_path, write_record
+
+    import_plugins([scaling.PLUGIN])
+    earlier = [record("mlp", "panda", s) for s in range(3)] + [record("mlp", "double_pendulum", 0)]
+    other_budget = Record.new({"system": "ur5", "method": "mggp", "experiment": "indirect", "seed": 0, "budget_s": 60.0},
+                              "failed", error="x")
+    for r in earlier + [other_budget]:
+        write_record(record_path(tmp_path, r.run_id), r)
+    (tmp_path / "records" / "broken.json").write_text("{")
+    new = [record("delan", "panda", 0), record("mlp", "panda", 0, mse=0.5)]  # mlp seed 0 redone
+    merged = scaling.with_earlier(new, tmp_path, 5.0, (0, 1))
+    assert sorted((r.method, r.system, r.seed, r.test_mse) for r in merged) == [
+        ("delan", "panda", 0, 1.0), ("mlp", "panda", 0, 0.5), ("mlp", "panda", 1, 1.0)]
