@@ -16,9 +16,11 @@ from methods.delan import DeepLagrangian, DeLaNConfig
 @pytest.mark.parametrize("activation", ["softplus", "tanh", "relu"])
 @pytest.mark.parametrize("diagonal", ["softplus", "relu"])
 @pytest.mark.parametrize("dof", [1, 2, 4])
-def test_its_own_derivatives_give_the_torques_autograd_gives(activation, diagonal, dof):
+@pytest.mark.parametrize("potential", ["separate", "shared"])
+def test_its_own_derivatives_give_the_torques_autograd_gives(activation, diagonal, dof, potential):
     torch.manual_seed(dof)
-    config = DeLaNConfig(activation=activation, diagonal=diagonal, diagonal_bias_init=0.3, output_gain=1.0)
+    config = DeLaNConfig(activation=activation, diagonal=diagonal, diagonal_bias_init=0.3, output_gain=1.0,
+                         potential=potential)
     net = DeepLagrangian(dof, config).double()
     q, qd, qdd = (torch.randn(64, dof, dtype=torch.float64) for _ in range(3))
     own = euler_lagrange(net, q, qd, qdd)  # the model's tangent
@@ -59,7 +61,7 @@ def test_the_warm_up_raises_the_rate_linearly_then_holds_it():
 def test_the_public_configuration_is_the_authors_optimiser():
     method = METHODS["delan"](**METHODS["delan"].configuration("public"))
     h = method.hyperparameters()
-    assert (h["lr"], h["amsgrad"], h["batch_size"], h["warmup"]) == (5e-4, True, 512, 0)
+    assert (h["lr"], h["amsgrad"], h["batch_size"], h["warmup"], h["potential"]) == (5e-4, True, 512, 0, "shared")
     assert method.make_scheduler(torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))], lr=5e-4)) is None
 
 
@@ -71,3 +73,21 @@ def test_a_fitted_network_is_evaluated_in_float64_and_a_warm_start_trains_in_flo
     m.fit(train, "indirect", 0, steps=5, warm_start=True)  # Adam's float32 state would refuse float64 weights
     assert all(p.dtype == torch.float64 for p in m.model.parameters())
     assert not np.allclose(m.predict(train), before)  # it trained on
+
+
+def test_the_compiled_loss_and_its_gradients_are_the_eager_ones(double_pendulum):
+    from methods.delan import compiled_torque_loss, torque_loss
+
+    batch = generate(double_pendulum, 256, 0).tensors(torch.float32)
+    torch.manual_seed(0)
+    net = DeepLagrangian(2, DeLaNConfig())
+    grads = []
+    for loss in (torque_loss, compiled_torque_loss()):
+        net.zero_grad()
+        value = loss(net, batch["q"], batch["qd"], batch["qdd"], batch["tau"])
+        value.backward()
+        grads.append((value.item(), [torch.zeros_like(p) if p.grad is None else p.grad.clone() for p in net.parameters()]))
+    (eager, g_eager), (compiled, g_compiled) = grads
+    assert compiled == pytest.approx(eager, rel=1e-5)
+    for a, b in zip(g_eager, g_compiled):
+        torch.testing.assert_close(b, a, rtol=1e-4, atol=1e-6)
