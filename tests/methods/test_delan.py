@@ -47,6 +47,13 @@ def test_delan_learns_the_double_pendulum_from_torques(double_pendulum):
     np.testing.assert_allclose(np.einsum("bij,bj->bi", H, test.qdd[:16]), parts["inertial"][:16], rtol=1e-4, atol=1e-4)
 
 
+def test_delan_learns_the_double_pendulums_lagrangian_directly(double_pendulum):
+    train, test = generate(double_pendulum, 2048, 0), generate(double_pendulum, 512, 1000)
+    assert abs(train.L.mean()) > 10  # far from V's initial constant: what the start at the data's level is for
+    m = METHODS["delan"](eval_samples=512).fit(train, "direct", 0, steps=1500)
+    assert mse(m.predict(test), test.L) / np.var(test.L) < 0.01
+
+
 def test_the_warm_up_raises_the_rate_linearly_then_holds_it():
     from methods.torch_method import Warmup
 
