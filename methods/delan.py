@@ -87,7 +87,7 @@ Engineering
 forward Jacobian, the torques and the loss) with ``torch.compile``, once
 per process, before the budget starts (:meth:`methods.base.Method.prepare`;
 the record's ``prepare_seconds``). The numbers are the eager loop's to
-rounding; a step takes less time (measured in ``results/arms/README.md``).
+rounding; a step takes a little over half the time.
 """
 
 from __future__ import annotations
