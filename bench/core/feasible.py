@@ -176,7 +176,10 @@ def nearest_completion(W: np.ndarray, columns: np.ndarray, coef: np.ndarray, pri
     """The full parameter set nearest ``prior`` that gives the same torques
     as ``coef`` on the columns ``columns`` of the regressor ``W`` (rows of
     samples and joints): a fit of base parameters completed. The directions
-    ``W`` does not see are the prior's."""
+    ``W`` does not see are the prior's. ``W`` may be the regressor's
+    triangular factor (:class:`~bench.core.regression.Compressed`'s ``R``
+    without its last column): ``W = Q R`` with ``Q`` orthonormal gives the
+    same solution from a problem of as many rows as columns."""
     step, *_ = np.linalg.lstsq(W, W[:, columns] @ coef - W @ prior, rcond=None)
     return prior + step
 

@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.core.data import add_noise, generate, mse
-from bench.core.feasible import (Feasibility, feasible_fit, from_pseudo_inertia, project, pseudo_inertia,
-                                 smallest_eigenvalues)
-from bench.core.regression import Compressed
+from bench.core.feasible import (Feasibility, feasible_fit, from_pseudo_inertia, nearest_completion, project,
+                                 pseudo_inertia, smallest_eigenvalues)
+from bench.core.regression import Compressed, base_columns, least_squares
 from methods import METHODS
 from systems import get_system
 from systems.urdf_arm import physically_consistent
@@ -69,6 +69,19 @@ def test_on_noisy_data_least_squares_is_infeasible_and_the_feasible_fit_is_not(p
     # centre of mass that is positive definite and keeps the triangle inequalities, on every link
     assert physically_consistent(feasible.linear.coef) == []
     assert mse(feasible.predict(test), test.tau) < 1.05 * mse(ls.predict(test), test.tau)
+
+
+def test_the_completion_from_the_regressors_factor_is_the_one_from_the_regressor(panda):
+    data = add_noise(generate(panda, 256, 0), "indirect", 0.05, 0)
+    form = panda.linear_form()
+    W, y = form.torque_regressor(data.q, data.qd, data.qdd).reshape(-1, len(form.names)), data.tau.ravel()
+    independent, _, _ = base_columns(W)
+    coef, prior = least_squares(W[:, independent], y), np.asarray(form.prior)
+    full = nearest_completion(W, independent, coef, prior)
+    np.testing.assert_allclose(W @ full, W[:, independent] @ coef, rtol=1e-8, atol=1e-8 * np.abs(y).max())
+    problem = Compressed(W, y)
+    from_factor = nearest_completion(problem.R[:, : problem.columns], independent, coef, prior)
+    np.testing.assert_allclose(from_factor, full, rtol=1e-8, atol=1e-10 * np.abs(full).max())
 
 
 def test_free_columns_beside_the_bodies_are_fitted_without_constraint(panda):
