@@ -10,6 +10,7 @@ from systems import (  # noqa: E402,F401  (registers)
     cart_pole,
     delan_characters,
     dfki_double_pendulum,
+    measured_arm,
     double_pendulum,
     n_link_pendulum,
     single_pendulum,

@@ -5,13 +5,27 @@ In memory, a :class:`Dataset` holds float64 arrays ``q, qd, qdd, tau`` of shape
 
 On disk it is a CSV file with the columns::
 
-    q_1..q_n, qd_1..qd_n, qdd_1..qdd_n, tau_1..tau_n[, L][, trajectory][, sign_qd_1..sign_qd_n]
+    q_1..q_n, qd_1..qd_n, qdd_1..qdd_n, tau_1..tau_n[, L][, trajectory[, recording]][, time][, sign_qd_1..sign_qd_n]
 
-``trajectory`` is optional: the recording each sample comes from (any
-non-empty text). Measured data come in recordings, and neighbouring samples
-of one recording are near copies, so whatever is validated on held-out data
-holds out whole recordings where the data name them. Generated samples are
-independent and have no recording.
+``trajectory`` and ``recording`` are optional labels (any non-empty text).
+Measured data come in recordings, and neighbouring samples of one recording
+are near copies; a robot also repeats an excitation trajectory, and a
+recording of the same trajectory again is a near copy of the first. So
+whatever is validated on held-out data holds out whole *trajectories*, every
+recording of one trajectory together (:meth:`Dataset.trajectories`):
+
+* ``trajectory`` alone names each sample's recording, which is then a
+  trajectory of its own (the DFKI recordings, DeLaN's characters);
+* ``trajectory`` with ``recording`` names the trajectory a recording
+  follows and the recording itself (the KUKA's runs 1 and 2 repeat one
+  trajectory);
+* ``recording`` alone is refused: recordings whose trajectories are not
+  named cannot be held out honestly.
+
+Generated samples are independent and have none of these.
+
+``time`` is optional: each sample's time in its recording, in seconds. The
+driven rollouts of measured data (:mod:`bench.evaluation.driven`) need it.
 
 ``sign_qd_i`` is optional too: the sign of joint i's velocity as the
 torque's low-pass saw it. Where a recording's torque was filtered
@@ -69,8 +83,15 @@ class Dataset:
     source
         Where it came from: a file path or a generator description.
     recording
-        Array of shape ``(n,)`` of text labels: the recording (trajectory)
-        each sample comes from, or ``None`` for independent samples.
+        Array of shape ``(n,)`` of text labels: the recording each sample
+        comes from, or ``None`` for independent samples.
+    trajectory
+        Array of shape ``(n,)`` of text labels: the trajectory each sample's
+        recording follows, or ``None`` where every recording is a trajectory
+        of its own (see the module docstring).
+    time
+        Array of shape ``(n,)``: each sample's time in its recording, s, or
+        ``None`` where not known.
     sign_qd
         Array of shape ``(n, dof)``: the sign of each velocity as the
         torque's filter saw it (see the module docstring), or ``None`` where
@@ -87,6 +108,8 @@ class Dataset:
     meta: dict = field(default_factory=dict)
     recording: np.ndarray | None = None
     sign_qd: np.ndarray | None = None
+    trajectory: np.ndarray | None = None
+    time: np.ndarray | None = None
 
     def __post_init__(self):
         shapes = {a.shape for a in (self.q, self.qd, self.qdd, self.tau)}
@@ -94,11 +117,19 @@ class Dataset:
             raise DataError(f"{self.source}: q, qd, qdd, tau must share one (n, dof) shape, got {sorted(shapes)}")
         if self.L is not None and self.L.shape != (self.q.shape[0],):
             raise DataError(f"{self.source}: L must have shape ({self.q.shape[0]},), got {self.L.shape}")
-        if self.recording is not None:
-            labels = np.asarray(self.recording, dtype=str)
-            if labels.shape != (self.q.shape[0],):
-                raise DataError(f"{self.source}: recording must have shape ({self.q.shape[0]},), got {labels.shape}")
-            object.__setattr__(self, "recording", labels)
+        for name in ("recording", "trajectory"):
+            if getattr(self, name) is not None:
+                labels = np.asarray(getattr(self, name), dtype=str)
+                if labels.shape != (self.q.shape[0],):
+                    raise DataError(f"{self.source}: {name} must have shape ({self.q.shape[0]},), got {labels.shape}")
+                object.__setattr__(self, name, labels)
+        if self.trajectory is not None and self.recording is None:
+            raise DataError(f"{self.source}: trajectory labels need recording labels beside them")
+        if self.time is not None:
+            times = np.asarray(self.time, dtype=np.float64)
+            if times.shape != (self.q.shape[0],):
+                raise DataError(f"{self.source}: time must have shape ({self.q.shape[0]},), got {times.shape}")
+            object.__setattr__(self, "time", times)
         if self.sign_qd is not None and self.sign_qd.shape != self.q.shape:
             raise DataError(f"{self.source}: sign_qd must have the shape of q, {self.q.shape}, got {self.sign_qd.shape}")
 
@@ -124,6 +155,8 @@ class Dataset:
             None if self.L is None else self.L[index], self.system, self.source, dict(self.meta),
             None if self.recording is None else self.recording[index],
             None if self.sign_qd is None else self.sign_qd[index],
+            None if self.trajectory is None else self.trajectory[index],
+            None if self.time is None else self.time[index],
         )
 
     def replace(self, **changes) -> "Dataset":
@@ -136,16 +169,30 @@ class Dataset:
 
     def recordings(self) -> list[str]:
         """The recordings' labels in order of first appearance; ``[]`` for independent samples."""
-        if self.recording is None:
-            return []
-        labels, first = np.unique(self.recording, return_index=True)
-        return [str(labels[i]) for i in np.argsort(first)]
+        return _in_order(self.recording)
+
+    def trajectory_labels(self) -> np.ndarray | None:
+        """``(n,)``: the trajectory of each sample, its recording's label where
+        every recording is a trajectory of its own; ``None`` for independent samples."""
+        return self.recording if self.trajectory is None else self.trajectory
+
+    def trajectories(self) -> list[str]:
+        """The trajectories' labels in order of first appearance (recordings of
+        one trajectory count once); ``[]`` for independent samples."""
+        return _in_order(self.trajectory_labels())
 
     def tensors(self, dtype: torch.dtype = torch.float64) -> dict[str, torch.Tensor]:
         out = {k: torch.tensor(getattr(self, k), dtype=dtype) for k in ("q", "qd", "qdd", "tau")}
         if self.L is not None:
             out["L"] = torch.tensor(self.L, dtype=dtype)
         return out
+
+
+def _in_order(labels: np.ndarray | None) -> list[str]:
+    if labels is None:
+        return []
+    unique, first = np.unique(labels, return_index=True)
+    return [str(unique[i]) for i in np.argsort(first)]
 
 
 def check_experiment(experiment: str) -> None:
@@ -195,8 +242,12 @@ def generate(system, n: int, seed: int, *, cache: bool = True) -> Dataset:
 # -- CSV ---------------------------------------------------------------------------
 
 _COLUMN = re.compile(r"^(q|qd|qdd|tau)_(\d+)$")
-#: the optional column naming each sample's recording
-RECORDING = "trajectory"
+#: the optional column naming each sample's trajectory (alone: its recording, a trajectory of its own)
+TRAJECTORY = "trajectory"
+#: the optional column naming each sample's recording, beside :data:`TRAJECTORY`
+RECORDING = "recording"
+#: the optional column of each sample's time in its recording, s
+TIME = "time"
 #: the optional columns ``sign_qd_1..sign_qd_n`` (:attr:`Dataset.sign_qd`)
 SIGN = "sign_qd"
 
@@ -217,7 +268,11 @@ def write_csv(data: Dataset, path: str | os.PathLike) -> None:
     if data.L is not None:
         arrays["L"] = data.L
     if data.recording is not None:
-        arrays[RECORDING] = data.recording
+        arrays[TRAJECTORY] = data.trajectory_labels()
+        if data.trajectory is not None:
+            arrays[RECORDING] = data.recording
+    if data.time is not None:
+        arrays[TIME] = data.time
     if data.sign_qd is not None:
         for i in range(data.dof):
             arrays[f"{SIGN}_{i + 1}"] = data.sign_qd[:, i]
@@ -225,9 +280,10 @@ def write_csv(data: Dataset, path: str | os.PathLike) -> None:
     atomic_write(Path(path), lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
 
 
-def read_frame(path: Path):
+def read_frame(path: Path, nrows: int | None = None):
     """A CSV file (optionally compressed) as a DataFrame with at least one row
-    and distinct column names; :class:`DataError` naming the file otherwise."""
+    and distinct column names (its first ``nrows`` rows only, where given);
+    :class:`DataError` naming the file otherwise."""
     import pandas as pd
 
     path = Path(path)
@@ -237,7 +293,7 @@ def read_frame(path: Path):
         raise DataError(f"{path}: no such file")
     try:
         header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False)
-        frame = pd.read_csv(path)
+        frame = pd.read_csv(path, nrows=nrows)
     except pd.errors.EmptyDataError:
         raise DataError(f"{path}: the file is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError, EOFError, OSError) as exc:
@@ -312,7 +368,17 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
 
     arrays = {k: np.stack([numeric(f"{k}_{i}") for i in range(1, file_dof + 1)], axis=1) for k in found}
     L = numeric("L") if "L" in frame.columns else None
+    trajectory = label_column(frame, TRAJECTORY, path) if TRAJECTORY in frame.columns else None
     recording = label_column(frame, RECORDING, path) if RECORDING in frame.columns else None
+    if recording is None:  # the trajectory column alone: each recording a trajectory of its own
+        recording, trajectory = trajectory, None
+    elif trajectory is None:
+        raise DataError(f"{path}: recordings {', '.join(_in_order(recording)[:4])} (column {RECORDING}) name no "
+                        f"trajectory (column {TRAJECTORY}): say which trajectory each follows, e.g. with "
+                        f"bench convert --trajectory NAME")
+    else:
+        _check_nesting(recording, trajectory, path)
+    time = numeric("time") if TIME in frame.columns else None
     signs = [f"{SIGN}_{i}" for i in range(1, file_dof + 1)]
     present = [c for c in signs if c in frame.columns]
     if present and len(present) < len(signs):
@@ -320,7 +386,18 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
                         f"(the filtered velocity signs come for every joint or for none)")
     sign_qd = np.stack([numeric(c) for c in signs], axis=1) if present else None
     return Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], L, system, str(path), recording=recording,
-                   sign_qd=sign_qd)
+                   sign_qd=sign_qd, trajectory=trajectory, time=time)
+
+
+def _check_nesting(recording: np.ndarray, trajectory: np.ndarray, path: Path) -> None:
+    """Each recording follows one trajectory; :class:`DataError` naming the first that follows two."""
+    pairs = np.unique(np.stack([recording, trajectory], axis=1), axis=0)
+    names, counts = np.unique(pairs[:, 0], return_counts=True)
+    if np.any(counts > 1):
+        name = str(names[counts > 1][0])
+        both = sorted(str(t) for r, t in pairs if r == name)
+        raise DataError(f"{path}: recording {name!r} is labelled with two trajectories ({', '.join(both)}) in column "
+                        f"{TRAJECTORY}; a recording follows one trajectory")
 
 
 def label_column(frame, col: str, path: Path) -> np.ndarray:

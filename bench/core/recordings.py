@@ -12,7 +12,8 @@ clean, so :func:`preprocess` turns a recording into samples in four steps:
    is delayed against another and both sides of ``tau = g(L)`` see one filter;
 3. ``qdd`` as the central difference of the filtered velocity;
 4. ``trim_s`` cut from both ends (the filter's start-up), then every
-   ``decimate``-th sample kept.
+   ``decimate``-th sample kept, each with its time since the recording's
+   first row.
 
 Beside them it gives ``sign_qd``, the sign of the filtered velocity put
 through the same low-pass at the full rate (parallel filtering,
@@ -180,12 +181,18 @@ def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filte
         sign_qd = sosfiltfilt(sos, sign_qd, axis=0)
     qdd = np.gradient(qd, spec.dt, axis=0)
     keep = slice(trim, len(grid) - trim, spec.decimate)
-    return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep], "sign_qd": sign_qd[keep]}
+    return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep], "sign_qd": sign_qd[keep],
+            "time": grid[keep] - t[0]}
 
 
-def joined(parts: list[dict[str, np.ndarray]], names: list[str]) -> dict[str, np.ndarray]:
+def joined(parts: list[dict[str, np.ndarray]], names: list[str],
+           trajectories: list[str] | None = None) -> dict[str, np.ndarray]:
     """The samples of several recordings (:func:`preprocess` of each) one after
-    another, with ``recording``: each sample's recording name from ``names``."""
+    another, with ``recording``: each sample's recording name from ``names``;
+    and, given ``trajectories`` (one per recording), ``trajectory``: the
+    trajectory each sample's recording follows."""
     out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     out["recording"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
+    if trajectories is not None:
+        out["trajectory"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(trajectories, parts)])
     return out

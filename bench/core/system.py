@@ -45,6 +45,7 @@ import torch
 
 from bench.core import symbolic
 from bench.core.dynamics import euler_lagrange_chunked
+from bench.core.errors import ConfigError
 from bench.core.registry import Registry
 
 #: the parts of a Lagrangian's torque, as :meth:`System.forces` gives them
@@ -173,6 +174,9 @@ class System(abc.ABC):
         An instance of ``Params``; the defaults when omitted.
     domain
         The sampling domain; :attr:`default_domain` when omitted.
+    split
+        Which of :attr:`splits` a measured system's :meth:`load` gives; the
+        first when omitted.
     """
 
     name: ClassVar[str] = "unnamed"
@@ -201,6 +205,11 @@ class System(abc.ABC):
     #: ``False`` for measured systems, which cannot generate data; they
     #: provide :meth:`load` instead, and their Lagrangian is unknown
     simulated: ClassVar[bool] = True
+    #: the names of the train and test splits a measured system offers, its
+    #: default first; an instance is made for one (``split``, ``--split`` on
+    #: the command line), which its :meth:`load` gives. A system with one
+    #: split offers ``("default",)``
+    splits: ClassVar[tuple[str, ...]] = ("default",)
     #: the experiments the system's data allow (measured trajectories have no L)
     experiments: ClassVar[tuple[str, ...]] = ("direct", "indirect")
     #: why an experiment missing from ``experiments`` does not apply
@@ -211,11 +220,14 @@ class System(abc.ABC):
     #: (see the module docstring), so no expression can be judged exact
     symbolic: ClassVar[bool] = True
 
-    def __init__(self, params=None, domain: Domain | None = None):
+    def __init__(self, params=None, domain: Domain | None = None, split: str | None = None):
         self.params = params if params is not None else self.Params()
         if not isinstance(self.params, self.Params):
             raise TypeError(f"{self.name}: params must be a {self.Params.__name__}")
         self.domain = domain if domain is not None else self.default_domain
+        if split is not None and split not in self.splits:
+            raise ConfigError(f"system {self.name} has no split {split!r}; it offers {', '.join(self.splits)}")
+        self.split = split if split is not None else self.splits[0]
 
     # -- what a subclass writes -------------------------------------------------
     @abc.abstractmethod
@@ -227,7 +239,8 @@ class System(abc.ABC):
         """
 
     def load(self, split: str):
-        """The ``"train"`` or ``"test"`` part of a measured system's data."""
+        """The ``"train"`` or ``"test"`` part of a measured system's data (of
+        the instance's :attr:`split` where it offers several)."""
         raise NotImplementedError(f"{self.name} is simulated: generate its data with bench.core.data.generate")
 
     def nonconservative_torque(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> torch.Tensor | None:
