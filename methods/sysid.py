@@ -38,6 +38,17 @@ squares' parameters were no rigid body's. The record's ``feasibility``
 gives, for both fits, the masses and each link's smallest pseudo-inertia
 eigenvalue, and for the feasible one its distance to the least-squares
 optimum.
+
+The standard model (``--config sysid=standard``)
+------------------------------------------------
+The field's textbook identified model of an arm, which every measured-arm
+table reads its learners against: the rigid-body base parameters plus
+Coulomb and viscous friction on each joint (``F_c sign(qd_j) + b qd_j``;
+the Coulomb column uses the data's filtered velocity sign where they carry
+it, :meth:`~bench.core.data.Dataset.velocity_sign`), by ordinary least
+squares (``friction=True, feasible=False``). See, for instance, Swevers,
+Verdonck & De Schutter, "Dynamic model identification for industrial
+robots", IEEE Control Systems 27(5), 2007.
 """
 
 from __future__ import annotations
@@ -52,12 +63,14 @@ import torch
 
 from bench.core.data import Dataset
 from bench.core.errors import DataError
-from bench.core.models import FeasibleSet, LinearParametricModel, ParametricModel, mass_and_bias
+from bench.core.effects import EFFECTS
+from bench.core.models import (FeasibleSet, LinearParametricModel, ParametricModel, lagrangian_regressor, mass_and_bias,
+                               torque_regressor)
 from bench.core.feasible import Feasibility, feasible_fit, nearest_completion
 from bench.core.regression import Compressed, base_columns, least_squares
 from bench.core.system import LinearForm
 from methods.base import METHODS
-from methods.config import Range
+from methods.config import Named, Range
 from methods.torch_method import TorchConfig, TorchLagrangianMethod
 
 
@@ -69,12 +82,24 @@ class SysIdConfig(TorchConfig):
     pseudo-inertia positive semidefinite, the directions the data do not
     identify pulled toward the form's prior (the URDF) with weight
     ``regularisation`` (:mod:`bench.core.feasible`); ``False`` gives the
-    base parameters by least squares."""
+    base parameters by least squares. ``friction``: a linear form fitted
+    with Coulomb and viscous friction on each joint (:func:`with_friction`)."""
 
     hidden: Annotated[int, Range(1)] = 64
     linear_samples: Annotated[int, Range(1)] = 8192
     feasible: bool = True
     regularisation: Annotated[float, Range(0)] = 1e-6
+    friction: bool = False
+
+
+def with_friction(form: LinearForm) -> LinearForm:
+    """``form`` with viscous and Coulomb friction on each joint as further
+    columns (``b_j``, ``F_c_j``), in the suite's effects' terms."""
+    terms, names = [], []
+    for j in range(form.dof):
+        terms += [EFFECTS["viscous_friction"].term(j), EFFECTS["coulomb_friction"].term(j)]
+        names += [f"b_{j + 1}", f"F_c_{j + 1}"]
+    return form.with_terms(terms, names)
 
 
 def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: bool = False,
@@ -90,10 +115,10 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
     the least-squares base parameters are judged by the full set nearest
     the prior with their torques (:func:`~bench.core.feasible.nearest_completion`)."""
     if experiment == "direct":
-        W = np.column_stack([form.lagrangian_regressor(data.q, data.qd), np.ones(len(data))])  # L up to a constant
+        W = np.column_stack([lagrangian_regressor(form, data), np.ones(len(data))])  # L up to a constant
         y = data.target(experiment)
     else:
-        W = form.torque_regressor(data.q, data.qd, data.qdd).reshape(len(data) * data.dof, -1)
+        W = torque_regressor(form, data).reshape(len(data) * data.dof, -1)
         y = data.tau.ravel()
     start = time.perf_counter()
     independent, dependent, beta = base_columns(W)
@@ -110,13 +135,13 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
         base_true = (true[independent] + beta @ true[dependent])[keep]
         facts["parameter_error"] = float(np.linalg.norm(model.coef - base_true) / np.linalg.norm(base_true))
     if form.bodies and form.prior is not None and experiment == "indirect":
-        prior = np.asarray(form.prior)
+        prior = form.full_prior()
         start = time.perf_counter()
         problem = Compressed(W, y)  # one QR of the regressor: the completion and the feasible fit use its factor
         ls_full = nearest_completion(problem.R[:, : problem.columns], independent, coef, prior)
         report = {"least_squares": {**Feasibility.of(ls_full, form.bodies).as_dict(), "seconds": round(ls_seconds, 3)}}
         if feasible:
-            full, solve = feasible_fit(problem, form.bodies, prior, regularisation)
+            full, solve = feasible_fit(problem, form.bodies, np.asarray(form.prior), regularisation)
             base = full[independent] + beta @ full[dependent]
             model = LinearParametricModel(form, np.arange(len(form.names)), full, form.names,
                                           feasible=FeasibleSet(form.bodies, form.prior, regularisation))
@@ -153,10 +178,21 @@ class ParameterNetwork(torch.nn.Module):
 class SysId(TorchLagrangianMethod):
     Config = SysIdConfig
     smoke = {"max_steps": 20, "eval_samples": 256}
+    configurations = {
+        "standard": Named("the field's standard identified model of an arm: rigid-body base parameters plus Coulomb "
+                          "and viscous friction on each joint, by least squares", {"feasible": False, "friction": True}),
+    }
     linear: LinearParametricModel | None = None
 
     def _fit(self, train, experiment, progress):
         form = self.system.linear_form() if self.system is not None else None
+        if form is not None and self.config.friction:
+            if experiment == "direct":
+                raise DataError("sysid's friction columns act on torques: the direct experiment (samples of L) has none")
+            form = with_friction(form)
+        if form is None and self.config.friction:
+            raise DataError(f"sysid's friction columns extend an arm's linear form; {train.system} has a symbolic "
+                            f"form instead (leave friction off, or let the residual loop find the friction)")
         if form is None:
             self.linear = None
             return super()._fit(train, experiment, progress)

@@ -7,8 +7,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_budget, add_config, add_plugin, add_set, budget, check_names,
-                               configurations, hyperparameters, load_plugins)
+from bench.cli.options import (UsageError, add_budget, add_config, add_plugin, add_set, add_split, budget, check_names,
+                               check_split, configurations, hyperparameters, load_plugins)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
 from bench.runner import matrix
@@ -29,6 +29,7 @@ def add_arguments(f) -> None:
     f.add_argument("--test", type=Path, default=None, help="test CSV (default: generated when --train is not given)")
     f.add_argument("--seed", type=seed, default=0, help="the run's seed (default 0)")
     add_budget(f, "for the fit")
+    add_split(f)
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
     add_config(f)
     add_set(f)
@@ -44,6 +45,7 @@ def main(args) -> int:
         check_output(args.json)
     (name,), plugins = load_plugins(args, [args.system])
     check_names(args, [name], [args.method], [args.experiment])
+    check_split(args.split, [name])
     if args.test and not args.train:
         raise UsageError("--test needs --train (generated training data comes with generated test data)")
     spec = RunSpec(
@@ -52,7 +54,7 @@ def main(args) -> int:
         hyperparameters=hyperparameters(args.overrides, args.method, [args.method]),
         n_train=args.n_train, n_test=args.n_test,
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
-        domain_half_width=args.domain_half_width, plugins=plugins,
+        domain_half_width=args.domain_half_width, plugins=plugins, split=args.split,
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now

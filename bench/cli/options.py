@@ -77,6 +77,22 @@ def configurations(args, methods: list[str]) -> dict[str, str]:
     return chosen
 
 
+def add_split(parser) -> None:
+    """``--split NAME``: which train and test split of a measured system's trajectories."""
+    parser.add_argument("--split", default=None, metavar="NAME",
+                        help="a measured system's split of its trajectories into train and test: default, or swapped "
+                             "(train on the default's test trajectories and test on its training ones)")
+
+
+def check_split(split: str | None, systems: list[str]) -> None:
+    """Every system offers ``split`` (``None``: each its default)."""
+    if split is None:
+        return
+    lacking = [s for s in systems if split not in SYSTEMS[s].splits]
+    if lacking:
+        raise UsageError(f"--split {split}: {', '.join(lacking)} offer(s) only {', '.join(SYSTEMS[lacking[0]].splits)}")
+
+
 def add_plugin(parser) -> None:
     parser.add_argument("--plugin", action="append", default=[], help=PLUGIN_HELP)
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_config, add_plugin, add_set, budget, check_names, configurations,
-                               hyperparameters, load_plugins, number)
+from bench.cli.options import (UsageError, add_config, add_plugin, add_set, add_split, budget, check_names, check_split,
+                               configurations, hyperparameters, load_plugins, number)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
 from bench.residual.job import ResidualJob, run_residual
@@ -32,6 +32,7 @@ def add_arguments(res) -> None:
                      help="bound the loop by work instead of time: the method's fit (and each cross-fit) does N steps "
                           "of its work, the polish all its starts, the trace until nothing is significant, and at most "
                           f"{MAX_ROUNDS} rounds; the same command then gives the same effects and numbers on any machine")
+    add_split(res)
     res.add_argument("--seed", type=seed, default=0, help="the method's seed (default 0)")
     add_config(res)
     add_set(res)
@@ -46,7 +47,8 @@ def main(args) -> int:
             check_output(path)
     (name,), plugins = load_plugins(args, [args.system])
     check_names(args, [name], [args.method])
-    system = SYSTEMS[name]()
+    check_split(args.split, [name])
+    system = SYSTEMS[name](split=args.split)
     entry = METHODS.entry(args.method)
     if not entry.available:
         raise UsageError(f"method {args.method} is unavailable: {entry.unavailable_reason()}")
@@ -65,7 +67,7 @@ def main(args) -> int:
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
         budget_s=budget(args)[0], steps=args.steps, seed=args.seed, hyperparameters=settings,
         json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
-        plugins=plugins,
+        plugins=plugins, split=args.split,
     )
     result = run_residual(job)
     b, a = result.mse_before, result.mse_after

@@ -6,8 +6,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from bench.cli.options import (add_budget, add_config, add_plugin, add_set, budget, check_names, configurations,
-                               hyperparameters, load_plugins)
+from bench.cli.options import (add_budget, add_config, add_plugin, add_set, add_split, budget, check_names,
+                               check_split, configurations, hyperparameters, load_plugins)
 from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
@@ -22,13 +22,15 @@ HELP = "run a matrix of systems x methods x experiments x seeds and write tables
 
 def add_arguments(r) -> None:
     r.add_argument("--systems", type=csv_list, default=["double_pendulum"],
-                   help="comma-separated, or 'all'; urdf:PATH for any arm's URDF (default: double_pendulum)")
+                   help="comma-separated, or 'all'; urdf:PATH for any arm's URDF, measured:PATH for a measured arm's "
+                        "file (default: double_pendulum)")
     r.add_argument("--methods", type=csv_list, default=None, help="comma-separated (default: all registered)")
     r.add_argument("--experiments", type=csv_list, default=["direct", "indirect"], help="direct,indirect (default: both)")
     seeds = r.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
     seeds.add_argument("--n-seeds", type=seed_count, default=10, help="the first N of the ten fixed seeds (default 10)")
     add_budget(r, "per run")
+    add_split(r)
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
     r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
     r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
@@ -59,6 +61,7 @@ def main(args) -> int:
     systems, plugins = load_plugins(args, SYSTEMS.names() if args.systems == ["all"] else args.systems)
     methods = args.methods or METHODS.names()
     check_names(args, systems, methods, args.experiments)
+    check_split(args.split, systems)
     seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
     budget_s, steps = budget(args)
     chosen = configurations(args, methods)
@@ -69,6 +72,7 @@ def main(args) -> int:
         plugins=plugins,
         threads=args.threads,
         rollout=not args.no_rollout,
+        split=args.split,
     )
     specs = [dataclasses.replace(s, profile=chosen[s.method],
                                  hyperparameters=hyperparameters(args.overrides, s.method, methods)) for s in specs]

@@ -193,7 +193,7 @@ def feasibility_of(model, data) -> dict | None:
     form = model.form
     if not form.bodies or form.prior is None:
         return None
-    prior = np.asarray(form.prior)
+    prior = form.full_prior()
     if len(model.columns) == len(prior):
         full = np.zeros(len(prior))
         full[model.columns] = model.coef

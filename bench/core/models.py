@@ -261,16 +261,30 @@ _REGRESSORS: "weakref.WeakKeyDictionary[Dataset, dict]" = weakref.WeakKeyDiction
 
 
 def torque_regressor(form, data: Dataset) -> np.ndarray:
-    """``form.torque_regressor`` at the states of ``data``, computed once per form
-    and data set (read-only): the residual loop refits a linear model's
+    """``form.torque_regressor`` at the states of ``data``, with the form's
+    further :attr:`~bench.core.system.LinearForm.terms`' columns, computed once
+    per form and data set (read-only): the residual loop refits a linear model's
     coefficients many times on the same data, and an arm's regressor costs
     a pass of its rigid-body algorithm per sample."""
     kept = _REGRESSORS.setdefault(data, {})
     if form not in kept:
         Y = np.asarray(form.torque_regressor(data.q, data.qd, data.qdd), dtype=np.float64)
+        if form.terms:
+            extra = TermLibrary(form.terms).design(data, "indirect").reshape(len(data), data.dof, len(form.terms))
+            Y = np.concatenate([Y, extra], axis=2)
         Y.setflags(write=False)
         kept[form] = Y
     return kept[form]
+
+
+def lagrangian_regressor(form, data: Dataset) -> np.ndarray:
+    """``form.lagrangian_regressor`` at the states of ``data``, with each of
+    the form's further :attr:`~bench.core.system.LinearForm.terms`' value in
+    ``L`` (zero for friction): ``(n, p)``."""
+    Y = form.lagrangian_regressor(data.q, data.qd)
+    if not form.terms:
+        return Y
+    return np.column_stack([Y] + [t.value(data) for t in form.terms])
 
 
 class LinearParametricModel(FittedModel):
@@ -298,7 +312,7 @@ class LinearParametricModel(FittedModel):
         return (self.torque_columns(data) @ self.coef).reshape(len(data), data.dof)
 
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
-        return self.form.lagrangian_regressor(data.q, data.qd)[:, self.columns] @ self.coef + self.offset
+        return lagrangian_regressor(self.form, data)[:, self.columns] @ self.coef + self.offset
 
     def with_coefficients(self, coef) -> "LinearParametricModel":
         return LinearParametricModel(self.form, self.columns, coef, self.names, self.offset, self.feasible)

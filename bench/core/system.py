@@ -149,6 +149,11 @@ class LinearForm:
     prior
         The parameters' nominal values (an arm's URDF), which a feasible fit
         falls back on where the data do not decide; ``None`` where none are known.
+    terms
+        Further columns after the regressors' (:meth:`with_terms`): terms of
+        the suite's term library (:class:`~bench.core.terms.Term`), such as
+        joint friction, each with one coefficient; the regressors above do
+        not give them, :func:`bench.core.models.torque_regressor` does.
     """
 
     names: tuple[str, ...]
@@ -158,6 +163,16 @@ class LinearForm:
     true_values: tuple[float, ...] | None = None
     bodies: int = 0
     prior: tuple[float, ...] | None = None
+    terms: tuple = ()
+
+    def with_terms(self, terms, names) -> "LinearForm":
+        """The form with ``terms`` as further columns, named ``names``."""
+        return dataclasses.replace(self, names=self.names + tuple(names), terms=self.terms + tuple(terms),
+                                   true_values=None if self.true_values is None else self.true_values + (0.0,) * len(terms))
+
+    def full_prior(self) -> np.ndarray | None:
+        """:attr:`prior` with a zero for each of :attr:`terms` (``None`` without a prior)."""
+        return None if self.prior is None else np.concatenate([self.prior, np.zeros(len(self.terms))])
 
 
 class System(abc.ABC):

@@ -28,7 +28,7 @@ class ResidualJob:
     """One run of the loop, as the command line gives it.
 
     ``train_path`` / ``test_path`` are CSV files in the suite's format; a
-    measured system without them uses its own splits. ``json_path`` and
+    measured system without them uses its own split ``split`` (``None``: its default). ``json_path`` and
     ``report_path`` are written by the loop's process, atomically.
     """
 
@@ -43,9 +43,10 @@ class ResidualJob:
     json_path: str | None = None
     report_path: str | None = None
     plugins: tuple[str, ...] = ()
+    split: str | None = None
 
     def data(self) -> tuple[Dataset, Dataset | None]:
-        data = given_data(SYSTEMS[self.system](), self.train_path, self.test_path)
+        data = given_data(SYSTEMS[self.system](split=self.split), self.train_path, self.test_path)
         if data is None:
             raise UserError(f"{self.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
         return data

@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 
 from bench.core.errors import UserError
-from bench.runner.plugins import URDF, import_plugins
+from bench.runner.plugins import BY_FILE, import_plugins
 from bench.runner.provenance import PROJECT_ROOT
 from methods import METHODS
 from systems import SYSTEMS
@@ -55,11 +55,12 @@ def _name(path: Path) -> str:
 
 def code_files(method: str, system: str, plugins: tuple[str, ...] = ()) -> dict[str, str]:
     """``{file: sha256 prefix}`` of the code that defines ``method`` and ``system``,
-    with the ``.py`` plugins and ``urdf:`` descriptions the run imports."""
+    with the ``.py`` plugins, ``urdf:`` descriptions and ``measured:`` files the run imports."""
     paths = _class_files(METHODS[method]) + _class_files(SYSTEMS[system])
     for plugin in plugins:
-        name = plugin[len(URDF):] if plugin.startswith(URDF) else plugin
-        if name.endswith((".py", ".urdf")) and Path(name).is_file():
+        prefix = next((p for p in BY_FILE if plugin.startswith(p)), "")
+        name = plugin[len(prefix):]
+        if name.endswith((".py", ".urdf", ".toml")) and Path(name).is_file():
             paths.append(Path(name).resolve())
     out = {}
     for path in paths:

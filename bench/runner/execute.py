@@ -45,10 +45,10 @@ def method_config(spec: RunSpec) -> dict:
 
 
 def make_system(spec: RunSpec) -> System:
-    """The spec's system, with its domain widened where the spec asks."""
-    system = SYSTEMS[spec.system]()
+    """The spec's system, of the spec's split, with its domain widened where the spec asks."""
+    system = SYSTEMS[spec.system](split=spec.split)
     if spec.domain_half_width and system.simulated:
-        system = SYSTEMS[spec.system](domain=system.scaled_domain(spec.domain_half_width))
+        system = SYSTEMS[spec.system](domain=system.scaled_domain(spec.domain_half_width), split=spec.split)
     return system
 
 

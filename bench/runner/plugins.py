@@ -1,6 +1,7 @@
 """Plugins: methods and systems registered outside the suite, imported by
-file path or module name before their names are resolved, and robot arms
-given as ``urdf:PATH`` (:func:`systems.urdf_arm.register_urdf`)."""
+file path or module name before their names are resolved, robot arms given
+as ``urdf:PATH`` (:func:`systems.urdf_arm.register_urdf`) and measured arms
+as ``measured:PATH`` (:func:`systems.measured_arm.register_measured`)."""
 
 from __future__ import annotations
 
@@ -12,18 +13,22 @@ from pathlib import Path
 from typing import Iterable
 
 from bench.core.errors import UserError
+from systems.measured_arm import MEASURED, register_measured
 from systems.urdf_arm import register_urdf
 
 #: a system given by its robot description: ``urdf:PATH``
 URDF = "urdf:"
+#: the systems given by a file, by prefix, and how each is registered
+BY_FILE = {URDF: register_urdf, MEASURED: register_measured}
 
 
 def import_plugins(plugins: Iterable[str]) -> None:
-    """Import each plugin once: a ``.py`` path, a module name, or ``urdf:PATH``."""
+    """Import each plugin once: a ``.py`` path, a module name, ``urdf:PATH`` or ``measured:PATH``."""
     for plugin in plugins:
         try:
-            if plugin.startswith(URDF):
-                register_urdf(plugin)
+            prefix = _file_prefix(plugin)
+            if prefix:
+                BY_FILE[prefix](plugin)
                 continue
             _import_plugin(plugin)
         except UserError:
@@ -60,10 +65,16 @@ def system_plugins(names: Iterable[str]) -> tuple[list[str], tuple[str, ...]]:
     plugins a run's own process needs to resolve them."""
     out, plugins = [], []
     for name in names:
-        if name.startswith(URDF):
-            plugin = URDF + str(Path(name[len(URDF):]).expanduser().resolve())
-            out.append(register_urdf(plugin))
+        prefix = _file_prefix(name)
+        if prefix:
+            plugin = prefix + str(Path(name[len(prefix):]).expanduser().resolve())
+            out.append(BY_FILE[prefix](plugin))
             plugins.append(plugin)
         else:
             out.append(name)
     return out, tuple(plugins)
+
+
+def _file_prefix(name: str) -> str | None:
+    """The prefix of a system given by a file (``urdf:``, ``measured:``), or ``None``."""
+    return next((p for p in BY_FILE if name.startswith(p)), None)

@@ -78,6 +78,9 @@ class RunSpec:
     plugins
         Python files or modules to import before resolving names, for methods
         and systems registered outside the suite.
+    split
+        Which of a measured system's splits (:attr:`~bench.core.system.System.splits`)
+        its data come from; ``None``: its default.
     budget_s, steps, schedule
         The budget (:mod:`bench.core.budget`): ``budget_s`` seconds of
         wall-clock time; or, with ``steps``, that many steps of the method's
@@ -104,6 +107,7 @@ class RunSpec:
     noise: float = 0.0
     steps: int | None = None
     schedule: dict | None = None
+    split: str | None = None
 
     def __post_init__(self):
         _ = self.budget  # a spec without a valid budget is refused where it is made (ConfigError)
