@@ -100,10 +100,14 @@ def scores(model: FittedModel, experiment: str, train: Dataset, test: Dataset | 
     return out
 
 
+#: why no expression is judged exact on measured data
+MEASURED = "the measured system's Lagrangian is not known"
+
+
 def not_judged(system: System) -> str | None:
     """Why no expression can be judged exact on ``system`` (``None``: it can be)."""
     if not system.simulated:
-        return "the measured system's Lagrangian is not known"
+        return MEASURED
     if not system.symbolic:
         return "the system has no closed-form Lagrangian (its dynamics come from an engine)"
     return None

@@ -51,6 +51,7 @@ from typing import Callable
 import numpy as np
 
 from bench.core.fileio import atomic_write, link
+from bench.evaluation.scores import MEASURED
 from bench.reporting.plots import convergence_plot, plot_name
 from bench.reporting.significance import by_seed, seed_ranks, ties_with_best
 from bench.runner.provenance import PROJECT_ROOT, machine
@@ -123,6 +124,8 @@ def _exact_cell(records: list[Record]) -> str:
     late = [r.details["exact_timed_out"] for r in records if r.details.get("exact_timed_out")]
     if not judged and not late:
         reasons = {r.details.get("exact_not_judged") for r in records if r.details.get("exact_not_judged")}
+        if reasons == {MEASURED}:
+            return "not applicable: measured data have no true L"
         if reasons:
             return "not judged: no closed-form Lagrangian"
         if any(r.details.get("exact_not_applicable") for r in records):
@@ -144,6 +147,42 @@ def _rollout_cell(records: list[Record]) -> str:
     text = f"{fmt(float(np.median(errors)))} ({len(errors)}/{len(rolled)}" if errors else f"— (0/{len(rolled)}"
     others = "".join(f"; {v} {k.replace('_', ' ')}" for k, v in sorted(counts.items()))
     return text + others + ")"
+
+
+def _driven_cell(records: list[Record], length: str) -> str:
+    """The median over seeds of each run's median q RMSE over its driven windows of
+    ``length`` s, the runs with any window left, and the windows that diverged."""
+    entries = [r.rollout["windows"][length] for r in records
+               if r.status == "ok" and r.rollout and length in r.rollout.get("windows", {})]
+    if not entries:
+        return "—"
+    medians = [e["median_q_rmse"] for e in entries if e.get("median_q_rmse") is not None]
+    diverged, total = sum(e["diverged"] for e in entries), sum(e["windows"] for e in entries)
+    head = fmt(float(np.median(medians))) if medians else "—"
+    return f"{head} ({diverged}/{total} windows diverged)"
+
+
+def _standard(records: list[Record]) -> dict | None:
+    """The standard model's figures (``details.standard_model``) the records carry, if any."""
+    return next((r.details["standard_model"] for r in records if (r.details or {}).get("standard_model")), None)
+
+
+def standard_line(records: list[Record]) -> str:
+    """The standard model as the line a measured arm's table reads against; empty where the records carry none."""
+    s = _standard(records)
+    if not s:
+        return ""
+    text = (f"Standard model (SysId's `{s['configuration']}` configuration: rigid-body base parameters plus Coulomb and "
+            f"viscous friction per joint, least squares, on the same samples): train MSE {fmt(s['train_mse'])}, test MSE "
+            f"{fmt(s['test_mse']) if s.get('test_mse') is not None else '—'}")
+    rollout = s.get("rollout") or {}
+    for length, e in sorted(rollout.get("windows", {}).items(), key=lambda kv: float(kv[0])):
+        median = "—" if e.get("median_q_rmse") is None else fmt(e["median_q_rmse"])
+        text += f"; driven {length} s: q RMSE {median} ({e['diverged']}/{e['windows']} windows diverged)"
+    if s.get("mass_matrix_positive_definite") is False:
+        text += (f". Its mass matrix is not positive definite (smallest eigenvalue "
+                 f"{s['mass_matrix_smallest_eigenvalue']:.3g} at the training states), so it has no forward dynamics")
+    return text + "."
 
 
 def _angle(value: float) -> str:
@@ -169,8 +208,13 @@ def _data(records: list[Record]) -> str:
     for r in described:
         if r.spec.get("train_path"):
             sources.add(f"the files {r.spec['train_path']} (test: {r.spec.get('test_path') or 'none'})")
+        elif not _simulated(r.system) and r.spec.get("split") not in (None, "default"):
+            sources.add(f"the system's recordings, its split {r.spec['split']} ({r.details.get('train_source', '?')}; "
+                        f"test: {r.details.get('test_source', '?')})")
         elif not _simulated(r.system):
-            sources.add("the system's recordings, its published train and test split")
+            sources.add("the system's recordings, its published train and test split"
+                        + (f" ({r.details['train_source']}; test: {r.details.get('test_source')})"
+                           if r.details.get("train_source") else ""))
         elif "domain" in r.details:
             d = r.details["domain"]
             ranges = {k: _uniform(d[k]) for k in ("q", "qd", "qdd")}
@@ -302,8 +346,21 @@ def build_table(records: list[Record]) -> str:
             lines.append(f"| {label} | {split} | " + " | ".join(cells) + " |")
     lines.append("| Runs | | " + " | ".join(_runs_cell(by_method[m]) for m in methods) + " |")
     lines.append("| Exact | | " + " | ".join(_exact_cell(by_method[m]) for m in methods) + " |")
-    if any(r.rollout for r in records):
+    driven = any((r.rollout or {}).get("kind") == "driven" for r in records)
+    if driven:
+        lengths = sorted({k for r in records for k in (r.rollout or {}).get("windows", {})}, key=float)
+        for length in lengths:
+            lines.append(f"| Driven {length} s | q RMSE | " + " | ".join(_driven_cell(by_method[m], length) for m in methods)
+                         + " |")
+    elif any(r.rollout for r in records):
         lines.append("| Rollout | q RMSE | " + " | ".join(_rollout_cell(by_method[m]) for m in methods) + " |")
+    standard = _standard(records)
+    if standard and standard.get("test_mse"):
+        cells = []
+        for m in methods:
+            v = stats[m].get(TESTED_GROUP, {}).get("test")
+            cells.append("—" if v is None else f"{v[0] / standard['test_mse']:.3g}×")
+        lines.append(f"| {TESTED_GROUP} / standard | test | " + " | ".join(cells) + " |")
     ranks, seeds = seed_ranks(by_seed(records))
     if ranks:
         order = sorted(ranks, key=lambda m: (ranks[m], m))
@@ -364,6 +421,9 @@ def build_tables(records: list[Record], plots: dict[tuple, str] | None = None, p
         reference = _reference(system)
         if reference:
             parts += ["", f"Reference: {reference}"]
+        standard = standard_line(recs)
+        if standard:
+            parts += ["", standard]
         parts += ["", build_table(recs), ""]
         if (system, experiment, noise) in plots:
             parts += [f"![convergence: {system}, {experiment}]({plots[(system, experiment, noise)]})", ""]

@@ -22,7 +22,9 @@ from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate, read_csv
 from bench.core.timeouts import Timeout
 from bench.core.system import System
+from bench.evaluation.driven import driven_entry
 from bench.evaluation.forces import forces_entry
+from bench.evaluation.reference import applies as has_standard_model, standard_reference
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record
@@ -170,7 +172,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             "prepare_seconds": prepared or info.get("prepare_seconds", 0.0),
             **stages.run("details", method.record_details, default={}),
             "variants": variants,
-            **({"exact_not_judged": not_judged(system)} if not_judged(system) and system.simulated else {}),
+            **({"exact_not_judged": not_judged(system)} if not_judged(system) else {}),
             **exact,
         }
         if system.simulated and test is not None and spec.rollout:
@@ -178,6 +180,14 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             limit = None if budget.kind == STEPS else ROLLOUT_LIMIT_S  # a work budget's results do not depend on time
             fields["rollout"] = stages.run("rollout", rollout_entry, method, system, test, limit)
             timing["rollout_s"] = time.perf_counter() - clock
+        elif test is not None and test.time is not None and spec.rollout and spec.experiment == "indirect":
+            clock = time.perf_counter()  # measured recordings: driven by their torques
+            fields["rollout"] = stages.run("rollout", driven_entry, method, test)
+            timing["rollout_s"] = time.perf_counter() - clock
+        if has_standard_model(system) and spec.experiment == "indirect":
+            clock = time.perf_counter()
+            fields["details"]["standard_model"] = stages.run("standard model", standard_reference, system, train, test)
+            timing["standard_model_s"] = time.perf_counter() - clock
         if test is not None:
             clock = time.perf_counter()
             part = test.subset(slice(0, FORCES_SAMPLES))

@@ -1,0 +1,137 @@
+"""Driven rollouts of measured data: a model's simulation error.
+
+How the field judges an identified model of a real robot, without a true
+model to compare with: the model is forward-simulated under the *measured*
+torques, from the measured state at the start of a window of a test
+recording, and its motion is compared with the measured ``q`` over the
+window. Short windows (:data:`WINDOWS_S`: 0.25 s and 1 s) keep a small
+model error from compounding over a whole recording into a figure that says
+only "it drifted".
+
+Forward dynamics come from any model's torques, as in
+:mod:`bench.evaluation.rollout`: ``tau = M(q, qd) qdd + c(q, qd)``, so
+``qdd = M^-1 (tau_measured - c)``; a model with friction (the standard model,
+the residual loop's) has it in ``c``. The windows of a data set are
+consecutive and non-overlapping within each recording (the data's ``time``
+and ``recording`` say where each sample lies) and are integrated together
+by the classical fourth-order Runge–Kutta method with a fixed step, the
+data's sample step divided by :data:`SUBSTEPS`, the measured torque held
+linear between samples. A fixed step makes the work a function of the data
+alone, so the same model gives the same figures on any machine; an adaptive
+integrator takes a friction law's sign change for stiffness.
+
+A window *diverges* where the model's mass matrix is not positive definite
+(or is singular) at a state it reaches, or its motion blows up (``|qd|``
+beyond :data:`BLOW_UP`, or not finite); that window stops there and counts
+as diverged, and the others go on. The figure per window is the RMS of
+``q - q_measured`` over its samples and joints (rad); an entry gives, per
+window length, how many windows there were, how many diverged, and the
+median RMSE of the rest.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bench.core.data import Dataset
+from bench.core.models import FittedModel, mass_and_bias
+from bench.evaluation.rollout import BLOW_UP, MAX_CONDITION
+
+#: the windows' lengths, s
+WINDOWS_S = (0.25, 1.0)
+#: integration steps per sample step of the data
+SUBSTEPS = 4
+
+
+def windows(data: Dataset, length_s: float) -> list[np.ndarray]:
+    """Consecutive, non-overlapping windows of ``length_s`` within each
+    recording of ``data``: index arrays of the samples each spans, first to
+    last. Each recording's samples must be evenly spaced in time."""
+    if data.time is None or data.recording is None:
+        raise ValueError(f"{data.source}: driven rollouts need each sample's recording and time")
+    out = []
+    for name in data.recordings():
+        index = np.flatnonzero(data.recording == name)
+        index = index[np.argsort(data.time[index], kind="stable")]
+        if len(index) < 2:
+            continue
+        step = float(np.median(np.diff(data.time[index])))
+        per = int(round(length_s / step))
+        if per < 1:
+            raise ValueError(f"{data.source}: a window of {length_s:g} s is shorter than the sample step {step:g} s")
+        for start in range(0, len(index) - per, per):
+            out.append(index[start:start + per + 1])
+    return out
+
+
+def _accelerations(model: FittedModel, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``M^-1 (tau - c)`` at each row, and which rows have forward dynamics
+    (``M`` positive definite and not singular, every value finite)."""
+    M, c = mass_and_bias(model, q, qd)
+    ok = np.all(np.isfinite(M), axis=(1, 2)) & np.all(np.isfinite(c), axis=1)
+    M = np.where(ok[:, None, None], M, np.eye(q.shape[1]))
+    c = np.where(ok[:, None], c, 0.0)
+    eig = np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))
+    scale = np.maximum(np.max(np.abs(eig), axis=1), np.finfo(float).tiny)
+    ok &= eig[:, 0] / scale >= 1.0 / MAX_CONDITION
+    M = np.where(ok[:, None, None], M, np.eye(q.shape[1]))
+    return np.linalg.solve(M, (tau - c)[..., None])[..., 0], ok
+
+
+def driven_rollout(model: FittedModel, data: Dataset, length_s: float, substeps: int = SUBSTEPS) -> dict:
+    """The driven rollouts of ``model`` over every window of ``length_s`` in
+    ``data``: ``{"window_s", "windows", "diverged", "median_q_rmse", "q_rmse"}``
+    (``q_rmse``: each window's, ``None`` for a diverged one)."""
+    spans = windows(data, length_s)
+    out = {"window_s": length_s, "windows": len(spans), "diverged": 0, "median_q_rmse": None, "q_rmse": []}
+    if not spans:
+        return out
+    steps = min(len(s) for s in spans) - 1
+    spans = np.stack([s[: steps + 1] for s in spans])  # (W, steps + 1): windows of one recording rate have one length
+    h = float(np.median(np.diff(data.time[spans], axis=1))) / substeps
+    q, qd = data.q[spans[:, 0]].copy(), data.qd[spans[:, 0]].copy()
+    alive = np.ones(len(spans), dtype=bool)
+    sq = np.zeros(len(spans))
+
+    def f(q, qd, tau):
+        qdd, ok = _accelerations(model, q, qd, tau)
+        return qdd, ok & np.all(np.isfinite(qd), axis=1) & (np.max(np.abs(qd), axis=1) <= BLOW_UP)
+
+    for k in range(steps):
+        tau0, tau1 = data.tau[spans[:, k]], data.tau[spans[:, k + 1]]
+        for s in range(substeps):
+            idx = np.flatnonzero(alive)
+            if not len(idx):
+                break
+            a, b = s / substeps, (s + 0.5) / substeps
+            t0, tm, t1 = ((1 - w) * tau0[idx] + w * tau1[idx] for w in (a, b, (s + 1) / substeps))
+            x, v = q[idx], qd[idx]
+            k1v, ok1 = f(x, v, t0)
+            k2v, ok2 = f(x + 0.5 * h * v, v + 0.5 * h * k1v, tm)
+            k3v, ok3 = f(x + 0.5 * h * (v + 0.5 * h * k1v), v + 0.5 * h * k2v, tm)
+            k4v, ok4 = f(x + h * (v + 0.5 * h * k2v), v + h * k3v, t1)
+            x_new = x + h * v + h * h / 6 * (k1v + k2v + k3v)
+            v_new = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+            ok = ok1 & ok2 & ok3 & ok4 & np.all(np.isfinite(v_new), axis=1) & (np.max(np.abs(v_new), axis=1) <= BLOW_UP)
+            q[idx[ok]], qd[idx[ok]] = x_new[ok], v_new[ok]
+            alive[idx[~ok]] = False
+        err = q - data.q[spans[:, k + 1]]
+        sq += np.where(alive, np.sum(err * err, axis=1), 0.0)
+    rmse = np.sqrt(sq / (steps * data.dof))
+    out["q_rmse"] = [float(r) if a else None for r, a in zip(rmse, alive)]
+    out["diverged"] = int((~alive).sum())
+    out["median_q_rmse"] = float(np.median(rmse[alive])) if alive.any() else None
+    return out
+
+
+def driven_entry(model: FittedModel, data: Dataset) -> dict:
+    """A run's ``rollout`` entry on measured data: the driven rollouts of every
+    window length in :data:`WINDOWS_S`, the longest's median as the entry's
+    ``q_rmse``; a model that is no Lagrangian of ``(q, qd)`` has none."""
+    reason = model.not_a_lagrangian()
+    if reason:
+        return {"kind": "driven", "status": "not_applicable", "q_rmse": None, "detail": reason}
+    by_length = {f"{s:g}": driven_rollout(model, data, s) for s in WINDOWS_S}
+    longest = by_length[f"{WINDOWS_S[-1]:g}"]
+    status = "ok" if longest["median_q_rmse"] is not None else "diverged"
+    return {"kind": "driven", "status": status, "q_rmse": longest["median_q_rmse"], "windows": by_length}

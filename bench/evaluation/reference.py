@@ -1,0 +1,47 @@
+"""The standard model of a measured arm, as a reference in every run's record.
+
+Each learner on a measured arm reads against what the field would identify
+from the same samples: SysId's standard configuration, the rigid-body base
+parameters plus Coulomb and viscous friction on each joint by least squares
+(:mod:`methods.sysid`). :func:`standard_reference` fits it on the run's
+training data (a solve of a few seconds, the same in every run of one data
+split) and scores it as a run is scored: torque MSE on the training and test
+data, the driven rollouts of the test recordings
+(:mod:`bench.evaluation.driven`), and whether its mass matrix is positive
+definite, without which it has no forward dynamics.
+"""
+
+from __future__ import annotations
+
+from bench.core.budget import Budget
+from bench.core.data import Dataset, mse
+from bench.core.system import System
+from bench.evaluation.driven import driven_entry
+from methods import METHODS
+
+#: the method and configuration of the standard model
+METHOD, CONFIGURATION = "sysid", "standard"
+
+
+def applies(system: System) -> bool:
+    """Whether ``system`` has a standard model to read against: a measured system linear in its parameters (an arm)."""
+    return not system.simulated and system.linear_form() is not None
+
+
+def standard_reference(system: System, train: Dataset, test: Dataset | None) -> dict:
+    """The record's ``details.standard_model``: the standard model's train and
+    test torque MSE, its driven rollouts where the test data name their
+    recordings' times, and its fit's facts (the mass matrix's definiteness)."""
+    model = METHODS[METHOD](**METHODS[METHOD].configuration(CONFIGURATION))
+    model.fit(train, "indirect", 0, Budget(steps=1), system=system)
+    facts = model.record_details()
+    out = {
+        "method": METHOD, "configuration": CONFIGURATION,
+        "train_mse": mse(model.predict_torque(train), train.tau),
+        "test_mse": None if test is None else mse(model.predict_torque(test), test.tau),
+        "mass_matrix_positive_definite": facts.get("mass_matrix_positive_definite"),
+        "mass_matrix_smallest_eigenvalue": facts.get("mass_matrix_smallest_eigenvalue"),
+    }
+    if test is not None and test.time is not None:
+        out["rollout"] = driven_entry(model, test)
+    return out
