@@ -76,7 +76,7 @@ def main(args) -> int:
         what = e.get("expression") or e["name"]
         where = f"joint{'s' if len(e['joints']) > 1 else ''} {'-'.join(map(str, e['joints']))}"
         params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items())
-        print(f"  {what} ({e['kind']}) on {where}: {params}")
+        print(f"  {what} ({e['kind']}) on {where}: {params or e.get('finding', '')}")
     if not result.effects:
         print("  no effect added: nothing significant in the residual")
     return 0

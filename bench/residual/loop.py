@@ -79,6 +79,7 @@ from bench.residual.candidates import candidates, describe_all, is_named, label,
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shape_stderr, simplest_laws
+from bench.residual.reach import beyond_data, earns_place, finding, not_identified
 from bench.residual.result import ResidualResult
 from bench.residual.selection import BUDGET_STOP, trace
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
@@ -166,6 +167,7 @@ class _Loop:
         self.horizon = budget.fit_seconds  # the loop's time (unlimited under a work budget)
         self.fitter = Fitter(method, seed, budget.scaled(FIT_SHARE), hyperparameters)
         self.start = time.perf_counter()
+        self.beyond: dict[str, tuple] = {}  # effects dropped for claiming beyond the data: label -> (term, entry)
         self.statistics = 0.0  # seconds in selection, pruning and the held-out and mass-matrix checks
 
     def timed(self, fn, *args, **kwargs):
@@ -217,7 +219,7 @@ class _Loop:
         return ResidualResult(
             system=train.system, method=self.method, mse_before=before, mse_after=after,
             effects=describe_all(model.effects, model.coef, model.stderr, self.timed(shape_stderr, strategy, model, train))
-            + list(findings.values()),
+            + list(findings.values()) + [entry for _, entry in self.beyond.values()],
             rounds=[r.to_json() for r in rounds], validation=split,
             mass_matrix={"smallest_eigenvalue_before": mass_before, "smallest_eigenvalue_after": mass,
                          "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
@@ -251,6 +253,29 @@ class _Loop:
             if not dropped:
                 return model, simplified, impossible
 
+    def confine(self, model: LoopModel):
+        """``model`` without each effect the data do not identify, and each that
+        claims beyond the training data and does not earn its place on a
+        held-out trajectory (:mod:`bench.residual.reach`), dropped one at a time
+        with a refit; returns the model and the labels dropped (their findings
+        go to :attr:`beyond`)."""
+        dropped = []
+        while True:
+            suspects = [(i, why, None) for i, why in not_identified(model)] + \
+                [(i, why, self.strategy) for i, why in beyond_data(model, self.train)]
+            for index, why, strategy in suspects:
+                keep, verdict = (False, "") if strategy is None else earns_place(strategy, model, self.train, index)
+                if keep:
+                    continue
+                term = model.effects[index]
+                self.beyond[label(term)] = (term, finding(term, model.coef[index], model.stderr[index], why, verdict))
+                self.report(f"  dropping {label(term)}: {why}; {verdict}")
+                model = self.strategy.refit(model, self.train, [t for t in model.effects if t is not term])
+                dropped.append(label(term))
+                break
+            else:
+                return model, dropped
+
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
         """Rounds 1 to :data:`MAX_ROUNDS`; returns the final model, its held-out
         error and mass-matrix eigenvalue, and the structural findings."""
@@ -264,7 +289,8 @@ class _Loop:
                 report(f"round {k}: not started, the budget of {self.budget.seconds:g} s would be spent before it ended")
                 break
             target, fixed = strategy.problem(model, train)
-            selection = self.timed(trace, target, train, pool, fixed, exclude=model.effects, max_steps=strategy.trace_steps,
+            excluded = model.effects + [term for term, _ in self.beyond.values()]
+            selection = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
                                    deadline=self.start + TRACE_SHARE * self.horizon)
             findings = {}  # what is left unexplained where the loop ends
             for term, c, se in selection.structural:
@@ -287,6 +313,8 @@ class _Loop:
             for term, c, se in impossible:
                 findings[label(term)] = structural(term, c, se)
                 removed.append(label(term))
+            candidate, beyond = self.timed(self.confine, candidate)
+            removed += beyond
             candidate_held = self.timed(heldout, strategy, candidate, train)
             candidate_mass = self.timed(smallest_mass_eigenvalue, candidate, train)
             undo = None  # why the round is undone: the JSON's words, then the progress line's

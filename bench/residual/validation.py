@@ -1,15 +1,22 @@
-"""Held-out validation for the residual loop: by whole recordings.
+"""Held-out validation for the residual loop: by whole trajectories.
 
 On a measured trajectory, neighbouring samples are near copies, so a choice
 tested on rows interleaved with (or next to) the rows it was fitted on is not
-tested at all. Every choice the loop makes is therefore judged by
-cross-validation over folds that are
+tested at all; and a robot that repeats an excitation trajectory records a
+near copy of it each time, so a choice tested on a repeat of the trajectory
+it was fitted on is not tested either. Every choice the loop makes is
+therefore judged by cross-validation over folds that are
 
-* **one recording each** (leave one recording out) where the data name two
-  or more recordings (the ``trajectory`` column of the data format);
-* otherwise :data:`BLOCKS` contiguous blocks of the samples: the only honest
-  split of a single recording, and, for generated data, whose samples are
-  independent draws, as good as any other split.
+* **one trajectory each** (leave one trajectory out, every recording of it
+  together) where the data name two or more trajectories
+  (:meth:`~bench.core.data.Dataset.trajectories`);
+* where they name one trajectory, :data:`BLOCKS` contiguous spans of it in
+  time, each span of every recording of it in one fold: the held-out span's
+  repeats are held out with it, so what is tested is a part of the motion the
+  fit has not seen (a weaker test than another trajectory, which such data
+  cannot give);
+* otherwise :data:`BLOCKS` contiguous blocks of the samples: for generated
+  data, whose samples are independent draws, as good as any other split.
 
 :func:`cv_mse` refits a linear problem without each fold and scores it on
 that fold; the mean over all held-out rows is the figure the loop compares.
@@ -28,20 +35,34 @@ BLOCKS = 4
 
 def folds(data: Dataset) -> list[np.ndarray]:
     """Boolean masks over the samples, one per fold; every sample is held out once."""
-    names = data.recordings()
+    names = data.trajectories()
     if len(names) >= 2:
-        return [data.recording == name for name in names]
+        labels = data.trajectory_labels()
+        return [labels == name for name in names]
+    if names:  # one trajectory: spans of it in time, aligned across its recordings
+        block = np.zeros(len(data), dtype=int)
+        for name in data.recordings():
+            index = np.flatnonzero(data.recording == name)
+            if data.time is not None:
+                index = index[np.argsort(data.time[index], kind="stable")]
+            block[index] = np.arange(len(index)) * BLOCKS // max(len(index), 1)
+        return [block == k for k in range(min(BLOCKS, len(data)))]
     block = np.arange(len(data)) * BLOCKS // max(len(data), 1)
     return [block == k for k in range(min(BLOCKS, len(data)))]
 
 
 def describe(data: Dataset) -> str:
     """How :func:`folds` splits ``data``, in words."""
-    names = data.recordings()
+    names = data.trajectories()
     if len(names) >= 2:
-        return f"leave one recording out, over {len(names)} recordings"
-    what = "one recording" if names else "samples without recordings"
-    return f"{BLOCKS} contiguous blocks of {what}"
+        recordings = len(data.recordings())
+        extra = f" ({recordings} recordings)" if recordings != len(names) else ""
+        return f"leave one trajectory out, over {len(names)} trajectories{extra}"
+    if names:
+        recordings = len(data.recordings())
+        return (f"{BLOCKS} contiguous spans in time of one trajectory, each span of its {recordings} recording(s) "
+                f"held out together")
+    return f"{BLOCKS} contiguous blocks of samples without recordings"
 
 
 def row_folds(data: Dataset) -> list[np.ndarray]:

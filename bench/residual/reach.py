@@ -1,0 +1,88 @@
+"""What a law may claim beyond the data it was fitted on.
+
+A law fitted on one trajectory can fit that trajectory and not the arm: a
+spring whose rest angle lies where the arm never went, or an open-ended term
+(``qd_j^4 / 4``, a term of ``L`` from the library) that bends the fit to the
+motion it saw. Such an effect *claims beyond the data*
+(:func:`beyond_data`):
+
+* every open-ended term;
+* a spring on a joint whose rest angle lies outside the joint's recorded
+  range: ``-tau_0 / k`` with the offset ``tau_0`` on its joint (the
+  offset-spring law), else 0.
+
+An effect whose standard error is at least its value is not identified by
+the data at all (:func:`not_identified`): it is dropped and reported the
+same way, whatever the trajectories.
+
+An effect that claims beyond the data stays in the model only if it earns
+its place on a trajectory it was not fitted on (:func:`earns_place`): with the training data's trajectories left
+out one at a time (:mod:`bench.residual.validation`), the model without it
+must have a held-out error at least :data:`MIN_GAIN` higher than with it.
+Training data that hold one trajectory have no other to judge by, so there
+such an effect never stays: the loop drops it, reports it as a finding with
+its fitted value and the reason, and does not offer it again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bench.core.data import Dataset
+from bench.core.effects import EFFECTS
+from bench.residual.candidates import is_named, label
+from bench.residual.checks import heldout
+from bench.residual.model import LoopModel
+from bench.residual.strategies import Strategy
+
+#: the held-out error an effect that claims beyond the data must save, as a fraction of the error without it
+MIN_GAIN = 0.01
+
+
+def beyond_data(model: LoopModel, train: Dataset) -> list[tuple[int, str]]:
+    """The effects of ``model`` (by index) that claim beyond the training data, each with why."""
+    out = []
+    low, high = train.q.min(axis=0), train.q.max(axis=0)
+    index = {(t.name, t.joint): i for i, t in enumerate(model.effects)}
+    for i, term in enumerate(model.effects):
+        if not is_named(term):
+            out.append((i, f"an open-ended term, {term.name}"))
+        elif term.name == "spring" and term.joint is not None:
+            j = term.joint
+            offset = index.get(("offset", j))
+            k = model.coef[i]
+            rest = -model.coef[offset] / k if offset is not None and k else 0.0
+            if not low[j] <= rest <= high[j]:
+                out.append((i, f"a spring whose rest angle {rest:.3g} rad lies outside joint {j + 1}'s recorded range "
+                               f"[{low[j]:.3g}, {high[j]:.3g}]"))
+    return out
+
+
+def not_identified(model: LoopModel) -> list[tuple[int, str]]:
+    """The effects of ``model`` (by index) whose standard error is at least their value, each with why."""
+    return [(i, f"not identified: its standard error {se:.2g} is at least its value {c:.4g}")
+            for i, (c, se) in enumerate(zip(model.coef, model.stderr)) if se > 0 and se >= abs(c)]
+
+
+def earns_place(strategy: Strategy, model: LoopModel, train: Dataset, index: int) -> tuple[bool, str]:
+    """Whether effect ``index`` of ``model`` lowers the error on held-out trajectories
+    by :data:`MIN_GAIN` at least; and the figures, in words."""
+    if len(train.trajectories()) < 2:
+        return False, "the training data hold one trajectory, so no held-out trajectory can confirm it"
+    without = strategy.refit(model, train, [t for k, t in enumerate(model.effects) if k != index])
+    kept, dropped = heldout(strategy, model, train), heldout(strategy, without, train)
+    if dropped >= (1 + MIN_GAIN) * kept:
+        return True, ""
+    return False, (f"on held-out trajectories it does not pay: held-out MSE {kept:.4g} with it, {dropped:.4g} without")
+
+
+def finding(term, coefficient: float, stderr: float, why: str, verdict: str) -> dict:
+    """The JSON entry of an effect dropped because it claims beyond the data."""
+    parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
+    entry = {"name": term.name if is_named(term) else "symbolic", "kind": "beyond_data" if verdict else "not_identified",
+             "joints": [j + 1 for j in term.joints], "parameters": {},
+             "finding": (f"{label(term)} fits the training data with {parameter} = {coefficient:.4g} ± {stderr:.2g}, "
+                         f"but it is {why}{', and ' + verdict if verdict else ''}: reported, not added")}
+    if not is_named(term):
+        entry["expression"] = term.name
+    return entry
