@@ -23,6 +23,14 @@ def add_arguments(cv) -> None:
     cv.add_argument("raw", type=Path, nargs="+",
                     help="the log(s) (CSV, may be gzipped); each is one recording, named in the output's "
                          "trajectory column by its file name")
+    named = cv.add_mutually_exclusive_group()
+    named.add_argument("--distinct", action="store_true",
+                       help="every log follows an excitation trajectory of its own (instead of --trajectory)")
+    named.add_argument("--trajectory", nargs="+", default=None, metavar="NAME",
+                    help="the excitation trajectory the logs follow: one name for all, or one per log in order "
+                         "(logs that repeat a trajectory share its name, so that the residual loop never tests on a "
+                         "repeat of what it fitted); with --columns and two or more logs, this or --distinct is "
+                         "needed; DFKI recordings are each a trajectory of their own")
     cv.add_argument("--out", type=Path, required=True, help="CSV file to write")
     cv.add_argument("--dt", type=positive, default=DEFAULT_FILTER.dt,
                     help=f"the uniform time step the log is resampled to, s (default {DEFAULT_FILTER.dt:g})")
@@ -46,15 +54,35 @@ def main(args) -> int:
         raise UsageError(f"two logs would be the same recording {repeated[0]!r}: give files with distinct names")
     # one column map for every log, so they share their joints; each is read and checked before anything is written
     columns = ColumnMap.parse(args.columns) if args.columns else None
+    trajectories = trajectory_names(args.trajectory, names, need=columns is not None and not args.distinct)
     system = None if columns else "dfki_double_pendulum"
     parts = [preprocess(read_recording(path, columns) if columns else read_raw(path), spec) for path in args.raw]
-    s = joined(parts, names)
+    s = joined(parts, names, trajectories)
     source = ", ".join(map(str, args.raw))
     write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, system, source, recording=s["recording"],
-                      sign_qd=s["sign_qd"]), args.out)
+                      sign_qd=s["sign_qd"], trajectory=s.get("trajectory"), time=s["time"]), args.out)
     print(f"wrote {len(s['q'])} samples of {s['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
           f"({spec.describe()})")
     return 0
+
+
+def trajectory_names(given: list[str] | None, recordings: list[str], need: bool) -> list[str] | None:
+    """The trajectory each recording follows: one name for all, or one per
+    recording; ``None`` (each recording a trajectory of its own) where none is
+    given and none is ``need`` ed, or there is one recording."""
+    if given is None:
+        if need and len(recordings) > 1:
+            raise UsageError(f"name the excitation trajectory that the logs {', '.join(recordings)} follow "
+                             f"(--trajectory NAME, or one name per log; --distinct where each follows its own): logs "
+                             f"that repeat one trajectory are held out together, since a repeat of a fitted trajectory "
+                             f"is no test of the fit")
+        return None
+    if len(given) == 1:
+        return given * len(recordings)
+    if len(given) != len(recordings):
+        raise UsageError(f"--trajectory gives {len(given)} names for {len(recordings)} logs ({', '.join(recordings)}): "
+                         f"give one for all, or one per log")
+    return list(given)
 
 
 def recording_name(path: Path) -> str:

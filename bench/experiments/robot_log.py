@@ -125,5 +125,6 @@ def main(args) -> int:
         write_log(path, time, data)
         dof = data.dof
         print(f"wrote {path} ({len(time)} samples, {args.seconds:g} s at {args.rate_hz:g} Hz)", flush=True)
-    print(f"convert with: python -m bench convert --columns {columns(dof)} --out OUT.csv {args.out}/recording_*.csv")
+    print(f"convert with: python -m bench convert --columns {columns(dof)} --distinct --out OUT.csv "
+          f"{args.out}/recording_*.csv")
     return 0

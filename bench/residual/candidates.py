@@ -103,7 +103,7 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     explains: the declared form lacks this freedom. It names the term and the
     coefficient that would be needed; the term is not added to the model."""
     parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
-    law = _law(term, parameter)
+    law = law_text(term, parameter)
     entry = {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,
              "joints": [j + 1 for j in term.joints], "parameters": {},
              "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "
@@ -123,7 +123,7 @@ def label(term: Term) -> str:
     return f"{term.name}{shape} on {where}"
 
 
-def _law(term: Term, parameter: str) -> str:
+def law_text(term: Term, parameter: str) -> str:
     """The text of a term's law with its parameter: ``L += ...``, ``D = ...``
     or ``tau += ...``."""
     where = {"L": "L += ", "D": "D = "}.get(term.place, "tau += ")
@@ -178,7 +178,7 @@ def describe(term: Term, coefficient: float, stderr: float) -> dict:
     term ``expression``."""
     named = is_named(term)
     parameter = EFFECTS[term.name].parameter if named else "c"
-    law = _law(term, parameter)
+    law = law_text(term, parameter)
     if named and EFFECTS[term.name].coefficient_of is not None:  # a tilt's coefficient is sin(alpha): report alpha
         coefficient, stderr = EFFECTS[term.name].parameter_from(coefficient, stderr)
         law = law.replace(parameter, str(EFFECTS[term.name].coefficient_of(sympy.Symbol(parameter))), 1)

@@ -30,7 +30,7 @@ import numpy as np
 
 from bench.core.data import Dataset
 from bench.core.effects import EFFECTS
-from bench.residual.candidates import is_named, label
+from bench.residual.candidates import is_named, label, law_text
 from bench.residual.checks import heldout
 from bench.residual.model import LoopModel
 from bench.residual.strategies import Strategy
@@ -80,7 +80,7 @@ def finding(term, coefficient: float, stderr: float, why: str, verdict: str) -> 
     """The JSON entry of an effect dropped because it claims beyond the data."""
     parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
     entry = {"name": term.name if is_named(term) else "symbolic", "kind": "beyond_data" if verdict else "not_identified",
-             "joints": [j + 1 for j in term.joints], "parameters": {},
+             "law": law_text(term, parameter), "joints": [j + 1 for j in term.joints], "parameters": {},
              "finding": (f"{label(term)} fits the training data with {parameter} = {coefficient:.4g} ± {stderr:.2g}, "
                          f"but it is {why}{', and ' + verdict if verdict else ''}: reported, not added")}
     if not is_named(term):

@@ -192,3 +192,41 @@ def test_a_filtered_sign_for_some_joints_only_is_refused(tmp_path):
     path.write_text(GOOD.replace("tau_2\n", "tau_2,sign_qd_1\n").replace("0.8\n", "0.8,1\n"))
     with pytest.raises(DataError, match=f"{path}: has sign_qd_1 but not sign_qd_2"):
         read_csv(path, dof=2)
+
+
+def test_trajectories_recordings_and_times_travel_through_csv(small_data, tmp_path):
+    small_data = small_data[0]
+    n = len(small_data)
+    recording = np.where(np.arange(n) < n // 2, "run1", "run3")
+    data = small_data.replace(recording=recording, trajectory=np.where(recording == "run1", "A", "B"),
+                              time=np.arange(n) * 0.01)
+    write_csv(data, tmp_path / "d.csv")
+    back = read_csv(tmp_path / "d.csv")
+    assert back.recordings() == ["run1", "run3"] and back.trajectories() == ["A", "B"]
+    np.testing.assert_array_equal(back.time, data.time)
+    part = back.subset(slice(0, 3))
+    assert part.trajectories() == ["A"] and len(part.time) == 3
+    # the trajectory column alone (older files, DFKI): each recording a trajectory of its own
+    write_csv(small_data.replace(recording=recording), tmp_path / "old.csv")
+    old = read_csv(tmp_path / "old.csv")
+    assert old.recordings() == old.trajectories() == ["run1", "run3"] and old.trajectory is None
+
+
+def test_recordings_without_trajectories_and_a_recording_on_two_are_refused(small_data, tmp_path):
+    import pandas as pd
+
+    frame = pd.read_csv(_written(small_data[0], tmp_path))
+    frame["recording"] = "run1"
+    frame.to_csv(tmp_path / "bare.csv", index=False)
+    with pytest.raises(DataError, match=r"bare\.csv: recordings run1 \(column recording\) name no trajectory"):
+        read_csv(tmp_path / "bare.csv")
+    frame["trajectory"] = np.where(np.arange(len(frame)) % 2, "A", "B")
+    frame.to_csv(tmp_path / "two.csv", index=False)
+    with pytest.raises(DataError, match=r"two\.csv: recording 'run1' is labelled with two trajectories \(A, B\)"):
+        read_csv(tmp_path / "two.csv")
+
+
+def _written(data, tmp_path):
+    path = tmp_path / "plain.csv"
+    write_csv(data, path)
+    return path

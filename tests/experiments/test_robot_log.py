@@ -40,6 +40,9 @@ def test_the_logs_convert_into_the_suites_format_with_one_recording_each(tmp_pat
     assert f"--columns {columns(2)}" in r.stdout
     logs = sorted(str(p) for p in (tmp_path / "logs").glob("recording_*.csv"))
     r = cli("convert", "--columns", columns(2), "--out", str(tmp_path / "train.csv"), *logs)
+    assert r.returncode == 2 and "name the excitation trajectory that the logs recording_0, recording_1" in r.stderr
+    assert not (tmp_path / "train.csv").exists()
+    r = cli("convert", "--columns", columns(2), "--distinct", "--out", str(tmp_path / "train.csv"), *logs)
     assert r.returncode == 0, r.stderr
     data = read_csv(tmp_path / "train.csv", system="double_pendulum")
     assert data.recordings() == ["recording_0", "recording_1"] and len(data) > 500

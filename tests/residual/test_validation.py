@@ -31,7 +31,28 @@ def test_folds_are_whole_recordings_where_the_data_name_them_and_blocks_otherwis
     assert [int(f.sum()) for f in by_recording] == [334, 333, 333]
     assert all(len(set(labelled.recording[f])) == 1 for f in by_recording)
     assert np.logical_or.reduce(by_recording).all()  # every sample held out once
-    assert describe(labelled) == "leave one recording out, over 3 recordings"
+    assert describe(labelled) == "leave one trajectory out, over 3 trajectories"
+
+
+def test_recordings_of_one_trajectory_are_held_out_together():
+    data = generate(get_system("double_pendulum"), 1200, 0)
+    recording = np.repeat(["run1", "run2", "run3"], 400)
+    grouped = data.replace(recording=recording, trajectory=np.where(recording == "run3", "B", "A"))
+    by_trajectory = folds(grouped)
+    assert [sorted(set(grouped.recording[f])) for f in by_trajectory] == [["run1", "run2"], ["run3"]]
+    assert describe(grouped) == "leave one trajectory out, over 2 trajectories (3 recordings)"
+    # one trajectory: spans in time, each span of every recording of it in one fold
+    one = grouped.subset(grouped.trajectory == "A")
+    one = one.replace(time=np.tile(np.arange(400) * 0.01, 2)[::-1].copy())  # time runs backwards through the rows
+    spans = folds(one)
+    assert len(spans) == BLOCKS and np.logical_or.reduce(spans).all() and sum(int(f.sum()) for f in spans) == 800
+    for f in spans:
+        assert sorted(set(one.recording[f])) == ["run1", "run2"]
+        for name in ("run1", "run2"):  # the same span of time in both recordings
+            times = one.time[f & (one.recording == name)]
+            assert np.ptp(times) == pytest.approx(0.99, abs=1e-9)
+        assert set(np.round(one.time[f & (one.recording == "run1")], 6)) == set(np.round(one.time[f & (one.recording == "run2")], 6))
+    assert describe(one).startswith(f"{BLOCKS} contiguous spans in time of one trajectory")
 
 
 def test_cv_mse_scores_each_fold_by_a_fit_on_the_others():
