@@ -1,0 +1,56 @@
+"""Laws that claim beyond the data: found, and kept only where a held-out trajectory confirms them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bench.core.data import add_noise, generate
+from bench.core.effects import EFFECTS
+from bench.core.terms import Term
+from bench.residual.model import LoopModel
+from bench.residual.reach import beyond_data, earns_place, not_identified
+from bench.residual.strategies import strategy_for
+from bench.core.models import ExpressionModel
+from systems import get_system
+
+
+def _model(coef, stderr):
+    system = get_system("double_pendulum")
+    rigid = ExpressionModel(system.lagrangian_sympy, system.dof)
+    effects = [EFFECTS["spring"].term(0), EFFECTS["offset"].term(0), Term.dissipation(abs_cube(), "Abs(qd_2)**3/3", 1)]
+    return LoopModel(rigid, effects, coef, stderr)
+
+
+def abs_cube():
+    import sympy
+
+    return sympy.Abs(sympy.Symbol("qd_2", real=True)) ** 3 / 3
+
+
+def _data():
+    return generate(get_system("double_pendulum"), 400, 0)
+
+
+def test_an_open_ended_term_and_a_rest_angle_outside_the_recorded_range_claim_beyond_the_data():
+    data = _data()
+    low, high = data.q[:, 0].min(), data.q[:, 0].max()
+    inside = _model([2.0, -2.0 * 0.5 * high, 0.1], [0.01, 0.01, 0.01])  # rest angle at half the largest angle
+    assert [i for i, _ in beyond_data(inside, data)] == [2]
+    outside = _model([2.0, -2.0 * (high + 1.0), 0.1], [0.01, 0.01, 0.01])
+    found = dict(beyond_data(outside, data))
+    assert set(found) == {0, 2} and "outside joint 1's recorded range" in found[0] and f"{low:.3g}" in found[0]
+    assert not_identified(_model([2.0, 0.3, 0.1], [0.01, 0.5, 0.01])) == [(1, "not identified: its standard error "
+                                                                              "0.5 is at least its value 0.3")]
+
+
+def test_one_trajectory_cannot_confirm_a_law_and_two_can_judge_it():
+    data = _data()
+    model = _model([0.0, 0.0, 0.0], [0.01, 0.01, 0.01])
+    strategy = strategy_for(model.rigid)
+    assert strategy.name == "expression"
+    keep, why = earns_place(strategy, model, data.replace(recording=np.full(len(data), "run1")), 0)
+    assert not keep and "one trajectory" in why
+    noisy = add_noise(data, "indirect", 0.05, 0)
+    two = noisy.replace(recording=np.where(np.arange(len(data)) < 200, "a", "b"))
+    keep, why = earns_place(strategy, model, two, 0)  # a zero spring on data without one saves nothing
+    assert not keep and "held-out MSE" in why
