@@ -75,6 +75,7 @@ from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
 from bench.core.models import FittedModel
 from bench.core.terms import TermLibrary, remembered_columns
+from bench.evaluation.driven import driven_entry
 from bench.residual.candidates import candidates, describe_all, is_named, label, structural
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
@@ -214,6 +215,10 @@ class _Loop:
         model, held, mass, findings = self.rounds(model, held, mass, rounds)
         after = self.scores(model)
         feasible_after = strategy.feasibility(model, train)
+        driven = None
+        if self.test is not None and self.test.time is not None and self.test.recording is not None:
+            report("driven rollouts of the test recordings, before and after")
+            driven = {"before": self.timed(driven_entry, first, self.test), "after": self.timed(driven_entry, model, self.test)}
         bound = model.rigid.expression_terms_bound()  # SyReNets' full equation is never built
         expr = model.expression() if bound is None or bound <= MAX_SYMBOLIC_TERMS else None
         return ResidualResult(
@@ -230,6 +235,7 @@ class _Loop:
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
             test_source=None if self.test is None else self.test.source, provenance=provenance(), models=(first, model),
             feasibility=None if feasible_before is None else {"before": feasible_before, "after": feasible_after},
+            rollout=driven,
         )
 
     def candidates(self) -> TermLibrary:

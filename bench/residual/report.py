@@ -75,6 +75,13 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
                   f"before). Smallest pseudo-inertia eigenvalue of each body, before: {eigen('before')}; "
                   f"after: {eigen('after')}. Masses after: "
                   + ", ".join(f"{m:.4g}" for m in feasible["after"]["masses"]) + ".", ""]
+    if result.rollout:
+        def driven(entry):
+            return "; ".join(f"{k} s: {'—' if w['median_q_rmse'] is None else format(w['median_q_rmse'], '.4g')} rad "
+                             f"({w['diverged']}/{w['windows']} windows diverged)" for k, w in entry.get("windows", {}).items()) \
+                or entry.get("detail") or entry.get("status", "")
+        lines += [f"Driven rollouts of the test recordings under their measured torques, median q RMSE over windows: "
+                  f"before {driven(result.rollout['before'])}; after {driven(result.rollout['after'])}.", ""]
     if result.effects:
         lines += ["| effect | kind | law | joints | parameters (± std. error) |", "|---|---|---|---|---|"]
         for e in result.effects:

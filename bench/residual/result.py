@@ -28,6 +28,9 @@ class ResidualResult:
     whether its inertial parameters are a rigid body's before and after the
     loop (:func:`bench.core.feasible.feasibility_of`): the masses and each
     body's smallest pseudo-inertia eigenvalue; ``None`` for other models.
+    ``rollout`` gives, where the test data name their recordings' times
+    (measured data), the driven rollouts of the test recordings before and
+    after the loop (:func:`bench.evaluation.driven.driven_entry`).
     ``models`` holds the fitted models before and after the loop, for the
     report's residual plots; it is not part of the JSON.
     """
@@ -52,6 +55,7 @@ class ResidualResult:
     budget: dict | None = None
     provenance: dict = field(default_factory=dict)
     feasibility: dict | None = None
+    rollout: dict | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:
