@@ -46,6 +46,13 @@ def test_the_logs_convert_into_the_suites_format_with_one_recording_each(tmp_pat
     assert r.returncode == 0, r.stderr
     data = read_csv(tmp_path / "train.csv", system="double_pendulum")
     assert data.recordings() == ["recording_0", "recording_1"] and len(data) > 500
+    assert data.trajectories() == ["recording_0", "recording_1"] and np.all(np.diff(data.time[data.recording == "recording_0"]) > 0)
+    r = cli("convert", "--columns", columns(2), "--trajectory", "A", "--out", str(tmp_path / "one.csv"), *logs)
+    assert r.returncode == 0, r.stderr
+    one = read_csv(tmp_path / "one.csv")
+    assert one.recordings() == ["recording_0", "recording_1"] and one.trajectories() == ["A"]
+    r = cli("convert", "--columns", columns(2), "--trajectory", "A", "B", "C", "--out", str(tmp_path / "bad.csv"), *logs)
+    assert r.returncode == 2 and "--trajectory gives 3 names for 2 logs" in r.stderr and not (tmp_path / "bad.csv").exists()
 
 
 def test_a_measured_system_is_refused_in_one_line_and_nothing_is_written(tmp_path):
