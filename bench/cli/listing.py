@@ -19,8 +19,9 @@ def main(args) -> int:
     for entry in SYSTEMS.entries():
         sys_obj = entry.obj()
         kind = "simulated" if sys_obj.simulated else "measured"
+        splits = f"  splits={','.join(sys_obj.splits)}" if len(sys_obj.splits) > 1 else ""
         print(f"  {entry.name:<20} dof={sys_obj.dof}  {kind:<9}  coordinates={','.join(sys_obj.coordinates)}  "
-              f"tags={','.join(sorted(entry.tags))}")
+              f"tags={','.join(sorted(entry.tags))}{splits}")
     print("Methods:")
     for entry in METHODS.entries():
         reason = entry.unavailable_reason()
