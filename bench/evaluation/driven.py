@@ -35,7 +35,7 @@ import numpy as np
 
 from bench.core.data import Dataset
 from bench.core.models import FittedModel, mass_and_bias
-from bench.evaluation.rollout import BLOW_UP, MAX_CONDITION
+from bench.evaluation.rollout import BLOW_UP, MAX_CONDITION, definiteness
 
 #: the windows' lengths, s
 WINDOWS_S = (0.25, 1.0)
@@ -71,9 +71,7 @@ def _accelerations(model: FittedModel, q: np.ndarray, qd: np.ndarray, tau: np.nd
     ok = np.all(np.isfinite(M), axis=(1, 2)) & np.all(np.isfinite(c), axis=1)
     M = np.where(ok[:, None, None], M, np.eye(q.shape[1]))
     c = np.where(ok[:, None], c, 0.0)
-    eig = np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))
-    scale = np.maximum(np.max(np.abs(eig), axis=1), np.finfo(float).tiny)
-    ok &= eig[:, 0] / scale >= 1.0 / MAX_CONDITION
+    ok &= definiteness(M)[1] >= 1.0 / MAX_CONDITION
     M = np.where(ok[:, None, None], M, np.eye(q.shape[1]))
     return np.linalg.solve(M, (tau - c)[..., None])[..., 0], ok
 

@@ -49,15 +49,22 @@ class NoDynamics(Exception):
         self.status = status
 
 
+def definiteness(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The eigenvalues of each (symmetrised) ``M`` of shape ``(n, dof, dof)``,
+    and each one's smallest over its largest magnitude: negative where ``M``
+    is indefinite, below ``1 / MAX_CONDITION`` where it is singular."""
+    eig = np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))
+    scale = np.maximum(np.max(np.abs(eig), axis=1), np.finfo(float).tiny)
+    return eig, eig[:, 0] / scale
+
+
 def forward_dynamics(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
     """Unforced accelerations ``M^-1 (-c)``; raises :class:`NoDynamics` where
     ``M`` is indefinite or singular."""
     M, c = mass_and_bias(model, q, qd)
     if not np.all(np.isfinite(M)) or not np.all(np.isfinite(c)):
         raise NoDynamics("diverged", "the model's torques are not finite")
-    eig = np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))
-    scale = np.maximum(np.max(np.abs(eig), axis=1), np.finfo(float).tiny)
-    low = eig[:, 0] / scale
+    eig, low = definiteness(M)
     i = int(np.argmin(low))
     where = f"at q = {np.round(q[i], 3).tolist()}, qd = {np.round(qd[i], 3).tolist()} (eigenvalues {eig[i].tolist()})"
     if low[i] < -1e-12:
