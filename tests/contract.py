@@ -144,15 +144,22 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
 
 
 def check_measured_system(system) -> None:
-    """A measured system: its packaged splits load, agree on the coordinates, and are disjoint."""
-    train, test = system.load("train"), system.load("test")
-    for data in (train, test):
-        assert len(data) > 0 and data.dof == system.dof and data.system == system.name
-        for k in ("q", "qd", "qdd", "tau"):
-            assert np.isfinite(getattr(data, k)).all()
-    assert not np.isin(test.q[:, 0], train.q[:, 0]).all()
-    if "direct" not in system.experiments:
-        assert train.L is None and system.not_applicable
+    """A measured system: each of its splits loads, agrees on the coordinates, and holds
+    its test trajectories out of training; its form for SysId claims no true values."""
+    for split in system.splits:
+        train, test = (type(system)(split=split).load(part) for part in ("train", "test"))
+        for data in (train, test):
+            assert len(data) > 0 and data.dof == system.dof and data.system == system.name
+            for k in ("q", "qd", "qdd", "tau"):
+                assert np.isfinite(getattr(data, k)).all()
+        assert not np.isin(test.q[:, 0], train.q[:, 0]).all()
+        assert not set(train.trajectories()) & set(test.trajectories())
+        if "direct" not in system.experiments:
+            assert train.L is None and system.not_applicable
+    linear = system.linear_form()
+    if linear is not None:
+        assert linear.true_values is None and len(linear.names) >= 1
+        return
     form = system.parametric_form()
     assert form.true_values is None and len(form.unknowns) >= 1
 

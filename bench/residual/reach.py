@@ -19,8 +19,10 @@ An effect that claims beyond the data stays in the model only if it earns
 its place on a trajectory it was not fitted on (:func:`earns_place`): with the training data's trajectories left
 out one at a time (:mod:`bench.residual.validation`), the model without it
 must have a held-out error at least :data:`MIN_GAIN` higher than with it.
-Training data that hold one trajectory have no other to judge by, so there
-such an effect never stays: the loop drops it, reports it as a finding with
+Independent samples (generated data) have no trajectory to overfit, and the
+loop's held-out blocks have judged the effect already. Training data that
+hold one trajectory have no other to judge by, so there such an effect
+never stays: the loop drops it, reports it as a finding with
 its fitted value and the reason, and does not offer it again.
 """
 
@@ -66,7 +68,12 @@ def not_identified(model: LoopModel) -> list[tuple[int, str]]:
 
 def earns_place(strategy: Strategy, model: LoopModel, train: Dataset, index: int) -> tuple[bool, str]:
     """Whether effect ``index`` of ``model`` lowers the error on held-out trajectories
-    by :data:`MIN_GAIN` at least; and the figures, in words."""
+    by :data:`MIN_GAIN` at least; and the figures, in words. Independent samples
+    (generated data, no recordings) have no trajectory to overfit: there the
+    loop's held-out blocks, which accepted the effect, are other samples of the
+    same domain, and the effect stays."""
+    if not train.trajectories():
+        return True, ""
     if len(train.trajectories()) < 2:
         return False, "the training data hold one trajectory, so no held-out trajectory can confirm it"
     without = strategy.refit(model, train, [t for k, t in enumerate(model.effects) if k != index])
