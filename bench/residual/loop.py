@@ -33,7 +33,11 @@ can undo a round) is the model's refit strategy, chosen once from the model
    refined, each law replaced by the simplest law it contains that the data
    do not tell apart from it, with at most one law of each physical family
    on a joint (:func:`~bench.residual.pruning.simplest_laws`), and effects
-   the refit made impossible dropped. The JSON reports the effects as laws
+   the refit made impossible dropped. Then an effect the data do not
+   identify, or one that claims beyond them (an open-ended term, a spring
+   whose rest angle the arm never visited) without earning its place on a
+   held-out trajectory, is dropped and reported as a finding
+   (:mod:`bench.residual.reach`). The JSON reports the effects as laws
    (:mod:`bench.core.laws`).
 6. **Keep the round only if it generalises.** The round's model is scored by
    cross-validation over whole recordings (:mod:`bench.residual.validation`:
