@@ -76,6 +76,11 @@ def _accelerations(model: FittedModel, q: np.ndarray, qd: np.ndarray, tau: np.nd
     return np.linalg.solve(M, (tau - c)[..., None])[..., 0], ok
 
 
+def _bounded(qd: np.ndarray) -> np.ndarray:
+    """Which rows of ``qd`` are finite and within :data:`BLOW_UP`."""
+    return np.all(np.isfinite(qd), axis=1) & (np.max(np.abs(qd), axis=1) <= BLOW_UP)
+
+
 def driven_rollout(model: FittedModel, data: Dataset, length_s: float, substeps: int = SUBSTEPS) -> dict:
     """The driven rollouts of ``model`` over every window of ``length_s`` in
     ``data``: ``{"window_s", "windows", "diverged", "median_q_rmse", "q_rmse"}``
@@ -93,7 +98,7 @@ def driven_rollout(model: FittedModel, data: Dataset, length_s: float, substeps:
 
     def f(q, qd, tau):
         qdd, ok = _accelerations(model, q, qd, tau)
-        return qdd, ok & np.all(np.isfinite(qd), axis=1) & (np.max(np.abs(qd), axis=1) <= BLOW_UP)
+        return qdd, ok & _bounded(qd)
 
     for k in range(steps):
         tau0, tau1 = data.tau[spans[:, k]], data.tau[spans[:, k + 1]]
@@ -110,7 +115,7 @@ def driven_rollout(model: FittedModel, data: Dataset, length_s: float, substeps:
             k4v, ok4 = f(x + h * (v + 0.5 * h * k2v), v + h * k3v, t1)
             x_new = x + h * v + h * h / 6 * (k1v + k2v + k3v)
             v_new = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
-            ok = ok1 & ok2 & ok3 & ok4 & np.all(np.isfinite(v_new), axis=1) & (np.max(np.abs(v_new), axis=1) <= BLOW_UP)
+            ok = ok1 & ok2 & ok3 & ok4 & _bounded(v_new)
             q[idx[ok]], qd[idx[ok]] = x_new[ok], v_new[ok]
             alive[idx[~ok]] = False
         err = q - data.q[spans[:, k + 1]]
