@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 
 from bench.core.errors import UserError
-from bench.runner.plugins import BY_FILE, import_plugins
+from bench.runner.plugins import file_prefix, import_plugins
 from bench.runner.provenance import PROJECT_ROOT
 from methods import METHODS
 from systems import SYSTEMS
@@ -58,8 +58,7 @@ def code_files(method: str, system: str, plugins: tuple[str, ...] = ()) -> dict[
     with the ``.py`` plugins, ``urdf:`` descriptions and ``measured:`` files the run imports."""
     paths = _class_files(METHODS[method]) + _class_files(SYSTEMS[system])
     for plugin in plugins:
-        prefix = next((p for p in BY_FILE if plugin.startswith(p)), "")
-        name = plugin[len(prefix):]
+        name = plugin[len(file_prefix(plugin) or ""):]
         if name.endswith((".py", ".urdf", ".toml")) and Path(name).is_file():
             paths.append(Path(name).resolve())
     out = {}

@@ -26,7 +26,7 @@ def import_plugins(plugins: Iterable[str]) -> None:
     """Import each plugin once: a ``.py`` path, a module name, ``urdf:PATH`` or ``measured:PATH``."""
     for plugin in plugins:
         try:
-            prefix = _file_prefix(plugin)
+            prefix = file_prefix(plugin)
             if prefix:
                 BY_FILE[prefix](plugin)
                 continue
@@ -65,7 +65,7 @@ def system_plugins(names: Iterable[str]) -> tuple[list[str], tuple[str, ...]]:
     plugins a run's own process needs to resolve them."""
     out, plugins = [], []
     for name in names:
-        prefix = _file_prefix(name)
+        prefix = file_prefix(name)
         if prefix:
             plugin = prefix + str(Path(name[len(prefix):]).expanduser().resolve())
             out.append(BY_FILE[prefix](plugin))
@@ -75,6 +75,6 @@ def system_plugins(names: Iterable[str]) -> tuple[list[str], tuple[str, ...]]:
     return out, tuple(plugins)
 
 
-def _file_prefix(name: str) -> str | None:
+def file_prefix(name: str) -> str | None:
     """The prefix of a system given by a file (``urdf:``, ``measured:``), or ``None``."""
     return next((p for p in BY_FILE if name.startswith(p)), None)
