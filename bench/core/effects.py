@@ -30,6 +30,8 @@ name                   kind           term per unit coefficient                 
 ``coupled_damper``     dissipative    ``D = (qd_i - qd_j)^2 / 2``               ``b (qd_i - qd_j)`` on i, minus on j
 ``smooth_coulomb``     dissipative    ``D = v_s log cosh(qd_j / v_s)``          ``F_c tanh(qd_j / v_s)``
 ``stribeck_hump``      dissipative    ``D = v_s sqrt(pi)/2 erf(|qd_j| / v_s)``  ``dF exp(-(qd_j/v_s)^2) sign(qd_j)``
+``periodic_sin``       conservative   ``L += cos(N q_j) / N``                   ``a sin(N q_j)``
+``periodic_cos``       conservative   ``L += -sin(N q_j) / N``                  ``b cos(N q_j)``
 =====================  =============  ========================================  ===================================
 
 ``smooth_coulomb`` is Coulomb friction that reaches its level over a
@@ -43,6 +45,27 @@ law (:data:`bench.core.laws.LAWS`)::
     tau = (F_c + (F_s - F_c) exp(-(qd / v_s)^2)) sign(qd) + b qd,
 
 which is physical with ``F_s >= F_c >= 0``, ``v_s > 0`` and ``b >= 0``.
+
+Two effects act on the measured torque, not on the arm (``sensor``; the
+residual loop's :mod:`bench.residual.sensors` finds them, and the data
+generator adds the gain after every other effect):
+
+=================  ======  ==================================================
+name               kind    what is measured
+=================  ======  ==================================================
+``torque_gain``    sensor  ``g_j tau_j``: joint ``j``'s torque sensor reads
+                           ``g_j`` times the torque (a calibration error)
+``time_shift``     sensor  ``tau(t - delta)``: the torque lags the recorded
+                           state by ``delta`` seconds (a sensor's or filter's
+                           delay); it needs a recording's time stamps
+=================  ======  ==================================================
+
+``periodic_sin`` and ``periodic_cos`` are the two parts of a torque that
+repeats ``N`` times a revolution of its joint (a motor's cogging torque, a
+drive's position ripple): ``A sin(N q + phi) = a sin(N q) + b cos(N q)``
+with ``a = A cos(phi)``, ``b = A sin(phi)``. It depends on the position only,
+so it is the force of a potential; ``N`` is a whole number, the
+:attr:`Effect.grid` the loop searches, and is not refined.
 
 On absolute angles, ``q_i - q_j`` is the relative angle of the joint
 between links ``i`` and ``j``: an elbow spring or damper is one coupled
@@ -134,6 +157,10 @@ class Effect:
     #: for the data generator, ``exact(system, value)``: the effect's exact term at ``value``
     #: (coefficient 1), where the term the loop fits is only its part linear in a coefficient
     exact: Callable | None = None
+    #: for a shaped effect whose shape takes only some values (a whole number of periods a
+    #: revolution): those values, which the loop tries each and does not refine; ``None`` for a
+    #: shape on a continuous scale
+    grid: tuple | None = None
 
     def parameter_from(self, coefficient: float, stderr: float) -> tuple[float, float]:
         """The reported parameter and its standard error, from the fitted
@@ -148,6 +175,12 @@ class Effect:
             return math.nan, math.inf
         slope = float(sympy.diff(f, x).subs(x, value))
         return value, abs(stderr / slope) if slope else math.inf
+
+    @property
+    def sensor(self) -> bool:
+        """Whether the effect is a law of the torque sensor (:mod:`bench.residual.sensors`),
+        which acts on the measured torque rather than on the arm."""
+        return self.place == "sensor"
 
     def applies_to(self, system) -> bool:
         """Whether the effect can be placed on ``system`` (a payload needs the
@@ -196,7 +229,10 @@ class Effect:
             raise ValueError(f"{self.name} needs {'a positive ' + self.shaped if self.shaped else 'no shape'}, got {shape}")
         q = tuple(sympy.Symbol(f"q_{j + 1}", real=True) for j in joints)
         qd = tuple(sympy.Symbol(f"qd_{j + 1}", real=True) for j in joints)
-        expr = sympy.sympify(self.expr(q, qd) if shape is None else self.expr(q, qd, sympy.Float(shape)))
+        if shape is not None and self.grid is not None and shape != int(shape):
+            raise ValueError(f"{self.name} needs a whole number {self.shaped}, got {shape}")
+        value = None if shape is None else sympy.Integer(int(shape)) if self.grid is not None else sympy.Float(shape)
+        expr = sympy.sympify(self.expr(q, qd) if shape is None else self.expr(q, qd, value))
         joint = joints[0] if self.arity == 1 else None
         return Term(expr, self.place, self.name, joint, shape)
 
@@ -219,6 +255,15 @@ EFFECTS: dict[str, Effect] = {
         Effect("stribeck_hump", lambda q, qd, v: v * sympy.sqrt(sympy.pi) / 2 * sympy.erf(sympy.Abs(qd[0]) / v), "D",
                "dF", "dF·exp(−(qd/v_s)²)·sign(qd) (D = dF·v_s·√π/2·erf(|qd|/v_s))", shaped="v_s",
                numeric=lambda q, qd, v, sign: np.exp(-((qd / v) ** 2)) * sign),
+        Effect("periodic_sin", lambda q, qd, N: sympy.cos(N * q[0]) / N, "L", "a",
+               "a·sin(N·q) (L += a·cos(N·q)/N)", nonnegative=False, shaped="N",
+               numeric=lambda q, qd, N, sign: np.sin(N * q), grid=tuple(range(1, 13))),
+        Effect("periodic_cos", lambda q, qd, N: -sympy.sin(N * q[0]) / N, "L", "b",
+               "b·cos(N·q) (L −= b·sin(N·q)/N)", nonnegative=False, shaped="N",
+               numeric=lambda q, qd, N, sign: np.cos(N * q), grid=tuple(range(1, 13))),
+        Effect("torque_gain", lambda q, qd: sympy.Symbol("tau" + str(q[0])[1:], real=True), "sensor", "g",
+               "tau_measured = g·tau", nonnegative=False),
+        Effect("time_shift", None, "sensor", "delta", "tau_measured(t) = tau(t − delta)", arity=0, nonnegative=False),
         Effect("tip_payload", None, "L", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
                arity=0, on_system=lambda system, q, qd: _payload(system, q, qd), needs_link_lengths=True),
         Effect("gravity_tilt", None, "L", "alpha",

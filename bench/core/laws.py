@@ -27,7 +27,20 @@ law                                     family    parameters            contains
 ``offset_spring``                       spring    ``k, q0``             a spring (``q0 = 0``); it is a spring
                                                                         plus a torque offset ``-k q0``, which
                                                                         torques cannot tell apart
+``periodic_torque``                     periodic  ``A, N, phi``         its sine part alone (``phi = 0``)
 ======================================  ========  ====================  =====================================
+
+``periodic_torque`` is ``tau = A sin(N q + phi)`` on its joint: a motor's
+cogging torque, or a gear's or a drive's position ripple, ``N`` times a
+revolution (the cogging torque of a permanent-magnet motor has the period of
+the least common multiple of its slots and poles: Jahns & Soong, "Pulsating
+torque minimization techniques for permanent magnet AC motor drives", IEEE
+Trans. Ind. Electron. 43(2), 1996). Its parts are ``a sin(N q)`` and
+``b cos(N q)`` (:mod:`bench.core.effects`), ``A = sqrt(a^2 + b^2)`` and
+``phi = atan2(b, a)``, ``phi`` in ``(-pi, pi]``. A spring and an offset are
+what it looks like on a joint that moves over a small part of one period,
+so the loop offers it only for the ``N`` whose period the joint's recorded
+range covers (:func:`bench.residual.candidates.resolved_periods`).
 
 A law's :attr:`~Law.limits` say, for each of its shaped parts (a Stribeck
 hump, a smoothed Coulomb term), which parts replace it in each limit, the
@@ -131,6 +144,16 @@ def _offset_spring(parts: dict) -> dict:
     return {"k": (k, se_k), "q0": (q0, se)}
 
 
+def _periodic(parts: dict) -> dict:
+    (a, se_a), (b, se_b) = _value(parts.get("periodic_sin")), _value(parts.get("periodic_cos"))
+    N = next(p.shape for p in parts.values() if p is not None)
+    A = math.hypot(a, b)
+    # the delta method, the two coefficients taken as independent
+    se_A = math.hypot(a * se_a, b * se_b) / A if A else math.inf
+    se_phi = math.hypot(b * se_a, a * se_b) / A**2 if A else math.inf
+    return {"A": (A, se_A), "N": (float(N), 0.0), "phi": (math.atan2(b, a), se_phi)}
+
+
 def _single(name: str, family: str) -> Law:
     effect = EFFECTS[name]
     return Law(name, family, (effect.parameter,), "", effect.kind, (name,),
@@ -170,6 +193,11 @@ LAWS: dict[str, Law] = {
         Law("offset_spring", "spring", ("k", "q0"), "L += -k*(q_{n} - q0)**2/2", "conservative", ("spring", "offset"),
             admissible=lambda k, q0: k >= 0, condition="k >= 0", parts=lambda k, q0: [Part("spring", k), Part("offset", -k * q0)],
             parameters_of=_offset_spring, simpler=("spring",)),
+        Law("periodic_torque", "periodic", ("A", "N", "phi"), "tau += A*sin(N*q_{n} + phi)", "conservative",
+            ("periodic_sin",), ("periodic_cos",), admissible=lambda A, N, phi: A >= 0 and N >= 1 and N == int(N),
+            condition="A >= 0, N a whole number >= 1",
+            parts=lambda A, N, phi: [Part("periodic_sin", A * math.cos(phi), N), Part("periodic_cos", A * math.sin(phi), N)],
+            parameters_of=_periodic),
     )
 }
 
@@ -180,11 +208,18 @@ FAMILIES["offset"] = "offset"
 
 def led_by(part: str) -> Law | None:
     """The law whose one required part is the shaped ``part`` (a Stribeck hump
-    leads the Stribeck law), or ``None``."""
+    leads the Stribeck law, a sine part the periodic torque), or ``None``."""
     for law in LAWS.values():
-        if law.required == (part,) and part in law.limits:
+        if law.required == (part,) and EFFECTS[part].shaped is not None:
             return law
     return None
+
+
+def part_of(part: str) -> Law:
+    """The law ``part`` stands for where it is the only part of its law left:
+    the law it leads, its own one-parameter law, or else the law it is a part of
+    (a periodic torque's cosine part alone)."""
+    return led_by(part) or LAWS.get(part) or next(law for law in LAWS.values() if part in law.members)
 
 
 def group(parts: dict[str, Part]) -> list[tuple[Law, dict[str, Part]]]:
@@ -196,7 +231,7 @@ def group(parts: dict[str, Part]) -> list[tuple[Law, dict[str, Part]]]:
         fits = [(len(set(law.members) & set(left)), law) for law in LAWS.values() if set(law.required) <= set(left)]
         if not fits:
             name = next(iter(left))
-            law = led_by(name) or LAWS[name]
+            law = part_of(name)
             out.append((law, {name: left.pop(name)}))
             continue
         _, law = max(fits, key=lambda f: f[0])

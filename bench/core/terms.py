@@ -43,7 +43,7 @@ from bench.core.timeouts import Timeout
 
 
 #: where a term acts, and what the loop's JSON calls that kind of term
-PLACES = {"L": "conservative", "D": "dissipative", "force": "force"}
+PLACES = {"L": "conservative", "D": "dissipative", "force": "force", "sensor": "sensor"}
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,10 @@ class Term:
     place
         ``"L"``: a piece of the Lagrangian; ``"D"``: a piece of the Rayleigh
         dissipation function, its torque ``dD/dqd``; ``"force"``: a
-        generalized force on :attr:`joint`.
+        generalized force on :attr:`joint`; ``"sensor"``: a law of the torque
+        sensor (a gain, a time shift), in the measured torque's symbols
+        ``tau_i``, whose column the residual loop computes from the model it
+        corrects (:mod:`bench.residual.sensors`).
     name
         What reports call the term (an effect's name, say); ``str(expr)``
         when empty.
@@ -140,6 +143,9 @@ class Term:
             out = np.zeros_like(data.tau)
             out[:, self.joint] = _force_function(self.expr)(data)
             return out
+        if self.place == "sensor":
+            raise ValueError(f"{self.label} is a law of the torque sensor: its column depends on the model it "
+                             f"corrects (bench.residual.sensors), not on the data alone")
         t = data.tensors()
         fn = symbolic.to_torch(self.expr, data.dof)
         return euler_lagrange_chunked(fn, t["q"], t["qd"], t["qdd"])[0].numpy()
@@ -183,6 +189,19 @@ def remembered_columns(*datasets: Dataset | None):
                 entry[0] -= 1
                 if entry[0] <= 0:
                     del _REMEMBERED[d]
+
+
+def share_columns(data: Dataset, like: Dataset) -> bool:
+    """Let ``data`` use the columns remembered for ``like`` (inside its
+    :func:`remembered_columns` block), where the two hold the same states
+    (the same ``q``, ``qd``, ``qdd`` and velocity sign arrays; a term's column
+    depends on those only). Returns whether they are shared."""
+    kept = _REMEMBERED.get(like)
+    same = all(getattr(data, k) is getattr(like, k) for k in ("q", "qd", "qdd", "sign_qd"))
+    if kept is None or not same:
+        return False
+    _REMEMBERED[data] = kept
+    return True
 
 
 def _tanh(expr: sympy.Expr) -> sympy.Expr:

@@ -5,6 +5,8 @@ as ``bench data --effects`` names them.
 * a one-joint effect: one coefficient per joint (``viscous_friction=0.8,0.5``);
 * a coupled effect: ``i-j:c`` items, joints from 1 (``coupled_spring=1-2:3.0``);
 * an effect of the whole system: one number (``tip_payload=0.3``);
+* a torque sensor's gain: one per joint, applied to the torque the arm and
+  every other effect make (``torque_gain=1,0.96``);
 * a law of several parameters: ``j:p1,...,pk`` items, ``;``-separated, in the
   order of its parameters (``stribeck_friction=1:1.0,2.0,0.5,0.3``,
   ``smooth_coulomb=2:0.7,0.05``).
@@ -36,7 +38,10 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
         name = name.strip()
         if not sep:
             raise ConfigError(f"{source}: expected NAME=c1,...,c{dof} or NAME=i-j:c, got {item!r}")
-        known = [n for n, e in EFFECTS.items() if e.shaped is None] + list(GENERATOR_LAWS)
+        known = [n for n, e in EFFECTS.items() if e.shaped is None and n != "time_shift"] + list(GENERATOR_LAWS)
+        if name == "time_shift":
+            raise ConfigError(f"{source}: time_shift needs recordings with time stamps; generated samples have none "
+                              f"(bench robot-log --torque-delay SECONDS records one)")
         if name not in known:
             raise ConfigError(f"{source}: unknown effect {name!r}; known: {', '.join(known)}")
         if name in GENERATOR_LAWS:
@@ -59,6 +64,8 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
                 raise ConfigError(f"{source}: {name} needs numbers, got {values!r}") from None
             if len(coefs) != dof or not all(np.isfinite(coefs)):
                 raise ConfigError(f"{source}: {name} needs {dof} finite coefficient(s), one per joint, got {values!r}")
+            if name == "torque_gain" and not min(coefs) > 0:
+                raise ConfigError(f"{source}: torque_gain needs {dof} gains > 0, one per joint (1: exact), got {values!r}")
             out[name] = {(j,): c for j, c in enumerate(coefs)}
             continue
         pairs = {}
@@ -108,6 +115,8 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
     effects = {name: coefs if isinstance(coefs, dict) else {(j,): c for j, c in enumerate(coefs)}
                for name, coefs in effects.items()}
     for name, coefs in effects.items():
+        if name == "torque_gain":  # the sensor reads the torque of the arm with every other effect: last
+            continue
         for joints, c in coefs.items():
             if name in GENERATOR_LAWS:
                 pairs = [(EFFECTS[p.name].term(joints[0], shape=p.shape), p.coefficient) for p in GENERATOR_LAWS[name].parts(*c)]
@@ -122,6 +131,9 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
                 tau += coef * term.torque(data)
                 if L is not None and term.in_lagrangian:
                     L += coef * term.value(data)
+
+    if "torque_gain" in effects:
+        tau *= np.asarray([effects["torque_gain"].get((j,), 1.0) for j in range(data.dof)])
 
     def value(c):
         return ",".join(f"{x:g}" for x in c) if isinstance(c, tuple) else f"{c:g}"

@@ -17,7 +17,8 @@ velocity and torque columns under the names a robot's software uses
 are not logged. Usage::
 
     python -m bench robot-log --system panda --recordings 6 --seconds 30 \\
-        --effects viscous_friction=... coulomb_friction=... offset=... --noise 0.03 --out logs/
+        --effects viscous_friction=... coulomb_friction=... offset=... --noise 0.03 \\
+        [--torque-delay 0.005] --out logs/
 
 It prints the ``bench convert --columns`` mapping for the logs it wrote.
 """
@@ -30,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bench.core.arguments import noise_level, positive, positive_int, seed
+from bench.core.arguments import noise_level, nonnegative, positive, positive_int, seed
 from bench.core.data import Dataset, add_noise
 from bench.core.errors import ConfigError
 from bench.core.fileio import atomic_write
@@ -60,24 +61,34 @@ def fourier_trajectory(dof: int, time: np.ndarray, base_hz: float, rng: np.rando
 
 
 def simulate(system_name: str, seconds: float, rate_hz: float, base_hz: float, effects: list[str], noise: float,
-             seed: int) -> tuple[np.ndarray, Dataset]:
+             seed: int, torque_delay: float = 0.0) -> tuple[np.ndarray, Dataset]:
     """One recording: its time stamps and its samples (``q, qd, qdd`` exact,
-    the torque with the effects and the noise)."""
+    the torque with the effects and the noise). With ``torque_delay`` the
+    torque logged at ``t`` is the one at ``t - torque_delay`` (its effects
+    and noise included): a sensor's or a filter's delay, exact because the
+    trajectory is a Fourier series."""
     system = get_system(system_name)
     if not system.simulated:
         raise ConfigError(f"{system_name} is measured; a log can be simulated for a simulated system only")
     fx = parse_effects(effects, system.dof)
     time = np.arange(int(round(seconds * rate_hz))) / rate_hz
     rng = np.random.default_rng(seed)
-    q, qd, qdd = fourier_trajectory(system.dof, time, base_hz, rng)
+    n = len(time)
+    # the logged states' times, then the torque's: one series, one scale
+    q, qd, qdd = fourier_trajectory(system.dof, np.concatenate([time, time - torque_delay]), base_hz, rng)
     (q_lo, q_hi), (v_lo, v_hi) = (system.domain.bounds(k, system.dof) for k in ("q", "qd"))
     # each joint's amplitude: within REACH of its range of positions, and of velocities
     amplitude = REACH * np.minimum((q_hi - q_lo) / 2, (v_hi - v_lo) / 2 / np.abs(qd).max(axis=0))
     q, qd, qdd = (q_lo + q_hi) / 2 + amplitude * q, amplitude * qd, amplitude * qdd
-    tau, L = system.torque(*(torch.from_numpy(np.ascontiguousarray(x)) for x in (q, qd, qdd)))
-    data = Dataset(q, qd, qdd, tau.numpy(), L.numpy(), system.name, f"simulated log of {system.name}")
+    seen = [np.ascontiguousarray(x[n:]) for x in (q, qd, qdd)]  # where the arm was when its torque was logged
+    tau, L = system.torque(*(torch.from_numpy(x) for x in seen))
+    data = Dataset(*seen, tau.numpy(), L.numpy(), system.name, f"simulated log of {system.name}")
     data = add_effects(data, fx, system)
-    return time, add_noise(data, "indirect", noise, seed) if noise else data
+    data = add_noise(data, "indirect", noise, seed) if noise else data
+    if torque_delay:
+        data = data.replace(q=q[:n], qd=qd[:n], qdd=qdd[:n], L=None,
+                            source=f"{data.source}, its torque {torque_delay:g} s behind its state")
+    return time, data
 
 
 def columns(dof: int) -> str:
@@ -113,13 +124,17 @@ def add_arguments(parser) -> None:
     parser.add_argument("--noise", type=noise_level, default=0.0,
                         help="Gaussian noise on the torque, a fraction of each joint's torque std (default 0)")
     parser.add_argument("--seed", type=seed, default=0, help="recording k uses seed + k (default 0)")
+    parser.add_argument("--torque-delay", type=nonnegative, default=0.0, metavar="SECONDS",
+                        help="log each torque this many seconds after the state it belongs to (a sensor's or "
+                             "filter's delay; default 0)")
     parser.add_argument("--out", type=Path, required=True, help="the folder to write recording_<k>.csv into")
 
 
 def main(args) -> int:
     dof = None
     for k in range(args.recordings):
-        time, data = simulate(args.system, args.seconds, args.rate_hz, args.base_hz, args.effects, args.noise, args.seed + k)
+        time, data = simulate(args.system, args.seconds, args.rate_hz, args.base_hz, args.effects, args.noise, args.seed + k,
+                              args.torque_delay)
         args.out.mkdir(parents=True, exist_ok=True)  # once the system and the effects are known to be good
         path = args.out / f"recording_{k}.csv"
         write_log(path, time, data)

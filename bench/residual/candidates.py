@@ -70,11 +70,29 @@ def candidates(dof: int, coupled: bool = True, system=None) -> TermLibrary:
     shaped ones at each velocity of :data:`SHAPE_GRID`), the effects of
     the whole ``system`` that apply to it (a tip payload and a gravity tilt
     on a planar chain), then the open-ended terms of ``L`` and ``D``."""
-    named = [effect.term(*joints, shape=v) for effect in EFFECTS.values() if effect.arity == 1 or (coupled and effect.arity == 2)
-             for joints in _placements(effect.arity, dof) for v in (SHAPE_GRID if effect.shaped else (None,))]
-    whole = [effect.term(system=system) for effect in EFFECTS.values() if effect.arity == 0 and effect.applies_to(system)]
+    arm = [effect for effect in EFFECTS.values() if not effect.sensor]  # the sensor's laws: bench.residual.sensors
+    named = [effect.term(*joints, shape=v) for effect in arm if effect.arity == 1 or (coupled and effect.arity == 2)
+             for joints in _placements(effect.arity, dof) for v in _shapes(effect)]
+    whole = [effect.term(system=system) for effect in arm if effect.arity == 0 and effect.applies_to(system)]
     kinds = system.kinds if system is not None else ("angle",) * dof
     return TermLibrary(named + whole + list(open_ended(dof, tuple(kinds))))
+
+
+def _shapes(effect) -> tuple:
+    """The shapes an effect's candidates take: none, its own grid, or :data:`SHAPE_GRID`."""
+    if not effect.shaped:
+        return (None,)
+    return effect.grid if effect.grid is not None else SHAPE_GRID
+
+
+def resolved_periods(term: Term, data) -> bool:
+    """Whether a periodic part's period fits in its joint's recorded range
+    (``N * (max q - min q) >= 2 pi``): over a smaller part of one period its
+    torque is a spring's and an offset's, which the simpler laws explain."""
+    if term.shape is None or EFFECTS[term.name].grid is None:
+        return True
+    q = data.q[:, term.joint]
+    return term.shape * float(q.max() - q.min()) >= 2 * math.pi
 
 
 def _placements(arity: int, dof: int) -> list[tuple[int, ...]]:

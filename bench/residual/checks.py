@@ -15,12 +15,19 @@ from bench.residual.validation import cv_mse, row_folds
 MASS_STATES = 256
 
 
-def heldout(strategy: Strategy, model: LoopModel, train: Dataset) -> float:
+def heldout(strategy: Strategy, model: LoopModel, train: Dataset, scale: np.ndarray | None = None) -> float:
     """The model's torque MSE on held-out data: the linear problem that
     tracing and pruning fit (:meth:`~bench.residual.strategies.Strategy.problem`),
-    cross-validated over whole recordings (:func:`bench.residual.validation.cv_mse`)."""
+    cross-validated over whole recordings (:func:`bench.residual.validation.cv_mse`).
+    ``scale`` (one factor a joint: a torque sensor's gains, :mod:`bench.residual.sensors`)
+    turns the corrected torques ``train`` holds back into measured ones, so that
+    models read through different gains are compared in the same units."""
     target, F = strategy.problem(model, train)
-    return cv_mse(F, target.ravel(), row_folds(train))
+    y = target.ravel()
+    if scale is not None:
+        rows = np.tile(np.asarray(scale, dtype=np.float64), len(train))
+        y, F = y * rows, F * rows[:, None]
+    return cv_mse(F, y, row_folds(train))
 
 
 def smallest_mass_eigenvalue(model: FittedModel, train: Dataset) -> float:

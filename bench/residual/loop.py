@@ -69,6 +69,7 @@ runs it through the runner, in its own process.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 from dataclasses import dataclass, field
@@ -78,15 +79,16 @@ import numpy as np
 from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
 from bench.core.models import FittedModel
-from bench.core.terms import TermLibrary, remembered_columns
+from bench.core.terms import TermLibrary, remembered_columns, share_columns
 from bench.evaluation.driven import driven_entry
-from bench.residual.candidates import candidates, describe_all, is_named, label, structural
+from bench.residual.candidates import candidates, describe_all, is_named, label, resolved_periods, structural
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shape_stderr, simplest_laws
 from bench.residual.reach import beyond_data, earns_place, finding, not_identified
 from bench.residual.result import ResidualResult
-from bench.residual.selection import BUDGET_STOP, trace
+from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, trace
+from bench.residual.sensors import Sensed, Sensor, column as sensor_column, redundant, settle
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.validation import describe as describe_validation
 from bench.runner.progress import Report
@@ -168,6 +170,9 @@ class _Loop:
     def __init__(self, method: str, train: Dataset, test: Dataset | None, budget: Budget, seed: int,
                  hyperparameters: dict, report: Report, open_ended: bool | None):
         self.method, self.train, self.test, self.budget, self.seed = method, train, test, budget, seed
+        # the measured training data; ``train`` is what the sensor's laws found so far make of them
+        self.measured, self.sensor = train, Sensor.exact(train)
+        self.stack = contextlib.ExitStack()  # the corrected training data's remembered columns
         self.report, self.open_ended = report, open_ended
         self.horizon = budget.fit_seconds  # the loop's time (unlimited under a work budget)
         self.fitter = Fitter(method, seed, budget.scaled(FIT_SHARE), hyperparameters)
@@ -182,14 +187,33 @@ class _Loop:
         finally:
             self.statistics += time.perf_counter() - t0
 
-    def scores(self, model: FittedModel) -> dict:
-        return {"train": mse(model.predict_torque(self.train), self.train.tau),
+    def scores(self, model: FittedModel, sensor: Sensor | None = None) -> dict:
+        """Torque MSEs in the measured torque's units: the model read through the sensor."""
+        model = Sensed(model, self.sensor if sensor is None else sensor)
+        return {"train": mse(model.predict_torque(self.measured), self.measured.tau),
                 "test": None if self.test is None else mse(model.predict_torque(self.test), self.test.tau)}
+
+    def heldout(self, model: LoopModel, train: Dataset | None = None, sensor: Sensor | None = None) -> float:
+        """:func:`~bench.residual.checks.heldout` in the measured torque's units."""
+        sensor = self.sensor if sensor is None else sensor
+        return heldout(self.strategy, model, self.train if train is None else train, sensor.scale)
+
+    def use(self, train: Dataset, sensor: Sensor) -> None:
+        """Fit from now on to ``train``, the measured data as ``sensor`` corrects them;
+        their columns are remembered (shared with the measured data's where the states are theirs)."""
+        if train is not self.train:
+            if not share_columns(train, self.measured):
+                self.stack.enter_context(remembered_columns(train))
+        self.train, self.sensor = train, sensor
 
     def elapsed(self) -> float:
         return round(time.perf_counter() - self.start, 3)
 
     def run(self, fitted: FittedModel | None) -> ResidualResult:
+        with self.stack:
+            return self._run(fitted)
+
+    def _run(self, fitted: FittedModel | None) -> ResidualResult:
         train, report, budget = self.train, self.report, self.budget
         given = fitted is not None  # a given fit was made on other data: what it leaves here is out of sample
         if fitted is None:
@@ -204,7 +228,7 @@ class _Loop:
                         given, self.start + POLISH_SHARE * self.horizon, report)
         model, started = strategy.start(fitted, train, context)
         first, before = model, self.scores(model)
-        held = self.timed(heldout, strategy, model, train)
+        held = self.timed(self.heldout, model)
         mass = mass_before = self.timed(smallest_mass_eigenvalue, model, train)
         if not mass > 0:
             report(f"round 0: {self.method}'s mass matrix is not positive definite on the training data "
@@ -218,17 +242,19 @@ class _Loop:
         feasible_before = strategy.feasibility(model, train)
         model, held, mass, findings = self.rounds(model, held, mass, rounds)
         after = self.scores(model)
-        feasible_after = strategy.feasibility(model, train)
+        feasible_after = strategy.feasibility(model, self.train)
         driven = None
         if self.test is not None and self.test.time is not None and self.test.recording is not None:
             report("driven rollouts of the test recordings, before and after")
-            driven = {"before": self.timed(driven_entry, first, self.test), "after": self.timed(driven_entry, model, self.test)}
+            # after: the arm's model under the arm's torques, as the sensor's laws correct the measured ones
+            driven = {"before": self.timed(driven_entry, first, self.test),
+                      "after": self.timed(driven_entry, model, self.sensor.correct(self.test))}
         bound = model.rigid.expression_terms_bound()  # SyReNets' full equation is never built
         expr = model.expression() if bound is None or bound <= MAX_SYMBOLIC_TERMS else None
         return ResidualResult(
             system=train.system, method=self.method, mse_before=before, mse_after=after,
-            effects=describe_all(model.effects, model.coef, model.stderr, self.timed(shape_stderr, strategy, model, train))
-            + list(findings.values()) + [entry for _, entry in self.beyond.values()],
+            effects=describe_all(model.effects, model.coef, model.stderr, self.timed(shape_stderr, strategy, model, self.train))
+            + self.sensor.entries(train.dof) + list(findings.values()) + [entry for _, entry in self.beyond.values()],
             rounds=[r.to_json() for r in rounds], validation=split,
             mass_matrix={"smallest_eigenvalue_before": mass_before, "smallest_eigenvalue_after": mass,
                          "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
@@ -237,7 +263,8 @@ class _Loop:
             seconds=round(time.perf_counter() - self.start, 2), statistics_seconds=round(self.statistics, 2),
             budget_s=budget.seconds, fit_budget_s=self.fitter.budget.seconds if budget.kind == "seconds" else None,
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
-            test_source=None if self.test is None else self.test.source, provenance=provenance(), models=(first, model),
+            test_source=None if self.test is None else self.test.source, provenance=provenance(),
+            models=(first, Sensed(model, self.sensor)),
             feasibility=None if feasible_before is None else {"before": feasible_before, "after": feasible_after},
             rollout=driven,
         )
@@ -245,8 +272,9 @@ class _Loop:
     def candidates(self) -> TermLibrary:
         train = self.train
         system = SYSTEMS[train.system]() if train.system in SYSTEMS else None
-        pool = candidates(train.dof, coupled=bool(getattr(system, "absolute_angles", False)), system=system)
-        return TermLibrary([t for t in pool if is_named(t)]) if self.open_ended is False else pool
+        pool = [t for t in candidates(train.dof, coupled=bool(getattr(system, "absolute_angles", False)), system=system)
+                if resolved_periods(t, train)]
+        return TermLibrary([t for t in pool if is_named(t) or self.open_ended is not False])
 
     def settle(self, model: LoopModel):
         """Each law its simplest (:func:`~bench.residual.pruning.simplest_laws`), then
@@ -289,7 +317,7 @@ class _Loop:
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
         """Rounds 1 to :data:`MAX_ROUNDS`; returns the final model, its held-out
         error and mass-matrix eigenvalue, and the structural findings."""
-        train, report, strategy = self.train, self.report, self.strategy
+        report, strategy = self.report, self.strategy
         pool, findings, longest = self.candidates(), {}, 0.0
         for k in range(1, MAX_ROUNDS + 1):
             began = time.perf_counter()
@@ -298,10 +326,12 @@ class _Loop:
                                     f"be spent before a round ended", seconds=self.elapsed()))
                 report(f"round {k}: not started, the budget of {self.budget.seconds:g} s would be spent before it ended")
                 break
+            train, sensor = self.train, self.sensor
             target, fixed = strategy.problem(model, train)
             excluded = model.effects + [term for term, _ in self.beyond.values()]
+            laws = {t: sensor_column(t, model, train) for t in sensor.candidates(train)}
             selection = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
-                                   deadline=self.start + TRACE_SHARE * self.horizon)
+                                   deadline=self.start + TRACE_SHARE * self.horizon, given=laws)
             findings = {}  # what is left unexplained where the loop ends
             for term, c, se in selection.structural:
                 findings[label(term)] = structural(term, c, se)
@@ -316,8 +346,26 @@ class _Loop:
                 break
             accepted = [label(c) for c in selection.accepted]
             report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
-            candidate = strategy.refit(model, train, model.effects + selection.accepted)
+            on_sensor = [t for t in selection.accepted if t in laws]
+            before_round = (train, sensor)
+            candidate = strategy.refit(model, train, model.effects + [t for t in selection.accepted if t not in laws])
+            if on_sensor:  # the sensor's laws applied exactly: the model refitted to the corrected torques
+                candidate, new_sensor, new_train = settle(strategy, candidate, self.measured, sensor, on_sensor)
+                self.use(new_train, new_sensor)
+                report("  " + "; ".join(f"{e['name']} on joint(s) {e['joints']}: "
+                                        + ", ".join(f"{k} = {v['value']:.5g} ± {v['stderr']:.2g}" for k, v in e["parameters"].items())
+                                        for e in new_sensor.entries(train.dof)))
+            train = self.train
             candidate, removed = self.timed(prune, strategy, candidate, train, report)
+            if self.sensor.found_gain or self.sensor.found_shift:
+                candidate, new_sensor, new_train, gone = self.timed(redundant, strategy, candidate, self.measured,
+                                                                    self.sensor, MIN_BIC_DROP)
+                for text in gone:
+                    report(f"  dropping {text}: redundant after the joint refit")
+                if gone:
+                    self.use(new_train, new_sensor)
+                    train = self.train
+                removed += gone
             candidate = refine_shapes(strategy, candidate, train, report)
             candidate, simplified, impossible = self.timed(self.settle, candidate)
             for term, c, se in impossible:
@@ -325,7 +373,7 @@ class _Loop:
                 removed.append(label(term))
             candidate, beyond = self.timed(self.confine, candidate)
             removed += beyond
-            candidate_held = self.timed(heldout, strategy, candidate, train)
+            candidate_held = self.timed(self.heldout, candidate)
             candidate_mass = self.timed(smallest_mass_eigenvalue, candidate, train)
             undo = None  # why the round is undone: the JSON's words, then the progress line's
             if mass > 0 and not candidate_mass > 0:
@@ -338,6 +386,7 @@ class _Loop:
             else:
                 undo = self.timed(strategy.check, candidate, model, train)
             if undo is not None:
+                self.use(*before_round)
                 rounds.append(Round(k, self.scores(model), held, accepted, selection.steps, removed, f"undone: {undo[0]}",
                                     candidate_held, simplified=simplified or None, seconds=self.elapsed()))
                 report(f"round {k}: undone, {undo[1]}")

@@ -17,7 +17,7 @@ from bench.core.regression import Compressed
 from bench.core.terms import Term
 from bench.residual.candidates import admissible, label
 from bench.residual.model import LoopModel
-from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, at_limit, bic, extend_basis, refined_shape, shape_rss
+from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, at_limit, bic, extend_basis, refinable, refined_shape, shape_rss
 from bench.residual.strategies import Strategy
 from bench.runner.progress import Report
 
@@ -72,7 +72,7 @@ def refine_shapes(strategy: Strategy, model: LoopModel, train: Dataset, report: 
     coefficients refitted at each value (variable projection), near where it
     stands (:func:`~bench.residual.selection.refined_shape`); then a joint refit."""
     for i, term in enumerate(model.effects):
-        if term.shape is None:
+        if not refinable(term):
             continue
         Q, r, _, _ = _shape_problem(strategy, model, train, i)
         v = refined_shape(Q, r, term, train)
@@ -88,6 +88,9 @@ def shape_stderr(strategy: Strategy, model: LoopModel, train: Dataset) -> dict[T
     out = {}
     for i, term in enumerate(model.effects):
         if term.shape is None:
+            continue
+        if not refinable(term):  # a whole number of periods is not estimated on a continuous scale
+            out[term] = 0.0
             continue
         Q, r, n, k = _shape_problem(strategy, model, train, i)
         rss = shape_rss(Q, r, term, train, exact=True)  # a curvature from differences: every row projected
@@ -159,22 +162,29 @@ class _Fits:
         self.k, self.n, self.effects = F.shape[1], len(y), model.effects
         self.problem = Compressed(np.hstack(columns), y)
         self.first = self.k - len(model.effects)  # the effects' columns come last
-        self.shapes = sum(t.shape is not None for t in model.effects)
+        self.shapes = sum(_has_shape(t) for t in model.effects)
         self.floor = ROUNDOFF * float(np.mean(train.tau**2)) * self.n
         self.now = self.bic()
 
     def bic(self, without: tuple[int, ...] = (), added: list[Term] = ()) -> float:
         gone = {self.first + i for i in without}
         columns = [c for c in range(self.k) if c not in gone] + [self.k + self.extra.index(t) for t in added]
-        shapes = self.shapes - sum(self.effects[i].shape is not None for i in without)
+        shapes = self.shapes - sum(_has_shape(self.effects[i]) for i in without)
         rss = max(self.problem.rss(columns), self.floor)
         return bic(rss, self.n, len(columns) + shapes)
+
+
+def _has_shape(term: Term) -> bool:
+    """Whether ``term`` carries its law's shape as a parameter of its own: a shaped
+    part that leads its law (a periodic torque's cosine part shares its sine's ``N``)."""
+    return term.shape is not None and led_by(term.name) is not None
 
 
 def _simpler(strategy: Strategy, model: LoopModel, train: Dataset) -> tuple[list[Term], str] | None:
     """The first shaped part to replace by a limit of its law, as the new
     effects and the words for it; ``None`` where every one holds."""
-    shaped = [i for i, t in enumerate(model.effects) if t.shape is not None and led_by(t.name) is not None]
+    shaped = [i for i, t in enumerate(model.effects)
+              if t.shape is not None and led_by(t.name) is not None and t.name in led_by(t.name).limits]
     if not shaped:
         return None
     on_joint = {i: {t.name for t in model.effects if t.joint == model.effects[i].joint and len(t.joints) == 1}

@@ -88,7 +88,8 @@ class Selection:
 
 
 def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
-          exclude: list[Term] = (), max_steps: int | None = None, deadline: float = math.inf) -> Selection:
+          exclude: list[Term] = (), max_steps: int | None = None, deadline: float = math.inf,
+          given: dict[Term, np.ndarray] | None = None) -> Selection:
     """Forward stepwise selection of candidates explaining ``target`` (``(n, dof)``).
 
     Each step tries the named effects first and the open-ended (symbolic)
@@ -99,6 +100,9 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     stay in every fit, so a candidate that only repeats them gains nothing.
     At most ``max_steps`` candidates (or laws) are accepted, where given, and
     no step starts after ``deadline`` (``time.perf_counter()``).
+    ``given`` adds candidates whose columns depend on more than the data (a
+    sensor's laws, linearised at the model: :mod:`bench.residual.sensors`),
+    with those columns; they are named candidates like the effects.
     Returns the newly accepted candidates, per step the statistics of the
     best candidate, accepted or not, and any structural finding.
     """
@@ -108,6 +112,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     floor = ROUNDOFF * float(np.mean(data.tau**2))
     fixed = np.zeros((n_rows, 0)) if fixed is None else fixed
     F_all = {c: c.column(data, "indirect") for c in pool if c not in exclude}
+    F_all.update({c: np.asarray(f, dtype=np.float64) for c, f in (given or {}).items()})
     F_all = {c: f for c, f in F_all.items() if np.isfinite(f).all()}  # a term not finite on the data is no candidate
     accepted, steps, structural = [], [], []
     taken = {slot(t) for t in exclude}
@@ -126,7 +131,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         law = led_by(c.name) if c.shape is not None else None
         if law is None or not law.optional:
             return [c]
-        mates = [EFFECTS[n].term(c.joint) for n in law.optional]
+        mates = [EFFECTS[n].term(c.joint, shape=c.shape if EFFECTS[n].shaped else None) for n in law.optional]
         mates = [t for t in mates if slot(t) not in taken]
         for t in mates:
             if t not in F_all:
@@ -201,7 +206,8 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     # the design's orthonormal basis, extended by each step's new columns
     Q, in_basis = orthonormal_basis(fixed), set()
     # the named effects first; the open-ended terms only where no named effect passes
-    tiers = [[c for c in pool if is_named(c) and c in F_all], [c for c in pool if not is_named(c) and c in F_all]]
+    named = list(given or ()) + [c for c in pool if is_named(c)]
+    tiers = [[c for c in named if c in F_all], [c for c in pool if not is_named(c) and c in F_all]]
     while max_steps is None or len(steps_taken) < max_steps:
         k_now = fixed.shape[1] + len(nuisance) + len(accepted)
         new = [t for t in nuisance + accepted if t not in in_basis]
@@ -228,7 +234,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                 if slot(best["candidate"]) in seen:
                     continue
                 seen.add(slot(best["candidate"]))
-                if best["candidate"].shape is not None and best["bic_drop"] > MIN_BIC_DROP:
+                if refinable(best["candidate"]) and best["bic_drop"] > MIN_BIC_DROP:
                     refined = refine(best["candidate"])
                     if at_limit(refined.shape):  # there it is the simpler law it contains: that law stands instead
                         best = limit(refined, k_now, rss_now)
@@ -336,6 +342,13 @@ def refined_shape(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset) -> fl
     if rss(v) <= NEAR_EXACT * float(r @ r):
         v = best_shape(shape_rss(Q, r, term, data, exact=True), v, factor=1.01)
     return v
+
+
+def refinable(term: Term) -> bool:
+    """Whether ``term``'s shape is on a continuous scale, to refine (a Stribeck
+    velocity), rather than one of its effect's :attr:`~bench.core.effects.Effect.grid`
+    (a whole number of periods, each value a candidate of its own)."""
+    return term.shape is not None and EFFECTS[term.name].grid is None
 
 
 def at_limit(shape: float) -> bool:

@@ -48,6 +48,7 @@ from bench.core.data import Dataset, mse
 from bench.core.models import ExpressionModel, FittedModel, ParametricModel
 from bench.core.feasible import feasibility_of, feasible_fit
 from bench.core.regression import Compressed, fit_statistics
+from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary
 from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
 from bench.residual.selection import orthonormal_basis
@@ -218,15 +219,31 @@ class Feasible(Linear):
 
 class Expression(Strategy):
     """A symbolic model of at most :data:`MAX_SYMBOLIC_TERMS` terms: its terms'
-    coefficients are refitted with the effects (``g`` is linear in ``L``)."""
+    coefficients are refitted with the effects (``g`` is linear in ``L``).
+
+    Its freedom holds, beside its own terms, the kinetic term ``qd_j^2`` of
+    each coordinate where the expression lacks it: the Lagrangian of every
+    mechanical system has one, and a model whose coefficients are free cannot
+    tell a rotor inertia (an armature) from its own inertia on that joint. A
+    symbolic fit that left ``qd_j^2`` out would otherwise see its own missing
+    term as an armature and report it as a physical effect."""
 
     name = "expression"
     spans_its_torque = True
 
     def __init__(self, basis: tuple[sympy.Expr, ...]):
+        self.own = tuple(basis)
         self.basis = TermLibrary.of_lagrangian(basis)
 
+    def kinetic(self, dof: int) -> None:
+        """Add each ``qd_j^2`` the basis lacks (see the class docstring)."""
+        _, qd = coordinate_symbols(dof)
+        missing = [v**2 for v in qd if v**2 not in self.own]
+        if missing and len(self.basis) == len(self.own):
+            self.basis = TermLibrary.of_lagrangian(self.own + tuple(missing))
+
     def freedom(self, model, train):
+        self.kinetic(train.dof)
         return self.basis.design(train, "indirect")
 
     def refit(self, model, train, effects):

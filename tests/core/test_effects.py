@@ -32,8 +32,8 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
     tau_extra = euler_lagrange_chunked(extra, t["q"], t["qd"], t["qdd"])[0].numpy()
     np.testing.assert_allclose(withfx.tau - clean.tau, tau_extra, atol=1e-12)
     assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset",
-                            "coupled_spring", "coupled_damper", "smooth_coulomb", "stribeck_hump", "tip_payload",
-                            "gravity_tilt"}
+                            "coupled_spring", "coupled_damper", "smooth_coulomb", "stribeck_hump", "periodic_sin",
+                            "periodic_cos", "tip_payload", "gravity_tilt", "torque_gain", "time_shift"}
 
 
 @pytest.mark.parametrize(
@@ -140,7 +140,7 @@ def test_a_shaped_effects_numeric_torque_is_its_terms():
     for data in (plain, filtered):
         for name, effect in EFFECTS.items():
             if effect.shaped:
-                for v in (0.05, 0.5, 3.0):
+                for v in effect.grid[::5] if effect.grid else (0.05, 0.5, 3.0):
                     tau = effect.term(1, shape=v).torque(data)
                     numeric = effect.numeric(data.q[:, 1], data.qd[:, 1], v, data.velocity_sign()[:, 1])
                     np.testing.assert_allclose(numeric, tau[:, 1], rtol=1e-13, atol=1e-15)

@@ -18,7 +18,7 @@ def test_every_law_is_made_of_named_effects_and_its_simpler_laws_exist():
         for part, limits in law.limits.items():
             assert EFFECTS[part].shaped and part in law.required
             assert all(set(limit) <= set(EFFECTS) for limit in limits)
-    assert set(FAMILIES.values()) == {"friction", "inertia", "spring", "offset"}
+    assert set(FAMILIES.values()) == {"friction", "inertia", "spring", "offset", "periodic"}
 
 
 def test_only_the_stribeck_law_names_stribeck():

@@ -82,7 +82,7 @@ def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
     train = add_effects(generate(s, 2000, 0), {"viscous_friction": (0.8, 0.5)})
     test = add_effects(generate(s, 1000, 1), {"viscous_friction": (0.8, 0.5)})
     calls = iter([1.0, 2.0])  # round 0, then the refitted round 1: worse
-    monkeypatch.setattr(loop, "heldout", lambda strategy, model, data: next(calls))
+    monkeypatch.setattr(loop, "heldout", lambda strategy, model, data, scale=None: next(calls))
     out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
     assert out.effects == [] and out.mse_after == out.mse_before
     last = out.rounds[-1]

@@ -1,0 +1,303 @@
+r"""Laws of the torque sensor and its recording, which act on the measured
+torque rather than on the arm:
+
+* **a gain per joint**, ``tau_measured_j = g_j tau_j`` (a calibration error);
+* **a time shift** between the torque and the recorded state,
+  ``tau_measured(t) = tau(t - delta)`` (a sensor's or a filter's delay), one
+  for every joint and recording, so that it carries over to the test
+  recordings.
+
+The gains are relative. Multiplying every joint's torque by one factor is a
+rescaling of ``L``, which no torque data can tell from the arm's own
+parameters (a gauge), so one joint's gain is fixed at 1: the *reference*,
+the joint whose measured torque has the largest root mean square on the
+training data. Its torque is the best measured against the noise, so the
+ratios the other gains are stand on the best-conditioned footing; a user who
+knows which sensor is calibrated reads the others as ratios to it.
+
+Both laws are bilinear in the model and the law (``g_j`` times the model's
+torque), so each is judged like any candidate (:func:`bench.residual.selection.trace`)
+by its column linearised at the model where it stands:
+
+* a gain's: the model's torque on its joint, ``tau_hat_j``, coefficient
+  ``eps`` with ``g_j <- g_j (1 + eps)``;
+* a shift's: ``-d tau_hat / dt`` along each recording, coefficient the change
+  of ``delta``.
+
+An accepted law is then applied exactly (:func:`settle`): the model is
+refitted on the corrected training data (each ``tau_j`` divided by ``g_j``;
+each recording's states taken at ``t - delta``, linearly interpolated along
+it), the linearised columns fitted again beside the model's freedom, and the
+law updated, until its correction is below :data:`TOLERANCE` (a fixed point:
+Gauss–Newton on the law's parameters). The loop predicts a measured torque as
+``g_j tau_hat_j(t - delta)`` (:class:`Sensed`), and compares rounds by their
+held-out error in the measured torque's units.
+
+A time shift needs time stamps and recordings (``bench convert`` data, a
+robot log); on independent samples it is not offered. Where a recording's
+torque barely changes over ``delta`` (a slow motion), the shift's column is
+small and its standard error large: the loop's significance test refuses it.
+A per-joint shift (one sensor lagging the others) is not among the laws; each
+recording's own estimate of the common one is reported beside it, so that a
+recording whose delay differs shows.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import sympy
+
+from bench.core.data import Dataset
+from bench.core.effects import EFFECTS
+from bench.core.models import FittedModel
+from bench.core.regression import fit_statistics
+from bench.core.terms import Term
+
+#: the fixed point of :func:`settle` is reached when no gain changes by more than this share and
+#: the shift by no more than this share of the median sample step
+TOLERANCE = 1e-7
+#: the most linearise-and-refit steps :func:`settle` takes
+MAX_STEPS = 12
+#: why the reference joint is the one it is, in the loop's JSON
+WHY_REFERENCE = ("a gain common to every joint rescales L and no torque data identify it, so one joint's gain is "
+                 "fixed at 1: the joint with the largest torque RMS on the training data, whose ratios to the others "
+                 "are the best conditioned")
+
+
+def gain_term(joint: int) -> Term:
+    """Joint ``joint``'s (0-based) sensor gain as a candidate term."""
+    return EFFECTS["torque_gain"].term(joint)
+
+
+def shift_term(dof: int) -> Term:
+    """The time shift between torque and state as a candidate term."""
+    return Term(sympy.Add(*[sympy.Symbol(f"tau_{j + 1}", real=True) for j in range(dof)]), "sensor", "time_shift")
+
+
+def has_time(data: Dataset) -> bool:
+    """Whether ``data`` hold recordings with time stamps, where a time shift can be seen."""
+    return data.time is not None and data.recording is not None
+
+
+def shifted(data: Dataset, delta: float) -> Dataset:
+    """``data`` with each recording's states (``q, qd, qdd`` and the velocity
+    sign) taken at ``t - delta``, linearly interpolated along the recording
+    (held at its ends); the torques stay."""
+    if not delta or not has_time(data):
+        return data
+    q, qd, qdd = data.q.copy(), data.qd.copy(), data.qdd.copy()
+    sign = None if data.sign_qd is None else data.sign_qd.astype(np.float64).copy()
+    for name in data.recordings():
+        index = np.flatnonzero(data.recording == name)
+        index = index[np.argsort(data.time[index], kind="stable")]
+        t = data.time[index]
+        for array in (q, qd, qdd) + ((sign,) if sign is not None else ()):
+            source = array[index].copy()
+            for j in range(data.dof):
+                array[index, j] = np.interp(t - delta, t, source[:, j])
+    return data.replace(q=q, qd=qd, qdd=qdd, sign_qd=None if sign is None else np.sign(sign))
+
+
+def time_derivative(data: Dataset, values: np.ndarray) -> np.ndarray:
+    """``d values / dt`` along each recording (``np.gradient`` over its time stamps)."""
+    out = np.zeros_like(values)
+    for name in data.recordings():
+        index = np.flatnonzero(data.recording == name)
+        index = index[np.argsort(data.time[index], kind="stable")]
+        if len(index) >= 2:
+            out[index] = np.gradient(values[index], data.time[index], axis=0)
+    return out
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """What the loop knows of the torque sensor: each joint's gain (1 at the
+    reference joint), the time shift in seconds, and their standard errors."""
+
+    gains: tuple[float, ...]
+    reference: int
+    shift: float = 0.0
+    gain_stderr: tuple[float, ...] = ()
+    shift_stderr: float = 0.0
+    #: each training recording's own estimate of the shift, ``{recording: (value, stderr)}``
+    per_recording: dict | None = None
+    found_gain: frozenset = frozenset()
+    found_shift: bool = False
+
+    @classmethod
+    def exact(cls, train: Dataset) -> "Sensor":
+        """A sensor that reads the torque as it is, its reference joint chosen on ``train``."""
+        reference = int(np.argmax(np.sqrt(np.mean(train.tau**2, axis=0))))
+        return cls((1.0,) * train.dof, reference, gain_stderr=(0.0,) * train.dof)
+
+    @property
+    def scale(self) -> np.ndarray:
+        return np.asarray(self.gains, dtype=np.float64)
+
+    def states(self, data: Dataset) -> Dataset:
+        """``data`` with the states at which the measured torques were the arm's."""
+        return shifted(data, self.shift)
+
+    def correct(self, measured: Dataset) -> Dataset:
+        """The arm's torques at its states, from measured ones."""
+        data = self.states(measured)
+        return data if not self.found_gain else data.replace(tau=data.tau / self.scale)
+
+    def candidates(self, train: Dataset) -> list[Term]:
+        """The sensor's laws not yet found: a gain on each joint but the
+        reference, and a time shift where ``train`` has time stamps."""
+        out = [gain_term(j) for j in range(train.dof) if j != self.reference and j not in self.found_gain]
+        if has_time(train) and not self.found_shift:
+            out.append(shift_term(train.dof))
+        return out
+
+    def entries(self, dof: int) -> list[dict]:
+        """The JSON entries of the laws found."""
+        out = []
+        for j in sorted(self.found_gain):
+            out.append({"name": "torque_gain", "kind": "sensor", "law": f"tau_measured_{j + 1} = g*tau_{j + 1}",
+                        "joints": [j + 1], "joint": j + 1,
+                        "parameters": {"g": {"value": float(self.gains[j]), "stderr": float(self.gain_stderr[j])}},
+                        "reference_joint": self.reference + 1, "reference": WHY_REFERENCE})
+        if self.found_shift:
+            out.append({"name": "time_shift", "kind": "sensor", "law": "tau_measured(t) = tau(t - delta)",
+                        "joints": list(range(1, dof + 1)),
+                        "parameters": {"delta": {"value": float(self.shift), "stderr": float(self.shift_stderr)}},
+                        "per_recording": {k: {"value": v, "stderr": e} for k, (v, e) in (self.per_recording or {}).items()}})
+        return out
+
+
+def column(term: Term, model: FittedModel, train: Dataset) -> np.ndarray:
+    """A sensor law's column linearised at ``model`` on the corrected ``train``
+    (see the module docstring), flattened sample-major."""
+    tau = np.asarray(model.predict_torque(train), dtype=np.float64)
+    if term.name == "torque_gain":
+        out = np.zeros_like(tau)
+        out[:, term.joint] = tau[:, term.joint]
+        return out.ravel()
+    return -time_derivative(train, tau).ravel()
+
+
+def settle(strategy, model, measured: Dataset, sensor: Sensor, new: list[Term]):
+    """Apply the laws ``new`` (and those ``sensor`` has) exactly: refit the
+    model on the corrected data, fit the laws' linearised columns beside it,
+    update them, until the fixed point (:data:`TOLERANCE`). Returns the
+    model, the sensor and the corrected training data."""
+    sensor = dataclasses.replace(sensor, found_gain=sensor.found_gain | {t.joint for t in new if t.name == "torque_gain"},
+                                 found_shift=sensor.found_shift or any(t.name == "time_shift" for t in new))
+    terms = found(sensor, measured.dof)
+    if not terms:
+        train = sensor.correct(measured)
+        return strategy.refit(model, train, model.effects), sensor, train
+    step = float(np.median(np.diff(np.unique(measured.time)))) if has_time(measured) and len(measured) > 1 else 1.0
+    for _ in range(MAX_STEPS):
+        train = sensor.correct(measured)
+        model = strategy.refit(model, train, model.effects)
+        target, F = strategy.problem(model, train)
+        G = np.column_stack([column(t, model, train) for t in terms])
+        coef, stderr, _ = fit_statistics(np.hstack([F, G]), target.ravel())
+        coef, stderr = coef[-len(terms):], stderr[-len(terms):]
+        gains, gain_se, shift, shift_se = list(sensor.gains), list(sensor.gain_stderr), sensor.shift, sensor.shift_stderr
+        change = 0.0
+        for t, c, e in zip(terms, coef, stderr):
+            if t.name == "torque_gain":
+                gains[t.joint] *= 1.0 + c
+                gain_se[t.joint] = gains[t.joint] * e
+                change = max(change, abs(c))
+            else:
+                shift += c
+                shift_se = e
+                change = max(change, abs(c) / step)
+        sensor = dataclasses.replace(sensor, gains=tuple(gains), gain_stderr=tuple(gain_se), shift=shift, shift_stderr=shift_se)
+        if change < TOLERANCE:
+            break
+    train = sensor.correct(measured)
+    model = strategy.refit(model, train, model.effects)
+    if sensor.found_shift:
+        sensor = dataclasses.replace(sensor, per_recording={k: (sensor.shift + v, e) for k, (v, e)
+                                                            in _each_recording(strategy, model, train).items()})
+    return model, sensor, train
+
+
+def without(sensor: Sensor, term: Term) -> Sensor:
+    """``sensor`` without the law ``term`` (a gain back at 1, no shift)."""
+    if term.name == "torque_gain":
+        gains = list(sensor.gains)
+        gains[term.joint] = 1.0
+        return dataclasses.replace(sensor, gains=tuple(gains), found_gain=sensor.found_gain - {term.joint})
+    return dataclasses.replace(sensor, shift=0.0, shift_stderr=0.0, per_recording=None, found_shift=False)
+
+
+def found(sensor: Sensor, dof: int) -> list[Term]:
+    """The laws ``sensor`` has found, as terms."""
+    return [gain_term(j) for j in sorted(sensor.found_gain)] + ([shift_term(dof)] if sensor.found_shift else [])
+
+
+def redundant(strategy, model, measured: Dataset, sensor: Sensor, min_drop: float):
+    """Backward elimination of the sensor's laws after a round's refit: a law
+    whose removal (the others settled again, :func:`settle`) raises the BIC of
+    the fit to the measured torques by less than ``min_drop`` went redundant
+    with what the round added (a gain that stood in for a missing term of
+    ``L``), and goes. Returns the model, the sensor, the corrected training
+    data and the labels of the laws dropped."""
+    from bench.residual.selection import bic  # the loop's own criterion
+
+    dropped = []
+    while sensor.found_gain or sensor.found_shift:
+        n, k = measured.tau.size, len(found(sensor, measured.dof))
+
+        def rss(m, s):
+            r = Sensed(m, s).predict_torque(measured) - measured.tau
+            return float(np.sum(r**2))
+
+        now = bic(rss(model, sensor), n, k)
+        options = []
+        for term in found(sensor, measured.dof):
+            less = without(sensor, term)
+            m, s, t = settle(strategy, model, measured, less, [])
+            options.append((bic(rss(m, s), n, k - 1) - now, term, m, s, t))
+        gain, term, m, s, t = min(options, key=lambda o: o[0])
+        if gain >= min_drop:
+            break
+        dropped.append(f"{term.name} on joint {term.joint + 1}" if term.joint is not None else term.name)
+        model, sensor = m, s
+    return model, sensor, sensor.correct(measured), dropped
+
+
+def _each_recording(strategy, model, train: Dataset) -> dict:
+    """Each recording's own estimate of what is left of the shift, added to it:
+    the shift's column on that recording's rows only, fitted beside the model."""
+    target, F = strategy.problem(model, train)
+    full = column(shift_term(train.dof), model, train)
+    rows = np.repeat(train.recording, train.dof)
+    out = {}
+    for name in train.recordings():
+        G = np.where(rows == name, full, 0.0)[:, None]
+        coef, stderr, _ = fit_statistics(np.hstack([F, G]), target.ravel())
+        out[str(name)] = (float(coef[-1]), float(stderr[-1]))
+    return out
+
+
+class Sensed(FittedModel):
+    """A model of the arm read through a sensor: it predicts measured torques,
+    ``g_j tau_hat_j(t - delta)``; everything else is the arm's model's."""
+
+    def __init__(self, model: FittedModel, sensor: Sensor):
+        self.model, self.sensor = model, sensor
+
+    def __getattr__(self, name):
+        if name in ("model", "sensor"):  # not yet set (while unpickling)
+            raise AttributeError(name)
+        return getattr(self.model, name)
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        return np.asarray(self.model.predict_torque(self.sensor.states(data))) * self.sensor.scale
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        return self.model.predict_lagrangian(self.sensor.states(data))
+
+    def expression(self):
+        return self.model.expression()
