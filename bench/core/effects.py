@@ -157,6 +157,8 @@ class Effect:
     #: for the data generator, ``exact(system, value)``: the effect's exact term at ``value``
     #: (coefficient 1), where the term the loop fits is only its part linear in a coefficient
     exact: Callable | None = None
+    #: where only a range of coefficients is physical (a sensor's gain correction): ``(low, high)``
+    bounds: tuple[float, float] | None = None
     #: for a shaped effect whose shape takes only some values (a whole number of periods a
     #: revolution): those values, which the loop tries each and does not refine; ``None`` for a
     #: shape on a continuous scale
@@ -197,7 +199,16 @@ class Effect:
 
     def admissible(self, coefficient: float) -> bool:
         """Whether ``coefficient`` is physical for this effect."""
+        if self.bounds is not None:
+            return self.bounds[0] <= coefficient <= self.bounds[1]
         return coefficient >= 0 or not self.nonnegative
+
+    @property
+    def condition(self) -> str:
+        """What :meth:`admissible` asks, in words (``""`` where any coefficient is)."""
+        if self.bounds is not None:
+            return f"{self.bounds[0]:g} <= {self.parameter} <= {self.bounds[1]:g}"
+        return f"{self.parameter} >= 0" if self.nonnegative else ""
 
     @property
     def conservative(self) -> bool:
@@ -261,8 +272,10 @@ EFFECTS: dict[str, Effect] = {
         Effect("periodic_cos", lambda q, qd, N: -sympy.sin(N * q[0]) / N, "L", "b",
                "b·cos(N·q) (L −= b·sin(N·q)/N)", nonnegative=False, shaped="N",
                numeric=lambda q, qd, N, sign: np.cos(N * q), grid=tuple(range(1, 13))),
+        # the coefficient is the gain's change, g <- g (1 + c): a gain between 0.5 and 2 is a calibration error;
+        # a residual that asks for more is something else the model lacks, and a finding
         Effect("torque_gain", lambda q, qd: sympy.Symbol("tau" + str(q[0])[1:], real=True), "sensor", "g",
-               "tau_measured = g·tau", nonnegative=False),
+               "tau_measured = g·tau", nonnegative=False, bounds=(-0.5, 1.0)),
         Effect("time_shift", None, "sensor", "delta", "tau_measured(t) = tau(t − delta)", arity=0, nonnegative=False),
         Effect("tip_payload", None, "L", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
                arity=0, on_system=lambda system, q, qd: _payload(system, q, qd), needs_link_lengths=True),

@@ -121,15 +121,33 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     explains: the declared form lacks this freedom. It names the term and the
     coefficient that would be needed; the term is not added to the model."""
     parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
+    condition = EFFECTS[term.name].condition if is_named(term) else f"{parameter} >= 0"
     law = law_text(term, parameter)
+    if is_named(term) and EFFECTS[term.name].sensor and term.name == "torque_gain":  # its coefficient is g's change
+        law, parameter, coefficient, condition = law_text(term, "g"), "g", 1.0 + coefficient, "0.5 <= g <= 2"
     entry = {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,
              "joints": [j + 1 for j in term.joints], "parameters": {},
              "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "
                          f"{parameter} = {coefficient:.4g} ± {stderr:.2g}, which is not physical "
-                         f"({parameter} >= 0); the term is not added")}
+                         f"({condition}); the term is not added")}
     if not is_named(term):
         entry["expression"] = term.name
     return entry
+
+
+def mismatch(named: list[Term], term: Term, margin: float, size: float, rms: float) -> dict:
+    """The JSON entry of a step where the named law ``named`` was the nearest
+    the vocabulary has but an open-ended ``term`` explained the residual far
+    better (by ``margin`` of BIC): what was seen, its joints, and its torque's
+    size (``size``, RMS) against the residual's (``rms``). The named law is
+    not reported for it."""
+    where = "joint" + ("s " if len(term.joints) > 1 else " ") + "-".join(str(j + 1) for j in term.joints)
+    return {"name": "unnamed", "kind": "structural", "law": law_text(term, "c"), "joints": [j + 1 for j in term.joints],
+            "parameters": {}, "expression": term.name,
+            "finding": (f"no named law explains the residual on {where}: its shape is {term.name}, which explains it "
+                        f"better than the nearest named law ({' + '.join(label(t) for t in named)}) by a BIC of "
+                        f"{margin:.3g}; its torque's RMS is {size:.3g} against the residual's {rms:.3g}; the named "
+                        f"law is not reported for it")}
 
 
 def label(term: Term) -> str:
@@ -144,6 +162,9 @@ def label(term: Term) -> str:
 def law_text(term: Term, parameter: str) -> str:
     """The text of a term's law with its parameter: ``L += ...``, ``D = ...``
     or ``tau += ...``."""
+    if term.place == "sensor":
+        return (f"tau_measured_{term.joint + 1} = {parameter}*tau_{term.joint + 1}" if term.joint is not None
+                else f"tau_measured(t) = tau(t - {parameter})")
     where = {"L": "L += ", "D": "D = "}.get(term.place, "tau += ")
     return f"{where}{sympy.Symbol(parameter) * term.expr}"
 

@@ -79,15 +79,15 @@ import numpy as np
 from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
 from bench.core.models import FittedModel
-from bench.core.terms import TermLibrary, remembered_columns, share_columns
+from bench.core.terms import Term, TermLibrary, remembered_columns, share_columns
 from bench.evaluation.driven import driven_entry
-from bench.residual.candidates import candidates, describe_all, is_named, label, resolved_periods, structural
+from bench.residual.candidates import candidates, describe_all, is_named, label, mismatch, resolved_periods, structural
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shape_stderr, simplest_laws
 from bench.residual.reach import beyond_data, earns_place, finding, not_identified
 from bench.residual.result import ResidualResult
-from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, trace
+from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, ROUNDOFF, bic, trace
 from bench.residual.sensors import Sensed, Sensor, column as sensor_column, redundant, settle
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.validation import describe as describe_validation
@@ -178,6 +178,7 @@ class _Loop:
         self.fitter = Fitter(method, seed, budget.scaled(FIT_SHARE), hyperparameters)
         self.start = time.perf_counter()
         self.beyond: dict[str, tuple] = {}  # effects dropped for claiming beyond the data: label -> (term, entry)
+        self.unnamed: dict[str, dict] = {}  # open-ended terms taken where a named law was only the nearest: label -> entry
         self.statistics = 0.0  # seconds in selection, pruning and the held-out and mass-matrix checks
 
     def timed(self, fn, *args, **kwargs):
@@ -254,7 +255,8 @@ class _Loop:
         return ResidualResult(
             system=train.system, method=self.method, mse_before=before, mse_after=after,
             effects=describe_all(model.effects, model.coef, model.stderr, self.timed(shape_stderr, strategy, model, self.train))
-            + self.sensor.entries(train.dof) + list(findings.values()) + [entry for _, entry in self.beyond.values()],
+            + self.sensor.entries(train.dof) + list(findings.values()) + list(self.unnamed.values())
+            + [entry for _, entry in self.beyond.values()],
             rounds=[r.to_json() for r in rounds], validation=split,
             mass_matrix={"smallest_eigenvalue_before": mass_before, "smallest_eigenvalue_after": mass,
                          "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
@@ -268,6 +270,34 @@ class _Loop:
             feasibility=None if feasible_before is None else {"before": feasible_before, "after": feasible_after},
             rollout=driven,
         )
+
+    def build(self, model: LoopModel, effects: list[Term], on_sensor: list[Term]):
+        """``model`` refitted with ``effects`` and the sensor's new laws ``on_sensor``
+        (applied exactly, :func:`~bench.residual.sensors.settle`): the model, the
+        sensor and the corrected training data."""
+        candidate = self.strategy.refit(model, self.train, effects)
+        if not on_sensor:
+            return candidate, self.sensor, self.train
+        return settle(self.strategy, candidate, self.measured, self.sensor, on_sensor)
+
+    def rival(self, model: LoopModel, effects: list[Term], on_sensor: list[Term], named: list[Term], rival: Term,
+              built: tuple):
+        """Where the trace found an open-ended ``rival`` far better than the named
+        law ``named`` it accepted (:attr:`~bench.residual.selection.Selection.mismatched`):
+        both refitted, the rival's build if its BIC on the measured torques is lower
+        by more than :data:`~bench.residual.selection.MIN_BIC_DROP`, else ``None``."""
+        other = self.build(model, [t for t in effects if t not in named] + [rival], [t for t in on_sensor if t not in named])
+        n = self.measured.tau.size
+        floor = ROUNDOFF * float(np.mean(self.measured.tau**2)) * n  # below it, two fits are equally exact
+
+        def rss(m, s):
+            r = Sensed(m, s).predict_torque(self.measured) - self.measured.tau
+            return max(float(np.sum(r**2)), floor)
+
+        extra = len(named) + sum(t.shape is not None for t in named[-1:])  # a law's parameters, its shape among them
+        if bic(rss(*other[:2]), n, 1) + MIN_BIC_DROP < bic(rss(*built[:2]), n, extra):
+            return other
+        return None
 
     def candidates(self) -> TermLibrary:
         train = self.train
@@ -348,9 +378,16 @@ class _Loop:
             report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
             on_sensor = [t for t in selection.accepted if t in laws]
             before_round = (train, sensor)
-            candidate = strategy.refit(model, train, model.effects + [t for t in selection.accepted if t not in laws])
-            if on_sensor:  # the sensor's laws applied exactly: the model refitted to the corrected torques
-                candidate, new_sensor, new_train = settle(strategy, candidate, self.measured, sensor, on_sensor)
+            effects = model.effects + [t for t in selection.accepted if t not in laws]
+            candidate, new_sensor, new_train = self.build(model, effects, on_sensor)
+            for named, rival, *seen in selection.mismatched:
+                other = self.rival(model, effects, on_sensor, named, rival, (candidate, new_sensor, new_train))
+                if other is not None:
+                    candidate, new_sensor, new_train = other
+                    effects = candidate.effects
+                    self.unnamed[label(rival)] = mismatch(named, rival, *seen)
+                    report(f"round {k}: structural finding: {self.unnamed[label(rival)]['finding']}")
+            if new_sensor is not sensor:  # the sensor's laws applied exactly: the model refitted to the corrected torques
                 self.use(new_train, new_sensor)
                 report("  " + "; ".join(f"{e['name']} on joint(s) {e['joints']}: "
                                         + ", ".join(f"{k} = {v['value']:.5g} ± {v['stderr']:.2g}" for k, v in e["parameters"].items())

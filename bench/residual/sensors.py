@@ -246,6 +246,11 @@ def redundant(strategy, model, measured: Dataset, sensor: Sensor, min_drop: floa
     from bench.residual.selection import bic  # the loop's own criterion
 
     dropped = []
+    low, high = (1.0 + b for b in EFFECTS["torque_gain"].bounds)
+    for j in sorted(sensor.found_gain):  # the fixed point may leave a calibration error's range
+        if not low <= sensor.gains[j] <= high:
+            dropped.append(f"torque_gain on joint {j + 1} (g = {sensor.gains[j]:.4g}, outside [{low:g}, {high:g}])")
+            model, sensor, _ = settle(strategy, model, measured, without(sensor, gain_term(j)), [])
     while sensor.found_gain or sensor.found_shift:
         n, k = measured.tau.size, len(found(sensor, measured.dof))
 

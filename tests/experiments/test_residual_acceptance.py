@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from bench.core.undeclared import parse_effects
-from bench.experiments.residual_acceptance import CASES, expected, run_case
+from bench.experiments.acceptance_scoring import expected
+from bench.experiments.residual_acceptance import CASES, run_case
 
 
 def test_each_case_expects_its_effects_under_the_names_and_joints_the_loop_reports():
@@ -22,6 +23,7 @@ def test_each_case_expects_its_effects_under_the_names_and_joints_the_loop_repor
 def test_a_case_run_names_the_elbow_spring_and_its_stiffness():
     # bounded by work: under a time budget, on a loaded machine, tracing had no time left now and then
     row = run_case("elbow_spring", 0.0, "sysid", 1500, 500, None, steps=1000)
-    assert row["named_right"] and row["found"] == ["coupled_spring j1-2"]
-    assert row["worst_coef_error"] < 0.02 and row["after"] < 1e-6 * row["before"]
+    assert row["right"] == row["put_in"] == row["reported"] == row["true_reported"] == 1
+    assert row["found"] == ["coupled_spring j1-2"] and row["spurious"] == []
+    assert row["worst_error"] < 0.02 and row["after"] < 1e-6 * row["before"]
     assert 0 <= row["statistics_seconds"] <= row["seconds"]

@@ -1,0 +1,109 @@
+"""How the undeclared-effects benchmark (:mod:`bench.experiments.residual_acceptance`)
+scores a residual loop's report against the effects that were put in.
+
+* :func:`expected`: the laws put in, ``{(name, joints from 1): {parameter: value}}``,
+  as the loop's JSON names them (the parts on one joint as their laws; a
+  sensor's gains relative to the loop's reference joint);
+* :func:`reported`: the laws a loop's JSON reports (findings are not laws);
+* :func:`score`: per run, the laws put in that were found right (the right law
+  on the right joints, each parameter within :data:`WITHIN`), the laws
+  reported and how many of them were put in (:func:`put_in`: a simpler law
+  the one put in contains counts as put in, an incomplete finding rather than
+  a false one), and what each law put in was reported as (for the confusion
+  table).
+
+A gain's parameter is judged by its deviation from 1, ``g - 1``: a gain of
+0.96 within 10 % is 0.956 to 0.964 (10 % of ``g`` itself would take any gain
+from 0.86 to 1.06). A periodic torque's ``N`` must be exact; its phase, like
+every other parameter, within 10 % (a parameter put in as 0 is not judged).
+"""
+
+from __future__ import annotations
+
+from bench.core.effects import EFFECTS
+from bench.core.laws import FAMILIES, LAWS, Part, group
+from bench.core.undeclared import GENERATOR_LAWS
+
+#: a parameter is right within this share of its true value
+WITHIN = 0.10
+#: the kinds of a loop's JSON entries that are findings, not laws
+FINDINGS = ("structural", "beyond_data", "not_identified")
+
+
+def expected(effects: dict, dof: int, reference: int = 0) -> dict[tuple, dict[str, float]]:
+    """``{(name, joints from 1): {parameter: value}}`` of the effects added (see
+    the module docstring); ``reference`` is the loop's reference joint (0-based)
+    for a sensor's gains."""
+    out, on_joint = {}, {}
+    for name, placed in effects.items():
+        if name == "torque_gain":
+            base = placed.get((reference,), 1.0)
+            for (j,), g in placed.items():
+                if j != reference and g / base != 1.0:
+                    out[("torque_gain", (j + 1,))] = {"g": g / base}
+            continue
+        for joints, c in placed.items():
+            if name in GENERATOR_LAWS:
+                for part in GENERATOR_LAWS[name].parts(*c):
+                    if part.coefficient:
+                        on_joint.setdefault(joints[0], {})[part.name] = part
+            elif len(joints) == 1 and name in FAMILIES:
+                if c:
+                    on_joint.setdefault(joints[0], {})[name] = Part(name, c)
+            elif c:
+                where = tuple(j + 1 for j in joints) or tuple(range(1, dof + 1))
+                out[(name, where)] = {EFFECTS[name].parameter: c}
+    for j, parts in on_joint.items():
+        for law, members in group(parts):
+            out[(law.name, (j + 1,))] = {k: v for k, (v, _) in law.parameters_of(members).items()}
+    return out
+
+
+def reported(effects: list[dict]) -> dict[tuple, dict[str, float]]:
+    """The laws of a loop's JSON ``effects``, keyed as :func:`expected` keys them."""
+    return {(e["name"], tuple(e["joints"])): {k: p["value"] for k, p in e["parameters"].items()}
+            for e in effects if e["kind"] not in FINDINGS}
+
+
+def error(name: str, parameter: str, got: float, want: float) -> float | None:
+    """The relative error of one parameter (see the module docstring); ``None``
+    where it is not judged (put in as 0)."""
+    if name == "torque_gain":
+        return abs(got - want) / abs(want - 1.0)
+    if parameter == "N":
+        return 0.0 if got == want else float("inf")
+    return abs(got - want) / abs(want) if want else None
+
+
+def score(want: dict, found: dict) -> dict:
+    """One run's figures: ``right`` (laws put in and found right), ``put_in``,
+    ``reported``, ``true_reported`` (reported laws that were put in, on their
+    joints, whatever their parameters), ``worst_error`` (over the laws found on
+    their joints) and ``as`` (per law put in, what it was reported as)."""
+    errors, right, seen_as = [], 0, {}
+    for key, params in want.items():
+        if key not in found:
+            others = sorted(f"{n} j{'-'.join(map(str, j))}" for n, j in found if set(j) & set(key[1]))
+            seen_as[key] = ", ".join(others) or "nothing"
+            continue
+        mine = [error(key[0], p, found[key].get(p, float("nan")), v) for p, v in params.items()]
+        mine = [e for e in mine if e is not None]
+        errors += mine
+        ok = all(e <= WITHIN for e in mine)
+        right += ok
+        seen_as[key] = key[0] if ok else f"{key[0]} (off by more than {WITHIN:.0%})"
+    true_reported = sum(put_in(key, want) for key in found)
+    return {"right": right, "put_in": len(want), "reported": len(found), "true_reported": true_reported,
+            "worst_error": max(errors) if errors else None,
+            "as": {f"{n} j{'-'.join(map(str, j))}": v for (n, j), v in seen_as.items()},
+            "spurious": sorted(f"{n} j{'-'.join(map(str, j))}" for n, j in found if not put_in((n, j), want))}
+
+
+def put_in(key: tuple, want: dict) -> bool:
+    """Whether the reported law ``key`` was put in: the law itself on its joints,
+    or a law it contains on the same joints (Coulomb friction where Coulomb plus
+    viscous friction was put in: an incomplete finding, which recall counts,
+    not a false one)."""
+    name, joints = key
+    return key in want or any(j == joints and name in LAWS[n].simpler + LAWS[n].members
+                              for n, j in want if n in LAWS)
