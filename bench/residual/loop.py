@@ -280,13 +280,18 @@ class _Loop:
             return candidate, self.sensor, self.train
         return settle(self.strategy, candidate, self.measured, self.sensor, on_sensor)
 
-    def rival(self, model: LoopModel, effects: list[Term], on_sensor: list[Term], named: list[Term], rival: Term,
-              built: tuple):
-        """Where the trace found an open-ended ``rival`` far better than the named
-        law ``named`` it accepted (:attr:`~bench.residual.selection.Selection.mismatched`):
-        both refitted, the rival's build if its BIC on the measured torques is lower
-        by more than :data:`~bench.residual.selection.MIN_BIC_DROP`, else ``None``."""
-        other = self.build(model, [t for t in effects if t not in named] + [rival], [t for t in on_sensor if t not in named])
+    def compare(self, model: LoopModel, effects: list[Term], on_sensor: list[Term], chosen: list[Term],
+                other: list[Term], built: tuple, margin: float):
+        """The build (:meth:`build`) with the group ``other`` in place of the accepted
+        ``chosen``, where its BIC on the measured torques, both refitted with the model,
+        is lower by more than ``margin``; else ``None``. For an open-ended term far
+        better than the named law accepted (:attr:`~bench.residual.selection.Selection.mismatched`,
+        margin :data:`~bench.residual.selection.MIN_BIC_DROP`), and for the runner-up
+        of a step whose model's linearisation may rank the two wrongly
+        (:attr:`~bench.residual.selection.Selection.runners_up`, margin 0)."""
+        sensors = [t for t in self.sensor.candidates(self.train) if t.place == "sensor"]
+        alternative = self.build(model, [t for t in effects if t not in chosen] + [t for t in other if t not in sensors],
+                                 [t for t in on_sensor if t not in chosen] + [t for t in other if t in sensors])
         n = self.measured.tau.size
         floor = ROUNDOFF * float(np.mean(self.measured.tau**2)) * n  # below it, two fits are equally exact
 
@@ -294,9 +299,11 @@ class _Loop:
             r = Sensed(m, s).predict_torque(self.measured) - self.measured.tau
             return max(float(np.sum(r**2)), floor)
 
-        extra = len(named) + sum(t.shape is not None for t in named[-1:])  # a law's parameters, its shape among them
-        if bic(rss(*other[:2]), n, 1) + MIN_BIC_DROP < bic(rss(*built[:2]), n, extra):
-            return other
+        def size(group):  # a law's parameters, its shape among them
+            return len(group) + sum(t.shape is not None for t in group[-1:])
+
+        if bic(rss(*alternative[:2]), n, size(other)) + margin < bic(rss(*built[:2]), n, size(chosen)):
+            return alternative
         return None
 
     def candidates(self) -> TermLibrary:
@@ -361,7 +368,8 @@ class _Loop:
             excluded = model.effects + [term for term, _ in self.beyond.values()]
             laws = {t: sensor_column(t, model, train) for t in sensor.candidates(train)}
             selection = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
-                                   deadline=self.start + TRACE_SHARE * self.horizon, given=laws)
+                                   deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
+                                   runner_up=not strategy.fixed_freedom)
             findings = {}  # what is left unexplained where the loop ends
             for term, c, se in selection.structural:
                 findings[label(term)] = structural(term, c, se)
@@ -380,8 +388,17 @@ class _Loop:
             before_round = (train, sensor)
             effects = model.effects + [t for t in selection.accepted if t not in laws]
             candidate, new_sensor, new_train = self.build(model, effects, on_sensor)
+            for chosen, runner in selection.runners_up:
+                other = self.compare(model, effects, on_sensor, chosen, runner, (candidate, new_sensor, new_train), 0.0)
+                if other is not None:
+                    report(f"  {' + '.join(map(label, runner))} instead of {' + '.join(map(label, chosen))}: "
+                           f"a lower BIC once refitted with the model")
+                    candidate, new_sensor, new_train = other
+                    effects = candidate.effects
+                    on_sensor = [t for t in on_sensor if t not in chosen] + [t for t in runner if t in laws]
             for named, rival, *seen in selection.mismatched:
-                other = self.rival(model, effects, on_sensor, named, rival, (candidate, new_sensor, new_train))
+                other = self.compare(model, effects, on_sensor, named, [rival], (candidate, new_sensor, new_train),
+                                     MIN_BIC_DROP)
                 if other is not None:
                     candidate, new_sensor, new_train = other
                     effects = candidate.effects

@@ -88,6 +88,11 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
             name = f"symbolic: `{e['expression']}`" if e.get("expression") else e["name"]
             params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items()) \
                 or e.get("finding", "")
+            if e.get("reference_joint"):
+                params += f" (relative to joint {e['reference_joint']})"
+            if e.get("per_recording"):
+                params += "; each recording's own: " + ", ".join(f"{k} {p['value']:.4g} ± {p['stderr']:.2g}"
+                                                                 for k, p in e["per_recording"].items())
             joints = ", ".join(map(str, e["joints"]))
             lines.append(f"| {name} | {e['kind']} | `{e['law']}` | {joints} | {params} |")
     else:

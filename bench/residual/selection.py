@@ -96,11 +96,13 @@ class Selection:
     #: ``(named group, open-ended term, BIC margin, its torque's RMS, the residual's RMS)`` where an
     #: open-ended term explained the residual far better than the named law accepted for it
     mismatched: list[tuple] = field(default_factory=list)
+    #: ``(accepted group, runner-up group)``: the next best named candidate that passed every test
+    runners_up: list[tuple] = field(default_factory=list)
 
 
 def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
           exclude: list[Term] = (), max_steps: int | None = None, deadline: float = math.inf,
-          given: dict[Term, np.ndarray] | None = None) -> Selection:
+          given: dict[Term, np.ndarray] | None = None, runner_up: bool = False) -> Selection:
     """Forward stepwise selection of candidates explaining ``target`` (``(n, dof)``).
 
     Each step tries the named effects first and the open-ended (symbolic)
@@ -119,6 +121,10 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     ``given`` adds candidates whose columns depend on more than the data (a
     sensor's laws, linearised at the model: :mod:`bench.residual.sensors`),
     with those columns; they are named candidates like the effects.
+    With ``runner_up``, each step also records the next best named candidate
+    of another slot that passes every test (:attr:`Selection.runners_up`),
+    for a model whose linearisation may rank the two wrongly (a parametric
+    form: :meth:`bench.residual.loop._Loop.runner_up` refits both).
     Returns the newly accepted candidates, per step the statistics of the
     best candidate, accepted or not, and any structural finding.
     """
@@ -138,6 +144,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
 
     nuisance: list[Term] = []  # what structural findings explain: in every later fit, in no model
     mismatched: list[tuple] = []  # named laws an open-ended term explained far better: (group, term, margin, size, rms)
+    runners_up: list[tuple] = []  # (accepted group, the next best group that passed every test)
 
     def _rival(chosen: dict) -> dict | None:
         """The open-ended term that explains the residual better than the named law
@@ -298,10 +305,21 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                     before = held_fits.cv()
                 ok, info = _passes(best, before, lambda g: held_fits.cv(np.column_stack([F_all[t] for t in g])), min_gain)
                 impossible = physical(best)
+                if chosen is not None and not (ok and impossible is None):  # no runner-up
+                    tried += 1
+                    if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
+                        break
+                    continue
                 if ok and impossible is None:
+                    if chosen is not None:  # the runner-up: the step's choice is made
+                        runners_up.append((chosen["group"], best["group"]))
+                        steps.append({**info, "runner_up_of": " + ".join(label(t) for t in chosen["group"])})
+                        break
                     steps.append({**info, "accepted": True})
                     chosen = best
-                    break
+                    if not runner_up or not is_named(best["candidate"]):
+                        break
+                    continue
                 if ok:
                     if inadmissible is None:
                         steps.append({**info, "accepted": False, "inadmissible": label(impossible[0])})
@@ -333,7 +351,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         steps_taken.append(chosen)
         taken.update(slot(t) for t in chosen["group"])
         rss_now = chosen["rss"]
-    return Selection(accepted, steps, structural, mismatched)
+    return Selection(accepted, steps, structural, mismatched, runners_up)
 
 
 def best_shape(rss, shape: float, factor: float = SHAPE_RANGE) -> float:

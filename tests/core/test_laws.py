@@ -81,3 +81,21 @@ def test_the_generator_adds_a_smoothed_coulomb_law_and_a_spring_at_its_rest_angl
 def test_a_law_with_wrong_parameters_is_refused_with_one_line(items, message):
     with pytest.raises(ConfigError, match=message):
         parse_effects(items, 2)
+
+
+def test_a_periodic_torque_is_amplitude_periods_and_phase_of_its_two_parts():
+    law = LAWS["periodic_torque"]
+    parts = {p.name: p for p in law.parts(0.3, 6, 0.5)}
+    assert parts["periodic_sin"].shape == parts["periodic_cos"].shape == 6
+    got = law.parameters_of(parts)
+    assert got["A"][0] == pytest.approx(0.3) and got["N"][0] == 6 and got["phi"][0] == pytest.approx(0.5)
+    # the cosine part alone is the same law at phase pi/2
+    (only,) = group({"periodic_cos": Part("periodic_cos", 0.2, 4)})
+    assert only[0].name == "periodic_torque"
+    assert only[0].parameters_of(only[1])["phi"][0] == pytest.approx(math.pi / 2)
+    # the generated torque is A sin(N q + phi) on its joint
+    s = get_system("double_pendulum")
+    clean = generate(s, 100, 0)
+    data = add_effects(clean, parse_effects(["periodic_torque=2:0.3,6,0.5"], 2), s)
+    np.testing.assert_allclose(data.tau[:, 1] - clean.tau[:, 1], 0.3 * np.sin(6 * clean.q[:, 1] + 0.5), atol=1e-12)
+    np.testing.assert_allclose(data.tau[:, 0], clean.tau[:, 0], atol=1e-12)

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import pytest
+
 from bench.core.undeclared import parse_effects
-from bench.experiments.acceptance_scoring import expected
+from bench.experiments.acceptance_scoring import expected, score
 from bench.experiments.residual_acceptance import CASES, run_case
 
 
@@ -27,3 +29,27 @@ def test_a_case_run_names_the_elbow_spring_and_its_stiffness():
     assert row["found"] == ["coupled_spring j1-2"] and row["spurious"] == []
     assert row["worst_error"] < 0.02 and row["after"] < 1e-6 * row["before"]
     assert 0 <= row["statistics_seconds"] <= row["seconds"]
+
+
+def test_a_gain_is_expected_relative_to_the_loops_reference_joint():
+    fx = parse_effects(["torque_gain=1.1,0.99"], 2)
+    assert expected(fx, 2, reference=0) == {("torque_gain", (2,)): {"g": pytest.approx(0.9)}}
+    assert expected(fx, 2, reference=1) == {("torque_gain", (1,)): {"g": pytest.approx(1.1 / 0.99)}}
+    assert expected(parse_effects(["periodic_torque=1:0.3,6,0.5"], 2), 2) == {
+        ("periodic_torque", (1,)): {"A": pytest.approx(0.3), "N": 6.0, "phi": pytest.approx(0.5)}}
+
+
+def test_a_run_is_scored_by_law_joints_and_parameters():
+    want = {("coulomb_viscous_friction", (1,)): {"F_c": 1.5, "b": 0.8}, ("torque_gain", (2,)): {"g": 0.96}}
+    found = {("coulomb_friction", (1,)): {"F_c": 2.2},  # the simpler law it contains: put in, not right
+             ("torque_gain", (2,)): {"g": 0.9635},  # within 1 % of the gain
+             ("armature", (2,)): {"I": 0.3}}  # not put in
+    s = score(want, found)
+    assert (s["right"], s["put_in"], s["reported"], s["true_reported"]) == (1, 2, 3, 2)
+    assert s["spurious"] == ["armature j2"]
+    assert s["as"] == {"coulomb_viscous_friction j1": "coulomb_friction j1", "torque_gain j2": "torque_gain"}
+    off = score({("torque_gain", (2,)): {"g": 0.96}}, {("torque_gain", (2,)): {"g": 0.97}})
+    assert off["right"] == 0 and off["as"] == {"torque_gain j2": "torque_gain (off by more than 1%)"}
+    wrong_n = score({("periodic_torque", (1,)): {"A": 0.3, "N": 6.0, "phi": 0.5}},
+                    {("periodic_torque", (1,)): {"A": 0.3, "N": 5.0, "phi": 0.5}})
+    assert wrong_n["right"] == 0 and wrong_n["true_reported"] == 1
