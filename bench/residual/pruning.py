@@ -17,7 +17,9 @@ from bench.core.regression import Compressed
 from bench.core.terms import Term
 from bench.residual.candidates import admissible, label
 from bench.residual.model import LoopModel
-from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, at_limit, bic, extend_basis, refinable, refined_shape, shape_rss
+from bench.residual.basis import extend_basis
+from bench.residual.selection import MIN_BIC_DROP, ROUNDOFF, bic
+from bench.residual.shapes import at_limit, refinable, refined_shape, shape_rss
 from bench.residual.strategies import Strategy
 from bench.runner.progress import Report
 
@@ -70,7 +72,7 @@ def refine_shapes(strategy: Strategy, model: LoopModel, train: Dataset, report: 
     """Each shaped effect's nonlinear parameter (a Stribeck velocity) by a
     bounded scalar search of the residual sum of squares, the linear
     coefficients refitted at each value (variable projection), near where it
-    stands (:func:`~bench.residual.selection.refined_shape`); then a joint refit."""
+    stands (:func:`~bench.residual.shapes.refined_shape`); then a joint refit."""
     for i, term in enumerate(model.effects):
         if not refinable(term):
             continue
@@ -129,7 +131,7 @@ def simplest_laws(strategy: Strategy, model: LoopModel, train: Dataset, report: 
     standard error is at least its value, where an essential part of its law
     is missing (:attr:`~bench.core.laws.Law.essential`: a Stribeck law's
     Coulomb level, then ``0 ± 0``), where its shape sits at an end of
-    :data:`~bench.residual.selection.SHAPE_LIMITS`, or where that limit's BIC
+    :data:`~bench.residual.shapes.SHAPE_LIMITS`, or where that limit's BIC
     is not above the law's by more than :data:`MIN_BIC_DROP` (the loop's own
     criterion: a shape is a parameter). Then, where a joint's parts make two
     laws of one family (smoothed Coulomb friction beside a Stribeck hump, say),

@@ -50,12 +50,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bench.core.data import Dataset
-import scipy.linalg
-
 from bench.core.effects import EFFECTS
 from bench.core.laws import led_by
 from bench.core.terms import Term, TermLibrary
-from bench.residual.candidates import SHAPE_GRID, admissible, is_named, label
+from bench.residual.basis import extend_basis, orthonormal_basis, project_off
+from bench.residual.candidates import admissible, is_named, label
+from bench.residual.shapes import SHAPE_LIMITS, at_limit, refinable, refined_shape
 from bench.residual.validation import FoldFits, row_folds
 
 MIN_BIC_DROP = 10.0
@@ -64,20 +64,12 @@ MIN_HELDOUT_GAIN = 0.01
 #: on independent samples, a held-out gain this many rows' worth of residual is enough (see the module docstring)
 MIN_HELDOUT_CHI2 = MIN_BIC_DROP
 ROUNDOFF = 1e-20
-#: a shaped candidate's parameter is refined within this factor of its grid value
-SHAPE_RANGE = 4.0
-#: the range a shape is searched in: past the grid's ends by :data:`SHAPE_RANGE`;
-#: a shape at either end is not identified (:func:`at_limit`)
-SHAPE_LIMITS = (min(SHAPE_GRID) / SHAPE_RANGE, max(SHAPE_GRID) * SHAPE_RANGE)
 #: candidates tried a step, best first, past ones that fail on significance or held-out error
 MAX_TRIES = 8
 #: an admissible candidate replaces a better one with an impossible coefficient
 #: only if it removes at least this share of what that one removes
 AS_WELL = 0.9
 
-#: a fit that leaves less than this share of its residual sum of squares is near round-off
-#: (:func:`refined_shape`)
-NEAR_EXACT = 1e-8
 #: a trace's last step where the loop's time ran out before it ended
 BUDGET_STOP = "the loop's budget: no further step started"
 
@@ -352,112 +344,6 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         taken.update(slot(t) for t in chosen["group"])
         rss_now = chosen["rss"]
     return Selection(accepted, steps, structural, mismatched, runners_up)
-
-
-def best_shape(rss, shape: float, factor: float = SHAPE_RANGE) -> float:
-    """The value within ``factor`` of ``shape``, and within
-    :data:`SHAPE_LIMITS`, where ``rss(value)`` is least: a bounded scalar
-    search in ``log(value)``."""
-    from scipy.optimize import minimize_scalar  # 0.3 s to import: only a shaped effect needs it
-
-    lo, hi = SHAPE_LIMITS
-    shape = min(max(shape, lo), hi)
-    bounds = (math.log(max(shape / factor, lo)), math.log(min(shape * factor, hi)))
-    x = minimize_scalar(lambda x: rss(math.exp(x)), bounds=bounds, method="bounded", options={"xatol": 1e-10}).x
-    return float(math.exp(x))
-
-
-def shape_rss(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset, exact: bool = False):
-    """``rss(v)``: the residual sum of squares when the shaped ``term``'s column
-    at shape ``v`` joins a design with orthonormal basis ``Q`` (rows of
-    ``tau.ravel()``) and residual ``r``.
-
-    The column lives on its joint's rows only, and ``r`` is orthogonal to
-    ``Q``, so by default each value costs a product of those rows of ``Q``
-    with it: ``rss = |r|^2 - (r.g)^2 / (|g|^2 - |Q^T g|^2)``. Its round-off
-    is that of ``|r|^2``; ``exact`` projects the column off ``Q`` on every row
-    instead (twice), for a fit near round-off (:func:`refined_shape`)."""
-    effect, joint = EFFECTS[term.name], term.joint
-    rows = slice(joint, None, data.dof)
-    Qj, rj = np.ascontiguousarray(Q[rows]), r[rows]
-    sign = data.velocity_sign()[:, joint]
-    rr = float(r @ r)
-
-    def rss(v: float) -> float:
-        g = effect.numeric(data.q[:, joint], data.qd[:, joint], v, sign)
-        if exact:
-            column = np.zeros(len(r))
-            column[rows] = g
-            column = project_off(Q, column)
-            cc = float(column @ column)
-            return max(rr - float(r @ column) ** 2 / cc, 0.0) if cc > 0 else rr
-        a = Qj.T @ g
-        gg, part = float(g @ g), float(g @ g) - float(a @ a)
-        if not part > 1e-12 * gg:  # (nearly) in the design already: it explains nothing more
-            return rr
-        return max(rr - float(rj @ g) ** 2 / part, 0.0)
-
-    return rss
-
-
-def refined_shape(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset) -> float:
-    """The shape of ``term`` where its column fits ``r`` best beside ``Q``
-    (:func:`best_shape` on :func:`shape_rss`); where that fit leaves less than
-    :data:`NEAR_EXACT` of ``|r|^2``, the shape is refined again near it with
-    every row projected, so that round-off does not decide it."""
-    rss = shape_rss(Q, r, term, data)
-    v = best_shape(rss, term.shape)
-    if rss(v) <= NEAR_EXACT * float(r @ r):
-        v = best_shape(shape_rss(Q, r, term, data, exact=True), v, factor=1.01)
-    return v
-
-
-def refinable(term: Term) -> bool:
-    """Whether ``term``'s shape is on a continuous scale, to refine (a Stribeck
-    velocity), rather than one of its effect's :attr:`~bench.core.effects.Effect.grid`
-    (a whole number of periods, each value a candidate of its own)."""
-    return term.shape is not None and EFFECTS[term.name].grid is None
-
-
-def at_limit(shape: float) -> bool:
-    """Whether ``shape`` sits at an end of :data:`SHAPE_LIMITS` (within 1 %)."""
-    lo, hi = SHAPE_LIMITS
-    return shape <= lo * 1.01 or shape >= hi / 1.01
-
-
-def orthonormal_basis(D: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of the columns of ``D`` (pivoted QR of the
-    column-scaled matrix; columns dependent to 1e-10 left out)."""
-    if D.shape[1] == 0:
-        return np.zeros((D.shape[0], 0))
-    scale = np.sqrt(np.einsum("ij,ij->j", D, D))
-    scale[scale == 0] = 1.0
-    Q, R, _ = scipy.linalg.qr(D / scale, mode="economic", pivoting=True)
-    d = np.abs(np.diag(R))
-    return Q[:, d > 1e-10 * d[0]] if d[0] > 0 else Q[:, :0]
-
-
-def extend_basis(Q: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """``Q`` (orthonormal columns) with an orthonormal basis of what the
-    columns ``G`` add to it: their parts off ``Q`` (projected twice) that keep
-    more than 1e-10 of their norm, by pivoted QR. The span is that of
-    :func:`orthonormal_basis` of ``[Q | G]``, at the cost of a projection."""
-    scale = np.sqrt(np.einsum("ij,ij->j", G, G))
-    G = project_off(Q, G[:, scale > 0] / scale[scale > 0])
-    kept = np.sqrt(np.einsum("ij,ij->j", G, G)) > 1e-10
-    if not kept.any():
-        return Q
-    P, R, _ = scipy.linalg.qr(G[:, kept], mode="economic", pivoting=True)
-    P = P[:, np.abs(np.diag(R)) > 1e-10]
-    P = project_off(Q, P)  # orthogonal to Q to round-off again
-    P /= np.sqrt(np.einsum("ij,ij->j", P, P))
-    return np.hstack([Q, P])
-
-
-def project_off(Q: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """``G`` less its projection on the orthonormal columns ``Q`` (twice, for accuracy)."""
-    G = G - Q @ (Q.T @ G)
-    return G - Q @ (Q.T @ G)
 
 
 def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:

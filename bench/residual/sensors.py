@@ -55,6 +55,7 @@ from bench.core.effects import EFFECTS
 from bench.core.models import FittedModel
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term
+from bench.residual.selection import bic
 
 #: the fixed point of :func:`settle` is reached when no gain changes by more than this share and
 #: the shift by no more than this share of the median sample step
@@ -243,8 +244,6 @@ def redundant(strategy, model, measured: Dataset, sensor: Sensor, min_drop: floa
     with what the round added (a gain that stood in for a missing term of
     ``L``), and goes. Returns the model, the sensor, the corrected training
     data and the labels of the laws dropped."""
-    from bench.residual.selection import bic  # the loop's own criterion
-
     dropped = []
     low, high = (1.0 + b for b in EFFECTS["torque_gain"].bounds)
     for j in sorted(sensor.found_gain):  # the fixed point may leave a calibration error's range

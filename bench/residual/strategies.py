@@ -51,7 +51,7 @@ from bench.core.regression import Compressed, fit_statistics
 from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary
 from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
-from bench.residual.selection import orthonormal_basis
+from bench.residual.basis import orthonormal_basis
 from bench.residual.validation import folds
 from bench.runner.progress import Report
 

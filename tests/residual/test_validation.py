@@ -269,7 +269,7 @@ def test_held_out_fits_with_added_columns_equal_refitting_without_each_fold():
 
 
 def test_an_extended_basis_spans_what_a_fresh_one_spans():
-    from bench.residual.selection import extend_basis, orthonormal_basis
+    from bench.residual.basis import extend_basis, orthonormal_basis
 
     rng = np.random.default_rng(4)
     A, B = rng.normal(size=(300, 4)), rng.normal(size=(300, 3))
