@@ -9,7 +9,11 @@ motion it saw. Such an effect *claims beyond the data*
 * every open-ended term;
 * a spring on a joint whose rest angle lies outside the joint's recorded
   range: ``-tau_0 / k`` with the offset ``tau_0`` on its joint (the
-  offset-spring law), else 0.
+  offset-spring law), else 0;
+* a periodic torque (its sine and cosine parts): along one trajectory a
+  joint's position is a function of time, so two coefficients and a choice
+  of N among a dozen fit a smooth share of any residual the trajectory
+  leaves, cogging or not.
 
 An effect whose standard error is at least its value is not identified by
 the data at all (:func:`not_identified`): it is dropped and reported the
@@ -49,6 +53,8 @@ def beyond_data(model: LoopModel, train: Dataset) -> list[tuple[int, str]]:
     for i, term in enumerate(model.effects):
         if not is_named(term):
             out.append((i, f"an open-ended term, {term.name}"))
+        elif EFFECTS[term.name].grid is not None:
+            out.append((i, f"a periodic torque ({label(term)}), which one trajectory cannot tell from a function of time"))
         elif term.name == "spring" and term.joint is not None:
             j = term.joint
             offset = index.get(("offset", j))
