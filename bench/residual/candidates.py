@@ -124,7 +124,8 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     condition = EFFECTS[term.name].condition if is_named(term) else f"{parameter} >= 0"
     law = law_text(term, parameter)
     if is_named(term) and EFFECTS[term.name].sensor and term.name == "torque_gain":  # its coefficient is g's change
-        law, parameter, coefficient, condition = law_text(term, "g"), "g", 1.0 + coefficient, "0.5 <= g <= 2"
+        low, high = (1.0 + b for b in EFFECTS[term.name].bounds)
+        law, parameter, coefficient, condition = law_text(term, "g"), "g", 1.0 + coefficient, f"{low:g} <= g <= {high:g}"
     entry = {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,
              "joints": [j + 1 for j in term.joints], "parameters": {},
              "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "

@@ -427,6 +427,12 @@ class _Loop:
                 removed.append(label(term))
             candidate, beyond = self.timed(self.confine, candidate)
             removed += beyond
+            if beyond:  # a refit without what was dropped can leave a law impossible or not itself again
+                candidate, more, impossible = self.timed(self.settle, candidate)
+                simplified += more
+                for term, c, se in impossible:
+                    findings[label(term)] = structural(term, c, se)
+                    removed.append(label(term))
             candidate_held = self.timed(self.heldout, candidate)
             candidate_mass = self.timed(smallest_mass_eigenvalue, candidate, train)
             undo = None  # why the round is undone: the JSON's words, then the progress line's
