@@ -59,3 +59,18 @@ def test_a_model_without_forward_dynamics_diverges_in_every_window():
     out = driven_rollout(indefinite, data, 0.25)
     assert out["diverged"] == out["windows"] == 8 and out["median_q_rmse"] is None
     assert driven_entry(indefinite, data)["status"] == "diverged"
+
+
+def test_a_window_that_blows_up_on_a_stiff_damper_is_integrated_again_at_a_finer_step(monkeypatch):
+    from bench.core.effects import EFFECTS
+    from bench.evaluation import driven
+    from bench.residual.model import LoopModel
+
+    system = get_system("double_pendulum")
+    data = _recorded_motion(system)
+    # a damper so stiff for the joint's inertia that RK4 at a quarter of the 10 ms step is unstable
+    damped = LoopModel(TrueModel(system), [EFFECTS["viscous_friction"].term(1)], np.array([1000.0]), np.zeros(1))
+    out = driven_rollout(damped, data, 0.25)
+    assert out["diverged"] == 0 and out["median_q_rmse"] is not None
+    monkeypatch.setattr(driven, "REFINEMENTS", 0)
+    assert driven_rollout(damped, data, 0.25)["diverged"] > 0
