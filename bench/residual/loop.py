@@ -88,7 +88,7 @@ from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shap
 from bench.residual.reach import beyond_data, earns_place, finding, not_identified
 from bench.residual.result import ResidualResult
 from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, ROUNDOFF, bic, trace
-from bench.residual.sensors import Sensed, Sensor, column as sensor_column, redundant, settle
+from bench.residual.sensors import Sensed, Sensor, column as sensor_column, confine as confine_sensor, redundant, settle
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.validation import describe as describe_validation
 from bench.runner.progress import Report
@@ -366,7 +366,7 @@ class _Loop:
             train, sensor = self.train, self.sensor
             target, fixed = strategy.problem(model, train)
             excluded = model.effects + [term for term, _ in self.beyond.values()]
-            laws = {t: sensor_column(t, model, train) for t in sensor.candidates(train)}
+            laws = {t: sensor_column(t, model, train) for t in sensor.candidates(train) if t not in excluded}
             selection = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
                                    deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
                                    runner_up=not strategy.fixed_freedom)
@@ -426,6 +426,17 @@ class _Loop:
                 findings[label(term)] = structural(term, c, se)
                 removed.append(label(term))
             candidate, beyond = self.timed(self.confine, candidate)
+            if self.sensor.found_gain or self.sensor.found_shift:
+                candidate, new_sensor, new_train, gone = self.timed(
+                    confine_sensor, strategy, candidate, self.measured, self.sensor,
+                    lambda m, t, s: heldout(strategy, m, t, s.scale))
+                for term, entry in gone:
+                    self.beyond[label(term)] = (term, entry)
+                    report(f"  dropping {label(term)}: a law of the sensor that no held-out trajectory confirms")
+                    beyond.append(label(term))
+                if gone:
+                    self.use(new_train, new_sensor)
+                    train = self.train
             removed += beyond
             if beyond:  # a refit without what was dropped can leave a law impossible or not itself again
                 candidate, more, impossible = self.timed(self.settle, candidate)

@@ -159,12 +159,12 @@ class Sensor:
         """The JSON entries of the laws found."""
         out = []
         for j in sorted(self.found_gain):
-            out.append({"name": "torque_gain", "kind": "sensor", "law": f"tau_measured_{j + 1} = g*tau_{j + 1}",
+            out.append({"name": "torque_gain", "kind": "sensor", "law": _law(gain_term(j), "g"),
                         "joints": [j + 1], "joint": j + 1,
                         "parameters": {"g": {"value": float(self.gains[j]), "stderr": float(self.gain_stderr[j])}},
                         "reference_joint": self.reference + 1, "reference": WHY_REFERENCE})
         if self.found_shift:
-            out.append({"name": "time_shift", "kind": "sensor", "law": "tau_measured(t) = tau(t - delta)",
+            out.append({"name": "time_shift", "kind": "sensor", "law": _law(shift_term(dof), "delta"),
                         "joints": list(range(1, dof + 1)),
                         "parameters": {"delta": {"value": float(self.shift), "stderr": float(self.shift_stderr)}},
                         "per_recording": {k: {"value": v, "stderr": e} for k, (v, e) in (self.per_recording or {}).items()}})
@@ -269,6 +269,55 @@ def redundant(strategy, model, measured: Dataset, sensor: Sensor, min_drop: floa
         dropped.append(f"{term.name} on joint {term.joint + 1}" if term.joint is not None else term.name)
         model, sensor = m, s
     return model, sensor, sensor.correct(measured), dropped
+
+
+#: the held-out error a sensor's law must save on another trajectory, as a fraction of the error without it
+MIN_GAIN = 0.01
+
+
+def confine(strategy, model, measured: Dataset, sensor: Sensor, heldout):
+    """On measured trajectories, each law the sensor has found must earn its
+    place on a held-out trajectory, as an open-ended term must
+    (:mod:`bench.residual.reach`): it rescales or delays whatever the model
+    does, so along the one trajectory it was fitted on it can absorb the
+    model's own error there. With the law, the held-out error
+    (``heldout(model, train, sensor)``, over whole trajectories) must be at
+    least :data:`MIN_GAIN` lower than without it; training data that hold one
+    trajectory cannot confirm it, and there it never stays. Independent
+    samples (generated data) have no trajectory to overfit. Returns the model,
+    the sensor, the corrected training data and, per law dropped,
+    ``(term, finding)``."""
+    dropped = []
+    names = measured.trajectories()
+    if not names:
+        return model, sensor, sensor.correct(measured), dropped
+    for term in found(sensor, measured.dof):
+        value, stderr = ((sensor.gains[term.joint], sensor.gain_stderr[term.joint]) if term.name == "torque_gain"
+                         else (sensor.shift, sensor.shift_stderr))
+        m, s, t = settle(strategy, model, measured, without(sensor, term), [])
+        if len(names) < 2:
+            verdict = "the training data hold one trajectory, so no held-out trajectory can confirm it"
+        else:
+            kept, less = heldout(model, sensor.correct(measured), sensor), heldout(m, t, s)
+            if less >= (1 + MIN_GAIN) * kept:
+                continue
+            verdict = f"on held-out trajectories it does not pay: held-out MSE {kept:.4g} with it, {less:.4g} without"
+        parameter = EFFECTS[term.name].parameter
+        where = f"joint {term.joint + 1}" if term.joint is not None else "every joint"
+        dropped.append((term, {
+            "name": term.name, "kind": "beyond_data", "law": _law(term, parameter), "joints": [j + 1 for j in term.joints],
+            "parameters": {},
+            "finding": (f"{term.name} on {where} fits the training data with {parameter} = {value:.4g} ± {stderr:.2g}, "
+                        f"but it is a law of the sensor, which rescales or delays whatever the model does, and "
+                        f"{verdict}: reported, not added")}))
+        model, sensor = m, s
+    return model, sensor, sensor.correct(measured), dropped
+
+
+def _law(term: Term, parameter: str) -> str:
+    if term.joint is not None:
+        return f"tau_measured_{term.joint + 1} = {parameter}*tau_{term.joint + 1}"
+    return f"tau_measured(t) = tau(t - {parameter})"
 
 
 def _each_recording(strategy, model, train: Dataset) -> dict:
