@@ -17,7 +17,9 @@ can undo a round) is the model's refit strategy, chosen once from the model
 3. **Trace.** Forward stepwise selection (:mod:`bench.residual.selection`)
    over the candidates of :mod:`bench.residual.candidates`: the named
    effects on every joint, those of the whole system (a payload, a gravity
-   tilt) and an open-ended library of terms of ``L`` and ``D``. The named
+   tilt), the laws of the torque sensor (a gain, a time shift:
+   :mod:`bench.residual.sensors`, their columns linearised at the model) and
+   an open-ended library of terms of ``L`` and ``D``. The named
    effects are tried first at each step. Candidates are judged beside the
    model's own freedom (:meth:`~bench.residual.strategies.Strategy.freedom`),
    so a candidate the model could already express gains nothing.
@@ -27,7 +29,11 @@ can undo a round) is the model's refit strategy, chosen once from the model
    viscous friction ``c qd^2/2``, Coulomb and Stribeck friction, drag), an
    offset as a generalized force.
 5. **Refit jointly**, without fitting the method again
-   (:meth:`~bench.residual.strategies.Strategy.refit`). Effects made
+   (:meth:`~bench.residual.strategies.Strategy.refit`), the sensor's laws
+   applied exactly to the training data (:meth:`_Loop.choose`); where the
+   trace's linearisation may have ranked two candidates wrongly, or an
+   open-ended term explained the residual far better than the named law it
+   accepted, both are refitted and the lower BIC kept. Effects made
    redundant by the refit are dropped again (backward elimination on the
    BIC, :func:`~bench.residual.pruning.prune`), shaped effects' parameters
    refined, each law replaced by the simplest law it contains that the data
@@ -351,6 +357,78 @@ class _Loop:
             else:
                 return model, dropped
 
+    def choose(self, model: LoopModel, selection, laws: dict, k: int) -> LoopModel:
+        """The round's model: ``model`` refitted with what the trace accepted
+        (:meth:`build`), where refitting shows it better, with a runner-up in place
+        of the accepted candidate, and with an open-ended term in place of a named
+        law it explains far better (a structural finding, :attr:`unnamed`); the
+        sensor's new laws applied."""
+        sensor, train, report = self.sensor, self.train, self.report
+        on_sensor = [t for t in selection.accepted if t in laws]
+        effects = model.effects + [t for t in selection.accepted if t not in laws]
+        built = self.build(model, effects, on_sensor)
+        for chosen, runner in selection.runners_up:
+            other = self.compare(model, effects, on_sensor, chosen, runner, built, 0.0)
+            if other is not None:
+                report(f"  {' + '.join(map(label, runner))} instead of {' + '.join(map(label, chosen))}: "
+                       f"a lower BIC once refitted with the model")
+                built, effects = other, other[0].effects
+                on_sensor = [t for t in on_sensor if t not in chosen] + [t for t in runner if t in laws]
+        for named, rival, *seen in selection.mismatched:
+            other = self.compare(model, effects, on_sensor, named, [rival], built, MIN_BIC_DROP)
+            if other is not None:
+                built, effects = other, other[0].effects
+                self.unnamed[label(rival)] = mismatch(named, rival, *seen)
+                report(f"round {k}: structural finding: {self.unnamed[label(rival)]['finding']}")
+        candidate, new_sensor, new_train = built
+        if new_sensor is not sensor:  # the sensor's laws applied exactly: the model refitted to the corrected torques
+            self.use(new_train, new_sensor)
+            report("  " + "; ".join(f"{e['name']} on joint(s) {e['joints']}: "
+                                    + ", ".join(f"{n} = {v['value']:.5g} ± {v['stderr']:.2g}" for n, v in e["parameters"].items())
+                                    for e in new_sensor.entries(train.dof)))
+        return candidate
+
+    def tidy(self, candidate: LoopModel, findings: dict):
+        """What follows a round's joint refit: redundant effects and sensor laws
+        dropped, shapes refined, each law its simplest and possible, and what the
+        data do not identify or a held-out trajectory does not confirm dropped
+        (findings go to ``findings`` and :attr:`beyond`). Returns the model, the
+        labels removed and the laws simplified."""
+        strategy, report = self.strategy, self.report
+        candidate, removed = self.timed(prune, strategy, candidate, self.train, report)
+        if self.sensor.found_gain or self.sensor.found_shift:
+            candidate, new_sensor, new_train, gone = self.timed(redundant, strategy, candidate, self.measured,
+                                                                self.sensor, MIN_BIC_DROP)
+            for text in gone:
+                report(f"  dropping {text}: redundant after the joint refit")
+            if gone:
+                self.use(new_train, new_sensor)
+            removed += gone
+        candidate = refine_shapes(strategy, candidate, self.train, report)
+        candidate, simplified, impossible = self.timed(self.settle, candidate)
+        for term, c, se in impossible:
+            findings[label(term)] = structural(term, c, se)
+            removed.append(label(term))
+        candidate, beyond = self.timed(self.confine, candidate)
+        if self.sensor.found_gain or self.sensor.found_shift:
+            candidate, new_sensor, new_train, gone = self.timed(
+                confine_sensor, strategy, candidate, self.measured, self.sensor,
+                lambda m, t, s: heldout(strategy, m, t, s.scale))
+            for term, entry in gone:
+                self.beyond[label(term)] = (term, entry)
+                report(f"  dropping {label(term)}: a law of the sensor that no held-out trajectory confirms")
+                beyond.append(label(term))
+            if gone:
+                self.use(new_train, new_sensor)
+        removed += beyond
+        if beyond:  # a refit without what was dropped can leave a law impossible or not itself again
+            candidate, more, impossible = self.timed(self.settle, candidate)
+            simplified += more
+            for term, c, se in impossible:
+                findings[label(term)] = structural(term, c, se)
+                removed.append(label(term))
+        return candidate, removed, simplified
+
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
         """Rounds 1 to :data:`MAX_ROUNDS`; returns the final model, its held-out
         error and mass-matrix eigenvalue, and the structural findings."""
@@ -384,66 +462,10 @@ class _Loop:
                 break
             accepted = [label(c) for c in selection.accepted]
             report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
-            on_sensor = [t for t in selection.accepted if t in laws]
             before_round = (train, sensor)
-            effects = model.effects + [t for t in selection.accepted if t not in laws]
-            candidate, new_sensor, new_train = self.build(model, effects, on_sensor)
-            for chosen, runner in selection.runners_up:
-                other = self.compare(model, effects, on_sensor, chosen, runner, (candidate, new_sensor, new_train), 0.0)
-                if other is not None:
-                    report(f"  {' + '.join(map(label, runner))} instead of {' + '.join(map(label, chosen))}: "
-                           f"a lower BIC once refitted with the model")
-                    candidate, new_sensor, new_train = other
-                    effects = candidate.effects
-                    on_sensor = [t for t in on_sensor if t not in chosen] + [t for t in runner if t in laws]
-            for named, rival, *seen in selection.mismatched:
-                other = self.compare(model, effects, on_sensor, named, [rival], (candidate, new_sensor, new_train),
-                                     MIN_BIC_DROP)
-                if other is not None:
-                    candidate, new_sensor, new_train = other
-                    effects = candidate.effects
-                    self.unnamed[label(rival)] = mismatch(named, rival, *seen)
-                    report(f"round {k}: structural finding: {self.unnamed[label(rival)]['finding']}")
-            if new_sensor is not sensor:  # the sensor's laws applied exactly: the model refitted to the corrected torques
-                self.use(new_train, new_sensor)
-                report("  " + "; ".join(f"{e['name']} on joint(s) {e['joints']}: "
-                                        + ", ".join(f"{k} = {v['value']:.5g} ± {v['stderr']:.2g}" for k, v in e["parameters"].items())
-                                        for e in new_sensor.entries(train.dof)))
+            candidate = self.choose(model, selection, laws, k)
+            candidate, removed, simplified = self.tidy(candidate, findings)
             train = self.train
-            candidate, removed = self.timed(prune, strategy, candidate, train, report)
-            if self.sensor.found_gain or self.sensor.found_shift:
-                candidate, new_sensor, new_train, gone = self.timed(redundant, strategy, candidate, self.measured,
-                                                                    self.sensor, MIN_BIC_DROP)
-                for text in gone:
-                    report(f"  dropping {text}: redundant after the joint refit")
-                if gone:
-                    self.use(new_train, new_sensor)
-                    train = self.train
-                removed += gone
-            candidate = refine_shapes(strategy, candidate, train, report)
-            candidate, simplified, impossible = self.timed(self.settle, candidate)
-            for term, c, se in impossible:
-                findings[label(term)] = structural(term, c, se)
-                removed.append(label(term))
-            candidate, beyond = self.timed(self.confine, candidate)
-            if self.sensor.found_gain or self.sensor.found_shift:
-                candidate, new_sensor, new_train, gone = self.timed(
-                    confine_sensor, strategy, candidate, self.measured, self.sensor,
-                    lambda m, t, s: heldout(strategy, m, t, s.scale))
-                for term, entry in gone:
-                    self.beyond[label(term)] = (term, entry)
-                    report(f"  dropping {label(term)}: a law of the sensor that no held-out trajectory confirms")
-                    beyond.append(label(term))
-                if gone:
-                    self.use(new_train, new_sensor)
-                    train = self.train
-            removed += beyond
-            if beyond:  # a refit without what was dropped can leave a law impossible or not itself again
-                candidate, more, impossible = self.timed(self.settle, candidate)
-                simplified += more
-                for term, c, se in impossible:
-                    findings[label(term)] = structural(term, c, se)
-                    removed.append(label(term))
             candidate_held = self.timed(self.heldout, candidate)
             candidate_mass = self.timed(smallest_mass_eigenvalue, candidate, train)
             undo = None  # why the round is undone: the JSON's words, then the progress line's
