@@ -117,6 +117,14 @@ def worth(rows: list[dict]) -> None:
         r["worth"] = None if before is None else math.inf if not r["floor"] else r["rows"] * before / r["floor"]
 
 
+def _error(worst: list[float]) -> str:
+    """The median of the runs' worst parameter errors, in words where a whole number (N) differs."""
+    if not worst:
+        return "—"
+    m = float(np.median(worst))
+    return f"{m:.1%}" if math.isfinite(m) else "N differs"
+
+
 def _percent(hits: int, of: int) -> str:
     return "—" if not of else f"{hits / of:.0%} ({hits}/{of})"
 
@@ -157,7 +165,7 @@ def per_case(rows: list[dict], cases: list[str], methods: list[str], noises: lis
                 chi2 = "—" if not chi2 or c == "clean" else f"{float(np.median(chi2)):.3g}"
                 lines.append(f"| {c} | {z:g} | {m} | {chi2} | {_percent(_sum(mine, 'right'), _sum(mine, 'put_in'))} "
                              f"| {_percent(_sum(mine, 'true_reported'), _sum(mine, 'reported'))} "
-                             f"| {'—' if not worst else f'{float(np.median(worst)):.1%}'} "
+                             f"| {_error(worst)} "
                              f"| {'—' if not over else f'{float(np.median(over)):.3g}'} |")
     return "\n".join(lines)
 
