@@ -84,9 +84,9 @@ def has_time(data: Dataset) -> bool:
 
 
 def shifted(data: Dataset, delta: float) -> Dataset:
-    """``data`` with each recording's states (``q, qd, qdd`` and the velocity
-    sign) taken at ``t - delta``, linearly interpolated along the recording
-    (held at its ends); the torques stay."""
+    """``data`` with each recording's states (``q, qd, qdd`` and the filtered
+    velocity sign, where the data carry one) taken at ``t - delta``, linearly
+    interpolated along the recording (held at its ends); the torques stay."""
     if not delta or not has_time(data):
         return data
     q, qd, qdd = data.q.copy(), data.qd.copy(), data.qdd.copy()
@@ -99,7 +99,7 @@ def shifted(data: Dataset, delta: float) -> Dataset:
             source = array[index].copy()
             for j in range(data.dof):
                 array[index, j] = np.interp(t - delta, t, source[:, j])
-    return data.replace(q=q, qd=qd, qdd=qdd, sign_qd=None if sign is None else np.sign(sign))
+    return data.replace(q=q, qd=qd, qdd=qdd, sign_qd=sign)  # a filtered sign is a smooth signal too
 
 
 def time_derivative(data: Dataset, values: np.ndarray) -> np.ndarray:
