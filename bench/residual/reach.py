@@ -32,8 +32,6 @@ its fitted value and the reason, and does not offer it again.
 
 from __future__ import annotations
 
-import numpy as np
-
 from bench.core.data import Dataset
 from bench.core.effects import EFFECTS
 from bench.residual.candidates import is_named, label, law_text
