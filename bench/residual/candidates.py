@@ -123,7 +123,7 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
     condition = EFFECTS[term.name].condition if is_named(term) else f"{parameter} >= 0"
     law = law_text(term, parameter)
-    if is_named(term) and EFFECTS[term.name].sensor and term.name == "torque_gain":  # its coefficient is g's change
+    if term.name == "torque_gain":  # its coefficient is g's change
         low, high = (1.0 + b for b in EFFECTS[term.name].bounds)
         law, parameter, coefficient, condition = law_text(term, "g"), "g", 1.0 + coefficient, f"{low:g} <= g <= {high:g}"
     entry = {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,

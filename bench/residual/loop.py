@@ -94,7 +94,8 @@ from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shap
 from bench.residual.reach import beyond_data, earns_place, finding, not_identified
 from bench.residual.result import ResidualResult
 from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, ROUNDOFF, bic, trace
-from bench.residual.sensors import Sensed, Sensor, column as sensor_column, confine as confine_sensor, redundant, settle
+from bench.residual.sensors import (Sensed, Sensor, column as sensor_column, confine as confine_sensor, measured_rss,
+                                    redundant, settle)
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.validation import describe as describe_validation
 from bench.runner.progress import Report
@@ -194,9 +195,9 @@ class _Loop:
         finally:
             self.statistics += time.perf_counter() - t0
 
-    def scores(self, model: FittedModel, sensor: Sensor | None = None) -> dict:
+    def scores(self, model: FittedModel) -> dict:
         """Torque MSEs in the measured torque's units: the model read through the sensor."""
-        model = Sensed(model, self.sensor if sensor is None else sensor)
+        model = Sensed(model, self.sensor)
         return {"train": mse(model.predict_torque(self.measured), self.measured.tau),
                 "test": None if self.test is None else mse(model.predict_torque(self.test), self.test.tau)}
 
@@ -295,15 +296,13 @@ class _Loop:
         margin :data:`~bench.residual.selection.MIN_BIC_DROP`), and for the runner-up
         of a step whose model's linearisation may rank the two wrongly
         (:attr:`~bench.residual.selection.Selection.runners_up`, margin 0)."""
-        sensors = [t for t in self.sensor.candidates(self.train) if t.place == "sensor"]
-        alternative = self.build(model, [t for t in effects if t not in chosen] + [t for t in other if t not in sensors],
-                                 [t for t in on_sensor if t not in chosen] + [t for t in other if t in sensors])
+        alternative = self.build(model, [t for t in effects if t not in chosen] + [t for t in other if t.place != "sensor"],
+                                 [t for t in on_sensor if t not in chosen] + [t for t in other if t.place == "sensor"])
         n = self.measured.tau.size
         floor = ROUNDOFF * float(np.mean(self.measured.tau**2)) * n  # below it, two fits are equally exact
 
         def rss(m, s):
-            r = Sensed(m, s).predict_torque(self.measured) - self.measured.tau
-            return max(float(np.sum(r**2)), floor)
+            return max(measured_rss(m, s, self.measured), floor)
 
         def size(group):  # a law's parameters, its shape among them
             return len(group) + sum(t.shape is not None for t in group[-1:])
@@ -412,8 +411,7 @@ class _Loop:
         candidate, beyond = self.timed(self.confine, candidate)
         if self.sensor.found_gain or self.sensor.found_shift:
             candidate, new_sensor, new_train, gone = self.timed(
-                confine_sensor, strategy, candidate, self.measured, self.sensor,
-                lambda m, t, s: heldout(strategy, m, t, s.scale))
+                confine_sensor, strategy, candidate, self.measured, self.sensor, self.heldout)
             for term, entry in gone:
                 self.beyond[label(term)] = (term, entry)
                 report(f"  dropping {label(term)}: a law of the sensor that no held-out trajectory confirms")

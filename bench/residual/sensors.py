@@ -55,6 +55,7 @@ from bench.core.effects import EFFECTS
 from bench.core.models import FittedModel
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term
+from bench.residual.candidates import law_text
 from bench.residual.selection import bic
 
 #: the fixed point of :func:`settle` is reached when no gain changes by more than this share and
@@ -159,12 +160,12 @@ class Sensor:
         """The JSON entries of the laws found."""
         out = []
         for j in sorted(self.found_gain):
-            out.append({"name": "torque_gain", "kind": "sensor", "law": _law(gain_term(j), "g"),
+            out.append({"name": "torque_gain", "kind": "sensor", "law": law_text(gain_term(j), "g"),
                         "joints": [j + 1], "joint": j + 1,
                         "parameters": {"g": {"value": float(self.gains[j]), "stderr": float(self.gain_stderr[j])}},
                         "reference_joint": self.reference + 1, "reference": WHY_REFERENCE})
         if self.found_shift:
-            out.append({"name": "time_shift", "kind": "sensor", "law": _law(shift_term(dof), "delta"),
+            out.append({"name": "time_shift", "kind": "sensor", "law": law_text(shift_term(dof), "delta"),
                         "joints": list(range(1, dof + 1)),
                         "parameters": {"delta": {"value": float(self.shift), "stderr": float(self.shift_stderr)}},
                         "per_recording": {k: {"value": v, "stderr": e} for k, (v, e) in (self.per_recording or {}).items()}})
@@ -237,6 +238,13 @@ def found(sensor: Sensor, dof: int) -> list[Term]:
     return [gain_term(j) for j in sorted(sensor.found_gain)] + ([shift_term(dof)] if sensor.found_shift else [])
 
 
+def measured_rss(model: FittedModel, sensor: Sensor, measured: Dataset) -> float:
+    """The residual sum of squares of ``model`` read through ``sensor`` on the
+    measured torques: what fits read through different sensors are compared by."""
+    r = Sensed(model, sensor).predict_torque(measured) - measured.tau
+    return float(np.sum(r**2))
+
+
 def redundant(strategy, model, measured: Dataset, sensor: Sensor, min_drop: float):
     """Backward elimination of the sensor's laws after a round's refit: a law
     whose removal (the others settled again, :func:`settle`) raises the BIC of
@@ -252,17 +260,11 @@ def redundant(strategy, model, measured: Dataset, sensor: Sensor, min_drop: floa
             model, sensor, _ = settle(strategy, model, measured, without(sensor, gain_term(j)), [])
     while sensor.found_gain or sensor.found_shift:
         n, k = measured.tau.size, len(found(sensor, measured.dof))
-
-        def rss(m, s):
-            r = Sensed(m, s).predict_torque(measured) - measured.tau
-            return float(np.sum(r**2))
-
-        now = bic(rss(model, sensor), n, k)
+        now = bic(measured_rss(model, sensor, measured), n, k)
         options = []
         for term in found(sensor, measured.dof):
-            less = without(sensor, term)
-            m, s, t = settle(strategy, model, measured, less, [])
-            options.append((bic(rss(m, s), n, k - 1) - now, term, m, s, t))
+            m, s, t = settle(strategy, model, measured, without(sensor, term), [])
+            options.append((bic(measured_rss(m, s, measured), n, k - 1) - now, term, m, s, t))
         gain, term, m, s, t = min(options, key=lambda o: o[0])
         if gain >= min_drop:
             break
@@ -287,37 +289,33 @@ def confine(strategy, model, measured: Dataset, sensor: Sensor, heldout):
     samples (generated data) have no trajectory to overfit. Returns the model,
     the sensor, the corrected training data and, per law dropped,
     ``(term, finding)``."""
-    dropped = []
+    dropped, train = [], sensor.correct(measured)
     names = measured.trajectories()
     if not names:
-        return model, sensor, sensor.correct(measured), dropped
+        return model, sensor, train, dropped
+    kept = heldout(model, train, sensor) if len(names) >= 2 else None
     for term in found(sensor, measured.dof):
         value, stderr = ((sensor.gains[term.joint], sensor.gain_stderr[term.joint]) if term.name == "torque_gain"
                          else (sensor.shift, sensor.shift_stderr))
         m, s, t = settle(strategy, model, measured, without(sensor, term), [])
-        if len(names) < 2:
+        if kept is None:
             verdict = "the training data hold one trajectory, so no held-out trajectory can confirm it"
         else:
-            kept, less = heldout(model, sensor.correct(measured), sensor), heldout(m, t, s)
+            less = heldout(m, t, s)
             if less >= (1 + MIN_GAIN) * kept:
                 continue
             verdict = f"on held-out trajectories it does not pay: held-out MSE {kept:.4g} with it, {less:.4g} without"
         parameter = EFFECTS[term.name].parameter
         where = f"joint {term.joint + 1}" if term.joint is not None else "every joint"
         dropped.append((term, {
-            "name": term.name, "kind": "beyond_data", "law": _law(term, parameter), "joints": [j + 1 for j in term.joints],
+            "name": term.name, "kind": "beyond_data", "law": law_text(term, parameter), "joints": [j + 1 for j in term.joints],
             "parameters": {},
             "finding": (f"{term.name} on {where} fits the training data with {parameter} = {value:.4g} ± {stderr:.2g}, "
                         f"but it is a law of the sensor, which rescales or delays whatever the model does, and "
                         f"{verdict}: reported, not added")}))
-        model, sensor = m, s
-    return model, sensor, sensor.correct(measured), dropped
-
-
-def _law(term: Term, parameter: str) -> str:
-    if term.joint is not None:
-        return f"tau_measured_{term.joint + 1} = {parameter}*tau_{term.joint + 1}"
-    return f"tau_measured(t) = tau(t - {parameter})"
+        model, sensor, train = m, s, t
+        kept = None if kept is None else less
+    return model, sensor, train, dropped
 
 
 def _each_recording(strategy, model, train: Dataset) -> dict:
