@@ -104,7 +104,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     Where an open-ended term explains it better than the best named law by
     more than :data:`MIN_BIC_DROP`, that law may be only the nearest one the
     vocabulary has: the step is recorded in :attr:`Selection.mismatched`, and
-    the loop settles it by refitting both (:meth:`bench.residual.loop._Loop.rival`;
+    the loop settles it by refitting both (:meth:`bench.residual.loop._Loop.compare`;
     a parametric model's linearisation can favour either).
     ``fixed`` columns (the model's own terms and effects already accepted)
     stay in every fit, so a candidate that only repeats them gains nothing.
@@ -116,7 +116,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     With ``runner_up``, each step also records the next best named candidate
     of another slot that passes every test (:attr:`Selection.runners_up`),
     for a model whose linearisation may rank the two wrongly (a parametric
-    form: :meth:`bench.residual.loop._Loop.runner_up` refits both).
+    form: :meth:`bench.residual.loop._Loop.compare` refits both).
     Returns the newly accepted candidates, per step the statistics of the
     best candidate, accepted or not, and any structural finding.
     """
@@ -150,7 +150,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         best = max((stats(c, k_now, rss_now) for c in others), key=lambda b: b["bic_drop"])
         if not best["bic_drop"] > chosen["bic_drop"] + MIN_BIC_DROP or physical(best) is not None:
             return None
-        ok, info = _passes(best, before, lambda g: held_fits.cv(np.column_stack([F_all[t] for t in g])), min_gain)
+        ok, info = _passes(best, before, held_cv, min_gain)
         if not ok:
             return None
         steps.append({**info, "rival_of": " + ".join(label(t) for t in chosen["group"])})
@@ -167,6 +167,10 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     def design(cands):
         cands = nuisance + list(cands)
         return np.column_stack([fixed] + [F_all[c][:, None] for c in cands]) if cands else fixed
+
+    def held_cv(group: list[Term]) -> float:
+        """The held-out error with ``group``'s columns beside this step's design (``held_fits``)."""
+        return held_fits.cv(np.column_stack([F_all[t] for t in group]))
 
     def group(c: Term) -> list[Term]:
         """A shaped candidate with the other parts of the law it leads
@@ -295,7 +299,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                 if before is None:
                     held_fits = FoldFits(design(accepted), y, held)
                     before = held_fits.cv()
-                ok, info = _passes(best, before, lambda g: held_fits.cv(np.column_stack([F_all[t] for t in g])), min_gain)
+                ok, info = _passes(best, before, held_cv, min_gain)
                 impossible = physical(best)
                 if chosen is not None and not (ok and impossible is None):  # no runner-up
                     tried += 1
