@@ -287,6 +287,9 @@ EFFECTS: dict[str, Effect] = {
     )
 }
 
+#: the gains a torque sensor's calibration error may have, ``(low, high)``: its coefficient's bounds as ``g = 1 + c``
+GAIN_RANGE = tuple(1.0 + b for b in EFFECTS["torque_gain"].bounds)
+
 
 def _payload(system, q, qd) -> sympy.Expr:
     """``|v_tip|^2 / 2 - g y_tip``: the Lagrangian of a unit point mass at the

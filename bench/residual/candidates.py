@@ -35,7 +35,7 @@ import math
 
 import sympy
 
-from bench.core.effects import EFFECTS
+from bench.core.effects import EFFECTS, GAIN_RANGE
 from bench.core.laws import FAMILIES, Part, group
 from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary, lagrangian_library, lagrangian_library_size
@@ -124,8 +124,8 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     condition = EFFECTS[term.name].condition if is_named(term) else f"{parameter} >= 0"
     law = law_text(term, parameter)
     if term.name == "torque_gain":  # its coefficient is g's change
-        low, high = (1.0 + b for b in EFFECTS[term.name].bounds)
-        law, parameter, coefficient, condition = law_text(term, "g"), "g", 1.0 + coefficient, f"{low:g} <= g <= {high:g}"
+        law, parameter, coefficient = law_text(term, "g"), "g", 1.0 + coefficient
+        condition = f"{GAIN_RANGE[0]:g} <= g <= {GAIN_RANGE[1]:g}"
     entry = {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,
              "joints": [j + 1 for j in term.joints], "parameters": {},
              "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "

@@ -51,7 +51,7 @@ import numpy as np
 import sympy
 
 from bench.core.data import Dataset
-from bench.core.effects import EFFECTS
+from bench.core.effects import EFFECTS, GAIN_RANGE
 from bench.core.models import FittedModel
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term
@@ -253,7 +253,7 @@ def redundant(strategy, model, measured: Dataset, sensor: Sensor, min_drop: floa
     ``L``), and goes. Returns the model, the sensor, the corrected training
     data and the labels of the laws dropped."""
     dropped = []
-    low, high = (1.0 + b for b in EFFECTS["torque_gain"].bounds)
+    low, high = GAIN_RANGE
     for j in sorted(sensor.found_gain):  # the fixed point may leave a calibration error's range
         if not low <= sensor.gains[j] <= high:
             dropped.append(f"torque_gain on joint {j + 1} (g = {sensor.gains[j]:.4g}, outside [{low:g}, {high:g}])")
