@@ -107,14 +107,16 @@ def _integrate(model: FittedModel, data: Dataset, spans: np.ndarray, substeps: i
             t0, tm, t1 = ((1 - w) * tau0[idx] + w * tau1[idx] for w in (a, b, (s + 1) / substeps))
             x, v = q[idx], qd[idx]
             k1v, ok1 = _accelerations(model, x, v, t0)
-            k2v, ok2 = _accelerations(model, x + 0.5 * h * v, v + 0.5 * h * k1v, tm)
-            k3v, ok3 = _accelerations(model, x + 0.5 * h * (v + 0.5 * h * k1v), v + 0.5 * h * k2v, tm)
-            k4v, ok4 = _accelerations(model, x + h * (v + 0.5 * h * k2v), v + h * k3v, t1)
+            v2 = v + 0.5 * h * k1v
+            k2v, ok2 = _accelerations(model, x + 0.5 * h * v, v2, tm)
+            v3 = v + 0.5 * h * k2v
+            k3v, ok3 = _accelerations(model, x + 0.5 * h * v2, v3, tm)
+            v4 = v + h * k3v
+            k4v, ok4 = _accelerations(model, x + h * v3, v4, t1)
             x_new = x + h * v + h * h / 6 * (k1v + k2v + k3v)
             v_new = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
             dynamics = ok1 & ok2 & ok3 & ok4
-            bounded = _bounded(v) & _bounded(v + 0.5 * h * k1v) & _bounded(v + 0.5 * h * k2v) & \
-                _bounded(v + h * k3v) & _bounded(v_new)
+            bounded = _bounded(v) & _bounded(v2) & _bounded(v3) & _bounded(v4) & _bounded(v_new)
             ok = dynamics & bounded
             q[idx[ok]], qd[idx[ok]] = x_new[ok], v_new[ok]
             alive[idx[~ok]] = False
