@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -133,6 +134,14 @@ def _sum(rows: list[dict], key: str) -> int:
     return sum(r[key] for r in rows)
 
 
+def _recall(rows: list[dict]) -> str:
+    return _percent(_sum(rows, "right"), _sum(rows, "put_in"))
+
+
+def _precision(rows: list[dict]) -> str:
+    return _percent(_sum(rows, "true_reported"), _sum(rows, "reported"))
+
+
 def summary(rows: list[dict], methods: list[str], noises: list[float]) -> str:
     """Recall and precision per method and noise level, over every case and seed."""
     lines = [f"| method | noise | recall | recall where the effects are worth χ² ≥ {IDENTIFIABLE:g} | precision "
@@ -141,9 +150,7 @@ def summary(rows: list[dict], methods: list[str], noises: list[float]) -> str:
         for z in noises:
             mine = [r for r in rows if r["method"] == m and r["noise"] == z]
             seen = [r for r in mine if r.get("worth") is not None and r["worth"] >= IDENTIFIABLE]
-            lines.append(f"| {m} | {z:g} | {_percent(_sum(mine, 'right'), _sum(mine, 'put_in'))} "
-                         f"| {_percent(_sum(seen, 'right'), _sum(seen, 'put_in'))} "
-                         f"| {_percent(_sum(mine, 'true_reported'), _sum(mine, 'reported'))} "
+            lines.append(f"| {m} | {z:g} | {_recall(mine)} | {_recall(seen)} | {_precision(mine)} "
                          f"| {sum(bool(r['spurious']) for r in mine)} | {len(mine)} |")
     return "\n".join(lines)
 
@@ -163,9 +170,7 @@ def per_case(rows: list[dict], cases: list[str], methods: list[str], noises: lis
                 over = [r["after"] / r["floor"] for r in mine if r["floor"]]
                 chi2 = [r["worth"] for r in mine if r.get("worth") is not None]
                 chi2 = "—" if not chi2 or c == "clean" else f"{float(np.median(chi2)):.3g}"
-                lines.append(f"| {c} | {z:g} | {m} | {chi2} | {_percent(_sum(mine, 'right'), _sum(mine, 'put_in'))} "
-                             f"| {_percent(_sum(mine, 'true_reported'), _sum(mine, 'reported'))} "
-                             f"| {_error(worst)} "
+                lines.append(f"| {c} | {z:g} | {m} | {chi2} | {_recall(mine)} | {_precision(mine)} | {_error(worst)} "
                              f"| {'—' if not over else f'{float(np.median(over)):.3g}'} |")
     return "\n".join(lines)
 
@@ -179,13 +184,10 @@ def confusion(rows: list[dict], cases: list[str], method: str) -> str:
         mine = [r for r in rows if r["case"] == c and r["method"] == method]
         if not mine:
             continue
-        seen, extra = {}, {}
+        seen, extra = {}, Counter(law for r in mine for law in r["spurious"])
         for r in mine:
             for law, was in r["as"].items():
-                seen.setdefault(law, {}).setdefault(was, 0)
-                seen[law][was] += 1
-            for law in r["spurious"]:
-                extra[law] = extra.get(law, 0) + 1
+                seen.setdefault(law, Counter())[was] += 1
 
         def counts(d):
             return ", ".join(f"{k} ×{v}" for k, v in sorted(d.items(), key=lambda kv: -kv[1]))
