@@ -232,15 +232,15 @@ class Expression(Strategy):
     spans_its_torque = True
 
     def __init__(self, basis: tuple[sympy.Expr, ...]):
-        self.own = tuple(basis)
         self.basis = TermLibrary.of_lagrangian(basis)
 
     def kinetic(self, dof: int) -> None:
         """Add each ``qd_j^2`` the basis lacks (see the class docstring)."""
         _, qd = coordinate_symbols(dof)
-        missing = [v**2 for v in qd if v**2 not in self.own]
-        if missing and len(self.basis) == len(self.own):
-            self.basis = TermLibrary.of_lagrangian(self.own + tuple(missing))
+        have = self.basis.expressions
+        missing = [v**2 for v in qd if v**2 not in have]
+        if missing:
+            self.basis = TermLibrary.of_lagrangian(tuple(have) + tuple(missing))
 
     def freedom(self, model, train):
         self.kinetic(train.dof)
