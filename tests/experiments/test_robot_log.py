@@ -63,3 +63,13 @@ def test_a_measured_system_is_refused_in_one_line_and_nothing_is_written(tmp_pat
     assert not (tmp_path / "logs").exists()
     r = cli("robot-log", "--system", "double_pendulum", "--effects", "smooth_coulomb=1:0.7", "--out", str(tmp_path / "x"))
     assert r.returncode == 2 and "needs j:F_c,v_s,b items" in r.stderr and not (tmp_path / "x").exists()
+
+
+def test_a_delayed_torque_is_the_arms_torque_an_instant_earlier_and_a_negative_delay_is_refused(tmp_path):
+    time, now = simulate("double_pendulum", 2.0, 200.0, 0.1, [], 0.0, 0)
+    _, late = simulate("double_pendulum", 2.0, 200.0, 0.1, [], 0.0, 0, torque_delay=0.01)
+    np.testing.assert_allclose(late.q, now.q)  # the states are the ones logged at t
+    np.testing.assert_allclose(late.tau[2:], now.tau[:-2], rtol=1e-6, atol=1e-8)  # 10 ms = two samples at 200 Hz
+    r = cli("robot-log", "--system", "double_pendulum", "--torque-delay", "-0.005", "--out", str(tmp_path / "logs"))
+    assert r.returncode == 2 and "--torque-delay" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "logs").exists()
