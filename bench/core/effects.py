@@ -46,19 +46,36 @@ law (:data:`bench.core.laws.LAWS`)::
 
 which is physical with ``F_s >= F_c >= 0``, ``v_s > 0`` and ``b >= 0``.
 
-Two effects act on the measured torque, not on the arm (``sensor``; the
-residual loop's :mod:`bench.residual.sensors` finds them, and the data
-generator adds the gain after every other effect):
+Three effects act between the arm's torque and the measured one, not on the
+arm's Lagrangian (place ``sensor``; the residual loop's
+:mod:`bench.residual.sensors` finds them, and the data generator adds them
+after every other effect, the load-dependent friction before the gain):
 
 =================  ======  ==================================================
 name               kind    what is measured
 =================  ======  ==================================================
+``load_friction``  drive   ``tau_j + mu_j |tau_j| sign(qd_j)``: a Coulomb
+                           level that grows with the load the joint's drive
+                           carries, ``tau_j`` the arm's torque on it
 ``torque_gain``    sensor  ``g_j tau_j``: joint ``j``'s torque sensor reads
                            ``g_j`` times the torque (a calibration error)
 ``time_shift``     sensor  ``tau(t - delta)``: the torque lags the recorded
                            state by ``delta`` seconds (a sensor's or filter's
                            delay); it needs a recording's time stamps
 =================  ======  ==================================================
+
+Load-dependent friction is the friction of a gear whose contact forces, and
+so its Coulomb level, grow with the torque it transmits (Bittencourt &
+Gunnarsson, "Static friction in a robot joint: modeling and identification
+of load and temperature effects", J. Dyn. Syst. Meas. Control 134(5), 2012).
+It is the drive's efficiency read as a torque: the measured torque is
+``(1 + mu)`` times the load where the drive moves it (``tau qd > 0``) and
+``(1 - mu)`` times where the load drives the joint back. It is admissible
+for ``0 <= mu <= 0.5``: a drive that loses at most half the torque it
+carries; a residual that asks for more, or for a negative ``mu``, is
+something else the model lacks, and a finding. Its simpler limit is no law
+(``mu = 0``); a Coulomb level that does not grow with the load is the
+``coulomb_friction`` beside it.
 
 ``periodic_sin`` and ``periodic_cos`` are the two parts of a torque that
 repeats ``N`` times a revolution of its joint (a motor's cogging torque, a
@@ -180,8 +197,9 @@ class Effect:
 
     @property
     def sensor(self) -> bool:
-        """Whether the effect is a law of the torque sensor (:mod:`bench.residual.sensors`),
-        which acts on the measured torque rather than on the arm."""
+        """Whether the effect is a law of the torque sensor or the drive
+        (:mod:`bench.residual.sensors`), which acts on the measured torque
+        rather than on the arm's Lagrangian."""
         return self.place == "sensor"
 
     def applies_to(self, system) -> bool:
@@ -277,6 +295,8 @@ EFFECTS: dict[str, Effect] = {
         # model lacks, and a finding
         Effect("torque_gain", lambda q, qd: sympy.Symbol("tau" + str(q[0])[1:], real=True), "sensor", "g",
                "tau_measured = g·tau", nonnegative=False, bounds=(-0.2, 0.25)),
+        Effect("load_friction", lambda q, qd: sympy.Abs(sympy.Symbol("tau" + str(q[0])[1:], real=True))
+               * sympy.sign(qd[0]), "sensor", "mu", "tau_measured = tau + mu·|tau|·sign(qd)", bounds=(0.0, 0.5)),
         Effect("time_shift", None, "sensor", "delta", "tau_measured(t) = tau(t − delta)", arity=0, nonnegative=False),
         Effect("tip_payload", None, "L", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
                arity=0, on_system=lambda system, q, qd: _payload(system, q, qd), needs_link_lengths=True),

@@ -7,6 +7,9 @@ as ``bench data --effects`` names them.
 * an effect of the whole system: one number (``tip_payload=0.3``);
 * a torque sensor's gain: one per joint, applied to the torque the arm and
   every other effect make (``torque_gain=1,0.96``);
+* a drive's load-dependent friction: one ``mu`` per joint, applied to the
+  torque the arm and every other effect make, before a gain
+  (``load_friction=0,0.1``);
 * a law of several parameters: ``j:p1,...,pk`` items, ``;``-separated, in the
   order of its parameters (``stribeck_friction=1:1.0,2.0,0.5,0.3``,
   ``smooth_coulomb=2:0.7,0.05``).
@@ -66,6 +69,9 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
                 raise ConfigError(f"{source}: {name} needs {dof} finite coefficient(s), one per joint, got {values!r}")
             if name == "torque_gain" and not min(coefs) > 0:
                 raise ConfigError(f"{source}: torque_gain needs {dof} gains > 0, one per joint (1: exact), got {values!r}")
+            if name == "load_friction" and not all(EFFECTS[name].admissible(c) for c in coefs):
+                raise ConfigError(f"{source}: load_friction needs {dof} coefficients with "
+                                  f"{EFFECTS[name].condition}, one per joint (0: none), got {values!r}")
             out[name] = {(j,): c for j, c in enumerate(coefs)}
             continue
         pairs = {}
@@ -115,7 +121,7 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
     effects = {name: coefs if isinstance(coefs, dict) else {(j,): c for j, c in enumerate(coefs)}
                for name, coefs in effects.items()}
     for name, coefs in effects.items():
-        if name == "torque_gain":  # the sensor reads the torque of the arm with every other effect: last
+        if EFFECTS.get(name) is not None and EFFECTS[name].sensor:  # they act on the arm's torque: after the arm's effects
             continue
         for joints, c in coefs.items():
             if name in GENERATOR_LAWS:
@@ -132,6 +138,9 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
                 if L is not None and term.in_lagrangian:
                     L += coef * term.value(data)
 
+    if "load_friction" in effects:  # the drive carries the arm's torque; its friction grows with it
+        mu = np.asarray([effects["load_friction"].get((j,), 0.0) for j in range(data.dof)])
+        tau += mu * np.abs(tau) * data.velocity_sign()
     if "torque_gain" in effects:
         tau *= np.asarray([effects["torque_gain"].get((j,), 1.0) for j in range(data.dof)])
 

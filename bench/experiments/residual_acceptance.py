@@ -66,10 +66,14 @@ CASES = {
     "torque_gain": ["torque_gain=1,0.96"],
     # cogging, or a drive's ripple: six periods a revolution of joint 1
     "periodic_torque": ["periodic_torque=1:0.3,6,0.5"],
-    # chosen pairs: a sensor's gain and offset on one joint; a gain beside friction; ripple beside a spring
+    # a gear whose Coulomb level grows with its load: 10 % of joint 1's torque
+    "load_friction": ["load_friction=0.1,0"],
+    # chosen pairs: a sensor's gain and offset on one joint; a gain beside friction; ripple beside a spring;
+    # a load-dependent Coulomb level beside a constant one
     "gain_offset": ["torque_gain=1,1.05", "offset=0,0.2"],
     "gain_viscous": ["torque_gain=1,0.96", "viscous_friction=0.8,0.5"],
     "periodic_spring": ["periodic_torque=1:0.3,6,0.5", "spring=0,1.0"],
+    "load_coulomb": ["load_friction=0.1,0", "coulomb_friction=0.5,0"],
     "clean": [],
 }
 

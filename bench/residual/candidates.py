@@ -164,8 +164,11 @@ def law_text(term: Term, parameter: str) -> str:
     """The text of a term's law with its parameter: ``L += ...``, ``D = ...``
     or ``tau += ...``."""
     if term.place == "sensor":
-        return (f"tau_measured_{term.joint + 1} = {parameter}*tau_{term.joint + 1}" if term.joint is not None
-                else f"tau_measured(t) = tau(t - {parameter})")
+        if term.joint is None:
+            return f"tau_measured(t) = tau(t - {parameter})"
+        j = term.joint + 1
+        return (f"tau_measured_{j} = tau_{j} + {parameter}*|tau_{j}|*sign(qd_{j})" if term.name == "load_friction"
+                else f"tau_measured_{j} = {parameter}*tau_{j}")
     where = {"L": "L += ", "D": "D = "}.get(term.place, "tau += ")
     return f"{where}{sympy.Symbol(parameter) * term.expr}"
 

@@ -19,13 +19,14 @@ def heldout(strategy: Strategy, model: LoopModel, train: Dataset, scale: np.ndar
     """The model's torque MSE on held-out data: the linear problem that
     tracing and pruning fit (:meth:`~bench.residual.strategies.Strategy.problem`),
     cross-validated over whole recordings (:func:`bench.residual.validation.cv_mse`).
-    ``scale`` (one factor a joint: a torque sensor's gains, :mod:`bench.residual.sensors`)
+    ``scale`` (one factor a joint, or one a sample and joint: a torque sensor's
+    gains and a drive's load-dependent friction, :meth:`bench.residual.sensors.Sensor.factor`)
     turns the corrected torques ``train`` holds back into measured ones, so that
-    models read through different gains are compared in the same units."""
+    models read through different laws are compared in the same units."""
     target, F = strategy.problem(model, train)
     y = target.ravel()
     if scale is not None:
-        rows = np.tile(np.asarray(scale, dtype=np.float64), len(train))
+        rows = np.broadcast_to(np.asarray(scale, dtype=np.float64), train.tau.shape).ravel()
         y, F = y * rows, F * rows[:, None]
     return cv_mse(F, y, row_folds(train))
 

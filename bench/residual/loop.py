@@ -94,8 +94,8 @@ from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shap
 from bench.residual.reach import beyond_data, earns_place, finding, not_identified
 from bench.residual.result import ResidualResult
 from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, ROUNDOFF, bic, trace
-from bench.residual.sensors import (Sensed, Sensor, column as sensor_column, confine as confine_sensor, measured_rss,
-                                    redundant, settle)
+from bench.residual.sensors import (Sensed, Sensor, column as sensor_column, confine as confine_sensor,
+                                    inadmissible as inadmissible_sensor, measured_rss, redundant, settle)
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.validation import describe as describe_validation
 from bench.runner.progress import Report
@@ -204,7 +204,8 @@ class _Loop:
     def heldout(self, model: LoopModel, train: Dataset | None = None, sensor: Sensor | None = None) -> float:
         """:func:`~bench.residual.checks.heldout` in the measured torque's units."""
         sensor = self.sensor if sensor is None else sensor
-        return heldout(self.strategy, model, self.train if train is None else train, sensor.scale)
+        train = self.train if train is None else train
+        return heldout(self.strategy, model, train, sensor.factor(train))
 
     def use(self, train: Dataset, sensor: Sensor) -> None:
         """Fit from now on to ``train``, the measured data as ``sensor`` corrects them;
@@ -395,7 +396,16 @@ class _Loop:
         labels removed and the laws simplified."""
         strategy, report = self.strategy, self.report
         candidate, removed = self.timed(prune, strategy, candidate, self.train, report)
-        if self.sensor.found_gain or self.sensor.found_shift:
+        if self.sensor.found_any:
+            candidate, new_sensor, impossible = self.timed(inadmissible_sensor, strategy, candidate, self.measured,
+                                                           self.sensor)
+            for term, entry in impossible:
+                findings[label(term)] = entry
+                report(f"  dropping {label(term)}: {entry['finding']}")
+            if impossible:
+                self.use(new_sensor.correct(self.measured), new_sensor)
+                removed += [label(term) for term, _ in impossible]
+        if self.sensor.found_any:
             candidate, new_sensor, new_train, gone = self.timed(redundant, strategy, candidate, self.measured,
                                                                 self.sensor, MIN_BIC_DROP)
             for text in gone:
@@ -409,7 +419,7 @@ class _Loop:
             findings[label(term)] = structural(term, c, se)
             removed.append(label(term))
         candidate, beyond = self.timed(self.confine, candidate)
-        if self.sensor.found_gain or self.sensor.found_shift:
+        if self.sensor.found_any:
             candidate, new_sensor, new_train, gone = self.timed(
                 confine_sensor, strategy, candidate, self.measured, self.sensor, self.heldout)
             for term, entry in gone:
@@ -442,7 +452,7 @@ class _Loop:
             train, sensor = self.train, self.sensor
             target, fixed = strategy.problem(model, train)
             excluded = model.effects + [term for term, _ in self.beyond.values()]
-            laws = {t: sensor_column(t, model, train) for t in sensor.candidates(train) if t not in excluded}
+            laws = {t: sensor_column(t, model, train, sensor) for t in sensor.candidates(train) if t not in excluded}
             selection = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
                                    deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
                                    runner_up=not strategy.fixed_freedom)

@@ -33,7 +33,8 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
     np.testing.assert_allclose(withfx.tau - clean.tau, tau_extra, atol=1e-12)
     assert set(EFFECTS) == {"viscous_friction", "coulomb_friction", "armature", "spring", "offset",
                             "coupled_spring", "coupled_damper", "smooth_coulomb", "stribeck_hump", "periodic_sin",
-                            "periodic_cos", "tip_payload", "gravity_tilt", "torque_gain", "time_shift"}
+                            "periodic_cos", "tip_payload", "gravity_tilt", "torque_gain", "time_shift",
+                            "load_friction"}
 
 
 @pytest.mark.parametrize(
@@ -57,6 +58,8 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
         (["tip_payload=0.1,0.2"], "tip_payload needs one finite number"),
         (["gravity_tilt=nan"], "gravity_tilt needs one finite number"),
         (["gravity_tilt=1-2:0.1"], "gravity_tilt needs one finite number"),
+        (["load_friction=-0.1,0"], "load_friction needs 2 coefficients with 0 <= mu <= 0.5"),
+        (["load_friction=0,0.6"], "0 <= mu <= 0.5"),
     ],
 )
 def test_bad_effect_specs_are_refused(items, message):

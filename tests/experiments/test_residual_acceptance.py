@@ -19,6 +19,7 @@ def test_each_case_expects_its_effects_under_the_names_and_joints_the_loop_repor
                                        ("coulomb_viscous_friction", (2,)): {"F_c": 0.7, "b": 0.5}}
     assert want["smooth_coulomb"][("smooth_coulomb", (2,))] == {"F_c": 0.7, "v_s": 0.02, "b": 0.0}
     assert want["offset_spring"] == {("offset_spring", (2,)): {"k": 2.0, "q0": 0.3}}
+    assert want["load_coulomb"] == {("load_friction", (1,)): {"mu": 0.1}, ("coulomb_friction", (1,)): {"F_c": 0.5}}
     assert want["clean"] == {}
 
 

@@ -152,3 +152,45 @@ def test_on_one_measured_trajectory_a_sensor_law_is_a_finding_not_a_law():
     assert ("torque_gain", (2,)) not in laws(out)
     (gain,) = [e for e in out.effects if e["name"] == "torque_gain"]
     assert gain["kind"] == "beyond_data" and "one trajectory" in gain["finding"]
+
+
+def test_the_generator_adds_load_dependent_friction_to_the_arm_torque_before_the_gain():
+    s = get_system("double_pendulum")
+    clean = generate(s, 50, 0)
+    both = add_effects(clean, parse_effects(["load_friction=0.1,0", "torque_gain=1,1.05", "offset=0.2,0"], 2), s)
+    arm = clean.tau[:, 0] + 0.2
+    np.testing.assert_allclose(both.tau[:, 0], arm + 0.1 * np.abs(arm) * np.sign(clean.qd[:, 0]))
+    np.testing.assert_allclose(both.tau[:, 1], 1.05 * clean.tau[:, 1])
+
+
+@pytest.mark.parametrize("method", ["sysid", "sparse"])
+def test_a_coulomb_level_that_grows_with_the_load_is_load_dependent_friction(method):
+    train, test = generated(["load_friction=0.1,0"], noise=0.01)
+    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
+    found = laws(out)
+    assert list(found) == [("load_friction", (1,))]
+    entry = found[("load_friction", (1,))]
+    assert entry["kind"] == "drive" and "|tau_1|*sign(qd_1)" in entry["law"]
+    assert entry["parameters"]["mu"]["value"] == pytest.approx(0.1, rel=0.05)
+    assert out.mse_after["test"] < 0.05 * out.mse_before["test"]
+    # the model it ends with reads the arm's torque through the drive: the measured torque
+    np.testing.assert_allclose(out.models[1].predict_torque(test), test.tau, atol=5 * np.sqrt(out.mse_after["test"]))
+
+
+def test_a_coulomb_level_that_does_not_grow_with_the_load_stays_coulomb_friction():
+    train, test = generated(["coulomb_friction=1.5,0.7"], noise=0.01)
+    found = laws(residual_loop("sysid", train, test, steps=SYSID, report=quiet))
+    assert set(found) == {("coulomb_friction", (1,)), ("coulomb_friction", (2,))}
+
+
+def test_a_friction_that_falls_with_the_load_is_a_finding_not_a_law():
+    # the torque a drive reads is less where it moves the load than where the load moves it: no
+    # friction does that, so a negative mu is reported and not added
+    s = get_system("double_pendulum")
+    train, test = generate(s, 3000, 0), generate(s, 1500, 1000)
+    train, test = (d.replace(tau=d.tau - 0.15 * np.abs(d.tau) * np.sign(d.qd) * np.asarray([1.0, 0.0]))
+                   for d in (train, test))
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    assert ("load_friction", (1,)) not in laws(out)
+    (entry,) = [e for e in out.effects if e["name"] == "load_friction"]
+    assert entry["kind"] == "structural" and "0 <= mu <= 0.5" in entry["finding"]
