@@ -16,6 +16,12 @@ A gain is judged within :data:`GAIN_WITHIN` of itself: 10 % of ``g`` would
 take any gain from 0.86 to 1.06 for 0.96, which says nothing about a
 calibration. A periodic torque's ``N`` must be exact; its phase, like every
 other parameter, within 10 % (a parameter put in as 0 is not judged).
+
+Where the data do not pin a parameter to 10 %, no method can be right by
+that rule, so a run also counts the laws found on their joints whose every
+parameter is within 10 % *or* within :data:`CONSISTENT` of its reported
+standard errors (``consistent``; ``N`` still exact): an estimate the data's
+own precision cannot tell from the truth.
 """
 
 from __future__ import annotations
@@ -28,6 +34,9 @@ from bench.core.undeclared import GENERATOR_LAWS
 WITHIN = 0.10
 #: a torque sensor's gain is right within this share of its true value
 GAIN_WITHIN = 0.01
+#: a parameter off by more than :data:`WITHIN` is still consistent with its true value within this
+#: many of its standard errors
+CONSISTENT = 2.0
 #: the kinds of a loop's JSON entries that are findings, not laws
 FINDINGS = ("structural", "beyond_data", "not_identified")
 
@@ -61,9 +70,10 @@ def expected(effects: dict, dof: int, reference: int = 0) -> dict[tuple, dict[st
     return out
 
 
-def reported(effects: list[dict]) -> dict[tuple, dict[str, float]]:
-    """The laws of a loop's JSON ``effects``, keyed as :func:`expected` keys them."""
-    return {(e["name"], tuple(e["joints"])): {k: p["value"] for k, p in e["parameters"].items()}
+def reported(effects: list[dict], what: str = "value") -> dict[tuple, dict[str, float]]:
+    """The laws of a loop's JSON ``effects``, keyed as :func:`expected` keys
+    them: their parameters' values, or (``what="stderr"``) standard errors."""
+    return {(e["name"], tuple(e["joints"])): {k: p[what] for k, p in e["parameters"].items()}
             for e in effects if e["kind"] not in FINDINGS}
 
 
@@ -77,12 +87,21 @@ def error(name: str, parameter: str, got: float, want: float) -> float | None:
     return abs(got - want) / abs(want) if want else None
 
 
-def score(want: dict, found: dict) -> dict:
+def within(name: str, parameter: str, got: float, want: float, stderr: float) -> bool:
+    """Whether one parameter is right (:func:`error`) or, ``N`` aside, within
+    :data:`CONSISTENT` of its standard error ``stderr`` of its true value."""
+    e = error(name, parameter, got, want)
+    return e is None or e <= WITHIN or (parameter != "N" and abs(got - want) <= CONSISTENT * stderr)
+
+
+def score(want: dict, found: dict, stderr: dict | None = None) -> dict:
     """One run's figures: ``right`` (laws put in and found right), ``put_in``,
     ``reported``, ``true_reported`` (reported laws that were put in, on their
     joints, whatever their parameters), ``worst_error`` (over the laws found on
-    their joints) and ``as`` (per law put in, what it was reported as)."""
-    errors, right, seen_as = [], 0, {}
+    their joints), ``as`` (per law put in, what it was reported as) and
+    ``consistent`` (laws right, or off only within their standard errors
+    ``stderr``, keyed as ``found``; see the module docstring)."""
+    errors, right, consistent, seen_as = [], 0, 0, {}
     for key, params in want.items():
         if key not in found:
             others = sorted(f"{n} j{'-'.join(map(str, j))}" for n, j in found if set(j) & set(key[1]))
@@ -93,10 +112,12 @@ def score(want: dict, found: dict) -> dict:
         errors += mine
         ok = all(e <= WITHIN for e in mine)
         right += ok
+        se = (stderr or {}).get(key, {})
+        consistent += all(within(key[0], p, found[key].get(p, float("nan")), v, se.get(p, 0.0)) for p, v in params.items())
         tolerance = GAIN_WITHIN if key[0] == "torque_gain" else WITHIN
         seen_as[key] = key[0] if ok else f"{key[0]} (off by more than {tolerance:.0%})"
     true_reported = sum(put_in(key, want) for key in found)
-    return {"right": right, "put_in": len(want), "reported": len(found), "true_reported": true_reported,
+    return {"right": right, "consistent": consistent, "put_in": len(want), "reported": len(found), "true_reported": true_reported,
             "worst_error": max(errors) if errors else None,
             "as": {f"{n} j{'-'.join(map(str, j))}": v for (n, j), v in seen_as.items()},
             "spurious": sorted(f"{n} j{'-'.join(map(str, j))}" for n, j in found if not put_in((n, j), want))}

@@ -51,6 +51,13 @@ def test_a_run_is_scored_by_law_joints_and_parameters():
     assert s["as"] == {"coulomb_viscous_friction j1": "coulomb_friction j1", "torque_gain j2": "torque_gain"}
     off = score({("torque_gain", (2,)): {"g": 0.96}}, {("torque_gain", (2,)): {"g": 0.97}})
     assert off["right"] == 0 and off["as"] == {"torque_gain j2": "torque_gain (off by more than 1%)"}
+    # off by more than 10 %, but within two of its standard errors: consistent with the truth, not right
+    loose = score({("viscous_friction", (1,)): {"b": 0.8}}, {("viscous_friction", (1,)): {"b": 0.95}},
+                  {("viscous_friction", (1,)): {"b": 0.1}})
+    assert (loose["right"], loose["consistent"]) == (0, 1)
+    tight = score({("viscous_friction", (1,)): {"b": 0.8}}, {("viscous_friction", (1,)): {"b": 0.95}},
+                  {("viscous_friction", (1,)): {"b": 0.05}})
+    assert (tight["right"], tight["consistent"]) == (0, 0)
     wrong_n = score({("periodic_torque", (1,)): {"A": 0.3, "N": 6.0, "phi": 0.5}},
                     {("periodic_torque", (1,)): {"A": 0.3, "N": 5.0, "phi": 0.5}})
-    assert wrong_n["right"] == 0 and wrong_n["true_reported"] == 1
+    assert wrong_n["right"] == wrong_n["consistent"] == 0 and wrong_n["true_reported"] == 1
