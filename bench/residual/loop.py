@@ -281,10 +281,11 @@ class _Loop:
 
     def build(self, model: LoopModel, effects: list[Term], on_sensor: list[Term]):
         """``model`` refitted with ``effects`` and the sensor's new laws ``on_sensor``
-        (applied exactly, :func:`~bench.residual.sensors.settle`): the model, the
-        sensor and the corrected training data."""
+        (applied exactly, :func:`~bench.residual.sensors.settle`, the laws it has
+        settled again beside the new effects): the model, the sensor and the
+        corrected training data."""
         candidate = self.strategy.refit(model, self.train, effects)
-        if not on_sensor:
+        if not on_sensor and not self.sensor.found_any:
             return candidate, self.sensor, self.train
         return settle(self.strategy, candidate, self.measured, self.sensor, on_sensor)
 

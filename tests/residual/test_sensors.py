@@ -194,3 +194,15 @@ def test_a_friction_that_falls_with_the_load_is_a_finding_not_a_law():
     assert ("load_friction", (1,)) not in laws(out)
     (entry,) = [e for e in out.effects if e["name"] == "load_friction"]
     assert entry["kind"] == "structural" and "0 <= mu <= 0.5" in entry["finding"]
+
+
+def test_a_drive_law_found_first_is_settled_again_when_a_later_round_adds_friction_beside_it():
+    # load-dependent friction enters first and takes the constant Coulomb level in as well (mu too high);
+    # when Coulomb friction enters in the next round, mu must be fitted again beside it, or the loop ends
+    # with both wrong on noise-free data
+    train, test = generated(["load_friction=0.1,0", "coulomb_friction=0.5,0"])
+    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    found = laws(out)
+    assert found[("load_friction", (1,))]["parameters"]["mu"]["value"] == pytest.approx(0.1, rel=1e-6)
+    assert found[("coulomb_friction", (1,))]["parameters"]["F_c"]["value"] == pytest.approx(0.5, rel=1e-6)
+    assert out.mse_after["test"] < 1e-12
