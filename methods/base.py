@@ -112,6 +112,9 @@ class Method(FittedModel):
     experiments: ClassVar[tuple[str, ...]] = EXPERIMENTS
     #: whether ``fit(..., warm_start=True)`` can continue from the current state
     supports_warm_start: ClassVar[bool] = False
+    #: whether the method trains on the device a run names (``--device``, :mod:`bench.core.devices`):
+    #: the torch methods; the others always run on the CPU
+    uses_device: ClassVar[bool] = False
 
     def __init__(self, **hyperparameters):
         self.config = build_config(self.Config, dict(hyperparameters), self.name)
@@ -121,6 +124,18 @@ class Method(FittedModel):
         self.dof: int | None = None
         self.system = None
         self.fit_info: dict = {}
+        self.train_device = "cpu"
+
+    def use_device(self, device: str) -> "Method":
+        """Train on ``device`` (``cpu`` or ``cuda``, :func:`bench.core.devices.resolve`)
+        from the next fit on, where the method :attr:`uses_device`; else stay on the CPU."""
+        self.train_device = device if self.uses_device else "cpu"
+        return self
+
+    def trained_on(self) -> str:
+        """The device the last fit trained on, as its record names it: :attr:`train_device`,
+        unless the fit had nothing to train there (a method overrides this)."""
+        return self.train_device
 
     # -- class-level facts ---------------------------------------------------
     @classmethod

@@ -300,10 +300,11 @@ class DeLaN(TorchLagrangianMethod):
         if not self.config.compile or experiment != "indirect":
             return
         bs = min(self.config.batch_size, len(train))
-        t = {k: v[torch.arange(bs)] for k, v in train.tensors(getattr(torch, self.config.dtype)).items()}
+        dtype, device = getattr(torch, self.config.dtype), torch.device(self.train_device)
+        t = {k: v[torch.arange(bs)] for k, v in train.tensors(dtype, device).items()}
         with torch.random.fork_rng():
             torch.manual_seed(0)
-            model = DeepLagrangian(train.dof, self.config).to(getattr(torch, self.config.dtype))
+            model = DeepLagrangian(train.dof, self.config).to(device, dtype)
         compiled_torque_loss()(model, t["q"], t["qd"], t["qdd"], t["tau"]).backward()
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:

@@ -203,6 +203,10 @@ class SysId(TorchLagrangianMethod):
         while progress.step():
             progress.stop("solved")
 
+    def trained_on(self) -> str:
+        """The CPU where the fit solved an arm's linear form; its device where it trained the network."""
+        return "cpu" if self.linear is not None else super().trained_on()
+
     def _get_state(self):
         return self.linear if self.linear is not None else super()._get_state()
 
@@ -213,6 +217,7 @@ class SysId(TorchLagrangianMethod):
             super()._set_state(state)
 
     def _post_fit(self, train, experiment, seconds_left):
+        super()._post_fit(train, experiment, seconds_left)  # a network's fit: on the CPU, in float64
         if self.linear is not None:  # the consistency the data can decide: a positive definite mass matrix
             states = train.subset(slice(0, 256))
             M, _ = mass_and_bias(self.linear, states.q, states.qd)

@@ -11,6 +11,8 @@ import dataclasses
 import numpy as np
 import sympy
 import torch
+from torch.utils._python_dispatch import TorchDispatchMode
+from torch.utils._pytree import tree_leaves
 
 from bench.core import symbolic
 from bench.core.budget import Budget, Schedule
@@ -133,6 +135,8 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
         again = cls(**smoke).fit(train, experiment, seed=0, budget_s=Budget.replaying(Schedule.from_json(replay)))
         np.testing.assert_array_equal(again.predict(test), m.predict(test))
         assert again.fit_info["steps"] == info["steps"]
+    if cls.uses_device and experiment == "indirect":  # the torque loss is the one with every part of a step
+        check_device(cls, train, experiment)
     expr = m.expression()
     engine = train.system in SYSTEMS and not SYSTEMS[train.system].symbolic
     if "symbolic" in cls.tags and not (engine and "parametric" in cls.tags):  # SysId fits an engine's regressor
@@ -163,3 +167,55 @@ def check_measured_system(system) -> None:
     form = system.parametric_form()
     assert form.true_values is None and len(form.unknowns) >= 1
 
+
+
+class OnMeta(TorchDispatchMode):
+    """Stands in for a GPU on a machine without one: every torch op of a fit
+    on the ``meta`` device (tensors with shapes and no values) is checked to
+    take all its tensors on one device, as CUDA requires. ``.item()`` of a meta
+    tensor gives 1.0 and a copy to the CPU gives zeros, so that a whole fit
+    runs; a tensor the method left on the CPU shows as an op with mixed
+    devices (:attr:`mixed`), whether or not torch itself would refuse it."""
+
+    #: ops that move a tensor between devices, or index one with the CPU's indices (which CUDA allows)
+    ALLOWED = {torch.ops.aten._to_copy.default, torch.ops.aten.copy_.default, torch.ops.aten.index.Tensor,
+               torch.ops.aten.index_put_.default, torch.ops.aten.index_put.default,
+               torch.ops.aten._index_put_impl_.default}
+
+    def __init__(self):
+        super().__init__()
+        self.mixed, self.on_meta = set(), 0
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        tensors = [a for a in tree_leaves((args, kwargs)) if isinstance(a, torch.Tensor)]
+        if any(t.device.type == "meta" for t in tensors):
+            self.on_meta += 1
+            if func is torch.ops.aten._local_scalar_dense.default:
+                return 1.0
+            if func is torch.ops.aten._to_copy.default and torch.device(kwargs.get("device") or "meta").type == "cpu":
+                return torch.zeros(args[0].shape, dtype=kwargs.get("dtype") or args[0].dtype)
+        if len({t.device.type for t in tensors if t.dim() > 0}) > 1 and func not in self.ALLOWED:
+            self.mixed.add(str(func))
+        return func(*args, **kwargs)
+
+
+def check_device(cls, train: Dataset, experiment: str) -> None:
+    """A method that trains on a run's device (``--device``) keeps every tensor of
+    its fit there (checked on the ``meta`` device, :class:`OnMeta`) and ends on
+    the CPU, where fits are evaluated; any other method stays on the CPU."""
+    smoke = cls.smoke_config()
+    if not cls.uses_device:
+        assert cls(**smoke).use_device("cuda").train_device == "cpu"
+        return
+    method = cls(**smoke).use_device("meta")
+    mode = OnMeta()
+    with mode:
+        method.fit(train, experiment, seed=0, steps=smoke["max_steps"])
+    assert not mode.mixed, f"{cls.name} mixed devices in {sorted(mode.mixed)}"
+    if method.trained_on() == "meta":  # else it had nothing to train there (SysId solving an arm's linear form)
+        assert mode.on_meta > 10 * smoke["max_steps"], f"{cls.name} did not train on its device"
+    else:
+        assert method.trained_on() == "cpu" and mode.on_meta == 0
+    tau = method.predict_torque(train.subset(slice(0, 8)))  # evaluated on the CPU: real numbers, not meta zeros
+    assert tau.shape == (8, train.dof) and np.isfinite(tau).all()

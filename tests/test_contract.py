@@ -42,3 +42,4 @@ def test_method_contract(method_name, experiment, system_name, datasets):
     if reason:
         pytest.skip(reason)
     check_method(cls, *datasets[system_name], experiment)
+

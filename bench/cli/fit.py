@@ -7,8 +7,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_budget, add_config, add_plugin, add_set, add_split, budget, check_names,
-                               check_split, configurations, hyperparameters, load_plugins)
+from bench.cli.options import (UsageError, add_budget, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+                               check_split, configurations, device, hyperparameters, load_plugins)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
 from bench.runner import matrix
@@ -37,6 +37,7 @@ def add_arguments(f) -> None:
     f.add_argument("--n-test", type=positive_int, default=N_TEST, help=f"generated test samples (default {N_TEST})")
     f.add_argument("--domain-half-width", type=positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
+    add_device(f)
     add_plugin(f)
 
 
@@ -55,6 +56,7 @@ def main(args) -> int:
         n_train=args.n_train, n_test=args.n_test,
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
         domain_half_width=args.domain_half_width, plugins=plugins, split=args.split,
+        device=device(args.device, [args.method]),
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now

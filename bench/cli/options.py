@@ -14,6 +14,7 @@ from pathlib import Path
 
 from bench.core.arguments import assignment, positive, positive_int
 from bench.core.data import check_experiment
+from bench.core.devices import CHOICES, resolve as resolve_device
 from bench.core.errors import UserError
 from bench.core.registry import RegistryError
 from bench.runner.plugins import import_plugins, system_plugins
@@ -95,6 +96,28 @@ def check_split(split: str | None, systems: list[str]) -> None:
 
 def add_plugin(parser) -> None:
     parser.add_argument("--plugin", action="append", default=[], help=PLUGIN_HELP)
+
+
+def add_device(parser, default: str | None = "cpu") -> None:
+    """``--device cpu|cuda|auto``: where the torch methods train."""
+    parser.add_argument("--device", choices=CHOICES, default=default,
+                        help="where the torch methods (SyReNets, the MLP, DeLaN, SysId's network, a torch plugin) "
+                             "train: cpu, cuda, or auto (cuda where torch sees one); evaluation stays on the CPU in "
+                             "float64; other methods ignore it"
+                             + (f" (default {default})" if default else " (default: the recorded run's)"))
+
+
+def device(name: str, methods: list[str]) -> str:
+    """``--device`` resolved to ``cpu`` or ``cuda`` (:func:`bench.core.devices.resolve`,
+    a one-line error where cuda is asked for and there is none), saying once
+    which of ``methods`` do not train on it."""
+    resolved = resolve_device(name)
+    if resolved != "cpu":
+        ignoring = [m for m in methods if m in METHODS and not METHODS[m].uses_device]
+        if ignoring:
+            print(f"--device {name}: {', '.join(ignoring)} {'is not a torch method' if len(ignoring) == 1 else 'are not torch methods'} "
+                  f"and run{'s' if len(ignoring) == 1 else ''} on the CPU")
+    return resolved
 
 
 def add_budget(parser, what: str) -> None:

@@ -3,10 +3,11 @@ did and compare its errors with the record's."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from bench.cli.fit import run_one, summary_line
-from bench.cli.options import number
+from bench.cli.options import add_device, device, number
 from bench.core.arguments import positive
 from bench.core.fileio import check_output, write_json
 from bench.runner.plugins import import_plugins
@@ -22,6 +23,7 @@ def add_arguments(rr) -> None:
                     help="a ceiling in seconds past which the replay is killed (default: none; a slower machine "
                          "takes longer than the recorded budget to do the same work)")
     rr.add_argument("--json", type=Path, default=None, help="write the replay's record here")
+    add_device(rr, default=None)
 
 
 def main(args) -> int:
@@ -30,6 +32,9 @@ def main(args) -> int:
     recorded = read_record(args.record)
     spec = replay_spec(recorded, str(args.record), ceiling_s=args.budget)
     import_plugins(spec.plugins)
+    # the recorded run's device unless another is asked for; numbers computed on another device
+    # differ in their rounding, which the comparison below shows
+    spec = dataclasses.replace(spec, device=device(args.device or spec.device, [spec.method]))
     print(f"replaying {recorded.run_id}: {spec.budget.describe()} (recorded under {recorded.describe_budget()}, "
           f"stopped by {recorded.stop_reason})", flush=True)
     replayed, log = run_one(spec)

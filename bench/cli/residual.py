@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_config, add_plugin, add_set, add_split, budget, check_names, check_split,
-                               configurations, hyperparameters, load_plugins, number)
+from bench.cli.options import (UsageError, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+                               check_split, configurations, device, hyperparameters, load_plugins, number)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
 from bench.residual.job import ResidualJob, run_residual
@@ -38,6 +38,7 @@ def add_arguments(res) -> None:
     add_set(res)
     res.add_argument("--json", type=Path, default=None, help="write the result here (see the README for its keys)")
     res.add_argument("--report", type=Path, default=None, help="write a markdown report with residual plots here")
+    add_device(res)
     add_plugin(res)
 
 
@@ -67,7 +68,7 @@ def main(args) -> int:
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
         budget_s=budget(args)[0], steps=args.steps, seed=args.seed, hyperparameters=settings,
         json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
-        plugins=plugins, split=args.split,
+        plugins=plugins, split=args.split, device=device(args.device, [args.method]),
     )
     result = run_residual(job)
     b, a = result.mse_before, result.mse_after

@@ -6,8 +6,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from bench.cli.options import (add_budget, add_config, add_plugin, add_set, add_split, budget, check_names,
-                               check_split, configurations, hyperparameters, load_plugins)
+from bench.cli.options import (add_budget, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+                               check_split, configurations, device, hyperparameters, load_plugins)
 from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
@@ -34,6 +34,7 @@ def add_arguments(r) -> None:
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
     r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
     r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
+    add_device(r)
     add_config(r, "each method in the run that offers it")
     add_set(r, "every method in the run")
     r.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"training samples (default {N_TRAIN})")
@@ -65,6 +66,7 @@ def main(args) -> int:
     seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
     budget_s, steps = budget(args)
     chosen = configurations(args, methods)
+    where = device(args.device, methods)
     specs = build_specs(
         systems, methods, args.experiments, seeds, budget_s, noises=args.noise, steps=steps,
         n_train=args.n_train, n_test=args.n_test,
@@ -73,6 +75,7 @@ def main(args) -> int:
         threads=args.threads,
         rollout=not args.no_rollout,
         split=args.split,
+        device=where,
     )
     specs = [dataclasses.replace(s, profile=chosen[s.method],
                                  hyperparameters=hyperparameters(args.overrides, s.method, methods)) for s in specs]

@@ -181,10 +181,11 @@ class Dataset:
         one trajectory count once); ``[]`` for independent samples."""
         return _in_order(self.trajectory_labels())
 
-    def tensors(self, dtype: torch.dtype = torch.float64) -> dict[str, torch.Tensor]:
-        out = {k: torch.tensor(getattr(self, k), dtype=dtype) for k in ("q", "qd", "qdd", "tau")}
+    def tensors(self, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
+        """``q, qd, qdd, tau`` (and ``L``) as tensors of ``dtype`` on ``device`` (the CPU by default)."""
+        out = {k: torch.tensor(getattr(self, k), dtype=dtype, device=device) for k in ("q", "qd", "qdd", "tau")}
         if self.L is not None:
-            out["L"] = torch.tensor(self.L, dtype=dtype)
+            out["L"] = torch.tensor(self.L, dtype=dtype, device=device)
         return out
 
 

@@ -111,21 +111,23 @@ class LagrangianFunction(FittedModel):
     float64."""
 
     dtype: torch.dtype = torch.float64
+    #: where :meth:`lagrangian`'s tensors live (a torch method's network while it trains on a GPU)
+    device: torch.device = torch.device("cpu")
 
     @abc.abstractmethod
     def lagrangian(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
         """``L`` for a batch: ``(batch, dof) x 2 -> (batch,)``."""
 
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
-        t = data.tensors(self.dtype)
+        t = data.tensors(self.dtype, self.device)
         with torch.no_grad():
             out = torch.cat([self.lagrangian(q, qd) for q, qd in zip(t["q"].split(CHUNK), t["qd"].split(CHUNK))])
-        return out.double().numpy()
+        return out.double().cpu().numpy()
 
     def predict_torque(self, data: Dataset) -> np.ndarray:
-        t = data.tensors(self.dtype)
+        t = data.tensors(self.dtype, self.device)
         tau, _ = euler_lagrange_chunked(self.lagrangian, t["q"], t["qd"], t["qdd"])
-        return tau.double().numpy()
+        return tau.double().cpu().numpy()
 
 
 class ExpressionModel(LagrangianFunction):

@@ -44,6 +44,7 @@ class ResidualJob:
     report_path: str | None = None
     plugins: tuple[str, ...] = ()
     split: str | None = None
+    device: str = "cpu"
 
     def data(self) -> tuple[Dataset, Dataset | None]:
         data = given_data(SYSTEMS[self.system](split=self.split), self.train_path, self.test_path)
@@ -56,7 +57,7 @@ class ResidualJob:
         import_plugins(self.plugins)
         train, test = self.data()
         result = residual_loop(self.method, train, test, budget_s=self.budget_s, steps=self.steps, seed=self.seed,
-                               hyperparameters=self.hyperparameters, report=report)
+                               hyperparameters=self.hyperparameters, report=report, device=self.device)
         write_outputs(result, train, test, self.json_path, self.report_path)
         return result
 

@@ -84,6 +84,7 @@ import numpy as np
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
+from bench.core.devices import describe as describe_device
 from bench.core.models import FittedModel
 from bench.core.terms import Term, TermLibrary, remembered_columns, share_columns
 from bench.evaluation.driven import driven_entry
@@ -149,7 +150,8 @@ class Round:
 
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float | None = None,
                   steps: int | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
-                  fitted: FittedModel | None = None, open_ended: bool | None = None) -> ResidualResult:
+                  fitted: FittedModel | None = None, open_ended: bool | None = None,
+                  device: str = "cpu") -> ResidualResult:
     """Run the loop in this process; see the module docstring.
 
     ``budget_s`` bounds the whole loop (its method's fit has
@@ -162,27 +164,28 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     the machine's speed. ``fitted`` is an already fitted instance of
     ``method`` to start from instead of round 0's fit (for instance a model
     fitted before the system changed). Each round records ``seconds``, the
-    time since the loop began.
+    time since the loop began. ``device`` is where a torch method's fits
+    train (:mod:`bench.core.devices`); the loop's own work is on the CPU.
     """
     if budget_s is None and steps is None:
         budget_s = DEFAULT_BUDGET_S
     with remembered_columns(train, test):  # each candidate's and effect's columns once, for every round
         return _Loop(method, train, test, Budget(seconds=budget_s, steps=steps), seed, dict(hyperparameters or {}),
-                     report, open_ended).run(fitted)
+                     report, open_ended, device).run(fitted)
 
 
 class _Loop:
     """One run of the loop: its data, budget, strategy and running figures."""
 
     def __init__(self, method: str, train: Dataset, test: Dataset | None, budget: Budget, seed: int,
-                 hyperparameters: dict, report: Report, open_ended: bool | None):
+                 hyperparameters: dict, report: Report, open_ended: bool | None, device: str = "cpu"):
         self.method, self.train, self.test, self.budget, self.seed = method, train, test, budget, seed
         # the measured training data; ``train`` is what the sensor's laws found so far make of them
         self.measured, self.sensor = train, Sensor.exact(train)
         self.stack = contextlib.ExitStack()  # the corrected training data's remembered columns
         self.report, self.open_ended = report, open_ended
         self.horizon = budget.fit_seconds  # the loop's time (unlimited under a work budget)
-        self.fitter = Fitter(method, seed, budget.scaled(FIT_SHARE), hyperparameters)
+        self.fitter = Fitter(method, seed, budget.scaled(FIT_SHARE), hyperparameters, device)
         self.start = time.perf_counter()
         self.beyond: dict[str, tuple] = {}  # effects dropped for claiming beyond the data: label -> (term, entry)
         self.unnamed: dict[str, dict] = {}  # open-ended terms taken where a named law was only the nearest: label -> entry
@@ -233,6 +236,7 @@ class _Loop:
         else:
             report(f"round 0: starting from the given {self.method} fit")
         strategy = self.strategy = strategy_for(fitted)
+        trained_on = fitted.trained_on() if hasattr(fitted, "trained_on") else "cpu"
         context = Start(self.seed, self.fitter, dataclasses.replace(self.fitter, budget=budget.scaled(CROSS_FIT_SHARE)),
                         given, self.start + POLISH_SHARE * self.horizon, report)
         model, started = strategy.start(fitted, train, context)
@@ -272,6 +276,7 @@ class _Loop:
             lagrangian=None if expr is None else str(expr),
             seconds=round(time.perf_counter() - self.start, 2), statistics_seconds=round(self.statistics, 2),
             budget_s=budget.seconds, fit_budget_s=self.fitter.budget.seconds if budget.kind == "seconds" else None,
+            device=describe_device(trained_on),
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
             test_source=None if self.test is None else self.test.source, provenance=provenance(),
             models=(first, Sensed(model, self.sensor)),

@@ -100,6 +100,8 @@ class Fitter:
     seed: int
     budget: Budget
     hyperparameters: dict
+    device: str = "cpu"
 
     def fit(self, train: Dataset) -> FittedModel:
-        return METHODS[self.method](**self.hyperparameters).fit(train, "indirect", self.seed, self.budget)
+        method = METHODS[self.method](**self.hyperparameters).use_device(self.device)
+        return method.fit(train, "indirect", self.seed, self.budget)

@@ -56,6 +56,8 @@ class ResidualResult:
     provenance: dict = field(default_factory=dict)
     feasibility: dict | None = None
     rollout: dict | None = None
+    #: where the method's fits trained (:func:`bench.core.devices.describe`)
+    device: dict | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:

@@ -20,6 +20,7 @@ import torch
 
 from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate, read_csv
+from bench.core.devices import describe as describe_device
 from bench.core.timeouts import Timeout
 from bench.core.system import System
 from bench.evaluation.driven import driven_entry
@@ -130,7 +131,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         clock = time.perf_counter()
         system = make_system(spec)
         train, test = data if data is not None else load_data(spec, system)
-        method = METHODS[spec.method](**method_config(spec))
+        method = METHODS[spec.method](**method_config(spec)).use_device(spec.device)
         warm_up_torch()
         timing = {"load_s": time.perf_counter() - clock}
         memory = {"start_mb": resident_mb()}
@@ -168,6 +169,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             "n_train": len(train),
             "n_test": None if test is None else len(test),
             "domain": dataclasses.asdict(system.domain),
+            "device": describe_device(method.trained_on()),
             **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason", "schedule")},
             "prepare_seconds": prepared or info.get("prepare_seconds", 0.0),
             **stages.run("details", method.record_details, default={}),

@@ -81,6 +81,9 @@ class RunSpec:
     split
         Which of a measured system's splits (:attr:`~bench.core.system.System.splits`)
         its data come from; ``None``: its default.
+    device
+        Where a torch method trains: ``cpu`` or ``cuda`` (resolved from
+        ``--device``, :mod:`bench.core.devices`); other methods run on the CPU.
     budget_s, steps, schedule
         The budget (:mod:`bench.core.budget`): ``budget_s`` seconds of
         wall-clock time; or, with ``steps``, that many steps of the method's
@@ -108,6 +111,7 @@ class RunSpec:
     steps: int | None = None
     schedule: dict | None = None
     split: str | None = None
+    device: str = "cpu"
 
     def __post_init__(self):
         _ = self.budget  # a spec without a valid budget is refused where it is made (ConfigError)

@@ -31,7 +31,7 @@ class Equations:
 
     def _layer_values(self, data, weights):
         """Candidate values of every layer on ``data`` (frozen function)."""
-        t = data.tensors(self.dtype)
+        t = data.tensors(self.dtype, self.device)
         x = self._inputs(t["q"], t["qd"], t["qdd"])
         h = x.new_zeros(x.shape[0], self.config.heads)
         values = []

@@ -82,13 +82,13 @@ class SyReNets(Equations, TorchLagrangianMethod):
         come from the first batch, before its first step."""
         cfg = self.config
         seed = self.seed if start == 0 else int(np.random.SeedSequence([self.seed, start]).generate_state(1)[0])
-        model = self.build_model(train, seed).to(self.dtype)
+        model = self.build_model(train, seed).to(self.device, self.dtype)
         C = model.C
         scale_params = list(model.S.parameters())
         other = [p for n, p in model.named_parameters() if not n.startswith("S.")]
         optimizer = torch.optim.Adam(
             [{"params": other, "lr": cfg.lr}, {"params": scale_params, "lr": cfg.lr * C}],
-            betas=cfg.betas, **({"fused": True} if fused_adam_ok(self.dtype) else {}),
+            betas=cfg.betas, **({"fused": True} if fused_adam_ok(self.dtype, self.device) else {}),
         )
         if cfg.lr_schedule == "plateau":
             scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
@@ -126,13 +126,13 @@ class SyReNets(Equations, TorchLagrangianMethod):
     def _fit(self, train, experiment, progress):
         cfg = self.config
         self._start_training()
-        t = train.tensors(self.dtype)
+        t = train.tensors(self.dtype, self.device)
         n, bs = len(train), min(cfg.batch_size, len(train))
         feed = Feed.start(n, bs, self.seed)
         progress.reserve(cfg.post_fraction * progress.remaining())
         self._starts = None
         if self.warm_start:  # continue the network, its optimiser and its frozen weights
-            self.frozen = [w.to(self.dtype) for w in self.frozen]
+            self.frozen = [w.to(self.device, self.dtype) for w in self.frozen]
             self.net.lr_drops, self.net.replay = [], torch.empty(0, dtype=torch.long)
             if isinstance(self.scheduler, Cosine):
                 self.scheduler.start(progress)
@@ -165,11 +165,11 @@ class SyReNets(Equations, TorchLagrangianMethod):
         if not self.config.compile:
             return
         start = time.perf_counter()
-        cfg, dtype = self.config, getattr(torch, self.config.dtype)
+        cfg, dtype, device = self.config, getattr(torch, self.config.dtype), torch.device(self.train_device)
         with torch.random.fork_rng():
             torch.manual_seed(0)
-            model = SyReNet(train.dof * (2 if cfg.inputs == "q_qd" else 3), cfg).to(dtype)
-            t = train.tensors(dtype)
+            model = SyReNet(train.dof * (2 if cfg.inputs == "q_qd" else 3), cfg).to(device, dtype)
+            t = train.tensors(dtype, device)
             bs = min(cfg.batch_size, len(train))
             for size in sorted({bs, bs + cfg.replay}):
                 idx = torch.arange(size) % len(train)
@@ -192,7 +192,7 @@ class SyReNets(Equations, TorchLagrangianMethod):
                 lr = net.optimizer.param_groups[0]["lr"]
                 net.lr_drops.append([progress.steps + 1, round(progress.elapsed(), 2), lr])
             if cfg.replay:
-                net.replay = idx[torch.argsort(err, descending=True)[: cfg.replay]]
+                net.replay = idx[torch.argsort(err, descending=True)[: cfg.replay].cpu()]  # the feed's indices are the CPU's
         return True
 
     def _get_state(self):
@@ -209,21 +209,21 @@ class SyReNets(Equations, TorchLagrangianMethod):
         return lag
 
     def predict_lagrangian(self, data):
-        t = data.tensors(self.dtype)
+        t = data.tensors(self.dtype, self.device)
         with torch.no_grad():
             out = self.model.evaluate(self._inputs(t["q"], t["qd"], t["qdd"]), self.frozen)
-        return out.double().numpy()
+        return out.double().cpu().numpy()
 
     def predict_torque(self, data):
         if self.config.inputs == "q_qd":
             return super().predict_torque(data)
         # qdd is an input too: each chunk's Lagrangian sees its own accelerations
-        t = data.tensors(self.dtype)
+        t = data.tensors(self.dtype, self.device)
         taus = []
         for sl in range(0, len(data), 8192):
             part = slice(sl, sl + 8192)
             taus.append(euler_lagrange(self._frozen_lagrangian(t["qdd"][part]), t["q"][part], t["qd"][part], t["qdd"][part]))
-        return torch.cat(taus).double().numpy()
+        return torch.cat(taus).double().cpu().numpy()
 
     def lagrangian(self, q, qd):
         return self._frozen_lagrangian()(q, qd)
@@ -245,7 +245,7 @@ class SyReNets(Equations, TorchLagrangianMethod):
     def _post_fit(self, train, experiment, seconds_left):
         deadline = time.perf_counter() + seconds_left
         super()._post_fit(train, experiment, seconds_left)  # float64 from here on, for pruning and refinement
-        self.frozen = [w.to(torch.float64) for w in self.frozen]
+        self.frozen = [w.to("cpu", torch.float64) for w in self.frozen]
         self._variants, self._notes = {}, {}
         rng = np.random.default_rng(self.seed)
         ref = train.subset(np.sort(rng.choice(len(train), min(len(train), 1024), replace=False)))
