@@ -103,5 +103,7 @@ class Fitter:
     device: str = "cpu"
 
     def fit(self, train: Dataset) -> FittedModel:
-        method = METHODS[self.method](**self.hyperparameters).use_device(self.device)
+        method = METHODS[self.method](**self.hyperparameters)
+        if self.device != "cpu":  # a method trains on the CPU unless told otherwise
+            method.use_device(self.device)
         return method.fit(train, "indirect", self.seed, self.budget)
