@@ -115,6 +115,8 @@ class Method(FittedModel):
     #: whether the method trains on the device a run names (``--device``, :mod:`bench.core.devices`):
     #: the torch methods; the others always run on the CPU
     uses_device: ClassVar[bool] = False
+    #: whether several seeds' fits can train as one stacked model (:mod:`methods.stacking`)
+    stackable: ClassVar[bool] = False
 
     def __init__(self, **hyperparameters):
         self.config = build_config(self.Config, dict(hyperparameters), self.name)
@@ -202,6 +204,18 @@ class Method(FittedModel):
         ``system`` is the system the data belong to, for methods that read its
         declared form; by default the registered system named by ``train.system``.
         """
+        started = self.begin_fit(train, experiment, seed, budget_s, steps=steps, warm_start=warm_start, system=system)
+        with gc_frozen():
+            self._fit(train, experiment, started.progress)
+        return self.end_fit(started, train)
+
+    def begin_fit(self, train: Dataset, experiment: str, seed: int, budget_s: "float | Budget | None" = None, *,
+                  steps: int | None = None, warm_start: bool = False, system: System | None = None) -> "FitStart":
+        """What :meth:`fit` does before the method's loop: check the data, do
+        the one-time work, seed the generators, draw the evaluation subset and
+        start the budget's :class:`Progress`. With :meth:`end_fit` after the
+        loop, a fit whose loop runs elsewhere (several seeds' networks trained
+        as one, :mod:`methods.stacking`) is the same as :meth:`fit`."""
         budget = as_budget(budget_s, steps)
         if warm_start and not self.supports_warm_start:
             raise ConfigError(f"{self.name} cannot continue a fit (warm_start)")
@@ -237,21 +251,25 @@ class Method(FittedModel):
             max_steps=min(limits, default=None),
             schedule=budget.schedule,
         )
-        with gc_frozen():
-            self._fit(train, experiment, progress)
+        return FitStart(progress, budget, t0, prepare_seconds, n_eval)
+
+    def end_fit(self, started: "FitStart", train: Dataset) -> "Method":
+        """What :meth:`fit` does after the method's loop: restore the best
+        state, the work after it (:meth:`_post_fit`) and :attr:`fit_info`."""
+        progress, budget, t0 = started.progress, started.budget, started.t0
         progress.finish()
         if progress.best_state is not None:
             self._set_state(progress.best_state)
-        self._post_fit(train, experiment, budget.fit_seconds - (time.perf_counter() - t0))
+        self._post_fit(train, self.experiment, budget.fit_seconds - (time.perf_counter() - t0))
         self.fit_info = {
             "steps": self._work_done(progress),
             "best_step": progress.best_step,
             "stop_reason": progress.stop_reason or "loop ended",
             "fit_seconds": time.perf_counter() - t0,
-            "prepare_seconds": prepare_seconds,
+            "prepare_seconds": started.prepare_seconds,
             "evaluations": progress.evaluations,
             "eval_seconds": progress.eval_seconds,
-            "eval_samples": n_eval,
+            "eval_samples": started.n_eval,
             "curve": progress.curve,
             "schedule": self._replay_schedule(progress),
         }
@@ -334,6 +352,19 @@ class Method(FittedModel):
     def predict(self, data: Dataset, experiment: str | None = None) -> np.ndarray:
         """The prediction in the experiment's own target (L or tau), by default the fitted one's."""
         return super().predict(data, experiment or self.experiment)
+
+
+@dataclasses.dataclass
+class FitStart:
+    """A fit begun by :meth:`Method.begin_fit`: its progress and budget, when
+    its budget started, the seconds of one-time work before it and the size
+    of its evaluation subset."""
+
+    progress: Progress
+    budget: Budget
+    t0: float
+    prepare_seconds: float
+    n_eval: int
 
 
 METHODS: Registry[type[Method]] = Registry("method")

@@ -287,6 +287,12 @@ class DeLaN(TorchLagrangianMethod):
     def make_scheduler(self, optimizer):
         return Warmup(optimizer, self.config.warmup) if self.config.warmup > 0 else None
 
+    def loss(self, prediction, target, experiment):
+        """DeLaN's torque loss sums the squared error over the joints (:func:`torque_loss`)."""
+        if experiment == "direct":
+            return super().loss(prediction, target, experiment)
+        return ((prediction - target) ** 2).sum(1).mean()
+
     def batch_loss(self, batch, experiment):
         if experiment == "direct":
             return super().batch_loss(batch, experiment)

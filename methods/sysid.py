@@ -178,6 +178,7 @@ class ParameterNetwork(torch.nn.Module):
 class SysId(TorchLagrangianMethod):
     Config = SysIdConfig
     smoke = {"max_steps": 20, "eval_samples": 256}
+    stackable = False  # an arm's linear form is solved, not trained; one seed's solve is the work
     configurations = {
         "standard": Named("the field's standard identified model of an arm: rigid-body base parameters plus Coulomb "
                           "and viscous friction on each joint, by least squares", {"feasible": False, "friction": True}),

@@ -104,6 +104,9 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
     Config: ClassVar[type] = TorchConfig
     supports_warm_start: ClassVar[bool] = True
     uses_device: ClassVar[bool] = True
+    #: whether several seeds' fits can train as one stacked model (:mod:`methods.stacking`): a method
+    #: whose loop is this class's, its loss :meth:`loss` and no :meth:`extra_loss`
+    stackable: ClassVar[bool] = True
     model: torch.nn.Module
 
     @abc.abstractmethod
@@ -142,13 +145,17 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
         Euler–Lagrange transform its own derivatives."""
         return self.model
 
+    def loss(self, prediction: torch.Tensor, target: torch.Tensor, experiment: str) -> torch.Tensor:
+        """The training loss of a batch's predictions (``L``, or the torques): the mean squared error."""
+        return torch.mean((prediction - target) ** 2)
+
     def batch_loss(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
         if experiment == "direct":
             pred, target = self.lagrangian(batch["q"], batch["qd"]), batch["L"]
         else:
             pred = euler_lagrange(self.lagrangian, batch["q"], batch["qd"], batch["qdd"], create_graph=True)
             target = batch["tau"]
-        return torch.mean((pred - target) ** 2) + self.extra_loss()
+        return self.loss(pred, target, experiment) + self.extra_loss()
 
     def _start_training(self) -> None:
         """Back to ``config.dtype`` for a fit: a warm start's network returns
@@ -158,6 +165,19 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
             self.model.to(self.device, self.dtype)
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
+        tensors, feed = self.start_loop(train)
+        while progress.step():
+            idx = feed.next()
+            batch = {k: v[idx] for k, v in tensors.items()}
+            loss = self.batch_loss(batch, experiment)
+            self._optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            self.apply_step(loss)
+
+    def start_loop(self, train: Dataset) -> tuple[dict[str, torch.Tensor], Feed]:
+        """The loop's start: the network (built from the generators as the fit
+        seeded them), its optimiser and schedule unless a warm start keeps
+        them, the data's tensors on the device and the fit's feed of batches."""
         self._start_training()
         if not self.warm_start:
             self.model = self.build_model(train).to(self.device, self.dtype)
@@ -166,18 +186,14 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
                 **({"fused": True} if fused_adam_ok(self.dtype, self.device) else {}),
             )
             self._scheduler = self.make_scheduler(self._optimizer)
-        optimizer, scheduler = self._optimizer, self._scheduler
         tensors = train.tensors(self.dtype, self.device)
-        feed = Feed.start(len(train), min(self.config.batch_size, len(train)), self.seed)
-        while progress.step():
-            idx = feed.next()
-            batch = {k: v[idx] for k, v in tensors.items()}
-            loss = self.batch_loss(batch, experiment)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            if scheduler is not None:
-                scheduler.step(loss.item())
+        return tensors, Feed.start(len(train), min(self.config.batch_size, len(train)), self.seed)
+
+    def apply_step(self, loss: torch.Tensor) -> None:
+        """The optimiser's step on the gradients of ``loss`` (already back-propagated), and the schedule's."""
+        self._optimizer.step()
+        if self._scheduler is not None:
+            self._scheduler.step(loss.item())
 
     def _post_fit(self, train: Dataset, experiment: str, seconds_left: float) -> None:
         self._trained = True  # the fitted function is evaluated in float64, on the CPU, from here on

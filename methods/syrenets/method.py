@@ -31,6 +31,7 @@ class SyReNets(Equations, TorchLagrangianMethod):
     ``frozen``, ``optimizer`` and ``scheduler`` read it.
     """
 
+    stackable = False  # its loop (selection, replay, multi-start) is its own, not the one methods.stacking drives
     Config = SyReNetsConfig
     smoke = {"layers": 2, "heads": 3, "latent": 4, "ae_hidden": 8, "head_hidden": 8, "max_steps": 10,
              "eval_samples": 128, "refine": False}

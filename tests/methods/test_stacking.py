@@ -1,0 +1,81 @@
+"""Seeds stacked in one model: each seed's fit is the one it makes alone.
+
+The tolerance is floating-point reduction order: the stacked network's
+matrix products are batched (one call for every seed) where a seed alone
+makes its own. On a CPU, float64 fits agree to 1e-12 of the prediction's
+scale (the MLP's torques to the last bit), float32 fits (DeLaN's default)
+to 1e-5; each seed's steps, evaluations and best step are the same."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from bench.core.data import generate
+from bench.core.errors import ConfigError
+from methods import METHODS
+from methods.stacking import fit_stacked
+from systems import get_system
+from tests.contract import OnMeta
+
+STACKABLE = [n for n in METHODS.names() if METHODS.entry(n).available and METHODS[n].stackable]
+SEEDS = [0, 1, 2]
+
+
+@pytest.fixture(scope="module")
+def data():
+    s = get_system("double_pendulum")
+    return [generate(s, 256, k) for k in SEEDS], generate(s, 64, 1000)
+
+
+def test_the_suites_plain_torch_methods_stack():
+    assert {"mlp", "delan"} <= set(STACKABLE) and not {"syrenets", "sysid", "sparse"} & set(STACKABLE)
+
+
+@pytest.mark.parametrize("experiment", ["indirect", "direct"])
+@pytest.mark.parametrize("name", STACKABLE)
+def test_each_stacked_seed_is_the_fit_it_makes_alone(name, experiment, data):
+    train, test = data
+    cls, smoke = METHODS[name], METHODS[name].smoke_config()
+    alone = [cls(**smoke).fit(d, experiment, k, steps=smoke["max_steps"]) for d, k in zip(train, SEEDS)]
+    stacked = fit_stacked([cls(**smoke) for _ in SEEDS], train, experiment, SEEDS, steps=smoke["max_steps"])
+    tolerance = 1e-12 if alone[0].config.dtype == "float64" else 1e-5
+    for a, b in zip(alone, stacked):
+        want, got = a.predict(test), b.predict(test)
+        assert np.max(np.abs(got - want)) <= tolerance * np.max(np.abs(want))
+        for key in ("steps", "best_step", "evaluations", "stop_reason"):
+            assert b.fit_info[key] == a.fit_info[key], key
+        np.testing.assert_allclose([m for _, m in b.fit_info["curve"]], [m for _, m in a.fit_info["curve"]],
+                                   rtol=tolerance)
+        assert b.fit_info["stacked"] == len(SEEDS) and "stacked" not in a.fit_info
+    # different seeds' fits stay different: no seed reads another's parameters
+    assert not np.allclose(stacked[0].predict(test), stacked[1].predict(test))
+
+
+def test_a_stack_keeps_every_tensor_on_its_device(data):
+    train, _ = data
+    smoke = METHODS["mlp"].smoke_config()
+    methods = [METHODS["mlp"](**smoke).use_device("meta") for _ in SEEDS]
+    mode = OnMeta()
+    with mode:
+        fit_stacked(methods, train, "indirect", SEEDS, steps=smoke["max_steps"])
+    assert not mode.mixed and mode.on_meta > 0
+
+
+def test_seeds_under_one_clock_stop_together_and_say_they_shared_it(data):
+    train, _ = data
+    smoke = {**METHODS["mlp"].smoke_config(), "max_steps": None}
+    fits = fit_stacked([METHODS["mlp"](**smoke) for _ in SEEDS], train, "indirect", SEEDS, 0.3)
+    assert len({f.fit_info["steps"] for f in fits}) == 1 and all(f.fit_info["stacked"] == 3 for f in fits)
+
+
+def test_what_cannot_stack_is_refused(data):
+    train, _ = data
+    with pytest.raises(ConfigError, match="stackable"):
+        fit_stacked([METHODS["syrenets"]() for _ in SEEDS], train, "indirect", SEEDS, steps=1)
+    with pytest.raises(ConfigError, match="one configuration"):
+        fit_stacked([METHODS["mlp"](hidden=8), METHODS["mlp"](hidden=16)], train[:2], "indirect", SEEDS[:2], steps=1)
+    with pytest.raises(ConfigError, match="one dataset and one seed"):
+        fit_stacked([METHODS["mlp"]()], train, "indirect", SEEDS, steps=1)
+    assert torch.get_default_dtype() == torch.float32  # nothing above changed torch's defaults
