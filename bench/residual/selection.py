@@ -64,6 +64,8 @@ MIN_HELDOUT_GAIN = 0.01
 #: on independent samples, a held-out gain this many rows' worth of residual is enough (see the module docstring)
 MIN_HELDOUT_CHI2 = MIN_BIC_DROP
 ROUNDOFF = 1e-20
+#: a candidate column whose part off the design is below this share of its norm is one the design spans
+SPANNED = 1e-9
 #: candidates tried a step, best first, past ones that fail on significance or held-out error
 MAX_TRIES = 8
 #: an admissible candidate replaces a better one with an impossible coefficient
@@ -199,13 +201,18 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         return refined
 
     off: dict[Term, np.ndarray] = {}  # this step's candidate columns projected off the design
+    spanned: set[Term] = set()  # candidates the design already expresses (the model's own friction columns)
 
     def project(terms) -> None:
-        """Project the columns of ``terms`` not yet projected this step, in one product."""
+        """Project the columns of ``terms`` not yet projected this step, in one product;
+        a column the design already spans (its part off it at round-off) is noted in ``spanned``."""
         new = [t for t in dict.fromkeys(terms) if t not in off]
         if new:
-            P = project_off(Q, np.column_stack([F_all[t] for t in new]))
+            F = np.column_stack([F_all[t] for t in new])
+            P = project_off(Q, F)
             off.update({t: P[:, i] for i, t in enumerate(new)})
+            left = np.linalg.norm(P, axis=0) <= SPANNED * np.linalg.norm(F, axis=0)
+            spanned.update(t for t, inside in zip(new, left) if inside)
 
     def beside(terms: list[Term], k: int):
         project(terms)
@@ -216,6 +223,9 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         # columns' part orthogonal to the design, fitted to the design's residual
         g = group(c) if g is None else g
         coef, stderr, rss = beside(g, k_now)
+        if spanned & set(g):  # nothing the model could already express is a candidate, nor a finding
+            return {"candidate": c, "group": g, "bic_drop": -math.inf, "coef": 0.0, "stderr": math.inf,
+                    "coefs": [0.0] * len(g), "stderrs": [math.inf] * len(g), "rss": rss_now}
         if len(g) > 1:  # companions the data do not support leave the law (a Stribeck law without viscous friction)
             weak = [t for t, a, e in zip(g[:-1], coef, stderr) if not abs(a) >= MIN_T * e]
             if weak:
