@@ -100,7 +100,8 @@ def preflight(spec: RunSpec) -> Record | None:
     return None
 
 
-def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: tuple | None = None) -> Record:
+def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: tuple | None = None,
+            fitted=None) -> Record:
     """Run ``spec`` in this process and return its record (never raises for the method's faults).
 
     Variants a method derives from its fit (:meth:`methods.base.Method.variants`)
@@ -110,7 +111,9 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     work that its budget does not cover (:meth:`methods.base.Method.prepare`),
     with ``"fit"`` when the fit starts and with ``"evaluate"`` when it has
     ended. ``data`` is an already loaded ``(train, test)`` pair, else it is
-    loaded from the spec.
+    loaded from the spec. ``fitted`` is the spec's method already fitted on
+    ``data`` (one seed of a stack, :mod:`bench.runner.stacked`): the run then
+    evaluates it.
 
     What follows the fit runs in stages (:class:`~bench.evaluation.scores.Stages`):
     a stage that fails (the expression, exact recovery, a variant, the
@@ -131,15 +134,20 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         clock = time.perf_counter()
         system = make_system(spec)
         train, test = data if data is not None else load_data(spec, system)
-        method = METHODS[spec.method](**method_config(spec)).use_device(spec.device)
-        warm_up_torch()
+        budget = spec.budget
+        if fitted is None:
+            method = METHODS[spec.method](**method_config(spec)).use_device(spec.device)
+            warm_up_torch()
+        else:
+            method = fitted
         timing = {"load_s": time.perf_counter() - clock}
         memory = {"start_mb": resident_mb()}
-        budget = spec.budget
-        phase("prepare")
-        prepared = method.prepare(train, spec.experiment)
-        phase("fit")
-        method.fit(train, spec.experiment, spec.seed, budget, system=system)
+        prepared = None
+        if fitted is None:
+            phase("prepare")
+            prepared = method.prepare(train, spec.experiment)
+            phase("fit")
+            method.fit(train, spec.experiment, spec.seed, budget, system=system)
         phase("evaluate")
         info = method.fit_info
         fields.update(

@@ -35,6 +35,7 @@ from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now
 from bench.runner.records import Record, RecordError, quarantine, read_record, record_path, write_record
 from bench.runner.spec import RunSpec
+from bench.runner.stacked import groups, run_stacked, stack_name
 
 #: A run's fit is killed at this multiple of its time budget.
 KILL_FACTOR = 1.5
@@ -151,6 +152,7 @@ def run_matrix(
     report: Report | None = None,
     cluster=None,
     retry_failed: bool = False,
+    stack: bool = False,
 ) -> list[Record]:
     """Run every spec, ``workers`` at a time, each in its own process.
 
@@ -172,13 +174,17 @@ def run_matrix(
     Each Dask task runs :func:`run_isolated` on its worker, in a scratch
     directory there, and returns the record, which is written here; workers
     need the suite installed, not a shared file system.
+
+    ``stack`` trains the seeds of a stackable method's runs that differ only
+    in their seed as one model, in one process (:mod:`bench.runner.stacked`),
+    on the local pool.
     """
     import_plugins({p for s in specs for p in s.plugins})
     report = report if report is not None else print_now
     workers = workers or default_workers()
     out_dir = Path(out_dir)
     with FolderLock(out_dir):
-        return _run_matrix(specs, out_dir, workers, resume, report, cluster, retry_failed)
+        return _run_matrix(specs, out_dir, workers, resume, report, cluster, retry_failed, stack)
 
 
 def stale(record: Record, spec: RunSpec, retry_failed: bool = False) -> str | None:
@@ -194,7 +200,7 @@ def stale(record: Record, spec: RunSpec, retry_failed: bool = False) -> str | No
 
 
 def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool, report: Report, cluster,
-                retry_failed: bool) -> list[Record]:
+                retry_failed: bool, stack: bool = False) -> list[Record]:
     results: dict[str, Record] = {}
     todo: list[RunSpec] = []
     resumed = cannot_run = 0
@@ -236,6 +242,13 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
     if todo and cluster is not None:
         for record in _run_on_dask(todo, out_dir, cluster, workers):
             results[record.run_id] = done(record)
+    elif todo and stack:
+        def job(group: list[RunSpec]) -> list[Record]:
+            out = run_stacked(group, out_dir, lambda s: run_isolated(s, out_dir), phase_limits(group[0]))
+            return [done(r, log_path(out_dir, stack_name(group) if r.details.get("stacked") else r.run_id)) for r in out]
+
+        for records in map_interruptibly(job, groups(todo), workers):
+            results.update((r.run_id, r) for r in records)
     elif todo:
         for record in map_interruptibly(lambda s: done(run_isolated(s, out_dir), log_path(out_dir, s.run_id)), todo, workers):
             results[record.run_id] = record

@@ -9,8 +9,10 @@ import os
 import time
 
 import numpy as np
+import torch
 
 from methods import METHODS, Method, MethodConfig
+from methods.torch_method import TorchLagrangianMethod
 
 
 class _Constant(Method):
@@ -116,3 +118,26 @@ class ToyPrepared(_Constant):
 
     def record_details(self):
         return {"prepared_before_the_budget": self.prepared_at < self.fit_started_at}
+
+
+class _Unstackable(torch.nn.Module):
+    """A network whose forward reads a number out of its input: fine alone, refused by ``vmap``."""
+
+    def __init__(self, dof: int):
+        super().__init__()
+        self.w = torch.nn.Parameter(torch.ones(2 * dof, dtype=torch.float64))
+
+    def forward(self, q, qd):
+        x = torch.cat([q, qd], dim=-1)
+        scale = 1.0 if x.abs().max().item() < 1e9 else 0.0
+        return scale * (x * x * self.w).sum(-1)
+
+
+@METHODS.add("toy_unstackable")
+class ToyUnstackable(TorchLagrangianMethod):
+    """A torch method whose seeds cannot train stacked: the stack's process fails, and each seed runs alone."""
+
+    smoke = {"max_steps": 3, "eval_samples": 64}
+
+    def build_model(self, train):
+        return _Unstackable(train.dof)

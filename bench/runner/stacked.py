@@ -1,0 +1,91 @@
+"""Runs of a matrix that differ only in their seed, trained in one process as
+one stacked model (``bench run --stack-seeds``, :mod:`methods.stacking`) and
+written as ordinary records.
+
+* :func:`groups`: the runs to do, each seed of a stackable method's run
+  grouped with the seeds whose specs equal it in all else;
+* :func:`run_stacked`: one group in its own process, killed like any run
+  (its fit shares one limit, its evaluations have one each); each seed's
+  record is then what :func:`~bench.runner.execute.execute` writes for a fit
+  made alone, its ``details.stacked`` the number of seeds that trained with it.
+  Where the group's process fails or is killed, each of its seeds runs again
+  on its own, so that no seed's record is lost to another's failure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Callable
+
+from bench.runner.code import code_hash
+from bench.runner.execute import execute, load_data, make_system, method_config, warm_up_torch
+from bench.runner.isolation import Call, run_call
+from bench.runner.plugins import import_plugins
+from bench.runner.records import Record, record_path, write_record
+from bench.runner.spec import RunSpec
+from methods import METHODS
+from methods.stacking import fit_stacked
+
+
+def groups(specs: list[RunSpec]) -> list[list[RunSpec]]:
+    """``specs`` in order, the runs of a stackable method (:attr:`~methods.base.Method.stackable`)
+    grouped by everything but their seed; every other run alone."""
+    out: dict = {}
+    for spec in specs:
+        stackable = spec.method in METHODS and METHODS.entry(spec.method).available and METHODS[spec.method].stackable
+        key = repr(sorted(dataclasses.replace(spec, seed=0).to_dict().items())) if stackable else spec.run_id
+        out.setdefault(key, []).append(spec)
+    return list(out.values())
+
+
+def run_stacked_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
+    """The entry point of a group's process: ``payload["specs"]`` are the specs
+    (:meth:`RunSpec.to_dict`); returns ``{"records": [...]}``, one record's JSON a seed."""
+    specs = [RunSpec.from_dict(d) for d in payload["specs"]]
+    import_plugins(specs[0].plugins)
+    first = specs[0]
+    system = make_system(first)
+    data = [load_data(spec, system) for spec in specs]
+    methods = [METHODS[spec.method](**method_config(spec)).use_device(spec.device) for spec in specs]
+    warm_up_torch()
+    on_phase("prepare")
+    for method, (train, _) in zip(methods, data):
+        method.prepare(train, first.experiment)
+    on_phase("fit")
+    fit_stacked(methods, [train for train, _ in data], first.experiment, [s.seed for s in specs], first.budget,
+                system=system)
+    on_phase("evaluate")
+    return {"records": [execute(spec, data=pair, fitted=method).to_json()
+                        for spec, pair, method in zip(specs, data, methods)]}
+
+
+def stack_name(group: list[RunSpec]) -> str:
+    """The name of a group's process, its log's and call's: its first run's id and its size."""
+    return f"{group[0].run_id}__stack{len(group)}"
+
+
+def run_stacked(group: list[RunSpec], out_dir: str | Path, run_alone: Callable[[RunSpec], Record],
+                limits: dict[str, float]) -> list[Record]:
+    """Run ``group`` stacked in its own process (``limits`` as one run's,
+    :func:`~bench.runner.matrix.phase_limits`; the evaluation's times the
+    seeds); write and return its records. A group of one, or a group whose
+    process gave no records, runs each seed with ``run_alone``."""
+    if len(group) == 1:
+        return [run_alone(group[0])]
+    out_dir = Path(out_dir)
+    name = stack_name(group)
+    limits = {**limits, "evaluate": limits["evaluate"] * len(group)}
+    call = Call("bench.runner.stacked:run_stacked_payload", {"specs": [s.to_dict() for s in group]}, group[0].threads)
+    outcome = run_call(call, out_dir / "logs" / f"{name}.result.json", out_dir / "logs", name, limits)
+    if outcome.interrupted:
+        raise KeyboardInterrupt(f"{name} interrupted")
+    if outcome.result is None:  # the stack failed or was killed: each seed on its own
+        return [run_alone(spec) for spec in group]
+    code = code_hash(group[0].method, group[0].system, group[0].plugins)
+    records = []
+    for spec, obj in zip(group, outcome.result["records"]):
+        record = Record.from_json(obj, f"{name}: {spec.run_id}").replace(code=code)
+        write_record(record_path(out_dir, spec.run_id), record)
+        records.append(record)
+    return records
