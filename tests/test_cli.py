@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "rerun", "leaderboard", "index",
             "adaptation", "residual-acceptance", "residual-dfki", "robot-log", "overhead", "dfki-filter", "scaling",
-            "syrenets-speed", "syrenets-profile")
+            "syrenets-speed", "syrenets-profile", "stacking-speed")
 
 
 def _subparsers():

@@ -23,7 +23,7 @@ from bench.cli import convert, data, fit, index, leaderboard, listing, rerun, re
 from bench.cli.options import Parser
 from bench.core.errors import UserError
 from bench.experiments import (adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, robot_log, scaling,
-                               syrenets_profile, syrenets_speed)
+                               stacking_speed, syrenets_profile, syrenets_speed)
 from bench.runner.isolation import CallFailed
 
 EXIT_USAGE = 2
@@ -34,7 +34,7 @@ COMMANDS = {
     "convert": convert, "rerun": rerun, "leaderboard": leaderboard, "index": index,
     "adaptation": adaptation, "residual-acceptance": residual_acceptance, "residual-dfki": residual_dfki,
     "robot-log": robot_log, "overhead": overhead, "dfki-filter": dfki_filter, "scaling": scaling,
-    "syrenets-speed": syrenets_speed, "syrenets-profile": syrenets_profile,
+    "syrenets-speed": syrenets_speed, "syrenets-profile": syrenets_profile, "stacking-speed": stacking_speed,
 }
 
 

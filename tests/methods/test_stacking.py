@@ -79,3 +79,16 @@ def test_what_cannot_stack_is_refused(data):
     with pytest.raises(ConfigError, match="one dataset and one seed"):
         fit_stacked([METHODS["mlp"]()], train, "indirect", SEEDS, steps=1)
     assert torch.get_default_dtype() == torch.float32  # nothing above changed torch's defaults
+
+
+def test_the_stacking_measurement_prints_both_rates_and_their_ratio(tmp_path):
+    from tests.commandline import cli
+
+    out = tmp_path / "speed.md"
+    r = cli("stacking-speed", "--cases", "mlp:double_pendulum", "--seeds", "1", "2", "--steps", "2", "--n-train", "64",
+            "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "mlp on double_pendulum, 2 seed(s): stacked" in r.stdout and "stacked ÷ one by one" in r.stdout
+    assert out.read_text().count("| mlp | double_pendulum |") == 2
+    bad = cli("stacking-speed", "--cases", "syrenets:double_pendulum", "--seeds", "1")
+    assert bad.returncode == 2 and "syrenets is not a stackable method" in bad.stderr and bad.stderr.count("\n") == 1
