@@ -12,7 +12,7 @@ from bench.core.arguments import positive
 from bench.core.fileio import check_output, write_json
 from bench.runner.plugins import import_plugins
 from bench.runner.records import read_record
-from bench.runner.replay import RELATIVE_TOLERANCE, compare, replay_spec
+from bench.runner.replay import compare, replay_spec, tolerance
 
 HELP = "replay a recorded run with the work it did and compare its train and test MSE"
 
@@ -47,7 +47,10 @@ def main(args) -> int:
     print(f"{'':10} {'recorded':>24} {'replayed':>24} {'relative difference':>20}")
     for name, a, b, diff in rows:
         print(f"{name:10} {number(a, '.17g'):>24} {number(b, '.17g'):>24} {diff:>20.3g}")
-    same = all(diff <= RELATIVE_TOLERANCE for *_, diff in rows)
-    print(f"{'the same' if same else 'DIFFERENT'} up to a relative {RELATIVE_TOLERANCE:g} "
+    limit = tolerance(recorded)
+    same = all(diff <= limit for *_, diff in rows)
+    stacked = (recorded.details or {}).get("stacked")
+    why = f", as the record trained stacked with {stacked} seeds and the replay alone" if stacked else ""
+    print(f"{'the same' if same else 'DIFFERENT'} up to a relative {limit:g}{why} "
           f"({replayed.steps} steps; recorded {recorded.steps})")
     return 0 if same else 1

@@ -316,6 +316,12 @@ def test_seeds_trained_stacked_give_the_records_they_give_one_by_one(tmp_path):
     # a resume takes the stacked records for what they stand for
     again = matrix.run_matrix(specs, tmp_path / "stacked", workers=2, report=quiet, stack=True)
     assert [r.to_json() for r in again] == [r.to_json() for r in stacked]
+    # a stacked record replays alone (bench rerun), the same up to the stated tolerance
+    from tests.commandline import cli
+
+    delan = tmp_path / "stacked" / "records" / "double_pendulum__delan__indirect__seed1.json"
+    r = cli("rerun", delan)
+    assert r.returncode == 0 and "the same up to a relative 1e-06, as the record trained stacked with 3 seeds" in r.stdout
 
 
 def test_a_stack_that_fails_runs_each_of_its_seeds_alone(tmp_path):
