@@ -36,10 +36,11 @@ refitted on the corrected training data (each ``tau_j`` divided by ``g_j``;
 each recording's states taken at ``t - delta``, linearly interpolated along
 it; each ``tau_j`` divided by ``1 + mu_j sigma_j``, which needs only the
 measured torque's sign, the arm's as long as ``mu_j < 1``), the linearised
-columns fitted again beside the model's freedom, and the law updated, until its correction is below :data:`TOLERANCE` (a fixed point:
-Gauss–Newton on the law's parameters). The loop predicts a measured torque as
-``g_j (tau_hat_j + mu_j |tau_hat_j| s_j)`` at ``t - delta`` (:class:`Sensed`), and compares rounds by their
-held-out error in the measured torque's units.
+columns fitted again beside the model's freedom, and the law updated, until
+its correction is below :data:`TOLERANCE` (a fixed point: Gauss–Newton on
+the law's parameters). The loop predicts a measured torque as
+``g_j (tau_hat_j + mu_j |tau_hat_j| s_j)`` at ``t - delta`` (:class:`Sensed`),
+and compares rounds by their held-out error in the measured torque's units.
 
 A time shift needs time stamps and recordings (``bench convert`` data, a
 robot log); on independent samples it is not offered. Where a recording's

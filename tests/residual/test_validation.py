@@ -279,3 +279,33 @@ def test_an_extended_basis_spans_what_a_fresh_one_spans():
     np.testing.assert_allclose(Q.T @ Q, np.eye(6), atol=1e-12)
     fresh = orthonormal_basis(np.hstack([A, B]))
     np.testing.assert_allclose(Q @ (Q.T @ fresh), fresh, atol=1e-10)
+
+
+@pytest.mark.parametrize("trajectories", [True, False])
+def test_on_trajectories_a_round_must_save_one_percent_of_the_held_out_error(trajectories, monkeypatch):
+    # a round whose held-out error falls by 0.5 %: kept on independent samples, undone on trajectories,
+    # whose held-out spans are not independent of the rest of their motion
+    from bench.experiments.robot_log import simulate
+    from bench.residual import loop as loop_module
+
+    parts = []
+    for k in range(2):
+        time, d = simulate("double_pendulum", 6.0, 100.0, 0.2, ["viscous_friction=0.8,0.5"], 0.01, k)
+        label = np.asarray([f"r{k}"] * len(d))
+        parts.append(d.replace(recording=label, trajectory=label, time=time) if trajectories else d)
+    join = lambda name: None if getattr(parts[0], name) is None else np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+    train = parts[0].replace(**{k: join(k) for k in ("q", "qd", "qdd", "tau", "L", "recording", "trajectory", "time")})
+    calls = []
+
+    def heldout(self, model, train=None, sensor=None):
+        calls.append(model)
+        return 1.0 if len(calls) == 1 else 0.995
+
+    monkeypatch.setattr(loop_module._Loop, "heldout", heldout)
+    out = residual_loop("sysid", train, None, steps=SOLVED, report=quiet, open_ended=False)
+    first = out.rounds[1]
+    if trajectories:
+        assert first["stop"].startswith("undone: the refitted model does not lower the held-out error by 1%")
+        assert out.effects == [] or all(e["kind"] != "dissipative" for e in out.effects)
+    else:
+        assert first.get("stop") is None and any(e["name"] == "viscous_friction" for e in out.effects)
