@@ -78,7 +78,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -93,7 +92,7 @@ from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shape_stderr, simplest_laws
 from bench.residual.reach import beyond_data, earns_place, finding, not_identified
-from bench.residual.result import ResidualResult
+from bench.residual.result import ResidualResult, Round
 from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, bic, trace
 from bench.residual.sensors import (Sensed, Sensor, column as sensor_column, confine as confine_sensor,
                                     inadmissible as inadmissible_sensor, measured_rss, redundant, settle)
@@ -116,36 +115,6 @@ TRACE_SHARE = 0.85
 #: the share of the loop's budget each of the two cross-fits of a kept fit has
 #: (see :func:`~bench.residual.strategies.cross_fit`)
 CROSS_FIT_SHARE = 0.15
-
-
-@dataclass
-class Round:
-    """One round of the loop, as its JSON gives it (fields that are ``None`` are left out).
-
-    ``accepted`` names the effects the trace added, ``removed`` those the
-    refit made redundant or impossible, ``simplified`` each law replaced by a
-    simpler one it contains, and why, ``trace`` the statistics of each step;
-    ``stop`` says why the loop ended here (undone, not started, the budget);
-    ``candidate_heldout_mse`` is an undone round's held-out error; round 0 has
-    ``method_mse`` (the method's own model, before its strategy's start) and
-    ``cross_fit`` (a kept fit's cross-fits) where those apply.
-    """
-
-    round: int
-    mse: dict
-    heldout_mse: float
-    accepted: list[str] = field(default_factory=list)
-    trace: list[dict] = field(default_factory=list)
-    removed: list[str] | None = None
-    stop: str | None = None
-    candidate_heldout_mse: float | None = None
-    method_mse: dict | None = None
-    cross_fit: dict | None = None
-    simplified: list[str] | None = None
-    seconds: float = 0.0
-
-    def to_json(self) -> dict:
-        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
 
 
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float | None = None,

@@ -1,4 +1,4 @@
-"""The residual loop's typed result (:func:`bench.residual.loop.residual_loop`)."""
+"""The residual loop's typed result (:func:`bench.residual.loop.residual_loop`) and the record of each of its rounds."""
 
 from __future__ import annotations
 
@@ -66,3 +66,33 @@ class ResidualResult:
     @classmethod
     def from_json(cls, obj: dict) -> "ResidualResult":
         return cls(**obj)
+
+
+@dataclass
+class Round:
+    """One round of the loop, as its JSON gives it (fields that are ``None`` are left out).
+
+    ``accepted`` names the effects the trace added, ``removed`` those the
+    refit made redundant or impossible, ``simplified`` each law replaced by a
+    simpler one it contains, and why, ``trace`` the statistics of each step;
+    ``stop`` says why the loop ended here (undone, not started, the budget);
+    ``candidate_heldout_mse`` is an undone round's held-out error; round 0 has
+    ``method_mse`` (the method's own model, before its strategy's start) and
+    ``cross_fit`` (a kept fit's cross-fits) where those apply.
+    """
+
+    round: int
+    mse: dict
+    heldout_mse: float
+    accepted: list[str] = field(default_factory=list)
+    trace: list[dict] = field(default_factory=list)
+    removed: list[str] | None = None
+    stop: str | None = None
+    candidate_heldout_mse: float | None = None
+    method_mse: dict | None = None
+    cross_fit: dict | None = None
+    simplified: list[str] | None = None
+    seconds: float = 0.0
+
+    def to_json(self) -> dict:
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
