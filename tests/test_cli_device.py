@@ -44,7 +44,8 @@ def test_auto_is_the_cpu_without_a_gpu_and_the_record_says_where_the_fit_trained
             "--device", "auto", "--json", out)
     assert r.returncode == 0, r.stderr
     record = json.loads(out.read_text())
-    assert record["spec"]["device"] == "cpu" and record["details"]["device"] == {"type": "cpu"}
+    assert record["spec"]["device"] == "cpu" and record["details"]["device"]["type"] == "cpu"
+    assert record["details"]["device"]["name"] == record["provenance"]["cpu"]  # the processor's model
     # the rerun keeps the recorded device, and gives the same numbers
     again = cli("rerun", out, "--json", tmp_path / "again.json")
     assert again.returncode == 0 and "the same up to" in again.stdout
@@ -70,4 +71,4 @@ def test_the_residual_loop_says_where_its_fits_trained():
     train, test = generate(s, 400, 0), generate(s, 100, 1)
     out = residual_loop("mlp", train, test, steps=5, hyperparameters={"hidden": 8, "layers": 1}, report=lambda _: None,
                         device="cpu")
-    assert out.device == {"type": "cpu"} and out.to_json()["device"] == {"type": "cpu"}
+    assert out.device["type"] == "cpu" and out.device["name"] and out.to_json()["device"] == out.device

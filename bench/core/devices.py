@@ -39,8 +39,8 @@ def resolve(name: str, option: str = "--device") -> str:
 
 def describe(name: str) -> dict:
     """What a record says of the device ``name``: its type and, for ``cuda``,
-    the card's model name and torch's CUDA version (a CPU's model is in the
-    record's provenance)."""
+    the card's model name, torch's CUDA version and its memory (a CPU's model
+    is read where the record is made, :func:`bench.runner.provenance.device_entry`)."""
     if name != "cuda":
         return {"type": "cpu"}
     index = torch.cuda.current_device()

@@ -83,7 +83,6 @@ import numpy as np
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
-from bench.core.devices import describe as describe_device
 from bench.core.models import FittedModel
 from bench.core.terms import Term, TermLibrary, remembered_columns, share_columns
 from bench.evaluation.driven import driven_entry
@@ -99,7 +98,7 @@ from bench.residual.sensors import (Sensed, Sensor, column as sensor_column, con
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.validation import describe as describe_validation
 from bench.runner.progress import Report
-from bench.runner.provenance import provenance
+from bench.runner.provenance import device_entry, provenance
 from systems import SYSTEMS
 
 MAX_ROUNDS = 6
@@ -248,7 +247,7 @@ class _Loop:
             lagrangian=None if expr is None else str(expr),
             seconds=round(time.perf_counter() - self.start, 2), statistics_seconds=round(self.statistics, 2),
             budget_s=budget.seconds, fit_budget_s=self.fitter.budget.seconds if budget.kind == "seconds" else None,
-            device=describe_device(trained_on),
+            device=device_entry(trained_on),
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
             test_source=None if self.test is None else self.test.source, provenance=provenance(),
             models=(first, Sensed(model, self.sensor)),

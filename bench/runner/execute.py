@@ -20,7 +20,6 @@ import torch
 
 from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate, read_csv
-from bench.core.devices import describe as describe_device
 from bench.core.timeouts import Timeout
 from bench.core.system import System
 from bench.evaluation.driven import driven_entry
@@ -28,6 +27,7 @@ from bench.evaluation.forces import forces_entry
 from bench.evaluation.reference import applies as has_standard_model, standard_reference
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
 from bench.runner.plugins import import_plugins
+from bench.runner.provenance import device_entry
 from bench.runner.records import Record
 from bench.runner.spec import TEST_SEED_OFFSET, RunSpec
 from methods import METHODS
@@ -177,7 +177,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             "n_train": len(train),
             "n_test": None if test is None else len(test),
             "domain": dataclasses.asdict(system.domain),
-            "device": describe_device(method.trained_on()),
+            "device": device_entry(method.trained_on()),
             **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason", "schedule")},
             "prepare_seconds": prepared or info.get("prepare_seconds", 0.0),
             **stages.run("details", method.record_details, default={}),

@@ -13,6 +13,8 @@ import sys
 from importlib import metadata
 from pathlib import Path
 
+from bench.core.devices import describe
+
 #: the checkout the suite runs from
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 _PACKAGES = ("torch", "numpy", "scipy", "sympy", "pandas", "deap", "pysr")
@@ -104,6 +106,13 @@ def package_versions() -> dict:
         except metadata.PackageNotFoundError:
             out[name] = None
     return out
+
+
+def device_entry(device: str) -> dict:
+    """What a record says of the device its fit trained on: :func:`bench.core.devices.describe`,
+    with the processor's model where it is the CPU."""
+    entry = describe(device)
+    return {**entry, "name": cpu_model()} if entry["type"] == "cpu" else entry
 
 
 def provenance(threads: int | None = None) -> dict:
