@@ -72,6 +72,7 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
             if name == "load_friction" and not all(EFFECTS[name].admissible(c) for c in coefs):
                 raise ConfigError(f"{source}: load_friction needs {dof} coefficients with "
                                   f"{EFFECTS[name].condition}, one per joint (0: none), got {values!r}")
+            _physical(name, {(j,): c for j, c in enumerate(coefs)}, source)
             out[name] = {(j,): c for j, c in enumerate(coefs)}
             continue
         pairs = {}
@@ -86,8 +87,25 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
                 raise ConfigError(f"{source}: {name} needs i-j:c items with two distinct joints in 1..{dof} and a "
                                   f"finite coefficient, got {part!r}")
             pairs[key] = c
+        _physical(name, pairs, source)
         out[name] = pairs
     return out
+
+
+def _physical(name: str, coefficients: dict[tuple[int, ...], float], source: str) -> None:
+    """A clear :class:`ConfigError` naming the effect and joint where an effect that
+    only a coefficient >= 0 makes physical (friction, damping, an armature, a
+    passive spring, :attr:`Effect.nonnegative`) is given a negative one: it would
+    generate data with energy put in, or a negative inertia."""
+    effect = EFFECTS[name]
+    if effect.bounds is not None or not effect.nonnegative:
+        return
+    for joints, c in coefficients.items():
+        if c < 0:
+            where = f"joint {joints[0] + 1}" if len(joints) == 1 else f"joints {joints[0] + 1}-{joints[1] + 1}"
+            raise ConfigError(f"{source}: {name} on {where} is {c:g}, which is not physical ({effect.condition}): "
+                              f"negative friction or damping would put energy in, a negative armature is a negative "
+                              f"inertia, and a passive spring's stiffness is not negative")
 
 
 def _parse_law(name: str, values: str, dof: int, source: str) -> dict[tuple[int], tuple[float, ...]]:

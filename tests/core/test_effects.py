@@ -59,6 +59,9 @@ def test_effects_add_to_tau_and_conservative_ones_to_L():
         (["gravity_tilt=nan"], "gravity_tilt needs one finite number"),
         (["gravity_tilt=1-2:0.1"], "gravity_tilt needs one finite number"),
         (["load_friction=-0.1,0"], "load_friction needs 2 coefficients with 0 <= mu <= 0.5"),
+        (["viscous_friction=-0.8,0.3"], "viscous_friction on joint 1 is -0.8, which is not physical \\(b >= 0\\)"),
+        (["armature=0,-0.5"], "armature on joint 2 is -0.5, which is not physical \\(I >= 0\\)"),
+        (["coupled_damper=1-2:-0.6"], "coupled_damper on joints 1-2 is -0.6"),
         (["load_friction=0,0.6"], "0 <= mu <= 0.5"),
     ],
 )
