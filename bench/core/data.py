@@ -281,10 +281,16 @@ def write_csv(data: Dataset, path: str | os.PathLike) -> None:
     atomic_write(Path(path), lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
 
 
+#: the separators besides the comma that a CSV file may use, tried where its header has no comma
+OTHER_SEPARATORS = (";", "\t")
+
+
 def read_frame(path: Path, nrows: int | None = None):
     """A CSV file (optionally compressed) as a DataFrame with at least one row
     and distinct column names (its first ``nrows`` rows only, where given);
-    :class:`DataError` naming the file otherwise."""
+    :class:`DataError` naming the file otherwise. A file whose header is one
+    name holding semicolons or tabs is read with that separator (a spreadsheet's
+    export in a locale whose decimal mark is the comma)."""
     import pandas as pd
 
     path = Path(path)
@@ -294,7 +300,12 @@ def read_frame(path: Path, nrows: int | None = None):
         raise DataError(f"{path}: no such file")
     try:
         header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False)
-        frame = pd.read_csv(path, nrows=nrows)
+        sep = ","
+        if header.shape[1] == 1 and len(header):
+            sep = next((s for s in OTHER_SEPARATORS if s in str(header.iloc[0, 0])), ",")
+            if sep != ",":
+                header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False, sep=sep)
+        frame = pd.read_csv(path, nrows=nrows, sep=sep)
     except pd.errors.EmptyDataError:
         raise DataError(f"{path}: the file is empty") from None
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError, EOFError, OSError) as exc:

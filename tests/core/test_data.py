@@ -230,3 +230,17 @@ def _written(data, tmp_path):
     path = tmp_path / "plain.csv"
     write_csv(data, path)
     return path
+
+
+@pytest.mark.parametrize("sep", [";", "\t"])
+def test_a_csv_separated_by_semicolons_or_tabs_reads_as_with_commas(tmp_path, sep):
+    comma, other = tmp_path / "comma.csv", tmp_path / "other.csv"
+    comma.write_text(GOOD)
+    other.write_text(GOOD.replace(",", sep))
+    a, b = read_csv(comma, dof=2), read_csv(other, dof=2)
+    np.testing.assert_array_equal(a.tau, b.tau)
+    np.testing.assert_array_equal(a.q, b.q)
+    # a decimal comma beside semicolons is named as the value it makes, in one line
+    other.write_text(GOOD.replace(",", sep).replace("0.7", "0,7", 1))
+    with pytest.raises(DataError, match="column tau_1 has a non-numeric value '0,7' in data row 1"):
+        read_csv(other, dof=2)
