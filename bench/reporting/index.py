@@ -164,12 +164,13 @@ def build_index(root: Path, entries: list[Entry] | None = None, values: dict[str
     return "\n".join(lines)
 
 
-def unlisted(root: Path, entries: list[Entry] | None = None) -> list[str]:
-    """Files under ``root`` that no entry covers (an entry's folder covers what it holds)."""
+def unlisted(root: Path, entries: list[Entry] | None = None, files: list[Path] | None = None) -> list[str]:
+    """Files under ``root`` (or of ``files``, where given: those a checkout
+    publishes) that no entry covers (an entry's folder covers what it holds)."""
     entries = read_manifest(root) if entries is None else entries
     covered = [Path(root) / p for e in entries for p in e.paths()]
     out = []
-    for path in sorted(Path(root).rglob("*")):
+    for path in sorted(Path(root).rglob("*") if files is None else files):
         if not path.is_file() or path.name in (MANIFEST, INDEX) or _scratch(root, path):
             continue
         if not any(path == c or c in path.parents for c in covered):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -19,8 +20,28 @@ RESULTS = ROOT / "results"
 STUDY = "syrenets/studies/syrenets_300s_compiled_best"
 
 
+def published() -> list[Path] | None:
+    """The files under results/ that the repository holds (what a user's own runs
+    beside them do not change); ``None`` outside a git checkout: every file there."""
+    try:
+        out = subprocess.run(["git", "ls-files", "-z", "results"], cwd=ROOT, capture_output=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return [ROOT / name for name in out.stdout.decode().split("\0") if name]
+
+
 def test_every_published_file_is_in_the_manifest():
-    assert unlisted(RESULTS) == []
+    assert unlisted(RESULTS, files=published()) == []
+
+
+def test_the_readmes_own_runs_write_where_git_ignores_them():
+    # the quick start's folders must not turn up among the published results, nor in git status
+    text = (ROOT / "README.md").read_text() + (ROOT / "docs" / "cli.md").read_text()
+    outs = set(re.findall(r"--out (runs/\w+)", text))
+    assert {"runs/first", "runs/mine", "runs/my_run", "runs/by_work"} <= outs
+    assert "--out results/" not in re.sub(r"--out results/(quick|measured|residual|harness|paper|syrenets|arms|scaling|leaderboard)", "", text)
+    ignored = subprocess.run(["git", "check-ignore", "-q", "runs/first/tables.md"], cwd=ROOT)
+    assert ignored.returncode == 0
 
 
 def test_the_index_is_what_the_manifest_and_the_records_give():
