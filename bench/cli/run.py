@@ -4,6 +4,7 @@ noise levels x seeds, each run isolated and budgeted, then its tables."""
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 
 from bench.cli.options import (UsageError, add_budget, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
@@ -12,7 +13,7 @@ from bench.core.arguments import csv_list, noise_level, positive, positive_int, 
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
 from bench.runner import matrix
-from bench.runner.execute import method_config
+from bench.runner.execute import method_config, raised
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, build_specs, seed_count
 from methods import METHODS
 from systems import SYSTEMS
@@ -88,9 +89,14 @@ def main(args) -> int:
             METHODS[spec.method](**method_config(spec))
     if args.stack_seeds and args.cluster:
         raise UsageError("--stack-seeds runs the stacked seeds on the local pool; with --cluster each run is a task of its own")
-    matrix.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume, cluster=args.cluster,
-                      retry_failed=args.retry_failed, stack=args.stack_seeds)
+    records = matrix.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume,
+                                cluster=args.cluster, retry_failed=args.retry_failed, stack=args.stack_seeds)
     text = write_tables(args.out)
     print(f"tables written to {args.out / 'tables.md'}")
     print(text)
-    return 0
+    errors = [r for r in records if raised(r)]
+    for r in errors:  # what a script or CI must see: the runs whose code raised, one line each
+        first = (r.error or "").strip().splitlines()[0] if (r.error or "").strip() else "no message"
+        print(f"error: {r.system} {r.method} {r.experiment} seed={r.seed}: {first} "
+              f"(log: {matrix.log_path(args.out, r.run_id)})", file=sys.stderr)
+    return 1 if errors else 0

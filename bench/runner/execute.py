@@ -33,6 +33,9 @@ from bench.runner.spec import TEST_SEED_OFFSET, RunSpec
 from methods import METHODS
 from systems import SYSTEMS
 
+#: how a failed record's error begins where the fit diverged (its MSE is NaN or inf): an outcome a
+#: benchmark records, not an error of the method's code (:func:`raised`)
+DIVERGED = "non-finite"
 #: test samples the force decomposition is scored on (:mod:`bench.evaluation.forces`)
 FORCES_SAMPLES = 2000
 #: seconds a rollout of a time-budgeted run may take (under a work budget only its count of evaluations bounds it)
@@ -211,7 +214,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         fields["failed_stages"] = stages.failed
         bad = [k for k in ("train_mse", "test_mse") if fields[k] is not None and not math.isfinite(fields[k])]
         if bad:
-            return Record.new(spec, "failed", error=f"non-finite {' and '.join(bad)} (the model produced NaN or inf)", **fields)
+            return Record.new(spec, "failed", error=f"{DIVERGED} {' and '.join(bad)} (the model produced NaN or inf)", **fields)
         return Record.new(spec, "ok", **fields)
     except Timeout as exc:  # the method's own work ran out of its budget and stopped itself
         return Record.new(spec, "timeout", error=f"out of budget: {exc}", **_kept(fields))
@@ -221,6 +224,14 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         kept = _kept(fields)
         kept["details"] = {**kept.get("details", {}), "traceback": tb}
         return Record.new(spec, "failed", error=f"{type(exc).__name__}: {exc}", **kept)
+
+
+def raised(record: Record) -> bool:
+    """Whether ``record``'s run ended in an error (an exception in the method or
+    a plugin, a crashed worker) rather than in an outcome a benchmark records
+    (ok, its budget or time limit, a diverged fit, a method unavailable here
+    or not applicable)."""
+    return record.status == "failed" and not (record.error or "").startswith(DIVERGED)
 
 
 def _kept(fields: dict) -> dict:

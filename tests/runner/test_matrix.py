@@ -10,7 +10,7 @@ import pytest
 
 from bench.evaluation.scores import MAX_EXPRESSION_CHARS, clip
 from bench.runner import matrix
-from bench.runner.execute import execute, load_data, make_system, preflight
+from bench.runner.execute import execute, load_data, make_system, preflight, raised
 from bench.runner.isolation import fork_server
 from bench.runner.progress import print_now, quiet
 from bench.runner.spec import build_specs
@@ -43,6 +43,25 @@ def test_statuses_for_every_way_a_run_can_end(tmp_path):
     on_disk = read_records(tmp_path)
     assert len(on_disk) == 7 and all(r.schema == SCHEMA for r in on_disk)
     assert not list((tmp_path / "records").glob(".*.tmp"))
+    # errors are the runs whose code raised or whose worker died; a time limit, a diverged fit, an
+    # unavailable or inapplicable method are outcomes a benchmark records
+    assert sorted(m for m, r in records.items() if raised(r)) == ["toy_crasher", "toy_exit"]
+
+
+def test_a_matrix_exits_1_and_names_the_runs_that_raised_after_writing_its_tables(tmp_path):
+    from tests.commandline import cli
+
+    plugin = str(Path(__file__).resolve().parents[1] / "plugins" / "faulty.py")
+    common = ("--experiments", "indirect", "--seeds", "0,1", "--n-train", "64", "--n-test", "32", "--no-rollout",
+              "--plugin", plugin)
+    bad = cli("run", "--methods", "toy_constant,toy_crasher", "--budget", "5", "--out", tmp_path / "bad", *common)
+    assert bad.returncode == 1 and (tmp_path / "bad" / "tables.md").exists()
+    lines = [line for line in bad.stderr.splitlines() if line.startswith("error: ")]
+    assert len(lines) == 2 and all("toy_crasher indirect" in line and "RuntimeError: the toy fell over" in line
+                                   and "(log: " in line for line in lines)
+    good = cli("run", "--methods", "toy_constant,toy_nan,toy_unavailable", "--budget", "5", "--out", tmp_path / "good",
+               *common)
+    assert good.returncode == 0 and "error: " not in good.stderr
 
 
 def test_record_holds_configuration_results_and_provenance(tmp_path):
