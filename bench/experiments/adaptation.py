@@ -234,7 +234,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--system", default=Setup.system, help=f"a simulated system (default {Setup.system})")
     parser.add_argument("--effects", nargs="+", default=list(Setup.effects), metavar="NAME=c1,...",
                         help="the undeclared effect(s) after the switch, one coefficient per joint (default: spring=5,0)")
-    parser.add_argument("--seeds", type=positive_int, default=5, help="seeds 0..N-1 (default 5)")
+    parser.add_argument("--n-seeds", type=positive_int, default=5, help="seeds 0..N-1 (default 5)")
     parser.add_argument("--before", type=positive, default=Setup.before_s, help="seconds of fitting before the switch (default 20)")
     parser.add_argument("--checkpoints", type=positive, nargs="+", default=list(Setup.checkpoints),
                         help="seconds of fitting after the switch at which the test MSE is measured, from 0")
@@ -248,7 +248,7 @@ def main(args) -> int:
     check_output(args.out, folder=True)
     setup = Setup(args.system, tuple(args.effects), args.before, tuple(args.checkpoints), args.n_train, args.n_test)
     setup.check()
-    seeds = list(range(args.seeds))
+    seeds = list(range(args.n_seeds))
     results = run(setup, seeds, args.workers)
     path = write(results, setup, seeds, args.out, args.invocation)
     print(json.dumps({"table": str(path)}))

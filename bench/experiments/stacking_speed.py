@@ -10,7 +10,7 @@ samples a seed), once stacked and once one by one; a fit's time is its
 evaluations on its schedule included, as a run spends it. The ratio is the
 stacked seed-steps per second over the one-by-one's::
 
-    python -m bench stacking-speed [--device cpu] [--seeds 1 10 100] [--steps 20] [--out PAGE.md]
+    python -m bench stacking-speed [--device cpu] [--n-seeds 1 10 100] [--steps 20] [--out PAGE.md]
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ HELP = "measure seeds trained stacked against one by one: steps/s per seed and s
 def add_arguments(parser) -> None:
     parser.add_argument("--cases", nargs="+", default=list(DEFAULT_CASES), metavar="METHOD:SYSTEM",
                         help=f"stackable methods and their systems (default {' '.join(DEFAULT_CASES)})")
-    parser.add_argument("--seeds", type=positive_int, nargs="+", default=[1, 10, 100],
+    parser.add_argument("--n-seeds", type=positive_int, nargs="+", default=[1, 10, 100],
                         help="numbers of seeds to stack (default 1 10 100)")
     parser.add_argument("--steps", type=positive_int, default=20, help="training steps of each seed's fit (default 20)")
     parser.add_argument("--n-train", type=positive_int, default=2048, help="generated training samples a seed (default 2048)")
@@ -87,13 +87,13 @@ def main(args) -> int:
     print_now(f"on {where['type']} ({machine}), one thread; {args.steps} steps a seed, {args.n_train} samples a seed")
     rows = []
     for method, system in cases:
-        for s in args.seeds:
+        for s in args.n_seeds:
             row = measure(method, system, s, args.steps, args.n_train, device)
             rows.append(row)
             print_now(f"{method} on {system}, {s} seed(s): stacked {row['stacked_steps_per_s']:.3g} steps/s, "
                       f"{row['stacked_seed_steps_per_s']:.3g} seed-steps/s; one by one {row['alone_seed_steps_per_s']:.3g} "
                       f"seed-steps/s; stacked ÷ one by one {row['ratio']:.2f}")
-    lines = [f"Measured by `python -m bench stacking-speed --device {args.device} --seeds {' '.join(map(str, args.seeds))} "
+    lines = [f"Measured by `python -m bench stacking-speed --device {args.device} --n-seeds {' '.join(map(str, args.n_seeds))} "
              f"--steps {args.steps} --n-train {args.n_train}` on {where['type']} ({machine}), one thread.", "",
              "| method | system | seeds | stacked steps/s (each seed) | stacked seed-steps/s | one by one seed-steps/s "
              "| stacked ÷ one by one |", "|---|---|---:|---:|---:|---:|---:|"]
