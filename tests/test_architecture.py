@@ -82,3 +82,14 @@ def test_old_module_names_import_as_the_modules_that_hold_them_now_with_a_warnin
         module = importlib.import_module(old)
     assert module is importlib.import_module(new)
     assert module.__spec__.name == new  # the module keeps its own identity
+
+
+def test_the_repository_root_holds_only_the_layouts_files():
+    # a stray file at the root (a shell's error output, a user's run) is committed by accident, not by design
+    try:
+        tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("not a git checkout")
+    top = {line.split("/", 1)[0] for line in tracked.splitlines() if line}
+    assert top <= {".ci", ".gitignore", "LICENSE", "Makefile", "README.md", "pyproject.toml",
+                   "bench", "docs", "methods", "results", "systems", "tests"}, sorted(top)
