@@ -372,3 +372,13 @@ def test_a_bad_number_is_refused_in_one_line_naming_the_option(tmp_path, monkeyp
     assert exc.value.code == 2
     assert f"argument {option}" in err and f"got {value}" in err and err.count("\n") == 1, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_no_effect_line_of_the_residual_command_ends_in_an_empty_description():
+    from bench.cli.residual import effect_line
+
+    law = {"name": "spring", "kind": "conservative", "joints": [2], "parameters": {"k": {"value": 2.0, "stderr": 0.01}}}
+    assert effect_line(law) == "spring (conservative) on joint 2: k = 2 ± 0.01"
+    bare = {"name": "spring", "kind": "structural", "joints": [2], "parameters": {}, "law": "L += -k*q_2**2/2"}
+    assert effect_line(bare) == "spring (structural) on joint 2: L += -k*q_2**2/2"
+    assert not effect_line({**bare, "law": ""}).endswith(": ")

@@ -72,3 +72,4 @@ def test_the_residual_loop_says_where_its_fits_trained():
     out = residual_loop("mlp", train, test, steps=5, hyperparameters={"hidden": 8, "layers": 1}, report=lambda _: None,
                         device="cpu")
     assert out.device["type"] == "cpu" and out.device["name"] and out.to_json()["device"] == out.device
+

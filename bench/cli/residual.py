@@ -74,10 +74,17 @@ def main(args) -> int:
     b, a = result.mse_before, result.mse_after
     print(f"torque MSE before: train {b['train']:.4g}, test {number(b['test'])}; after: train {a['train']:.4g}, test {number(a['test'])}")
     for e in result.effects:
-        what = e.get("expression") or e["name"]
-        where = f"joint{'s' if len(e['joints']) > 1 else ''} {'-'.join(map(str, e['joints']))}"
-        params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items())
-        print(f"  {what} ({e['kind']}) on {where}: {params or e.get('finding', '')}")
+        print("  " + effect_line(e))
     if not result.effects:
         print("  no effect added: nothing significant in the residual")
     return 0
+
+
+def effect_line(entry: dict) -> str:
+    """One effect of the loop's JSON as the console shows it: what, its kind and
+    joints, then its parameters with their standard errors, or the finding, or
+    its law; never an empty description."""
+    what = entry.get("expression") or entry["name"]
+    where = f"joint{'s' if len(entry['joints']) > 1 else ''} {'-'.join(map(str, entry['joints']))}"
+    params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in entry["parameters"].items())
+    return f"{what} ({entry['kind']}) on {where}: {params or entry.get('finding') or entry.get('law') or 'no parameters'}"
