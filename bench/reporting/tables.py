@@ -24,7 +24,8 @@ Definitions
 * Only runs with status ``ok`` enter the groups. With ``n`` such runs,
   "5 Best" and "5 Worse" take ``min(5, n)`` runs (they overlap when
   ``n < 10``) and "All 10" takes all ``n``. The **Runs** row gives ``n`` and
-  what happened to the others (failed, timeout, unavailable, not applicable).
+  what happened to the others (failed, timeout, unavailable, not applicable);
+  below the table, each run that is not ok is named with its reason.
 * std is the population standard deviation (``ddof = 0``).
 * **Exact** counts the seeds whose expression is exactly the true Lagrangian
   up to the experiment's gauge (:mod:`bench.evaluation.recovery`); "—" for
@@ -372,6 +373,15 @@ def build_table(records: list[Record]) -> str:
         if statuses in ({"unavailable"}, {"not_applicable"}):
             kind = "unavailable" if statuses == {"unavailable"} else "not applicable"
             notes.append(f"- **{m}** is {kind}: {by_method[m][0].error}")
+            continue
+        reasons: dict[tuple[str, str], list[int]] = defaultdict(list)  # every run that is not ok, with its reason
+        for r in sorted(by_method[m], key=lambda r: r.seed):
+            if r.status != "ok":
+                reason = (r.error or "").strip().splitlines()[0] if (r.error or "").strip() else "no reason recorded"
+                reasons[(r.status.replace("_", " "), reason)].append(r.seed)
+        for (status, reason), seeds in reasons.items():
+            which = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))}"
+            notes.append(f"- **{m}**, {which}: {status}: {reason}")
     if notes:
         lines += [""] + notes
     return "\n".join(lines)

@@ -122,3 +122,13 @@ def test_the_scratch_folder_of_make_bench_is_no_result_and_no_page(tmp_path):
     assert unlisted(root) == [] and stale_figures(root) == []
     assert cli("index", root).returncode == 0
     assert "-->9<!--" in (root / "quick" / "tables.md").read_text()
+
+
+
+def test_a_table_names_each_run_that_is_not_ok_with_its_reason(tmp_path):
+    from bench.reporting.tables import write_tables
+
+    shutil.copytree(RESULTS / "measured" / "kuka_swapped_60s" / "records", tmp_path / "records")
+    text = write_tables(tmp_path)
+    assert "- **syrenets**, seed 1: timeout: fit still running at 1.5 x its 60 s budget; killed" in text
+    assert text.count("- **") == 1  # the runs that are ok are not named
