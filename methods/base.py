@@ -210,12 +210,14 @@ class Method(FittedModel):
         return self.end_fit(started, train)
 
     def begin_fit(self, train: Dataset, experiment: str, seed: int, budget_s: "float | Budget | None" = None, *,
-                  steps: int | None = None, warm_start: bool = False, system: System | None = None) -> "FitStart":
+                  steps: int | None = None, warm_start: bool = False, system: System | None = None,
+                  prepare: bool = True) -> "FitStart":
         """What :meth:`fit` does before the method's loop: check the data, do
-        the one-time work, seed the generators, draw the evaluation subset and
-        start the budget's :class:`Progress`. With :meth:`end_fit` after the
-        loop, a fit whose loop runs elsewhere (several seeds' networks trained
-        as one, :mod:`methods.stacking`) is the same as :meth:`fit`."""
+        the one-time work (:meth:`prepare`; ``prepare=False`` where the loop that
+        runs elsewhere does not use it), seed the generators, draw the evaluation
+        subset and start the budget's :class:`Progress`. With :meth:`end_fit`
+        after the loop, a fit whose loop runs elsewhere (several seeds' networks
+        trained as one, :mod:`methods.stacking`) is the same as :meth:`fit`."""
         budget = as_budget(budget_s, steps)
         if warm_start and not self.supports_warm_start:
             raise ConfigError(f"{self.name} cannot continue a fit (warm_start)")
@@ -232,7 +234,7 @@ class Method(FittedModel):
         if len(train) == 0:
             raise DataError(f"{train.source}: no samples to fit")
         train.target(experiment)  # raises a DataError naming what is missing
-        prepare_seconds = self.prepare(train, experiment)
+        prepare_seconds = self.prepare(train, experiment) if prepare else 0.0
         t0 = time.perf_counter()
         self.experiment, self.seed, self.dof = experiment, int(seed), train.dof
         self.system = system if system is not None else self._resolve_system(train)

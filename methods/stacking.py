@@ -123,7 +123,8 @@ def fit_stacked(methods: list, datasets: list[Dataset], experiment: str, seeds: 
                           f"{sorted({type(m).name for m in methods})}")
     starts, loops = [], []
     for method, data, seed in zip(methods, datasets, seeds):
-        starts.append(method.begin_fit(data, experiment, seed, budget_s, steps=steps, system=system))
+        # no one-time work: what a method prepares (DeLaN's compiled loss) is for its own step, not the stack's
+        starts.append(method.begin_fit(data, experiment, seed, budget_s, steps=steps, system=system, prepare=False))
         loops.append(method.start_loop(data))  # its network from its own seeded generators, as alone
     stack = StackedLagrangian([m.model for m in methods])
     direct = experiment == "direct"

@@ -50,6 +50,11 @@ def method_config(spec: RunSpec) -> dict:
     return config
 
 
+def make_method(spec: RunSpec):
+    """The spec's method, in its configuration, to train on the spec's device."""
+    return METHODS[spec.method](**method_config(spec)).use_device(spec.device)
+
+
 def make_system(spec: RunSpec) -> System:
     """The spec's system, of the spec's split, with its domain widened where the spec asks."""
     system = SYSTEMS[spec.system](split=spec.split)
@@ -139,7 +144,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         train, test = data if data is not None else load_data(spec, system)
         budget = spec.budget
         if fitted is None:
-            method = METHODS[spec.method](**method_config(spec)).use_device(spec.device)
+            method = make_method(spec)
             warm_up_torch()
         else:
             method = fitted

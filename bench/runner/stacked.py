@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Callable
 
 from bench.runner.code import code_hash
-from bench.runner.execute import execute, load_data, make_system, method_config, warm_up_torch
+from bench.runner.execute import execute, load_data, make_method, make_system, warm_up_torch
 from bench.runner.isolation import Call, run_call
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record, record_path, write_record
@@ -47,11 +47,8 @@ def run_stacked_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
     first = specs[0]
     system = make_system(first)
     data = [load_data(spec, system) for spec in specs]
-    methods = [METHODS[spec.method](**method_config(spec)).use_device(spec.device) for spec in specs]
+    methods = [make_method(spec) for spec in specs]
     warm_up_torch()
-    on_phase("prepare")
-    for method, (train, _) in zip(methods, data):
-        method.prepare(train, first.experiment)
     on_phase("fit")
     fit_stacked(methods, [train for train, _ in data], first.experiment, [s.seed for s in specs], first.budget,
                 system=system)
