@@ -134,6 +134,18 @@ class Method(FittedModel):
         self.train_device = device if self.uses_device else "cpu"
         return self
 
+    def stacking_unavailable_reason(self) -> str | None:
+        """``None`` where several seeds' fits of this configuration can train as
+        one stacked model (:mod:`methods.stacking`); otherwise why not."""
+        return None if self.stackable else f"{self.name} is not a stackable method"
+
+    @classmethod
+    def train_stacked(cls, methods: list, starts: list, datasets: list, experiment: str, slots: list) -> None:
+        """The loop of a stacked fit (:func:`methods.stacking.fit_stacked`): ``methods``
+        after their :meth:`begin_fit` (``starts``), each seed's own random draws
+        inside its :class:`~methods.stacking.RngSlot`; a stackable method writes it."""
+        raise NotImplementedError(f"{cls.name} has no stacked loop")
+
     def trained_on(self) -> str:
         """The device the last fit trained on, as its record names it: :attr:`train_device`,
         unless the fit had nothing to train there (a method overrides this)."""

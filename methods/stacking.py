@@ -36,7 +36,10 @@ its clock.
 from __future__ import annotations
 
 import copy
+import functools
+import random
 
+import numpy as np
 import torch
 from torch.func import functional_call, stack_module_state, vmap
 
@@ -46,22 +49,21 @@ from bench.core.errors import ConfigError
 from methods.base import gc_frozen
 
 
-class _Tangent(torch.nn.Module):
-    """``base.tangent`` as a module's forward, so that ``functional_call`` can call it."""
+class _Call(torch.nn.Module):
+    """``base``'s method ``name`` as a module's forward, so that ``functional_call`` can call it."""
 
-    def __init__(self, base: torch.nn.Module):
+    def __init__(self, base: torch.nn.Module, name: str):
         super().__init__()
-        self.base = base
+        self.base, self.name = base, name
 
-    def forward(self, q, qd, dq, dqd):
-        return self.base.tangent(q, qd, dq, dqd)
+    def forward(self, *args):
+        return getattr(self.base, self.name)(*args)
 
 
-class StackedLagrangian:
-    """``(q, qd) -> L`` of S networks of one shape on S seeds' samples,
-    concatenated seed by seed (each seed ``rows`` samples); with a
-    ``tangent`` where the networks give their own derivatives
-    (:class:`~bench.core.dynamics.TangentLagrangian`).
+class Stack:
+    """The parameters and buffers of S networks of one shape, stacked along a
+    first axis (``torch.func.stack_module_state``), and any of the networks'
+    methods over S inputs at once (:meth:`vmapped`).
 
     The stack's parameters are leaves of their own; each network's parameters
     become views of its slice (:meth:`__init__`), and :meth:`share_grads`
@@ -76,26 +78,28 @@ class StackedLagrangian:
             for name, b in net.named_buffers():
                 b.data = self.buffers[name].data[s]
         self.base = copy.deepcopy(networks[0]).to("meta")
-        self._forward = vmap(lambda p, b, q, qd: functional_call(self.base, (p, b), (q, qd)))
-        if hasattr(self.base, "tangent"):
-            tangent = _Tangent(self.base)
+        self._calls: dict = {}
 
-            def one(p, b, q, qd, dq, dqd):
-                return functional_call(tangent, ({"base." + k: v for k, v in p.items()},
-                                                 {"base." + k: v for k, v in b.items()}), (q, qd, dq, dqd))
+    def vmapped(self, name: str, in_dims=0):
+        """The networks' method ``name``, each on its slice of the stacked
+        arguments (``in_dims`` as :func:`torch.func.vmap` takes them, for the
+        arguments after the parameters)."""
+        key = (name, in_dims if not isinstance(in_dims, list) else tuple(in_dims))
+        if key not in self._calls:
+            call = _Call(self.base, name)
+            prefixed = {k: "base." + k for k in (*self.params, *self.buffers)}
 
-            self._tangent = vmap(one)
-            self.tangent = self._tangent_of_rows
+            def one(p, b, *args):
+                return functional_call(call, ({prefixed[k]: v for k, v in p.items()},
+                                              {prefixed[k]: v for k, v in b.items()}), args)
 
-    def _split(self, *xs: torch.Tensor):
+            dims = (0, 0, *in_dims) if isinstance(in_dims, (tuple, list)) else 0
+            self._calls[key] = vmap(one, in_dims=dims)
+        return functools.partial(self._calls[key], self.params, self.buffers)
+
+    def split(self, *xs: torch.Tensor):
+        """Rows concatenated seed by seed, each seed's its own block: ``(S, rows, ...)``."""
         return tuple(x.reshape(self.size, -1, *x.shape[1:]) for x in xs)
-
-    def __call__(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
-        return self._forward(self.params, self.buffers, *self._split(q, qd)).reshape(-1)
-
-    def _tangent_of_rows(self, q, qd, dq, dqd):
-        out = self._tangent(self.params, self.buffers, *self._split(q, qd, dq, dqd))
-        return tuple(x.reshape(-1, *x.shape[2:]) for x in out)
 
     def zero_grad(self) -> None:
         for p in self.params.values():
@@ -109,51 +113,123 @@ class StackedLagrangian:
                 p.grad = torch.zeros_like(p) if g is None else g[s]
 
 
+class StackedLagrangian(Stack):
+    """``(q, qd) -> L`` of S networks of one shape on S seeds' samples,
+    concatenated seed by seed (each seed ``rows`` samples); with a
+    ``tangent`` where the networks give their own derivatives
+    (:class:`~bench.core.dynamics.TangentLagrangian`)."""
+
+    def __init__(self, networks: list[torch.nn.Module]):
+        super().__init__(networks)
+        if hasattr(self.base, "tangent"):
+            self.tangent = self._tangent_of_rows
+
+    def __call__(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return self.vmapped("forward")(*self.split(q, qd)).reshape(-1)
+
+    def _tangent_of_rows(self, q, qd, dq, dqd):
+        out = self.vmapped("tangent")(*self.split(q, qd, dq, dqd))
+        return tuple(x.reshape(-1, *x.shape[2:]) for x in out)
+
+
+class RngSlot:
+    """One seed's generators (Python's, NumPy's and torch's, the CPU's and
+    the device's) while several seeds' fits share one process: entering
+    puts the seed's states in place, leaving keeps them and puts back what
+    was there, so that each fit draws the numbers it draws alone."""
+
+    def __init__(self, device: str = "cpu"):
+        self.cuda = torch.device(device).type == "cuda"
+        self.mine = self.saved = None
+
+    def _state(self):
+        return (random.getstate(), np.random.get_state(), torch.get_rng_state(),
+                torch.cuda.get_rng_state() if self.cuda else None)
+
+    @staticmethod
+    def _put(state) -> None:
+        py, nump, cpu, cuda = state
+        random.setstate(py)
+        np.random.set_state(nump)
+        torch.set_rng_state(cpu)
+        if cuda is not None:
+            torch.cuda.set_rng_state(cuda)
+
+    def __enter__(self):
+        self.saved = self._state()
+        if self.mine is not None:
+            self._put(self.mine)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.mine = self._state()
+        self._put(self.saved)
+
+
+def train_lagrangians(methods: list, starts: list, datasets: list[Dataset], experiment: str, slots: list[RngSlot]) -> None:
+    """The stacked loop of :class:`~methods.torch_method.TorchLagrangianMethod`'s
+    own: mini-batch steps of the loss :meth:`loss` on the stack's predictions
+    (a :class:`StackedLagrangian`), each seed's step by its :meth:`apply_step`."""
+    loops = []
+    for method, data, slot in zip(methods, datasets, slots):
+        with slot:
+            loops.append(method.start_loop(data))  # its network from its own seeded generators, as alone
+    stack = StackedLagrangian([m.model for m in methods])
+    direct = experiment == "direct"
+    while True:
+        going = [s.progress.step() for s in starts]
+        if not all(going):
+            for s, g in zip(starts, going):
+                if g:
+                    s.progress.stop(SHARED_BUDGET)
+            break
+        batches = []
+        for tensors, feed in loops:
+            idx = feed.next()
+            batches.append({k: v[idx] for k, v in tensors.items()})
+        q, qd, qdd = (torch.cat([b[k] for b in batches]) for k in ("q", "qd", "qdd"))
+        pred = stack(q, qd) if direct else euler_lagrange(stack, q, qd, qdd, create_graph=True)
+        losses, row = [], 0
+        for method, batch in zip(methods, batches):
+            target = batch["L" if direct else "tau"]
+            losses.append(method.loss(pred[row:row + len(target)], target, experiment))
+            row += len(target)
+        stack.zero_grad()
+        torch.stack(losses).sum().backward()
+        stack.share_grads()
+        for method, loss in zip(methods, losses):
+            method.apply_step(loss)
+
+
+#: why a stacked seed's loop ended before its own budget did
+SHARED_BUDGET = "another seed of the stack used up the shared budget"
+
+
 def fit_stacked(methods: list, datasets: list[Dataset], experiment: str, seeds: list[int], budget_s=None, *,
                 steps: int | None = None, system=None) -> list:
     """Fit ``methods`` (instances of one stackable torch method, one configuration)
     on ``datasets`` with ``seeds``, one each, as one stacked model (see the module
     docstring); returns them fitted, each as :meth:`~methods.base.Method.fit`
-    leaves it."""
+    leaves it. The loop is the method's :meth:`~methods.base.Method.train_stacked`."""
     if not methods or not (len(methods) == len(datasets) == len(seeds)):
         raise ConfigError("fit_stacked needs one dataset and one seed per method")
     kind = type(methods[0])
-    if not kind.stackable or any(type(m) is not kind or m.config != methods[0].config for m in methods):
+    if any(type(m) is not kind or m.config != methods[0].config for m in methods):
         raise ConfigError(f"only fits of one stackable method in one configuration stack; got "
                           f"{sorted({type(m).name for m in methods})}")
-    starts, loops = [], []
-    for method, data, seed in zip(methods, datasets, seeds):
-        # no one-time work: what a method prepares (DeLaN's compiled loss) is for its own step, not the stack's
-        starts.append(method.begin_fit(data, experiment, seed, budget_s, steps=steps, system=system, prepare=False))
-        loops.append(method.start_loop(data))  # its network from its own seeded generators, as alone
-    stack = StackedLagrangian([m.model for m in methods])
-    direct = experiment == "direct"
+    reason = methods[0].stacking_unavailable_reason()
+    if reason:
+        raise ConfigError(reason)
+    slots = [RngSlot(m.train_device) for m in methods]
+    starts = []
+    for method, data, seed, slot in zip(methods, datasets, seeds, slots):
+        with slot:  # no one-time work: what a method prepares (DeLaN's compiled loss) is for its own step
+            starts.append(method.begin_fit(data, experiment, seed, budget_s, steps=steps, system=system, prepare=False))
     with gc_frozen():
-        while True:
-            going = [s.progress.step() for s in starts]
-            if not all(going):
-                for s, g in zip(starts, going):
-                    if g:
-                        s.progress.stop("another seed of the stack used up the shared budget")
-                break
-            batches = []
-            for tensors, feed in loops:
-                idx = feed.next()
-                batches.append({k: v[idx] for k, v in tensors.items()})
-            q, qd, qdd = (torch.cat([b[k] for b in batches]) for k in ("q", "qd", "qdd"))
-            pred = stack(q, qd) if direct else euler_lagrange(stack, q, qd, qdd, create_graph=True)
-            losses, row = [], 0
-            for method, batch in zip(methods, batches):
-                target = batch["L" if direct else "tau"]
-                losses.append(method.loss(pred[row:row + len(target)], target, experiment))
-                row += len(target)
-            stack.zero_grad()
-            torch.stack(losses).sum().backward()
-            stack.share_grads()
-            for method, loss in zip(methods, losses):
-                method.apply_step(loss)
+        kind.train_stacked(methods, starts, datasets, experiment, slots)
     out = []
-    for method, start, data in zip(methods, starts, datasets):
-        out.append(method.end_fit(start, data))
+    for method, start, data, slot in zip(methods, starts, datasets, slots):
+        with slot:
+            out.append(method.end_fit(start, data))
         method.fit_info["stacked"] = len(methods)
     return out

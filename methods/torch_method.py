@@ -21,6 +21,7 @@ from bench.core.models import LagrangianFunction
 from methods.base import Method
 from methods.config import POSITIVE, MethodConfig, Range
 from methods.progress import Progress
+from methods.stacking import train_lagrangians
 
 
 @dataclass(frozen=True)
@@ -112,6 +113,10 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
     @abc.abstractmethod
     def build_model(self, train: Dataset) -> torch.nn.Module:
         """The network, for data of ``train``'s shape."""
+
+    @classmethod
+    def train_stacked(cls, methods, starts, datasets, experiment, slots) -> None:
+        train_lagrangians(methods, starts, datasets, experiment, slots)
 
     def make_scheduler(self, optimizer: torch.optim.Optimizer):
         """Return an object with ``step(loss: float)``, or ``None``."""

@@ -11,6 +11,9 @@ evaluations on its schedule included, as a run spends it. The ratio is the
 stacked seed-steps per second over the one-by-one's::
 
     python -m bench stacking-speed [--device cpu] [--n-seeds 1 10 100] [--steps 20] [--out PAGE.md]
+
+SyReNets is measured without its refinement after training
+(``refine=False``), which a step count does not bound.
 """
 
 from __future__ import annotations
@@ -30,8 +33,10 @@ from methods import METHODS
 from methods.stacking import fit_stacked
 from systems import get_system
 
-#: what is measured by default: the MLP and DeLaN on the Panda (the stackable torch methods)
-DEFAULT_CASES = ("mlp:panda", "delan:panda")
+#: what is measured by default: SyReNets on the double pendulum (1 and 10 seeds), the MLP and DeLaN on the Panda
+DEFAULT_CASES = ("syrenets:double_pendulum:1,10", "mlp:panda", "delan:panda")
+#: each method's configuration here: its defaults, less the work after training that a step count does not bound
+MEASURED_CONFIG = {"syrenets": {"refine": False}}
 
 
 def measure(method: str, system_name: str, seeds: int, steps: int, n_train: int, device: str) -> dict:
@@ -41,7 +46,7 @@ def measure(method: str, system_name: str, seeds: int, steps: int, n_train: int,
     cls = METHODS[method]
 
     def fresh():
-        return cls().use_device(device)
+        return cls(**MEASURED_CONFIG.get(method, {})).use_device(device)
 
     fresh().fit(data[0], "indirect", 0, steps=1, system=system)  # the process's one-time work (imports, compiling)
     alone = [fresh().fit(d, "indirect", k, steps=steps, system=system) for k, d in enumerate(data)]
@@ -60,9 +65,28 @@ def measure(method: str, system_name: str, seeds: int, steps: int, n_train: int,
 HELP = "measure seeds trained stacked against one by one: steps/s per seed and seed-steps/s, on a device"
 
 
+def parse_case(case: str, n_seeds: list[int]) -> tuple[str, str, list[int]]:
+    """``METHOD:SYSTEM[:S,...]`` as (method, system, numbers of seeds); a :class:`UserError` naming what is wrong."""
+    parts = case.split(":")
+    if len(parts) not in (2, 3):
+        raise UserError(f"--cases {case}: expected METHOD:SYSTEM or METHOD:SYSTEM:S,S,...")
+    method, system = parts[:2]
+    stackable = [n for n in METHODS.names() if METHODS.entry(n).available and METHODS[n].stackable]
+    if method not in stackable:
+        raise UserError(f"--cases {case}: {method} is not a stackable method (stackable: {', '.join(stackable)})")
+    if len(parts) == 2:
+        return method, system, n_seeds
+    try:
+        counts = [positive_int(x) for x in parts[2].split(",")]
+    except Exception:
+        raise UserError(f"--cases {case}: the numbers of seeds must be positive integers, e.g. {method}:{system}:1,10") from None
+    return method, system, counts
+
+
 def add_arguments(parser) -> None:
-    parser.add_argument("--cases", nargs="+", default=list(DEFAULT_CASES), metavar="METHOD:SYSTEM",
-                        help=f"stackable methods and their systems (default {' '.join(DEFAULT_CASES)})")
+    parser.add_argument("--cases", nargs="+", default=list(DEFAULT_CASES), metavar="METHOD:SYSTEM[:S,...]",
+                        help=f"stackable methods, their systems and, optionally, their numbers of seeds in place of "
+                             f"--n-seeds (default {' '.join(DEFAULT_CASES)})")
     parser.add_argument("--n-seeds", type=positive_int, nargs="+", default=[1, 10, 100],
                         help="numbers of seeds to stack (default 1 10 100)")
     parser.add_argument("--steps", type=positive_int, default=20, help="training steps of each seed's fit (default 20)")
@@ -75,19 +99,16 @@ def main(args) -> int:
     if args.out:
         check_output(args.out)
     device = resolve(args.device)
-    cases = [c.split(":", 1) for c in args.cases]
-    for method, system in cases:
-        if method not in METHODS or not METHODS[method].stackable:
-            raise UserError(f"--cases {method}:{system}: {method} is not a stackable method (stackable: "
-                            f"{', '.join(n for n in METHODS.names() if METHODS[n].stackable)})")
+    cases = [parse_case(c, args.n_seeds) for c in args.cases]
+    for method, system, _ in cases:
         get_system(system)
     torch.set_num_threads(1)
     where = describe(device)
     machine = where.get("name") or cpu_model()
     print_now(f"on {where['type']} ({machine}), one thread; {args.steps} steps a seed, {args.n_train} samples a seed")
     rows = []
-    for method, system in cases:
-        for s in args.n_seeds:
+    for method, system, counts in cases:
+        for s in counts:
             row = measure(method, system, s, args.steps, args.n_train, device)
             rows.append(row)
             print_now(f"{method} on {system}, {s} seed(s): stacked {row['stacked_steps_per_s']:.3g} steps/s, "

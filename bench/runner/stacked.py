@@ -29,14 +29,23 @@ from methods.stacking import fit_stacked
 
 
 def groups(specs: list[RunSpec]) -> list[list[RunSpec]]:
-    """``specs`` in order, the runs of a stackable method (:attr:`~methods.base.Method.stackable`)
-    grouped by everything but their seed; every other run alone."""
+    """``specs`` in order, the runs of a stackable method in a stackable configuration
+    (:meth:`~methods.base.Method.stacking_unavailable_reason`) grouped by everything
+    but their seed; every other run alone."""
     out: dict = {}
     for spec in specs:
-        stackable = spec.method in METHODS and METHODS.entry(spec.method).available and METHODS[spec.method].stackable
+        stackable = (spec.method in METHODS and METHODS.entry(spec.method).available and METHODS[spec.method].stackable
+                     and _stacks(spec))
         key = repr(sorted(dataclasses.replace(spec, seed=0).to_dict().items())) if stackable else spec.run_id
         out.setdefault(key, []).append(spec)
     return list(out.values())
+
+
+def _stacks(spec: RunSpec) -> bool:
+    try:
+        return make_method(spec).stacking_unavailable_reason() is None
+    except Exception:  # a configuration the run itself will refuse, with its reason, alone
+        return False
 
 
 def run_stacked_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:

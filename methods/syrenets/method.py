@@ -18,7 +18,8 @@ from methods.syrenets.config import SyReNetsConfig
 from methods.syrenets.equations import MAX_READABLE_TERMS, Equations
 from methods.syrenets.multistart import halve
 from methods.syrenets.network import SyReNet
-from methods.syrenets.training import Cosine, Network, compiled_pass, inputs_of, training_pass
+from methods.syrenets.stacked import train_syrenets
+from methods.syrenets.training import Cosine, Network, compiled_pass, inputs_of, run_steps, training_pass
 from methods.torch_method import Feed, TorchLagrangianMethod, fused_adam_ok
 
 
@@ -31,7 +32,7 @@ class SyReNets(Equations, TorchLagrangianMethod):
     ``frozen``, ``optimizer`` and ``scheduler`` read it.
     """
 
-    stackable = False  # its loop (selection, replay, multi-start) is its own, not the one methods.stacking drives
+    stackable = True  # its own stacked loop: methods.syrenets.stacked
     Config = SyReNetsConfig
     smoke = {"layers": 2, "heads": 3, "latent": 4, "ae_hidden": 8, "head_hidden": 8, "max_steps": 10,
              "eval_samples": 128, "refine": False}
@@ -105,16 +106,22 @@ class SyReNets(Equations, TorchLagrangianMethod):
 
     def train_step(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
         """One optimisation step of the network in place on ``batch``; returns each sample's squared error."""
-        net = self.net
         loss, err, weights = self._pass(batch, experiment)
-        net.optimizer.zero_grad(set_to_none=True)
+        self.net.optimizer.zero_grad(set_to_none=True)
         loss.backward()
+        self.finish_step(err, weights)
+        return err
+
+    def finish_step(self, err: torch.Tensor, weights: list[torch.Tensor]) -> None:
+        """The step of the network in place after its gradients are in: the
+        optimiser's, the schedule's (on the batch's error ``err``) and the
+        frozen ``weights`` the batch selected."""
+        net = self.net
         net.optimizer.step()
         batch_loss, a = err.mean().item(), self.config.lr_smoothing
         net.watched = batch_loss if net.watched is None or not a else a * net.watched + (1 - a) * batch_loss
         net.scheduler.step(net.watched)
         net.frozen = weights
-        return err
 
     def _pass(self, batch: dict[str, torch.Tensor], experiment: str):
         """:func:`~methods.syrenets.training.training_pass` of the network in place, compiled with ``compile``."""
@@ -123,8 +130,26 @@ class SyReNets(Equations, TorchLagrangianMethod):
         return (compiled_pass() if cfg.compile else training_pass)(
             self.model, batch["q"], batch["qd"], batch["qdd"], target, experiment, cfg.inputs, cfg.compile)
 
+    def stacking_unavailable_reason(self) -> str | None:
+        if self.config.compile:
+            return "syrenets with compile=True trains alone: its compiled pass is one network's"
+        return None
+
+    @classmethod
+    def train_stacked(cls, methods, starts, datasets, experiment, slots) -> None:
+        train_syrenets(methods, starts, datasets, experiment, slots)
+
     # -- the fit --------------------------------------------------------------------
     def _fit(self, train, experiment, progress):
+        run_steps(self.steps(train, experiment, progress), lambda batch: self.train_step(batch, experiment))
+
+    def steps(self, train, experiment, progress):
+        """The fit's loop as a generator: it yields each step's batch, for the
+        network in place (:attr:`net`), and is sent back each sample's
+        squared error once the step is done, or ``None`` where the step was
+        not done and the loop must end (:func:`~methods.syrenets.training.run_steps`;
+        a stacked fit, :mod:`methods.syrenets.stacked`, does the steps of
+        several seeds' loops at once)."""
         cfg = self.config
         self._start_training()
         t = train.tensors(self.dtype, self.device)
@@ -137,7 +162,7 @@ class SyReNets(Equations, TorchLagrangianMethod):
             self.net.lr_drops, self.net.replay = [], torch.empty(0, dtype=torch.long)
             if isinstance(self.scheduler, Cosine):
                 self.scheduler.start(progress)
-            self._train(t, experiment, progress, feed)
+            yield from self._train(t, experiment, progress, feed)
             return
         networks = []
         for k in range(cfg.starts):
@@ -149,10 +174,10 @@ class SyReNets(Equations, TorchLagrangianMethod):
             networks.append(net)
         self.net = networks[0]
         if cfg.starts > 1:
-            self._starts = halve(self, networks, t, experiment, progress, feed)
+            self._starts = yield from halve(self, networks, t, experiment, progress, feed)
         del networks
         if progress.stop_reason is None:
-            self._train(t, experiment, progress, feed)
+            yield from self._train(t, experiment, progress, feed)
 
     def _prepare(self, train, experiment) -> None:
         """With ``compile``, compile the training pass for the loop's batch
@@ -181,14 +206,16 @@ class SyReNets(Equations, TorchLagrangianMethod):
 
     def _train(self, t, experiment, progress, feed: Feed, until: float = math.inf) -> bool:
         """Steps of the network in place until ``progress.fraction()`` reaches
-        ``until``; ``False`` once the budget is spent."""
+        ``until`` (a generator, as :meth:`steps`); ``False`` once the budget is spent."""
         cfg, net = self.config, self.net
         lr = net.optimizer.param_groups[0]["lr"]
         while progress.fraction() < until:
             if not progress.step():
                 return False
             idx = torch.cat([feed.next(), net.replay])
-            err = self.train_step({k: v[idx] for k, v in t.items()}, experiment)
+            err = yield {k: v[idx] for k, v in t.items()}
+            if err is None:
+                return False
             if cfg.lr_schedule == "plateau" and net.optimizer.param_groups[0]["lr"] != lr:
                 lr = net.optimizer.param_groups[0]["lr"]
                 net.lr_drops.append([progress.steps + 1, round(progress.elapsed(), 2), lr])

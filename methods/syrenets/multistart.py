@@ -16,7 +16,8 @@ from methods.torch_method import Feed
 
 
 def halve(method, networks: list[Network], t, experiment: str, progress, feed: Feed) -> dict:
-    """Successive halving over ``networks``; leaves the survivor in
+    """Successive halving over ``networks`` (a generator of the fit's steps,
+    :meth:`~methods.syrenets.method.SyReNets.steps`); leaves the survivor in
     ``method.net`` and returns the record's entry: the networks, each round's
     ``[network, score]`` (``None`` for a score that is not finite) and the
     network kept.
@@ -42,7 +43,7 @@ def halve(method, networks: list[Network], t, experiment: str, progress, feed: F
         for i, k in enumerate(alive):
             method.net = networks[k]
             seen = len(progress.measured)
-            more = method._train(t, experiment, progress, feed, until=begin + r * length + (i + 1) * turn)
+            more = yield from method._train(t, experiment, progress, feed, until=begin + r * length + (i + 1) * turn)
             if math.isfinite(progress.measure()):
                 best[k] = scores[k] = min(v for v in [best[k], *progress.measured[seen:]] if not math.isnan(v))
             else:  # a network whose state is no longer finite is dropped first

@@ -43,11 +43,17 @@ class HeadsOutput(torch.autograd.Function):
     (heads, C, k). Measured: results/syrenets/design.md.
     """
 
+    generate_vmap_rule = True  # several networks' heads at once (methods.stacking)
+
     @staticmethod
-    def forward(ctx, W: torch.Tensor, h: torch.Tensor, hidden_first: bool = False) -> torch.Tensor:
-        ctx.save_for_backward(W, h)
-        ctx.hidden_first = hidden_first
+    def forward(W: torch.Tensor, h: torch.Tensor, hidden_first: bool = False) -> torch.Tensor:
         return (W * h.unsqueeze(-1)).sum(1) if hidden_first else (W * h.unsqueeze(1)).sum(-1)
+
+    @staticmethod
+    def setup_context(ctx, inputs, output) -> None:
+        W, h = inputs[:2]
+        ctx.save_for_backward(W, h)
+        ctx.hidden_first = inputs[2] if len(inputs) > 2 else False
 
     @staticmethod
     @torch.autograd.function.once_differentiable
@@ -72,10 +78,15 @@ class Gram(torch.autograd.Function):
     autograd's takes two, ``G W`` and ``G^T W``, each as costly as the
     forward."""
 
+    generate_vmap_rule = True
+
     @staticmethod
-    def forward(ctx, W: torch.Tensor) -> torch.Tensor:
-        ctx.save_for_backward(W)
+    def forward(W: torch.Tensor) -> torch.Tensor:
         return W @ W.T
+
+    @staticmethod
+    def setup_context(ctx, inputs, output) -> None:
+        ctx.save_for_backward(inputs[0])
 
     @staticmethod
     @torch.autograd.function.once_differentiable
@@ -134,14 +145,15 @@ class SyReNet(torch.nn.Module):
         return self.dec[2](h)
 
     def contractive(self, a1: torch.Tensor, a2: torch.Tensor, probes: int = 0, K: torch.Tensor | None = None,
-                    groups: int = 1) -> torch.Tensor:
+                    groups: int = 1, e: torch.Tensor | None = None) -> torch.Tensor:
         """Mean squared entry of the encoder Jacobian, averaged over rows.
 
         ``probes == 0``: exact, in closed form. ``probes > 0``: Hutchinson's
         unbiased estimate ``E ||J^T e||^2`` with that many Rademacher vectors
         ``e``, shared by the rows of a group: the rows are ``groups`` equal
         blocks (the layers' batches, stacked), each with its own vectors.
-        16 / probes times cheaper. ``K = W1 W1^T`` may be passed in.
+        16 / probes times cheaper. ``K = W1 W1^T`` may be passed in, and so may
+        the vectors ``e`` (:meth:`probe_vectors`), drawn by the caller.
         """
         W1, W2, W3 = self.enc[0].weight, self.enc[1].weight, self.enc[2].weight
         s1, s2 = torch.sigmoid(a1), torch.sigmoid(a2)  # softplus' = sigmoid
@@ -151,12 +163,18 @@ class SyReNet(torch.nn.Module):
             M = torch.matmul(W3.unsqueeze(0) * s2.unsqueeze(1), W2) * s1.unsqueeze(1)  # (B, d, h) = J W1^+
         else:
             rows, h = a1.shape[0] // groups, a1.shape[1]
-            e = torch.randint(0, 2, (groups, probes, W3.shape[0]), dtype=W3.dtype, device=W3.device) * 2 - 1
+            if e is None:
+                e = self.probe_vectors(groups, probes)
             s1, s2 = s1.view(groups, 1, rows, h), s2.view(groups, 1, rows, h)
             M = ((e @ W3).unsqueeze(2) * s2) @ W2 * s1  # (groups, probes, rows, h) = e^T J W1^+
             M = M.transpose(1, 2).reshape(groups * rows, probes, h) / math.sqrt(probes)
         sq = (torch.matmul(M, K) * M).sum(dim=(1, 2))  # ||J_b||_F^2 (exact or estimated)
         return sq.mean() / (W3.shape[0] * W1.shape[1])
+
+    def probe_vectors(self, groups: int, probes: int) -> torch.Tensor:
+        """``groups`` x ``probes`` Rademacher vectors of the latent size, from torch's generator of the device."""
+        W3 = self.enc[2].weight
+        return torch.randint(0, 2, (groups, probes, W3.shape[0]), dtype=W3.dtype, device=W3.device) * 2 - 1
 
     def heads(self, layer: int, G: torch.Tensor, prev_prod: torch.Tensor):
         """Selection of every head of ``layer`` at once: (P, phi, weights)."""
@@ -169,8 +187,10 @@ class SyReNet(torch.nn.Module):
         return P, phi, phi.unsqueeze(1) * P * self.S[layer]
 
     # -- passes -------------------------------------------------------------------
-    def select(self, x: torch.Tensor):
-        """Training pass on a batch: (output, frozen weights, auxiliary losses)."""
+    def select(self, x: torch.Tensor, probes: torch.Tensor | None = None):
+        """Training pass on a batch: (output, frozen weights, auxiliary losses);
+        ``probes``, the contractive penalty's vectors where the caller draws
+        them (:meth:`probe_vectors` with ``layers`` groups), else drawn here."""
         cfg = self.cfg
         B, H = x.shape[0], cfg.heads
         h = x.new_zeros(B, H)
@@ -194,7 +214,8 @@ class SyReNet(torch.nn.Module):
         ae_loss = L * F.mse_loss(self.decode(torch.cat(latents)), torch.cat(normed))
         if cfg.lambda_contractive:
             W1 = self.enc[0].weight
-            penalty = self.contractive(torch.cat(pre1), torch.cat(pre2), cfg.contractive_probes, Gram.apply(W1), groups=L)
+            penalty = self.contractive(torch.cat(pre1), torch.cat(pre2), cfg.contractive_probes, Gram.apply(W1), groups=L,
+                                       e=probes)
             ae_loss = ae_loss + L * cfg.lambda_contractive * penalty
         return h.sum(dim=1), weights, ae_loss + self._diversity(torch.stack(selections))
 

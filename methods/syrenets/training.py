@@ -1,5 +1,5 @@
 """One SyReNets network's training: its state between steps
-(:class:`Network`), the training pass
+(:class:`Network`), the driver of a fit's steps (:func:`run_steps`), the training pass
 (:func:`training_pass`, compiled by :func:`compiled_pass`), the frozen
 function a batch selects (:class:`Fixed`) and the cosine schedule
 (:class:`Cosine`)."""
@@ -33,6 +33,17 @@ class Network:
     watched: float | None = None
     lr_drops: list = field(default_factory=list)
     replay: torch.Tensor = field(default_factory=lambda: torch.empty(0, dtype=torch.long))
+
+
+def run_steps(steps, step) -> None:
+    """Drive a fit's generator of steps (:meth:`~methods.syrenets.method.SyReNets.steps`)
+    to its end: each batch it yields goes to ``step``, whose squared errors go back."""
+    err = None
+    try:
+        while True:
+            err = step(steps.send(err))
+    except StopIteration:
+        pass
 
 
 def inputs_of(q, qd, qdd, inputs: str) -> torch.Tensor:

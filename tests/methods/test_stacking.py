@@ -30,7 +30,7 @@ def data():
 
 
 def test_the_suites_plain_torch_methods_stack():
-    assert {"mlp", "delan"} <= set(STACKABLE) and not {"syrenets", "sysid", "sparse"} & set(STACKABLE)
+    assert {"mlp", "delan", "syrenets"} <= set(STACKABLE) and not {"sysid", "sparse"} & set(STACKABLE)
 
 
 @pytest.mark.parametrize("experiment", ["indirect", "direct"])
@@ -53,6 +53,25 @@ def test_each_stacked_seed_is_the_fit_it_makes_alone(name, experiment, data):
     assert not np.allclose(stacked[0].predict(test), stacked[1].predict(test))
 
 
+@pytest.mark.parametrize("experiment", ["indirect", "direct"])
+def test_stacked_syrenets_seeds_keep_their_own_selection_replay_probes_and_multi_start_turns(experiment, data):
+    """Each seed's networks take their turns, replay their own worst samples
+    and draw their own contractive probes: the stacked fits are the fits alone."""
+    train, test = data
+    config = {**METHODS["syrenets"].smoke_config(), "starts": 2, "replay": 4, "max_steps": 24, "eval_samples": 64,
+              "lr_schedule": "cosine"}
+    alone = [METHODS["syrenets"](**config).fit(d, experiment, k, steps=24) for d, k in zip(train, SEEDS)]
+    stacked = fit_stacked([METHODS["syrenets"](**config) for _ in SEEDS], train, experiment, SEEDS, steps=24)
+    for a, b in zip(alone, stacked):
+        want, got = a.predict(test), b.predict(test)
+        assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want))
+        assert b.record_details()["starts"] == a.record_details()["starts"]
+        for key in ("steps", "best_step", "evaluations", "stop_reason"):
+            assert b.fit_info[key] == a.fit_info[key], key
+    assert len({str(f.record_details()["starts"]["rounds"]) for f in stacked}) > 1 or \
+        not np.allclose(stacked[0].predict(test), stacked[1].predict(test))
+
+
 def test_a_stack_keeps_every_tensor_on_its_device(data):
     train, _ = data
     smoke = METHODS["mlp"].smoke_config()
@@ -73,7 +92,9 @@ def test_seeds_under_one_clock_stop_together_and_say_they_shared_it(data):
 def test_what_cannot_stack_is_refused(data):
     train, _ = data
     with pytest.raises(ConfigError, match="stackable"):
-        fit_stacked([METHODS["syrenets"]() for _ in SEEDS], train, "indirect", SEEDS, steps=1)
+        fit_stacked([METHODS["sysid"]() for _ in SEEDS], train, "indirect", SEEDS, steps=1)
+    with pytest.raises(ConfigError, match="compiled pass"):
+        fit_stacked([METHODS["syrenets"](compile=True) for _ in SEEDS], train, "indirect", SEEDS, steps=1)
     with pytest.raises(ConfigError, match="one configuration"):
         fit_stacked([METHODS["mlp"](hidden=8), METHODS["mlp"](hidden=16)], train[:2], "indirect", SEEDS[:2], steps=1)
     with pytest.raises(ConfigError, match="one dataset and one seed"):
@@ -90,5 +111,5 @@ def test_the_stacking_measurement_prints_both_rates_and_their_ratio(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "mlp on double_pendulum, 2 seed(s): stacked" in r.stdout and "stacked ÷ one by one" in r.stdout
     assert out.read_text().count("| mlp | double_pendulum |") == 2
-    bad = cli("stacking-speed", "--cases", "syrenets:double_pendulum", "--n-seeds", "1")
-    assert bad.returncode == 2 and "syrenets is not a stackable method" in bad.stderr and bad.stderr.count("\n") == 1
+    bad = cli("stacking-speed", "--cases", "sysid:double_pendulum", "--n-seeds", "1")
+    assert bad.returncode == 2 and "sysid is not a stackable method" in bad.stderr and bad.stderr.count("\n") == 1

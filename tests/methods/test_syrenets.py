@@ -432,13 +432,16 @@ def test_the_selection_scores_each_network_by_its_lowest_evaluation_so_far():
             self.measured.append(end[m.model].pop(0))
             return self.measured[-1]
 
-    def turn(t, experiment, progress, feed, until):
+    def turn(t, experiment, progress, feed, until):  # a turn of no steps: a generator that yields nothing
         progress.measured.extend(during[m.model].pop(0))
         return True
+        yield
 
     m._train = turn
     networks = [Network(model=k, optimizer=None, scheduler=None, frozen=[]) for k in range(4)]
-    starts = halve(m, networks, None, "direct", Scripted(), feed=None)
+    with pytest.raises(StopIteration) as done:
+        next(halve(m, networks, None, "direct", Scripted(), feed=None))
+    starts = done.value.value
     first, second = starts["rounds"]
     assert first == [[0, 0.3], [1, 0.05], [2, 0.4], [3, 0.7]]
     assert second == [[0, 0.2], [1, 0.04]]
