@@ -140,6 +140,11 @@ class Method(FittedModel):
         return None if self.stackable else f"{self.name} is not a stackable method"
 
     @classmethod
+    def prepare_stacked(cls, methods: list, datasets: list, experiment: str) -> None:
+        """One-time work of a stacked fit of ``methods`` on ``datasets``, before
+        their budgets start (compiling its step); none by default."""
+
+    @classmethod
     def train_stacked(cls, methods: list, starts: list, datasets: list, experiment: str, slots: list) -> None:
         """The loop of a stacked fit (:func:`methods.stacking.fit_stacked`): ``methods``
         after their :meth:`begin_fit` (``starts``), each seed's own random draws

@@ -299,6 +299,10 @@ class DeLaN(TorchLagrangianMethod):
         loss = compiled_torque_loss() if self.config.compile else torque_loss
         return loss(self.model, batch["q"], batch["qd"], batch["qdd"], batch["tau"])
 
+    def compiles_stacked_step(self, experiment: str) -> bool:
+        """With ``compile``, a stacked fit's indirect step is compiled too (:mod:`methods.stacking`)."""
+        return self.config.compile and experiment == "indirect"
+
     def _prepare(self, train, experiment) -> None:
         """With ``compile``, compile the indirect loss for the fit's batch on a
         network of the fit's shapes before the budget starts (the runner

@@ -23,6 +23,14 @@ transform's derivatives of the batch sum are each sample's; on a CPU the
 stacked torques and gradients equal the seeds' own to the last bit for the
 MLP (``tests/methods/test_stacking.py`` states the tolerance it checks).
 
+The loop is the method's (:meth:`~methods.base.Method.train_stacked`):
+:func:`train_lagrangians` for a :class:`~methods.torch_method.TorchLagrangianMethod`,
+:mod:`methods.syrenets.stacked` for SyReNets. Each seed's random draws come
+from its own generators (:class:`RngSlot`). Where a method compiles its own
+step (DeLaN's ``compile=True``), the stack's Euler–Lagrange torques are
+compiled too (:func:`compiled_stacked_torques`), once, before the budgets
+start (:meth:`~methods.base.Method.prepare_stacked`).
+
 A CPU gains nothing from this: one step of S seeds costs S steps' work. A
 GPU runs S small networks' steps in about the time of one, where a single
 small network leaves it idle between kernel launches.
@@ -36,8 +44,10 @@ its clock.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import random
+import time
 
 import numpy as np
 import torch
@@ -113,6 +123,38 @@ class Stack:
                 p.grad = torch.zeros_like(p) if g is None else g[s]
 
 
+_COMPILED = None
+
+
+def _stacked_torques(base: torch.nn.Module, params: dict, buffers: dict, q, qd, qdd) -> torch.Tensor:
+    """The Euler–Lagrange torques of the stacked networks (``base``'s shape, the
+    stack's ``params`` and ``buffers``) on rows concatenated seed by seed, for
+    networks with their own derivatives (``tangent``): no ``autograd.grad``, so
+    the whole of it compiles."""
+    size = next(iter(params.values())).shape[0]
+    call = _Call(base, "tangent")
+    prefixed = {k: "base." + k for k in (*params, *buffers)}
+
+    def one(p, b, *args):
+        return functional_call(call, ({prefixed[k]: v for k, v in p.items()}, {prefixed[k]: v for k, v in b.items()}), args)
+
+    q, qd, dq, dqd = (x.reshape(size, -1, *x.shape[1:]) for x in (q, qd, qd.detach(), qdd.detach()))
+    _, dL_dq, _, along = vmap(one)(params, buffers, q, qd, dq, dqd)
+    return (along - dL_dq).reshape(-1, along.shape[-1])
+
+
+def compiled_stacked_torques():
+    """:func:`_stacked_torques` compiled, one for the process: the networks are
+    arguments, so every stack of one shape and size reuses the compiled graphs."""
+    global _COMPILED
+    if _COMPILED is None:
+        import torch._inductor.config
+
+        torch._inductor.config.compile_threads = 1  # a run has one core: no pool of compiling processes
+        _COMPILED = torch.compile(_stacked_torques, dynamic=False)
+    return _COMPILED
+
+
 class StackedLagrangian(Stack):
     """``(q, qd) -> L`` of S networks of one shape on S seeds' samples,
     concatenated seed by seed (each seed ``rows`` samples); with a
@@ -130,6 +172,10 @@ class StackedLagrangian(Stack):
     def _tangent_of_rows(self, q, qd, dq, dqd):
         out = self.vmapped("tangent")(*self.split(q, qd, dq, dqd))
         return tuple(x.reshape(-1, *x.shape[2:]) for x in out)
+
+    def compiled_torques(self, q, qd, qdd) -> torch.Tensor:
+        """The transform's torques, for networks with a ``tangent``, by the compiled :func:`_stacked_torques`."""
+        return compiled_stacked_torques()(self.base, self.params, self.buffers, q, qd, qdd)
 
 
 class RngSlot:
@@ -166,6 +212,24 @@ class RngSlot:
         self._put(self.saved)
 
 
+def prepare_lagrangians(methods: list, datasets: list[Dataset], experiment: str) -> None:
+    """Compile the stacked step of ``methods`` (where they ask for it,
+    :meth:`~methods.torch_method.TorchLagrangianMethod.compiles_stacked_step`) for
+    their number, networks' shapes and batch, on networks of their own that are
+    then discarded, before any fit's budget starts."""
+    method = methods[0]
+    if not method.compiles_stacked_step(experiment):
+        return
+    dtype, device = getattr(torch, method.config.dtype), torch.device(method.train_device)
+    rows = min(method.config.batch_size, *(len(d) for d in datasets))
+    with torch.random.fork_rng(devices=[device] if device.type == "cuda" else []):
+        torch.manual_seed(0)
+        stack = StackedLagrangian([method.build_model(d).to(device, dtype) for d in datasets])
+    t = [d.tensors(dtype, device) for d in datasets]
+    q, qd, qdd = (torch.cat([x[k][:rows] for x in t]) for k in ("q", "qd", "qdd"))
+    stack.compiled_torques(q, qd, qdd).sum().backward()
+
+
 def train_lagrangians(methods: list, starts: list, datasets: list[Dataset], experiment: str, slots: list[RngSlot]) -> None:
     """The stacked loop of :class:`~methods.torch_method.TorchLagrangianMethod`'s
     own: mini-batch steps of the loss :meth:`loss` on the stack's predictions
@@ -176,6 +240,7 @@ def train_lagrangians(methods: list, starts: list, datasets: list[Dataset], expe
             loops.append(method.start_loop(data))  # its network from its own seeded generators, as alone
     stack = StackedLagrangian([m.model for m in methods])
     direct = experiment == "direct"
+    compiled = methods[0].compiles_stacked_step(experiment)
     while True:
         going = [s.progress.step() for s in starts]
         if not all(going):
@@ -188,7 +253,10 @@ def train_lagrangians(methods: list, starts: list, datasets: list[Dataset], expe
             idx = feed.next()
             batches.append({k: v[idx] for k, v in tensors.items()})
         q, qd, qdd = (torch.cat([b[k] for b in batches]) for k in ("q", "qd", "qdd"))
-        pred = stack(q, qd) if direct else euler_lagrange(stack, q, qd, qdd, create_graph=True)
+        if direct:
+            pred = stack(q, qd)
+        else:
+            pred = stack.compiled_torques(q, qd, qdd) if compiled else euler_lagrange(stack, q, qd, qdd, create_graph=True)
         losses, row = [], 0
         for method, batch in zip(methods, batches):
             target = batch["L" if direct else "tau"]
@@ -206,11 +274,14 @@ SHARED_BUDGET = "another seed of the stack used up the shared budget"
 
 
 def fit_stacked(methods: list, datasets: list[Dataset], experiment: str, seeds: list[int], budget_s=None, *,
-                steps: int | None = None, system=None) -> list:
+                steps: int | None = None, system=None, on_fit=None) -> list:
     """Fit ``methods`` (instances of one stackable torch method, one configuration)
     on ``datasets`` with ``seeds``, one each, as one stacked model (see the module
     docstring); returns them fitted, each as :meth:`~methods.base.Method.fit`
-    leaves it. The loop is the method's :meth:`~methods.base.Method.train_stacked`."""
+    leaves it. The loop is the method's :meth:`~methods.base.Method.train_stacked`;
+    its one-time work (:meth:`~methods.base.Method.prepare_stacked`) comes first,
+    before the budgets start and ``on_fit()`` is called, and each fit's
+    ``prepare_seconds`` is its time."""
     if not methods or not (len(methods) == len(datasets) == len(seeds)):
         raise ConfigError("fit_stacked needs one dataset and one seed per method")
     kind = type(methods[0])
@@ -220,11 +291,17 @@ def fit_stacked(methods: list, datasets: list[Dataset], experiment: str, seeds: 
     reason = methods[0].stacking_unavailable_reason()
     if reason:
         raise ConfigError(reason)
+    began = time.perf_counter()
+    kind.prepare_stacked(methods, datasets, experiment)
+    prepared = round(time.perf_counter() - began, 3)
+    if on_fit is not None:
+        on_fit()
     slots = [RngSlot(m.train_device) for m in methods]
     starts = []
     for method, data, seed, slot in zip(methods, datasets, seeds, slots):
-        with slot:  # no one-time work: what a method prepares (DeLaN's compiled loss) is for its own step
-            starts.append(method.begin_fit(data, experiment, seed, budget_s, steps=steps, system=system, prepare=False))
+        with slot:  # no one-time work of its own: what a method prepares for its own step is not the stack's
+            start = method.begin_fit(data, experiment, seed, budget_s, steps=steps, system=system, prepare=False)
+            starts.append(dataclasses.replace(start, prepare_seconds=prepared))
     with gc_frozen():
         kind.train_stacked(methods, starts, datasets, experiment, slots)
     out = []

@@ -21,7 +21,7 @@ from bench.core.models import LagrangianFunction
 from methods.base import Method
 from methods.config import POSITIVE, MethodConfig, Range
 from methods.progress import Progress
-from methods.stacking import train_lagrangians
+from methods.stacking import prepare_lagrangians, train_lagrangians
 
 
 @dataclass(frozen=True)
@@ -115,8 +115,18 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
         """The network, for data of ``train``'s shape."""
 
     @classmethod
+    def prepare_stacked(cls, methods, datasets, experiment) -> None:
+        prepare_lagrangians(methods, datasets, experiment)
+
+    @classmethod
     def train_stacked(cls, methods, starts, datasets, experiment, slots) -> None:
         train_lagrangians(methods, starts, datasets, experiment, slots)
+
+    def compiles_stacked_step(self, experiment: str) -> bool:
+        """Whether a stacked fit (:mod:`methods.stacking`) compiles its step, the
+        Euler–Lagrange torques of the stack: for a network with its own
+        derivatives (``tangent``) whose method compiles its own step."""
+        return False
 
     def make_scheduler(self, optimizer: torch.optim.Optimizer):
         """Return an object with ``step(loss: float)``, or ``None``."""

@@ -114,8 +114,8 @@ def main(args) -> int:
             print_now(f"{method} on {system}, {s} seed(s): stacked {row['stacked_steps_per_s']:.3g} steps/s, "
                       f"{row['stacked_seed_steps_per_s']:.3g} seed-steps/s; one by one {row['alone_seed_steps_per_s']:.3g} "
                       f"seed-steps/s; stacked ÷ one by one {row['ratio']:.2f}")
-    lines = [f"Measured by `python -m bench stacking-speed --device {args.device} --n-seeds {' '.join(map(str, args.n_seeds))} "
-             f"--steps {args.steps} --n-train {args.n_train}` on {where['type']} ({machine}), one thread.", "",
+    lines = [f"Measured by `python -m bench stacking-speed --device {args.device} --cases {' '.join(args.cases)} "
+             f"--n-seeds {' '.join(map(str, args.n_seeds))} --steps {args.steps} --n-train {args.n_train}` on {where['type']} ({machine}), one thread.", "",
              "| method | system | seeds | stacked steps/s (each seed) | stacked seed-steps/s | one by one seed-steps/s "
              "| stacked ÷ one by one |", "|---|---|---:|---:|---:|---:|---:|"]
     for r in rows:

@@ -58,9 +58,9 @@ def run_stacked_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
     data = [load_data(spec, system) for spec in specs]
     methods = [make_method(spec) for spec in specs]
     warm_up_torch()
-    on_phase("fit")
+    on_phase("prepare")
     fit_stacked(methods, [train for train, _ in data], first.experiment, [s.seed for s in specs], first.budget,
-                system=system)
+                system=system, on_fit=lambda: on_phase("fit"))
     on_phase("evaluate")
     return {"records": [execute(spec, data=pair, fitted=method).to_json()
                         for spec, pair, method in zip(specs, data, methods)]}

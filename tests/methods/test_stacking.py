@@ -72,6 +72,19 @@ def test_stacked_syrenets_seeds_keep_their_own_selection_replay_probes_and_multi
         not np.allclose(stacked[0].predict(test), stacked[1].predict(test))
 
 
+def test_a_compiled_stacked_step_is_compiled_before_the_budget_and_gives_the_fits_alone(data):
+    """DeLaN compiles its step alone (``compile=True``); stacked, the stack's
+    torques are compiled, before the budgets start, and the fits agree to float32's rounding."""
+    train, test = data
+    config = {**METHODS["delan"].smoke_config(), "compile": True, "max_steps": 8}
+    alone = [METHODS["delan"](**config).fit(d, "indirect", k, steps=8) for d, k in zip(train, SEEDS)]
+    stacked = fit_stacked([METHODS["delan"](**config) for _ in SEEDS], train, "indirect", SEEDS, steps=8)
+    for a, b in zip(alone, stacked):
+        want, got = a.predict(test), b.predict(test)
+        assert np.max(np.abs(got - want)) <= 1e-5 * np.max(np.abs(want))
+        assert b.fit_info["prepare_seconds"] > 0 and b.fit_info["steps"] == 8
+
+
 def test_a_stack_keeps_every_tensor_on_its_device(data):
     train, _ = data
     smoke = METHODS["mlp"].smoke_config()
