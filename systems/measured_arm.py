@@ -185,6 +185,10 @@ class MeasuredArm(UrdfArm):
     not_applicable = "a measured arm's recordings have torques and no samples of L, so only the indirect experiment applies"
     measured: ClassVar[MeasuredArmSpec]
 
+    @classmethod
+    def source_files(cls) -> list[str]:
+        return [str(cls.measured.source), *super().source_files()]
+
     def load(self, split: str) -> Dataset:
         """The ``train`` or ``test`` part of the instance's split (:attr:`split`): whole
         trajectories, each sample with its recording, trajectory and time."""

@@ -123,6 +123,10 @@ class UrdfArm(System):
     urdf_source: ClassVar[str] = ""
     locked_joints: ClassVar[tuple[str, ...]] = ()
 
+    @classmethod
+    def source_files(cls) -> list[str]:
+        return [cls.urdf_source]
+
     @property
     def model(self):
         return _model(self.urdf_text, self.locked_joints, self.params.g)

@@ -253,6 +253,12 @@ class System(abc.ABC):
         true Lagrangian, or a sympy symbol for the parametric form.
         """
 
+    @classmethod
+    def source_files(cls) -> list[str]:
+        """The files outside the code that define the system (its robot
+        description, its measured-arm file); none for a system given by code."""
+        return []
+
     def load(self, split: str):
         """The ``"train"`` or ``"test"`` part of a measured system's data (of
         the instance's :attr:`split` where it offers several)."""

@@ -5,11 +5,14 @@ and the system's class hierarchies that the suite or a plugin defines
 (``methods/mlp.py``, ``methods/torch_method.py`` and ``methods/base.py`` for the MLP;
 every module of ``methods/syrenets/`` for SyReNets;
 ``systems/double_pendulum.py`` and ``bench/core/system.py`` for the double
-pendulum), and the plugin files and robot descriptions the run imports. A
-record carries it (``code``); a resumed matrix redoes a run whose record
-was made by other code (:func:`bench.runner.matrix.run_matrix`), so an
-edited plugin or method is run again instead of being reported from its old
-record. The rest of the suite (the transform, the data, the runner) is
+pendulum), a plugin's file where it defines one of those classes, and the
+robot description or measured-arm file a plugin gives the run's system
+(:meth:`~bench.core.system.System.source_files`). A record carries it
+(``code``); a resumed matrix redoes a run whose record was made by other
+code (:func:`bench.runner.matrix.run_matrix`), so an edited plugin or method
+is run again instead of being reported from its old record, and only its
+runs: a plugin that defines neither the run's method nor its system is not
+the run's code. The rest of the suite (the transform, the data, the runner) is
 shared by every run and named by the record's commit (its provenance).
 """
 
@@ -54,13 +57,14 @@ def _name(path: Path) -> str:
 
 
 def code_files(method: str, system: str, plugins: tuple[str, ...] = ()) -> dict[str, str]:
-    """``{file: sha256 prefix}`` of the code that defines ``method`` and ``system``,
-    with the ``.py`` plugins, ``urdf:`` descriptions and ``measured:`` files the run imports."""
+    """``{file: sha256 prefix}`` of the code that defines ``method`` and ``system``
+    (a ``.py`` plugin among it where it defines one of their classes), with the
+    files of a system that a ``urdf:`` or ``measured:`` plugin gives (the file, and the URDF it names)."""
     paths = _class_files(METHODS[method]) + _class_files(SYSTEMS[system])
-    for plugin in plugins:
-        name = plugin[len(file_prefix(plugin) or ""):]
-        if name.endswith((".py", ".urdf", ".toml")) and Path(name).is_file():
-            paths.append(Path(name).resolve())
+    sources = [Path(p).resolve() for p in SYSTEMS[system].source_files() if p]
+    given = {Path(p[len(file_prefix(p)):]).expanduser().resolve() for p in plugins if file_prefix(p)}
+    if given & set(sources):  # a system given by a plugin's file: that file and the files it names
+        paths += [p for p in sources if p.is_file()]
     out = {}
     for path in paths:
         out.setdefault(_name(path), _digest(path))

@@ -351,3 +351,18 @@ def test_a_stack_that_fails_runs_each_of_its_seeds_alone(tmp_path):
     records = matrix.run_matrix(specs, tmp_path, workers=1, report=quiet, stack=True)
     assert [r.status for r in records] == ["ok", "ok"] and all("stacked" not in r.details for r in records)
     assert "vmap" in (tmp_path / "logs" / "double_pendulum__toy_unstackable__indirect__seed0__stack2.log").read_text()
+
+
+def test_one_edited_plugin_redoes_only_the_records_of_the_method_it_defines(tmp_path):
+    plugin = tmp_path / "edited.py"
+    plugin.write_text(PLUGIN_THAT_FAILS.format(body="pass"))
+    todo = build_specs(["double_pendulum"], ["toy_fixable", "sparse"], ["indirect"], [0, 1], None, steps=3,
+                       plugins=(str(plugin),), n_train=64, n_test=32, rollout=False)
+    first = matrix.run_matrix(todo, tmp_path / "out", workers=1, report=quiet)
+    plugin.write_text(PLUGIN_THAT_FAILS.format(body="pass  # one edited line"))
+    lines = []
+    again = matrix.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)
+    assert "redoing 2 run(s) whose record was made by other code" in lines, lines
+    assert [r.status for r in again] == ["ok"] * 4
+    for a, b in zip(first, again):
+        assert (a.code["hash"] == b.code["hash"]) == (a.method == "sparse")
