@@ -358,8 +358,9 @@ class Method(FittedModel):
         """Further fitted models derived from this one (for example a refined
         equation), each reported by the harness as ``<method>+<variant>``.
 
-        A variant that could not be made is given as a string saying why; it
-        is recorded as failed, so that every seed stays counted.
+        A variant that could not be made is given as a string saying why (a
+        :class:`~bench.core.models.NoVariant` with its outcome: out of budget,
+        not applicable, failed; a plain string is a failure); every seed stays counted.
         """
         return {}
 

@@ -46,6 +46,22 @@ from bench.core.terms import TermLibrary
 CHUNK = 8192
 
 
+class NoVariant(str):
+    """Why a method gives no model for one of its variants
+    (:meth:`methods.base.Method.variants`), with the outcome it is: ``"timeout"``
+    where the variant's work ran out of the run's budget, ``"not_applicable"``
+    where the variant does not apply to the configuration, ``"failed"`` else."""
+
+    status: str
+
+    def __new__(cls, reason: str, status: str = "failed"):
+        if status not in ("failed", "timeout", "not_applicable"):
+            raise ValueError(f"a variant's outcome is failed, timeout or not_applicable; got {status!r}")
+        out = super().__new__(cls, reason)
+        out.status = status
+        return out
+
+
 class FittedModel(abc.ABC):
     """A fitted Lagrangian model; see the module docstring."""
 

@@ -4,7 +4,7 @@ With ten seeds a method and standard deviations as large as the means, most
 differences between two methods' means are not evidence of anything. Three
 summaries say which are:
 
-* **Ties with the best** (:func:`ties_with_best`), for the All 10 rows of a table:
+* **Ties with the best** (:func:`ties_with_best`), for the All n rows of a table:
   the best method has the lowest mean; every other method's seeds are
   compared with the best's by a two-sided Mann–Whitney U test
   (:func:`scipy.stats.mannwhitneyu`), the p-values adjusted over the row by

@@ -4,13 +4,17 @@ For each (system, experiment) there is one markdown table with one column per
 method and the rows of Valle & Haddadin (2021), Tables 1 and 2:
 
 * **Best**: the best seed;
-* **5 Best**: mean (± std) over the 5 best seeds;
-* **All 10**: mean (± std) over all seeds;
-* **5 Worse**: mean (± std) over the 5 worst seeds;
+* **k Best**: mean (± std) over the k best seeds;
+* **All n**: mean (± std) over all seeds;
+* **k Worse**: mean (± std) over the k worst seeds;
+
+with ``n`` the table's seeds and ``k = ⌈n/2⌉`` (the paper's 10 seeds read
+"5 Best", "All 10", "5 Worse"); below 4 seeds the k rows are left out
+(:func:`group_label`),
 
 each split into train and test MSE, in the experiment's own target (``L``
 for direct, ``tau`` for indirect). The lowest mean of each row is bold; in
-the All 10 rows (:data:`TESTED_GROUP`, the only seeds not chosen by training
+the All n rows (:data:`TESTED_GROUP`, the only seeds not chosen by training
 MSE) so is every method whose seeds are not significantly different from
 that method's (:func:`bench.reporting.significance.ties_with_best`), and a
 method with too few seeds to test is marked †. Under each table, the methods'
@@ -21,9 +25,9 @@ Definitions
 * Seeds are ranked by their **training** MSE, so that picking the "best"
   seed uses no test information; the test row shows the test MSE of the same
   seeds. Ties break by seed number.
-* Only runs with status ``ok`` enter the groups. With ``n`` such runs,
-  "5 Best" and "5 Worse" take ``min(5, n)`` runs (they overlap when
-  ``n < 10``) and "All 10" takes all ``n``. The **Runs** row gives ``n`` and
+* Only runs with status ``ok`` enter the groups: "k Best" and "k Worse"
+  take ``k`` of them (all of them, overlapping, where fewer than ``k`` are
+  ok) and "All n" takes every one. The **Runs** row gives their number and
   what happened to the others (failed, timeout, unavailable, not applicable);
   below the table, each run that is not ok is named with its reason.
 * std is the population standard deviation (``ddof = 0``).
@@ -59,10 +63,23 @@ from bench.runner.provenance import PROJECT_ROOT, machine
 from bench.runner.records import MISSING, Record, missing_runs, quarantine, read_records
 from systems import SYSTEMS
 
-GROUPS = ("Best", "5 Best", "All 10", "5 Worse")
+#: the groups of seeds, in the table's order; each row's label is :func:`group_label`'s
+GROUPS = ("best", "best half", "all", "worse half")
 #: the rows whose methods are compared for significance: the only group whose
 #: seeds are not chosen by their own training MSE
-TESTED_GROUP = "All 10"
+TESTED_GROUP = "all"
+#: the fewest seeds whose halves are rows of their own
+HALVES_FROM = 4
+
+
+def half(n: int) -> int:
+    """``k`` of "k Best" and "k Worse" for ``n`` seeds: ⌈n/2⌉."""
+    return math.ceil(n / 2)
+
+
+def group_label(group: str, n: int) -> str:
+    """A group's row label in a table of ``n`` seeds: "Best", "k Best", "All n", "k Worse"."""
+    return {"best": "Best", "best half": f"{half(n)} Best", "all": f"All {n}", "worse half": f"{half(n)} Worse"}[group]
 
 
 def fmt(value: float) -> str:
@@ -71,15 +88,19 @@ def fmt(value: float) -> str:
     return f"{value:.2e}"
 
 
-def group_members(records: list[Record]) -> dict[str, dict[str, list[float]]]:
+def group_members(records: list[Record], n_seeds: int | None = None) -> dict[str, dict[str, list[float]]]:
     """``{group: {split: values}}``: each group's seeds' MSE, over ``ok`` records
-    (a split without test data is absent)."""
+    (a split without test data is absent), for a table of ``n_seeds`` seeds
+    (by default the records' own); no halves below :data:`HALVES_FROM` seeds."""
     ok = sorted((r for r in records if r.status == "ok"), key=lambda r: (r.train_mse, r.seed))
     n = len(ok)
     if n == 0:
         return {}
-    k = min(5, n)
-    members = {"Best": ok[:1], "5 Best": ok[:k], "All 10": ok, "5 Worse": ok[n - k:]}
+    seeds = n_seeds if n_seeds is not None else len({r.seed for r in records})
+    k = min(half(seeds), n)
+    members = {"best": ok[:1], "all": ok}
+    if seeds >= HALVES_FROM:
+        members |= {"best half": ok[:k], "worse half": ok[n - k:]}
     out = {}
     for group, runs in members.items():
         out[group] = {}
@@ -93,7 +114,7 @@ def group_members(records: list[Record]) -> dict[str, dict[str, list[float]]]:
 def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float | None]]]:
     """``{group: {"train": (mean, std), "test": (mean, std)}}`` over ``ok`` records.
 
-    ``std`` is ``None`` for the single-run "Best" group; a split without test
+    ``std`` is ``None`` for the single-run "best" group; a split without test
     data is absent.
     """
     return _stats(group_members(records))
@@ -101,7 +122,7 @@ def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float
 
 def _stats(members: dict[str, dict[str, list[float]]]) -> dict[str, dict[str, tuple[float, float | None]]]:
     """:func:`group_stats` from :func:`group_members`' values."""
-    return {group: {split: (float(np.mean(vals)), None if group == "Best" else float(np.std(vals)))
+    return {group: {split: (float(np.mean(vals)), None if group == "best" else float(np.std(vals)))
                     for split, vals in splits.items()}
             for group, splits in members.items()}
 
@@ -322,10 +343,13 @@ def build_table(records: list[Record]) -> str:
     by_method = defaultdict(list)
     for r in records:
         by_method[r.method].append(r)
-    members = {m: group_members(by_method[m]) for m in methods}
+    n_seeds = len({r.seed for r in records})
+    members = {m: group_members(by_method[m], n_seeds) for m in methods}
     stats = {m: _stats(members[m]) for m in methods}
     lines = ["| Group | Split | " + " | ".join(methods) + " |", "|---|---|" + "---|" * len(methods)]
     for group in GROUPS:
+        if not any(group in members[m] for m in methods):
+            continue
         for split in ("train", "test"):
             means = {m: stats[m].get(group, {}).get(split) for m in methods}
             samples = {m: members[m].get(group, {}).get(split) for m in methods}
@@ -343,7 +367,7 @@ def build_table(records: list[Record]) -> str:
                 elif tested_row and m in compared and not compared[m].tested:
                     text += " †"
                 cells.append(text)
-            label = group if split == "train" else ""
+            label = group_label(group, n_seeds) if split == "train" else ""
             lines.append(f"| {label} | {split} | " + " | ".join(cells) + " |")
     lines.append("| Runs | | " + " | ".join(_runs_cell(by_method[m]) for m in methods) + " |")
     lines.append("| Exact | | " + " | ".join(_exact_cell(by_method[m]) for m in methods) + " |")
@@ -361,7 +385,7 @@ def build_table(records: list[Record]) -> str:
         for m in methods:
             v = stats[m].get(TESTED_GROUP, {}).get("test")
             cells.append("—" if v is None else f"{v[0] / standard['test_mse']:.3g}×")
-        lines.append(f"| {TESTED_GROUP} / standard | test | " + " | ".join(cells) + " |")
+        lines.append(f"| {group_label(TESTED_GROUP, n_seeds)} / standard | test | " + " | ".join(cells) + " |")
     ranks, seeds = seed_ranks(by_seed(records))
     if ranks:
         order = sorted(ranks, key=lambda m: (ranks[m], m))

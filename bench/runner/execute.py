@@ -170,8 +170,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         fields["exact"] = exact.pop("exact")
         variants = {}
         for name, model in stages.run("variants", method.variants, default={}).items():
-            if isinstance(model, str):
-                variants[name] = {"status": "failed", "error": model}
+            if isinstance(model, str):  # why there is none, and its outcome (bench.core.models.NoVariant)
+                variants[name] = {"status": getattr(model, "status", "failed"), "error": str(model)}
                 continue
             variant = Stages(prefix=f"variant {name}: ")
             scored = variant.run("scores", scores, model, spec.experiment, train, test, system, variant)

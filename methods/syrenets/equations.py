@@ -14,7 +14,7 @@ import torch
 
 from bench.core import regression, symbolic
 from bench.core.data import mse
-from bench.core.models import ExpressionModel, FittedModel
+from bench.core.models import ExpressionModel, FittedModel, NoVariant
 from bench.core.timeouts import Timeout, call_with_timeout
 
 #: the refinement gives up on pruned equations that expand into more terms
@@ -147,7 +147,8 @@ class Equations:
                 self._notes["refined_from_terms"] = k
                 self._notes["refined_terms"] = int(np.count_nonzero(coef))
         if best is None:
-            return "no refit finished: " + "; ".join(reasons)
+            out_of_budget = bool(reasons) and reasons[-1].endswith("out of budget")
+            return NoVariant("no refit finished: " + "; ".join(reasons), "timeout" if out_of_budget else "failed")
         return best
 
     def variants(self):

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from bench.core.dynamics import euler_lagrange
+from bench.core.models import NoVariant
 from methods.base import METHODS
 from methods.config import Named
 from methods.syrenets.config import SyReNetsConfig
@@ -282,7 +283,7 @@ class SyReNets(Equations, TorchLagrangianMethod):
         if not self.config.refine:
             return
         if self.config.inputs != "q_qd":
-            refined = "refinement needs inputs='q_qd' (a Lagrangian of q and qd)"
+            refined = NoVariant("refinement needs inputs='q_qd' (a Lagrangian of q and qd)", "not_applicable")
         else:
             refined = self._refine(train, experiment, deadline)
         self._variants["refined"] = refined

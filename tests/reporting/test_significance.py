@@ -40,7 +40,7 @@ def test_two_methods_from_one_distribution_share_the_bold_and_one_far_apart_does
 
 def test_fewer_than_five_seeds_are_never_called_different():
     table = build_table(_records("a", [1.0, 1.1, 0.9, 1.0, 1.05, 0.95]) + _records("b", [50.0, 60.0, 55.0, 52.0]))
-    a, b = _row(table, "All 10", "test")
+    a, b = _row(table, "All 6", "test")
     assert a.startswith("**") and b.endswith("†") and not b.startswith("**")
     best, compared = ties_with_best({"a": [1.0] * 6, "b": [50.0] * 4})
     assert best == "a" and not compared["b"].tested and not compared["b"].ties

@@ -22,26 +22,37 @@ def test_groups_rank_by_training_mse():
     # train MSE 1..10 for seeds 9..0; test MSE = 2 * train
     records = [rec("a", s, float(10 - s), 2.0 * (10 - s)) for s in range(10)]
     g = group_stats(records)
-    assert g["Best"]["train"] == (1.0, None) and g["Best"]["test"] == (2.0, None)
-    assert g["5 Best"]["train"][0] == pytest.approx(3.0)
-    assert g["5 Best"]["train"][1] == pytest.approx(2**0.5)  # population std of 1..5
-    assert g["All 10"]["test"][0] == pytest.approx(11.0)
-    assert g["5 Worse"]["train"][0] == pytest.approx(8.0)
+    assert g["best"]["train"] == (1.0, None) and g["best"]["test"] == (2.0, None)
+    assert g["best half"]["train"][0] == pytest.approx(3.0)
+    assert g["best half"]["train"][1] == pytest.approx(2**0.5)  # population std of 1..5
+    assert g["all"]["test"][0] == pytest.approx(11.0)
+    assert g["worse half"]["train"][0] == pytest.approx(8.0)
+    assert [line.split(" | ")[0] for line in build_table(records).splitlines() if " | train | " in line] == \
+        ["| Best", "| 5 Best", "| All 10", "| 5 Worse"]  # the paper's rows
 
 
 def test_best_row_uses_the_seed_with_lowest_train_not_test():
     records = [rec("a", 0, 1.0, 50.0), rec("a", 1, 2.0, 3.0)]
-    assert group_stats(records)["Best"]["test"] == (50.0, None)
+    assert group_stats(records)["best"]["test"] == (50.0, None)
 
 
 def test_fewer_seeds_and_failures():
     records = [rec("a", s, float(s + 1), float(s + 1)) for s in range(3)]
     records += [rec("a", 3, None, None, status="timeout", error="killed"), rec("a", 4, None, None, status="failed", error="boom")]
     g = group_stats(records)
-    assert g["5 Best"]["train"][0] == pytest.approx(2.0)  # min(5, 3) = all three
-    assert g["5 Worse"]["train"][0] == pytest.approx(2.0)
+    assert g["best half"]["train"][0] == pytest.approx(2.0)  # ⌈5/2⌉ = 3 of 5 seeds: the three that are ok
+    assert g["worse half"]["train"][0] == pytest.approx(2.0)
     table = build_table(records)
     assert "| Runs | | 3/5 ok (1 failed, 1 timeout) |" in table
+    assert [line.split(" | ")[0] for line in table.splitlines() if " | train | " in line] == \
+        ["| Best", "| 3 Best", "| All 5", "| 3 Worse"]
+
+
+def test_tables_of_three_seeds_say_so_and_have_no_halves():
+    records = [rec("a", s, float(s + 1), float(s + 1)) for s in range(3)]
+    table = build_table(records)
+    assert [line.split(" | ")[0] for line in table.splitlines() if " | train | " in line] == ["| Best", "| All 3"]
+    assert not any(word in table for word in ("All 10", "5 Best", "5 Worse"))
 
 
 def test_bold_marks_the_lowest_mean_of_each_row():
@@ -51,9 +62,8 @@ def test_bold_marks_the_lowest_mean_of_each_row():
     best_test = next(line for line in table if line.startswith("|  | test"))
     assert best_train == "| Best | train | **1.00e+00** | 2.00e+00 |"
     assert best_test == "|  | test | 5.00e+00 | **4.00e+00** |"
-    assert "| 5 Best | train | **1.00e+00 (± 0.00e+00)** | 2.00e+00 (± 0.00e+00) |" in table
     # two seeds a method: too few to test, so b is marked untested rather than called different
-    assert "| All 10 | train | **1.00e+00 (± 0.00e+00)** | 2.00e+00 (± 0.00e+00) † |" in table
+    assert "| All 2 | train | **1.00e+00 (± 0.00e+00)** | 2.00e+00 (± 0.00e+00) † |" in table
 
 
 def test_unavailable_and_not_applicable_columns():
@@ -154,10 +164,25 @@ def test_measured_tables_give_driven_rollouts_the_standard_model_and_each_learne
                                  details={"standard_model": standard, "exact_not_judged": MEASURED}))
     lines = build_table(records).splitlines()
     assert "| Driven 0.25 s | q RMSE | 2.00e-01 (1/12 windows diverged) |" in lines
-    assert "| All 10 / standard | test | 4× |" in lines  # the mean test MSE 2.0 over the standard model's 0.5
+    assert "| All 3 / standard | test | 4× |" in lines  # the mean test MSE 2.0 over the standard model's 0.5
     assert "| Exact | | not applicable: measured data have no true L |" in lines
     assert not any(line.startswith("| Rollout") for line in lines)
     text = standard_line(records)
     assert "train MSE 2.00e-01, test MSE 5.00e-01" in text and "driven 0.25 s: q RMSE — (4/4 windows diverged)" in text
     assert "not positive definite (smallest eigenvalue -1.5" in text
     assert standard_line([rec("m", 0, 1.0, 1.0)]) == ""
+
+
+def test_a_variant_out_of_budget_reads_as_a_budget_outcome_with_its_reason():
+    from bench.core.models import NoVariant
+
+    why = NoVariant("no refit finished: 8 terms: out of budget", "timeout")
+    assert why.status == "timeout" and isinstance(why, str)
+    with pytest.raises(ValueError):
+        NoVariant("anything", "ok")
+    records = [rec("s", k, 1.0, 1.0).replace(details={"variants": {"refined": {"status": why.status, "error": str(why)}}})
+               for k in range(2)]
+    table = build_table(expand_variants(records))
+    assert "| Runs | | 2/2 ok | 0/2 ok (2 timeout) |" in table
+    assert "- **s+refined**, seeds 0, 1: timeout: no refit finished: 8 terms: out of budget" in table
+    assert "failed" not in table

@@ -355,11 +355,12 @@ def test_a_stack_that_fails_runs_each_of_its_seeds_alone(tmp_path):
 
 def test_one_edited_plugin_redoes_only_the_records_of_the_method_it_defines(tmp_path):
     plugin = tmp_path / "edited.py"
-    plugin.write_text(PLUGIN_THAT_FAILS.format(body="pass"))
-    todo = build_specs(["double_pendulum"], ["toy_fixable", "sparse"], ["indirect"], [0, 1], None, steps=3,
+    text = PLUGIN_THAT_FAILS.replace("toy_fixable", "toy_edited")  # a name of its own: another test imports toy_fixable
+    plugin.write_text(text.format(body="pass"))
+    todo = build_specs(["double_pendulum"], ["toy_edited", "sparse"], ["indirect"], [0, 1], None, steps=3,
                        plugins=(str(plugin),), n_train=64, n_test=32, rollout=False)
     first = matrix.run_matrix(todo, tmp_path / "out", workers=1, report=quiet)
-    plugin.write_text(PLUGIN_THAT_FAILS.format(body="pass  # one edited line"))
+    plugin.write_text(text.format(body="pass  # one edited line"))
     lines = []
     again = matrix.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)
     assert "redoing 2 run(s) whose record was made by other code" in lines, lines
