@@ -187,7 +187,7 @@ class MeasuredArm(UrdfArm):
 
     @classmethod
     def source_files(cls) -> list[str]:
-        return [str(cls.measured.source), *super().source_files()]
+        return [str(cls.measured.source), *(str(r.path) for r in cls.measured.recordings), *super().source_files()]
 
     def load(self, split: str) -> Dataset:
         """The ``train`` or ``test`` part of the instance's split (:attr:`split`): whole

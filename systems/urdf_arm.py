@@ -262,6 +262,7 @@ def urdf_arm(urdf: str | Path, *, locked: Sequence[str] = (), name: str | None =
         "coordinates": tuple(model.names[i] for i in range(1, model.njoints)),
         "coordinate_kinds": kinds,
         "default_domain": domain,
+        "position_limits": tuple((float(a), float(b)) for a, b in zip(lo, hi)),
         "urdf_text": text,
         "urdf_source": str(path),
         "locked_joints": locked,

@@ -3,13 +3,16 @@ resampled, low-passed and differentiated (:mod:`bench.core.recordings`)."""
 
 from __future__ import annotations
 
+import dataclasses
+import sys
 from pathlib import Path
 
 from bench.cli.options import UsageError
 from bench.core.arguments import nonnegative, positive, positive_int
 from bench.core.data import Dataset, write_csv
-from bench.core.fileio import check_output
-from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, joined, preprocess, read_recording
+from bench.core.fileio import check_output, file_digest, settings_path, write_json
+from bench.core.recordings import (DEFAULT_FILTER, TIME_UNITS, ColumnMap, FilterSpec, Recording, beyond_a_turn,
+                                   check_rate, in_units, joined, preprocess, read_recording)
 from systems.dfki_double_pendulum import read_raw
 
 HELP = "turn a robot's log into the suite's CSV format: resample, low-pass, differentiate"
@@ -43,6 +46,12 @@ def add_arguments(cv) -> None:
                     help=f"seconds cut from each end, the filter's start-up (default {DEFAULT_FILTER.trim_s:g})")
     cv.add_argument("--decimate", type=positive_int, default=DEFAULT_FILTER.decimate,
                     help=f"keep every N-th sample (default {DEFAULT_FILTER.decimate})")
+    cv.add_argument("--time-unit", choices=sorted(TIME_UNITS), default="s",
+                    help="the unit of the log's time column (default s); rows further apart than a robot logs, or "
+                         "too slow a rate for the cut-off, stop the conversion with a line naming the column")
+    cv.add_argument("--degrees", action="store_true",
+                    help="the log's q and qd are in degrees and degrees/s: convert them to radians (a q beyond ±2π "
+                         "without it gives a warning)")
 
 
 def main(args) -> int:
@@ -56,14 +65,33 @@ def main(args) -> int:
     columns = ColumnMap.parse(args.columns) if args.columns else None
     trajectories = trajectory_names(args.trajectory, names, need=columns is not None and not args.distinct)
     system = None if columns else "dfki_double_pendulum"
-    parts = [preprocess(read_recording(path, columns) if columns else read_raw(path), spec) for path in args.raw]
+    recordings = [read_log(path, columns, spec, args.time_unit, args.degrees) for path in args.raw]
+    parts = [preprocess(r, spec) for r in recordings]
     s = joined(parts, names, trajectories)
     source = ", ".join(map(str, args.raw))
     write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, system, source, recording=s["recording"],
                       sign_qd=s["sign_qd"], trajectory=s.get("trajectory"), time=s["time"]), args.out)
+    write_json(settings_path(args.out), {
+        "logs": {str(p): file_digest(p) for p in args.raw},
+        "columns": args.columns, "format": args.format, "time_unit": args.time_unit, "degrees": args.degrees,
+        "filter": dataclasses.asdict(spec), "trajectories": trajectories, "command": args.invocation,
+    })
     print(f"wrote {len(s['q'])} samples of {s['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
-          f"({spec.describe()})")
+          f"({spec.describe()}); its settings to {settings_path(args.out)}")
     return 0
+
+
+def read_log(path: Path, columns: ColumnMap | None, spec: FilterSpec, time_unit: str, degrees: bool) -> Recording:
+    """One log, in seconds and radians, its rate checked against the filter
+    (:func:`~bench.core.recordings.check_rate`); a warning naming degrees where
+    its q leaves ±2π and ``degrees`` was not given."""
+    recording = in_units(read_recording(path, columns) if columns else read_raw(path), time_unit, degrees)
+    check_rate(recording, spec, path, columns.time if columns else "time")
+    for j, lo, hi in ([] if degrees else beyond_a_turn(recording)):
+        name = columns.q[j] if columns else f"q{j + 1}"
+        print(f"warning: {path}: column {name} (q_{j + 1}) spans {lo:.4g} to {hi:.4g}, beyond ±2π: if the log is in "
+              f"degrees, give --degrees to convert q and qd to radians", file=sys.stderr)
+    return recording
 
 
 def trajectory_names(given: list[str] | None, recordings: list[str], need: bool) -> list[str] | None:

@@ -7,7 +7,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_budget, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
                                check_split, configurations, device, hyperparameters, load_plugins)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
@@ -37,6 +37,7 @@ def add_arguments(f) -> None:
     f.add_argument("--n-test", type=positive_int, default=N_TEST, help=f"generated test samples (default {N_TEST})")
     f.add_argument("--domain-half-width", type=positive, default=None,
                    help="sample angles, velocities and accelerations from U(-w, w) (default: the system's own domain)")
+    add_ignore_limits(f)
     add_device(f)
     add_plugin(f)
 
@@ -60,7 +61,8 @@ def main(args) -> int:
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now
-    given = given_data(make_system(spec), spec.train_path, spec.test_path) if preflight(spec) is None else None
+    given = given_data(make_system(spec), spec.train_path, spec.test_path, check_limits=not args.ignore_limits) \
+        if preflight(spec) is None else None
     for part in given or ():
         if part is not None:
             part.target(args.experiment)  # bad files: exit 2 now, before the run's process starts

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+from bench.cli.options import (UsageError, add_ignore_limits, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
                                check_split, configurations, device, hyperparameters, load_plugins, number)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
@@ -38,6 +38,7 @@ def add_arguments(res) -> None:
     add_set(res)
     res.add_argument("--json", type=Path, default=None, help="write the result here (see the README for its keys)")
     res.add_argument("--report", type=Path, default=None, help="write a markdown report with residual plots here")
+    add_ignore_limits(res)
     add_device(res)
     add_plugin(res)
 
@@ -56,8 +57,10 @@ def main(args) -> int:
     reason = entry.obj.not_applicable_reason("indirect")
     if reason:
         raise UsageError(f"method {args.method} cannot run the loop, which fits torques: {reason}")
-    named = METHODS[args.method].configuration(configurations(args, [args.method])[args.method])
-    settings = {**named, **hyperparameters(args.overrides, args.method, [args.method])}
+    configuration = configurations(args, [args.method])[args.method]
+    named = METHODS[args.method].configuration(configuration)
+    overrides = hyperparameters(args.overrides, args.method, [args.method])
+    settings = {**named, **overrides}
     METHODS[args.method](**settings)  # bad hyperparameters: exit 2 now
     if not args.train and system.simulated:
         raise UsageError(f"{name} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
@@ -68,7 +71,8 @@ def main(args) -> int:
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
         budget_s=budget(args)[0], steps=args.steps, seed=args.seed, hyperparameters=settings,
         json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
-        plugins=plugins, split=args.split, device=device(args.device, [args.method]),
+        plugins=plugins, split=args.split, device=device(args.device, [args.method]), check_limits=not args.ignore_limits,
+        command=args.invocation, overrides=overrides, configuration=configuration,
     )
     result = run_residual(job)
     b, a = result.mse_before, result.mse_after

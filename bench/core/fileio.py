@@ -5,6 +5,7 @@ any work starts."""
 from __future__ import annotations
 
 import errno
+import hashlib
 import json
 import os
 import re
@@ -94,3 +95,30 @@ def check_output(path: str | os.PathLike, *, folder: bool = False) -> Path:
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise UserError(f"{path}: cannot be written, {ancestor} is not writable ({os.strerror(errno.EACCES)})")
     return path
+
+
+def file_digest(path: str | os.PathLike) -> str:
+    """The sha256 of a file's bytes, in hex."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+#: what a converted CSV's sidecar is named after: ``OUT.csv`` -> ``OUT.csv.convert.json``
+SETTINGS_SUFFIX = ".convert.json"
+
+
+def settings_path(csv: str | os.PathLike) -> Path:
+    """Where ``convert`` writes the settings a CSV was made with (beside it)."""
+    return Path(str(csv) + SETTINGS_SUFFIX)
+
+
+def read_settings(csv: str | os.PathLike) -> dict | None:
+    """The settings ``convert`` wrote beside ``csv`` (:func:`settings_path`);
+    ``None`` where there are none or they are unreadable."""
+    try:
+        return json.loads(settings_path(csv).read_text())
+    except (OSError, ValueError):
+        return None

@@ -1,6 +1,7 @@
 """Measured recordings: from a robot's log to samples in the suite's format.
 
-A log is a CSV file (optionally compressed) with a time column, in seconds,
+A log is a CSV file (optionally compressed) with a time column, in seconds
+(or in the units :func:`in_units` converts, checked by :func:`check_rate`),
 and per joint a position, a velocity and a torque column; a
 :class:`ColumnMap` names them (``time=t,q_1=pos1,qd_1=vel1,tau_1=eff1,...``).
 Robots rarely log accelerations, and their clocks and encoders are not
@@ -30,6 +31,7 @@ its own cut-off, chosen the same way.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,6 +44,10 @@ from bench.core.errors import ConfigError
 MIN_ROWS = 16
 #: the most samples a recording may span on the uniform grid (5.5 hours at 2 ms)
 MAX_GRID = 10_000_000
+#: seconds per unit of a log's time column (``convert --time-unit``)
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+#: the longest median step between a robot log's rows, s: slower is a time column in other units
+MAX_MEDIAN_STEP = 0.5
 
 
 @dataclass(frozen=True)
@@ -141,6 +147,40 @@ class ColumnMap:
             raise DataError(f"{path}: column {self.time} does not increase at data row {row}")
         q, qd, tau = (np.stack([numeric_column(frame, c, path) for c in cols], axis=1) for cols in (self.q, self.qd, self.tau))
         return Recording(time, q, qd, tau)
+
+
+def in_units(recording: Recording, time_unit: str = "s", degrees: bool = False) -> Recording:
+    """``recording`` with its time in seconds (from ``time_unit``, :data:`TIME_UNITS`)
+    and, with ``degrees``, its q and qd from degrees to radians."""
+    angle = math.pi / 180 if degrees else 1.0
+    return Recording(recording.time * TIME_UNITS[time_unit], recording.q * angle, recording.qd * angle, recording.tau)
+
+
+def check_rate(recording: Recording, spec: FilterSpec, path: Path | str, column: str) -> None:
+    """A :class:`DataError` naming the file and its time ``column`` where the
+    rows are further apart than a robot logs (a median step above
+    :data:`MAX_MEDIAN_STEP`), or where their rate's Nyquist frequency is at or
+    below the filter's cut-off: both are a time column in other units than seconds."""
+    step = float(np.median(np.diff(recording.time)))
+    if step > MAX_MEDIAN_STEP:
+        raise DataError(f"{path}: column {column}: rows a median {step:.4g} s apart, slower than a robot logs: is the "
+                        f"time in milliseconds? (--time-unit ms, or us)")
+    nyquist = 0.5 / step
+    if spec.cutoff_hz >= nyquist:
+        raise DataError(f"{path}: column {column}: rows a median {step:.4g} s apart have a Nyquist frequency of "
+                        f"{nyquist:.4g} Hz, not above the cut-off of {spec.cutoff_hz:g} Hz: is the time in seconds? "
+                        f"(--time-unit ms or us; or a lower --cutoff-hz)")
+
+
+def beyond_a_turn(recording: Recording) -> list[tuple[int, float, float]]:
+    """The joints (0-based) whose q leaves ±2π, with the range seen: angles
+    that only make sense in degrees, where the joint turns."""
+    out = []
+    for j in range(recording.q.shape[1]):
+        lo, hi = float(np.min(recording.q[:, j])), float(np.max(recording.q[:, j]))
+        if max(abs(lo), abs(hi)) > 2 * math.pi:
+            out.append((j, lo, hi))
+    return out
 
 
 def read_recording(path: str | Path, columns: ColumnMap) -> Recording:

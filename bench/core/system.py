@@ -45,7 +45,7 @@ import torch
 
 from bench.core import symbolic
 from bench.core.dynamics import euler_lagrange_chunked
-from bench.core.errors import ConfigError
+from bench.core.errors import ConfigError, DataError
 from bench.core.registry import Registry
 
 #: the parts of a Lagrangian's torque, as :meth:`System.forces` gives them
@@ -175,6 +175,10 @@ class LinearForm:
         return None if self.prior is None else np.concatenate([self.prior, np.zeros(len(self.terms))])
 
 
+#: how far past its position limits, as a share of the joint's range, a log's q may go (:meth:`System.check_positions`)
+LIMIT_SLACK = 0.1
+
+
 class System(abc.ABC):
     """Base class of every system in the suite.
 
@@ -252,6 +256,24 @@ class System(abc.ABC):
         ``p`` has one attribute per field of ``Params``; each is a number for the
         true Lagrangian, or a sympy symbol for the parametric form.
         """
+
+    #: each coordinate's position limits ``(lower, upper)``, where the system declares them (an arm's URDF)
+    position_limits: ClassVar[tuple[tuple[float, float], ...] | None] = None
+
+    def check_positions(self, data, margin: float = LIMIT_SLACK) -> None:
+        """A :class:`DataError` naming the file, the joint, the range of q seen
+        and the limits where ``data``'s positions leave the system's position
+        limits by more than ``margin`` of the joint's range (a log in degrees
+        leaves them by far); nothing for a system without limits."""
+        if self.position_limits is None or data is None or not len(data):
+            return
+        for j, ((lo, hi), name) in enumerate(zip(self.position_limits, self.coordinates)):
+            slack = margin * (hi - lo)
+            seen = (float(np.min(data.q[:, j])), float(np.max(data.q[:, j])))
+            if seen[0] < lo - slack or seen[1] > hi + slack:
+                raise DataError(f"{data.source}: joint {j + 1} ({name}) has q from {seen[0]:.4g} to {seen[1]:.4g}, "
+                                f"outside its limits [{lo:.4g}, {hi:.4g}] by more than {margin:.0%} of its range: is the "
+                                f"log in degrees? (--ignore-limits fits it anyway)")
 
     @classmethod
     def source_files(cls) -> list[str]:

@@ -12,6 +12,7 @@ from typing import Callable
 
 from bench.core.data import Dataset
 from bench.core.errors import UserError
+from bench.core.fileio import file_digest, read_settings
 from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
@@ -20,6 +21,7 @@ from bench.runner.isolation import Call, CallFailed, run_call
 from bench.runner.matrix import KILL_FACTOR
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import Report, print_now
+from methods import METHODS
 from systems import SYSTEMS
 
 
@@ -30,6 +32,8 @@ class ResidualJob:
     ``train_path`` / ``test_path`` are CSV files in the suite's format; a
     measured system without them uses its own split ``split`` (``None``: its default). ``json_path`` and
     ``report_path`` are written by the loop's process, atomically.
+    ``check_limits`` stops the loop where the files' positions leave the
+    arm's joint limits (:meth:`~bench.core.system.System.check_positions`).
     """
 
     system: str
@@ -45,9 +49,14 @@ class ResidualJob:
     plugins: tuple[str, ...] = ()
     split: str | None = None
     device: str = "cpu"
+    check_limits: bool = True
+    command: str = ""
+    overrides: dict = field(default_factory=dict)
+    configuration: str = "default"
 
     def data(self) -> tuple[Dataset, Dataset | None]:
-        data = given_data(SYSTEMS[self.system](split=self.split), self.train_path, self.test_path)
+        data = given_data(SYSTEMS[self.system](split=self.split), self.train_path, self.test_path,
+                          check_limits=self.check_limits)
         if data is None:
             raise UserError(f"{self.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
         return data
@@ -58,8 +67,25 @@ class ResidualJob:
         train, test = self.data()
         result = residual_loop(self.method, train, test, budget_s=self.budget_s, steps=self.steps, seed=self.seed,
                                hyperparameters=self.hyperparameters, report=report, device=self.device)
+        result.inputs = self.inputs()
         write_outputs(result, train, test, self.json_path, self.report_path)
         return result
+
+    def inputs(self) -> dict:
+        """What the result is made from: the command line, the ``--set``
+        values, the named configuration and the method's whole configuration,
+        and each data file (the given CSVs, else the measured system's own
+        files) with its sha256 and the settings ``convert`` wrote beside it."""
+        paths = [p for p in (self.train_path, self.test_path) if p] or SYSTEMS[self.system].source_files()
+        files = {}
+        for path in paths:
+            files[str(path)] = {"sha256": file_digest(path)}
+            settings = read_settings(path)
+            if settings is not None:
+                files[str(path)]["convert"] = settings
+        method = METHODS[self.method](**self.hyperparameters)
+        return {"command": self.command, "set": dict(self.overrides), "configuration": self.configuration,
+                "hyperparameters": method.hyperparameters(), "files": files}
 
 
 def run_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:

@@ -115,7 +115,23 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         lines += ["", f"![residuals before and after]({plot_name})"]
     if result.lagrangian:
         lines += ["", "Final Lagrangian:", "", f"    {result.lagrangian}"]
+    lines += _inputs(result.inputs, result.provenance)
     return "\n".join(lines) + "\n"
+
+
+def _inputs(inputs: dict | None, provenance: dict) -> list[str]:
+    """The report's last section: what it was made from (:attr:`ResidualResult.inputs`)."""
+    if not inputs:
+        return []
+    lines = ["", "## Made from", "", f"    {inputs['command']}" if inputs.get("command") else "    (no command line)", ""]
+    given = ", ".join(f"{k}={v}" for k, v in inputs.get("set", {}).items()) or "none"
+    lines.append(f"- configuration `{inputs.get('configuration', 'default')}`; --set: {given}; commit "
+                 f"{str(provenance.get('commit', '?'))[:10]}")
+    for path, entry in inputs.get("files", {}).items():
+        convert = entry.get("convert")
+        made = "" if not convert else f"; converted by `{convert.get('command', 'convert')}`"
+        lines.append(f"- `{path}`: sha256 {entry['sha256'][:16]}…{made}")
+    return lines
 
 
 def _budget(result: ResidualResult) -> str:

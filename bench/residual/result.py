@@ -58,6 +58,10 @@ class ResidualResult:
     rollout: dict | None = None
     #: where the method's fits trained (:func:`bench.core.devices.describe`)
     device: dict | None = None
+    #: what the result was made from (:meth:`bench.residual.job.ResidualJob.inputs`): the command
+    #: line, the ``--set`` values, the configuration and every hyperparameter of the method, and
+    #: each data file's sha256 with the settings ``convert`` made it with
+    inputs: dict | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:

@@ -73,3 +73,55 @@ def test_a_delayed_torque_is_the_arms_torque_an_instant_earlier_and_a_negative_d
     r = cli("robot-log", "--system", "double_pendulum", "--torque-delay", "-0.005", "--out", str(tmp_path / "logs"))
     assert r.returncode == 2 and "--torque-delay" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "logs").exists()
+
+
+@pytest.fixture(scope="module")
+def panda_log(tmp_path_factory):
+    """One 12 s log of the Panda (7 joints), in seconds and radians, and the same log in degrees and in milliseconds."""
+    import pandas as pd
+
+    folder = tmp_path_factory.mktemp("panda_log")
+    r = cli("robot-log", "--system", "panda", "--recordings", "1", "--seconds", "12", "--out", str(folder))
+    assert r.returncode == 0, r.stderr
+    log = folder / "recording_0.csv"
+    frame = pd.read_csv(log)
+    degrees = frame.copy()
+    for c in frame.columns:
+        if c.endswith(("_position", "_velocity")):
+            degrees[c] = frame[c] * 180 / np.pi
+    millis = frame.assign(time=frame["time"] * 1000)
+    degrees.to_csv(folder / "degrees.csv", index=False)
+    millis.to_csv(folder / "millis.csv", index=False)
+    return folder
+
+
+def test_a_log_in_milliseconds_stops_with_one_line_naming_the_time_column(panda_log, tmp_path):
+    out = tmp_path / "out.csv"
+    r = cli("convert", "--columns", columns(7), "--out", out, panda_log / "millis.csv")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and not out.exists()
+    assert "millis.csv: column time" in r.stderr and "--time-unit ms" in r.stderr
+    r = cli("convert", "--columns", columns(7), "--time-unit", "ms", "--out", out, panda_log / "millis.csv")
+    assert r.returncode == 0, r.stderr
+    r = cli("convert", "--columns", columns(7), "--out", tmp_path / "seconds.csv", panda_log / "recording_0.csv")
+    assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
+    np.testing.assert_allclose(read_csv(out).qdd, read_csv(tmp_path / "seconds.csv").qdd, rtol=1e-9, atol=1e-9)
+
+
+def test_a_log_in_degrees_is_named_before_any_fit_and_converted_on_request(panda_log, tmp_path):
+    out = tmp_path / "deg.csv"
+    r = cli("convert", "--columns", columns(7), "--out", out, panda_log / "degrees.csv")
+    assert r.returncode == 0 and "beyond ±2π: if the log is in degrees, give --degrees" in r.stderr, r.stderr
+    # the arm's joint limits stop the fit, in one line that names the joint, the range seen and the limits
+    r = cli("fit", "--system", "panda", "--method", "sysid", "--experiment", "indirect", "--train", out, "--steps", "1")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "is the log in degrees?" in r.stderr, r.stderr
+    assert "deg.csv: joint " in r.stderr and "outside its limits [" in r.stderr
+    r = cli("residual", "--system", "panda", "--method", "sysid", "--train", out, "--steps", "1")
+    assert r.returncode == 2 and "is the log in degrees?" in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    r = cli("fit", "--system", "panda", "--method", "sysid", "--experiment", "indirect", "--train", out, "--steps", "1",
+            "--ignore-limits")
+    assert r.returncode == 0, r.stderr
+    r = cli("convert", "--columns", columns(7), "--degrees", "--out", tmp_path / "rad.csv", panda_log / "degrees.csv")
+    assert r.returncode == 0 and "warning" not in r.stderr, r.stderr
+    r = cli("fit", "--system", "panda", "--method", "sysid", "--experiment", "indirect", "--train", tmp_path / "rad.csv",
+            "--steps", "1")
+    assert r.returncode == 0, r.stderr

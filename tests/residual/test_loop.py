@@ -132,7 +132,7 @@ def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
         assert r.returncode == 0, r.stderr
     r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--train", str(tmp_path / "train.csv"),
             "--test", str(tmp_path / "test.csv"), "--steps", "1", "--json", str(tmp_path / "out.json"),
-            "--report", str(tmp_path / "report.md"))
+            "--report", str(tmp_path / "report.md"), "--set", "samples=4000")
     assert r.returncode == 0, r.stderr
     # the loop runs in its own process; its progress lines reach the terminal as they are printed
     assert "round 0: fitting sparse" in r.stdout and "round 1: adding" in r.stdout
@@ -140,6 +140,16 @@ def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
     assert {"system", "method", "mse_before", "mse_after", "effects", "rounds", "fit_budget_s", "provenance"} <= set(out)
     assert out["provenance"]["threads"]["torch_intra_op"] == 1  # the loop's process pins its threads like any run
     assert set(out["mse_before"]) == {"train", "test"}
+    # the result traces to its inputs: the command line, every --set, the method's whole configuration, the files
+    import hashlib
+
+    inputs = out["inputs"]
+    assert inputs["command"].startswith("python -m bench residual --system double_pendulum --method sparse")
+    assert "--set samples=4000" in inputs["command"] and inputs["set"] == {"samples": 4000}
+    assert inputs["hyperparameters"]["samples"] == 4000 and "threshold" in inputs["hyperparameters"]
+    for name in ("train", "test"):
+        path = str(tmp_path / f"{name}.csv")
+        assert inputs["files"][path]["sha256"] == hashlib.sha256((tmp_path / f"{name}.csv").read_bytes()).hexdigest()
     # Coulomb and viscous friction on one joint are one law, with its parts
     assert sorted((e["name"], e["joint"]) for e in out["effects"]) == [
         ("coulomb_viscous_friction", 1), ("coulomb_viscous_friction", 2)]
@@ -148,6 +158,7 @@ def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
         ("coulomb_friction", 1), ("coulomb_friction", 2), ("viscous_friction", 1), ("viscous_friction", 2)]
     assert all({"name", "joint", "coefficient", "stderr"} <= set(p) for p in parts(out["effects"]))
     report = (tmp_path / "report.md").read_text()
+    assert "## Made from" in report and "--set: samples=4000" in report
     assert "| before (declared model only) |" in report and "![residuals before and after](report_residuals.png)" in report
     assert (tmp_path / "report_residuals.png").read_bytes()[:4] == b"\x89PNG"
 
@@ -178,6 +189,14 @@ def test_cli_converts_a_raw_dfki_recording(tmp_path):
     data = read_csv(tmp_path / "t.csv", dof=2)
     expected = get_system("dfki_double_pendulum").load("test")
     np.testing.assert_allclose(data.qdd, expected.qdd[: len(data)], rtol=1e-12, atol=1e-12)
+    # the settings it was made with travel beside it, and a residual loop on it records them
+    from bench.residual.job import ResidualJob
+
+    inputs = ResidualJob(system="dfki_double_pendulum", method="sysid", train_path=str(tmp_path / "t.csv")).inputs()
+    convert = inputs["files"][str(tmp_path / "t.csv")]["convert"]
+    assert convert["format"] == "dfki" and convert["filter"]["cutoff_hz"] == 6.0 and convert["time_unit"] == "s"
+    assert convert["command"].startswith("python -m bench convert --format dfki")
+    assert list(convert["logs"]) == [str(trajectory_path("03"))] and len(convert["logs"][str(trajectory_path("03"))]) == 64
 
 
 def test_a_huge_symbolic_model_is_refitted_like_a_neural_one():
