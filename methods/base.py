@@ -274,8 +274,11 @@ class Method(FittedModel):
 
     def end_fit(self, started: "FitStart", train: Dataset) -> "Method":
         """What :meth:`fit` does after the method's loop: restore the best
-        state, the work after it (:meth:`_post_fit`) and :attr:`fit_info`."""
+        state, the work after it (:meth:`_post_fit`) and :attr:`fit_info`
+        (``loop_seconds``: of ``fit_seconds``, those before the final evaluation
+        and the work after the loop)."""
         progress, budget, t0 = started.progress, started.budget, started.t0
+        loop_seconds = time.perf_counter() - t0
         progress.finish()
         if progress.best_state is not None:
             self._set_state(progress.best_state)
@@ -285,6 +288,7 @@ class Method(FittedModel):
             "best_step": progress.best_step,
             "stop_reason": progress.stop_reason or "loop ended",
             "fit_seconds": time.perf_counter() - t0,
+            "loop_seconds": round(loop_seconds, 4),
             "prepare_seconds": started.prepare_seconds,
             "evaluations": progress.evaluations,
             "eval_seconds": progress.eval_seconds,
