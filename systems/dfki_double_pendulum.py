@@ -25,7 +25,7 @@ The lab publishes recordings in two column layouts (:data:`LAYOUTS`):
 (the shipped ones) and ``time, pos1, pos2, vel1, vel2, tau1, tau2``;
 :func:`read_raw` reads either.
 
-The cut-off was chosen by measuring: ``python -m bench dfki-filter`` fits the
+The cut-off was chosen by measuring: ``python -m bench study dfki-filter`` fits the
 lab's model structure (rigid body, rotor inertia, viscous and Coulomb
 friction) by least squares for a range of cut-offs and prints its test torque
 MSE against the *unfiltered* measured torque. Results are in
@@ -145,7 +145,7 @@ class DfkiDoublePendulum(System):
     reference = ("with this pre-processing, the lab's own identified model 2.0 (rigid body, rotor inertia, "
                  "viscous and Coulomb friction; not fitted here) has a test torque MSE of 0.0177, and a "
                  "least-squares fit of the rigid-body form alone 0.0343 "
-                 "(`python -m bench dfki-filter`, results/measured/dfki_filter.md).")
+                 "(`python -m bench study dfki-filter`, results/measured/dfki_filter.md).")
     not_applicable = "the DFKI recordings are measured trajectories with torques and no samples of L, so only the indirect experiment applies"
 
     def lagrangian_expr(self, q, qd, p):

@@ -22,30 +22,51 @@ from tests.commandline import cli
 ROOT = Path(__file__).resolve().parent.parent
 
 
-COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "rerun", "leaderboard", "index",
-            "adaptation", "residual-acceptance", "residual-dfki", "robot-log", "overhead", "dfki-filter", "scaling",
-            "syrenets-speed", "syrenets-profile", "stacking-speed")
+#: the user's verbs, and the one verb of the project's studies
+COMMANDS = ("list", "run", "table", "data", "fit", "residual", "convert", "robot-log", "rerun", "leaderboard", "index",
+            "study")
+STUDIES = ("adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling", "syrenets-speed",
+           "syrenets-profile", "stacking-speed")
 
 
-def _subparsers():
-    (sub,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+def _subparsers_of(parser):
+    (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     return sub
 
 
-def test_help_lists_every_command():
+class _Leaves:
+    """Every command's parser, a study's as ``study NAME``: ``.choices`` and ``._choices_actions`` as argparse's."""
+
+    def __init__(self):
+        top = _subparsers_of(build_parser())
+        study = _subparsers_of(top.choices["study"])
+        self.choices = {**{k: v for k, v in top.choices.items() if k != "study"},
+                        **{f"study {k}": v for k, v in study.choices.items()}}
+        self._choices_actions = [*top._choices_actions, *study._choices_actions]
+
+
+def _subparsers():
+    return _Leaves()
+
+
+def test_help_lists_the_users_verbs_and_one_verb_for_the_studies():
     text = build_parser().format_help()
     for command in COMMANDS:
         assert command in text
-    assert set(_subparsers().choices) == set(COMMANDS)
+    assert set(_subparsers_of(build_parser()).choices) == set(COMMANDS)
+    assert not any(f"    {s} " in text for s in STUDIES)
+    studies = cli("study", "--help").stdout
+    assert all(s in studies for s in STUDIES)
+    assert set(_subparsers().choices) == {c for c in COMMANDS if c != "study"} | {f"study {s}" for s in STUDIES}
     fit_help = cli("fit", "--help").stdout
     assert "--train" in fit_help and "--json" in fit_help
 
 
-@pytest.mark.parametrize("command", [None, *COMMANDS])
+@pytest.mark.parametrize("command", [None, *COMMANDS, *(f"study {s}" for s in STUDIES)])
 def test_every_help_renders(command, capsys):
     # argparse formats help texts with %: a stray "%" in one raises only when that help is printed
     with pytest.raises(SystemExit) as exit_:
-        main(["--help"] if command is None else [command, "--help"])
+        main(["--help"] if command is None else [*command.split(), "--help"])
     assert exit_.value.code == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: python -m bench") and "--help" in out
@@ -359,15 +380,15 @@ def test_no_option_takes_an_unchecked_number():
             if a.type in (int, float)]
     assert bare == []
     commands = {name for name, _, _ in _numeric_options()}
-    assert {"syrenets-speed", "syrenets-profile", "overhead", "adaptation", "residual-acceptance", "residual-dfki",
-            "scaling", "run", "fit", "convert"} <= commands
+    assert {"study syrenets-speed", "study syrenets-profile", "study overhead", "study adaptation",
+            "study residual-acceptance", "study residual-dfki", "study scaling", "run", "fit", "convert"} <= commands
 
 
 @pytest.mark.parametrize("command, option, value", _numeric_options())
 def test_a_bad_number_is_refused_in_one_line_naming_the_option(tmp_path, monkeypatch, capsys, command, option, value):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as exc:
-        main([command, option, value])
+        main([*command.split(), option, value])
     err = capsys.readouterr().err
     assert exc.value.code == 2
     assert f"argument {option}" in err and f"got {value}" in err and err.count("\n") == 1, err

@@ -6,8 +6,9 @@ stderr and exit code 2; nothing is half-written. Every option has a help
 text (``python -m bench COMMAND --help``).
 
 Each command is one module with ``HELP``, ``add_arguments(parser)`` and
-``main(args) -> exit code``: the core commands here, in :data:`COMMANDS`,
-and the measurement scripts of :mod:`bench.experiments`. What several
+``main(args) -> exit code``: the user's commands here, in :data:`COMMANDS`,
+and the project's studies under one of them, ``study`` (:mod:`bench.cli.study`,
+the measurement scripts of :mod:`bench.experiments`). What several
 commands share (``--set``, ``--plugin``, ``--budget`` with ``--steps``) is in
 :mod:`bench.cli.options`; the option values' types are in
 :mod:`bench.core.arguments`.
@@ -19,22 +20,19 @@ import argparse
 import shlex
 import sys
 
-from bench.cli import convert, data, fit, index, leaderboard, listing, rerun, residual, run, table
+from bench.cli import convert, data, fit, index, leaderboard, listing, rerun, residual, run, study, table
 from bench.cli.options import Parser
 from bench.core.errors import UserError
-from bench.experiments import (adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, robot_log, scaling,
-                               stacking_speed, syrenets_profile, syrenets_speed)
+from bench.experiments import robot_log
 from bench.runner.isolation import CallFailed
 
 EXIT_USAGE = 2
 
-#: the commands, by name: the core ones, then the measurement scripts
+#: the commands, by name: the user's, then the project's studies under one verb
 COMMANDS = {
     "list": listing, "run": run, "table": table, "data": data, "fit": fit, "residual": residual,
-    "convert": convert, "rerun": rerun, "leaderboard": leaderboard, "index": index,
-    "adaptation": adaptation, "residual-acceptance": residual_acceptance, "residual-dfki": residual_dfki,
-    "robot-log": robot_log, "overhead": overhead, "dfki-filter": dfki_filter, "scaling": scaling,
-    "syrenets-speed": syrenets_speed, "syrenets-profile": syrenets_profile, "stacking-speed": stacking_speed,
+    "convert": convert, "robot-log": robot_log, "rerun": rerun, "leaderboard": leaderboard, "index": index,
+    "study": study,
 }
 
 

@@ -65,9 +65,11 @@ def main(args) -> int:
     columns = ColumnMap.parse(args.columns) if args.columns else None
     trajectories = trajectory_names(args.trajectory, names, need=columns is not None and not args.distinct)
     system = None if columns else "dfki_double_pendulum"
-    recordings = [read_log(path, columns, spec, args.time_unit, args.degrees) for path in args.raw]
+    recordings, warnings = zip(*(read_log(path, columns, spec, args.time_unit, args.degrees) for path in args.raw))
     parts = [preprocess(r, spec) for r in recordings]
     s = joined(parts, names, trajectories)
+    for line in (w for group in warnings for w in group):  # once every log is read: an error is the one line
+        print(line, file=sys.stderr)
     source = ", ".join(map(str, args.raw))
     write_csv(Dataset(s["q"], s["qd"], s["qdd"], s["tau"], None, system, source, recording=s["recording"],
                       sign_qd=s["sign_qd"], trajectory=s.get("trajectory"), time=s["time"]), args.out)
@@ -81,17 +83,19 @@ def main(args) -> int:
     return 0
 
 
-def read_log(path: Path, columns: ColumnMap | None, spec: FilterSpec, time_unit: str, degrees: bool) -> Recording:
+def read_log(path: Path, columns: ColumnMap | None, spec: FilterSpec, time_unit: str,
+             degrees: bool) -> tuple[Recording, list[str]]:
     """One log, in seconds and radians, its rate checked against the filter
-    (:func:`~bench.core.recordings.check_rate`); a warning naming degrees where
-    its q leaves ±2π and ``degrees`` was not given."""
+    (:func:`~bench.core.recordings.check_rate`), and its warnings: one naming
+    degrees for each q that leaves ±2π where ``degrees`` was not given."""
     recording = in_units(read_recording(path, columns) if columns else read_raw(path), time_unit, degrees)
     check_rate(recording, spec, path, columns.time if columns else "time")
+    warnings = []
     for j, lo, hi in ([] if degrees else beyond_a_turn(recording)):
         name = columns.q[j] if columns else f"q{j + 1}"
-        print(f"warning: {path}: column {name} (q_{j + 1}) spans {lo:.4g} to {hi:.4g}, beyond ±2π: if the log is in "
-              f"degrees, give --degrees to convert q and qd to radians", file=sys.stderr)
-    return recording
+        warnings.append(f"warning: {path}: column {name} (q_{j + 1}) spans {lo:.4g} to {hi:.4g}, beyond ±2π: if the "
+                        f"log is in degrees, give --degrees to convert q and qd to radians")
+    return recording, warnings
 
 
 def trajectory_names(given: list[str] | None, recordings: list[str], need: bool) -> list[str] | None:

@@ -25,7 +25,7 @@ rest of a model's columns are smooth functions of the filtered state, which
 the low-pass passes as they are.
 
 The defaults (:data:`DEFAULT_FILTER`) are those measured for the DFKI
-double pendulum (``python -m bench dfki-filter``); a robot of its own wants
+double pendulum (``python -m bench study dfki-filter``); a robot of its own wants
 its own cut-off, chosen the same way.
 """
 

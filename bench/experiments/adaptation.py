@@ -37,7 +37,7 @@ stops a little before its budget); evaluating the test MSE is not counted.
 Each learner and seed runs in its own process through the runner
 (:mod:`bench.runner.isolation`). Usage::
 
-    python -m bench adaptation [--seeds 5] [--effects spring=5,0] [--out results/residual/adaptation]
+    python -m bench study adaptation [--seeds 5] [--effects spring=5,0] [--out results/residual/adaptation]
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ the model's own evaluation (train and test MSE on the full data, variants,
 rollout, timed inside each run): what is left is the harness's share.
 Usage::
 
-    python -m bench overhead [--budget 30] [--runs 8] [--workers 1 2] [--out results/harness/overhead.md]
+    python -m bench study overhead [--budget 30] [--runs 8] [--workers 1 2] [--out results/harness/overhead.md]
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ scored (:mod:`bench.experiments.acceptance_scoring`):
 The page gives them per method and noise level over every case, per case,
 and the confusion per method; a JSON file beside it holds every run. Usage::
 
-    python -m bench residual-acceptance [--noise 0 0.01 0.05 0.1] [--seeds 0 1 2] [--methods sysid sparse] \\
+    python -m bench study residual-acceptance [--noise 0 0.01 0.05 0.1] [--seeds 0 1 2] [--methods sysid sparse] \\
         --steps 2000 [--out results/residual/acceptance.md]
 """
 

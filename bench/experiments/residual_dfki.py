@@ -14,7 +14,7 @@ and the part of it spent in the loop's statistics. The lab's identified
 model (rigid body, rotor inertia, viscous and Coulomb friction) has a test
 MSE of 0.0177 on the suite's split. Usage::
 
-    python -m bench residual-dfki [--methods sysid sparse ...] [--budget 60] [--loro-budget 30] [--out results/residual/dfki.md]
+    python -m bench study residual-dfki [--methods sysid sparse ...] [--budget 60] [--loro-budget 30] [--out results/residual/dfki.md]
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ and a log–log plot draws time per step and test MSE against the degrees of
 freedom. A method that cannot run at some size is in the table with its
 status and reason. Usage::
 
-    python -m bench scaling [--budget 5] [--seeds 5] [--out results/scaling]
+    python -m bench study scaling [--budget 5] [--seeds 5] [--out results/scaling]
 
 The table covers every method recorded in the folder at the same budget and
 seeds, so ``--methods delan`` adds a method's rows to a study already there

@@ -11,7 +11,7 @@ compiling, to its loop's end), evaluations on its schedule included, as a
 run spends it, and the work after the loop (SyReNets' pruning) left out. The ratio is the
 stacked seed-steps per second over the one-by-one's::
 
-    python -m bench stacking-speed [--device cpu] [--n-seeds 1 10 100] [--steps 20] [--out PAGE.md]
+    python -m bench study stacking-speed [--device cpu] [--n-seeds 1 10 100] [--steps 20] [--out PAGE.md]
 
 SyReNets is measured without its refinement after training
 (``refine=False``), which a step count does not bound.
@@ -115,7 +115,7 @@ def main(args) -> int:
             print_now(f"{method} on {system}, {s} seed(s): stacked {row['stacked_steps_per_s']:.3g} steps/s, "
                       f"{row['stacked_seed_steps_per_s']:.3g} seed-steps/s; one by one {row['alone_seed_steps_per_s']:.3g} "
                       f"seed-steps/s; stacked ÷ one by one {row['ratio']:.2f}")
-    lines = [f"Measured by `python -m bench stacking-speed --device {args.device} --cases {' '.join(args.cases)} "
+    lines = [f"Measured by `python -m bench study stacking-speed --device {args.device} --cases {' '.join(args.cases)} "
              f"--n-seeds {' '.join(map(str, args.n_seeds))} --steps {args.steps} --n-train {args.n_train}` on {where['type']} ({machine}), one thread.", "",
              "| method | system | seeds | stacked steps/s (each seed) | stacked seed-steps/s | one by one seed-steps/s "
              "| stacked ÷ one by one |", "|---|---|---:|---:|---:|---:|---:|"]

@@ -34,7 +34,7 @@ and the operators are timed alone once per round; the tables give medians. Confi
 one (inputs ``(q, qd, qdd)``, 32 samples plus 16 replayed), the direct experiment, float64, one thread, inside
 the garbage-collector context of the suite's fit loop. Usage::
 
-    python -m bench syrenets-profile [--steps 200] [--rounds 3] [--out results/syrenets/speed/syrenets_profile.md]
+    python -m bench study syrenets-profile [--steps 200] [--rounds 3] [--out results/syrenets/speed/syrenets_profile.md]
 
 With ``--compiled`` it profiles the step with ``compile=True`` instead
 (:func:`measure_compiled`, results/syrenets/speed/syrenets_profile_compiled.md): the
@@ -84,7 +84,7 @@ from systems import get_system
 HELP = ("where SyReNets' training step spends its time, and its heads' product with and without torch.profiler "
         "(results/syrenets/speed/syrenets_profile.md)")
 
-#: the authors' public configuration, as bench syrenets-speed times it
+#: the authors' public configuration, as bench study syrenets-speed times it
 CONFIG = syrenets_speed.CONFIGS["public"]
 MODES = ("plain", "profiler", "timers")
 #: untimed steps at the start of each mode

@@ -24,7 +24,7 @@ inside the context that the tree's own ``Method.fit`` runs its loop in
 (``methods.base.gc_frozen`` where the tree has it), so that what the loop
 does around the step counts as well. Usage::
 
-    python -m bench syrenets-speed --against REV [--rounds 5] [--seconds 3] [--compiled [--both-compiled]] [--out results/syrenets/speed/syrenets_speed.md]
+    python -m bench study syrenets-speed --against REV [--rounds 5] [--seconds 3] [--compiled [--both-compiled]] [--out results/syrenets/speed/syrenets_speed.md]
 """
 
 from __future__ import annotations

@@ -68,6 +68,9 @@ class Entry:
 def read_manifest(root: Path) -> list[Entry]:
     """The manifest's entries; a bad one ends in one line naming the field."""
     path = Path(root) / MANIFEST
+    if not path.is_file():
+        raise UserError(f"{path}: no such file; index lists the results a manifest names (docs/cli.md, 'index'); "
+                        f"a run folder's tables are written by python -m bench table {root}")
     try:
         raw = tomllib.loads(path.read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:

@@ -1,8 +1,9 @@
-"""Build the leaderboard, ``results/README.md``, from the records of ``results/leaderboard``.
+"""A leaderboard: the tables of one run folder (every system, method and
+experiment; :mod:`bench.reporting.tables`) with their convergence plots and
+the methods' ranks across them, nothing else unless a commentary is given.
 
-The leaderboard is the tables of one run directory (every system, method and
-experiment; :mod:`bench.reporting.tables`) with their convergence plots, interleaved
-with a commentary: a markdown file whose ``## `` headings name the table
+The project's own (``results/README.md``, from the records of
+``results/leaderboard``) interleaves them with a commentary: a markdown file whose ``## `` headings name the table
 sections they comment on (``## double_pendulum, direct``), plus an
 ``## Introduction`` that comes first; any other heading becomes a section of
 its own after the tables, in the file's order.
@@ -100,9 +101,9 @@ def rank_summary(records) -> str:
     return text
 
 
-def write_leaderboard(run_dir: Path, commentary: Path, out: Path) -> list[str]:
+def write_leaderboard(run_dir: Path, commentary: Path | None, out: Path) -> list[str]:
     """Write the leaderboard ``out`` from ``run_dir``'s records and the
-    ``commentary`` file; returns the table sections without commentary."""
-    text, missing = build(run_dir, read_commentary(commentary), out)
+    ``commentary`` file (``None``: none); returns the table sections without commentary."""
+    text, missing = build(run_dir, {} if commentary is None else read_commentary(commentary), out)
     atomic_write(out, lambda f: f.write(text))
     return missing

@@ -87,7 +87,7 @@ def test_outputs_table_plot_and_json(tmp_path):
         {"learner": "mlp", "seed": s, "before": 1.0, "curve": [[0.0, 4.0], [0.9, 2.0 + s]]} for s in range(2)
     ] + [{"learner": "sysid+residual", "seed": 0, "before": 1.0, "curve": [[0.0, 4.0], [3.0, 1e-20]],
           "effects": [{"name": "spring", "joints": [1], "law": "L += -k*q_1**2/2", "parameters": {"k": {"value": 5.0, "stderr": 1e-9}}}]}]
-    path = adaptation.write(results, setup, [0, 1], tmp_path, "python -m bench adaptation")
+    path = adaptation.write(results, setup, [0, 1], tmp_path, "python -m bench study adaptation")
     text = path.read_text()
     assert "| mlp | 1 | 4 | 2.5 | 2.5 | 0.9 | 0.625 |" in text  # medians over the two seeds
     assert "| sysid+residual | 1 | 4 | 4 | 1e-20 | 3.0 | 2.5e-21 |" in text  # the loop ends after the last checkpoint
@@ -98,7 +98,7 @@ def test_outputs_table_plot_and_json(tmp_path):
 
 def test_command_refuses_a_bad_setup_in_one_line_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / "adaptation"
-    assert main(["adaptation", "--checkpoints", "1", "2", "--out", str(out)]) == 2
+    assert main(["study", "adaptation", "--checkpoints", "1", "2", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: --checkpoints must start at 0") and "\n" not in err
     assert not out.exists()

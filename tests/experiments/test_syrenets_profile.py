@@ -61,7 +61,7 @@ def test_the_operators_timed_alone_are_those_of_one_step():
 @pytest.mark.slow
 def test_a_short_run_writes_one_row_per_mode_and_where_the_time_goes(tmp_path):
     out = tmp_path / "profile.md"
-    args = argparse.Namespace(steps=2, rounds=1, out=out, compiled=False, invocation="python -m bench syrenets-profile")
+    args = argparse.Namespace(steps=2, rounds=1, out=out, compiled=False, invocation="python -m bench study syrenets-profile")
     assert syrenets_profile.main(args) == 0
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in out.read_text().splitlines()
              if line.startswith("| ")]
@@ -110,7 +110,7 @@ def test_the_compiled_steps_profile_groups_adam_the_matrix_products_and_the_gene
 def test_a_short_compiled_profile_adds_up_to_the_plain_step(tmp_path):
     out = tmp_path / "compiled.md"
     args = argparse.Namespace(steps=3, rounds=1, out=out, compiled=True,
-                              invocation="python -m bench syrenets-profile --compiled")
+                              invocation="python -m bench study syrenets-profile --compiled")
     assert syrenets_profile.main(args) == 0
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in out.read_text().splitlines()
              if line.startswith("| ")]

@@ -18,7 +18,7 @@ def test_an_unknown_revision_is_one_clear_error(tmp_path):
 
 def test_both_compiled_without_compiled_is_one_clear_error(tmp_path):
     args = argparse.Namespace(against="HEAD", rounds=1, seconds=0.2, compiled=False, both_compiled=True,
-                              out=tmp_path / "speed.md", invocation="python -m bench syrenets-speed --both-compiled")
+                              out=tmp_path / "speed.md", invocation="python -m bench study syrenets-speed --both-compiled")
     with pytest.raises(UserError, match="--both-compiled: add --compiled"):
         syrenets_speed.main(args)
     assert not (tmp_path / "speed.md").exists()
@@ -28,7 +28,7 @@ def test_both_compiled_without_compiled_is_one_clear_error(tmp_path):
 def test_both_trees_are_timed_in_turn_and_the_table_gives_their_ratio(tmp_path):
     out = tmp_path / "speed.md"
     args = argparse.Namespace(against="HEAD", rounds=1, seconds=0.2, compiled=False, both_compiled=False, out=out,
-                              invocation="python -m bench syrenets-speed")
+                              invocation="python -m bench study syrenets-speed")
     assert syrenets_speed.main(args) == 0
     rows = [line for line in out.read_text().splitlines() if line.startswith("| direct") or line.startswith("| indirect")]
     assert len(rows) == 4

@@ -119,10 +119,10 @@ def test_the_stacking_measurement_prints_both_rates_and_their_ratio(tmp_path):
     from tests.commandline import cli
 
     out = tmp_path / "speed.md"
-    r = cli("stacking-speed", "--cases", "mlp:double_pendulum", "--n-seeds", "1", "2", "--steps", "2", "--n-train", "64",
+    r = cli("study", "stacking-speed", "--cases", "mlp:double_pendulum", "--n-seeds", "1", "2", "--steps", "2", "--n-train", "64",
             "--out", out)
     assert r.returncode == 0, r.stderr
     assert "mlp on double_pendulum, 2 seed(s): stacked" in r.stdout and "stacked ÷ one by one" in r.stdout
     assert out.read_text().count("| mlp | double_pendulum |") == 2
-    bad = cli("stacking-speed", "--cases", "sysid:double_pendulum", "--n-seeds", "1")
+    bad = cli("study", "stacking-speed", "--cases", "sysid:double_pendulum", "--n-seeds", "1")
     assert bad.returncode == 2 and "sysid is not a stackable method" in bad.stderr and bad.stderr.count("\n") == 1

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from bench.reporting.leaderboard import build, read_commentary
 from bench.runner.records import Record, record_path, write_record
 
@@ -43,3 +45,23 @@ def test_the_methods_mean_ranks_across_sections_follow_the_tables(tmp_path):
     summary = text.split("## Ranks across systems")[1].split("## More runs")[0]
     assert "Each of the 3 sections" in summary and "sparse 1.00, mlp 2.00, mggp 3.00" in summary
     assert "χ² = 6.00, p = 0.05; at α = 0.05 the methods' ranks differ" in summary  # p = exp(-3) = 0.0498
+
+
+def test_a_users_leaderboard_is_the_users_own_and_lies_in_their_folder(tmp_path):
+    from tests.commandline import cli
+
+    run_dir = tmp_path / "my_runs"
+    for seed in range(3):
+        write(run_dir, "double_pendulum", "direct", "mlp", seed)
+    project_page = Path(__file__).parents[2] / "results" / "README.md"
+    before = project_page.read_bytes()
+    r = cli("leaderboard", run_dir)
+    assert r.returncode == 0, r.stderr
+    text = (run_dir / "leaderboard.md").read_text()
+    assert "| Group | Split | mlp |" in text and "| All 3 | train |" in text
+    commentary = (Path(__file__).parents[2] / "results" / "commentary.md").read_text()
+    paragraphs = [p.strip() for p in commentary.split("\n\n") if len(p.strip()) > 40 and not p.startswith("#")]
+    assert paragraphs and not any(p in text for p in paragraphs)  # nothing of the project's commentary
+    assert "no commentary" not in r.stdout and project_page.read_bytes() == before
+    r = cli("index", run_dir)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "python -m bench table" in r.stderr

@@ -1,0 +1,28 @@
+"""``python -m bench study NAME``: the project's own studies, each a
+measurement that writes one of the project's published pages under
+``results/`` by default (:mod:`bench.experiments`)."""
+
+from __future__ import annotations
+
+from bench.cli.options import Parser
+from bench.experiments import (adaptation, dfki_filter, overhead, residual_acceptance, residual_dfki, scaling,
+                               stacking_speed, syrenets_profile, syrenets_speed)
+
+HELP = "the project's studies: measurements that write its published pages (python -m bench study --help lists them)"
+
+#: the studies, by name
+STUDIES = {
+    "adaptation": adaptation, "residual-acceptance": residual_acceptance, "residual-dfki": residual_dfki,
+    "overhead": overhead, "dfki-filter": dfki_filter, "scaling": scaling, "syrenets-speed": syrenets_speed,
+    "syrenets-profile": syrenets_profile, "stacking-speed": stacking_speed,
+}
+
+
+def add_arguments(parser) -> None:
+    sub = parser.add_subparsers(dest="study", required=True, metavar="NAME", parser_class=Parser)
+    for name, module in STUDIES.items():
+        module.add_arguments(sub.add_parser(name, help=module.HELP))
+
+
+def main(args) -> int:
+    return STUDIES[args.study].main(args)
