@@ -26,7 +26,7 @@ from pathlib import Path
 
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
-from bench.reporting.tables import GROUPS, HALVES_FROM, TESTED_GROUP, group_stats
+from bench.reporting.groups import GROUPS, HALVES_FROM, TESTED_GROUP, group_stats
 from bench.runner.records import read_records
 
 MANIFEST = "manifest.toml"

@@ -10,7 +10,7 @@ method and the rows of Valle & Haddadin (2021), Tables 1 and 2:
 
 with ``n`` the table's seeds and ``k = ⌈n/2⌉`` (the paper's 10 seeds read
 "5 Best", "All 10", "5 Worse"); below 4 seeds the k rows are left out
-(:func:`group_label`),
+(:func:`bench.reporting.groups.group_label`),
 
 each split into train and test MSE, in the experiment's own target (``L``
 for direct, ``tau`` for indirect). The lowest mean of each row is bold; in
@@ -57,74 +57,17 @@ import numpy as np
 
 from bench.core.fileio import atomic_write, link
 from bench.evaluation.scores import MEASURED
+from bench.reporting.groups import GROUPS, TESTED_GROUP, _stats, group_label, group_members
 from bench.reporting.plots import convergence_plot, plot_name
 from bench.reporting.significance import by_seed, seed_ranks, ties_with_best
 from bench.runner.provenance import PROJECT_ROOT, machine
 from bench.runner.records import MISSING, Record, missing_runs, quarantine, read_records
 from systems import SYSTEMS
 
-#: the groups of seeds, in the table's order; each row's label is :func:`group_label`'s
-GROUPS = ("best", "best half", "all", "worse half")
-#: the rows whose methods are compared for significance: the only group whose
-#: seeds are not chosen by their own training MSE
-TESTED_GROUP = "all"
-#: the fewest seeds whose halves are rows of their own
-HALVES_FROM = 4
-
-
-def half(n: int) -> int:
-    """``k`` of "k Best" and "k Worse" for ``n`` seeds: ⌈n/2⌉."""
-    return math.ceil(n / 2)
-
-
-def group_label(group: str, n: int) -> str:
-    """A group's row label in a table of ``n`` seeds: "Best", "k Best", "All n", "k Worse"."""
-    return {"best": "Best", "best half": f"{half(n)} Best", "all": f"All {n}", "worse half": f"{half(n)} Worse"}[group]
-
-
 def fmt(value: float) -> str:
     if value is None or not math.isfinite(value):
         return "nan"
     return f"{value:.2e}"
-
-
-def group_members(records: list[Record], n_seeds: int | None = None) -> dict[str, dict[str, list[float]]]:
-    """``{group: {split: values}}``: each group's seeds' MSE, over ``ok`` records
-    (a split without test data is absent), for a table of ``n_seeds`` seeds
-    (by default the records' own); no halves below :data:`HALVES_FROM` seeds."""
-    ok = sorted((r for r in records if r.status == "ok"), key=lambda r: (r.train_mse, r.seed))
-    n = len(ok)
-    if n == 0:
-        return {}
-    seeds = n_seeds if n_seeds is not None else len({r.seed for r in records})
-    k = min(half(seeds), n)
-    members = {"best": ok[:1], "all": ok}
-    if seeds >= HALVES_FROM:
-        members |= {"best half": ok[:k], "worse half": ok[n - k:]}
-    out = {}
-    for group, runs in members.items():
-        out[group] = {}
-        for split in ("train", "test"):
-            vals = [getattr(r, f"{split}_mse") for r in runs]
-            if not any(v is None for v in vals):
-                out[group][split] = [float(v) for v in vals]
-    return out
-
-
-def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float | None]]]:
-    """``{group: {"train": (mean, std), "test": (mean, std)}}`` over ``ok`` records.
-
-    ``std`` is ``None`` for the single-run "best" group; a split without test
-    data is absent.
-    """
-    return _stats(group_members(records))
-
-
-def _stats(members: dict[str, dict[str, list[float]]]) -> dict[str, dict[str, tuple[float, float | None]]]:
-    """:func:`group_stats` from :func:`group_members`' values."""
-    return {group: {split: (float(np.mean(vals)), None if group == "best" else float(np.std(vals)))
-                    for split, vals in splits.items()}
-            for group, splits in members.items()}
 
 
 def _runs_cell(records: list[Record]) -> str:

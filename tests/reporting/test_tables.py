@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from bench.evaluation.scores import MEASURED
-from bench.reporting.tables import (build_table, build_tables, expand_variants, group_stats, standard_line,
+from bench.reporting.groups import group_stats
+from bench.reporting.tables import (build_table, build_tables, expand_variants, standard_line,
                                      write_tables)
 from bench.runner.records import Record, record_path, write_record
 
