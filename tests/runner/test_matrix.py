@@ -367,3 +367,13 @@ def test_one_edited_plugin_redoes_only_the_records_of_the_method_it_defines(tmp_
     assert [r.status for r in again] == ["ok"] * 4
     for a, b in zip(first, again):
         assert (a.code["hash"] == b.code["hash"]) == (a.method == "sparse")
+
+
+def test_seeds_group_where_their_configuration_stacks_and_run_alone_where_it_does_not():
+    from bench.runner.stacked import groups
+
+    common = dict(steps=5, n_train=64, n_test=32, rollout=False)
+    plain = build_specs(["double_pendulum"], ["syrenets", "sysid"], ["indirect"], [0, 1, 2], None, **common)
+    assert sorted(len(g) for g in groups(plain)) == [1, 1, 1, 3]  # SyReNets' three seeds together, SysId's alone
+    compiled = build_specs(["double_pendulum"], ["syrenets"], ["indirect"], [0, 1], None, profile="best-300s", **common)
+    assert [len(g) for g in groups(compiled)] == [1, 1]  # compile=True: one network's compiled pass, each seed alone
