@@ -48,6 +48,7 @@ import dataclasses
 import functools
 import random
 import time
+from typing import Callable
 
 import numpy as np
 import torch
@@ -68,6 +69,19 @@ class _Call(torch.nn.Module):
 
     def forward(self, *args):
         return getattr(self.base, self.name)(*args)
+
+
+def _per_network(base: torch.nn.Module, name: str, keys) -> Callable:
+    """``(params, buffers, *args) -> base.name(*args)`` with one network's
+    parameters and buffers (named ``keys``) in place of ``base``'s: what
+    ``vmap`` maps over a stack."""
+    call = _Call(base, name)
+    prefixed = {k: "base." + k for k in keys}
+
+    def one(p, b, *args):
+        return functional_call(call, ({prefixed[k]: v for k, v in p.items()}, {prefixed[k]: v for k, v in b.items()}), args)
+
+    return one
 
 
 class Stack:
@@ -96,15 +110,8 @@ class Stack:
         arguments after the parameters)."""
         key = (name, in_dims if not isinstance(in_dims, list) else tuple(in_dims))
         if key not in self._calls:
-            call = _Call(self.base, name)
-            prefixed = {k: "base." + k for k in (*self.params, *self.buffers)}
-
-            def one(p, b, *args):
-                return functional_call(call, ({prefixed[k]: v for k, v in p.items()},
-                                              {prefixed[k]: v for k, v in b.items()}), args)
-
             dims = (0, 0, *in_dims) if isinstance(in_dims, (tuple, list)) else 0
-            self._calls[key] = vmap(one, in_dims=dims)
+            self._calls[key] = vmap(_per_network(self.base, name, (*self.params, *self.buffers)), in_dims=dims)
         return functools.partial(self._calls[key], self.params, self.buffers)
 
     def split(self, *xs: torch.Tensor):
@@ -132,14 +139,8 @@ def _stacked_torques(base: torch.nn.Module, params: dict, buffers: dict, q, qd, 
     networks with their own derivatives (``tangent``): no ``autograd.grad``, so
     the whole of it compiles."""
     size = next(iter(params.values())).shape[0]
-    call = _Call(base, "tangent")
-    prefixed = {k: "base." + k for k in (*params, *buffers)}
-
-    def one(p, b, *args):
-        return functional_call(call, ({prefixed[k]: v for k, v in p.items()}, {prefixed[k]: v for k, v in b.items()}), args)
-
     q, qd, dq, dqd = (x.reshape(size, -1, *x.shape[1:]) for x in (q, qd, qd.detach(), qdd.detach()))
-    _, dL_dq, _, along = vmap(one)(params, buffers, q, qd, dq, dqd)
+    _, dL_dq, _, along = vmap(_per_network(base, "tangent", (*params, *buffers)))(params, buffers, q, qd, dq, dqd)
     return (along - dL_dq).reshape(-1, along.shape[-1])
 
 

@@ -65,7 +65,7 @@ def build(run_dir: Path, commentary: dict[str, str], out: Path) -> tuple[str, li
                 missing.append(key)
         parts.append(chunk)
     intro = commentary.get("Introduction", "")
-    text = "# Leaderboard\n\n" + (intro + "\n\n" if intro else "") + "".join(parts).rstrip() + "\n"
+    text = "# Leaderboard\n\n" + (intro + "\n\n" if intro else "") + "".join(parts).strip("\n") + "\n"
     summary = rank_summary(records)
     if summary:
         text += f"\n## Ranks across systems\n\n{summary}\n"

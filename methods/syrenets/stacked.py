@@ -78,7 +78,7 @@ def train_syrenets(methods: list, starts: list, datasets: list, experiment: str,
         with slot:
             loops.append(method.steps(data, experiment, start.progress))
     sent: list = [None] * len(methods)
-    stack = None
+    stack, cfg = None, methods[0].config
     while True:
         batches, ended = [], False
         for loop, slot, err in zip(loops, slots, sent):
@@ -95,7 +95,6 @@ def train_syrenets(methods: list, starts: list, datasets: list, experiment: str,
         models = [m.net.model for m in methods]
         if stack is None or any(a is not b for a, b in zip(stack.networks, models)):
             stack = Stack(models)  # a multi-start turn handed a seed another network
-        cfg = methods[0].config
         probes = None
         if cfg.lambda_contractive and cfg.contractive_probes:
             draws = []
