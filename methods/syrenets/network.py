@@ -24,6 +24,25 @@ def _layer_norm(x: torch.Tensor) -> torch.Tensor:
     return F.layer_norm(x, x.shape[-1:])
 
 
+def _heads_forward(W: torch.Tensor, h: torch.Tensor, hidden_first: bool) -> torch.Tensor:
+    return (W * h.unsqueeze(-1)).sum(1) if hidden_first else (W * h.unsqueeze(1)).sum(-1)
+
+
+def _heads_backward(W: torch.Tensor, h: torch.Tensor, g: torch.Tensor, hidden_first: bool, needs) -> tuple:
+    gW = gh = None
+    if hidden_first:
+        if needs[0]:
+            gW = h.unsqueeze(-1) * g.unsqueeze(1)
+        if needs[1]:
+            gh = (W * g.unsqueeze(1)).sum(-1)
+    else:
+        if needs[0]:
+            gW = g.unsqueeze(-1) * h.unsqueeze(1)
+        if needs[1]:
+            gh = torch.bmm(g.unsqueeze(1), W).squeeze(1)
+    return gW, gh, None
+
+
 class HeadsOutput(torch.autograd.Function):
     """``(W * h.unsqueeze(1)).sum(-1)`` for ``W`` (heads, C, k) and ``h``
     (heads, k): every head's output layer over the candidates. With
@@ -41,42 +60,68 @@ class HeadsOutput(torch.autograd.Function):
     code then sums along C, vertically in a vector register, instead of
     ending each sum in a horizontal reduction. The eager pass keeps
     (heads, C, k). Measured: results/syrenets/design.md.
+
+    Several networks' heads at once (under ``vmap``, :mod:`methods.syrenets.stacked`)
+    take :class:`_BatchedHeadsOutput`, the same computation in the form torch's
+    transforms batch (:func:`heads_output` chooses). This class keeps the
+    older form for one network: its ``apply`` costs about 60 µs less (1,000 µs
+    against 1,060 µs with its backward, for the public configuration's shapes),
+    about 1.5 % of an eager step with :class:`Gram`'s.
     """
 
-    generate_vmap_rule = True  # several networks' heads at once (methods.stacking)
+    @staticmethod
+    def forward(ctx, W: torch.Tensor, h: torch.Tensor, hidden_first: bool = False) -> torch.Tensor:
+        ctx.save_for_backward(W, h)
+        ctx.hidden_first = hidden_first
+        return _heads_forward(W, h, hidden_first)
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g: torch.Tensor):
+        W, h = ctx.saved_tensors
+        return _heads_backward(W, h, g, ctx.hidden_first, ctx.needs_input_grad)
+
+
+class _BatchedHeadsOutput(torch.autograd.Function):
+    """:class:`HeadsOutput` in the form ``vmap`` batches (``setup_context``, a generated vmap rule)."""
+
+    generate_vmap_rule = True
 
     @staticmethod
     def forward(W: torch.Tensor, h: torch.Tensor, hidden_first: bool = False) -> torch.Tensor:
-        return (W * h.unsqueeze(-1)).sum(1) if hidden_first else (W * h.unsqueeze(1)).sum(-1)
+        return _heads_forward(W, h, hidden_first)
 
     @staticmethod
     def setup_context(ctx, inputs, output) -> None:
-        W, h = inputs[:2]
-        ctx.save_for_backward(W, h)
+        ctx.save_for_backward(inputs[0], inputs[1])
         ctx.hidden_first = inputs[2] if len(inputs) > 2 else False
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx, g: torch.Tensor):
         W, h = ctx.saved_tensors
-        gW = gh = None
-        if ctx.hidden_first:
-            if ctx.needs_input_grad[0]:
-                gW = h.unsqueeze(-1) * g.unsqueeze(1)
-            if ctx.needs_input_grad[1]:
-                gh = (W * g.unsqueeze(1)).sum(-1)
-        else:
-            if ctx.needs_input_grad[0]:
-                gW = g.unsqueeze(-1) * h.unsqueeze(1)
-            if ctx.needs_input_grad[1]:
-                gh = torch.bmm(g.unsqueeze(1), W).squeeze(1)
-        return gW, gh, None
+        return _heads_backward(W, h, g, ctx.hidden_first, ctx.needs_input_grad)
 
 
 class Gram(torch.autograd.Function):
     """``W W^T``, whose backward is one matrix product, ``(G + G^T) W``;
     autograd's takes two, ``G W`` and ``G^T W``, each as costly as the
-    forward."""
+    forward. Under ``vmap``, :class:`_BatchedGram` (see :class:`HeadsOutput`)."""
+
+    @staticmethod
+    def forward(ctx, W: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(W)
+        return W @ W.T
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g: torch.Tensor):
+        (W,) = ctx.saved_tensors
+        return (g + g.T) @ W
+
+
+class _BatchedGram(torch.autograd.Function):
+    """:class:`Gram` in the form ``vmap`` batches."""
 
     generate_vmap_rule = True
 
@@ -93,6 +138,21 @@ class Gram(torch.autograd.Function):
     def backward(ctx, g: torch.Tensor):
         (W,) = ctx.saved_tensors
         return (g + g.T) @ W
+
+
+def _batched(*xs: torch.Tensor) -> bool:
+    """Whether any of ``xs`` is one slice of a ``vmap``'s batch."""
+    return any(torch._C._functorch.is_batchedtensor(x) for x in xs)
+
+
+def heads_output(W: torch.Tensor, h: torch.Tensor, hidden_first: bool = False) -> torch.Tensor:
+    """:class:`HeadsOutput`, or under ``vmap`` its batched form."""
+    return (_BatchedHeadsOutput if _batched(W, h) else HeadsOutput).apply(W, h, hidden_first)
+
+
+def gram(W: torch.Tensor) -> torch.Tensor:
+    """:class:`Gram`, or under ``vmap`` its batched form."""
+    return (_BatchedGram if _batched(W) else Gram).apply(W)
 
 
 class SyReNet(torch.nn.Module):
@@ -158,7 +218,7 @@ class SyReNet(torch.nn.Module):
         W1, W2, W3 = self.enc[0].weight, self.enc[1].weight, self.enc[2].weight
         s1, s2 = torch.sigmoid(a1), torch.sigmoid(a2)  # softplus' = sigmoid
         if K is None:
-            K = Gram.apply(W1)  # (h, h)
+            K = gram(W1)  # (h, h)
         if probes == 0:
             M = torch.matmul(W3.unsqueeze(0) * s2.unsqueeze(1), W2) * s1.unsqueeze(1)  # (B, d, h) = J W1^+
         else:
@@ -181,7 +241,7 @@ class SyReNet(torch.nn.Module):
         # rows of G mapped by Q, then each head's weighted sum over them: Wq (G Q^T)^T
         a = (self.Wq[layer] @ self.Q[layer]) @ G.T                 # (H, d)
         hidden = F.softplus(_layer_norm((self.W1[layer] * a.unsqueeze(1)).sum(-1)))
-        logits = _layer_norm(HeadsOutput.apply(self.W2[layer], hidden, self.cfg.compile))
+        logits = _layer_norm(heads_output(self.W2[layer], hidden, self.cfg.compile))
         P = torch.softmax(logits, dim=-1)                          # (H, C)
         phi = torch.sigmoid((self.G1[layer] * P).sum(-1) + self.G2[layer] @ prev_prod)  # (H,)
         return P, phi, phi.unsqueeze(1) * P * self.S[layer]
@@ -214,7 +274,7 @@ class SyReNet(torch.nn.Module):
         ae_loss = L * F.mse_loss(self.decode(torch.cat(latents)), torch.cat(normed))
         if cfg.lambda_contractive:
             W1 = self.enc[0].weight
-            penalty = self.contractive(torch.cat(pre1), torch.cat(pre2), cfg.contractive_probes, Gram.apply(W1), groups=L,
+            penalty = self.contractive(torch.cat(pre1), torch.cat(pre2), cfg.contractive_probes, gram(W1), groups=L,
                                        e=probes)
             ae_loss = ae_loss + L * cfg.lambda_contractive * penalty
         return h.sum(dim=1), weights, ae_loss + self._diversity(torch.stack(selections))
