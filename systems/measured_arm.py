@@ -16,6 +16,8 @@ One file declares an arm, a TOML *measured-arm file* (paths relative to it)::
     urdf = "my_arm.urdf"
     columns = "time=t,q_1=pos1,qd_1=vel1,tau_1=eff1,q_2=pos2,qd_2=vel2,tau_2=eff2"
     test = ["fast"]                          # the trajectories the default split tests on
+    time_unit = "s"                          # optional: the time column's unit, s (default), ms or us
+    degrees = false                          # optional: true where q and qd are in degrees
     [filter]                                 # optional: bench.core.recordings.FilterSpec's fields
     cutoff_hz = 10
     [recordings]
@@ -25,8 +27,9 @@ One file declares an arm, a TOML *measured-arm file* (paths relative to it)::
 
 and ``--systems measured:my_arm.toml`` (:func:`register_measured`) makes it a
 system named ``measured_my_arm``. Each recording is a robot log in the
-format of ``bench convert --columns`` (a time column in seconds; per joint
-q, qd and tau), turned into samples by the suite's filter-and-differentiate
+format of ``bench convert --columns`` (a time column in seconds, or in
+``time_unit``; per joint q, qd and tau, in radians unless ``degrees``),
+its rate checked as ``convert`` checks it, turned into samples by the suite's filter-and-differentiate
 step (:func:`bench.core.recordings.preprocess`); each sample keeps its
 recording, its trajectory and its time, so that the residual loop validates
 on whole trajectories and the driven rollouts (:mod:`bench.evaluation.driven`)
@@ -60,7 +63,8 @@ import numpy as np
 
 from bench.core.data import Dataset, DataError, read_frame
 from bench.core.errors import ConfigError
-from bench.core.recordings import ColumnMap, FilterSpec, joined, preprocess, read_recording
+from bench.core.recordings import (TIME_UNITS, ColumnMap, FilterSpec, check_rate, in_units, joined, preprocess,
+                                   read_recording)
 from bench.core.system import LinearForm
 from systems.base import SYSTEMS
 from systems.urdf_arm import UrdfArm, urdf_arm
@@ -91,6 +95,8 @@ class MeasuredArmSpec:
     recordings: tuple[RecordingFile, ...]
     test: tuple[str, ...]
     filter: FilterSpec
+    time_unit: str = "s"
+    degrees: bool = False
 
     @property
     def trajectories(self) -> tuple[str, ...]:
@@ -113,7 +119,7 @@ def read_spec(path: str | Path) -> MeasuredArmSpec:
         raise DataError(f"{path}: no such measured-arm file") from None
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise DataError(f"{path}: not a readable TOML file ({exc})") from None
-    known = {"urdf", "columns", "test", "filter", "recordings"}
+    known = {"urdf", "columns", "test", "filter", "recordings", "time_unit", "degrees"}
     unknown = sorted(set(raw) - known)
     if unknown:
         raise DataError(f"{path}: unknown key(s) {', '.join(unknown)} (a measured-arm file has {', '.join(sorted(known))})")
@@ -151,7 +157,13 @@ def read_spec(path: str | Path) -> MeasuredArmSpec:
         raise DataError(f"{path}: [filter]: {exc} (its keys: {', '.join(f.name for f in dataclasses.fields(FilterSpec))})") from None
     except ConfigError as exc:
         raise DataError(f"{path}: [filter]: {exc}") from None
-    return MeasuredArmSpec(path, urdf, columns, tuple(recordings), test, spec)
+    time_unit = raw.get("time_unit", "s")
+    if time_unit not in TIME_UNITS:
+        raise DataError(f"{path}: time_unit must be one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
+    degrees = raw.get("degrees", False)
+    if not isinstance(degrees, bool):
+        raise DataError(f"{path}: degrees must be true or false, got {degrees!r}")
+    return MeasuredArmSpec(path, urdf, columns, tuple(recordings), test, spec, time_unit, degrees)
 
 
 def check_logs(spec: MeasuredArmSpec, dof: int) -> None:
@@ -172,7 +184,11 @@ def check_logs(spec: MeasuredArmSpec, dof: int) -> None:
 @functools.lru_cache(maxsize=8)
 def _samples(spec: MeasuredArmSpec, trajectories: tuple[str, ...]) -> dict[str, np.ndarray]:
     chosen = [r for r in spec.recordings if r.trajectory in trajectories]
-    parts = [preprocess(read_recording(r.path, spec.columns), spec.filter) for r in chosen]
+    parts = []
+    for r in chosen:
+        recording = in_units(read_recording(r.path, spec.columns), spec.time_unit, spec.degrees)
+        check_rate(recording, spec.filter, r.path, spec.columns.time)
+        parts.append(preprocess(recording, spec.filter))
     return joined(parts, [r.name for r in chosen], [r.trajectory for r in chosen])
 
 

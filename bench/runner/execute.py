@@ -82,19 +82,21 @@ def _clean_data(spec: RunSpec, system: System):
 def given_data(system: System, train_path: str | None, test_path: str | None, *,
                check_limits: bool = False) -> tuple[Dataset, Dataset | None] | None:
     """Train and test data that need no generating: CSV files in the suite's
-    format (checked against the system; with ``check_limits``, their positions
-    against its position limits, :meth:`~bench.core.system.System.check_positions`),
-    else a measured system's own splits; ``None`` for a simulated system without files."""
+    format (checked against the system), else a measured system's own splits;
+    ``None`` for a simulated system without files. With ``check_limits``, their
+    positions are checked against the system's position limits
+    (:meth:`~bench.core.system.System.check_positions`)."""
     if train_path:
         train = read_csv(train_path, dof=system.dof, system=system.name)
         test = read_csv(test_path, dof=system.dof, system=system.name) if test_path else None
-        if check_limits:
-            for part in (train, test):
-                system.check_positions(part)
-        return train, test
-    if not system.simulated:
-        return system.load("train"), system.load("test")
-    return None
+    elif not system.simulated:
+        train, test = system.load("train"), system.load("test")
+    else:
+        return None
+    if check_limits:
+        for part in (train, test):
+            system.check_positions(part)
+    return train, test
 
 
 def preflight(spec: RunSpec) -> Record | None:

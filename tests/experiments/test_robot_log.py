@@ -125,3 +125,36 @@ def test_a_log_in_degrees_is_named_before_any_fit_and_converted_on_request(panda
     r = cli("fit", "--system", "panda", "--method", "sysid", "--experiment", "indirect", "--train", tmp_path / "rad.csv",
             "--steps", "1")
     assert r.returncode == 0, r.stderr
+
+
+def test_a_measured_arm_file_says_its_units_and_its_logs_in_degrees_stop_at_the_joint_limits(tmp_path):
+    """A measured-arm file's logs in degrees or milliseconds are caught as convert's are; the file can say its units."""
+    import pandas as pd
+
+    from bench.core.errors import DataError
+    from bench.runner.execute import given_data
+    from systems.measured_arm import measured_arm
+    from systems.urdf_arm import DATA_DIR
+
+    r = cli("robot-log", "--system", "ur5", "--recordings", "2", "--seconds", "6", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    for k in range(2):
+        frame = pd.read_csv(tmp_path / f"recording_{k}.csv")
+        angles = [c for c in frame.columns if c.endswith(("_position", "_velocity"))]
+        frame.assign(**{c: frame[c] * 180 / np.pi for c in angles}).to_csv(tmp_path / f"deg_{k}.csv", index=False)
+        frame.assign(time=frame["time"] * 1000).to_csv(tmp_path / f"ms_{k}.csv", index=False)
+
+    def arm(prefix, extra=""):
+        toml = tmp_path / f"{prefix}.toml"
+        toml.write_text(f'urdf = "{DATA_DIR / "ur5_robot.urdf.gz"}"\ncolumns = "{columns(6)}"\ntest = ["B"]\n{extra}'
+                        f'[recordings]\na = {{ file = "{prefix}_0.csv", trajectory = "A" }}\n'
+                        f'b = {{ file = "{prefix}_1.csv", trajectory = "B" }}\n')
+        return measured_arm(toml, name=f"ur5_{prefix}")()
+
+    with pytest.raises(DataError, match=r"deg.toml:train .*joint 1 .*is the log in degrees\?"):  # names file, joint, degrees
+        given_data(arm("deg"), None, None, check_limits=True)
+    train, test = given_data(arm("deg", "degrees = true\n"), None, None, check_limits=True)
+    assert np.max(np.abs(train.q)) < 2 * np.pi
+    with pytest.raises(DataError, match=r"ms_0.csv: column time: .*--time-unit ms"):
+        arm("ms").load("train")
+    assert len(arm("ms", 'time_unit = "ms"\n').load("train")) == len(train)
