@@ -95,11 +95,24 @@ def test_a_stack_keeps_every_tensor_on_its_device(data):
     assert not mode.mixed and mode.on_meta > 0
 
 
-def test_seeds_under_one_clock_stop_together_and_say_they_shared_it(data):
+@pytest.mark.parametrize("name, config", [("mlp", {}), ("syrenets", {"starts": 2})])
+def test_when_one_seeds_budget_ends_the_stack_stops_together_and_says_it_shared_the_budget(name, config, data):
+    """Under a shared wall-clock budget the first seed whose budget ends stops the stack; here, without a
+    clock, the first seed's budget is cut to 6 steps of the others' 20 (its Progress's work limit)."""
     train, _ = data
-    smoke = {**METHODS["mlp"].smoke_config(), "max_steps": None}
-    fits = fit_stacked([METHODS["mlp"](**smoke) for _ in SEEDS], train, "indirect", SEEDS, 0.3)
-    assert len({f.fit_info["steps"] for f in fits}) == 1 and all(f.fit_info["stacked"] == 3 for f in fits)
+    methods = [METHODS[name](**{**METHODS[name].smoke_config(), "max_steps": None, **config}) for _ in SEEDS]
+    begin = methods[0].begin_fit
+
+    def cut(*args, **kwargs):
+        started = begin(*args, **kwargs)
+        started.progress.work_limit = 6
+        return started
+
+    methods[0].begin_fit = cut
+    fits = fit_stacked(methods, train, "indirect", SEEDS, steps=20)
+    assert [f.fit_info["steps"] for f in fits] == [6, 6, 6] and all(f.fit_info["stacked"] == 3 for f in fits)
+    assert [f.fit_info["stop_reason"] for f in fits] == ["max_steps"] + ["another seed of the stack used up the "
+                                                                         "shared budget"] * 2
 
 
 def test_what_cannot_stack_is_refused(data):
