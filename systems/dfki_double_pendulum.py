@@ -162,6 +162,11 @@ class DfkiDoublePendulum(System):
         gravity = p.g * (p.m1 * p.r1 + p.m2 * p.l1) * sympy.cos(q1) + p.g * p.m2 * p.r2 * sympy.cos(q1 + q2)
         return kinetic + gravity
 
+    @classmethod
+    def source_files(cls) -> list[str]:
+        """The six recordings."""
+        return [str(trajectory_path(n)) for n in SPLITS["all"]]
+
     def load(self, split: str, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> Dataset:
         """The ``train`` (trajectories 00, 01, 02, 04) or ``test`` (03, 05) split,
         or ``all`` six; each sample's ``recording`` is its trajectory's name."""

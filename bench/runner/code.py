@@ -59,7 +59,7 @@ def _name(path: Path) -> str:
 def code_files(method: str, system: str, plugins: tuple[str, ...] = ()) -> dict[str, str]:
     """``{file: sha256 prefix}`` of the code that defines ``method`` and ``system``
     (a ``.py`` plugin among it where it defines one of their classes), with the
-    files of a system that a ``urdf:`` or ``measured:`` plugin gives (the file, and the URDF it names)."""
+    files of a system that a ``urdf:`` or ``measured:`` plugin gives (the file, and the URDF and logs it names)."""
     paths = _class_files(METHODS[method]) + _class_files(SYSTEMS[system])
     sources = [Path(p).resolve() for p in SYSTEMS[system].source_files() if p]
     given = {Path(p[len(file_prefix(p)):]).expanduser().resolve() for p in plugins if file_prefix(p)}

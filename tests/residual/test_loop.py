@@ -197,6 +197,9 @@ def test_cli_converts_a_raw_dfki_recording(tmp_path):
     assert convert["format"] == "dfki" and convert["filter"]["cutoff_hz"] == 6.0 and convert["time_unit"] == "s"
     assert convert["command"].startswith("python -m bench convert --format dfki")
     assert list(convert["logs"]) == [str(trajectory_path("03"))] and len(convert["logs"][str(trajectory_path("03"))]) == 64
+    # a measured system's own split: its recordings are the files
+    own = ResidualJob(system="dfki_double_pendulum", method="sysid").inputs()["files"]
+    assert str(trajectory_path("03")) in own and len(own) == 6 and all(len(f["sha256"]) == 64 for f in own.values())
 
 
 def test_a_huge_symbolic_model_is_refitted_like_a_neural_one():
