@@ -64,9 +64,9 @@ class HeadsOutput(torch.autograd.Function):
     Several networks' heads at once (under ``vmap``, :mod:`methods.syrenets.stacked`)
     take :class:`_BatchedHeadsOutput`, the same computation in the form torch's
     transforms batch (:func:`heads_output` chooses). This class keeps the
-    older form for one network: its ``apply`` costs about 60 µs less (1,000 µs
-    against 1,060 µs with its backward, for the public configuration's shapes),
-    about 1.5 % of an eager step with :class:`Gram`'s.
+    older form for one network: its ``apply`` costs 35–75 µs less, of about
+    1,000 µs with its backward at the public configuration's shapes; the
+    batched form everywhere made the eager step 2–3 % slower.
     """
 
     @staticmethod
