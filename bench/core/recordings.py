@@ -174,7 +174,9 @@ def check_rate(recording: Recording, spec: FilterSpec, path: Path | str, column:
 
 def beyond_a_turn(recording: Recording) -> list[tuple[int, float, float]]:
     """The joints (0-based) whose q leaves ±2π, with the range seen: angles
-    that only make sense in degrees, where the joint turns."""
+    that only make sense in degrees, where the joint turns (a log names no
+    joint kinds, so a prismatic joint past 6.28 m would be named too; it is a
+    warning, not an error)."""
     out = []
     for j in range(recording.q.shape[1]):
         lo, hi = float(np.min(recording.q[:, j])), float(np.max(recording.q[:, j]))

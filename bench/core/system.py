@@ -238,6 +238,8 @@ class System(abc.ABC):
     #: ``False`` for a system given by an engine: no sympy Lagrangian exists
     #: (see the module docstring), so no expression can be judged exact
     symbolic: ClassVar[bool] = True
+    #: each coordinate's position limits ``(lower, upper)``, where the system declares them (an arm's URDF)
+    position_limits: ClassVar[tuple[tuple[float, float], ...] | None] = None
 
     def __init__(self, params=None, domain: Domain | None = None, split: str | None = None):
         self.params = params if params is not None else self.Params()
@@ -256,9 +258,6 @@ class System(abc.ABC):
         ``p`` has one attribute per field of ``Params``; each is a number for the
         true Lagrangian, or a sympy symbol for the parametric form.
         """
-
-    #: each coordinate's position limits ``(lower, upper)``, where the system declares them (an arm's URDF)
-    position_limits: ClassVar[tuple[tuple[float, float], ...] | None] = None
 
     def check_positions(self, data, margin: float = LIMIT_SLACK) -> None:
         """A :class:`DataError` naming the file, the joint, the range of q seen
