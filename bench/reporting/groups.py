@@ -59,10 +59,10 @@ def group_stats(records: list[Record]) -> dict[str, dict[str, tuple[float, float
     ``std`` is ``None`` for the single-run "best" group; a split without test
     data is absent.
     """
-    return _stats(group_members(records))
+    return member_stats(group_members(records))
 
 
-def _stats(members: dict[str, dict[str, list[float]]]) -> dict[str, dict[str, tuple[float, float | None]]]:
+def member_stats(members: dict[str, dict[str, list[float]]]) -> dict[str, dict[str, tuple[float, float | None]]]:
     """:func:`group_stats` from :func:`group_members`' values."""
     return {group: {split: (float(np.mean(vals)), None if group == "best" else float(np.std(vals)))
                     for split, vals in splits.items()}

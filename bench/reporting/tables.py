@@ -57,12 +57,13 @@ import numpy as np
 
 from bench.core.fileio import atomic_write, link
 from bench.evaluation.scores import MEASURED
-from bench.reporting.groups import GROUPS, TESTED_GROUP, _stats, group_label, group_members
+from bench.reporting.groups import GROUPS, TESTED_GROUP, group_label, group_members, member_stats
 from bench.reporting.plots import convergence_plot, plot_name
 from bench.reporting.significance import by_seed, seed_ranks, ties_with_best
 from bench.runner.provenance import PROJECT_ROOT, machine
 from bench.runner.records import MISSING, Record, missing_runs, quarantine, read_records
 from systems import SYSTEMS
+
 
 def fmt(value: float) -> str:
     if value is None or not math.isfinite(value):
@@ -288,7 +289,7 @@ def build_table(records: list[Record]) -> str:
         by_method[r.method].append(r)
     n_seeds = len({r.seed for r in records})
     members = {m: group_members(by_method[m], n_seeds) for m in methods}
-    stats = {m: _stats(members[m]) for m in methods}
+    stats = {m: member_stats(members[m]) for m in methods}
     lines = ["| Group | Split | " + " | ".join(methods) + " |", "|---|---|" + "---|" * len(methods)]
     for group in GROUPS:
         if not any(group in members[m] for m in methods):
