@@ -133,15 +133,31 @@ class Stack:
 _COMPILED = None
 
 
-def _stacked_torques(base: torch.nn.Module, params: dict, buffers: dict, q, qd, qdd) -> torch.Tensor:
-    """The Euler–Lagrange torques of the stacked networks (``base``'s shape, the
-    stack's ``params`` and ``buffers``) on rows concatenated seed by seed, for
-    networks with their own derivatives (``tangent``): no ``autograd.grad``, so
-    the whole of it compiles."""
+def _rows_tangent(base: torch.nn.Module, params: dict, buffers: dict, q, qd, dq, dqd) -> tuple:
+    """``tangent`` of the stacked networks (``base``'s shape, the stack's
+    ``params`` and ``buffers``) on rows concatenated seed by seed."""
     size = next(iter(params.values())).shape[0]
-    q, qd, dq, dqd = (x.reshape(size, -1, *x.shape[1:]) for x in (q, qd, qd.detach(), qdd.detach()))
-    _, dL_dq, _, along = vmap(_per_network(base, "tangent", (*params, *buffers)))(params, buffers, q, qd, dq, dqd)
-    return (along - dL_dq).reshape(-1, along.shape[-1])
+    rows = (x.reshape(size, -1, *x.shape[1:]) for x in (q, qd, dq, dqd))
+    out = vmap(_per_network(base, "tangent", (*params, *buffers)))(params, buffers, *rows)
+    return tuple(x.reshape(-1, *x.shape[2:]) for x in out)
+
+
+class _TangentRows:
+    """The stacked networks as the Euler–Lagrange transform takes a Lagrangian
+    that gives its own derivatives (its ``tangent`` is all the transform calls)."""
+
+    def __init__(self, base: torch.nn.Module, params: dict, buffers: dict):
+        self.state = (base, params, buffers)
+
+    def tangent(self, q, qd, dq, dqd):
+        return _rows_tangent(*self.state, q, qd, dq, dqd)
+
+
+def _stacked_torques(base: torch.nn.Module, params: dict, buffers: dict, q, qd, qdd) -> torch.Tensor:
+    """The Euler–Lagrange torques of the stacked networks, for networks with
+    their own derivatives (``tangent``): no ``autograd.grad``, so the whole of
+    it compiles."""
+    return euler_lagrange(_TangentRows(base, params, buffers), q, qd, qdd, create_graph=True)
 
 
 def compiled_stacked_torques():
@@ -171,8 +187,7 @@ class StackedLagrangian(Stack):
         return self.vmapped("forward")(*self.split(q, qd)).reshape(-1)
 
     def _tangent_of_rows(self, q, qd, dq, dqd):
-        out = self.vmapped("tangent")(*self.split(q, qd, dq, dqd))
-        return tuple(x.reshape(-1, *x.shape[2:]) for x in out)
+        return _rows_tangent(self.base, self.params, self.buffers, q, qd, dq, dqd)
 
     def compiled_torques(self, q, qd, qdd) -> torch.Tensor:
         """The transform's torques, for networks with a ``tangent``, by the compiled :func:`_stacked_torques`."""

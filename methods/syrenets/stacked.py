@@ -24,30 +24,25 @@ import torch
 
 from bench.core.dynamics import euler_lagrange
 from methods.stacking import SHARED_BUDGET, Stack
-from methods.syrenets.training import inputs_of
+from methods.syrenets.training import Fixed, inputs_of
 
 
 class StackedFixed:
     """The fixed functions of S seeds' selected ``weights`` (each ``(S, heads, C)``)
-    as one Lagrangian of ``(q, qd)`` on rows concatenated seed by seed, with
-    their derivatives propagated forward, as :class:`~methods.syrenets.training.Fixed`."""
+    as one Lagrangian of ``(q, qd)`` on rows concatenated seed by seed: each
+    seed's :class:`~methods.syrenets.training.Fixed`, mapped over the seeds."""
 
     def __init__(self, stack: Stack, model, inputs: str, weights: list[torch.Tensor], qdd: torch.Tensor):
-        self.stack, self.model, self.inputs, self.weights, self.qdd = stack, model, inputs, weights, qdd
-        dof = qdd.shape[1]
-        self._tangent = torch.vmap(lambda ws, x, w: model.evaluate_tangent(x, ws, w, dof))
-        self._value = torch.vmap(lambda ws, x: model.evaluate(x, ws))
+        self.stack, self.weights, self.qdd = stack, weights, qdd
+        self._value = torch.vmap(lambda ws, qdd, q, qd: Fixed(model, inputs, ws, qdd)(q, qd))
+        self._tangent = torch.vmap(lambda ws, qdd, *rows: Fixed(model, inputs, ws, qdd).tangent(*rows))
 
     def __call__(self, q, qd):
-        x = inputs_of(q, qd, self.qdd, self.inputs)
-        return self._value(self.weights, *self.stack.split(x)).reshape(-1)
+        return self._value(self.weights, *self.stack.split(self.qdd, q, qd)).reshape(-1)
 
     def tangent(self, q, qd, dq, dqd):
-        dof = q.shape[1]
-        x = inputs_of(q, qd, self.qdd, self.inputs)
-        out = self._tangent(self.weights, *self.stack.split(x, torch.cat([dq, dqd], dim=1)))
-        out = out.reshape(-1, out.shape[-1])
-        return out[:, 0], out[:, 1:1 + dof], out[:, 1 + dof:1 + 2 * dof], out[:, 1 + 2 * dof:]
+        out = self._tangent(self.weights, *self.stack.split(self.qdd, q, qd, dq, dqd))
+        return tuple(x.reshape(-1, *x.shape[2:]) for x in out)
 
 
 def stacked_pass(stack: Stack, batches: list[dict], experiment: str, inputs: str, probes: torch.Tensor | None):
