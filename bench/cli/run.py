@@ -37,9 +37,10 @@ def add_arguments(r) -> None:
     r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
     add_device(r)
     r.add_argument("--stack-seeds", action="store_true",
-                   help="train the seeds of each MLP or DeLaN run (or a plain TorchLagrangianMethod plugin's) as one "
-                        "stacked model in one process: each seed's record is what its fit alone gives, to rounding; "
-                        "fast on a GPU (--device cuda), no faster on a CPU")
+                   help="train the seeds of each SyReNets, MLP or DeLaN run (or a plain TorchLagrangianMethod "
+                        "plugin's) as one stacked model in one process: each seed's record is what its fit alone "
+                        "gives, to rounding; fast on a GPU (--device cuda), no faster on a CPU; SysId and SyReNets' "
+                        "compiled configuration train alone")
     add_config(r, "each method in the run that offers it")
     add_set(r, "every method in the run")
     r.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"training samples (default {N_TRAIN})")
@@ -96,7 +97,6 @@ def main(args) -> int:
     print(text)
     errors = [r for r in records if raised(r)]
     for r in errors:  # what a script or CI must see: the runs whose code raised, one line each
-        first = (r.error or "").strip().splitlines()[0] if (r.error or "").strip() else "no message"
-        print(f"error: {r.system} {r.method} {r.experiment} seed={r.seed}: {first} "
+        print(f"error: {r.system} {r.method} {r.experiment} seed={r.seed}: {r.error_line or 'no message'} "
               f"(log: {matrix.log_path(args.out, r.run_id)})", file=sys.stderr)
     return 1 if errors else 0

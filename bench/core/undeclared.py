@@ -72,8 +72,8 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
             if name == "load_friction" and not all(EFFECTS[name].admissible(c) for c in coefs):
                 raise ConfigError(f"{source}: load_friction needs {dof} coefficients with "
                                   f"{EFFECTS[name].condition}, one per joint (0: none), got {values!r}")
-            _physical(name, {(j,): c for j, c in enumerate(coefs)}, source)
             out[name] = {(j,): c for j, c in enumerate(coefs)}
+            _physical(name, out[name], source)
             continue
         pairs = {}
         for part in values.split(","):

@@ -345,7 +345,7 @@ def build_table(records: list[Record]) -> str:
         reasons: dict[tuple[str, str], list[int]] = defaultdict(list)  # every run that is not ok, with its reason
         for r in sorted(by_method[m], key=lambda r: r.seed):
             if r.status != "ok":
-                reason = (r.error or "").strip().splitlines()[0] if (r.error or "").strip() else "no reason recorded"
+                reason = r.error_line or "no reason recorded"
                 reasons[(r.status.replace("_", " "), reason)].append(r.seed)
         for (status, reason), seeds in reasons.items():
             which = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))}"

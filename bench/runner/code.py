@@ -24,14 +24,11 @@ import os
 from pathlib import Path
 
 from bench.core.errors import UserError
+from bench.core.fileio import file_digest
 from bench.runner.plugins import file_prefix, import_plugins
 from bench.runner.provenance import PROJECT_ROOT
 from methods import METHODS
 from systems import SYSTEMS
-
-
-def _digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
 
 
 def _class_files(cls: type) -> list[Path]:
@@ -67,7 +64,7 @@ def code_files(method: str, system: str, plugins: tuple[str, ...] = ()) -> dict[
         paths += [p for p in sources if p.is_file()]
     out = {}
     for path in paths:
-        out.setdefault(_name(path), _digest(path))
+        out.setdefault(_name(path), file_digest(path)[:16])
     return dict(sorted(out.items()))
 
 

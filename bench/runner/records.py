@@ -116,6 +116,12 @@ class Record:
         """``"seconds"`` or ``"steps"`` (a record written before budgets had kinds had seconds)."""
         return (self.budget or {}).get("kind", "seconds")
 
+    @property
+    def error_line(self) -> str | None:
+        """The first line of :attr:`error`, ``None`` where there is none."""
+        text = (self.error or "").strip()
+        return text.splitlines()[0] if text else None
+
     def describe_budget(self) -> str:
         """The budget in words: ``60 s`` or ``5000 steps``."""
         if self.budget is None:
