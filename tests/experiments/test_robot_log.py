@@ -158,3 +158,7 @@ def test_a_measured_arm_file_says_its_units_and_its_logs_in_degrees_stop_at_the_
     with pytest.raises(DataError, match=r"ms_0.csv: column time: .*--time-unit ms"):
         arm("ms").load("train")
     assert len(arm("ms", 'time_unit = "ms"\n').load("train")) == len(train)
+    with pytest.raises(DataError, match=r"ms.toml: time_unit must be one of s, ms, us, got 'hours'"):
+        arm("ms", 'time_unit = "hours"\n')
+    with pytest.raises(DataError, match=r"deg.toml: degrees must be true or false, got 'yes'"):
+        arm("deg", 'degrees = "yes"\n')

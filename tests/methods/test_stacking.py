@@ -138,4 +138,7 @@ def test_the_stacking_measurement_prints_both_rates_and_their_ratio(tmp_path):
     assert "mlp on double_pendulum, 2 seed(s): stacked" in r.stdout and "stacked ÷ one by one" in r.stdout
     assert out.read_text().count("| mlp | double_pendulum |") == 2
     bad = cli("study", "stacking-speed", "--cases", "sysid:double_pendulum", "--n-seeds", "1")
+    count = cli("study", "stacking-speed", "--cases", "mlp:double_pendulum:1,x")
+    assert count.returncode == 2 and "the numbers of seeds must be positive integers" in count.stderr
+    assert count.stderr.count("\n") == 1
     assert bad.returncode == 2 and "sysid is not a stackable method" in bad.stderr and bad.stderr.count("\n") == 1
