@@ -24,9 +24,11 @@ def add_arguments(res) -> None:
     res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
     res.add_argument("--budget", type=positive, default=None,
-                     help=f"seconds for the whole loop (default 60): the method's fit has {FIT_SHARE:.0%}% of it, no "
-                          f"round starts that would end past it, and the loop's process is killed at "
-                          f"{matrix.KILL_FACTOR} x it; with --steps, only a ceiling past which the loop is killed "
+                     help=f"seconds for the fit and the rounds (default 60): the method's fit has {FIT_SHARE:.0%} of "
+                          f"it, no round starts that would end past it, a round still running at its end is undone, "
+                          f"and the result keeps the rounds before it; the driven rollouts after the rounds are not "
+                          f"charged to it. The loop's process is killed only at {matrix.KILL_FACTOR} x it (the rounds "
+                          f"that finished are kept); with --steps, only a ceiling past which the loop is killed "
                           f"(default: none)")
     res.add_argument("--steps", type=positive_int, default=None,
                      help="bound the loop by work instead of time: the method's fit (and each cross-fit) does N steps "
@@ -75,6 +77,8 @@ def main(args) -> int:
         command=args.invocation, overrides=overrides, configuration=configuration,
     )
     result = run_residual(job)
+    if result.stopped:
+        print(f"stopped early: {result.stopped}")
     b, a = result.mse_before, result.mse_after
     print(f"torque MSE before: train {b['train']:.4g}, test {number(b['test'])}; after: train {a['train']:.4g}, test {number(a['test'])}")
     for e in result.effects:

@@ -134,10 +134,8 @@ class Term:
         """The term's torque per unit coefficient, shape ``(n, dof)``."""
         if self.place == "D":
             out = np.zeros_like(data.tau)
-            for j in range(data.dof):
-                dD = _tanh(sympy.diff(self.expr, sympy.Symbol(f"qd_{j + 1}", real=True)))
-                if dD != 0:
-                    out[:, j] = _force_function(dD)(data)
+            for j, dD in _dissipative_forces(self.expr, data.dof):
+                out[:, j] = _force_function(dD)(data)
             return out
         if self.place == "force":
             out = np.zeros_like(data.tau)
@@ -147,8 +145,7 @@ class Term:
             raise ValueError(f"{self.label} is a law of the torque sensor: its column depends on the model it "
                              f"corrects (bench.residual.sensors), not on the data alone")
         t = data.tensors()
-        fn = symbolic.to_torch(self.expr, data.dof)
-        return euler_lagrange_chunked(fn, t["q"], t["qd"], t["qdd"])[0].numpy()
+        return euler_lagrange_chunked(_lagrangian_function(self.expr, data.dof), t["q"], t["qd"], t["qdd"])[0].numpy()
 
     def column(self, data: Dataset, experiment: str) -> np.ndarray:
         """The term's column in ``experiment``'s target: ``L`` (``(n,)``) or
@@ -209,6 +206,25 @@ def _tanh(expr: sympy.Expr) -> sympy.Expr:
     quotient, which overflows at large ``a`` (each ``sinh(a)`` is written
     ``tanh(a) cosh(a)``, and the ``cosh(a)`` cancel)."""
     return expr.subs({s: sympy.tanh(s.args[0]) * sympy.cosh(s.args[0]) for s in expr.atoms(sympy.sinh)})
+
+
+@functools.lru_cache(maxsize=4096)
+def _dissipative_forces(expr: sympy.Expr, dof: int) -> tuple[tuple[int, sympy.Expr], ...]:
+    """``(j, dD/dqd_j)`` for each joint ``j`` on which the Rayleigh term ``expr``
+    acts, derived once per expression: a model's torques are asked for at
+    every step of a driven rollout."""
+    out = []
+    for j in range(dof):
+        dD = _tanh(sympy.diff(expr, sympy.Symbol(f"qd_{j + 1}", real=True)))
+        if dD != 0:
+            out.append((j, dD))
+    return tuple(out)
+
+
+@functools.lru_cache(maxsize=4096)
+def _lagrangian_function(expr: sympy.Expr, dof: int):
+    """A Lagrangian term compiled to torch once per expression (see :func:`_dissipative_forces`)."""
+    return symbolic.to_torch(expr, dof)
 
 
 @functools.lru_cache(maxsize=4096)

@@ -25,13 +25,19 @@ A window *diverges* where the model's mass matrix is not positive definite
 beyond :data:`BLOW_UP`, or not finite) even at a step :data:`REFINE` squared
 times smaller (:func:`driven_rollout`: an explicit step is unstable on a
 stiff friction law where the model is not); that window stops there and
-counts as diverged, and the others go on. The figure per window is the RMS of
-``q - q_measured`` over its samples and joints (rad); an entry gives, per
+counts as diverged, and the others go on. Each diverged window records how
+far into it the model got (``diverged_after_s``: the start of the sample
+step in which it stopped). The figure per window is the RMS of
+``q - q_measured`` over its samples and joints (rad). An entry gives, per
 window length, how many windows there were, how many diverged, and the
-median RMSE of the rest.
+median over *all* windows with a diverged one counted as infinitely far
+(:func:`summary`): a model that diverges in most windows has no figure,
+however well it did in the few that survived.
 """
 
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 
@@ -87,15 +93,42 @@ def _bounded(qd: np.ndarray) -> np.ndarray:
     return np.all(np.isfinite(qd), axis=1) & (np.max(np.abs(qd), axis=1) <= BLOW_UP)
 
 
+def summary(q_rmse: list) -> tuple[float | None, int, int]:
+    """``(median, diverged, windows)`` of windows' figures (``None``: the window
+    diverged): the median over every window with a diverged one infinitely
+    far, so ``None`` where half of them or more diverged."""
+    values = np.array([np.inf if x is None else float(x) for x in q_rmse])
+    diverged = int(np.isinf(values).sum())
+    if not len(values) or 2 * diverged >= len(values):
+        return None, diverged, len(values)
+    return float(np.median(values)), diverged, len(values)
+
+
+def pooled(entries: list[dict]) -> tuple[float | None, int, int]:
+    """:func:`summary` over the windows of several entries of one window length
+    (each a :func:`driven_rollout` result: the seeds of a table's cell)."""
+    return summary([x for e in entries for x in e.get("q_rmse", [])])
+
+
+def describe(median: float | None, diverged: int, windows: int, fmt: Callable[[float], str]) -> str:
+    """A summary as the tables and reports show it: ``0.349 (3/980 windows
+    diverged)``, or ``diverged (972/980 windows)`` where half or more did."""
+    if median is None:
+        return f"diverged ({diverged}/{windows} windows)" if windows else "—"
+    return f"{fmt(median)} ({diverged}/{windows} windows diverged)"
+
+
 def _integrate(model: FittedModel, data: Dataset, spans: np.ndarray, substeps: int):
     """Integrate the windows ``spans`` (``(W, steps + 1)`` sample indices) at
     ``substeps`` steps a sample step: each window's summed squared ``q`` error,
-    whether it ran to its end, and whether it stopped on an indefinite (or
-    singular) mass matrix rather than a blow-up."""
+    whether it ran to its end, whether it stopped on an indefinite (or
+    singular) mass matrix rather than a blow-up, and the sample step in which
+    it stopped (``steps`` for one that ran to its end)."""
     steps = spans.shape[1] - 1
     h = float(np.median(np.diff(data.time[spans], axis=1))) / substeps
     q, qd = data.q[spans[:, 0]].copy(), data.qd[spans[:, 0]].copy()
     alive, indefinite = np.ones(len(spans), dtype=bool), np.zeros(len(spans), dtype=bool)
+    left = np.full(len(spans), steps)
     sq = np.zeros(len(spans))
     for k in range(steps):
         tau0, tau1 = data.tau[spans[:, k]], data.tau[spans[:, k + 1]]
@@ -120,50 +153,62 @@ def _integrate(model: FittedModel, data: Dataset, spans: np.ndarray, substeps: i
             ok = dynamics & bounded
             q[idx[ok]], qd[idx[ok]] = x_new[ok], v_new[ok]
             alive[idx[~ok]] = False
+            left[idx[~ok]] = k
             indefinite[idx[~dynamics]] = True
         err = q - data.q[spans[:, k + 1]]
         sq += np.where(alive, np.sum(err * err, axis=1), 0.0)
-    return sq, alive, indefinite
+    return sq, alive, indefinite, left
 
 
-def driven_rollout(model: FittedModel, data: Dataset, length_s: float, substeps: int = SUBSTEPS) -> dict:
+def driven_rollout(model: FittedModel, data: Dataset, length_s: float, substeps: int = SUBSTEPS,
+                   report: Callable[[str], None] | None = None) -> dict:
     """The driven rollouts of ``model`` over every window of ``length_s`` in
-    ``data``: ``{"window_s", "windows", "diverged", "median_q_rmse", "q_rmse"}``
-    (``q_rmse``: each window's, ``None`` for a diverged one). A window that
-    blows up (with a positive definite mass matrix all along) is integrated
-    again at a step :data:`REFINE` times smaller, up to :data:`REFINEMENTS`
-    times: a stiff friction law (a Coulomb level rounded over a small
-    velocity, on a light joint) makes the explicit step unstable where the
-    model is not. The step each window needed is a function of the data and
-    the model alone, so the figures stay the same on any machine."""
+    ``data``: ``{"window_s", "windows", "diverged", "median_q_rmse", "q_rmse",
+    "diverged_after_s"}`` (``q_rmse``: each window's, ``None`` for a diverged
+    one; ``diverged_after_s``: for each diverged window the seconds into it
+    at which it stopped, ``None`` for the others; ``median_q_rmse``:
+    :func:`summary`'s). A window that blows up (with a positive definite mass
+    matrix all along) is integrated again at a step :data:`REFINE` times
+    smaller, up to :data:`REFINEMENTS` times: a stiff friction law (a Coulomb
+    level rounded over a small velocity, on a light joint) makes the explicit
+    step unstable where the model is not. The step each window needed is a
+    function of the data and the model alone, so the figures stay the same on
+    any machine. ``report``, where given, hears each pass over the windows."""
     spans = windows(data, length_s)
-    out = {"window_s": length_s, "windows": len(spans), "diverged": 0, "median_q_rmse": None, "q_rmse": []}
+    out = {"window_s": length_s, "windows": len(spans), "diverged": 0, "median_q_rmse": None, "q_rmse": [],
+           "diverged_after_s": []}
     if not spans:
         return out
     steps = min(len(s) for s in spans) - 1
     spans = np.stack([s[: steps + 1] for s in spans])  # (W, steps + 1): windows of one recording rate have one length
-    sq, alive, indefinite = _integrate(model, data, spans, substeps)
+    say = report or (lambda line: None)
+    say(f"{length_s:g} s windows: {len(spans)} at {substeps} steps a sample")
+    sq, alive, indefinite, left = _integrate(model, data, spans, substeps)
     for _ in range(REFINEMENTS):
         again = np.flatnonzero(~alive & ~indefinite)
         if not len(again):
             break
         substeps *= REFINE
-        sq[again], alive[again], indefinite[again] = _integrate(model, data, spans[again], substeps)
+        say(f"{length_s:g} s windows: {len(again)} blew up, again at {substeps} steps a sample")
+        sq[again], alive[again], indefinite[again], left[again] = _integrate(model, data, spans[again], substeps)
     rmse = np.sqrt(sq / (steps * data.dof))
+    sample_step = float(np.median(np.diff(data.time[spans], axis=1)))
     out["q_rmse"] = [float(r) if a else None for r, a in zip(rmse, alive)]
-    out["diverged"] = int((~alive).sum())
-    out["median_q_rmse"] = float(np.median(rmse[alive])) if alive.any() else None
+    out["diverged_after_s"] = [None if a else round(float(k * sample_step), 6) for k, a in zip(left, alive)]
+    out["median_q_rmse"], out["diverged"], _ = summary(out["q_rmse"])
     return out
 
 
-def driven_entry(model: FittedModel, data: Dataset) -> dict:
+def driven_entry(model: FittedModel, data: Dataset, report: Callable[[str], None] | None = None) -> dict:
     """A run's ``rollout`` entry on measured data: the driven rollouts of every
     window length in :data:`WINDOWS_S`, the longest's median as the entry's
-    ``q_rmse``; a model that is no Lagrangian of ``(q, qd)`` has none."""
+    ``q_rmse`` and its status ``diverged`` where half its windows or more
+    diverged; a model that is no Lagrangian of ``(q, qd)`` has none.
+    ``report`` hears the progress (:func:`driven_rollout`)."""
     reason = model.not_a_lagrangian()
     if reason:
         return {"kind": "driven", "status": "not_applicable", "q_rmse": None, "detail": reason}
-    by_length = {f"{s:g}": driven_rollout(model, data, s) for s in WINDOWS_S}
+    by_length = {f"{s:g}": driven_rollout(model, data, s, report=report) for s in WINDOWS_S}
     longest = by_length[f"{WINDOWS_S[-1]:g}"]
     status = "ok" if longest["median_q_rmse"] is not None else "diverged"
     return {"kind": "driven", "status": status, "q_rmse": longest["median_q_rmse"], "windows": by_length}

@@ -56,6 +56,7 @@ from typing import Callable
 import numpy as np
 
 from bench.core.fileio import atomic_write, link
+from bench.evaluation.driven import describe as describe_driven, pooled
 from bench.evaluation.scores import MEASURED
 from bench.reporting.groups import GROUPS, TESTED_GROUP, group_label, group_members, member_stats
 from bench.reporting.plots import convergence_plot, plot_name
@@ -116,16 +117,14 @@ def _rollout_cell(records: list[Record]) -> str:
 
 
 def _driven_cell(records: list[Record], length: str) -> str:
-    """The median over seeds of each run's median q RMSE over its driven windows of
-    ``length`` s, the runs with any window left, and the windows that diverged."""
+    """The median q RMSE over every driven window of ``length`` s of the ``ok``
+    runs, a diverged window counted as infinitely far, and how many diverged
+    (:func:`~bench.evaluation.driven.pooled`): "diverged" where half or more did."""
     entries = [r.rollout["windows"][length] for r in records
                if r.status == "ok" and r.rollout and length in r.rollout.get("windows", {})]
     if not entries:
         return "—"
-    medians = [e["median_q_rmse"] for e in entries if e.get("median_q_rmse") is not None]
-    diverged, total = sum(e["diverged"] for e in entries), sum(e["windows"] for e in entries)
-    head = fmt(float(np.median(medians))) if medians else "—"
-    return f"{head} ({diverged}/{total} windows diverged)"
+    return describe_driven(*pooled(entries), fmt)
 
 
 def _standard(records: list[Record]) -> dict | None:
@@ -143,8 +142,7 @@ def standard_line(records: list[Record]) -> str:
             f"{fmt(s['test_mse']) if s.get('test_mse') is not None else '—'}")
     rollout = s.get("rollout") or {}
     for length, e in sorted(rollout.get("windows", {}).items(), key=lambda kv: float(kv[0])):
-        median = "—" if e.get("median_q_rmse") is None else fmt(e["median_q_rmse"])
-        text += f"; driven {length} s: q RMSE {median} ({e['diverged']}/{e['windows']} windows diverged)"
+        text += f"; driven {length} s: q RMSE {describe_driven(*pooled([e]), fmt)}"
     if s.get("mass_matrix_positive_definite") is False:
         text += (f". Its mass matrix is not positive definite (smallest eigenvalue "
                  f"{s['mass_matrix_smallest_eigenvalue']:.3g} at the training states), so it has no forward dynamics")

@@ -78,6 +78,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -119,7 +120,8 @@ CROSS_FIT_SHARE = 0.15
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float | None = None,
                   steps: int | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
                   fitted: FittedModel | None = None, open_ended: bool | None = None,
-                  device: str = "cpu") -> ResidualResult:
+                  device: str = "cpu", checkpoint: Callable[[ResidualResult], None] | None = None,
+                  on_phase: Callable[[str], None] | None = None) -> ResidualResult:
     """Run the loop in this process; see the module docstring.
 
     ``budget_s`` bounds the whole loop (its method's fit has
@@ -134,12 +136,27 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     fitted before the system changed). Each round records ``seconds``, the
     time since the loop began. ``device`` is where a torch method's fits
     train (:mod:`bench.core.devices`); the loop's own work is on the CPU.
+
+    A round still running when the time budget ends is undone, and the loop
+    ends with the rounds that finished (:attr:`ResidualResult.stopped` says
+    where). ``checkpoint``, where given, receives the result as it stands
+    (without driven rollouts) after round 0, after every later round and
+    once the rounds end, so that a caller that must kill the loop still has
+    the rounds that finished. ``on_phase`` is told ``"evaluate"`` when the
+    rounds end and the work after them (the driven rollouts of the test
+    recordings) begins: that work is not charged to the budget.
     """
     if budget_s is None and steps is None:
         budget_s = DEFAULT_BUDGET_S
     with remembered_columns(train, test):  # each candidate's and effect's columns once, for every round
-        return _Loop(method, train, test, Budget(seconds=budget_s, steps=steps), seed, dict(hyperparameters or {}),
-                     report, open_ended, device).run(fitted)
+        loop = _Loop(method, train, test, Budget(seconds=budget_s, steps=steps), seed, dict(hyperparameters or {}),
+                     report, open_ended, device)
+        loop.checkpoint, loop.on_phase = checkpoint or (lambda result: None), on_phase or (lambda phase: None)
+        return loop.run(fitted)
+
+
+class _BudgetSpent(Exception):
+    """The loop's time budget ended during a round (the message says in which of its stages)."""
 
 
 class _Loop:
@@ -153,6 +170,8 @@ class _Loop:
         self.stack = contextlib.ExitStack()  # the corrected training data's remembered columns
         self.report, self.open_ended = report, open_ended
         self.horizon = budget.fit_seconds  # the loop's time (unlimited under a work budget)
+        self.checkpoint, self.on_phase = (lambda result: None), (lambda phase: None)
+        self.stopped: str | None = None  # where the budget ended the loop early
         self.fitter = Fitter(method, seed, budget.scaled(FIT_SHARE), hyperparameters, device)
         self.start = time.perf_counter()
         self.beyond: dict[str, tuple] = {}  # effects dropped for claiming beyond the data: label -> (term, entry)
@@ -192,6 +211,13 @@ class _Loop:
     def elapsed(self) -> float:
         return round(time.perf_counter() - self.start, 3)
 
+    def in_budget(self, stage: str) -> None:
+        """Raise :class:`_BudgetSpent` where the loop's time budget has ended
+        (never under a work budget), naming ``stage``, the part of the round
+        that was running."""
+        if time.perf_counter() - self.start > self.horizon:
+            raise _BudgetSpent(stage)
+
     def run(self, fitted: FittedModel | None) -> ResidualResult:
         with self.stack:
             return self._run(fitted)
@@ -207,7 +233,7 @@ class _Loop:
         else:
             report(f"round 0: starting from the given {self.method} fit")
         strategy = self.strategy = strategy_for(fitted)
-        trained_on = fitted.trained_on() if hasattr(fitted, "trained_on") else "cpu"
+        self.trained_on = fitted.trained_on() if hasattr(fitted, "trained_on") else "cpu"
         context = Start(self.seed, self.fitter, dataclasses.replace(self.fitter, budget=budget.scaled(CROSS_FIT_SHARE)),
                         given, self.start + POLISH_SHARE * self.horizon, report)
         model, started = strategy.start(fitted, train, context)
@@ -223,37 +249,55 @@ class _Loop:
         split = describe_validation(train)
         report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
                f"held out ({split}) {held:.4g}")
-        feasible_before = strategy.feasibility(model, train)
+        self.first, self.before, self.mass_before = first, before, mass_before
+        self.feasible_before = strategy.feasibility(model, train)
+        self.save(model, held, mass, rounds, {})
         model, held, mass, findings = self.rounds(model, held, mass, rounds)
-        after = self.scores(model)
-        feasible_after = strategy.feasibility(model, self.train)
-        driven = None
+        loop_seconds = self.elapsed()
+        self.on_phase("evaluate")
+        result = self.result(model, held, mass, rounds, findings)
+        result.loop_seconds = loop_seconds
+        self.checkpoint(result)
         if self.test is not None and self.test.time is not None and self.test.recording is not None:
-            report("driven rollouts of the test recordings, before and after")
+            report("driven rollouts of the test recordings, before and after (after the budget: their work is the "
+                   "data's and the models')")
+            t0 = time.perf_counter()
             # after: the arm's model under the arm's torques, as the sensor's laws correct the measured ones
-            driven = {"before": self.timed(driven_entry, first, self.test),
-                      "after": self.timed(driven_entry, model, self.sensor.correct(self.test))}
+            result.rollout = {"before": driven_entry(first, self.test, report=_indented(report, "before")),
+                              "after": driven_entry(model, self.sensor.correct(self.test), report=_indented(report, "after"))}
+            result.rollout_seconds = round(time.perf_counter() - t0, 2)
+        result.seconds = round(time.perf_counter() - self.start, 2)
+        result.models = (first, Sensed(model, self.sensor))
+        return result
+
+    def result(self, model: LoopModel, held: float, mass: float, rounds: list[Round], findings: dict) -> ResidualResult:
+        """The result as it stands with ``model`` as the loop's model (no driven rollouts)."""
+        train, budget, strategy = self.train, self.budget, self.strategy
         bound = model.rigid.expression_terms_bound()  # SyReNets' full equation is never built
         expr = model.expression() if bound is None or bound <= MAX_SYMBOLIC_TERMS else None
+        feasible_after = strategy.feasibility(model, train)
         return ResidualResult(
-            system=train.system, method=self.method, mse_before=before, mse_after=after,
-            effects=describe_all(model.effects, model.coef, model.stderr, self.timed(shape_stderr, strategy, model, self.train))
+            system=train.system, method=self.method, mse_before=self.before, mse_after=self.scores(model),
+            effects=describe_all(model.effects, model.coef, model.stderr, self.timed(shape_stderr, strategy, model, train))
             + self.sensor.entries(train.dof) + list(findings.values()) + list(self.unnamed.values())
             + [entry for _, entry in self.beyond.values()],
-            rounds=[r.to_json() for r in rounds], validation=split,
-            mass_matrix={"smallest_eigenvalue_before": mass_before, "smallest_eigenvalue_after": mass,
+            rounds=[r.to_json() for r in rounds], validation=describe_validation(train),
+            mass_matrix={"smallest_eigenvalue_before": self.mass_before, "smallest_eigenvalue_after": mass,
                          "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
             mse_heldout_recordings={"before": rounds[0].heldout_mse, "after": held} if len(train.recordings()) >= 2 else None,
             lagrangian=None if expr is None else str(expr),
             seconds=round(time.perf_counter() - self.start, 2), statistics_seconds=round(self.statistics, 2),
             budget_s=budget.seconds, fit_budget_s=self.fitter.budget.seconds if budget.kind == "seconds" else None,
-            device=device_entry(trained_on),
+            device=device_entry(self.trained_on),
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
             test_source=None if self.test is None else self.test.source, provenance=provenance(),
-            models=(first, Sensed(model, self.sensor)),
-            feasibility=None if feasible_before is None else {"before": feasible_before, "after": feasible_after},
-            rollout=driven,
+            feasibility=None if self.feasible_before is None else {"before": self.feasible_before, "after": feasible_after},
+            stopped=self.stopped,
         )
+
+    def save(self, model: LoopModel, held: float, mass: float, rounds: list[Round], findings: dict) -> None:
+        """Hand the result as it stands to the checkpoint (see :func:`residual_loop`)."""
+        self.checkpoint(self.result(model, held, mass, rounds, findings))
 
     def build(self, model: LoopModel, effects: list[Term], on_sensor: list[Term]):
         """``model`` refitted with ``effects`` and the sensor's new laws ``on_sensor``
@@ -373,6 +417,7 @@ class _Loop:
         labels removed and the laws simplified."""
         strategy, report = self.strategy, self.report
         candidate, removed = self.timed(prune, strategy, candidate, self.train, report)
+        self.in_budget("dropping redundant effects")
         if self.sensor.found_any:
             candidate, new_sensor, impossible = self.timed(inadmissible_sensor, strategy, candidate, self.measured,
                                                            self.sensor)
@@ -391,11 +436,14 @@ class _Loop:
                 self.use(new_train, new_sensor)
             removed += gone
         candidate = refine_shapes(strategy, candidate, self.train, report)
+        self.in_budget("refining the laws' shapes")
         candidate, simplified, impossible = self.timed(self.settle, candidate)
+        self.in_budget("simplifying the laws")
         for term, c, se in impossible:
             findings[label(term)] = structural(term, c, se)
             removed.append(label(term))
         candidate, beyond = self.timed(self.confine, candidate)
+        self.in_budget("checking what the data identify")
         if self.sensor.found_any:
             candidate, new_sensor, new_train, gone = self.timed(
                 confine_sensor, strategy, candidate, self.measured, self.sensor, self.heldout)
@@ -424,62 +472,94 @@ class _Loop:
             if began - self.start + longest >= self.horizon:
                 rounds.append(Round(k, self.scores(model), held, stop=f"the budget of {self.budget.seconds:g} s would "
                                     f"be spent before a round ended", seconds=self.elapsed()))
+                self.stopped = (f"round {k} not started: the budget of {self.budget.seconds:g} s would be spent "
+                                f"before it ended")
                 report(f"round {k}: not started, the budget of {self.budget.seconds:g} s would be spent before it ended")
                 break
-            train, sensor = self.train, self.sensor
-            target, fixed = strategy.problem(model, train)
-            excluded = model.effects + [term for term, _ in self.beyond.values()]
-            laws = {t: sensor_column(t, model, train, sensor) for t in sensor.candidates(train) if t not in excluded}
-            selection = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
-                                   deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
-                                   runner_up=not strategy.fixed_freedom)
-            findings = {}  # what is left unexplained where the loop ends
-            for term, c, se in selection.structural:
-                findings[label(term)] = structural(term, c, se)
-                report(f"round {k}: structural finding: {findings[label(term)]['finding']}")
-            if not selection.accepted:
-                rounds.append(Round(k, self.scores(model), held, trace=selection.steps, seconds=self.elapsed()))
-                if any(step.get("stop") == BUDGET_STOP for step in selection.steps):
-                    report(f"round {k}: the loop's budget ran out before the trace found anything significant; "
-                           f"a larger budget may find more")
-                else:
-                    report(f"round {k}: nothing significant left")
-                break
-            accepted = [label(c) for c in selection.accepted]
-            report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
-            before_round = (train, sensor)
-            candidate = self.choose(model, selection, laws, k)
-            candidate, removed, simplified = self.tidy(candidate, findings)
-            train = self.train
-            candidate_held = self.timed(self.heldout, candidate)
-            candidate_mass = self.timed(smallest_mass_eigenvalue, candidate, train)
-            undo = None  # why the round is undone: the JSON's words, then the progress line's
-            if mass > 0 and not candidate_mass > 0:
-                undo = (f"with these effects the mass matrix is not positive definite on the training data "
-                        f"(smallest eigenvalue {candidate_mass:.4g})",
-                        f"the mass matrix would not be positive definite (smallest eigenvalue {candidate_mass:.4g})")
-            elif not candidate_held < (1 - self.round_gain) * held:
-                undo = ("the refitted model does not lower the held-out error"
-                        + (f" by {self.round_gain:.0%}, as each candidate must on trajectories" if self.round_gain else ""),
-                        f"held-out MSE {candidate_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")
-            else:
-                undo = self.timed(strategy.check, candidate, model, train)
-            if undo is not None:
-                self.use(*before_round)
-                rounds.append(Round(k, self.scores(model), held, accepted, selection.steps, removed, f"undone: {undo[0]}",
-                                    candidate_held, simplified=simplified or None, seconds=self.elapsed()))
-                report(f"round {k}: undone, {undo[1]}")
-                break
-            model, held, mass = candidate, candidate_held, candidate_mass
-            s = self.scores(model)
-            rounds.append(Round(k, s, held, accepted, selection.steps, removed, simplified=simplified or None,
-                                seconds=self.elapsed()))
+            before_round = (self.train, self.sensor, dict(self.beyond), dict(self.unnamed))
+            try:
+                model, held, mass, findings, done = self.round(k, model, held, mass, pool, rounds)
+            except _BudgetSpent as spent:
+                self.use(*before_round[:2])
+                self.beyond, self.unnamed = before_round[2], before_round[3]
+                self.stopped = (f"the budget of {self.budget.seconds:g} s ran out in round {k}, while {spent}: "
+                                f"the round is undone, and the rounds before it are kept")
+                rounds.append(Round(k, self.scores(model), held, stop=f"stopped: {self.stopped}", seconds=self.elapsed()))
+                report(f"round {k}: stopped, {self.stopped}")
+                done = True
             longest = max(longest, time.perf_counter() - began)
-            if not set(accepted) - set(removed):
-                report(f"round {k}: every effect it added became redundant; stopping")
+            if done:
                 break
-            report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {held:.4g}")
+            self.save(model, held, mass, rounds, findings)
         return model, held, mass, findings
+
+    def round(self, k: int, model: LoopModel, held: float, mass: float, pool: TermLibrary, rounds: list[Round]):
+        """Round ``k`` from ``model``; appends its :class:`Round` to ``rounds`` and
+        returns the loop's model, its held-out error and smallest mass-matrix
+        eigenvalue, the structural findings, and whether the loop ends here
+        (nothing found, the round undone, or nothing it added kept). Raises
+        :class:`_BudgetSpent` where the time budget ends before the round does."""
+        report, strategy = self.report, self.strategy
+        train, sensor = self.train, self.sensor
+        target, fixed = strategy.problem(model, train)
+        excluded = model.effects + [term for term, _ in self.beyond.values()]
+        laws = {t: sensor_column(t, model, train, sensor) for t in sensor.candidates(train) if t not in excluded}
+        selection = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
+                               deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
+                               runner_up=not strategy.fixed_freedom)
+        findings = {}  # what is left unexplained where the loop ends
+        for term, c, se in selection.structural:
+            findings[label(term)] = structural(term, c, se)
+            report(f"round {k}: structural finding: {findings[label(term)]['finding']}")
+        if not selection.accepted:
+            rounds.append(Round(k, self.scores(model), held, trace=selection.steps, seconds=self.elapsed()))
+            if any(step.get("stop") == BUDGET_STOP for step in selection.steps):
+                report(f"round {k}: the loop's budget ran out before the trace found anything significant; "
+                       f"a larger budget may find more")
+            else:
+                report(f"round {k}: nothing significant left")
+            return model, held, mass, findings, True
+        self.in_budget("tracing")
+        accepted = [label(c) for c in selection.accepted]
+        report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
+        before_round = (train, sensor)
+        candidate = self.choose(model, selection, laws, k)
+        self.in_budget("refitting jointly")
+        candidate, removed, simplified = self.tidy(candidate, findings)
+        train = self.train
+        candidate_held = self.timed(self.heldout, candidate)
+        candidate_mass = self.timed(smallest_mass_eigenvalue, candidate, train)
+        self.in_budget("scoring the refitted model on held-out data")
+        undo = None  # why the round is undone: the JSON's words, then the progress line's
+        if mass > 0 and not candidate_mass > 0:
+            undo = (f"with these effects the mass matrix is not positive definite on the training data "
+                    f"(smallest eigenvalue {candidate_mass:.4g})",
+                    f"the mass matrix would not be positive definite (smallest eigenvalue {candidate_mass:.4g})")
+        elif not candidate_held < (1 - self.round_gain) * held:
+            undo = ("the refitted model does not lower the held-out error"
+                    + (f" by {self.round_gain:.0%}, as each candidate must on trajectories" if self.round_gain else ""),
+                    f"held-out MSE {candidate_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")
+        else:
+            undo = self.timed(strategy.check, candidate, model, train)
+        if undo is not None:
+            self.use(*before_round)
+            rounds.append(Round(k, self.scores(model), held, accepted, selection.steps, removed, f"undone: {undo[0]}",
+                                candidate_held, simplified=simplified or None, seconds=self.elapsed()))
+            report(f"round {k}: undone, {undo[1]}")
+            return model, held, mass, findings, True
+        s = self.scores(candidate)
+        rounds.append(Round(k, s, candidate_held, accepted, selection.steps, removed, simplified=simplified or None,
+                            seconds=self.elapsed()))
+        if not set(accepted) - set(removed):
+            report(f"round {k}: every effect it added became redundant; stopping")
+            return candidate, candidate_held, candidate_mass, findings, True
+        report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {candidate_held:.4g}")
+        return candidate, candidate_held, candidate_mass, findings, False
+
+
+def _indented(report: Report, what: str) -> Report:
+    """``report`` with each line indented and prefixed by ``what``."""
+    return lambda line: report(f"  {what}: {line}")
 
 
 def _fmt(x) -> str:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from bench.core.data import Dataset
 from bench.core.fileio import atomic_write, write_json
+from bench.evaluation.driven import describe as describe_driven, pooled
 from bench.reporting.plots import residual_plot
 from bench.residual.result import ResidualResult
 
@@ -15,19 +16,23 @@ def write_outputs(result: ResidualResult, train: Dataset, test: Dataset | None, 
     """Write the JSON (:meth:`ResidualResult.to_json`) and the report.
 
     Each file is written atomically; the plot and the report's text are made
-    before the JSON and the report are written.
+    before the JSON and the report are written. A result without its models
+    (one taken from the loop's checkpoint, :func:`bench.residual.job.run_residual`)
+    has a report without the plot.
     """
     if report_path is not None:
         report_path = Path(report_path)
-        first, final = result.models
         data = test if test is not None else train
-        split = "test" if test is not None else "train"
-        stem = report_path.with_suffix("")
-        plot = residual_plot(data, data.tau - first.predict_torque(data), Path(f"{stem}_residuals.png"),
-                             title=f"{result.system}, {result.method}: torque residual on the {split} set, "
-                                   "before and after the loop",
-                             after=data.tau - final.predict_torque(data))
-        text = markdown(result, plot.name)
+        plot = None
+        if result.models is not None and data is not None:
+            first, final = result.models
+            split = "test" if test is not None else "train"
+            stem = report_path.with_suffix("")
+            plot = residual_plot(data, data.tau - first.predict_torque(data), Path(f"{stem}_residuals.png"),
+                                 title=f"{result.system}, {result.method}: torque residual on the {split} set, "
+                                       "before and after the loop",
+                                 after=data.tau - final.predict_torque(data)).name
+        text = markdown(result, plot)
     if json_path is not None:
         write_json(json_path, result.to_json())
     if report_path is not None:
@@ -50,9 +55,15 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         f"Training data: `{result.train_source}`; test data: `{result.test_source}`. "
         f"{_budget(result)}, seed {result.seed}; "
         f"{result.seconds:g} s in all"
-        + (f", {result.statistics_seconds:g} s of it the loop's statistics" if result.statistics_seconds is not None else "")
+        + (f", {result.loop_seconds:g} s of it the fit and the rounds" if result.loop_seconds is not None else "")
+        + (f", {result.statistics_seconds:g} s the loop's statistics" if result.statistics_seconds is not None else "")
+        + (f", {result.rollout_seconds:g} s the driven rollouts after the rounds" if result.rollout_seconds is not None else "")
         + f". Held out: {result.validation}.",
         "",
+    ]
+    if result.stopped:
+        lines += [f"**Stopped early:** {result.stopped}.", ""]
+    lines += [
         "| torque MSE | train | test |",
         "|---|---:|---:|",
         f"| before (declared model only) | {cell(b['train'])} | {cell(b['test'])} |",
@@ -77,11 +88,11 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
                   + ", ".join(f"{m:.4g}" for m in feasible["after"]["masses"]) + ".", ""]
     if result.rollout:
         def driven(entry):
-            return "; ".join(f"{k} s: {'—' if w['median_q_rmse'] is None else format(w['median_q_rmse'], '.4g')} rad "
-                             f"({w['diverged']}/{w['windows']} windows diverged)" for k, w in entry.get("windows", {}).items()) \
-                or entry.get("detail") or entry.get("status", "")
-        lines += [f"Driven rollouts of the test recordings under their measured torques, median q RMSE over windows: "
-                  f"before {driven(result.rollout['before'])}; after {driven(result.rollout['after'])}.", ""]
+            return "; ".join(f"{k} s: " + describe_driven(*pooled([w]), lambda x: f"{x:.4g} rad")
+                             for k, w in entry.get("windows", {}).items()) or entry.get("detail") or entry.get("status", "")
+        lines += [f"Driven rollouts of the test recordings under their measured torques, median q RMSE over all "
+                  f"windows (a diverged window counted as infinitely far): before {driven(result.rollout['before'])}; "
+                  f"after {driven(result.rollout['after'])}.", ""]
     if result.effects:
         lines += ["| effect | kind | law | joints | parameters (± std. error) |", "|---|---|---|---|---|"]
         for e in result.effects:

@@ -31,6 +31,11 @@ class ResidualResult:
     ``rollout`` gives, where the test data name their recordings' times
     (measured data), the driven rollouts of the test recordings before and
     after the loop (:func:`bench.evaluation.driven.driven_entry`).
+    ``stopped`` says where the time budget ended the loop before it ended by
+    itself (a round not started, a round undone when the budget ran out in
+    it, or the process killed), else ``None``. ``loop_seconds`` is the time of
+    the fit and the rounds, the part the budget bounds; ``rollout_seconds``
+    that of the driven rollouts after them.
     ``models`` holds the fitted models before and after the loop, for the
     report's residual plots; it is not part of the JSON.
     """
@@ -62,6 +67,9 @@ class ResidualResult:
     #: line, the ``--set`` values, the configuration and every hyperparameter of the method, and
     #: each data file's sha256 with the settings ``convert`` made it with
     inputs: dict | None = None
+    stopped: str | None = None
+    loop_seconds: float | None = None
+    rollout_seconds: float | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:

@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel, mass_and_bias
-from bench.evaluation.driven import driven_entry, driven_rollout, windows
+from bench.evaluation.driven import driven_entry, driven_rollout, summary, windows
 from bench.evaluation.rollout import TrueModel, forward_dynamics
 from systems import get_system
 
@@ -58,7 +58,23 @@ def test_a_model_without_forward_dynamics_diverges_in_every_window():
     indefinite = ExpressionModel(qd[0] ** 2 / 2 - qd[1] ** 2 / 2, 2)
     out = driven_rollout(indefinite, data, 0.25)
     assert out["diverged"] == out["windows"] == 8 and out["median_q_rmse"] is None
+    assert out["diverged_after_s"] == [0.0] * 8  # each window stops in its first step
     assert driven_entry(indefinite, data)["status"] == "diverged"
+
+
+def test_a_window_records_when_it_diverged_and_a_diverged_window_counts_as_infinitely_far():
+    system = get_system("double_pendulum")
+    data = _recorded_motion(system)
+    q, qd = sympy.symbols("q_1 q_2", real=True), sympy.symbols("qd_1 qd_2", real=True)
+    # a mass matrix that turns indefinite once |q_1| passes 0.35 rad: windows that reach it stop there
+    turns = ExpressionModel(sympy.expand(system.lagrangian_sympy) - 20 * q[0] ** 2 * qd[1] ** 2, 2)
+    out = driven_rollout(turns, data, 0.25)
+    late = [t for t in out["diverged_after_s"] if t is not None]
+    assert late and all(0.0 <= t < 0.25 for t in late) and len(late) == out["diverged"]
+    assert [t is None for t in out["diverged_after_s"]] == [r is not None for r in out["q_rmse"]]
+    assert summary([0.1, 0.2, None]) == (0.2, 1, 3)
+    assert summary([0.1, None, None, 0.3]) == (None, 2, 4)  # half diverged: no figure
+    assert summary([0.1, 0.4, 0.2, None, 0.3]) == (0.3, 1, 5)  # not the survivors' 0.25
 
 
 def test_a_window_that_blows_up_on_a_stiff_damper_is_integrated_again_at_a_finer_step(monkeypatch):

@@ -156,20 +156,30 @@ def test_tables_open_with_a_link_to_the_guide_that_resolves_and_matches_the_test
 def test_measured_tables_give_driven_rollouts_the_standard_model_and_each_learners_ratio_to_it():
     standard = {"configuration": "standard", "train_mse": 0.2, "test_mse": 0.5, "mass_matrix_positive_definite": False,
                 "mass_matrix_smallest_eigenvalue": -1.5,
-                "rollout": {"kind": "driven", "windows": {"0.25": {"windows": 4, "diverged": 4, "median_q_rmse": None}}}}
-    records = []
-    for seed, (median, diverged) in enumerate([(0.1, 0), (0.3, 1), (0.2, 0)]):
-        windows = {"0.25": {"windows": 4, "diverged": diverged, "median_q_rmse": median}}
-        r = rec("m", seed, 1.0, 1.0 + seed, experiment="indirect", system="kuka_lwr4")
-        records.append(r.replace(rollout={"kind": "driven", "status": "ok", "q_rmse": median, "windows": windows},
+                "rollout": {"kind": "driven", "windows": {"0.25": {"windows": 4, "diverged": 4, "median_q_rmse": None,
+                                                                   "q_rmse": [None] * 4}}}}
+
+    def runs(per_seed):
+        out = []
+        for seed, q_rmse in enumerate(per_seed):
+            windows = {"0.25": {"windows": 4, "diverged": q_rmse.count(None), "median_q_rmse": None, "q_rmse": q_rmse}}
+            r = rec("m", seed, 1.0, 1.0 + seed, experiment="indirect", system="kuka_lwr4")
+            out.append(r.replace(rollout={"kind": "driven", "status": "ok", "q_rmse": None, "windows": windows},
                                  details={"standard_model": standard, "exact_not_judged": MEASURED}))
+        return out
+
+    # the median over all 12 windows, the diverged one infinitely far
+    records = runs([[0.1, 0.1, 0.2, 0.3], [0.3, None, 0.4, 0.5], [0.2, 0.2, 0.2, 0.2]])
     lines = build_table(records).splitlines()
     assert "| Driven 0.25 s | q RMSE | 2.00e-01 (1/12 windows diverged) |" in lines
+    # half of the windows diverged: the few that survived do not make a figure
+    survivors = build_table(runs([[0.01, None, None, None], [None, None, 0.02, None], [0.03, 0.01, None, 0.01]]))
+    assert "| Driven 0.25 s | q RMSE | diverged (7/12 windows) |" in survivors.splitlines()
     assert "| All 3 / standard | test | 4× |" in lines  # the mean test MSE 2.0 over the standard model's 0.5
     assert "| Exact | | not applicable: measured data have no true L |" in lines
     assert not any(line.startswith("| Rollout") for line in lines)
     text = standard_line(records)
-    assert "train MSE 2.00e-01, test MSE 5.00e-01" in text and "driven 0.25 s: q RMSE — (4/4 windows diverged)" in text
+    assert "train MSE 2.00e-01, test MSE 5.00e-01" in text and "driven 0.25 s: q RMSE diverged (4/4 windows)" in text
     assert "not positive definite (smallest eigenvalue -1.5" in text
     assert standard_line([rec("m", 0, 1.0, 1.0)]) == ""
 

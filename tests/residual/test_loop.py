@@ -349,7 +349,7 @@ def _without_timings(obj):
     """The loop's JSON without what measures the machine: seconds, timing, provenance."""
     if isinstance(obj, dict):
         return {k: _without_timings(v) for k, v in obj.items()
-                if k not in ("seconds", "statistics_seconds", "provenance", "curve")}
+                if k not in ("seconds", "statistics_seconds", "loop_seconds", "rollout_seconds", "provenance", "curve")}
     if isinstance(obj, list):
         return [_without_timings(v) for v in obj]
     return obj
