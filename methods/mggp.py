@@ -9,7 +9,11 @@ Alavi 2012).
 Settings from the paper (Valle & Haddadin 2021, Section IV): population 1000,
 300 generations, tournament size 15, elite fraction 10 %, binary operators
 + - x, unary operators protected sqrt (``sqrt|x|``), square, cube, sin, cos;
-the run stops when the best MSE falls below 1e-10 or the budget ends.
+the run stops when the best MSE falls below 1e-10 or the budget ends. A
+generation is checked against the budget as it is bred and scored, and one the
+budget ends in is abandoned, so that the fit stops within its budget however
+long a generation takes; the last whole generation stands, as a replay of the
+generations done finds it.
 
 Settings the paper does not give, filled with GPTIPS-like values
 ------------------------------------------------------------------
@@ -327,6 +331,8 @@ class MGGP(ExpressionMethod):
             pop.sort(key=Individual.key)
             offspring: list[Individual] = []
             while len(offspring) < cfg.population - n_elite:
+                if progress.overrun():  # a generation cut short is abandoned: the last whole one stands
+                    break
                 r = random.random()
                 if r < cfg.p_crossover:
                     offspring += self._crossover(self._select(pop), self._select(pop))
@@ -339,8 +345,12 @@ class MGGP(ExpressionMethod):
                     offspring.append(child)
             offspring = offspring[: cfg.population - n_elite]
             for ind in offspring:
+                if progress.stop_reason or progress.overrun():
+                    break
                 if not ind.scored:
                     self._score(ind, algebra, y, cache)
+            if progress.stop_reason:
+                break
             pop = pop[:n_elite] + offspring
             self.best = min(pop, key=Individual.key)
             generation += 1

@@ -116,6 +116,17 @@ class Progress:
     def remaining(self) -> float:
         return self.deadline - time.perf_counter()
 
+    def overrun(self) -> bool:
+        """Whether the deadline has passed (never under a work budget): for a
+        method whose step is long, to ask inside the step and abandon it. The
+        state is then the last finished step's, and :attr:`steps` counts the
+        finished steps only, so that a replay of those steps ends in the same
+        state."""
+        if time.perf_counter() > self.deadline:
+            self.stop("budget")
+            return True
+        return False
+
     def evaluate_now(self) -> float:
         value = self.measure()
         if not math.isfinite(value):

@@ -91,9 +91,9 @@ class SparseLagrangian(ExpressionMethod):
         self.model = ExpressionModel(sympy.Integer(0), train.dof)
         while progress.step():
             F = self.library.design(sub, experiment, deadline=progress.deadline)
-            keep = regression.independent_columns(F)
+            keep = regression.independent_columns(F, deadline=progress.deadline)
             y = sub.target(experiment).ravel()
-            coef = regression.fit_columns(F[:, keep], y, len(sub), self.config.threshold)
+            coef = regression.fit_columns(F[:, keep], y, len(sub), self.config.threshold, deadline=progress.deadline)
             self.kept_terms = len(keep)
             kept = TermLibrary(self.library[k] for k in keep)
             self.model = ExpressionModel(kept.lagrangian(coef), train.dof)

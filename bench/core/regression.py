@@ -14,6 +14,7 @@ the standard errors and residual sum of squares that model selection needs.
 
 from __future__ import annotations
 
+import time
 from typing import Sequence
 
 import numpy as np
@@ -22,6 +23,7 @@ import sympy
 
 from bench.core.data import Dataset
 from bench.core.terms import TermLibrary
+from bench.core.timeouts import Timeout
 
 
 def least_squares(F: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -104,13 +106,15 @@ def fit_statistics(F: np.ndarray, y: np.ndarray, problem: "Compressed | None" = 
 
 
 def thresholded_least_squares(
-    F: np.ndarray, y: np.ndarray, threshold: float = 1e-6, max_iter: int = 10
+    F: np.ndarray, y: np.ndarray, threshold: float = 1e-6, max_iter: int = 10, deadline: float | None = None
 ) -> np.ndarray:
     """Sequentially thresholded least squares (as in SINDy).
 
     Repeatedly refit, dropping columns whose contribution ``|c_k| rms(F_k)``
     falls below ``threshold * rms(y)``. Columns that are zero on the data (an
     empty Euler–Lagrange image, for instance a constant) are dropped first.
+    Raises :class:`~bench.core.timeouts.Timeout` before a refit that starts
+    past ``deadline``.
     """
     K = F.shape[1]
     rms_f = np.sqrt(np.mean(F * F, axis=0)) if K else np.zeros(0)
@@ -118,6 +122,8 @@ def thresholded_least_squares(
     active = rms_f > 1e-12 * max(rms_f.max(initial=0.0), 1e-300)
     coef = np.zeros(K)
     for _ in range(max_iter):
+        if deadline is not None and time.perf_counter() > deadline:
+            raise Timeout("thresholded least squares: out of time between refits")
         coef = np.zeros(K)
         coef[active] = least_squares(F[:, active], y)
         keep = active & (np.abs(coef) * rms_f >= threshold * rms_y)
@@ -146,16 +152,18 @@ def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, thres
         basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
     library = TermLibrary.of_lagrangian(basis)
     F = library.design(data, experiment, deadline)
-    coef = fit_columns(F, data.target(experiment).ravel(), len(data), threshold)
+    coef = fit_columns(F, data.target(experiment).ravel(), len(data), threshold, deadline)
     return library.lagrangian(coef), coef
 
 
-def fit_columns(F: np.ndarray, y: np.ndarray, n_samples: int, threshold: float | None = None) -> np.ndarray:
+def fit_columns(F: np.ndarray, y: np.ndarray, n_samples: int, threshold: float | None = None,
+                deadline: float | None = None) -> np.ndarray:
     """Sparse coefficients for a design matrix of ``n_samples`` samples (rows
-    grouped by sample); the threshold is validated when not given."""
+    grouped by sample); the threshold is validated when not given. Raises
+    :class:`~bench.core.timeouts.Timeout` past ``deadline``."""
     if threshold is None:
-        threshold = _validated_threshold(F, y, n_samples, len(y) // max(n_samples, 1))
-    return thresholded_least_squares(F, y, threshold)
+        threshold = _validated_threshold(F, y, n_samples, len(y) // max(n_samples, 1), deadline)
+    return thresholded_least_squares(F, y, threshold, deadline=deadline)
 
 
 def base_columns(F: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -185,37 +193,46 @@ def base_columns(F: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarr
     return independent.astype(int), dependent, beta
 
 
-def independent_columns(F: np.ndarray, tol: float = 1e-8) -> np.ndarray:
+def independent_columns(F: np.ndarray, tol: float = 1e-8, deadline: float | None = None) -> np.ndarray:
     """Indices of a maximal set of linearly independent columns, earliest first.
 
     A column is kept when what remains of it, after projection on the kept
     columns, is larger than ``tol`` times its norm. Zero columns are dropped.
     Used to remove the gauge freedom from a library: terms with no
-    Euler–Lagrange image, or with the image of earlier terms.
+    Euler–Lagrange image, or with the image of earlier terms. The kept
+    columns' orthonormal basis fills one array allocated at the start.
+    Raises :class:`~bench.core.timeouts.Timeout` once ``time.perf_counter()``
+    passes ``deadline``.
     """
     kept: list[int] = []
-    Q = np.zeros((F.shape[0], 0))
+    basis = np.zeros((F.shape[0], min(F.shape)))
     for k in range(F.shape[1]):
+        if deadline is not None and time.perf_counter() > deadline:
+            raise Timeout(f"independent columns: {k} of {F.shape[1]} done")
         col = F[:, k]
         norm = float(np.linalg.norm(col))
         if norm == 0.0 or not np.isfinite(norm):
             continue
+        Q = basis[:, :len(kept)]
         r = col - Q @ (Q.T @ col)
         r = r - Q @ (Q.T @ r)  # re-orthogonalise once for stability
         rn = float(np.linalg.norm(r))
         if rn > tol * norm:
+            basis[:, len(kept)] = r / rn
             kept.append(k)
-            Q = np.column_stack([Q, r / rn])
+            if len(kept) == basis.shape[1]:
+                break
     return np.asarray(kept, dtype=int)
 
 
-def _validated_threshold(F: np.ndarray, y: np.ndarray, n: int, rows_per_sample: int) -> float:
+def _validated_threshold(F: np.ndarray, y: np.ndarray, n: int, rows_per_sample: int,
+                         deadline: float | None = None) -> float:
     cut = (3 * n // 4) * rows_per_sample  # split by sample, not by row
     if cut == 0 or cut >= len(y):
         return THRESHOLDS[0]
     errors = []
     for threshold in THRESHOLDS:
-        coef = thresholded_least_squares(F[:cut], y[:cut], threshold)
+        coef = thresholded_least_squares(F[:cut], y[:cut], threshold, deadline=deadline)
         residual = F[cut:] @ coef - y[cut:]
         errors.append(float(np.mean(residual * residual)))
     best = min(errors)

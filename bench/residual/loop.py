@@ -482,7 +482,7 @@ class _Loop:
             except _BudgetSpent as spent:
                 self.use(*before_round[:2])
                 self.beyond, self.unnamed = before_round[2], before_round[3]
-                self.stopped = (f"the budget of {self.budget.seconds:g} s ran out in round {k}, while {spent}: "
+                self.stopped = (f"the budget of {self.budget.describe()} ran out in round {k}, while {spent}: "
                                 f"the round is undone, and the rounds before it are kept")
                 rounds.append(Round(k, self.scores(model), held, stop=f"stopped: {self.stopped}", seconds=self.elapsed()))
                 report(f"round {k}: stopped, {self.stopped}")
@@ -514,6 +514,9 @@ class _Loop:
         if not selection.accepted:
             rounds.append(Round(k, self.scores(model), held, trace=selection.steps, seconds=self.elapsed()))
             if any(step.get("stop") == BUDGET_STOP for step in selection.steps):
+                self.stopped = (f"the budget of {self.budget.describe()} ran out in round {k}'s trace before it found "
+                                f"anything significant (no step of it starts after {TRACE_SHARE:.0%} of the budget); "
+                                f"a larger budget may find more")
                 report(f"round {k}: the loop's budget ran out before the trace found anything significant; "
                        f"a larger budget may find more")
             else:
