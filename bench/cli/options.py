@@ -98,10 +98,10 @@ def add_plugin(parser) -> None:
     parser.add_argument("--plugin", action="append", default=[], help=PLUGIN_HELP)
 
 
-def add_ignore_limits(parser) -> None:
+def add_ignore_limits(parser, what: str = "fit --train/--test files whose positions") -> None:
     parser.add_argument("--ignore-limits", action="store_true",
-                        help="fit --train/--test files whose positions leave the arm's joint limits (by default one "
-                             "line names the joint, the range seen and the limits, and nothing is fitted)")
+                        help=f"{what} leave the arm's joint limits (by default one line names the file, the joint, "
+                             f"the range seen and the limits, and nothing is fitted)")
 
 
 def add_device(parser, default: str | None = "cpu") -> None:

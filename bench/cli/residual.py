@@ -24,7 +24,7 @@ def add_arguments(res) -> None:
     res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
     res.add_argument("--budget", type=positive, default=None,
-                     help=f"seconds for the fit and the rounds (default 60): the method's fit has {FIT_SHARE:.0%} of "
+                     help=f"seconds for the fit and the rounds (default 60): the method's fit has {FIT_SHARE:.0%}% of "
                           f"it, no round starts that would end past it, a round still running at its end is undone, "
                           f"and the result keeps the rounds before it; the driven rollouts after the rounds are not "
                           f"charged to it. The loop's process is killed only at {matrix.KILL_FACTOR} x it (the rounds "

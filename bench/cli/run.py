@@ -7,13 +7,13 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_budget, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+from bench.cli.options import (UsageError, add_budget, add_ignore_limits, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
                                check_split, configurations, device, hyperparameters, load_plugins)
 from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
 from bench.runner import matrix
-from bench.runner.execute import method_config, raised
+from bench.runner.execute import given_data, make_system, method_config, raised
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, build_specs, seed_count
 from methods import METHODS
 from systems import SYSTEMS
@@ -56,6 +56,7 @@ def add_arguments(r) -> None:
                         "tcp://host:8786 uses a running scheduler (needs the 'dask' extra)")
     r.add_argument("--no-rollout", action="store_true",
                    help="skip the rollout error of simulated systems (integrating each model's dynamics for 1 s)")
+    add_ignore_limits(r, "run on a measured system whose recordings' positions")
     add_plugin(r)
     r.add_argument("--no-resume", action="store_true", help="rerun runs that already have a record")
     r.add_argument("--retry-failed", action="store_true",
@@ -88,6 +89,9 @@ def main(args) -> int:
     for spec in specs:  # fail fast on a bad override, before any process starts
         if spec.method in METHODS and METHODS.entry(spec.method).available:
             METHODS[spec.method](**method_config(spec))
+    if not args.ignore_limits:  # a measured arm's log in degrees, say: one line, before any run starts
+        for spec in {(s.system, s.split): s for s in specs}.values():
+            given_data(make_system(spec), None, None, check_limits=True)
     if args.stack_seeds and args.cluster:
         raise UsageError("--stack-seeds runs the stacked seeds on the local pool; with --cluster each run is a task of its own")
     records = matrix.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume,

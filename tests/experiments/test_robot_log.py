@@ -162,3 +162,10 @@ def test_a_measured_arm_file_says_its_units_and_its_logs_in_degrees_stop_at_the_
         arm("ms", 'time_unit = "hours"\n')
     with pytest.raises(DataError, match=r"deg.toml: degrees must be true or false, got 'yes'"):
         arm("deg", 'degrees = "yes"\n')
+    # the matrix checks the file as fit does: one line, before any run starts, and nothing written
+    arm("deg")  # writes deg.toml
+    r = cli("run", "--systems", f"measured:{tmp_path / 'deg.toml'}", "--methods", "sysid", "--experiments", "indirect",
+            "--seeds", "0", "--steps", "1", "--no-rollout", "--out", str(tmp_path / "matrix"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "deg.toml:train" in r.stderr and "is the log in degrees?" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "matrix" / "records").exists()
