@@ -26,7 +26,7 @@ the base parameters, the identifiable combinations, by QR with column
 pivoting (:func:`bench.core.regression.base_columns`), and fits them by
 least squares. The record gives the base parameters' relative error against
 the true ones (from the URDF's parameters) and whether the identified mass
-matrix is positive definite at the training states.
+matrix is positive definite at every training state (and at how many it is not).
 
 By default (``feasible=True``) the arm's parameters are then identified
 under the constraint that each link's pseudo-inertia is positive
@@ -174,6 +174,16 @@ class ParameterNetwork(torch.nn.Module):
         return self.form.torch_fn(q, qd, self.theta())
 
 
+#: training states whose mass matrices are computed at once (:meth:`SysId._post_fit`)
+MASS_CHUNK = 512
+
+
+def _smallest_eigenvalues(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """The smallest eigenvalue of ``model``'s mass matrix at each state."""
+    M, _ = mass_and_bias(model, q, qd)
+    return np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))[:, 0]
+
+
 @METHODS.add("sysid", "symbolic", "parametric", "baseline", "paper")
 class SysId(TorchLagrangianMethod):
     Config = SysIdConfig
@@ -220,11 +230,13 @@ class SysId(TorchLagrangianMethod):
     def _post_fit(self, train, experiment, seconds_left):
         super()._post_fit(train, experiment, seconds_left)  # a network's fit: on the CPU, in float64
         if self.linear is not None:  # the consistency the data can decide: a positive definite mass matrix
-            states = train.subset(slice(0, 256))
-            M, _ = mass_and_bias(self.linear, states.q, states.qd)
-            eig = np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))
-            self._facts["mass_matrix_positive_definite"] = bool(np.all(eig[:, 0] > 0))
-            self._facts["mass_matrix_smallest_eigenvalue"] = float(eig[:, 0].min())
+            smallest = np.concatenate([_smallest_eigenvalues(self.linear, train.q[k:k + MASS_CHUNK],
+                                                             train.qd[k:k + MASS_CHUNK])
+                                       for k in range(0, len(train), MASS_CHUNK)])
+            self._facts["mass_matrix_positive_definite"] = bool(np.all(smallest > 0))
+            self._facts["mass_matrix_smallest_eigenvalue"] = float(smallest.min())
+            self._facts["mass_matrix_states"] = len(smallest)  # every training state
+            self._facts["mass_matrix_indefinite_states"] = int(np.sum(~(smallest > 0)))
 
     def predict_lagrangian(self, data):
         return self.linear.predict_lagrangian(data) if self.linear is not None else super().predict_lagrangian(data)

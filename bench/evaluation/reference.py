@@ -41,6 +41,8 @@ def standard_reference(system: System, train: Dataset, test: Dataset | None) -> 
         "test_mse": None if test is None else mse(model.predict_torque(test), test.tau),
         "mass_matrix_positive_definite": facts.get("mass_matrix_positive_definite"),
         "mass_matrix_smallest_eigenvalue": facts.get("mass_matrix_smallest_eigenvalue"),
+        "mass_matrix_states": facts.get("mass_matrix_states"),
+        "mass_matrix_indefinite_states": facts.get("mass_matrix_indefinite_states"),
     }
     if test is not None and test.time is not None:
         out["rollout"] = driven_entry(model, test)

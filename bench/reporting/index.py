@@ -12,7 +12,8 @@ there are) or, for a page without records, the manifest's.
 A figure also has a name. Wherever a page (README.md, or any page under
 results/) marks a number as ``<!-- figure NAME -->0.0081<!-- /figure -->``,
 :func:`write_index` rewrites it from the records, and :func:`stale_figures`
-lists the marks that disagree with them.
+lists the marks that disagree with them. A page's generated tables and lists
+(:mod:`bench.reporting.pages`) are rewritten and checked the same way.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from pathlib import Path
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
 from bench.reporting.groups import GROUPS, HALVES_FROM, TESTED_GROUP, group_stats
+from bench.reporting.pages import rewrite, stale_blocks
 from bench.runner.records import read_records
 
 MANIFEST = "manifest.toml"
@@ -40,7 +42,10 @@ MARK = re.compile(r"<!-- figure (?P<name>[\w.-]+) -->(?P<value>.*?)<!-- /figure 
 @dataclass(frozen=True)
 class Figure:
     """One headline number: ``records`` (system, experiment, method, and
-    optionally group, split and noise) or ``json`` (a file and a dotted key)."""
+    optionally group, split and noise; ``quantity`` ``standard.KEY`` reads
+    ``KEY`` of the standard model the records carry, ``ratio`` the group's
+    test MSE over the standard model's) or ``json`` (a file and a dotted key,
+    whose parts may index a list)."""
 
     name: str
     label: str
@@ -118,9 +123,13 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
     """A figure's value, from the entry's records or from its JSON file."""
     if figure.json is not None:
         value = json.loads((Path(root) / figure.json["file"]).read_text())
-        for key in figure.json["key"].split("."):
-            value = value[key]
-        return float(value)
+        try:
+            for key in figure.json["key"].split("."):
+                value = value[int(key)] if isinstance(value, list) else value[key]
+            return float(value)
+        except (KeyError, IndexError, ValueError, TypeError) as exc:
+            raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: {figure.json['file']} has no number at "
+                            f"{figure.json['key']} ({type(exc).__name__}: {exc})") from None
     want = figure.records
     records = [r for r in (records or _Records(root))(entry.path)
                if (r.system, r.experiment, r.method, r.noise) == (want["system"], want["experiment"], want["method"],
@@ -130,11 +139,25 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
     group = want.get("group", TESTED_GROUP)
     if group not in GROUPS:
         raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: group {group!r} is none of {', '.join(GROUPS)}")
+    quantity = want.get("quantity", "")
+    standard = next((r.details["standard_model"] for r in records if (r.details or {}).get("standard_model")), None)
+    if quantity.startswith("standard."):
+        if standard is None or standard.get(quantity[len("standard."):]) is None:
+            raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: the records carry no {quantity}")
+        return float(standard[quantity[len("standard."):]])
     stats = group_stats(records)
     if group not in stats:
         raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: its records have no {group!r} group "
                         f"(fewer than {HALVES_FROM} seeds, or none ok)")
-    return stats[group][want.get("split", "test")][0]
+    value = stats[group][want.get("split", "test")][0]
+    if quantity == "ratio":
+        if standard is None or not standard.get("test_mse"):
+            raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: the records carry no standard model")
+        return value / standard["test_mse"]
+    if quantity not in ("", "mse"):
+        raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: quantity {quantity!r} is none of mse, ratio, "
+                        f"standard.KEY")
+    return value
 
 
 def commit_of(root: Path, entry: Entry, records: _Records | None = None) -> str:
@@ -198,14 +221,16 @@ def _pages(root: Path) -> list[Path]:
 
 
 def stale_figures(root: Path) -> list[str]:
-    """``page: name shows X, records give Y`` for each marked figure that disagrees (or has no entry)."""
+    """``page: name shows X, records give Y`` for each marked figure that disagrees
+    (or has no entry), and each generated block that is not what its records
+    give (:func:`bench.reporting.pages.stale_blocks`)."""
     values, out = figures(root), []
     for page in _pages(root):
         for m in MARK.finditer(page.read_text()):
             want = values.get(m["name"])
             if want != m["value"]:
                 out.append(f"{page}: {m['name']} shows {m['value']}, the records give {want or 'no such figure'}")
-    return out
+    return out + stale_blocks(root, _pages(root))
 
 
 def write_index(root: Path) -> tuple[Path, list[Path]]:
@@ -219,10 +244,11 @@ def write_index(root: Path) -> tuple[Path, list[Path]]:
     records = _Records(root)
     values = figures(root, entries, records)
     text = build_index(root, entries, values, records) + "\n"  # all computed before anything is written
-    changed = []
+    changed, made = [], {}
     for page in _pages(root):
         old = page.read_text()
         new = MARK.sub(lambda m: f"<!-- figure {m['name']} -->{values.get(m['name'], m['value'])}<!-- /figure -->", old)
+        new = rewrite(new, root, made)
         if new != old:
             atomic_write(page, lambda f, t=new: f.write(t))
             changed.append(page)

@@ -144,8 +144,10 @@ def standard_line(records: list[Record]) -> str:
     for length, e in sorted(rollout.get("windows", {}).items(), key=lambda kv: float(kv[0])):
         text += f"; driven {length} s: q RMSE {describe_driven(*pooled([e]), fmt)}"
     if s.get("mass_matrix_positive_definite") is False:
+        where = ("at the training states" if s.get("mass_matrix_states") is None else
+                 f"indefinite at {s['mass_matrix_indefinite_states']:,} of its {s['mass_matrix_states']:,} training states")
         text += (f". Its mass matrix is not positive definite (smallest eigenvalue "
-                 f"{s['mass_matrix_smallest_eigenvalue']:.3g} at the training states), so it has no forward dynamics")
+                 f"{s['mass_matrix_smallest_eigenvalue']:.3g}; {where}), so it has no forward dynamics there")
     return text + "."
 
 

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from bench.core.errors import UserError
-from bench.reporting.index import INDEX, build_index, read_manifest, stale_figures, unlisted, write_index
+from bench.reporting.index import INDEX, build_index, figures, read_manifest, stale_figures, unlisted, write_index
+from bench.reporting.pages import stale_blocks
 from tests.commandline import cli
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -51,6 +52,21 @@ def test_the_index_is_what_the_manifest_and_the_records_give():
 def test_no_page_shows_a_figure_its_records_do_not_give():
     assert stale_figures(RESULTS) == []
     assert len(re.findall(r"<!-- figure ", (ROOT / "README.md").read_text())) >= 3
+
+
+def test_a_number_changed_on_a_published_page_is_found(tmp_path):
+    page = tmp_path / "README.md"
+    text = (RESULTS / "measured" / "README.md").read_text()
+    assert stale_blocks(RESULTS, [RESULTS / "measured" / "README.md"]) == []
+    # one figure of a generated table: the MLP's driven row on the default split
+    row = next(line for line in text.splitlines() if line.startswith("| MLP |"))
+    page.write_text(text.replace(row, row.replace("(972/980 windows)", "(971/980 windows)", 1)))
+    assert row.count("(972/980 windows)") == 1
+    (stale,) = stale_blocks(RESULTS, [page])
+    assert "block measured.kuka.learners differs" in stale
+    # one marked figure in its prose
+    mark = re.search(r"<!-- figure measured.kuka.delan.train -->(.*?)<!-- /figure -->", text)
+    assert mark and mark[1] == figures(RESULTS)["measured.kuka.delan.train"]
 
 
 def test_every_link_in_the_readme_the_docs_and_the_results_resolves():

@@ -1,0 +1,185 @@
+"""The generated blocks of results/measured/README.md (:mod:`bench.reporting.pages`):
+the KUKA LWR4+'s learners beside the standard model, the residual loop from
+each fit, the laws it identified and those one trajectory cannot confirm, each
+made from the matrices' records and the loops' JSON files."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from bench.evaluation.driven import describe as describe_driven, pooled
+from bench.reporting.groups import group_stats
+from bench.reporting.pages import block
+from bench.runner.records import Record, read_records
+
+#: the two splits' matrices, and how the page heads them
+MATRICES = (("measured/kuka_60s", "train A, test B"), ("measured/kuka_swapped_60s", "train B, test A"))
+#: the learners, in the page's order, and their names there
+LEARNERS = (("sysid", "SysId (feasible, rigid body only)"), ("delan", "DeLaN"), ("syrenets", "SyReNets"),
+            ("mlp", "MLP"), ("mggp", "MGGP"), ("sparse", "sparse regression"))
+#: the driven rollouts' window lengths the page shows
+WINDOWS = ("0.25", "1")
+#: the loops' files (``LOOPS/{stem}_{split}.json``) and their names on the page
+LOOPS_DIR = "measured/kuka_loop"
+LOOPS = (("sysid", "SysId"), ("standard", "standard model"), ("delan", "DeLaN"), ("mlp", "MLP"))
+SPLIT_NAMES = ("default", "swapped")
+#: effect kinds that are findings, not laws
+FINDINGS = ("structural", "beyond_data", "not_identified")
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3g}"
+
+
+def _ratio(x: float) -> str:
+    """A ratio to the standard model: three figures, whole above 100."""
+    return f"{x:.0f}×" if x >= 100 else f"{x:.3g}×"
+
+
+def _records(root: Path, folder: str) -> list[Record]:
+    return [r for r in read_records(Path(root) / folder) if r.experiment == "indirect"]
+
+
+def _standard(records: list[Record]) -> dict | None:
+    return next((r.details["standard_model"] for r in records if (r.details or {}).get("standard_model")), None)
+
+
+def _driven(entries: list[dict], length: str) -> str:
+    windows = [e["windows"][length] for e in entries if e and length in e.get("windows", {})]
+    return describe_driven(*pooled(windows), _fmt) if windows else "—"
+
+
+_STATUS_WORDS = {"timeout": "timed out", "failed": "failed", "unavailable": "unavailable",
+                 "not_applicable": "not applicable"}
+
+
+def _learner_cells(records: list[Record], standard: dict | None) -> list[str]:
+    """A learner's cells on one split: All-n test MSE, ratio to the standard model, driven rollouts."""
+    if not records:
+        return ["not run", ""] + [""] * len(WINDOWS)
+    ok = [r for r in records if r.status == "ok"]
+    if not ok:
+        status = max({r.status for r in records}, key=lambda s: sum(r.status == s for r in records))
+        return [f"{len(records)} of {len(records)} runs {_STATUS_WORDS.get(status, status)}", ""] + [""] * len(WINDOWS)
+    mean = group_stats(records)["all"]["test"][0]
+    runs = "" if len(ok) == len(records) else f" ({len(ok)} of {len(records)} runs)"
+    ratio = _ratio(mean / standard['test_mse']) if standard and standard.get("test_mse") else "—"
+    return [f"{_fmt(mean)}{runs}", ratio] + [_driven([r.rollout for r in ok], w) for w in WINDOWS]
+
+
+@block("measured.kuka.learners")
+def learners(root: Path) -> str:
+    """Every learner's All-n test MSE on each split, its ratio to the standard model,
+    and its driven rollouts pooled over every seed's windows."""
+    matrices = [_records(root, folder) for folder, _ in MATRICES]
+    head = "| |" + "".join(f" {title} | ratio |" + "".join(f" driven {w} s |" for w in WINDOWS)
+                           for _, title in MATRICES)
+    lines = [head, "|---|" + "---:|---:|" + "---|" * len(WINDOWS) + ("---:|---:|" + "---|" * len(WINDOWS)) * (len(MATRICES) - 1)]
+    standard = [_standard(records) for records in matrices]
+    row = "| standard model |"
+    for s in standard:
+        row += (" — | | " + " | ".join([""] * len(WINDOWS)) + " |") if s is None else \
+            (f" {_fmt(s['test_mse'])} | 1 | " + " | ".join(_driven([s.get("rollout")], w) for w in WINDOWS) + " |")
+    lines.append(row)
+    for method, label in LEARNERS:
+        cells = []
+        for records, s in zip(matrices, standard):
+            cells += _learner_cells([r for r in records if r.method == method], s)
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _loop(root: Path, stem: str, split: str) -> dict | None:
+    path = Path(root) / LOOPS_DIR / f"{stem}_{split}.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def holds_out(result: dict) -> str:
+    """What the loop's held-out error holds out: the model and its effects where
+    both are refitted without each held-out span; only the effects' coefficients
+    for a kept fit, whose network saw every training row."""
+    if result.get("heldout_holds_out"):
+        return result["heldout_holds_out"]
+    return "the effects only" if result["rounds"][0].get("cross_fit") else "the model and its effects"
+
+
+def _driven_pair(result: dict, length: str) -> str:
+    rollout = result.get("rollout") or {}
+    if not rollout:
+        return "—"
+    before, after = (_driven([rollout.get(k)], length) for k in ("before", "after"))
+    return before if before == after and before.startswith("diverged") else f"{before} → {after}"
+
+
+@block("measured.kuka.loops")
+def loops(root: Path) -> str:
+    """The residual loop from each fit on each split: test MSE before and after, the
+    ratio to the standard model, the held-out error and what it holds out, the
+    rounds kept, and the driven rollouts before and after."""
+    standard = {split: _standard(_records(root, folder)) for split, (folder, _) in zip(SPLIT_NAMES, MATRICES)}
+    lines = ["| loop from | split | test MSE before → after | after / standard | held out before → after "
+             "(what it holds out) | rounds kept | " + " | ".join(f"driven {w} s before → after" for w in WINDOWS) + " |",
+             "|---|---|---|---:|---|---:|" + "---|" * len(WINDOWS)]
+    for stem, label in LOOPS:
+        for split in SPLIT_NAMES:
+            r = _loop(root, stem, split)
+            if r is None:
+                continue
+            s = standard[split]
+            ratio = _ratio(r['mse_after']['test'] / s['test_mse']) if s else "—"
+            kept = sum(1 for x in r["rounds"] if x["round"] > 0 and x.get("accepted") and not x.get("stop"))
+            lines.append(f"| {label} | {split} | {r['mse_before']['test']:.4g} → {r['mse_after']['test']:.4g} | {ratio} "
+                         f"| {_fmt(r['rounds'][0]['heldout_mse'])} → {_fmt(r['rounds'][-1]['heldout_mse'])} "
+                         f"({holds_out(r)}) | {kept} | " + " | ".join(_driven_pair(r, w) for w in WINDOWS) + " |")
+    return "\n".join(lines)
+
+
+@block("measured.kuka.laws")
+def laws(root: Path) -> str:
+    """The laws the loop from SysId kept on each split: each law's parameters on
+    each joint, default split / swapped split."""
+    found: dict[tuple[str, str], dict[int, list[str]]] = {}
+    results = [_loop(root, "sysid", split) for split in SPLIT_NAMES]
+    for k, r in enumerate(results):
+        for e in (r or {}).get("effects", []):
+            if e["kind"] in FINDINGS or len(e["joints"]) != 1:
+                continue
+            for name, p in e["parameters"].items():
+                if p["value"] == 0.0 and p.get("stderr", 0.0) == 0.0:  # a part the law's fit left out
+                    continue
+                cell = found.setdefault((e["name"], name), {}).setdefault(e["joints"][0], ["—"] * len(results))
+                cell[k] = f"{p['value']:.3g} ± {p['stderr']:.1g}"
+    dof = max([j for cells in found.values() for j in cells] + [0])
+    lines = ["| law, parameter (default / swapped) | " + " | ".join(f"joint {j}" for j in range(1, dof + 1)) + " |",
+             "|---|" + "---|" * dof]
+    for (law, name), cells in sorted(found.items()):
+        lines.append(f"| {law}, {name} | " + " | ".join(" / ".join(cells[j]) if j in cells else ""
+                                                         for j in range(1, dof + 1)) + " |")
+    return "\n".join(lines)
+
+
+#: what a finding's text says the law is and what it fitted with
+_FITTED = re.compile(r"^(?P<law>.*?) on (?:joints? [\d, -]+|every joint) fits the training data with (?P<what>.*?), but")
+
+
+@block("measured.kuka.unconfirmed")
+def unconfirmed(root: Path) -> str:
+    """Per loop, the laws of the sensor and the drive and the periodic torques it
+    fitted that no held-out trajectory can confirm, with their fitted values."""
+    lines = []
+    for stem, label in LOOPS:
+        for split in SPLIT_NAMES:
+            r = _loop(root, stem, split)
+            if r is None:
+                continue
+            entries = [e for e in r["effects"] if e["kind"] == "beyond_data"
+                       and (e["name"] in ("torque_gain", "time_shift", "load_friction") or e["name"].startswith("periodic"))]
+            parts = []
+            for e in entries:
+                m = _FITTED.search(e.get("finding", ""))
+                joints = "every joint" if len(e["joints"]) > 1 else f"joint {e['joints'][0]}"
+                parts.append(f"{m['law'] if m else e['name']} on {joints}" + (f", {m['what']}" if m else ""))
+            lines.append(f"- {label}, {split} split: " + ("; ".join(parts) if parts else "none of these laws") + ".")
+    return "\n".join(lines)
