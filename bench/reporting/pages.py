@@ -73,4 +73,4 @@ def stale_blocks(root: Path, pages: list[Path]) -> list[str]:
 
 def _load() -> None:
     """Import the modules whose generators the pages use."""
-    from bench.reporting import measured  # noqa: F401  (registers its blocks)
+    from bench.reporting import measured, panda_log  # noqa: F401  (register their blocks)
