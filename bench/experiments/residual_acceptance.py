@@ -1,5 +1,7 @@
 """The residual loop's benchmark of undeclared effects: recall, precision and
-confusion, per effect and noise level, over several data seeds and methods.
+confusion, per effect and noise level, over several data seeds and methods,
+on a development set and on an evaluation set held out from development
+(:mod:`bench.experiments.acceptance_cases`).
 
 For each case (an effect, a chosen pair of effects, or clean data), each
 noise level, each data seed and each method, the double pendulum's torques
@@ -12,14 +14,18 @@ scored (:mod:`bench.experiments.acceptance_scoring`):
 * **recall**: of the laws put in, the share found as the right law on the
   right joints with every parameter within 10 %;
 * **precision**: of the laws reported, the share that were put in (a
-  structural or other finding is not a law);
+  structural or other finding is not a law); **precision with parameters**:
+  the share that were put in and have every parameter right;
 * **confusion**: what each law put in was reported as.
 
-The page gives them per method and noise level over every case, per case,
-and the confusion per method; a JSON file beside it holds every run. Usage::
+The page gives them per method and noise level over every case, on the
+evaluation set beside the development set, then per case and the confusion
+per method on the evaluation set, the cases' values and seeds, and which of
+the loop's rules were chosen on which data; a JSON file beside it holds every
+run. Usage::
 
-    python -m bench study residual-acceptance [--noise 0 0.01 0.05 0.1] [--seeds 0 1 2] [--methods sysid sparse] \\
-        --steps 2000 [--out results/residual/acceptance.md]
+    python -m bench study residual-acceptance [--noise 0 0.01 0.05 0.1] [--methods sysid sparse] \\
+        [--sets development evaluation] --steps 2000 [--out results/residual/acceptance.md]
 """
 
 from __future__ import annotations
@@ -31,11 +37,15 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.core.arguments import noise_level, positive, positive_int, seed_list
+from bench.core.arguments import noise_level, positive, positive_int
 from bench.core.data import add_noise, generate
 from bench.core.undeclared import add_effects, parse_effects
 from bench.core.fileio import atomic_write, check_output, link, write_json
+from bench.experiments.acceptance_cases import (CASES, DEVELOPMENT, DEVELOPMENT_SEEDS, EVALUATION, EVALUATION_CASES,
+                                                EVALUATION_SEEDS, SETS, effects, seeds)
 from bench.experiments.acceptance_scoring import CONSISTENT, GAIN_WITHIN, WITHIN, expected, reported, score
+from bench.residual.reach import MIN_GAIN as REACH_GAIN
+from bench.residual.selection import AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T
 from bench.residual.loop import residual_loop
 from bench.residual.sensors import Sensor
 from bench.runner.isolation import run_jobs
@@ -44,59 +54,29 @@ from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import provenance
 from systems import SYSTEMS
 
-#: the undeclared effects, one case each, as ``bench data --effects`` takes them
-CASES = {
-    "viscous_friction": ["viscous_friction=0.8,0.5"],
-    "coulomb_friction": ["coulomb_friction=1.5,0.7"],
-    # on one joint: with armatures on both joints the double pendulum's SysId form is not identifiable
-    # from torques (six unknowns m1, m2, l1, l2, Ia1, Ia2 map to five coefficients of L)
-    "armature": ["armature=0.3,0"],
-    "spring": ["spring=2.0,1.0"],
-    "offset": ["offset=0.5,-0.3"],
-    "elbow_spring": ["coupled_spring=1-2:3.0"],
-    "elbow_damper": ["coupled_damper=1-2:0.6"],
-    "stribeck": ["stribeck_friction=1:1.0,2.0,0.5,0.3"],
-    "coulomb_viscous": ["viscous_friction=0.8,0.5", "coulomb_friction=1.5,0.7"],
-    # a low-pass filter's rounding of Coulomb friction, at a velocity well below the data's
-    "smooth_coulomb": ["smooth_coulomb=1:1.5,0.02,0;2:0.7,0.02,0"],
-    "offset_spring": ["offset_spring=2:2.0,0.3"],
-    "tip_payload": ["tip_payload=0.5"],
-    "gravity_tilt": ["gravity_tilt=0.05"],
-    # a torque sensor that reads 4 % low on joint 2
-    "torque_gain": ["torque_gain=1,0.96"],
-    # cogging, or a drive's ripple: six periods a revolution of joint 1
-    "periodic_torque": ["periodic_torque=1:0.3,6,0.5"],
-    # a gear whose Coulomb level grows with its load: 10 % of joint 1's torque
-    "load_friction": ["load_friction=0.1,0"],
-    # chosen pairs: a sensor's gain and offset on one joint; a gain beside friction; ripple beside a spring;
-    # a load-dependent Coulomb level beside a constant one
-    "gain_offset": ["torque_gain=1,1.05", "offset=0,0.2"],
-    "gain_viscous": ["torque_gain=1,0.96", "viscous_friction=0.8,0.5"],
-    "periodic_spring": ["periodic_torque=1:0.3,6,0.5", "spring=0,1.0"],
-    "load_coulomb": ["load_friction=0.1,0", "coulomb_friction=0.5,0"],
-    "clean": [],
-}
-
-
 def run_case(case: str, noise: float, method: str, n_train: int, n_test: int, budget: float | None,
-             steps: int | None = None, seed: int = 0) -> dict:
-    """One run: the loop on ``case`` at ``noise`` with ``method``, on the data of
-    ``seed`` (training samples from ``seed``, test samples from ``1000 + seed``,
-    the noise from their own streams of them), within ``budget`` seconds or,
-    with ``steps``, that work budget; scored against what was put in."""
+             steps: int | None = None, seed: int = 0, set: str = DEVELOPMENT) -> dict:
+    """One run: the loop on ``case`` of the set ``set`` at ``noise`` with ``method``,
+    on the data of ``seed`` (training samples from ``seed``, test samples from
+    ``1000 + seed``, the noise from their own streams of them; the effects as
+    :func:`~bench.experiments.acceptance_cases.effects` gives them), within
+    ``budget`` seconds or, with ``steps``, that work budget; scored against
+    what was put in."""
     system = SYSTEMS["double_pendulum"]()
-    effects = parse_effects(CASES[case], system.dof)
-    train = add_effects(generate(system, n_train, seed), effects, system)
-    test = clean_test = add_effects(generate(system, n_test, 1000 + seed), effects, system)
+    items = effects(set, case, seed)
+    put = parse_effects(items, system.dof)
+    train = add_effects(generate(system, n_train, seed), put, system)
+    test = clean_test = add_effects(generate(system, n_test, 1000 + seed), put, system)
     if noise:
         train, test = add_noise(train, "indirect", noise, seed), add_noise(clean_test, "indirect", noise, 1000 + seed)
     floor = float(np.mean((test.tau - clean_test.tau) ** 2))
     start = time.perf_counter()
     out = residual_loop(method, train, test, budget_s=budget, steps=steps, seed=seed, report=quiet)
-    want = expected(effects, system.dof, Sensor.exact(train).reference)
+    want = expected(put, system.dof, Sensor.exact(train).reference)
     found = reported(out.effects)
     return {
-        "case": case, "noise": noise, "method": method, "seed": seed, **score(want, found, reported(out.effects, "stderr")),
+        "set": set, "case": case, "effects": items, "noise": noise, "method": method, "seed": seed,
+        **score(want, found, reported(out.effects, "stderr")),
         "found": sorted(f"{n} j{'-'.join(map(str, j))}" for n, j in found),
         "findings": sorted(f"{e['kind']}: {e['name']} j{'-'.join(map(str, e['joints']))}" for e in out.effects
                            if (e["name"], tuple(e["joints"])) not in found),
@@ -112,13 +92,18 @@ IDENTIFIABLE = 100.0
 
 def worth(rows: list[dict]) -> None:
     """Give each run ``worth``: the chi-squared its effects are worth on its training
-    rows, ``rows * before_0 / floor``, where ``before_0`` is the test MSE its
-    method's declared model leaves on the same case and seed without noise (what
-    the effects leave once the model has absorbed what it can) and ``floor`` the
-    run's noise; ``None`` without a noise-free run, ``inf`` without noise."""
-    clean = {(r["case"], r["seed"], r["method"]): r["before"] for r in rows if r["noise"] == 0}
+    rows, ``rows * before_0 / floor``, where ``before_0`` is the least test MSE that
+    any method's declared model leaves on the same case, set and seed without noise
+    (what the effects leave once a model has absorbed what it can), so that every
+    method is judged on the same cases, and ``floor`` the run's noise; ``None``
+    without a noise-free run, ``inf`` without noise."""
+    clean: dict[tuple, float] = {}
     for r in rows:
-        before = clean.get((r["case"], r["seed"], r["method"]))
+        if r["noise"] == 0:
+            key = (r.get("set", DEVELOPMENT), r["case"], r["seed"])
+            clean[key] = min(clean.get(key, math.inf), r["before"])
+    for r in rows:
+        before = clean.get((r.get("set", DEVELOPMENT), r["case"], r["seed"]))
         r["worth"] = None if before is None else math.inf if not r["floor"] else r["rows"] * before / r["floor"]
 
 
@@ -142,30 +127,41 @@ def _recall(rows: list[dict], key: str = "right") -> str:
     return _percent(_sum(rows, key), _sum(rows, "put_in"))
 
 
-def _precision(rows: list[dict]) -> str:
-    return _percent(_sum(rows, "true_reported"), _sum(rows, "reported"))
+def _precision(rows: list[dict], key: str = "true_reported") -> str:
+    return _percent(_sum(rows, key), _sum(rows, "reported"))
 
 
-def summary(rows: list[dict], methods: list[str], noises: list[float]) -> str:
-    """Recall and precision per method and noise level, over every case and seed."""
-    lines = [f"| method | noise | recall | recall where the effects are worth χ² ≥ {IDENTIFIABLE:g} "
-             f"| recall, parameters within 10 % or {CONSISTENT:g} standard errors | precision "
-             f"| runs with a spurious law | runs |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+#: the summary's figures: heading, and the figure of a set's runs
+FIGURES = (
+    ("recall", _recall),
+    (f"recall where the effects are worth χ² ≥ {IDENTIFIABLE:g}",
+     lambda rows: _recall([r for r in rows if r.get("worth") is not None and r["worth"] >= IDENTIFIABLE])),
+    (f"recall, parameters within 10 % or {CONSISTENT:g} standard errors", lambda rows: _recall(rows, "consistent")),
+    ("precision", _precision),
+    ("precision with parameters right", lambda rows: _precision(rows, "right")),
+    ("runs with a spurious law", lambda rows: f"{sum(bool(r['spurious']) for r in rows)} of {len(rows)}"),
+)
+
+
+def summary(rows: list[dict], methods: list[str], noises: list[float], sets: list[str]) -> str:
+    """Each figure per method and noise level, over every case and seed, a row per set (the evaluation set first)."""
+    order = sorted(sets, key=lambda which: which != EVALUATION)
+    lines = ["| method | noise | set | " + " | ".join(name for name, _ in FIGURES) + " |",
+             "|---|---:|---|" + "---:|" * len(FIGURES)]
     for m in methods:
         for z in noises:
-            mine = [r for r in rows if r["method"] == m and r["noise"] == z]
-            seen = [r for r in mine if r.get("worth") is not None and r["worth"] >= IDENTIFIABLE]
-            lines.append(f"| {m} | {z:g} | {_recall(mine)} | {_recall(seen)} | {_recall(mine, 'consistent')} "
-                         f"| {_precision(mine)} "
-                         f"| {sum(bool(r['spurious']) for r in mine)} | {len(mine)} |")
+            for which in order:
+                mine = [r for r in rows if r["method"] == m and r["noise"] == z and r.get("set", DEVELOPMENT) == which]
+                if mine:
+                    lines.append(f"| {m} | {z:g} | {which} | " + " | ".join(figure(mine) for _, figure in FIGURES) + " |")
     return "\n".join(lines)
 
 
 def per_case(rows: list[dict], cases: list[str], methods: list[str], noises: list[float]) -> str:
     """Recall and precision per case, noise level and method, with the median worst parameter error."""
     lines = ["| effect | noise | method | χ² the effects are worth (median) | recall | precision "
-             "| median worst parameter error | test MSE after ÷ noise floor |",
-             "|---|---:|---|---:|---:|---:|---:|---:|"]
+             "| precision with parameters right | median worst parameter error | test MSE after ÷ noise floor |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|"]
     for c in cases:
         for z in noises:
             for m in methods:
@@ -176,7 +172,8 @@ def per_case(rows: list[dict], cases: list[str], methods: list[str], noises: lis
                 over = [r["after"] / r["floor"] for r in mine if r["floor"]]
                 chi2 = [r["worth"] for r in mine if r.get("worth") is not None]
                 chi2 = "—" if not chi2 or c == "clean" else f"{float(np.median(chi2)):.3g}"
-                lines.append(f"| {c} | {z:g} | {m} | {chi2} | {_recall(mine)} | {_precision(mine)} | {_error(worst)} "
+                lines.append(f"| {c} | {z:g} | {m} | {chi2} | {_recall(mine)} | {_precision(mine)} "
+                             f"| {_precision(mine, 'right')} | {_error(worst)} "
                              f"| {'—' if not over else f'{float(np.median(over)):.3g}'} |")
     return "\n".join(lines)
 
@@ -213,11 +210,33 @@ def run_payload(payload: dict, on_phase) -> dict:
 HELP = "the residual loop's benchmark of undeclared effects: recall, precision, confusion (results/residual/acceptance.md)"
 
 
+#: the loop's rules of acceptance, and the data each was chosen on: every one before the evaluation set existed
+RULES = (
+    (f"a candidate lowers the BIC by more than {MIN_BIC_DROP:g}",
+     "Kass and Raftery's scale of evidence, before any case was run"),
+    (f"its coefficient is at least {MIN_T:g} standard errors from zero", "the development set's cases"),
+    (f"it lowers the held-out residual by at least {MIN_HELDOUT_GAIN:.0%}",
+     "the development set's cases and the DFKI recordings"),
+    (f"on independent samples, by {MIN_HELDOUT_CHI2:g} rows' worth of the residual where that is less",
+     "the development set's Coulomb-plus-viscous case at 5 % noise, whose viscous part it otherwise missed"),
+    (f"an admissible candidate stands in for a better one with an impossible coefficient where it removes "
+     f"{AS_WELL:.0%} as much",
+     "the development set's cases"),
+    (f"an effect that claims beyond the data, or a law of the sensor or the drive, saves {REACH_GAIN:.0%} on a "
+     "held-out trajectory", "the measured recordings (the DFKI robot's, the KUKA LWR4+'s) and the development set"),
+    (f"on measured trajectories a round lowers the held-out error by {MIN_HELDOUT_GAIN:.0%}",
+     "the KUKA LWR4+'s default split, after seeing its test trajectory's error: a choice informed by a test set"),
+)
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--noise", type=noise_level, nargs="+", default=[0.0, 0.01, 0.05, 0.1],
                         help="noise levels, fractions of each joint's torque std (default 0 0.01 0.05 0.1)")
-    parser.add_argument("--seeds", type=seed_list, default=[0, 1, 2],
-                        help="data seeds, comma-separated or a range a-b (default 0,1,2)")
+    parser.add_argument("--sets", nargs="+", default=list(SETS), choices=list(SETS),
+                        help=f"the sets of cases: {DEVELOPMENT} (fixed values, data seeds "
+                             f"{', '.join(map(str, DEVELOPMENT_SEEDS))}; what tests and rules may use) and "
+                             f"{EVALUATION} (values drawn from each case's ranges, data seeds of their own; held out "
+                             f"from development) (default both)")
     parser.add_argument("--methods", nargs="+", default=["sysid", "sparse"], help="methods the loop fits (default sysid sparse)")
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), help="effect cases (default: all)")
     parser.add_argument("--n-train", type=positive_int, default=3000, help="training samples (default 3000)")
@@ -234,14 +253,28 @@ def add_arguments(parser) -> None:
                              "same name with .json")
 
 
+def cases_table(rows: list[dict], cases: list[str], sets: list[str]) -> str:
+    """Each case's effects in each set: the development set's values, the evaluation
+    set's ranges and the values drawn for each of its seeds."""
+    lines = ["| case | " + " | ".join(f"{which}" for which in sets) + " |", "|---|" + "---|" * len(sets)]
+    for c in cases:
+        cells = []
+        for which in sets:
+            drawn = {r["seed"]: r["effects"] for r in rows if r["case"] == c and r.get("set") == which}
+            values = "; ".join(f"seed {seed}: `{' '.join(e) or 'none'}`" for seed, e in sorted(drawn.items()))
+            cells.append(values if which == DEVELOPMENT else f"{EVALUATION_CASES[c].ranges}; {values}")
+        lines.append(f"| {c} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(args) -> int:
     check_output(args.out)
     if args.budget is None and args.steps is None:
         args.budget = 30.0
-    payloads = {f"{c} noise={z:g} seed={s} {m}": {"case": c, "noise": z, "method": m, "n_train": args.n_train,
-                                                  "n_test": args.n_test, "budget": args.budget, "steps": args.steps,
-                                                  "seed": s}
-                for c in args.cases for z in args.noise for s in args.seeds for m in args.methods}
+    payloads = {f"{which} {c} noise={z:g} seed={s} {m}": {
+        "set": which, "case": c, "noise": z, "method": m, "n_train": args.n_train, "n_test": args.n_test,
+        "budget": args.budget, "steps": args.steps, "seed": s}
+        for which in args.sets for c in args.cases for z in args.noise for s in seeds(which) for m in args.methods}
 
     def describe(r: dict) -> str:
         return (f"{r['right']}/{r['put_in']} right, {r['reported']} reported "
@@ -251,51 +284,73 @@ def main(args) -> int:
     rows = list(run_jobs("bench.experiments.residual_acceptance:run_payload", payloads, limit, args.workers, describe,
                          print_now).values())
     order = {c: i for i, c in enumerate(args.cases)}
-    rows.sort(key=lambda r: (order[r["case"]], r["noise"], r["seed"], args.methods.index(r["method"])))
+    rows.sort(key=lambda r: (args.sets.index(r["set"]), order[r["case"]], r["noise"], r["seed"],
+                             args.methods.index(r["method"])))
     worth(rows)
     prov = provenance()
     budget_words = (f"{args.budget:g} s for each loop, its method's fit included" if args.steps is None
                     else f"{args.steps} steps of its method's work for each loop's fit")
     runs = args.out.with_suffix(".json")
+    main_set = EVALUATION if EVALUATION in args.sets else args.sets[0]
+    shown = [r for r in rows if r["set"] == main_set]
     text = "\n".join([
         "# The residual loop on undeclared effects: recall, precision and confusion",
         "",
         f"Generated by `{args.invocation}` (commit {prov.get('commit', '?')[:7]}"
         f"{', dirty tree' if prov.get('dirty') else ''}); every run is in [{runs.name}]({runs.name}).",
         "",
-        f"The double pendulum, {args.n_train} training and {args.n_test} test samples per run, data seeds "
-        f"{', '.join(map(str, args.seeds))}; each case's effects as `bench data --effects` takes them (the cases in "
-        f"[bench/experiments/residual_acceptance.py]({link(__file__, args.out)})); noise on train and test torques "
-        f"as a fraction of each joint's torque standard deviation; {budget_words}.",
+        f"The double pendulum, {args.n_train} training and {args.n_test} test samples per run; noise on train and test "
+        f"torques as a fraction of each joint's torque standard deviation; {budget_words}. The cases are in two sets "
+        f"([bench/experiments/acceptance_cases.py]({link(Path(__file__).with_name('acceptance_cases.py'), args.out)})):",
+        "",
+        f"- the **{DEVELOPMENT} set**: each case's effects at fixed values, data seeds "
+        f"{', '.join(map(str, DEVELOPMENT_SEEDS))}. The tests and the loop's rules were made with these cases in view;",
+        f"- the **{EVALUATION} set**: the same cases, each effect's values drawn for each of the data seeds "
+        f"{', '.join(map(str, EVALUATION_SEEDS))} from the ranges the case states (the list below). No test reads it, "
+        "no rule was chosen on it, and it did not exist when the rules were chosen.",
+        "",
+        "The figures a reader should take are the evaluation set's; the development set's stand beside them so that "
+        "the gap shows.",
         "",
         f"**Recall** is the share of the laws put in that the loop reports as the right law on the right joints "
         f"with every parameter within {WITHIN:.0%} (a gain within {GAIN_WITHIN:.0%}; a periodic torque's N exactly); "
-        "**precision** the share of the laws it reports that were put in, on their joints; a finding (structural, "
-        "beyond the data, not identified) is not a law; a simpler law the one put in contains (Coulomb friction for "
-        "Coulomb plus viscous) counts as put in, and recall counts it as missed. How much the data say about a "
-        "case's effects is the chi-squared they are worth on the training rows: the training rows times the test "
-        "MSE the method's declared model leaves on the noise-free case, over the noise's mean square "
-        f"(`worth` in the script); the loop needs about 25 for one law, and below {IDENTIFIABLE:g} no method can be "
-        "expected to name it reliably. Where the data do not pin a parameter to 10 %, no method can be right by "
-        f"that rule: the column \"within {CONSISTENT:g} standard errors\" also counts a law found on its joints whose "
-        f"parameters are each within 10 % or within {CONSISTENT:g} of the standard errors the loop reports for them "
-        "(N still exact). How each is scored: "
-        "[bench/experiments/acceptance_scoring.py](" + link(Path(__file__).with_name("acceptance_scoring.py"), args.out) + ").",
+        "**precision** the share of the laws it reports that were put in, on their joints, whatever their parameters; "
+        "**precision with parameters right** the share that were put in and have every parameter right as recall "
+        "judges it. A finding (structural, beyond the data, not identified) is not a law; a simpler law the one put in "
+        "contains (Coulomb friction for Coulomb plus viscous) counts as put in for precision, and recall counts it as "
+        "missed. How much the data say about a case's effects is the chi-squared they are worth on the training rows: "
+        "the training rows times the least test MSE any method's declared model leaves on the noise-free case, over "
+        f"the noise's mean square (`worth` in the script), so that every method is judged on the same cases; the loop "
+        f"needs about 25 for one law, and below {IDENTIFIABLE:g} no method can be expected to name it reliably. "
+        "Where the data do not pin a parameter to 10 %, no method can be right by that rule: the column \"within "
+        f"{CONSISTENT:g} standard errors\" also counts a law found on its joints whose parameters are each within 10 % "
+        f"or within {CONSISTENT:g} of the standard errors the loop reports for them (N still exact). How each is "
+        "scored: [bench/experiments/acceptance_scoring.py](" + link(Path(__file__).with_name("acceptance_scoring.py"), args.out) + ").",
         "",
         "## Over every case",
         "",
-        summary(rows, args.methods, args.noise),
+        summary(rows, args.methods, args.noise, args.sets),
         "",
-        "## Per case",
+        f"## Per case, {main_set} set",
         "",
         "The noise floor is the test set's mean squared noise: at \"after ÷ floor\" ≈ 1 everything but the noise "
         "is explained.",
         "",
-        per_case(rows, args.cases, args.methods, args.noise),
+        per_case(shown, args.cases, args.methods, args.noise),
         "",
-        "## Confusion: what each law put in was reported as",
+        f"## Confusion: what each law put in was reported as, {main_set} set",
         "",
-        *[block for m in args.methods for block in (confusion(rows, args.cases, m), "")],
+        *[block for m in args.methods for block in (confusion(shown, args.cases, m), "")],
+        "## The cases and their seeds",
+        "",
+        cases_table(rows, args.cases, args.sets),
+        "",
+        "## The loop's rules and the data they were chosen on",
+        "",
+        "Each rule was chosen before the evaluation set existed, with these data in view:",
+        "",
+        *[f"- {rule}: {data}." for rule, data in RULES],
+        "",
     ])
     write_json(runs, rows)
     atomic_write(args.out, lambda f: f.write(text))

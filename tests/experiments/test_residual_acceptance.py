@@ -6,11 +6,12 @@ import pytest
 
 from bench.core.undeclared import parse_effects
 from bench.experiments.acceptance_scoring import expected, score
-from bench.experiments.residual_acceptance import CASES, run_case
+from bench.experiments.acceptance_cases import DEVELOPMENT, DEVELOPMENT_CASES, EVALUATION, effects
+from bench.experiments.residual_acceptance import run_case, worth
 
 
 def test_each_case_expects_its_effects_under_the_names_and_joints_the_loop_reports():
-    want = {case: expected(parse_effects(items, 2), 2) for case, items in CASES.items()}
+    want = {case: expected(parse_effects(items, 2), 2) for case, items in DEVELOPMENT_CASES.items()}
     assert want["armature"] == {("armature", (1,)): {"I": 0.3}}
     assert want["elbow_spring"] == {("coupled_spring", (1, 2)): {"k": 3.0}}
     assert want["stribeck"] == {("stribeck_friction", (1,)): {"F_c": 1.0, "F_s": 2.0, "v_s": 0.5, "b": 0.3}}
@@ -61,3 +62,35 @@ def test_a_run_is_scored_by_law_joints_and_parameters():
     wrong_n = score({("periodic_torque", (1,)): {"A": 0.3, "N": 6.0, "phi": 0.5}},
                     {("periodic_torque", (1,)): {"A": 0.3, "N": 5.0, "phi": 0.5}})
     assert wrong_n["right"] == wrong_n["consistent"] == 0 and wrong_n["true_reported"] == 1
+
+
+def test_the_evaluation_set_draws_each_case_from_its_ranges_and_no_test_reads_its_seeds():
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    # the draw, tried on seeds of the development set's, never the evaluation set's own
+    for case in DEVELOPMENT_CASES:
+        drawn = [effects(EVALUATION, case, seed) for seed in (0, 1)]
+        assert drawn[0] == effects(EVALUATION, case, 0)  # the same seed draws the same values
+        for items in drawn:
+            assert set(expected(parse_effects(items, 2), 2)) == set(expected(parse_effects(DEVELOPMENT_CASES[case], 2), 2))
+        assert case == "clean" or drawn[0] != drawn[1] != DEVELOPMENT_CASES[case]
+    assert effects(DEVELOPMENT, "spring", 5) == DEVELOPMENT_CASES["spring"]
+    # the evaluation seeds, read from the module's text, appear in no test
+    source = (root / "bench" / "experiments" / "acceptance_cases.py").read_text()
+    names = ["EVALUATION" + "_SEEDS", "EVALUATION" + "_CASES"]  # spelled so that this file does not hold them
+    held_out = re.search(rf"^{names[0]} = \((.*?)\)", source, re.M)[1].split(",")
+    assert len(held_out) == 3
+    for path in (root / "tests").rglob("*.py"):
+        text = path.read_text()
+        assert not any(name in text for name in names), path
+        assert not any(re.search(rf"\b{seed.strip()}\b", text) for seed in held_out), path
+
+
+def test_every_method_is_judged_on_the_same_cases():
+    rows = [{"set": "evaluation", "case": "spring", "seed": 5, "method": m, "noise": z, "before": b, "rows": 100,
+             "floor": f} for m, z, b, f in (("sysid", 0, 2.0, 0.0), ("sparse", 0, 0.5, 0.0),
+                                            ("sysid", 0.1, 3.0, 1.0), ("sparse", 0.1, 3.0, 1.0))]
+    worth(rows)
+    assert [r["worth"] for r in rows if r["noise"]] == [50.0, 50.0]  # the least of the methods' clean residuals
