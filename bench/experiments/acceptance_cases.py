@@ -133,11 +133,6 @@ EVALUATION_CASES = {
 CASES = tuple(DEVELOPMENT_CASES)
 
 
-def seeds(which: str) -> tuple[int, ...]:
-    """The data seeds of the set ``which``."""
-    return DEVELOPMENT_SEEDS if which == DEVELOPMENT else EVALUATION_SEEDS
-
-
 def effects(which: str, case: str, seed: int) -> list[str]:
     """The effects of ``case`` in the set ``which`` for data seed ``seed``: the
     development set's fixed values, or the evaluation set's draw for that seed

@@ -37,12 +37,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.core.arguments import noise_level, positive, positive_int
+from bench.core.arguments import noise_level, positive, positive_int, seed_list
 from bench.core.data import add_noise, generate
 from bench.core.undeclared import add_effects, parse_effects
 from bench.core.fileio import atomic_write, check_output, link, write_json
 from bench.experiments.acceptance_cases import (CASES, DEVELOPMENT, DEVELOPMENT_SEEDS, EVALUATION, EVALUATION_CASES,
-                                                EVALUATION_SEEDS, SETS, effects, seeds)
+                                                EVALUATION_SEEDS, SETS, effects)
 from bench.experiments.acceptance_scoring import CONSISTENT, GAIN_WITHIN, WITHIN, expected, reported, score
 from bench.residual.reach import MIN_GAIN as REACH_GAIN
 from bench.residual.selection import AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T
@@ -237,6 +237,11 @@ def add_arguments(parser) -> None:
                              f"{', '.join(map(str, DEVELOPMENT_SEEDS))}; what tests and rules may use) and "
                              f"{EVALUATION} (values drawn from each case's ranges, data seeds of their own; held out "
                              f"from development) (default both)")
+    parser.add_argument("--seeds", type=seed_list, default=list(DEVELOPMENT_SEEDS),
+                        help=f"the development set's data seeds, comma-separated or a range a-b (default "
+                             f"{','.join(map(str, DEVELOPMENT_SEEDS))})")
+    parser.add_argument("--n-evaluation-seeds", type=positive_int, default=len(EVALUATION_SEEDS),
+                        help=f"the first N of the evaluation set's {len(EVALUATION_SEEDS)} data seeds (default all)")
     parser.add_argument("--methods", nargs="+", default=["sysid", "sparse"], help="methods the loop fits (default sysid sparse)")
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), help="effect cases (default: all)")
     parser.add_argument("--n-train", type=positive_int, default=3000, help="training samples (default 3000)")
@@ -271,10 +276,11 @@ def main(args) -> int:
     check_output(args.out)
     if args.budget is None and args.steps is None:
         args.budget = 30.0
+    chosen = {DEVELOPMENT: args.seeds, EVALUATION: EVALUATION_SEEDS[:args.n_evaluation_seeds]}
     payloads = {f"{which} {c} noise={z:g} seed={s} {m}": {
         "set": which, "case": c, "noise": z, "method": m, "n_train": args.n_train, "n_test": args.n_test,
         "budget": args.budget, "steps": args.steps, "seed": s}
-        for which in args.sets for c in args.cases for z in args.noise for s in seeds(which) for m in args.methods}
+        for which in args.sets for c in args.cases for z in args.noise for s in chosen[which] for m in args.methods}
 
     def describe(r: dict) -> str:
         return (f"{r['right']}/{r['put_in']} right, {r['reported']} reported "
@@ -304,10 +310,11 @@ def main(args) -> int:
         f"([bench/experiments/acceptance_cases.py]({link(Path(__file__).with_name('acceptance_cases.py'), args.out)})):",
         "",
         f"- the **{DEVELOPMENT} set**: each case's effects at fixed values, data seeds "
-        f"{', '.join(map(str, DEVELOPMENT_SEEDS))}. The tests and the loop's rules were made with these cases in view;",
-        f"- the **{EVALUATION} set**: the same cases, each effect's values drawn for each of the data seeds "
-        f"{', '.join(map(str, EVALUATION_SEEDS))} from the ranges the case states (the list below). No test reads it, "
-        "no rule was chosen on it, and it did not exist when the rules were chosen.",
+        f"{', '.join(map(str, chosen[DEVELOPMENT]))} here. The tests and the loop's rules were made with these cases "
+        "in view;",
+        f"- the **{EVALUATION} set**: the same cases, each effect's values drawn for each data seed "
+        f"({', '.join(map(str, chosen[EVALUATION]))} here) from the ranges the case states (the list below). No test "
+        "reads it, no rule was chosen on it, and it did not exist when the rules were chosen.",
         "",
         "The figures a reader should take are the evaluation set's; the development set's stand beside them so that "
         "the gap shows.",
