@@ -101,7 +101,7 @@ def holds_out(result: dict) -> str:
     both are refitted without each held-out span; only the effects' coefficients
     for a kept fit, whose network saw every training row."""
     if result.get("heldout_holds_out"):
-        return result["heldout_holds_out"]
+        return result["heldout_holds_out"].split(":")[0]
     return "the effects only" if result["rounds"][0].get("cross_fit") else "the model and its effects"
 
 

@@ -248,7 +248,7 @@ class _Loop:
                         seconds=self.elapsed())]
         split = describe_validation(train)
         report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
-               f"held out ({split}) {held:.4g}")
+               f"held out ({split}; it holds out {strategy.holds_out()}) {held:.4g}")
         self.first, self.before, self.mass_before = first, before, mass_before
         self.feasible_before = strategy.feasibility(model, train)
         self.save(model, held, mass, rounds, {})
@@ -292,7 +292,7 @@ class _Loop:
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
             test_source=None if self.test is None else self.test.source, provenance=provenance(),
             feasibility=None if self.feasible_before is None else {"before": self.feasible_before, "after": feasible_after},
-            stopped=self.stopped,
+            stopped=self.stopped, heldout_holds_out=strategy.holds_out(),
         )
 
     def save(self, model: LoopModel, held: float, mass: float, rounds: list[Round], findings: dict) -> None:

@@ -58,7 +58,8 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         + (f", {result.loop_seconds:g} s of it the fit and the rounds" if result.loop_seconds is not None else "")
         + (f", {result.statistics_seconds:g} s the loop's statistics" if result.statistics_seconds is not None else "")
         + (f", {result.rollout_seconds:g} s the driven rollouts after the rounds" if result.rollout_seconds is not None else "")
-        + f". Held out: {result.validation}.",
+        + f". Held out: {result.validation}"
+        + (f"; what it holds out: {result.heldout_holds_out}" if result.heldout_holds_out else "") + ".",
         "",
     ]
     if result.stopped:

@@ -68,6 +68,8 @@ class ResidualResult:
     #: each data file's sha256 with the settings ``convert`` made it with
     inputs: dict | None = None
     stopped: str | None = None
+    #: what the held-out errors hold out (:meth:`bench.residual.strategies.Strategy.holds_out`)
+    heldout_holds_out: str | None = None
     loop_seconds: float | None = None
     rollout_seconds: float | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)

@@ -125,6 +125,11 @@ class Strategy(abc.ABC):
         (:func:`bench.core.feasible.feasibility_of`), for a model of rigid bodies; else ``None``."""
         return None
 
+    def holds_out(self) -> str:
+        """What the loop's held-out error holds out (the JSON's ``heldout_holds_out``):
+        what is refitted without each held-out span or trajectory."""
+        return "the model and its effects"
+
     def _effects_beside(self, model: LoopModel, train: Dataset, effects: list[Term]):
         """The effects' columns and their least-squares coefficients on what the rigid model leaves."""
         Phi = TermLibrary(effects).design(train, "indirect")
@@ -281,6 +286,11 @@ class KeptFit(Strategy):
     def refit(self, model, train, effects):
         _, (coef, stderr, _) = self._effects_beside(model, train, effects)
         return LoopModel(model.rigid, effects, coef, stderr)
+
+    def holds_out(self):
+        if not self.cross_fitted:  # a given fit was made on other data
+            return "the model and its effects (the fit was made on other data)"
+        return "the effects only: the fit saw every training row"
 
     def check(self, candidate, model, train):
         if not self.cross_fitted:  # a given fit has no cross-fits

@@ -39,6 +39,7 @@ def test_a_round_the_budget_ends_in_is_undone_and_the_rounds_before_it_are_kept(
     train, test = data_with(FRICTION, n=1000)
     whole = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
     assert whole.stopped is None and whole.effects and len(whole.rounds) >= 2
+    assert whole.heldout_holds_out == "the model and its effects"
     _budget_ends_at(monkeypatch, "refitting jointly", 1)
     saved, lines = [], []
     out = residual_loop("sysid", train, test, steps=SYSID, report=lines.append, checkpoint=saved.append)

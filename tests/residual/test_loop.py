@@ -302,6 +302,8 @@ def test_a_neural_model_keeps_its_fit_and_only_the_effects_are_fitted():
     first, last = out.models
     assert last.rigid is first.rigid  # the MLP was not fitted again
     assert out.effects and out.mse_after["test"] < out.mse_before["test"]
+    # its held-out figure holds out only the effects' coefficients, and says so
+    assert out.heldout_holds_out == "the effects only: the fit saw every training row"
 
 
 def test_the_result_is_typed_and_its_json_is_plain():
