@@ -8,7 +8,8 @@ Wherever a page under results/ (or the README) holds::
     <!-- /generated -->
 
 the lines between the marks are what the generator registered as ``NAME``
-(:func:`block`) makes from the records under results/; ``python -m bench
+(:func:`block`) makes from the records under results/ (the generators live in
+one module per page, which :mod:`bench.reporting.index` imports); ``python -m bench
 index`` rewrites them (:func:`rewrite`) beside the pages' marked figures, and
 :func:`stale_blocks` lists those that disagree with their records. A page's
 prose carries single numbers as marked figures instead
@@ -43,7 +44,6 @@ def block(name: str):
 
 def render(root: Path, name: str, made: dict[str, str] | None = None) -> str:
     """Block ``name``'s text made from the records under ``root`` (once per name in ``made``)."""
-    _load()
     if name not in GENERATORS:
         raise UserError(f"no generator makes the page block {name!r}; there are: {', '.join(sorted(GENERATORS))}")
     made = {} if made is None else made
@@ -70,7 +70,3 @@ def stale_blocks(root: Path, pages: list[Path]) -> list[str]:
                 out.append(f"{page}: block {m['name']} differs from what its records give (python -m bench index)")
     return out
 
-
-def _load() -> None:
-    """Import the modules whose generators the pages use."""
-    from bench.reporting import measured, panda_log  # noqa: F401  (register their blocks)
