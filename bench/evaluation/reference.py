@@ -1,4 +1,5 @@
-"""The standard model of a measured arm, as a reference in every run's record.
+"""The references every run on measured data is read against, in its record:
+the standard model of a measured arm, and the constant of any measured system.
 
 Each learner on a measured arm reads against what the field would identify
 from the same samples: SysId's standard configuration, the rigid-body base
@@ -9,9 +10,15 @@ split) and scores it as a run is scored: torque MSE on the training and test
 data, the driven rollouts of the test recordings
 (:mod:`bench.evaluation.driven`), and whether its mass matrix is positive
 definite, without which it has no forward dynamics.
+
+:func:`constant_reference` is the least a learner must beat: each joint's
+mean training torque, predicted everywhere. A learner whose test MSE is above
+it has learned nothing about the test data that a constant does not know.
 """
 
 from __future__ import annotations
+
+import numpy as np
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
@@ -47,3 +54,11 @@ def standard_reference(system: System, train: Dataset, test: Dataset | None) -> 
     if test is not None and test.time is not None:
         out["rollout"] = driven_entry(model, test)
     return out
+
+
+def constant_reference(train: Dataset, test: Dataset | None) -> dict:
+    """The record's ``details.constant_model``: the training-mean torque of each
+    joint (``tau``), and its train and test torque MSE."""
+    tau = train.tau.mean(axis=0)
+    return {"tau": [float(x) for x in tau], "train_mse": mse(np.broadcast_to(tau, train.tau.shape), train.tau),
+            "test_mse": None if test is None else mse(np.broadcast_to(tau, test.tau.shape), test.tau)}

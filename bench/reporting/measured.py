@@ -46,6 +46,10 @@ def _standard(records: list[Record]) -> dict | None:
     return next((r.details["standard_model"] for r in records if (r.details or {}).get("standard_model")), None)
 
 
+def _constant(records: list[Record]) -> dict | None:
+    return next((r.details["constant_model"] for r in records if (r.details or {}).get("constant_model")), None)
+
+
 def _driven(entries: list[dict], length: str) -> str:
     windows = [e["windows"][length] for e in entries if e and length in e.get("windows", {})]
     return describe_driven(*pooled(windows), _fmt) if windows else "—"
@@ -55,8 +59,9 @@ _STATUS_WORDS = {"timeout": "timed out", "failed": "failed", "unavailable": "una
                  "not_applicable": "not applicable"}
 
 
-def _learner_cells(records: list[Record], standard: dict | None) -> list[str]:
-    """A learner's cells on one split: All-n test MSE, ratio to the standard model, driven rollouts."""
+def _learner_cells(records: list[Record], standard: dict | None, constant: dict | None = None) -> list[str]:
+    """A learner's cells on one split: All-n test MSE (‡ where above the constant's), ratio to the
+    standard model, driven rollouts."""
     if not records:
         return ["not run", ""] + [""] * len(WINDOWS)
     ok = [r for r in records if r.status == "ok"]
@@ -66,7 +71,8 @@ def _learner_cells(records: list[Record], standard: dict | None) -> list[str]:
     mean = group_stats(records)["all"]["test"][0]
     runs = "" if len(ok) == len(records) else f" ({len(ok)} of {len(records)} runs)"
     ratio = _ratio(mean / standard['test_mse']) if standard and standard.get("test_mse") else "—"
-    return [f"{_fmt(mean)}{runs}", ratio] + [_driven([r.rollout for r in ok], w) for w in WINDOWS]
+    above = " ‡" if constant and constant.get("test_mse") is not None and mean > constant["test_mse"] else ""
+    return [f"{_fmt(mean)}{above}{runs}", ratio] + [_driven([r.rollout for r in ok], w) for w in WINDOWS]
 
 
 @block("measured.kuka.learners")
@@ -83,11 +89,20 @@ def learners(root: Path) -> str:
         row += (" — | | " + " | ".join([""] * len(WINDOWS)) + " |") if s is None else \
             (f" {_fmt(s['test_mse'])} | 1 | " + " | ".join(_driven([s.get("rollout")], w) for w in WINDOWS) + " |")
     lines.append(row)
+    constant = [_constant(records) for records in matrices]
+    if any(constant):
+        row = "| constant (each joint's training-mean torque) |"
+        for c, s in zip(constant, standard):
+            row += (" — | |" if not c else f" {_fmt(c['test_mse'])} | "
+                    + (_ratio(c['test_mse'] / s['test_mse']) if s else "—") + " |") + " |" * len(WINDOWS)
+        lines.append(row)
     for method, label in LEARNERS:
         cells = []
-        for records, s in zip(matrices, standard):
-            cells += _learner_cells([r for r in records if r.method == method], s)
+        for records, s, c in zip(matrices, standard, constant):
+            cells += _learner_cells([r for r in records if r.method == method], s, c)
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    if any(constant):
+        lines += ["", "‡: above the constant's test MSE."]
     return "\n".join(lines)
 
 

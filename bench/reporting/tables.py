@@ -132,6 +132,21 @@ def _standard(records: list[Record]) -> dict | None:
     return next((r.details["standard_model"] for r in records if (r.details or {}).get("standard_model")), None)
 
 
+def _constant(records: list[Record]) -> dict | None:
+    """The constant model's figures (``details.constant_model``) the records carry, if any."""
+    return next((r.details["constant_model"] for r in records if (r.details or {}).get("constant_model")), None)
+
+
+def constant_line(records: list[Record]) -> str:
+    """The constant model as a line above a measured system's table; empty where the records carry none."""
+    c = _constant(records)
+    if not c:
+        return ""
+    return (f"Constant model (each joint's training-mean torque, predicted everywhere): train MSE {fmt(c['train_mse'])}, "
+            f"test MSE {fmt(c['test_mse']) if c.get('test_mse') is not None else '—'}. A learner whose "
+            f"All n test MSE (the mean over its seeds) is above it is marked ‡.")
+
+
 def standard_line(records: list[Record]) -> str:
     """The standard model as the line a measured arm's table reads against; empty where the records carry none."""
     s = _standard(records)
@@ -299,6 +314,7 @@ def build_table(records: list[Record]) -> str:
             samples = {m: members[m].get(group, {}).get(split) for m in methods}
             best, compared = ties_with_best({m: v for m, v in samples.items() if v is not None})
             tested_row = group == TESTED_GROUP
+            constant = (_constant(records) or {}).get("test_mse") if split == "test" and tested_row else None
             cells = []
             for m in methods:
                 v = means[m]
@@ -310,6 +326,8 @@ def build_table(records: list[Record]) -> str:
                     text = f"**{text}**"
                 elif tested_row and m in compared and not compared[m].tested:
                     text += " †"
+                if constant is not None and v[0] > constant:
+                    text += " ‡"
                 cells.append(text)
             label = group_label(group, n_seeds) if split == "train" else ""
             lines.append(f"| {label} | {split} | " + " | ".join(cells) + " |")
@@ -399,9 +417,9 @@ def build_tables(records: list[Record], plots: dict[tuple, str] | None = None, p
         reference = _reference(system)
         if reference:
             parts += ["", f"Reference: {reference}"]
-        standard = standard_line(recs)
-        if standard:
-            parts += ["", standard]
+        for line in (standard_line(recs), constant_line(recs)):
+            if line:
+                parts += ["", line]
         parts += ["", build_table(recs), ""]
         if (system, experiment, noise) in plots:
             parts += [f"![convergence: {system}, {experiment}]({plots[(system, experiment, noise)]})", ""]

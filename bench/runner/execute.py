@@ -24,7 +24,7 @@ from bench.core.timeouts import Timeout
 from bench.core.system import System
 from bench.evaluation.driven import driven_entry
 from bench.evaluation.forces import forces_entry
-from bench.evaluation.reference import applies as has_standard_model, standard_reference
+from bench.evaluation.reference import applies as has_standard_model, constant_reference, standard_reference
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
 from bench.runner.plugins import import_plugins
 from bench.runner.provenance import device_entry
@@ -209,6 +209,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             clock = time.perf_counter()  # measured recordings: driven by their torques
             fields["rollout"] = stages.run("rollout", driven_entry, method, test)
             timing["rollout_s"] = time.perf_counter() - clock
+        if not system.simulated and spec.experiment == "indirect":
+            fields["details"]["constant_model"] = constant_reference(train, test)
         if has_standard_model(system) and spec.experiment == "indirect":
             clock = time.perf_counter()
             fields["details"]["standard_model"] = stages.run("standard model", standard_reference, system, train, test)

@@ -6,7 +6,7 @@ import pytest
 
 from bench.evaluation.scores import MEASURED
 from bench.reporting.groups import group_stats
-from bench.reporting.tables import (build_table, build_tables, expand_variants, standard_line,
+from bench.reporting.tables import (build_table, build_tables, expand_variants, constant_line, standard_line,
                                      write_tables)
 from bench.runner.records import Record, record_path, write_record
 
@@ -165,7 +165,8 @@ def test_measured_tables_give_driven_rollouts_the_standard_model_and_each_learne
             windows = {"0.25": {"windows": 4, "diverged": q_rmse.count(None), "median_q_rmse": None, "q_rmse": q_rmse}}
             r = rec("m", seed, 1.0, 1.0 + seed, experiment="indirect", system="kuka_lwr4")
             out.append(r.replace(rollout={"kind": "driven", "status": "ok", "q_rmse": None, "windows": windows},
-                                 details={"standard_model": standard, "exact_not_judged": MEASURED}))
+                                 details={"standard_model": standard, "exact_not_judged": MEASURED,
+                                          "constant_model": {"tau": [0.1], "train_mse": 0.3, "test_mse": 1.5}}))
         return out
 
     # the median over all 12 windows, the diverged one infinitely far
@@ -176,6 +177,10 @@ def test_measured_tables_give_driven_rollouts_the_standard_model_and_each_learne
     survivors = build_table(runs([[0.01, None, None, None], [None, None, 0.02, None], [0.03, 0.01, None, 0.01]]))
     assert "| Driven 0.25 s | q RMSE | diverged (7/12 windows) |" in survivors.splitlines()
     assert "| All 3 / standard | test | 4× |" in lines  # the mean test MSE 2.0 over the standard model's 0.5
+    # above the constant's 1.5: marked, and the constant's line says what the mark means
+    assert "|  | test | **2.00e+00 (± 8.16e-01)** ‡ |" in lines
+    assert "Constant model (each joint's training-mean torque, predicted everywhere): train MSE 3.00e-01, test MSE " \
+           "1.50e+00" in constant_line(records)
     assert "| Exact | | not applicable: measured data have no true L |" in lines
     assert not any(line.startswith("| Rollout") for line in lines)
     text = standard_line(records)
