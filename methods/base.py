@@ -117,6 +117,12 @@ class Method(FittedModel):
     uses_device: ClassVar[bool] = False
     #: whether several seeds' fits can train as one stacked model (:mod:`methods.stacking`)
     stackable: ClassVar[bool] = False
+    #: whether the fitted model's torque falls back to zero far from the training states by itself
+    #: (a Gaussian process with a zero mean); a hybrid gates a residual that does not (:mod:`methods.hybrid`)
+    falls_back_to_zero: ClassVar[bool] = False
+    #: whether the fitted model has a Lagrangian (a model of the torque alone, a GP, has none: its
+    #: :meth:`predict_lagrangian` is ``nan``)
+    has_lagrangian: ClassVar[bool] = True
 
     def __init__(self, **hyperparameters):
         self.config = build_config(self.Config, dict(hyperparameters), self.name)
@@ -168,6 +174,13 @@ class Method(FittedModel):
         given); ``None`` when it can."""
         if experiment not in cls.experiments:
             return f"{cls.name} does not apply to the {experiment} experiment"
+        return None
+
+    @classmethod
+    def refused_on(cls, system: System) -> str | None:
+        """Why a command line refuses the method on ``system`` outright (exit 2,
+        nothing run) rather than recording a run that does not apply; ``None``
+        by default. A hybrid whose prior the system cannot give is refused."""
         return None
 
     @classmethod
@@ -366,6 +379,11 @@ class Method(FittedModel):
         :class:`~bench.core.models.NoVariant` with its outcome: out of budget,
         not applicable, failed; a plain string is a failure); every seed stays counted.
         """
+        return {}
+
+    def references(self) -> dict[str, FittedModel]:
+        """Fitted models the method is made of that a run scores beside it on the
+        test data (a hybrid's prior); none by default."""
         return {}
 
     def record_details(self) -> dict:

@@ -186,9 +186,15 @@ def check_names(args, systems=(), methods=(), experiments=()) -> None:
             try:
                 registry.entry(name)
             except RegistryError as exc:
-                raise UsageError(f"{exc}{_plugin_hint(name, args.plugin)}") from None
+                unknown = str(exc).startswith("unknown ") and "unknown prior" not in str(exc) or "unknown residual" in str(exc)
+                raise UsageError(f"{exc}{_plugin_hint(name, args.plugin) if unknown else ''}") from None
     for name in experiments:
         check_experiment(name)
+    for method in methods:
+        refused = [METHODS[method].refused_on(SYSTEMS[s]()) for s in systems]
+        reason = next((r for r in refused if r), None)
+        if reason and all(refused):  # on none of the systems given
+            raise UsageError(reason)
 
 
 def _plugin_hint(name: str, plugins: list[str]) -> str:

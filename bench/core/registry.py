@@ -55,11 +55,20 @@ class Entry(Generic[T]):
 
 
 class Registry(Generic[T]):
-    """A name -> object map filled by a decorator, with tags and subsets."""
+    """A name -> object map filled by a decorator, with tags and subsets.
+
+    A registry may compose entries on demand: ``composer(name)`` returns an
+    object for a name no decorator registered (a method made of two others,
+    ``standard+gp``), or ``None``; the object is registered under that name
+    the first time it is asked for, and raises :class:`RegistryError` itself
+    for a composed name that is wrong.
+    """
 
     def __init__(self, kind: str):
         self.kind = kind
         self._entries: dict[str, Entry[T]] = {}
+        self.composer: Callable[[str], T | None] | None = None
+        self._composed: dict[str, Entry[T]] = {}  # not listed by names(): made on demand
 
     def add(self, name: str, *tags: str) -> Callable[[T], T]:
         """Register the decorated object under ``name`` with ``tags``.
@@ -87,13 +96,23 @@ class Registry(Generic[T]):
         return decorator
 
     def remove(self, name: str) -> None:
-        """Drop an entry (used by tests that register toys)."""
+        """Drop an entry (used by tests that register toys), and what was composed of it."""
         self._entries.pop(name, None)
+        self._composed = {k: v for k, v in self._composed.items() if k != name and name not in k.split("+")}
 
     def entry(self, name: str) -> Entry[T]:
         try:
-            return self._entries[name]
+            return self._entries.get(name) or self._composed[name]
         except KeyError:
+            composed = self.composer(name) if self.composer is not None else None
+            if composed is not None:
+                tags = frozenset(getattr(composed, "tags", ()))
+                try:
+                    setattr(composed, "name", name)
+                except (AttributeError, TypeError):
+                    pass
+                self._composed[name] = Entry(name, composed, tags)
+                return self._composed[name]
             close = difflib.get_close_matches(name, list(self._entries), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""
             known = ", ".join(sorted(self._entries)) or "none"
@@ -103,7 +122,15 @@ class Registry(Generic[T]):
         return self.entry(name).obj
 
     def __contains__(self, name: object) -> bool:
-        return name in self._entries
+        if name in self._entries or name in self._composed:
+            return True
+        if not isinstance(name, str) or self.composer is None:
+            return False
+        try:
+            self.entry(name)
+        except RegistryError:
+            return False
+        return True
 
     def __iter__(self) -> Iterator[str]:
         return iter(sorted(self._entries))

@@ -62,3 +62,22 @@ def constant_reference(train: Dataset, test: Dataset | None) -> dict:
     tau = train.tau.mean(axis=0)
     return {"tau": [float(x) for x in tau], "train_mse": mse(np.broadcast_to(tau, train.tau.shape), train.tau),
             "test_mse": None if test is None else mse(np.broadcast_to(tau, test.tau.shape), test.tau)}
+
+
+def against(model, reference, train: Dataset, test: Dataset | None) -> dict:
+    """``model`` beside a model it is made of (a hybrid's prior), as
+    ``details.references``: the reference's train and test torque MSE, the
+    model's test MSE over it (``ratio``), and on the test data how often and by
+    how much the model is worse than it: the share of test samples whose
+    squared torque error (summed over the joints) is above the reference's
+    (``worse_share``), and those samples' excess as a share of the
+    reference's test MSE (``worse_by``)."""
+    out = {"train_mse": mse(reference.predict_torque(train), train.tau), "test_mse": None}
+    if test is not None and len(test):
+        mine = np.sum((model.predict_torque(test) - test.tau) ** 2, axis=1)
+        theirs = np.sum((reference.predict_torque(test) - test.tau) ** 2, axis=1)
+        worse = mine > theirs
+        out.update(test_mse=float(np.mean(theirs)) / test.dof, ratio=float(np.mean(mine) / max(np.mean(theirs), 1e-300)),
+                   worse_share=float(np.mean(worse)),
+                   worse_by=float(np.sum(mine[worse] - theirs[worse]) / max(np.sum(theirs), 1e-300)))
+    return out

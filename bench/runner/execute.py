@@ -24,7 +24,7 @@ from bench.core.timeouts import Timeout
 from bench.core.system import System
 from bench.evaluation.driven import driven_entry
 from bench.evaluation.forces import forces_entry
-from bench.evaluation.reference import applies as has_standard_model, constant_reference, standard_reference
+from bench.evaluation.reference import against, applies as has_standard_model, constant_reference, standard_reference
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
 from bench.runner.plugins import import_plugins
 from bench.runner.provenance import device_entry
@@ -211,6 +211,10 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             timing["rollout_s"] = time.perf_counter() - clock
         if not system.simulated and spec.experiment == "indirect":
             fields["details"]["constant_model"] = constant_reference(train, test)
+        references = {name: stages.run(f"reference {name}", against, method, ref, train, test)
+                      for name, ref in method.references().items()}
+        if references:
+            fields["details"]["references"] = references
         if has_standard_model(system) and spec.experiment == "indirect":
             clock = time.perf_counter()
             fields["details"]["standard_model"] = stages.run("standard model", standard_reference, system, train, test)

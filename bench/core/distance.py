@@ -1,0 +1,33 @@
+"""How far a state lies from the states a model was fitted on.
+
+A state is ``(q, qd)``, each coordinate divided by its standard deviation over
+the training states, so that a radian and a radian per second weigh by how
+much each varies in the data; the distance is the Euclidean one to the
+nearest training state in that space (scipy's k-d tree). The same distance
+gates a hybrid's residual (:mod:`methods.hybrid`) and bins a test set's
+samples by how far they are from what the model saw
+(:mod:`bench.evaluation.distance_bins`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from bench.core.data import Dataset
+
+
+class TrainingStates:
+    """The training states, scaled, with a k-d tree for the nearest of them."""
+
+    def __init__(self, train: Dataset):
+        states = np.hstack([train.q, train.qd])
+        self.scale = np.maximum(states.std(axis=0), 1e-12)
+        self.tree = cKDTree(states / self.scale)
+
+    def distance(self, data: Dataset) -> np.ndarray:
+        """Each state of ``data``'s distance to the nearest training state, shape ``(n,)``."""
+        if not len(data):
+            return np.zeros(0)
+        distance, _ = self.tree.query(np.hstack([data.q, data.qd]) / self.scale)
+        return np.asarray(distance, dtype=np.float64)

@@ -1,0 +1,190 @@
+"""A sparse Gaussian process of the torque: one GP per joint, on GPyTorch.
+
+The model the field puts beside a rigid body (Nguyen-Tuong & Peters, ICRA
+2010): ``tau_j = f_j(x)``, each ``f_j`` a Gaussian process with a zero mean
+and a scaled RBF kernel with one length per input (ARD), learned from
+inducing points (Hensman, Matthews & Ghahramani, 2015: the stochastic
+variational GP, GPyTorch's ``VariationalStrategy`` with a Cholesky
+variational distribution and learned inducing locations). One step is one
+Adam step on the ELBO of a mini-batch, so a fit is bounded by work or time
+like every method and its steps replay. It trains in float64 on the CPU:
+GPyTorch's variational strategy has no implementation on the ``meta`` device
+the suite's device check runs methods on, so a run's ``--device`` leaves it on
+the CPU, as it does SysId and MGGP.
+
+Its inputs (``inputs``) are, for joint ``j``'s GP, by default (``joint``) every
+joint's ``q`` (what the rigid body's configuration-dependent errors depend
+on) and joint ``j``'s own ``qd`` and the sign of its ``qd`` (as the torque's
+filter saw it, :meth:`~bench.core.data.Dataset.velocity_sign`: a friction
+law's jump); ``all`` gives every GP every joint's ``q``, ``qd`` and signs, and
+``all_qdd`` the accelerations too. Each input is scaled by its training
+standard deviation; the targets are scaled by theirs and not centred. On the
+KUKA LWR4+ beside the feasible prior, per-joint inputs generalised to the
+other trajectory better than shared ones (``results/measured/``).
+
+With a zero mean the torque falls back to zero far from every training state
+(:attr:`falls_back_to_zero`): as a hybrid's residual (``standard+gp``,
+:mod:`methods.hybrid`) it leaves the prior alone where the data end. A GP of
+the torque has no Lagrangian; without ``qdd`` among its inputs its torque does
+not depend on the accelerations, so beside a prior the hybrid's mass matrix is
+the prior's.
+"""
+
+from __future__ import annotations
+
+import math
+import typing
+from dataclasses import dataclass
+from typing import Annotated, ClassVar
+
+import numpy as np
+import torch
+
+from bench.core.data import Dataset
+from methods.base import METHODS, Method
+from methods.config import POSITIVE, MethodConfig, Range
+from methods.progress import Progress
+from methods.torch_method import Feed, fused_adam_ok
+
+#: samples predicted at once
+CHUNK = 4096
+
+
+@dataclass(frozen=True)
+class GPConfig(MethodConfig):
+    """Attributes: ``inducing`` points per joint, ``batch_size`` samples a step,
+    Adam's ``lr``, and the ``inputs`` (see the module docstring)."""
+
+    inducing: Annotated[int, Range(1)] = 256
+    batch_size: Annotated[int, Range(1)] = 512
+    lr: Annotated[float, POSITIVE] = 0.01
+    inputs: typing.Literal["joint", "all", "all_qdd"] = "joint"
+
+
+def _gpytorch():
+    import gpytorch  # a dependency of the project; imported when a GP is built
+
+    return gpytorch
+
+
+def features(data: Dataset, inputs: str) -> np.ndarray:
+    """The inputs of each joint's GP for ``data``, shape ``(dof, n, d)`` (see the module docstring)."""
+    sign = data.velocity_sign()
+    if inputs == "joint":
+        return np.stack([np.hstack([data.q, data.qd[:, [j]], sign[:, [j]]]) for j in range(data.dof)])
+    shared = np.hstack([data.q, data.qd] + ([data.qdd] if inputs == "all_qdd" else []) + [sign])
+    return np.broadcast_to(shared, (data.dof, *shared.shape))
+
+
+def _model(inducing: torch.Tensor):
+    """The stochastic variational GP: one independent GP per joint over the inducing points ``(dof, m, d)``."""
+    gpytorch = _gpytorch()
+    shape = inducing.shape[:1]
+
+    class SVGP(gpytorch.models.ApproximateGP):
+        def __init__(self):
+            variational = gpytorch.variational.CholeskyVariationalDistribution(inducing.size(-2), batch_shape=shape)
+            super().__init__(gpytorch.variational.VariationalStrategy(self, inducing, variational,
+                                                                      learn_inducing_locations=True))
+            self.mean_module = gpytorch.means.ZeroMean(batch_shape=shape)
+            self.covar_module = gpytorch.kernels.ScaleKernel(
+                gpytorch.kernels.RBFKernel(ard_num_dims=inducing.size(-1), batch_shape=shape), batch_shape=shape)
+
+        def forward(self, x):
+            return gpytorch.distributions.MultivariateNormal(self.mean_module(x), self.covar_module(x))
+
+    return SVGP()
+
+
+@METHODS.add("gp", "probabilistic", "residual")
+class GaussianProcess(Method):
+    """A sparse GP per joint of the torque (see the module docstring)."""
+
+    Config = GPConfig
+    experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+    smoke = {"max_steps": 5, "inducing": 16, "batch_size": 64, "eval_samples": 128}
+    falls_back_to_zero: ClassVar[bool] = True
+    has_lagrangian: ClassVar[bool] = False
+
+    @classmethod
+    def unavailable_reason(cls) -> str | None:
+        try:
+            _gpytorch()
+        except ImportError as exc:
+            return f"gpytorch is not installed ({exc})"
+        return None
+
+    @classmethod
+    def not_applicable_reason(cls, experiment, system=None):
+        if experiment != "indirect":
+            return "a GP of the torque learns torques: the direct experiment has no torques, and the GP no L"
+        return None
+
+    def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
+        gpytorch = _gpytorch()
+        x = features(train, self.config.inputs)
+        self.x_scale = np.maximum(x.std(axis=1, keepdims=True), 1e-12)
+        self.y_scale = np.maximum(np.sqrt(np.mean(train.tau ** 2, axis=0)), 1e-12)
+        device = torch.device(self.train_device)
+        X = torch.as_tensor(x / self.x_scale, dtype=torch.float64, device=device)
+        Y = torch.as_tensor((train.tau / self.y_scale).T.copy(), dtype=torch.float64, device=device)
+        rng = np.random.default_rng(self.seed)
+        m = min(self.config.inducing, len(train))
+        pick = torch.as_tensor(np.sort(rng.choice(len(train), m, replace=False)), device=device)
+        self.model = _model(X[:, pick].clone()).to(device, torch.float64)
+        self.likelihood = gpytorch.likelihoods.GaussianLikelihood(batch_shape=X.shape[:1]).to(device, torch.float64)
+        elbo = gpytorch.mlls.VariationalELBO(self.likelihood, self.model, num_data=len(train))
+        parameters = list(self.model.parameters()) + list(self.likelihood.parameters())
+        optimizer = torch.optim.Adam(parameters, lr=self.config.lr,
+                                     **({"fused": True} if fused_adam_ok(torch.float64, device) else {}))
+        feed = Feed.start(len(train), min(self.config.batch_size, len(train)), self.seed)
+        self.model.train(), self.likelihood.train()
+        with gpytorch.settings.cholesky_max_tries(6):
+            while progress.step():
+                idx = feed.next().to(device)
+                optimizer.zero_grad(set_to_none=True)
+                loss = -elbo(self.model(X[:, idx]), Y[:, idx]).sum()
+                loss.backward()
+                optimizer.step()
+
+    def _post_fit(self, train, experiment, seconds_left):
+        self.model.to("cpu"), self.likelihood.to("cpu")
+
+    def _get_state(self):
+        return ({k: v.detach().clone() for k, v in self.model.state_dict().items()},
+                {k: v.detach().clone() for k, v in self.likelihood.state_dict().items()})
+
+    def _set_state(self, state) -> None:
+        self.model.load_state_dict(state[0])
+        self.likelihood.load_state_dict(state[1])
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        """The GP's mean torque (on the CPU, in float64)."""
+        gpytorch = _gpytorch()
+        model = self.model
+        device = next(model.parameters()).device
+        if not len(data):
+            return np.zeros((0, data.dof))
+        x = torch.as_tensor(features(data, self.config.inputs) / self.x_scale, dtype=torch.float64, device=device)
+        model.eval()
+        try:
+            with torch.no_grad(), gpytorch.settings.cholesky_max_tries(6):
+                out = torch.cat([model(chunk).mean for chunk in x.split(CHUNK, dim=1)], dim=1)
+        finally:
+            model.train()
+        return out.T.cpu().numpy() * self.y_scale
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        """A GP of the torque has no Lagrangian: ``nan``."""
+        return np.full(len(data), math.nan)
+
+    def not_a_lagrangian(self) -> str | None:
+        if "qdd" in self.config.inputs:
+            return "the GP's torque takes qdd as an input: it is not affine in the accelerations"
+        return None
+
+    def record_details(self) -> dict:
+        """What the GP learned with: its inducing points per joint and its inputs."""
+        model = getattr(self, "model", None)
+        inducing = None if model is None else int(model.variational_strategy.inducing_points.shape[-2])
+        return {"inducing": inducing, "inputs": self.config.inputs}

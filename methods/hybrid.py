@@ -1,0 +1,193 @@
+"""Hybrid learners: an identified rigid body (the prior) plus a learned residual
+of the torque, named ``PRIOR+RESIDUAL`` wherever a method name goes
+(``standard+gp``, ``feasible+delan``).
+
+How the field learns a real arm (Nguyen-Tuong & Peters, ICRA 2010; Reuss et al.
+2022): the rigid body the data identify, and a learner for what it lacks.
+
+* **The prior** is SysId identified on the training data in one of its
+  configurations (:data:`PRIORS`): ``standard`` (rigid-body base parameters
+  plus Coulomb and viscous friction per joint, by least squares) or
+  ``feasible`` (the physically feasible rigid body). It needs an arm's linear
+  form (a URDF).
+* **The residual** is any registered method that fits torques (the indirect
+  experiment), a user's plugin included, fitted to ``tau - tau_prior`` on the
+  same training data within the same budget: one composition for every pair
+  (:class:`Hybrid`, made for a name by :func:`compose`). The hybrid's
+  hyperparameters are the residual's, and its steps are the residual's.
+* **Never worse than its prior where the data end.** A residual learner
+  that falls back to zero far from its training states by itself (a Gaussian
+  process with a zero mean, :attr:`~methods.base.Method.falls_back_to_zero`)
+  is added as it is. Any other is multiplied by a gate,
+  ``exp(-d^2 / (2 gate_length^2))``, with ``d`` the state's distance to the
+  nearest training state (:class:`bench.core.distance.TrainingStates`: ``(q, qd)``
+  in training standard deviations): 1 on the training states, towards 0 away
+  from them, so that there the hybrid predicts its prior. The gate depends on
+  the state only, so the torque stays affine in ``qdd``: the hybrid's mass
+  matrix is the prior's plus the gated residual's (DeLaN's is positive
+  definite by construction, the feasible prior's too), and its forward
+  dynamics exist for driven rollouts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Annotated, ClassVar
+
+import numpy as np
+
+from bench.core.budget import Budget
+from bench.core.data import Dataset
+from bench.core.distance import TrainingStates
+from bench.core.registry import RegistryError
+from bench.core.system import System
+from methods.base import METHODS, Method
+from methods.config import POSITIVE
+from methods.progress import Progress
+
+#: the priors a hybrid may name: SysId's configurations
+PRIORS = {"standard": "standard", "feasible": "default"}
+#: the method that identifies the prior
+PRIOR_METHOD = "sysid"
+#: how a hybrid is named, for ``bench list`` and errors
+NAMING = (f"a hybrid is named PRIOR+RESIDUAL: PRIOR one of {', '.join(PRIORS)} (SysId's {PRIORS['standard']} "
+          f"configuration, or the feasible rigid body), RESIDUAL any method that fits torques, e.g. standard+gp, "
+          f"feasible+delan")
+
+
+class Hybrid(Method):
+    """A prior plus a residual learner (see the module docstring); one class is
+    made per name by :func:`compose`, which sets :attr:`prior_name` and
+    :attr:`residual_name` and the hyperparameters (the residual's, and
+    ``gate_length``)."""
+
+    prior_name: ClassVar[str] = ""
+    residual_name: ClassVar[str] = ""
+    experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+
+    def __init__(self, **hyperparameters):
+        super().__init__(**hyperparameters)
+        own = {k: v for k, v in hyperparameters.items() if k != "gate_length"}
+        self.residual: Method = METHODS[self.residual_name](**own)
+        self.prior: Method | None = None
+        self.gate: TrainingStates | None = None
+
+    # -- class-level facts ---------------------------------------------------
+    @classmethod
+    def unavailable_reason(cls) -> str | None:
+        return METHODS.entry(PRIOR_METHOD).unavailable_reason() or METHODS.entry(cls.residual_name).unavailable_reason()
+
+    @classmethod
+    def not_applicable_reason(cls, experiment: str, system: System | None = None) -> str | None:
+        if experiment != "indirect":
+            return f"{cls.name} learns the residual of the torque of its prior: the {experiment} experiment has no torques"
+        if system is not None and system.linear_form() is None:
+            return prior_unavailable(cls.prior_name, system)
+        return METHODS[cls.residual_name].not_applicable_reason("indirect", system)
+
+    @classmethod
+    def refused_on(cls, system: System) -> str | None:
+        return None if system.linear_form() is not None else f"{cls.name}: {prior_unavailable(cls.prior_name, system)}"
+
+    def use_device(self, device: str) -> "Method":
+        self.residual.use_device(device)
+        self.train_device = self.residual.train_device
+        return self
+
+    def trained_on(self) -> str:
+        return self.residual.trained_on()
+
+    def stacking_unavailable_reason(self) -> str | None:
+        return f"{self.name} fits its prior, then its residual, one seed at a time"
+
+    # -- the fit ---------------------------------------------------------------
+    def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
+        prior = METHODS[PRIOR_METHOD](**METHODS[PRIOR_METHOD].configuration(PRIORS[self.prior_name]))
+        self.prior = prior.fit(train, "indirect", self.seed, Budget(steps=1), system=self.system)
+        self._residual_data = train.replace(tau=train.tau - self.prior.predict_torque(train))
+        self.gate = None if self.residual.falls_back_to_zero else TrainingStates(train)
+        # the residual starts as a fit of its own would (its seed, its one-time work), on the hybrid's clock
+        self.residual.begin_fit(self._residual_data, "indirect", self.seed, self.budget, system=self.system)
+        self.residual._fit(self._residual_data, "indirect", progress)
+
+    def _post_fit(self, train: Dataset, experiment: str, seconds_left: float) -> None:
+        self.residual._post_fit(self._residual_data, "indirect", seconds_left)
+
+    def _get_state(self):
+        return self.residual._get_state()
+
+    def _set_state(self, state) -> None:
+        self.residual._set_state(state)
+
+    # -- predictions -------------------------------------------------------------
+    def weight(self, data: Dataset) -> np.ndarray:
+        """The residual's weight at each state of ``data``: the gate, or 1 where the residual needs none."""
+        if self.gate is None:
+            return np.ones(len(data))
+        d = self.gate.distance(data)
+        return np.exp(-0.5 * (d / self.config.gate_length) ** 2)
+
+    def residual_torque(self, data: Dataset) -> np.ndarray:
+        """What the hybrid adds to its prior's torque, weighted."""
+        return self.weight(data)[:, None] * self.residual.predict_torque(data)
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        return self.prior.predict_torque(data) + self.residual_torque(data)
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        """The prior's L plus the weighted residual's (for a residual that has one)."""
+        return self.prior.predict_lagrangian(data) + self.weight(data) * self.residual.predict_lagrangian(data)
+
+    def not_a_lagrangian(self) -> str | None:
+        return self.residual.not_a_lagrangian()
+
+    def references(self) -> dict:
+        return {"prior": self.prior}
+
+    def record_details(self) -> dict:
+        return {"prior": f"{PRIOR_METHOD} ({PRIORS[self.prior_name]} configuration)",
+                "gated": self.gate is not None, "residual": self.residual.record_details()}
+
+
+def prior_unavailable(prior: str, system: System) -> str:
+    """Why the prior ``prior`` cannot be identified on ``system``."""
+    return (f"the prior {prior} is SysId identified on an arm's linear form (from its URDF), and {system.name} has "
+            f"none")
+
+
+def compose(name: str) -> type | None:
+    """The hybrid named ``name`` (``PRIOR+RESIDUAL``), or ``None`` for a name that
+    is no hybrid; a hybrid name that is wrong raises :class:`RegistryError` in one
+    line: an unknown prior, an unknown residual, or one that fits no torques."""
+    prior, plus, residual = name.partition("+")
+    if not plus:
+        return None
+    if prior not in PRIORS:
+        if prior in METHODS:  # a variant of a method's fit (syrenets+pruned) is no hybrid
+            return None
+        raise RegistryError(f"unknown prior {prior!r} in {name!r}: {NAMING}")
+    try:
+        entry = METHODS.entry(residual)
+    except RegistryError as exc:
+        raise RegistryError(f"{name}: unknown residual learner: {exc}") from None
+    if "+" in residual:
+        raise RegistryError(f"{name}: the residual of a hybrid cannot be a hybrid")
+    reason = entry.obj.not_applicable_reason("indirect")
+    if reason:
+        raise RegistryError(f"{name}: {residual} cannot learn a residual torque: {reason}")
+    base = entry.obj
+    config = dataclasses.make_dataclass(
+        f"{base.Config.__name__}Hybrid", [("gate_length", Annotated[float, POSITIVE], 1.0)], bases=(base.Config,),
+        frozen=True)
+    config.__doc__ = (f"{base.name}'s hyperparameters, and ``gate_length``: the scale of the gate that takes a residual "
+                      "that does not fall back to zero by itself to zero away from the training states, in training "
+                      "standard deviations")
+    return type(f"Hybrid_{prior}_{residual}", (Hybrid,), {
+        "prior_name": prior, "residual_name": residual, "Config": config, "smoke": dict(base.smoke),
+        "uses_device": base.uses_device, "has_lagrangian": base.has_lagrangian,
+        "configurations": dict(base.configurations), "tags": frozenset({"hybrid"}),
+        "__doc__": f"{prior} prior plus a {residual} residual (see methods.hybrid)",
+    })
+
+
+METHODS.composer = compose

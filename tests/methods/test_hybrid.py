@@ -1,0 +1,84 @@
+"""Hybrid learners, PRIOR+RESIDUAL: one composition for every pair, each a method
+like any other (the contract), learning what the prior lacks, falling back to
+the prior where the data end, and refused in one line where a name is wrong."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bench.core.data import generate, mse
+from bench.core.undeclared import add_effects
+from methods import METHODS
+from systems import get_system
+from tests.commandline import cli
+from tests.contract import check_method
+
+#: what the standard model of the Panda lacks: an offset and a spring on each joint
+EFFECTS = {"offset": (0.5, -0.3, 0.4, -0.2, 0.3, -0.4, 0.2), "spring": (2.0, 1.0, 2.0, 1.0, 2.0, 1.0, 1.0)}
+SMALL_GP = {"inducing": 32, "batch_size": 256, "lr": 0.05}
+SMALL_MLP = {"hidden": 32, "layers": 2, "batch_size": 64}
+
+
+@pytest.fixture(scope="module")
+def panda():
+    system = get_system("panda")
+    return system, add_effects(generate(system, 600, 0), EFFECTS), add_effects(generate(system, 200, 1000), EFFECTS)
+
+
+@pytest.mark.parametrize("name", ["standard+gp", "feasible+mlp", "feasible+delan"])
+def test_a_hybrid_keeps_the_method_contract(name, panda):
+    _, train, test = panda
+    check_method(METHODS[name], train.subset(slice(0, 256)), test.subset(slice(0, 64)), "indirect")
+
+
+def test_a_gp_on_the_standard_model_learns_what_the_rigid_body_lacks_and_is_scored_against_its_prior(panda):
+    system, train, test = panda
+    hybrid = METHODS["standard+gp"](**SMALL_GP).fit(train, "indirect", seed=0, steps=150, system=system)
+    prior = mse(hybrid.prior.predict_torque(test), test.tau)
+    assert mse(hybrid.predict_torque(test), test.tau) < 0.5 * prior
+    assert hybrid.references() == {"prior": hybrid.prior} and hybrid.record_details()["gated"] is False
+
+
+@pytest.mark.parametrize("name, hyperparameters", [("standard+gp", SMALL_GP), ("standard+mlp", SMALL_MLP)])
+def test_far_from_every_training_state_a_hybrid_predicts_its_prior(name, hyperparameters, panda):
+    system, train, test = panda
+    hybrid = METHODS[name](**hyperparameters).fit(train, "indirect", seed=0, steps=50, system=system)
+    far = test.replace(q=test.q + 8 * train.q.std(axis=0), qd=test.qd + 8 * train.qd.std(axis=0))
+    near = test
+    assert np.abs(hybrid.residual_torque(near)).max() > 1e-2  # it learned something where the data are
+    np.testing.assert_allclose(hybrid.predict_torque(far), hybrid.prior.predict_torque(far), rtol=0, atol=1e-3)
+    # the GP by its zero mean; the MLP, whose own torque does not vanish there, by the gate
+    assert hybrid.record_details()["gated"] is (name == "standard+mlp")
+    if name == "standard+mlp":
+        assert np.abs(hybrid.residual.predict_torque(far)).max() > 1e-2 and hybrid.weight(far).max() < 1e-6
+
+
+def test_hybrid_names_are_refused_in_one_line_and_nothing_is_written(tmp_path):
+    out = tmp_path / "run.json"
+    for method, words in (("foo+gp", "unknown prior 'foo' in 'foo+gp'"),
+                          ("standard+operon", "operon cannot learn a residual torque"),
+                          ("standard+nothing", "unknown residual learner"),
+                          ("standard+gp", "the prior standard is SysId identified on an arm's linear form")):
+        r = cli("fit", "--system", "double_pendulum", "--experiment", "indirect", "--method", method, "--steps", "1",
+                "--json", out)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1 and words in r.stderr, (method, r.stderr)
+        assert not out.exists()
+    r = cli("list")
+    assert "a hybrid is named PRIOR+RESIDUAL" in r.stdout
+
+
+def test_a_matrix_runs_a_hybrid_by_its_name_and_records_its_prior(tmp_path):
+    r = cli("run", "--systems", "panda", "--methods", "standard+gp", "--experiments", "indirect", "--seeds", "0",
+            "--steps", "5", "--set", "standard+gp.inducing=16", "--n-train", "200", "--n-test", "50", "--no-rollout",
+            "--out", tmp_path / "m")
+    assert r.returncode == 0, r.stdout + r.stderr
+    (path,) = (tmp_path / "m" / "records").glob("*.json")
+    record = json.loads(path.read_text())
+    assert record["method"] == "standard+gp" and record["status"] == "ok"
+    prior = record["details"]["references"]["prior"]
+    assert {"train_mse", "test_mse", "ratio", "worse_share", "worse_by"} <= set(prior)
+    again = cli("rerun", path)
+    assert again.returncode == 0 and "the same up to" in again.stdout, again.stdout + again.stderr
