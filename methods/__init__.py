@@ -14,7 +14,8 @@ from methods.config import FRACTION, POSITIVE, MethodConfig, Range
 from methods.progress import Progress
 from methods.torch_method import TorchConfig, TorchLagrangianMethod
 
-from methods import delan, gp, mggp, mlp, operon, pysr_adapter, sparse, syrenets, sysid  # noqa: E402,F401  (registers)
+from methods import (delan, gp, mggp, mlp, operon, pysr_adapter, sparse, sparse_torque, syrenets,  # noqa: E402,F401
+                     sysid)  # (each registers its method)
 from methods import hybrid  # noqa: E402,F401  (composes PRIOR+RESIDUAL names)
 
 __all__ = [

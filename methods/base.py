@@ -381,6 +381,11 @@ class Method(FittedModel):
         """
         return {}
 
+    def size(self) -> dict:
+        """How much the fitted model learned, in its own terms (parameters, terms,
+        inducing points); empty by default."""
+        return {}
+
     def references(self) -> dict[str, FittedModel]:
         """Fitted models the method is made of that a run scores beside it on the
         test data (a hybrid's prior); none by default."""

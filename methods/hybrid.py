@@ -146,7 +146,10 @@ class Hybrid(Method):
 
     def record_details(self) -> dict:
         return {"prior": f"{PRIOR_METHOD} ({PRIORS[self.prior_name]} configuration)",
-                "gated": self.gate is not None, "residual": self.residual.record_details()}
+                "gated": self.gate is not None, "residual": self.residual.record_details(), "size": self.residual.size()}
+
+    def size(self) -> dict:
+        return self.residual.size()
 
 
 def prior_unavailable(prior: str, system: System) -> str:

@@ -215,6 +215,10 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
         if getattr(self, "model", None) is not None:  # a method may fit without a network (SysId's linear form)
             self.model.to("cpu", torch.float64)
 
+    def size(self) -> dict:
+        model = getattr(self, "model", None)
+        return {} if model is None else {"parameters": sum(p.numel() for p in model.parameters())}
+
     def _get_state(self):
         return {k: v.detach().clone() for k, v in self.model.state_dict().items()}
 

@@ -19,6 +19,11 @@ MATRICES = (("measured/kuka_60s", "train A, test B"), ("measured/kuka_swapped_60
 #: the learners, in the page's order, and their names there
 LEARNERS = (("sysid", "SysId (feasible, rigid body only)"), ("delan", "DeLaN"), ("syrenets", "SyReNets"),
             ("mlp", "MLP"), ("mggp", "MGGP"), ("sparse", "sparse regression"))
+#: the hybrids (an identified rigid body plus a learned residual), in the page's order, and their names there
+HYBRIDS = (("standard+gp", "standard model + GP"), ("feasible+gp", "feasible rigid body + GP"),
+           ("standard+mlp", "standard model + MLP"), ("feasible+delan", "feasible rigid body + DeLaN"),
+           ("standard+sparse_torque", "standard model + sparse torque terms"),
+           ("feasible+sparse_torque", "feasible rigid body + sparse torque terms"))
 #: the driven rollouts' window lengths the page shows
 WINDOWS = ("0.25", "1")
 #: the loops' files (``LOOPS/{stem}_{split}.json``) and their names on the page
@@ -96,13 +101,79 @@ def learners(root: Path) -> str:
             row += (" — | |" if not c else f" {_fmt(c['test_mse'])} | "
                     + (_ratio(c['test_mse'] / s['test_mse']) if s else "—") + " |") + " |" * len(WINDOWS)
         lines.append(row)
-    for method, label in LEARNERS:
+    for method, label in LEARNERS + HYBRIDS:
+        if not any(r.method == method for records in matrices for r in records):
+            continue
         cells = []
         for records, s, c in zip(matrices, standard, constant):
             cells += _learner_cells([r for r in records if r.method == method], s, c)
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     if any(constant):
         lines += ["", "‡: above the constant's test MSE."]
+    return "\n".join(lines)
+
+
+@block("measured.kuka.hybrids")
+def hybrids(root: Path) -> str:
+    """Each hybrid beside its prior on each split: its All-n test MSE over the
+    standard model's, its worst seed's, over its prior's, how many seeds ended
+    worse than their prior, on what share of the test samples (the median over
+    seeds), and the share of its 0.25 s driven windows that stayed finite."""
+    lines = ["| hybrid | split | All n / standard | worst seed / standard | All n / its prior | seeds worse than "
+             "their prior | test samples worse than the prior (median over seeds) | driven 0.25 s windows finite |",
+             "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for method, label in HYBRIDS:
+        for (folder, _), split in zip(MATRICES, SPLIT_NAMES):
+            records = [r for r in _records(root, folder) if r.method == method and r.status == "ok"]
+            s = _standard(_records(root, folder))
+            if not records or not s:
+                continue
+            tests = [r.test_mse for r in records]
+            priors = [r.details["references"]["prior"] for r in records]
+            windows = [x for r in records for x in (r.rollout or {}).get("windows", {}).get(WINDOWS[0], {}).get("q_rmse", [])]
+            finite = f"{sum(x is not None for x in windows) / len(windows):.0%}" if windows else "—"
+            lines.append(f"| {label} | {split} | {_ratio(sum(tests) / len(tests) / s['test_mse'])} "
+                         f"| {_ratio(max(tests) / s['test_mse'])} "
+                         f"| {_ratio(sum(tests) / sum(p['test_mse'] for p in priors))} "
+                         f"| {sum(p['ratio'] > 1 for p in priors)} of {len(priors)} "
+                         f"| {sorted(p['worse_share'] for p in priors)[len(priors) // 2]:.0%} | {finite} |")
+    return "\n".join(lines)
+
+
+def _size(records: list[Record]) -> str:
+    """What a hybrid's residual learned, as its records say (the first that says)."""
+    size = next(((r.details or {}).get("size") for r in records if (r.details or {}).get("size")), None)
+    if size:
+        return ", ".join(f"{v:,} {k}" for k, v in size.items())
+    own = next(((r.details or {}).get("residual") for r in records if (r.details or {}).get("residual")), None)
+    return ", ".join(f"{k} {v}" for k, v in own.items() if v is not None) if own else "—"
+
+
+@block("measured.kuka.residuals")
+def residuals(root: Path) -> str:
+    """Symbolic against neural on what the rigid body lacks: the loop's laws from
+    SysId beside each hybrid, on each split: test MSE, its ratio to the standard
+    model, the driven rollouts and the size of what was learned."""
+    lines = ["| what learns the residual | split | test MSE | / standard | " + " | ".join(f"driven {w} s" for w in WINDOWS)
+             + " | what it learned |", "|---|---|---:|---:|" + "---|" * len(WINDOWS) + "---|"]
+    for (folder, _), split in zip(MATRICES, SPLIT_NAMES):
+        records = _records(root, folder)
+        s = _standard(records)
+        loop = _loop(root, "sysid", split)
+        if loop is not None and s:
+            laws = [e for e in loop["effects"] if e["kind"] not in FINDINGS]
+            parameters = sum(len([p for p in e["parameters"].values() if p["value"] or p.get("stderr")]) for e in laws)
+            lines.append(f"| the residual loop from SysId: named laws | {split} | {loop['mse_after']['test']:.3g} "
+                         f"| {_ratio(loop['mse_after']['test'] / s['test_mse'])} | "
+                         + " | ".join(_driven([loop["rollout"]["after"]], w) for w in WINDOWS)
+                         + f" | {len(laws)} laws, {parameters} parameters |")
+        for method, label in HYBRIDS:
+            mine = [r for r in records if r.method == method and r.status == "ok"]
+            if not mine or not s:
+                continue
+            mean = sum(r.test_mse for r in mine) / len(mine)
+            lines.append(f"| {label} (All {len(mine)}) | {split} | {mean:.3g} | {_ratio(mean / s['test_mse'])} | "
+                         + " | ".join(_driven([r.rollout for r in mine], w) for w in WINDOWS) + f" | {_size(mine)} |")
     return "\n".join(lines)
 
 

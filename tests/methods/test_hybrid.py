@@ -82,3 +82,12 @@ def test_a_matrix_runs_a_hybrid_by_its_name_and_records_its_prior(tmp_path):
     assert {"train_mse", "test_mse", "ratio", "worse_share", "worse_by"} <= set(prior)
     again = cli("rerun", path)
     assert again.returncode == 0 and "the same up to" in again.stdout, again.stdout + again.stderr
+
+
+def test_the_fitted_gps_mean_is_gpytorchs(panda):
+    system, train, test = panda
+    gp = METHODS["gp"](**SMALL_GP).fit(train, "indirect", seed=0, steps=20, system=system)
+    fast = gp.predict_torque(test)
+    weights, gp._weights = gp._weights, None  # through GPyTorch's variational strategy instead
+    np.testing.assert_allclose(fast, gp.predict_torque(test), rtol=1e-9, atol=1e-9 * np.abs(fast).max())
+    gp._weights = weights
