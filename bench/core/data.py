@@ -171,6 +171,18 @@ class Dataset:
         """The recordings' labels in order of first appearance; ``[]`` for independent samples."""
         return _in_order(self.recording)
 
+    def in_time_order(self) -> list[np.ndarray]:
+        """Per recording (in :meth:`recordings`' order), the indices of its
+        samples in time order (in stored order where the data carry no time);
+        ``[]`` for independent samples."""
+        out = []
+        for name in self.recordings():
+            index = np.flatnonzero(self.recording == name)
+            if self.time is not None:
+                index = index[np.argsort(self.time[index], kind="stable")]
+            out.append(index)
+        return out
+
     def trajectory_labels(self) -> np.ndarray | None:
         """``(n,)``: the trajectory of each sample, its recording's label where
         every recording is a trajectory of its own; ``None`` for independent samples."""

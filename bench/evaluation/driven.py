@@ -62,9 +62,7 @@ def windows(data: Dataset, length_s: float) -> list[np.ndarray]:
     if data.time is None or data.recording is None:
         raise ValueError(f"{data.source}: driven rollouts need each sample's recording and time")
     out = []
-    for name in data.recordings():
-        index = np.flatnonzero(data.recording == name)
-        index = index[np.argsort(data.time[index], kind="stable")]
+    for index in data.in_time_order():
         if len(index) < 2:
             continue
         step = float(np.median(np.diff(data.time[index])))

@@ -106,9 +106,7 @@ def shifted(data: Dataset, delta: float) -> Dataset:
         return data
     q, qd, qdd = data.q.copy(), data.qd.copy(), data.qdd.copy()
     sign = None if data.sign_qd is None else data.sign_qd.astype(np.float64).copy()
-    for name in data.recordings():
-        index = np.flatnonzero(data.recording == name)
-        index = index[np.argsort(data.time[index], kind="stable")]
+    for index in data.in_time_order():
         t = data.time[index]
         for array in (q, qd, qdd) + ((sign,) if sign is not None else ()):
             source = array[index].copy()
@@ -120,9 +118,7 @@ def shifted(data: Dataset, delta: float) -> Dataset:
 def time_derivative(data: Dataset, values: np.ndarray) -> np.ndarray:
     """``d values / dt`` along each recording (``np.gradient`` over its time stamps)."""
     out = np.zeros_like(values)
-    for name in data.recordings():
-        index = np.flatnonzero(data.recording == name)
-        index = index[np.argsort(data.time[index], kind="stable")]
+    for index in data.in_time_order():
         if len(index) >= 2:
             out[index] = np.gradient(values[index], data.time[index], axis=0)
     return out

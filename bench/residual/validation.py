@@ -41,10 +41,7 @@ def folds(data: Dataset) -> list[np.ndarray]:
         return [labels == name for name in names]
     if names:  # one trajectory: spans of it in time, aligned across its recordings
         block = np.zeros(len(data), dtype=int)
-        for name in data.recordings():
-            index = np.flatnonzero(data.recording == name)
-            if data.time is not None:
-                index = index[np.argsort(data.time[index], kind="stable")]
+        for index in data.in_time_order():
             block[index] = np.arange(len(index)) * BLOCKS // max(len(index), 1)
         return [block == k for k in range(min(BLOCKS, len(data)))]
     block = np.arange(len(data)) * BLOCKS // max(len(data), 1)

@@ -91,3 +91,16 @@ def test_the_fitted_gps_mean_is_gpytorchs(panda):
     weights, gp._weights = gp._weights, None  # through GPyTorch's variational strategy instead
     np.testing.assert_allclose(fast, gp.predict_torque(test), rtol=1e-9, atol=1e-9 * np.abs(fast).max())
     gp._weights = weights
+
+
+def test_the_gps_elbo_counts_the_independent_samples_of_a_recording(panda):
+    system, train, _ = panda
+    gp = METHODS["gp"](**SMALL_GP).fit(train, "indirect", seed=0, steps=2, system=system)
+    assert gp.record_details()["effective_samples"] == [float(len(train))] * train.dof  # generated: independent
+    recorded = train.replace(recording=np.array(["a"] * len(train)), time=np.arange(len(train)) * 0.01)
+    smooth = np.sin(np.linspace(0, 4 * np.pi, len(train)))[:, None] * np.ones(train.dof)
+    gp = METHODS["gp"](**SMALL_GP).fit(recorded.replace(tau=smooth), "indirect", seed=0, steps=2, system=system)
+    assert max(gp.record_details()["effective_samples"]) < 0.1 * len(train)
+    every = METHODS["gp"](**SMALL_GP, samples="all").fit(recorded.replace(tau=smooth), "indirect", seed=0, steps=2,
+                                                          system=system)
+    assert every.record_details()["effective_samples"] == [float(len(train))] * train.dof
