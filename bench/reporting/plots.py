@@ -176,6 +176,8 @@ def line_plot(series: dict[str, list[tuple[float, float]]], path: Path, *, xlabe
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=110)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    if len(series) > len(colours):  # no two lines in one colour
+        colours = [plt.get_cmap("tab20")(k) for k in range(20)]
     xs = set()
     for i, (label, points) in enumerate(sorted(series.items())):
         colour = colours[i % len(colours)]
@@ -187,8 +189,11 @@ def line_plot(series: dict[str, list[tuple[float, float]]], path: Path, *, xlabe
             xs.add(markers[label][0])
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ticks = sorted(xs)
-    ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+    ticks = []
+    for t in sorted(xs):  # a tick too close to the one before it would print over it
+        if not ticks or t > ticks[-1] * 1.06:
+            ticks.append(t)
+    ax.set_xticks(ticks, [f"{t:.3g}" for t in ticks])
     ax.xaxis.set_minor_locator(plt.NullLocator())
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
