@@ -410,6 +410,11 @@ class MGGP(ExpressionMethod):
             self._model_for = self.best
         return self._model
 
+    def size(self) -> dict:
+        """The best individual's genes (terms of L) and its expression's nodes."""
+        best = getattr(self, "best", None)
+        return {} if best is None else {"genes": len(best.genes), "nodes": int(best.size)}
+
     def record_details(self):
         return {"generations": getattr(self, "generations_done", None), "genes": len(self.best.genes),
                 "nodes": self.best.size}

@@ -23,7 +23,8 @@ LEARNERS = (("sysid", "SysId (feasible, rigid body only)"), ("delan", "DeLaN"), 
 HYBRIDS = (("standard+gp", "standard model + GP"), ("feasible+gp", "feasible rigid body + GP"),
            ("standard+mlp", "standard model + MLP"), ("feasible+delan", "feasible rigid body + DeLaN"),
            ("standard+sparse_torque", "standard model + sparse torque terms"),
-           ("feasible+sparse_torque", "feasible rigid body + sparse torque terms"))
+           ("feasible+sparse_torque", "feasible rigid body + sparse torque terms"),
+           ("feasible+mggp", "feasible rigid body + MGGP"))
 #: the driven rollouts' window lengths the page shows
 WINDOWS = ("0.25", "1")
 #: the loops' files (``LOOPS/{stem}_{split}.json``) and their names on the page
