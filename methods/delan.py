@@ -293,6 +293,9 @@ class DeLaN(TorchLagrangianMethod):
             return super().loss(prediction, target, experiment)
         return ((prediction - target) ** 2).sum(1).mean()
 
+    #: its batch_loss is loss() of the Euler-Lagrange torques, compiled: the stacked loop's loss
+    stacked_loss_is_batch_loss = True
+
     def batch_loss(self, batch, experiment):
         if experiment == "direct":
             return super().batch_loss(batch, experiment)

@@ -106,8 +106,12 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
     supports_warm_start: ClassVar[bool] = True
     uses_device: ClassVar[bool] = True
     #: whether several seeds' fits can train as one stacked model (:mod:`methods.stacking`): a method
-    #: whose loop is this class's, its loss :meth:`loss` and no :meth:`extra_loss`
+    #: whose loop is this class's and whose loss is :meth:`loss` (see :meth:`stacking_unavailable_reason`)
     stackable: ClassVar[bool] = True
+    #: set ``True`` in the class body that overrides :meth:`batch_loss` or :meth:`extra_loss` where
+    #: what they compute is still the stacked loop's loss (:meth:`loss` of the batch's predictions);
+    #: a subclass that overrides them again must say so again
+    stacked_loss_is_batch_loss: ClassVar[bool] = False
     model: torch.nn.Module
 
     @abc.abstractmethod
@@ -127,6 +131,27 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
         Euler–Lagrange torques of the stack: for a network with its own
         derivatives (``tangent``) whose method compiles its own step."""
         return False
+
+    def stacking_unavailable_reason(self) -> str | None:
+        """Why this method's seeds cannot train as one stacked model, or ``None``.
+        The stacked loop (:func:`methods.stacking.train_lagrangians`) computes
+        :meth:`loss` of each seed's predictions and never calls :meth:`batch_loss`
+        or :meth:`extra_loss`: a class that overrides either stacks only where its
+        own class body says that its loss is still :meth:`loss`
+        (:attr:`stacked_loss_is_batch_loss`)."""
+        reason = super().stacking_unavailable_reason()
+        if reason:
+            return reason
+        unsaid = []
+        for hook in ("batch_loss", "extra_loss"):
+            owner = next(k for k in type(self).__mro__ if hook in vars(k))
+            if owner is not TorchLagrangianMethod and not vars(owner).get("stacked_loss_is_batch_loss", False):
+                unsaid.append(f"{owner.__name__}.{hook}")
+        if unsaid:
+            return (f"{self.name} overrides {' and '.join(unsaid)}, which the stacked loop does not call: it trains "
+                    f"alone (a class whose loss is still its loss(), stacked, says so with "
+                    f"stacked_loss_is_batch_loss = True)")
+        return None
 
     def make_scheduler(self, optimizer: torch.optim.Optimizer):
         """Return an object with ``step(loss: float)``, or ``None``."""

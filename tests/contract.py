@@ -18,6 +18,7 @@ from bench.core import symbolic
 from bench.core.budget import Budget, Schedule
 from bench.core.data import Dataset, generate
 from bench.core.models import mass_and_bias
+from methods.stacking import fit_stacked
 from systems import SYSTEMS, Domain
 
 
@@ -137,6 +138,8 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
         assert again.fit_info["steps"] == info["steps"]
     if cls.uses_device and experiment == "indirect":  # the torque loss is the one with every part of a step
         check_device(cls, train, experiment)
+    if cls(**smoke).stacking_unavailable_reason() is None:
+        check_stacked(cls, smoke, train, test, experiment)
     expr = m.expression()
     engine = train.system in SYSTEMS and not SYSTEMS[train.system].symbolic
     if "symbolic" in cls.tags and not (engine and "parametric" in cls.tags):  # SysId fits an engine's regressor
@@ -145,6 +148,22 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
         np.testing.assert_allclose(f(test.q, test.qd), L, rtol=1e-9, atol=1e-9)
     else:
         assert expr is None
+
+
+def check_stacked(cls, smoke: dict, train: Dataset, test: Dataset, experiment: str) -> None:
+    """Two seeds stacked in one model (``--stack-seeds``) give the fits each seed
+    makes alone: to the last bits in float64, to float32's rounding otherwise
+    (the stack's batched products sum in another order)."""
+    seeds = [0, 1]
+    alone = [cls(**smoke).fit(train, experiment, seed=k, steps=smoke["max_steps"]) for k in seeds]
+    stacked = fit_stacked([cls(**smoke) for _ in seeds], [train, train], experiment, seeds, steps=smoke["max_steps"])
+    tolerance = 1e-12 if getattr(alone[0].config, "dtype", "float64") == "float64" else 1e-5
+    for a, b in zip(alone, stacked):
+        want, got = a.predict(test), b.predict(test)
+        assert np.max(np.abs(got - want)) <= tolerance * np.max(np.abs(want)), (
+            f"{cls.name}: a stacked seed's fit is not the fit it makes alone; a method whose loss is not "
+            f"the stacked loop's must say why it cannot stack (stacking_unavailable_reason)")
+        assert b.fit_info["steps"] == a.fit_info["steps"]
 
 
 def check_measured_system(system) -> None:

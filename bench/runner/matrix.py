@@ -247,7 +247,7 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
             out = run_stacked(group, out_dir, lambda s: run_isolated(s, out_dir), phase_limits(group[0]))
             return [done(r, log_path(out_dir, stack_name(group) if r.details.get("stacked") else r.run_id)) for r in out]
 
-        for records in map_interruptibly(job, groups(todo), workers):
+        for records in map_interruptibly(job, groups(todo, report), workers):
             results.update((r.run_id, r) for r in records)
     elif todo:
         for record in map_interruptibly(lambda s: done(run_isolated(s, out_dir), log_path(out_dir, s.run_id)), todo, workers):

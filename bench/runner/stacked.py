@@ -18,6 +18,7 @@ import dataclasses
 from pathlib import Path
 from typing import Callable
 
+from bench.core.errors import UserError
 from bench.runner.code import code_hash
 from bench.runner.execute import execute, load_data, make_method, make_system, warm_up_torch
 from bench.runner.isolation import Call, run_call
@@ -28,24 +29,31 @@ from methods import METHODS
 from methods.stacking import fit_stacked
 
 
-def groups(specs: list[RunSpec]) -> list[list[RunSpec]]:
+def groups(specs: list[RunSpec], report: Callable[[str], None] | None = None) -> list[list[RunSpec]]:
     """``specs`` in order, the runs of a stackable method in a stackable configuration
     (:meth:`~methods.base.Method.stacking_unavailable_reason`) grouped by everything
-    but their seed; every other run alone."""
+    but their seed; every other run alone. ``report`` gets one line per method
+    (and configuration) whose seeds could stack but train alone, with the reason."""
     out: dict = {}
+    said = set()
     for spec in specs:
-        stackable = (spec.method in METHODS and METHODS.entry(spec.method).available and METHODS[spec.method].stackable
-                     and _stacks(spec))
-        key = repr(sorted(dataclasses.replace(spec, seed=0).to_dict().items())) if stackable else spec.run_id
+        reason = _unstackable(spec)
+        key = repr(sorted(dataclasses.replace(spec, seed=0).to_dict().items())) if reason is None else spec.run_id
         out.setdefault(key, []).append(spec)
+        if reason and report is not None and reason not in said:
+            said.add(reason)
+            report(f"--stack-seeds: {spec.method} runs each seed alone: {reason}")
     return list(out.values())
 
 
-def _stacks(spec: RunSpec) -> bool:
+def _unstackable(spec: RunSpec) -> str | None:
+    """Why ``spec``'s seeds cannot stack (``""`` for a method never meant to), or ``None``."""
+    if spec.method not in METHODS or not METHODS.entry(spec.method).available or not METHODS[spec.method].stackable:
+        return ""
     try:
-        return make_method(spec).stacking_unavailable_reason() is None
-    except Exception:  # a configuration the run itself will refuse, with its reason, alone
-        return False
+        return make_method(spec).stacking_unavailable_reason()
+    except UserError:  # a configuration the run itself will refuse, with its reason, alone
+        return ""
 
 
 def run_stacked_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:

@@ -142,3 +142,46 @@ def test_the_stacking_measurement_prints_both_rates_and_their_ratio(tmp_path):
     assert count.returncode == 2 and "the numbers of seeds must be positive integers" in count.stderr
     assert count.stderr.count("\n") == 1
     assert bad.returncode == 2 and "sysid is not a stackable method" in bad.stderr and bad.stderr.count("\n") == 1
+
+
+class _Penalised:
+    """A plugin's MLP with a weight penalty in extra_loss, which the stacked loop would not see."""
+
+    def extra_loss(self):
+        return 1e-2 * sum((p ** 2).sum() for p in self.model.parameters())
+
+
+def _plugin(honest: bool):
+    base = METHODS["mlp"]
+    body = {"extra_loss": _Penalised.extra_loss, "__module__": __name__}
+    if not honest:  # says, wrongly, that its loss is still the stacked loop's
+        body["stacked_loss_is_batch_loss"] = True
+    return type("PenalisedMLP", (base,), body)
+
+
+def test_a_method_that_overrides_its_loss_hooks_trains_alone_and_says_why():
+    cls = _plugin(honest=True)
+    reason = cls(**cls.smoke_config()).stacking_unavailable_reason()
+    assert reason and "PenalisedMLP.extra_loss" in reason and "stacked loop does not call" in reason
+    assert METHODS["delan"](**METHODS["delan"].smoke_config()).stacking_unavailable_reason() is None  # it says so
+
+
+def test_the_contract_catches_a_stacked_fit_that_is_not_the_fit_alone(data):
+    from tests.contract import check_stacked
+
+    train, test = data
+    cls = _plugin(honest=False)
+    with pytest.raises(AssertionError, match="not the fit it makes alone"):
+        check_stacked(cls, cls.smoke_config(), train[0], test, "indirect")
+
+
+def test_stack_seeds_runs_a_plugin_with_its_own_loss_alone_and_says_why(tmp_path):
+    from tests.commandline import cli
+
+    r = cli("run", "--systems", "double_pendulum", "--methods", "penalised_mlp", "--experiments", "indirect",
+            "--seeds", "0,1", "--steps", "3", "--n-train", "64", "--n-test", "32", "--no-rollout", "--stack-seeds",
+            "--plugin", "tests/plugins/penalised.py", "--out", tmp_path / "m")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "--stack-seeds: penalised_mlp runs each seed alone: penalised_mlp overrides PenalisedMLP.extra_loss" in r.stdout
+    records = [__import__("json").loads(p.read_text()) for p in (tmp_path / "m" / "records").glob("*.json")]
+    assert len(records) == 2 and all(r["status"] == "ok" and "stacked" not in r["details"] for r in records)
