@@ -9,16 +9,8 @@ The package is built in layers, and imports point down only
     bench.evaluation, bench.runner  scores, recovery, rollouts; runs, records, isolation, the matrix
     methods, systems                the registries (top-level packages)
     bench.core                      data, dynamics, symbolic, terms, models, systems' contract
-
-Modules that lived directly in ``bench/`` before it was split into layers
-still import under their old names, with a warning that names the new one
-(:mod:`bench.moved`).
 """
 
 from __future__ import annotations
 
-from bench import moved
-
 __version__ = "0.1.0"
-
-moved.install()

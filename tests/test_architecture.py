@@ -4,7 +4,6 @@ cover, measured from the source by :mod:`tests.architecture`."""
 
 from __future__ import annotations
 
-import importlib
 import os
 import shutil
 import subprocess
@@ -13,7 +12,6 @@ from pathlib import Path
 
 import pytest
 
-from bench import moved
 from tests import architecture
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -52,8 +50,8 @@ def test_an_upward_import_breaks_the_layers_contract(tmp_path):
     assert "bench.core.data -> bench.runner.records" in r.stdout
 
 
-def test_bench_holds_only_its_entry_points_the_old_names_and_the_layers():
-    assert sorted(p.name for p in (ROOT / "bench").glob("*.py")) == ["__init__.py", "__main__.py", "moved.py"]
+def test_bench_holds_only_its_entry_points_and_the_layers():
+    assert sorted(p.name for p in (ROOT / "bench").glob("*.py")) == ["__init__.py", "__main__.py"]
     layers = sorted(p.name for p in (ROOT / "bench").iterdir() if (p / "__init__.py").is_file())
     assert layers == ["cli", "core", "evaluation", "experiments", "reporting", "residual", "runner"]
 
@@ -67,21 +65,6 @@ def test_no_module_cycles_and_no_imports_hidden_in_functions(measured):
 
 def test_methods_and_systems_use_only_the_core_of_bench(measured):
     assert measured["imports from methods/ or systems/ into bench outside bench.core"] == []
-
-
-def test_the_suite_imports_no_module_by_its_old_name():
-    found = architecture.imports(architecture.suite_modules())
-    old = [f"{i.importer}:{i.line} {i.target}" for i in found if i.target in moved.MOVED]
-    assert old == []
-
-
-@pytest.mark.parametrize("old, new", sorted(moved.MOVED.items()))
-def test_old_module_names_import_as_the_modules_that_hold_them_now_with_a_warning(old, new):
-    sys.modules.pop(old, None)
-    with pytest.warns(FutureWarning, match=f"{old} is now {new}"):
-        module = importlib.import_module(old)
-    assert module is importlib.import_module(new)
-    assert module.__spec__.name == new  # the module keeps its own identity
 
 
 def test_the_repository_root_holds_only_the_layouts_files():

@@ -1,7 +1,7 @@
 """One training step of the paper's 5x300 MLP Lagrangian at batch 32, indirect loss.
 
 ``ours``: the suite's batched Hessian-vector product by double backward
-(:func:`bench.dynamics.euler_lagrange`).
+(:func:`bench.core.dynamics.euler_lagrange`).
 
 Baselines, per sample and vectorised with ``torch.func.vmap``:
 
