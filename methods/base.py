@@ -41,7 +41,7 @@ import torch
 from bench.core.budget import Budget
 from bench.core.data import EXPERIMENTS, Dataset, check_experiment, mse
 from bench.core.errors import ConfigError, DataError
-from bench.core.models import ExpressionModel, FittedModel
+from bench.core.models import ExpressionModel, FittedModel, NoVariant
 from bench.core.registry import Registry
 from bench.core.system import SYSTEMS, System
 from methods.config import MethodConfig, Named, build_config
@@ -371,13 +371,13 @@ class Method(FittedModel):
         work it did (``None``: it can, see :mod:`bench.core.budget`)."""
         return None
 
-    def variants(self) -> dict[str, "FittedModel | str"]:
+    def variants(self) -> dict[str, "FittedModel | NoVariant"]:
         """Further fitted models derived from this one (for example a refined
         equation), each reported by the harness as ``<method>+<variant>``.
 
-        A variant that could not be made is given as a string saying why (a
-        :class:`~bench.core.models.NoVariant` with its outcome: out of budget,
-        not applicable, failed; a plain string is a failure); every seed stays counted.
+        A variant that could not be made is a :class:`~bench.core.models.NoVariant`
+        saying why, with its outcome (out of budget, not applicable, failed);
+        every seed stays counted.
         """
         return {}
 

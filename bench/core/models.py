@@ -28,6 +28,7 @@ given parameter values) are two of them.
 from __future__ import annotations
 
 import abc
+import dataclasses
 import functools
 import weakref
 from dataclasses import dataclass
@@ -46,20 +47,22 @@ from bench.core.terms import TermLibrary
 CHUNK = 8192
 
 
-class NoVariant(str):
+@dataclasses.dataclass(frozen=True)
+class NoVariant:
     """Why a method gives no model for one of its variants
     (:meth:`methods.base.Method.variants`), with the outcome it is: ``"timeout"``
     where the variant's work ran out of the run's budget, ``"not_applicable"``
     where the variant does not apply to the configuration, ``"failed"`` else."""
 
-    status: str
+    reason: str
+    status: str = "failed"
 
-    def __new__(cls, reason: str, status: str = "failed"):
-        if status not in ("failed", "timeout", "not_applicable"):
-            raise ValueError(f"a variant's outcome is failed, timeout or not_applicable; got {status!r}")
-        out = super().__new__(cls, reason)
-        out.status = status
-        return out
+    def __post_init__(self):
+        if self.status not in ("failed", "timeout", "not_applicable"):
+            raise ValueError(f"a variant's outcome is failed, timeout or not_applicable; got {self.status!r}")
+
+    def __str__(self) -> str:
+        return self.reason
 
 
 class FittedModel(abc.ABC):

@@ -20,6 +20,7 @@ import torch
 
 from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate, read_csv
+from bench.core.models import NoVariant
 from bench.core.timeouts import Timeout
 from bench.core.system import System
 from bench.evaluation.driven import driven_entry
@@ -177,8 +178,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         fields["exact"] = exact.pop("exact")
         variants = {}
         for name, model in stages.run("variants", method.variants, default={}).items():
-            if isinstance(model, str):  # why there is none, and its outcome (bench.core.models.NoVariant)
-                variants[name] = {"status": getattr(model, "status", "failed"), "error": str(model)}
+            if isinstance(model, NoVariant):  # why there is none, and its outcome
+                variants[name] = {"status": model.status, "error": model.reason}
                 continue
             variant = Stages(prefix=f"variant {name}: ")
             scored = variant.run("scores", scores, model, spec.experiment, train, test, system, variant)

@@ -287,8 +287,8 @@ class SyReNets(Equations, TorchLagrangianMethod):
         else:
             refined = self._refine(train, experiment, deadline)
         self._variants["refined"] = refined
-        if isinstance(refined, str):
-            self._notes["refined"] = refined
+        if isinstance(refined, NoVariant):
+            self._notes["refined"] = refined.reason
 
     def record_details(self):
         notes = dict(getattr(self, "_notes", {}))
