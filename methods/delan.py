@@ -101,6 +101,7 @@ from typing import Annotated
 import numpy as np
 import torch
 
+from bench.core.compiled import compiled_once
 from bench.core.dynamics import euler_lagrange
 from methods.base import METHODS
 from methods.config import POSITIVE, Named, Range
@@ -245,19 +246,10 @@ def torque_loss(model: DeepLagrangian, q, qd, qdd, tau) -> torch.Tensor:
     return ((euler_lagrange(model, q, qd, qdd, create_graph=True) - tau) ** 2).sum(1).mean()
 
 
-_COMPILED = None
-
-
 def compiled_torque_loss():
     """:func:`torque_loss` compiled, one for the process: the model is an
     argument, so every network of the process reuses the compiled graphs."""
-    global _COMPILED
-    if _COMPILED is None:
-        import torch._inductor.config
-
-        torch._inductor.config.compile_threads = 1  # a run has one core: no pool of compiling processes
-        _COMPILED = torch.compile(torque_loss, dynamic=False)
-    return _COMPILED
+    return compiled_once(torque_loss)
 
 
 def _init(layer: torch.nn.Linear, gain: float, bias: float) -> None:

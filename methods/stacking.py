@@ -54,6 +54,7 @@ import numpy as np
 import torch
 from torch.func import functional_call, stack_module_state, vmap
 
+from bench.core.compiled import compiled_once
 from bench.core.data import Dataset
 from bench.core.dynamics import euler_lagrange
 from bench.core.errors import ConfigError
@@ -130,9 +131,6 @@ class Stack:
                 p.grad = torch.zeros_like(p) if g is None else g[s]
 
 
-_COMPILED = None
-
-
 def _rows_tangent(base: torch.nn.Module, params: dict, buffers: dict, q, qd, dq, dqd) -> tuple:
     """``tangent`` of the stacked networks (``base``'s shape, the stack's
     ``params`` and ``buffers``) on rows concatenated seed by seed."""
@@ -163,13 +161,7 @@ def _stacked_torques(base: torch.nn.Module, params: dict, buffers: dict, q, qd, 
 def compiled_stacked_torques():
     """:func:`_stacked_torques` compiled, one for the process: the networks are
     arguments, so every stack of one shape and size reuses the compiled graphs."""
-    global _COMPILED
-    if _COMPILED is None:
-        import torch._inductor.config
-
-        torch._inductor.config.compile_threads = 1  # a run has one core: no pool of compiling processes
-        _COMPILED = torch.compile(_stacked_torques, dynamic=False)
-    return _COMPILED
+    return compiled_once(_stacked_torques)
 
 
 class StackedLagrangian(Stack):

@@ -12,10 +12,9 @@ from typing import Any
 
 import torch
 
+from bench.core.compiled import compiled_once
 from bench.core.dynamics import euler_lagrange
 from methods.syrenets.network import SyReNet
-
-_COMPILED = None  # see compiled_pass
 
 
 @dataclass
@@ -69,13 +68,7 @@ def training_pass(model: SyReNet, q, qd, qdd, target, experiment: str, inputs: s
 def compiled_pass():
     """:func:`training_pass` compiled, one for the process: the model is an
     argument, so each new network reuses the compiled graphs."""
-    global _COMPILED
-    if _COMPILED is None:
-        import torch._inductor.config
-
-        torch._inductor.config.compile_threads = 1  # a run has one core: no pool of compiling processes
-        _COMPILED = torch.compile(training_pass, dynamic=False)
-    return _COMPILED
+    return compiled_once(training_pass)
 
 
 class Fixed:
