@@ -95,14 +95,14 @@ class DelanCharacters(System):
         parts = {"inertial": "tau_inertial", "coriolis": "tau_coriolis", "gravity": "tau_gravity"}
         return {part: _columns(frame, (column,))[rows] for part, column in parts.items()}
 
-    def load(self, split: str) -> Dataset:
-        """The published ``train`` or ``test`` split."""
+    def load(self, part: str) -> Dataset:
+        """The published ``train`` or ``test`` part."""
         frame = _frame()
         test = frame["character"].isin(TEST_CHARACTERS)
-        if split not in ("train", "test"):
-            raise ValueError(f"split must be 'train' or 'test', got {split!r}")
-        part = frame[test if split == "test" else ~test]
-        cols = {k: _columns(part, (k,)) for k in ("q", "qd", "qdd", "tau")}
-        chars = "".join(sorted(part["character"].unique()))
+        if part not in ("train", "test"):
+            raise ValueError(f"part must be 'train' or 'test', got {part!r}")
+        rows = frame[test if part == "test" else ~test]
+        cols = {k: _columns(rows, (k,)) for k in ("q", "qd", "qdd", "tau")}
+        chars = "".join(sorted(rows["character"].unique()))
         return Dataset(cols["q"], cols["qd"], cols["qdd"], cols["tau"], None, self.name,
-                       f"{DATA.name}:{split} (characters {chars})", recording=part["character"].astype(str).to_numpy())
+                       f"{DATA.name}:{part} (characters {chars})", recording=rows["character"].astype(str).to_numpy())

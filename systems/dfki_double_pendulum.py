@@ -167,14 +167,14 @@ class DfkiDoublePendulum(System):
         """The six recordings."""
         return [str(trajectory_path(n)) for n in SPLITS["all"]]
 
-    def load(self, split: str, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> Dataset:
-        """The ``train`` (trajectories 00, 01, 02, 04) or ``test`` (03, 05) split,
+    def load(self, part: str, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> Dataset:
+        """The ``train`` (trajectories 00, 01, 02, 04) or ``test`` (03, 05) part,
         or ``all`` six; each sample's ``recording`` is its trajectory's name."""
-        if split not in SPLITS:
-            raise ValueError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
-        s = _samples(split, spec, filter_torque)
-        names = SPLITS[split]
-        source = f"dfki_trajectory_{{{','.join(names)}}}.csv.gz:{split}"
+        if part not in SPLITS:
+            raise ValueError(f"part must be one of {', '.join(SPLITS)}, got {part!r}")
+        s = _samples(part, spec, filter_torque)
+        names = SPLITS[part]
+        source = f"dfki_trajectory_{{{','.join(names)}}}.csv.gz:{part}"
         meta = {"filter": asdict(spec), "torque_filtered": filter_torque}
         return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,
                        recording=s["recording"].copy(), sign_qd=s["sign_qd"].copy())

@@ -105,6 +105,8 @@ class MeasuredArmSpec:
 
     def parts(self, split: str) -> dict[str, tuple[str, ...]]:
         """The trajectories each part of ``split`` holds: ``{"train": ..., "test": ...}``."""
+        if split not in SPLITS:
+            raise ConfigError(f"{self.source}: no split {split!r}; a measured arm offers {', '.join(SPLITS)}")
         test = self.test
         train = tuple(t for t in self.trajectories if t not in test)
         return {"train": train, "test": test} if split == "default" else {"train": test, "test": train}
@@ -205,16 +207,16 @@ class MeasuredArm(UrdfArm):
     def source_files(cls) -> list[str]:
         return [str(cls.measured.source), *(str(r.path) for r in cls.measured.recordings), *super().source_files()]
 
-    def load(self, split: str) -> Dataset:
+    def load(self, part: str) -> Dataset:
         """The ``train`` or ``test`` part of the instance's split (:attr:`split`): whole
         trajectories, each sample with its recording, trajectory and time."""
         parts = self.measured.parts(self.split)
-        if split not in parts:
-            raise ValueError(f"split must be 'train' or 'test', got {split!r}")
-        trajectories = parts[split]
+        if part not in parts:
+            raise ValueError(f"part must be 'train' or 'test', got {part!r}")
+        trajectories = parts[part]
         s = _samples(self.measured, trajectories)
         names = sorted({str(r) for r in s["recording"]})
-        source = (f"{self.measured.source.name}:{split} of split {self.split} (trajectories {', '.join(trajectories)}; "
+        source = (f"{self.measured.source.name}:{part} of split {self.split} (trajectories {', '.join(trajectories)}; "
                   f"recordings {', '.join(names)})")
         meta = {"filter": dataclasses.asdict(self.measured.filter), "split": self.split}
         return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,

@@ -280,7 +280,7 @@ class System(abc.ABC):
         description, its measured-arm file); none for a system given by code."""
         return []
 
-    def load(self, split: str):
+    def load(self, part: str):
         """The ``"train"`` or ``"test"`` part of a measured system's data (of
         the instance's :attr:`split` where it offers several)."""
         raise NotImplementedError(f"{self.name} is simulated: generate its data with bench.core.data.generate")

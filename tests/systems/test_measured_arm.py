@@ -13,6 +13,7 @@ import pytest
 
 from bench.core.budget import Budget
 from bench.core.data import DataError, Dataset
+from bench.core.errors import ConfigError
 from methods import METHODS
 from systems import SYSTEMS
 from systems.measured_arm import DATA_DIR, measured_arm
@@ -39,6 +40,11 @@ def test_an_unknown_split_is_refused_in_one_line():
                  "--split", "sideways")
     assert result.returncode == 2
     assert "--split sideways: kuka_lwr4 offer(s) only default, swapped" in result.stderr
+    # the declaration itself names no other split, rather than taking any other name as swapped
+    with pytest.raises(ConfigError, match="no split 'sideways'"):
+        SYSTEMS["kuka_lwr4"].measured.parts("sideways")
+    with pytest.raises(ValueError, match="part must be 'train' or 'test'"):
+        SYSTEMS["kuka_lwr4"]().load("validation")
 
 
 def _arm_file(tmp_path, recordings: str, urdf: str = "kuka_lwr4.urdf.gz", columns: str = KUKA_COLUMNS):
