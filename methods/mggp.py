@@ -416,5 +416,4 @@ class MGGP(ExpressionMethod):
         return {} if best is None else {"genes": len(best.genes), "nodes": int(best.size)}
 
     def record_details(self):
-        return {"generations": getattr(self, "generations_done", None), "genes": len(self.best.genes),
-                "nodes": self.best.size}
+        return {"generations": getattr(self, "generations_done", None), **self.size()}

@@ -28,7 +28,6 @@ given parameter values) are two of them.
 from __future__ import annotations
 
 import abc
-import dataclasses
 import functools
 import weakref
 from dataclasses import dataclass
@@ -47,7 +46,7 @@ from bench.core.terms import TermLibrary
 CHUNK = 8192
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclass(frozen=True)
 class NoVariant:
     """Why a method gives no model for one of its variants
     (:meth:`methods.base.Method.variants`), with the outcome it is: ``"timeout"``
