@@ -6,11 +6,13 @@ add them, refit, and report the error before and after.
 * :mod:`~bench.residual.selection`: stepwise selection with its statistics,
   on :mod:`~bench.residual.basis` (projections off the design) and
   :mod:`~bench.residual.shapes` (a shaped effect's nonlinear parameter);
-* :mod:`~bench.residual.sensors`: the torque sensor's laws (a gain, a time
-  shift), which act on the measured torque rather than on the arm;
+* :mod:`~bench.residual.sensor_laws`, :mod:`~bench.residual.sensors`: the
+  laws of the torque sensor and the drive (a gain, a time shift, a
+  load-dependent friction), one class each, which act on the measured torque
+  rather than on the arm, and the loop's handling of them;
 * :mod:`~bench.residual.strategies`: how the loop refits each kind of model;
 * :mod:`~bench.residual.pruning`, :mod:`~bench.residual.checks`,
-  :mod:`~bench.residual.reach`: what follows a refit, what keeps or undoes a
+  :mod:`~bench.residual.beyond_data`: what follows a refit, what keeps or undoes a
   round, and what an effect may claim beyond the data;
 * :mod:`~bench.residual.loop`: the loop, in this process (:func:`residual_loop`);
 * :mod:`~bench.residual.job`: the loop through the runner (:func:`run_residual`);

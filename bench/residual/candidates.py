@@ -35,10 +35,11 @@ import math
 
 import sympy
 
-from bench.core.effects import EFFECTS, GAIN_RANGE
+from bench.core.effects import EFFECTS
 from bench.core.laws import FAMILIES, Part, group
 from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary, lagrangian_library, lagrangian_library_size
+from bench.residual.sensor_laws import law_of
 
 
 #: the most Lagrangian terms the open-ended library may have (see the module docstring)
@@ -111,6 +112,9 @@ def admissible(term: Term, coefficient: float) -> bool:
     :meth:`Effect.admissible`; an open-ended term of ``D`` (non-negative) needs
     one >= 0; an open-ended term of ``L`` has no sign to keep (the loop
     checks the mass matrix instead)."""
+    if term.place == "sensor":
+        kind = law_of(term)
+        return kind.admissible_value(kind.value_of(coefficient))
     if is_named(term):
         return EFFECTS[term.name].admissible(coefficient)
     return coefficient >= 0 if term.place == "D" else True
@@ -120,18 +124,19 @@ def structural(term: Term, coefficient: float, stderr: float) -> dict:
     """The JSON entry of a residual that only an inadmissible coefficient
     explains: the declared form lacks this freedom. It names the term and the
     coefficient that would be needed; the term is not added to the model."""
-    parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
-    condition = EFFECTS[term.name].condition if is_named(term) else f"{parameter} >= 0"
+    if term.place == "sensor":  # a law of the sensor or the drive: its coefficient is a change from its neutral value
+        kind = law_of(term)
+        parameter, condition, coefficient = kind.parameter, kind.condition(), kind.value_of(coefficient)
+    else:
+        parameter = EFFECTS[term.name].parameter if is_named(term) else "c"
+        condition = EFFECTS[term.name].condition if is_named(term) else f"{parameter} >= 0"
     law = law_text(term, parameter)
-    if term.name == "torque_gain":  # its coefficient is g's change
-        law, parameter, coefficient = law_text(term, "g"), "g", 1.0 + coefficient
-        condition = f"{GAIN_RANGE[0]:g} <= g <= {GAIN_RANGE[1]:g}"
-    entry = {"name": term.name if is_named(term) else "symbolic", "kind": "structural", "law": law,
+    entry = {"name": term.name if is_named(term) or term.place == "sensor" else "symbolic", "kind": "structural", "law": law,
              "joints": [j + 1 for j in term.joints], "parameters": {},
              "finding": (f"the declared form lacks this freedom: the residual is explained by {law} only with "
                          f"{parameter} = {coefficient:.4g} ± {stderr:.2g}, which is not physical "
                          f"({condition}); the term is not added")}
-    if not is_named(term):
+    if not is_named(term) and term.place != "sensor":
         entry["expression"] = term.name
     return entry
 
@@ -164,11 +169,7 @@ def law_text(term: Term, parameter: str) -> str:
     """The text of a term's law with its parameter: ``L += ...``, ``D = ...``
     or ``tau += ...``."""
     if term.place == "sensor":
-        if term.joint is None:
-            return f"tau_measured(t) = tau(t - {parameter})"
-        j = term.joint + 1
-        return (f"tau_measured_{j} = tau_{j} + {parameter}*|tau_{j}|*sign(qd_{j})" if term.name == "load_friction"
-                else f"tau_measured_{j} = {parameter}*tau_{j}")
+        return law_of(term).law_text(term, parameter)
     where = {"L": "L += ", "D": "D = "}.get(term.place, "tau += ")
     return f"{where}{sympy.Symbol(parameter) * term.expr}"
 

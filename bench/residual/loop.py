@@ -43,7 +43,7 @@ can undo a round) is the model's refit strategy, chosen once from the model
    identify, or one that claims beyond them (an open-ended term, a spring
    whose rest angle the arm never visited) without earning its place on a
    held-out trajectory, is dropped and reported as a finding
-   (:mod:`bench.residual.reach`). The JSON reports the effects as laws
+   (:mod:`bench.residual.beyond_data`). The JSON reports the effects as laws
    (:mod:`bench.core.laws`).
 6. **Keep the round only if it generalises.** The round's model is scored by
    cross-validation over whole recordings (:mod:`bench.residual.validation`:
@@ -91,7 +91,7 @@ from bench.residual.candidates import candidates, describe_all, is_named, label,
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shape_stderr, simplest_laws
-from bench.residual.reach import beyond_data, earns_place, finding, not_identified
+from bench.residual.beyond_data import beyond_data, earns_place, finding, not_identified
 from bench.residual.result import ResidualResult, Round
 from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, bic, trace
 from bench.residual.sensors import (Sensed, Sensor, column as sensor_column, confine as confine_sensor,
@@ -358,7 +358,7 @@ class _Loop:
     def confine(self, model: LoopModel):
         """``model`` without each effect the data do not identify, and each that
         claims beyond the training data and does not earn its place on a
-        held-out trajectory (:mod:`bench.residual.reach`), dropped one at a time
+        held-out trajectory (:mod:`bench.residual.beyond_data`), dropped one at a time
         with a refit; returns the model and the labels dropped (their findings
         go to :attr:`beyond`)."""
         dropped = []

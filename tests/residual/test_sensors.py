@@ -13,7 +13,8 @@ from bench.core.undeclared import add_effects, parse_effects
 from bench.core.errors import ConfigError
 from bench.experiments.robot_log import simulate
 from bench.residual import residual_loop
-from bench.residual.sensors import Sensed, Sensor, shifted
+from bench.residual.sensor_laws import shifted
+from bench.residual.sensors import Sensed, Sensor
 from systems import get_system
 
 #: every loop here is bounded by work (see tests/residual/test_loop.py)
@@ -126,7 +127,7 @@ def test_a_five_millisecond_delay_of_a_logged_torque_is_found_within_one_millise
     assert set(shift["per_recording"]) == {"r0", "r1", "r2"}
     assert out.mse_after["train"] < 0.5 * out.mse_before["train"]
     # the model it ends with predicts the measured torque: the arm's, delayed
-    assert isinstance(out.models[1], Sensed) and out.models[1].sensor.shift == shift["parameters"]["delta"]["value"]
+    assert isinstance(out.models[1], Sensed) and out.models[1].sensor.laws[-1].value == shift["parameters"]["delta"]["value"]
 
 
 def _stack(parts: list[Dataset]) -> Dataset:

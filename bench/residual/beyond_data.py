@@ -20,9 +20,11 @@ the data at all (:func:`not_identified`): it is dropped and reported the
 same way, whatever the trajectories.
 
 An effect that claims beyond the data stays in the model only if it earns
-its place on a trajectory it was not fitted on (:func:`earns_place`): with the training data's trajectories left
-out one at a time (:mod:`bench.residual.validation`), the model without it
-must have a held-out error at least :data:`MIN_GAIN` higher than with it.
+its place on a trajectory it was not fitted on (:func:`held_out_verdict`,
+the test the laws of the sensor and the drive pass too): with the training
+data's trajectories left out one at a time (:mod:`bench.residual.validation`),
+the model without it must have a held-out error at least :data:`MIN_GAIN`
+higher than with it.
 Independent samples (generated data) have no trajectory to overfit, and the
 loop's held-out blocks have judged the effect already. Training data that
 hold one trajectory have no other to judge by, so there such an effect
@@ -32,6 +34,8 @@ its fitted value and the reason, and does not offer it again.
 
 from __future__ import annotations
 
+from typing import Callable
+
 from bench.core.data import Dataset
 from bench.core.effects import EFFECTS
 from bench.residual.candidates import is_named, label, law_text
@@ -39,7 +43,8 @@ from bench.residual.checks import heldout
 from bench.residual.model import LoopModel
 from bench.residual.strategies import Strategy
 
-#: the held-out error an effect that claims beyond the data must save, as a fraction of the error without it
+#: the held-out error an effect that claims beyond the data, or a law of the sensor or the drive, must save,
+#: as a fraction of the error without it
 MIN_GAIN = 0.01
 
 
@@ -70,21 +75,41 @@ def not_identified(model: LoopModel) -> list[tuple[int, str]]:
             for i, (c, se) in enumerate(zip(model.coef, model.stderr)) if se > 0 and se >= abs(c)]
 
 
-def earns_place(strategy: Strategy, model: LoopModel, train: Dataset, index: int) -> tuple[bool, str]:
-    """Whether effect ``index`` of ``model`` lowers the error on held-out trajectories
-    by :data:`MIN_GAIN` at least; and the figures, in words. Independent samples
-    (generated data, no recordings) have no trajectory to overfit: there the
-    loop's held-out blocks, which accepted the effect, are other samples of the
-    same domain, and the effect stays."""
-    if not train.trajectories():
-        return True, ""
-    if len(train.trajectories()) < 2:
-        return False, "the training data hold one trajectory, so no held-out trajectory can confirm it"
-    without = strategy.refit(model, train, [t for k, t in enumerate(model.effects) if k != index])
-    kept, dropped = heldout(strategy, model, train), heldout(strategy, without, train)
+def held_out_verdict(train: Dataset, errors: Callable[[], tuple[float, float]]):
+    """The one test a law that may fit its own trajectory rather than the arm
+    must pass to stay: an effect that claims beyond the data
+    (:func:`earns_place`) and a law of the sensor or the drive
+    (:func:`bench.residual.sensors.confine`). ``errors()`` gives the held-out
+    errors over whole trajectories with the law and without it; without it
+    the error must be at least :data:`MIN_GAIN` higher. Training data without
+    trajectories (independent samples) have none to overfit, and the law
+    stays; data that hold one trajectory have no other to judge by, and it
+    never does. Returns ``(None, errors)`` where it stays, else
+    ``(verdict in words, errors)``; ``errors`` is ``None`` where they were not needed."""
+    names = train.trajectories()
+    if not names:
+        return None, None
+    if len(names) < 2:
+        return "the training data hold one trajectory, so no held-out trajectory can confirm it", None
+    kept, dropped = errors()
     if dropped >= (1 + MIN_GAIN) * kept:
-        return True, ""
-    return False, (f"on held-out trajectories it does not pay: held-out MSE {kept:.4g} with it, {dropped:.4g} without")
+        return None, (kept, dropped)
+    return (f"on held-out trajectories it does not pay: held-out MSE {kept:.4g} with it, {dropped:.4g} without",
+            (kept, dropped))
+
+
+def earns_place(strategy: Strategy, model: LoopModel, train: Dataset, index: int) -> tuple[bool, str]:
+    """Whether effect ``index`` of ``model`` earns its place on held-out
+    trajectories (:func:`held_out_verdict`); and the verdict, in words, where
+    it does not. Independent samples (generated data, no recordings): the
+    loop's held-out blocks, which accepted the effect, are other samples of
+    the same domain, and the effect stays."""
+    def errors():
+        without = strategy.refit(model, train, [t for k, t in enumerate(model.effects) if k != index])
+        return heldout(strategy, model, train), heldout(strategy, without, train)
+
+    verdict, _ = held_out_verdict(train, errors)
+    return verdict is None, verdict or ""
 
 
 def finding(term, coefficient: float, stderr: float, why: str, verdict: str) -> dict:

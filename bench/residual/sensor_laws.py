@@ -1,0 +1,326 @@
+r"""The laws that act between the arm's torque and the measured one, one class
+each, and their registry (:data:`LAWS`).
+
+A law either moves the states at which a torque was measured (a *state
+law*: the time shift) or multiplies the arm's torque on a joint by a factor
+(a *torque law*: a sensor's gain, a drive's load-dependent friction),
+``tau_measured_j = tau_j F_j(data)``. An instance is the law at its value on
+one joint (or on every joint, where :attr:`SensorLaw.per_joint` is false);
+:class:`bench.residual.sensors.Sensor` holds the instances found and
+:mod:`bench.residual.sensors` runs the loop over them.
+
+Each law gives the residual loop:
+
+* its *column*, the measured torque's derivative in the law's coefficient,
+  linearised at the model where it stands (:meth:`SensorLaw.column`); for a
+  torque law ``tau_hat_j d ln F_j / d theta``;
+* its *update* from a fitted coefficient (:meth:`SensorLaw.updated`) and how
+  large that step is (:meth:`SensorLaw.change`);
+* the values it may take (:attr:`SensorLaw.bounds`), its law in words
+  (:meth:`SensorLaw.law_text`) and its JSON entry (:meth:`SensorLaw.entry`).
+
+A new law is one subclass and :func:`register`; the loop offers it wherever
+:meth:`SensorLaw.offered` says, settles it, checks its range and asks it to
+earn its place on held-out trajectories as it does the others.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+import sympy
+
+from bench.core.data import Dataset
+from bench.core.effects import EFFECTS, GAIN_RANGE
+from bench.core.regression import fit_statistics
+from bench.core.terms import Term
+
+#: why the reference joint is the one it is, in the loop's JSON
+WHY_REFERENCE = ("a gain common to every joint rescales L and no torque data identify it, so one joint's gain is "
+                 "fixed at 1: the joint with the largest torque RMS on the training data, whose ratios to the others "
+                 "are the best conditioned")
+
+
+def has_time(data: Dataset) -> bool:
+    """Whether ``data`` hold recordings with time stamps, where a time shift can be seen."""
+    return data.time is not None and data.recording is not None
+
+
+@dataclass(frozen=True)
+class SensorLaw:
+    """One law of the sensor or the drive at its value on :attr:`joint`
+    (``None``: every joint), with the value's standard error."""
+
+    joint: int | None
+    value: float
+    stderr: float = 0.0
+
+    #: the law's name, in the JSON and in :class:`~bench.core.terms.Term`
+    name: ClassVar[str] = ""
+    #: ``"sensor"`` or ``"drive"``: the JSON's word for where it acts
+    kind: ClassVar[str] = "sensor"
+    #: the parameter's symbol
+    parameter: ClassVar[str] = "c"
+    #: the value at which the law does nothing
+    neutral: ClassVar[float] = 0.0
+    #: the values that are physical, ``(low, high)``; ``None``: any
+    bounds: ClassVar[tuple[float, float] | None] = None
+    #: one instance per joint, or one for every joint
+    per_joint: ClassVar[bool] = True
+
+    @classmethod
+    def start(cls, joint: int | None) -> "SensorLaw":
+        """The law on ``joint`` at its neutral value."""
+        return cls(joint, cls.neutral)
+
+    @classmethod
+    def offered(cls, train: Dataset, reference: int) -> list[int | None]:
+        """Where the loop may look for the law on ``train``: the joints (or
+        ``[None]`` for a law of every joint; ``[]`` where ``train`` cannot show it)."""
+        return list(range(train.dof)) if cls.per_joint else [None]
+
+    @classmethod
+    def expression(cls, joint: int | None, dof: int) -> sympy.Expr:
+        """The law's expression in the measured torque's symbols ``tau_i``."""
+        joints = [joint] if joint is not None else range(dof)
+        return sympy.Add(*[sympy.Symbol(f"tau_{j + 1}", real=True) for j in joints])
+
+    @classmethod
+    def term(cls, joint: int | None, dof: int) -> Term:
+        """The law on ``joint`` as a candidate term (place ``sensor``)."""
+        return Term(cls.expression(joint, dof), "sensor", cls.name, joint)
+
+    @classmethod
+    def law_text(cls, term: Term, parameter: str) -> str:
+        """The law in words with ``parameter``."""
+        j = term.joint + 1
+        return f"tau_measured_{j} = (1 + {parameter}*f(q, qd, tau))*tau_{j}"
+
+    @classmethod
+    def value_of(cls, coefficient: float) -> float:
+        """The value a first fitted coefficient (from the neutral value) gives."""
+        return cls.neutral + coefficient
+
+    @classmethod
+    def admissible_value(cls, value: float) -> bool:
+        """Whether ``value`` is physical (:attr:`bounds`)."""
+        return cls.bounds is None or cls.bounds[0] <= value <= cls.bounds[1]
+
+    @classmethod
+    def condition(cls) -> str:
+        """What :meth:`admissible_value` asks, in words."""
+        return "" if cls.bounds is None else f"{cls.bounds[0]:g} <= {cls.parameter} <= {cls.bounds[1]:g}"
+
+    def admissible(self) -> bool:
+        return self.admissible_value(self.value)
+
+    def as_term(self, dof: int) -> Term:
+        return self.term(self.joint, dof)
+
+    # what the law does to data
+    def states(self, data: Dataset) -> Dataset:
+        """``data`` with the states at which the measured torques were the arm's (a state law's)."""
+        return data
+
+    def factor(self, data: Dataset) -> np.ndarray | None:
+        """``(n, dof)``: what the arm's torques are multiplied by to read as
+        measured ones, on ``data`` (whose torques give any sign the law
+        needs); ``None`` for a state law."""
+        return None
+
+    def column(self, tau_hat: np.ndarray, data: Dataset) -> np.ndarray:
+        """``(n, dof)``: the law's column linearised at the model's torques
+        ``tau_hat`` on the corrected ``data``; its coefficient is the change
+        :meth:`updated` takes."""
+        raise NotImplementedError
+
+    def updated(self, coefficient: float, stderr: float) -> "SensorLaw":
+        """The law after a fitted change ``coefficient`` (standard error ``stderr``)."""
+        return dataclasses.replace(self, value=self.value + coefficient, stderr=stderr)
+
+    def change(self, coefficient: float, step: float) -> float:
+        """How large a step ``coefficient`` is, against the loop's tolerance
+        (``step``: the data's median sample step in seconds)."""
+        return abs(coefficient)
+
+    def settled(self, strategy, model, train: Dataset) -> "SensorLaw":
+        """The law once the loop has settled it at ``model`` (a hook for what it reports beside its value)."""
+        return self
+
+    def entry(self, dof: int, reference: int) -> dict:
+        """The JSON entry of the law found."""
+        joints = [self.joint + 1] if self.joint is not None else list(range(1, dof + 1))
+        out = {"name": self.name, "kind": self.kind, "law": self.law_text(self.as_term(dof), self.parameter),
+               "joints": joints}
+        if self.joint is not None:
+            out["joint"] = self.joint + 1
+        out["parameters"] = {self.parameter: {"value": float(self.value), "stderr": float(self.stderr)}}
+        return out
+
+
+def _on_joint(values: np.ndarray, joint: int) -> np.ndarray:
+    out = np.zeros_like(values)
+    out[:, joint] = values[:, joint]
+    return out
+
+
+class TorqueGain(SensorLaw):
+    """``tau_measured_j = g_j tau_j``: a calibration error of joint ``j``'s
+    torque sensor, relative to the reference joint (whose gain is fixed at 1:
+    a gain common to every joint is a rescaling of ``L``). Its coefficient is
+    the gain's relative change, ``g <- g (1 + c)``."""
+
+    name, kind, parameter, neutral, bounds = "torque_gain", "sensor", "g", 1.0, GAIN_RANGE
+
+    @classmethod
+    def offered(cls, train, reference):
+        return [j for j in range(train.dof) if j != reference]
+
+    @classmethod
+    def term(cls, joint, dof):
+        return EFFECTS[cls.name].term(joint)
+
+    @classmethod
+    def law_text(cls, term, parameter):
+        return f"tau_measured_{term.joint + 1} = {parameter}*tau_{term.joint + 1}"
+
+    def factor(self, data):
+        out = np.ones_like(data.tau)
+        out[:, self.joint] = self.value
+        return out
+
+    def column(self, tau_hat, data):
+        return _on_joint(tau_hat, self.joint)
+
+    def updated(self, coefficient, stderr):
+        value = self.value * (1.0 + coefficient)
+        return dataclasses.replace(self, value=value, stderr=value * stderr)
+
+    def entry(self, dof, reference):
+        return super().entry(dof, reference) | {"reference_joint": reference + 1, "reference": WHY_REFERENCE}
+
+
+class LoadFriction(SensorLaw):
+    """``tau_measured_j = tau_j + mu_j |tau_j| s_j``, ``s_j`` the sign of
+    ``qd_j`` (the data's, :meth:`~bench.core.data.Dataset.velocity_sign`): a
+    Coulomb level that grows with the load torque the drive carries; its
+    factor is ``1 + mu_j sigma_j``, ``sigma_j = sign(tau_j) s_j`` (+1 where
+    the drive moves the load, -1 where the load drives it back), which needs
+    only the torque's sign, the same measured or the arm's while ``mu < 1``."""
+
+    name, kind, parameter, neutral, bounds = "load_friction", "drive", "mu", 0.0, EFFECTS["load_friction"].bounds
+
+    @classmethod
+    def term(cls, joint, dof):
+        return EFFECTS[cls.name].term(joint)
+
+    @classmethod
+    def law_text(cls, term, parameter):
+        j = term.joint + 1
+        return f"tau_measured_{j} = tau_{j} + {parameter}*|tau_{j}|*sign(qd_{j})"
+
+    def factor(self, data):
+        out = np.ones_like(data.tau)
+        j = self.joint
+        out[:, j] = 1.0 + self.value * np.sign(data.tau[:, j]) * data.velocity_sign()[:, j]
+        return out
+
+    def column(self, tau_hat, data):
+        j, out = self.joint, np.zeros_like(tau_hat)
+        out[:, j] = np.abs(tau_hat[:, j]) * data.velocity_sign()[:, j] / self.factor(data)[:, j]
+        return out
+
+
+def shifted(data: Dataset, delta: float) -> Dataset:
+    """``data`` with each recording's states (``q, qd, qdd`` and the filtered
+    velocity sign, where the data carry one) taken at ``t - delta``, linearly
+    interpolated along the recording (held at its ends); the torques stay."""
+    if not delta or not has_time(data):
+        return data
+    q, qd, qdd = data.q.copy(), data.qd.copy(), data.qdd.copy()
+    sign = None if data.sign_qd is None else data.sign_qd.astype(np.float64).copy()
+    for index in data.in_time_order():
+        t = data.time[index]
+        for array in (q, qd, qdd) + ((sign,) if sign is not None else ()):
+            source = array[index].copy()
+            for j in range(data.dof):
+                array[index, j] = np.interp(t - delta, t, source[:, j])
+    return data.replace(q=q, qd=qd, qdd=qdd, sign_qd=sign)  # a filtered sign is a smooth signal too
+
+
+def time_derivative(data: Dataset, values: np.ndarray) -> np.ndarray:
+    """``d values / dt`` along each recording (``np.gradient`` over its time stamps)."""
+    out = np.zeros_like(values)
+    for index in data.in_time_order():
+        if len(index) >= 2:
+            out[index] = np.gradient(values[index], data.time[index], axis=0)
+    return out
+
+
+@dataclass(frozen=True)
+class TimeShift(SensorLaw):
+    """``tau_measured(t) = tau(t - delta)``: a sensor's or a filter's delay
+    between the torque and the recorded state, one for every joint and
+    recording, so that it carries over to the test recordings. It needs time
+    stamps and recordings; each training recording's own estimate of it is
+    reported beside it (:attr:`per_recording`), so that a recording whose
+    delay differs shows."""
+
+    #: each training recording's own estimate, ``{recording: (value, stderr)}``
+    per_recording: dict | None = field(default=None, compare=False)
+
+    name, kind, parameter, neutral, bounds, per_joint = "time_shift", "sensor", "delta", 0.0, None, False
+
+    @classmethod
+    def offered(cls, train, reference):
+        return [None] if has_time(train) else []
+
+    @classmethod
+    def law_text(cls, term, parameter):
+        return f"tau_measured(t) = tau(t - {parameter})"
+
+    def states(self, data):
+        return shifted(data, self.value)
+
+    def column(self, tau_hat, data):
+        return -time_derivative(data, tau_hat)
+
+    def change(self, coefficient, step):
+        return abs(coefficient) / step
+
+    def settled(self, strategy, model, train):
+        """Each recording's own estimate of what is left of the shift, added
+        to it: the shift's column on that recording's rows only, fitted beside the model."""
+        target, F = strategy.problem(model, train)
+        full = self.column(np.asarray(model.predict_torque(train), dtype=np.float64), train).ravel()
+        rows = np.repeat(train.recording, train.dof)
+        out = {}
+        for name in train.recordings():
+            G = np.where(rows == name, full, 0.0)[:, None]
+            coef, stderr, _ = fit_statistics(np.hstack([F, G]), target.ravel())
+            out[str(name)] = (self.value + float(coef[-1]), float(stderr[-1]))
+        return dataclasses.replace(self, per_recording=out)
+
+    def entry(self, dof, reference):
+        return super().entry(dof, reference) | {
+            "per_recording": {k: {"value": v, "stderr": e} for k, (v, e) in (self.per_recording or {}).items()}}
+
+
+#: every law of the sensor and the drive the loop looks for, by name, in the order it offers them
+LAWS: dict[str, type[SensorLaw]] = {law.name: law for law in (TorqueGain, LoadFriction, TimeShift)}
+
+
+def register(law: type[SensorLaw]) -> type[SensorLaw]:
+    """Add ``law`` to :data:`LAWS` (usable as a class decorator); a name taken already is refused."""
+    if not law.name or law.name in LAWS or law.name in EFFECTS and EFFECTS[law.name].place != "sensor":
+        raise ValueError(f"a law of the sensor or the drive needs a name of its own, got {law.name!r}")
+    LAWS[law.name] = law
+    return law
+
+
+def law_of(term: Term) -> type[SensorLaw]:
+    """The class of the law ``term`` (place ``sensor``) stands for."""
+    return LAWS[term.name]

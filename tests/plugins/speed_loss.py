@@ -1,0 +1,30 @@
+"""A law of the drive as a plugin (docs/extending.md, "A law of the sensor or
+the drive"): a torque reading that grows with speed,
+``tau_measured_j = (1 + c_j |qd_j|) tau_j``."""
+
+import numpy as np
+
+from bench.residual.sensor_laws import SensorLaw, register
+
+
+@register
+class SpeedLoss(SensorLaw):
+    """tau_measured_j = (1 + c_j |qd_j|) tau_j"""
+
+    name, kind, parameter, neutral, bounds = "speed_loss", "drive", "c", 0.0, (0.0, 0.5)
+
+    @classmethod
+    def law_text(cls, term, parameter):
+        j = term.joint + 1
+        return f"tau_measured_{j} = (1 + {parameter}*|qd_{j}|)*tau_{j}"
+
+    def factor(self, data):
+        out = np.ones_like(data.tau)
+        out[:, self.joint] = 1 + self.value * np.abs(data.qd[:, self.joint])
+        return out
+
+    def column(self, tau_hat, data):
+        out = np.zeros_like(tau_hat)
+        j = self.joint
+        out[:, j] = tau_hat[:, j] * np.abs(data.qd[:, j]) / self.factor(data)[:, j]
+        return out

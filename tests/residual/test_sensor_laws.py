@@ -1,0 +1,80 @@
+"""A law of the sensor or the drive is one class: a new one, in a plugin
+file (tests/plugins/speed_loss.py, the example of docs/extending.md) and
+nowhere in the loop, is offered, fitted, checked for its range and
+reported by the loop as the built-in ones are."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench.core.data import generate
+from bench.residual import residual_loop
+from bench.residual.sensor_laws import LAWS, SensorLaw, register
+from bench.residual.sensors import Sensed, Sensor
+from systems import get_system
+
+SYSID = 1000
+PLUGIN = Path(__file__).parents[1] / "plugins" / "speed_loss.py"
+
+
+@pytest.fixture
+def speed_loss():
+    """The plugin's law, registered for one test (importing the plugin registers it)."""
+    sys.modules.pop("speed_loss_plugin", None)
+    spec = importlib.util.spec_from_file_location("speed_loss_plugin", PLUGIN)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    yield module.SpeedLoss
+    del LAWS[module.SpeedLoss.name]
+
+
+def drive(data, c):
+    return data.replace(tau=data.tau * (1.0 + np.asarray(c) * np.abs(data.qd)))
+
+
+def laws(out) -> dict:
+    return {(e["name"], tuple(e["joints"])): e for e in out.effects
+            if e["kind"] not in ("structural", "beyond_data", "not_identified")}
+
+
+def test_a_registered_law_of_the_drive_is_found_with_its_value_and_read_through(speed_loss):
+    s = get_system("double_pendulum")
+    train, test = drive(generate(s, 3000, 0), [0.1, 0.0]), drive(generate(s, 1500, 1000), [0.1, 0.0])
+    out = residual_loop("sysid", train, test, steps=SYSID, report=lambda line: None)
+    found = laws(out)
+    assert list(found) == [("speed_loss", (1,))]
+    entry = found[("speed_loss", (1,))]
+    assert entry["kind"] == "drive" and entry["law"] == "tau_measured_1 = (1 + c*|qd_1|)*tau_1"
+    assert entry["parameters"]["c"]["value"] == pytest.approx(0.1, rel=1e-4)
+    assert out.mse_after["test"] < 1e-12 < out.mse_before["test"]
+    assert isinstance(out.models[1], Sensed)
+    np.testing.assert_allclose(out.models[1].predict_torque(test), test.tau, atol=1e-5)
+
+
+def test_a_registered_law_outside_its_range_is_a_finding(speed_loss):
+    s = get_system("double_pendulum")
+    train, test = drive(generate(s, 3000, 0), [-0.1, 0.0]), drive(generate(s, 1500, 1000), [-0.1, 0.0])
+    out = residual_loop("sysid", train, test, steps=SYSID, report=lambda line: None)
+    assert ("speed_loss", (1,)) not in laws(out)
+    (entry,) = [e for e in out.effects if e["name"] == "speed_loss" and e["joints"] == [1]]
+    assert entry["kind"] == "structural" and "0 <= c <= 0.5" in entry["finding"] and "c = -0.1" in entry["finding"]
+
+
+def test_a_sensor_offers_each_registered_law_where_it_applies(speed_loss):
+    train = generate(get_system("double_pendulum"), 50, 0)
+    sensor = Sensor.exact(train)
+    names = [(t.name, t.joint) for t in sensor.candidates(train)]
+    assert names == [("torque_gain", 1 - sensor.reference), ("load_friction", 0), ("load_friction", 1),
+                     ("speed_loss", 0), ("speed_loss", 1)]  # no time stamps: no time shift
+
+
+def test_a_law_needs_a_name_of_its_own():
+    with pytest.raises(ValueError, match="name of its own"):
+        register(type("Gain", (SensorLaw,), {"name": "torque_gain"}))
+    with pytest.raises(ValueError, match="name of its own"):
+        register(type("Offset", (SensorLaw,), {"name": "offset"}))
