@@ -42,8 +42,8 @@ from typing import Callable
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.models import FittedModel, mass_and_bias
-from bench.evaluation.rollout import BLOW_UP, MAX_CONDITION, definiteness
+from bench.core.models import FittedModel
+from bench.evaluation.rollout import BLOW_UP, accelerations
 
 #: the windows' lengths, s
 WINDOWS_S = (0.25, 1.0)
@@ -76,14 +76,9 @@ def windows(data: Dataset, length_s: float) -> list[np.ndarray]:
 
 def _accelerations(model: FittedModel, q: np.ndarray, qd: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``M^-1 (tau - c)`` at each row, and which rows have forward dynamics
-    (``M`` positive definite and not singular, every value finite)."""
-    M, c = mass_and_bias(model, q, qd)
-    ok = np.all(np.isfinite(M), axis=(1, 2)) & np.all(np.isfinite(c), axis=1)
-    M = np.where(ok[:, None, None], M, np.eye(q.shape[1]))
-    c = np.where(ok[:, None], c, 0.0)
-    ok &= definiteness(M)[1] >= 1.0 / MAX_CONDITION
-    M = np.where(ok[:, None, None], M, np.eye(q.shape[1]))
-    return np.linalg.solve(M, (tau - c)[..., None])[..., 0], ok
+    (:func:`bench.evaluation.rollout.accelerations`)."""
+    qdd, status, _ = accelerations(model, q, qd, tau)
+    return qdd, status == "ok"
 
 
 def _bounded(qd: np.ndarray) -> np.ndarray:

@@ -58,20 +58,39 @@ def definiteness(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return eig, eig[:, 0] / scale
 
 
-def forward_dynamics(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """Unforced accelerations ``M^-1 (-c)``; raises :class:`NoDynamics` where
-    ``M`` is indefinite or singular."""
+def accelerations(model, q: np.ndarray, qd: np.ndarray, tau: np.ndarray | None = None):
+    """The model's forward dynamics, ``M^-1 (tau - c)`` at each row (``tau``
+    ``None``: unforced), and each row's status: ``"ok"``, ``"diverged"``
+    (``M`` or ``c`` not finite), ``"indefinite"`` or ``"singular"``
+    (condition above :data:`MAX_CONDITION`); with the mass matrix's
+    eigenvalues. Rows without dynamics get an identity mass matrix and no
+    bias, so their values are finite and meaningless. Returns
+    ``(qdd, status, eigenvalues)``."""
     M, c = mass_and_bias(model, q, qd)
-    if not np.all(np.isfinite(M)) or not np.all(np.isfinite(c)):
-        raise NoDynamics("diverged", "the model's torques are not finite")
+    finite = np.all(np.isfinite(M), axis=(1, 2)) & np.all(np.isfinite(c), axis=1)
+    M = np.where(finite[:, None, None], M, np.eye(q.shape[1]))
+    c = np.where(finite[:, None], c, 0.0)
     eig, low = definiteness(M)
-    i = int(np.argmin(low))
+    status = np.where(~finite, "diverged", np.where(low < -1e-12, "indefinite",
+                                                    np.where(low < 1.0 / MAX_CONDITION, "singular", "ok")))
+    M = np.where((status == "ok")[:, None, None], M, np.eye(q.shape[1]))
+    rhs = -c if tau is None else tau - c
+    return np.linalg.solve(M, rhs[..., None])[..., 0], status, eig
+
+
+def forward_dynamics(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Unforced accelerations ``M^-1 (-c)`` (:func:`accelerations`); raises
+    :class:`NoDynamics` where any row has none."""
+    qdd, status, eig = accelerations(model, q, qd)
+    if np.any(status == "diverged"):
+        raise NoDynamics("diverged", "the model's torques are not finite")
+    i = int(np.argmin(eig[:, 0] / np.maximum(np.max(np.abs(eig), axis=1), np.finfo(float).tiny)))
     where = f"at q = {np.round(q[i], 3).tolist()}, qd = {np.round(qd[i], 3).tolist()} (eigenvalues {eig[i].tolist()})"
-    if low[i] < -1e-12:
+    if status[i] == "indefinite":
         raise NoDynamics("indefinite", f"d2L/dqd2 is not positive definite {where}")
-    if low[i] < 1.0 / MAX_CONDITION:
+    if status[i] == "singular":
         raise NoDynamics("singular", f"d2L/dqd2 is singular (condition above {MAX_CONDITION:g}) {where}")
-    return np.linalg.solve(M, -c[..., None])[..., 0]
+    return qdd
 
 
 def rollout(model, q0: np.ndarray, qd0: np.ndarray, horizon: float = HORIZON_S, n_points: int = N_POINTS,
