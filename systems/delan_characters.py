@@ -2,9 +2,13 @@
 
 A simulated 2-DoF planar robot writing 20 handwritten characters; 2913 samples
 of ``q, qd, qdd, tau`` at dt = 0.04 s, shipped in ``systems/data`` with its MIT
-license. The published split is kept: the characters ``e``, ``q`` and ``v``
-are the test set, the other 17 the training set. DeLaN's README reports a
-torque MSE of 4.327e-4 on them.
+license, and declared as a measured system (:mod:`systems.measured`) by
+``data/delan_characters.toml``: each character is a recording and a
+trajectory of its own, its rows the samples as they are (accelerations
+included) with their time. The published split is kept: the characters
+``e``, ``q`` and ``v`` are the test set, the other 17 the training set
+(``--split swapped``: the other way round). DeLaN's README reports a torque
+MSE of 4.327e-4 on them.
 
 These are trajectories with torques only: there are no samples of ``L``, so
 only the indirect experiment applies. The robot's true Lagrangian is not
@@ -30,11 +34,15 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-from bench.core.data import DataError, Dataset, numeric_column, read_frame
+from bench.core.data import DataError, Dataset
+from bench.core.csv_format import numeric_column, read_frame
 from systems.base import SYSTEMS, System
+from systems.measured import Measured, read_spec
 
 DATA = Path(__file__).parent / "data" / "delan_characters.csv.gz"
-TEST_CHARACTERS = ("e", "q", "v")
+#: the characters, their split and how their rows are read
+DECLARATION = read_spec(DATA.with_name("delan_characters.toml"))
+TEST_CHARACTERS = DECLARATION.test
 PUBLISHED_TORQUE_MSE = 4.327e-4
 
 
@@ -66,12 +74,11 @@ def _columns(frame, names: tuple[str, ...]) -> np.ndarray:
 
 
 @SYSTEMS.add("delan_characters", "measured", "external")
-class DelanCharacters(System):
+class DelanCharacters(Measured, System):
     coordinates = ("q1", "q2_relative")
     Params = PlanarArmParams
     sysid_unknowns = ("a1", "a2", "a3", "a4", "b1", "b2", "b3", "b4")
-    simulated = False
-    experiments = ("indirect",)
+    measured = DECLARATION
     reference = f"DeLaN's README reports a test torque MSE of {PUBLISHED_TORQUE_MSE} on these characters (e, q, v)."
     not_applicable = "DeLaN's data are trajectories with torques and no samples of L, so only the indirect experiment applies"
 
@@ -94,15 +101,3 @@ class DelanCharacters(System):
             return None
         parts = {"inertial": "tau_inertial", "coriolis": "tau_coriolis", "gravity": "tau_gravity"}
         return {part: _columns(frame, (column,))[rows] for part, column in parts.items()}
-
-    def load(self, part: str) -> Dataset:
-        """The published ``train`` or ``test`` part."""
-        frame = _frame()
-        test = frame["character"].isin(TEST_CHARACTERS)
-        if part not in ("train", "test"):
-            raise ValueError(f"part must be 'train' or 'test', got {part!r}")
-        rows = frame[test if part == "test" else ~test]
-        cols = {k: _columns(rows, (k,)) for k in ("q", "qd", "qdd", "tau")}
-        chars = "".join(sorted(rows["character"].unique()))
-        return Dataset(cols["q"], cols["qd"], cols["qdd"], cols["tau"], None, self.name,
-                       f"{DATA.name}:{part} (characters {chars})", recording=rows["character"].astype(str).to_numpy())

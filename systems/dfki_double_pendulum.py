@@ -8,8 +8,13 @@ is measured against link 1 and ``q = 0`` hangs down.
 
 Split
 -----
-Trajectories 00, 01, 02 and 04 train, 03 and 05 test. 04 and 05 are the two
-fast ones (joint 2 turns over, velocities to 20 rad/s), so each side has one.
+A measured system (:mod:`systems.measured`) declared by
+``data/dfki_double_pendulum.toml``: six trajectories, one recording each.
+Trajectories 00, 01, 02 and 04 train, 03 and 05 test (``--split swapped``:
+the other way round). 04 and 05 are the two fast ones (joint 2 turns over,
+velocities to 20 rad/s), so each side has one. Each sample keeps its time,
+so runs report driven rollouts of the test recordings and the residual loop
+offers a time shift.
 
 From a recording to samples (:func:`bench.core.recordings.preprocess`)
 ----------------------------------------------------------------------
@@ -54,22 +59,22 @@ a gear ratio of 6).
 
 from __future__ import annotations
 
-import functools
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import sympy
 
-from bench.core.data import DataError, Dataset, read_frame
-from bench.core.recordings import DEFAULT_FILTER, ColumnMap, FilterSpec, Recording, joined, preprocess
+from bench.core.data import DataError
+from bench.core.csv_format import read_frame
+from bench.core.recordings import ColumnMap, Recording, read_recording
 from systems.base import SYSTEMS, System
+from systems.measured import Measured, read_spec
 
 DATA_DIR = Path(__file__).parent / "data"
-TRAIN_TRAJECTORIES = ("00", "01", "02", "04")
-TEST_TRAJECTORIES = ("03", "05")
-#: the suite's split, and every recording (for validation that leaves one recording out at a time)
-SPLITS = {"train": TRAIN_TRAJECTORIES, "test": TEST_TRAJECTORIES, "all": tuple(sorted(TRAIN_TRAJECTORIES + TEST_TRAJECTORIES))}
+#: the recordings, their trajectories and the split
+DECLARATION = read_spec(DATA_DIR / "dfki_double_pendulum.toml")
+TRAIN_TRAJECTORIES = DECLARATION.parts("default")["train"]
+TEST_TRAJECTORIES = DECLARATION.parts("default")["test"]
 #: the lab's two column layouts of a recording
 LAYOUTS = (
     ColumnMap("time", ("pos_meas1", "pos_meas2"), ("vel_meas1", "vel_meas2"), ("tau_meas1", "tau_meas2")),
@@ -109,39 +114,38 @@ def lab_parameters() -> dict[str, float]:
     return values
 
 
+def layout_of(path: str | Path) -> ColumnMap:
+    """The lab's layout (:data:`LAYOUTS`) a raw DFKI recording is in; a
+    :class:`DataError` naming the file and the columns it lacks otherwise."""
+    path = Path(path)
+    header = read_frame(path, nrows=1).columns
+    layout = next((m for m in LAYOUTS if set(m.columns) <= set(header)), None)
+    if layout is None:
+        best = min(LAYOUTS, key=lambda m: len(set(m.columns) - set(header)))
+        missing = [c for c in best.columns if c not in header]
+        raise DataError(f"{path}: missing column(s) {', '.join(missing)} of a DFKI recording "
+                        f"(or give your own layout: bench convert --columns time=...,q_1=...,qd_1=...,tau_1=...)")
+    return layout
+
+
 def read_raw(path: str | Path) -> Recording:
     """A raw DFKI recording in either of the lab's layouts (:data:`LAYOUTS`),
     checked: numeric and finite, with strictly increasing time. Raises
     :class:`DataError` naming the file and the column."""
-    path = Path(path)
-    frame = read_frame(path)
-    layout = next((m for m in LAYOUTS if set(m.columns) <= set(frame.columns)), None)
-    if layout is None:
-        best = min(LAYOUTS, key=lambda m: len(set(m.columns) - set(frame.columns)))
-        missing = [c for c in best.columns if c not in frame.columns]
-        raise DataError(f"{path}: missing column(s) {', '.join(missing)} of a DFKI recording "
-                        f"(or give your own layout: bench convert --columns time=...,q_1=...,qd_1=...,tau_1=...)")
-    return layout.take(frame, path)
+    return read_recording(path, layout_of(path))
 
 
 def trajectory_path(name: str) -> Path:
     return DATA_DIR / f"dfki_trajectory_{name}.csv.gz"
 
 
-@functools.lru_cache(maxsize=8)
-def _samples(split: str, spec: FilterSpec, filter_torque: bool) -> dict[str, np.ndarray]:
-    names = SPLITS[split]
-    return joined([preprocess(read_raw(trajectory_path(n)), spec, filter_torque=filter_torque) for n in names], names)
-
-
 @SYSTEMS.add("dfki_double_pendulum", "measured", "external")
-class DfkiDoublePendulum(System):
+class DfkiDoublePendulum(Measured, System):
     coordinates = ("q1", "q2_relative")
     planar_chain = True  # its second link's length is not given: no tip payload
     Params = DfkiParams
     sysid_unknowns = ("m1", "m2", "r1", "r2", "I1", "I2")
-    simulated = False
-    experiments = ("indirect",)
+    measured = DECLARATION
     reference = ("with this pre-processing, the lab's own identified model 2.0 (rigid body, rotor inertia, "
                  "viscous and Coulomb friction; not fitted here) has a test torque MSE of 0.0177, and a "
                  "least-squares fit of the rigid-body form alone 0.0343 "
@@ -161,20 +165,3 @@ class DfkiDoublePendulum(System):
         # q = 0 hangs down: V = -g (m1 r1 + m2 l1) cos q1 - g m2 r2 cos(q1 + q2)
         gravity = p.g * (p.m1 * p.r1 + p.m2 * p.l1) * sympy.cos(q1) + p.g * p.m2 * p.r2 * sympy.cos(q1 + q2)
         return kinetic + gravity
-
-    @classmethod
-    def source_files(cls) -> list[str]:
-        """The six recordings."""
-        return [str(trajectory_path(n)) for n in SPLITS["all"]]
-
-    def load(self, part: str, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> Dataset:
-        """The ``train`` (trajectories 00, 01, 02, 04) or ``test`` (03, 05) part,
-        or ``all`` six; each sample's ``recording`` is its trajectory's name."""
-        if part not in SPLITS:
-            raise ValueError(f"part must be one of {', '.join(SPLITS)}, got {part!r}")
-        s = _samples(part, spec, filter_torque)
-        names = SPLITS[part]
-        source = f"dfki_trajectory_{{{','.join(names)}}}.csv.gz:{part}"
-        meta = {"filter": asdict(spec), "torque_filtered": filter_torque}
-        return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,
-                       recording=s["recording"].copy(), sign_qd=s["sign_qd"].copy())

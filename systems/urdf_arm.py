@@ -61,7 +61,7 @@ import torch
 
 from bench.core.data import DataError
 from bench.core.system import Domain, LinearForm
-from systems.base import SYSTEMS, System
+from systems.base import SYSTEMS, System, register_file
 
 DATA_DIR = Path(__file__).parent / "data"
 #: each joint's angle stays this fraction of its range inside its limits
@@ -73,7 +73,7 @@ INERTIAL = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
 
 def _pinocchio():
-    import pinocchio  # the engine: imported where an arm is built, so that the rest of the suite starts without it
+    import pinocchio  # the engine: imported where an arm is built (the shipped arms are built when systems is imported)
 
     return pinocchio
 
@@ -273,19 +273,14 @@ def urdf_arm(urdf: str | Path, *, locked: Sequence[str] = (), name: str | None =
 
 def register_urdf(spec: str) -> str:
     """Register the arm of ``urdf:PATH`` (every movable joint a coordinate)
-    under ``urdf_<file stem>``; returns that name. Registering the same file
-    again is a no-op."""
-    path = Path(spec.split(":", 1)[1]).expanduser().resolve()
-    stem = path.name.split(".")[0]
-    name = "urdf_" + re.sub(r"[^0-9a-zA-Z]+", "_", stem).strip("_").lower()
-    if name in SYSTEMS:
-        if getattr(SYSTEMS[name], "urdf_source", None) == str(path):
-            return name
-        raise DataError(f"{path}: another URDF is registered as {name!r} already")
-    if not path.is_file():
-        raise DataError(f"{path}: no such URDF file")
-    SYSTEMS.add(name, "simulated", "arm", "urdf")(urdf_arm(path))
-    return name
+    under ``urdf_<file stem>`` (:func:`systems.base.register_file`); returns that name."""
+    def build(path: Path, name: str) -> type[UrdfArm]:
+        if not path.is_file():
+            raise DataError(f"{path}: no such URDF file")
+        return urdf_arm(path)
+
+    return register_file("urdf", spec.split(":", 1)[1], ("simulated", "arm", "urdf"), build,
+                         lambda cls: getattr(cls, "urdf_source", None))
 
 
 @SYSTEMS.add("panda", "simulated", "arm")

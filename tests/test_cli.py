@@ -302,7 +302,7 @@ def dfki_raw(tmp_path, layout):
 
 
 def test_convert_reads_both_dfki_layouts_and_any_log_by_its_columns(tmp_path):
-    from bench.core.data import read_csv
+    from bench.core.csv_format import read_csv
     from systems.dfki_double_pendulum import LAYOUTS
 
     outputs = []
@@ -320,7 +320,7 @@ def test_convert_reads_both_dfki_layouts_and_any_log_by_its_columns(tmp_path):
 
 
 def test_convert_names_each_log_as_a_recording(tmp_path):
-    from bench.core.data import read_csv
+    from bench.core.csv_format import read_csv
     from systems.dfki_double_pendulum import LAYOUTS
 
     first, second = dfki_raw(tmp_path, LAYOUTS[0].columns), dfki_raw(tmp_path, LAYOUTS[1].columns)

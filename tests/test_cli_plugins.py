@@ -14,7 +14,7 @@ import pytest
 import tests.test_extension  # noqa: F401  (registers toy_mass_spring and toy_quadratic here, as --plugin does)
 from bench.cli import build_parser
 from bench.cli.options import UsageError, hyperparameters
-from bench.core.data import read_csv
+from bench.core.csv_format import read_csv
 from tests.commandline import cli
 
 ROOT = Path(__file__).resolve().parent.parent

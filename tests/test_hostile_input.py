@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from bench.cli import main
 from bench.core.arguments import assignment
-from bench.core.data import MAX_ABS_VALUE, DataError, read_csv
+from bench.core.data import DataError
+from bench.core.csv_format import MAX_ABS_VALUE, read_csv
 from bench.core.errors import UserError
 from bench.runner.records import Record, RecordError, read_records, record_path, write_record
 from bench.runner.spec import RunSpec

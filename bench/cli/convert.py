@@ -9,11 +9,12 @@ from pathlib import Path
 
 from bench.cli.options import UsageError
 from bench.core.arguments import nonnegative, positive, positive_int
-from bench.core.data import Dataset, write_csv
+from bench.core.data import Dataset
+from bench.core.csv_format import write_csv
 from bench.core.fileio import check_output, file_digest, settings_path, write_json
-from bench.core.recordings import (DEFAULT_FILTER, TIME_UNITS, ColumnMap, FilterSpec, Recording, beyond_a_turn,
-                                   check_rate, in_units, joined, preprocess, read_recording)
-from systems.dfki_double_pendulum import read_raw
+from bench.core.recordings import (DEFAULT_FILTER, TIME_UNITS, ColumnMap, FilterSpec, Recording, beyond_a_turn, joined,
+                                   preprocess, read_log)
+from systems.dfki_double_pendulum import layout_of
 
 HELP = "turn a robot's log into the suite's CSV format: resample, low-pass, differentiate"
 
@@ -63,9 +64,13 @@ def main(args) -> int:
         raise UsageError(f"two logs would be the same recording {repeated[0]!r}: give files with distinct names")
     # one column map for every log, so they share their joints; each is read and checked before anything is written
     columns = ColumnMap.parse(args.columns) if args.columns else None
+    if columns is not None and columns.qdd:
+        raise UsageError("--columns: convert differentiates the filtered velocity and would not use logged qdd_i "
+                         "columns; leave them out (a measured system's file with as_recorded = true takes logged "
+                         "accelerations as they are)")
     trajectories = trajectory_names(args.trajectory, names, need=columns is not None and not args.distinct)
     system = None if columns else "dfki_double_pendulum"
-    recordings, warnings = zip(*(read_log(path, columns, spec, args.time_unit, args.degrees) for path in args.raw))
+    recordings, warnings = zip(*(log_with_warnings(path, columns, spec, args.time_unit, args.degrees) for path in args.raw))
     parts = [preprocess(r, spec) for r in recordings]
     s = joined(parts, names, trajectories)
     for line in (w for group in warnings for w in group):  # once every log is read: an error is the one line
@@ -83,16 +88,17 @@ def main(args) -> int:
     return 0
 
 
-def read_log(path: Path, columns: ColumnMap | None, spec: FilterSpec, time_unit: str,
-             degrees: bool) -> tuple[Recording, list[str]]:
-    """One log, in seconds and radians, its rate checked against the filter
-    (:func:`~bench.core.recordings.check_rate`), and its warnings: one naming
-    degrees for each q that leaves ±2π where ``degrees`` was not given."""
-    recording = in_units(read_recording(path, columns) if columns else read_raw(path), time_unit, degrees)
-    check_rate(recording, spec, path, columns.time if columns else "time")
+def log_with_warnings(path: Path, columns: ColumnMap | None, spec: FilterSpec, time_unit: str,
+                      degrees: bool) -> tuple[Recording, list[str]]:
+    """One log as the suite takes it (:func:`~bench.core.recordings.read_log`;
+    ``columns`` ``None``: a DFKI recording in either of the lab's layouts), and
+    its warnings: one naming degrees for each q that leaves ±2π where
+    ``degrees`` was not given."""
+    columns = columns or layout_of(path)
+    recording = read_log(path, columns, spec, time_unit, degrees)
     warnings = []
     for j, lo, hi in ([] if degrees else beyond_a_turn(recording)):
-        name = columns.q[j] if columns else f"q{j + 1}"
+        name = columns.q[j]
         warnings.append(f"warning: {path}: column {name} (q_{j + 1}) spans {lo:.4g} to {hi:.4g}, beyond ±2π: if the "
                         f"log is in degrees, give --degrees to convert q and qd to radians")
     return recording, warnings

@@ -23,6 +23,8 @@ def main(args) -> int:
         splits = f"  splits={','.join(sys_obj.splits)}" if len(sys_obj.splits) > 1 else ""
         print(f"  {entry.name:<20} dof={sys_obj.dof}  {kind:<9}  coordinates={','.join(sys_obj.coordinates)}  "
               f"tags={','.join(sorted(entry.tags))}{splits}")
+        if sys_obj.listing():
+            print(f"  {'':<20} {sys_obj.listing()}")
     print("Methods:")
     for entry in METHODS.entries():
         reason = entry.unavailable_reason()

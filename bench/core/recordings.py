@@ -37,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.core.data import DataError, numeric_column, read_frame
+from bench.core.data import DataError
+from bench.core.csv_format import numeric_column, read_frame
 from bench.core.errors import ConfigError
 
 #: the fewest rows a recording may have
@@ -86,21 +87,26 @@ class Recording:
     q: np.ndarray
     qd: np.ndarray
     tau: np.ndarray
+    #: the logged accelerations, where the log holds them (``ColumnMap.qdd``)
+    qdd: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class ColumnMap:
-    """Which columns of a log hold time and each joint's q, qd and tau."""
+    """Which columns of a log hold time and each joint's q, qd and tau (and
+    qdd, where the log holds accelerations)."""
 
     time: str
     q: tuple[str, ...]
     qd: tuple[str, ...]
     tau: tuple[str, ...]
+    qdd: tuple[str, ...] = ()
 
     @classmethod
     def parse(cls, text: str, source: str = "--columns") -> "ColumnMap":
         """``"time=t,q_1=pos1,qd_1=vel1,tau_1=eff1,..."``: every joint from 1 to
-        n needs q, qd and tau; a clear :class:`ConfigError` otherwise."""
+        n needs q, qd and tau (and qdd on every joint or none); a clear
+        :class:`ConfigError` otherwise."""
         roles: dict[str, str] = {}
         for item in (part.strip() for part in text.split(",") if part.strip()):
             role, sep, column = item.partition("=")
@@ -113,16 +119,22 @@ class ColumnMap:
         if "time" not in roles:
             raise ConfigError(f"{source}: name the time column (time=COLUMN)")
         joints = sorted({int(r.rsplit("_", 1)[1]) for r in roles if r != "time" and r.rsplit("_", 1)[-1].isdigit()})
-        unknown = [r for r in roles if r != "time" and not (r.rsplit("_", 1)[0] in ("q", "qd", "tau") and r.rsplit("_", 1)[-1].isdigit())]
+        unknown = [r for r in roles if r != "time" and not (r.rsplit("_", 1)[0] in ("q", "qd", "qdd", "tau")
+                                                              and r.rsplit("_", 1)[-1].isdigit())]
         if unknown:
-            raise ConfigError(f"{source}: unknown role(s) {', '.join(unknown)}; use time, q_i, qd_i and tau_i")
+            raise ConfigError(f"{source}: unknown role(s) {', '.join(unknown)}; use time, q_i, qd_i and tau_i (and qdd_i)")
         dof = max(joints, default=0)
         if dof == 0:
             raise ConfigError(f"{source}: name the columns of q_1, qd_1 and tau_1 at least")
         missing = [f"{k}_{i}" for i in range(1, dof + 1) for k in ("q", "qd", "tau") if f"{k}_{i}" not in roles]
         if missing:
             raise ConfigError(f"{source}: missing {', '.join(missing)} (every joint from 1 to {dof} needs q, qd and tau)")
-        return cls(roles["time"], *(tuple(roles[f"{k}_{i}"] for i in range(1, dof + 1)) for k in ("q", "qd", "tau")))
+        given = [i for i in range(1, dof + 1) if f"qdd_{i}" in roles]
+        if given and len(given) != dof:
+            raise ConfigError(f"{source}: qdd is given for joint(s) {', '.join(map(str, given))} only; give it for every "
+                              f"joint from 1 to {dof} or for none")
+        kinds = ("q", "qd", "tau", "qdd") if given else ("q", "qd", "tau")
+        return cls(roles["time"], *(tuple(roles[f"{k}_{i}"] for i in range(1, dof + 1)) for k in kinds))
 
     @property
     def dof(self) -> int:
@@ -130,7 +142,7 @@ class ColumnMap:
 
     @property
     def columns(self) -> tuple[str, ...]:
-        return (self.time, *self.q, *self.qd, *self.tau)
+        return (self.time, *self.q, *self.qd, *self.tau, *self.qdd)
 
     def take(self, frame, path: Path | str = "recording") -> Recording:
         """The recording in ``frame`` (a DataFrame), checked: the columns
@@ -146,14 +158,16 @@ class ColumnMap:
             row = int(np.flatnonzero(steps <= 0)[0]) + 2
             raise DataError(f"{path}: column {self.time} does not increase at data row {row}")
         q, qd, tau = (np.stack([numeric_column(frame, c, path) for c in cols], axis=1) for cols in (self.q, self.qd, self.tau))
-        return Recording(time, q, qd, tau)
+        qdd = np.stack([numeric_column(frame, c, path) for c in self.qdd], axis=1) if self.qdd else None
+        return Recording(time, q, qd, tau, qdd)
 
 
 def in_units(recording: Recording, time_unit: str = "s", degrees: bool = False) -> Recording:
     """``recording`` with its time in seconds (from ``time_unit``, :data:`TIME_UNITS`)
     and, with ``degrees``, its q and qd from degrees to radians."""
     angle = math.pi / 180 if degrees else 1.0
-    return Recording(recording.time * TIME_UNITS[time_unit], recording.q * angle, recording.qd * angle, recording.tau)
+    qdd = None if recording.qdd is None else recording.qdd * angle
+    return Recording(recording.time * TIME_UNITS[time_unit], recording.q * angle, recording.qd * angle, recording.tau, qdd)
 
 
 def check_rate(recording: Recording, spec: FilterSpec, path: Path | str, column: str) -> None:
@@ -189,6 +203,21 @@ def read_recording(path: str | Path, columns: ColumnMap) -> Recording:
     """A log file's recording, checked (:meth:`ColumnMap.take`); :class:`DataError` naming the file otherwise."""
     path = Path(path)
     return columns.take(read_frame(path), path)
+
+
+def read_log(path: str | Path, columns: ColumnMap, spec: FilterSpec | None, time_unit: str = "s",
+             degrees: bool = False, rows=None, where: str | None = None) -> Recording:
+    """A robot log's recording as the suite takes it: checked
+    (:meth:`ColumnMap.take`), in seconds and radians (:func:`in_units`), and
+    its rate checked against ``spec``'s filter (:func:`check_rate`; ``None``:
+    its rows are the samples, no filter). ``rows`` (a DataFrame) are the
+    log's rows of this recording where the log holds several, ``where`` how
+    an error names them."""
+    raw = read_recording(path, columns) if rows is None else columns.take(rows, where or path)
+    recording = in_units(raw, time_unit, degrees)
+    if spec is not None:
+        check_rate(recording, spec, where or path, columns.time)
+    return recording
 
 
 def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> dict[str, np.ndarray]:

@@ -275,6 +275,11 @@ class System(abc.ABC):
                                 f"log in degrees? (--ignore-limits fits it anyway)")
 
     @classmethod
+    def listing(cls) -> str:
+        """What ``bench list`` says of the system's data beyond its kind (a measured system's recordings)."""
+        return ""
+
+    @classmethod
     def source_files(cls) -> list[str]:
         """The files outside the code that define the system (its robot
         description, its measured-arm file); none for a system given by code."""

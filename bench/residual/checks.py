@@ -1,5 +1,5 @@
 """The checks that keep or undo a round of the loop: its model's error on
-held-out recordings, and whether its mass matrix is positive definite."""
+held-out trajectories, and whether its mass matrix is positive definite."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ MASS_STATES = 256
 def heldout(strategy: Strategy, model: LoopModel, train: Dataset, scale: np.ndarray | None = None) -> float:
     """The model's torque MSE on held-out data: the linear problem that
     tracing and pruning fit (:meth:`~bench.residual.strategies.Strategy.problem`),
-    cross-validated over whole recordings (:func:`bench.residual.validation.cv_mse`).
+    cross-validated over whole trajectories (:func:`bench.residual.validation.cv_mse`).
     ``scale`` (one factor a joint, or one a sample and joint: a torque sensor's
     gains and a drive's load-dependent friction, :meth:`bench.residual.sensors.Sensor.factor`)
     turns the corrected torques ``train`` holds back into measured ones, so that

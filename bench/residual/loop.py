@@ -46,11 +46,11 @@ can undo a round) is the model's refit strategy, chosen once from the model
    (:mod:`bench.residual.beyond_data`). The JSON reports the effects as laws
    (:mod:`bench.core.laws`).
 6. **Keep the round only if it generalises.** The round's model is scored by
-   cross-validation over whole recordings (:mod:`bench.residual.validation`:
-   leave one recording out, or contiguous blocks where the training data
-   name fewer than two); a round that does not lower that held-out error is
-   undone and the loop ends, so the final model is never worse than the
-   starting one on held-out recordings. A strategy may undo a round too (a
+   cross-validation over whole trajectories (:mod:`bench.residual.validation`:
+   leave one trajectory out, contiguous spans of the one trajectory the
+   training data hold, or contiguous blocks of independent samples); a round
+   that does not lower that held-out error is undone and the loop ends, so
+   the final model is never worse than the starting one on held-out data. A strategy may undo a round too (a
    kept fit's effects must also lower, on each half, the error of the method
    fitted on the other half). Each round records the figure
    (``heldout_mse``). A round after which the mass matrix ``d^2 L / dqd^2``
@@ -284,7 +284,7 @@ class _Loop:
             rounds=[r.to_json() for r in rounds], validation=describe_validation(train),
             mass_matrix={"smallest_eigenvalue_before": self.mass_before, "smallest_eigenvalue_after": mass,
                          "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
-            mse_heldout_recordings={"before": rounds[0].heldout_mse, "after": held} if len(train.recordings()) >= 2 else None,
+            mse_heldout_trajectories={"before": rounds[0].heldout_mse, "after": held} if len(train.recordings()) >= 2 else None,
             lagrangian=None if expr is None else str(expr),
             seconds=round(time.perf_counter() - self.start, 2), statistics_seconds=round(self.statistics, 2),
             budget_s=budget.seconds, fit_budget_s=self.fitter.budget.seconds if budget.kind == "seconds" else None,
@@ -293,6 +293,7 @@ class _Loop:
             test_source=None if self.test is None else self.test.source, provenance=provenance(),
             feasibility=None if self.feasible_before is None else {"before": self.feasible_before, "after": feasible_after},
             stopped=self.stopped, heldout_holds_out=strategy.holds_out(),
+            sensor_laws_offered=list(dict.fromkeys(t.name for t in Sensor.exact(self.measured).candidates(self.measured))),
         )
 
     def save(self, model: LoopModel, held: float, mass: float, rounds: list[Round], findings: dict) -> None:
@@ -465,7 +466,7 @@ class _Loop:
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
         """Rounds 1 to :data:`MAX_ROUNDS`; returns the final model, its held-out
         error and mass-matrix eigenvalue, and the structural findings."""
-        report, strategy = self.report, self.strategy
+        report = self.report
         pool, findings, longest = self.candidates(), {}, 0.0
         for k in range(1, MAX_ROUNDS + 1):
             began = time.perf_counter()

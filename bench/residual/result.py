@@ -14,8 +14,13 @@ class ResidualResult:
     ``python -m bench residual --json``.
 
     ``validation`` says how held-out data were formed (:mod:`bench.residual.validation`);
-    ``mse_heldout_recordings`` is the cross-validated torque MSE before and
-    after the loop where the training data name two or more recordings.
+    ``mse_heldout_trajectories`` is the cross-validated torque MSE before and
+    after the loop, over held-out trajectories (or spans of one), where the
+    training data name two or more recordings (files published before the
+    key was named for trajectories call it ``mse_heldout_recordings``, and
+    :meth:`from_json` reads either). ``sensor_laws_offered`` names the laws
+    of the sensor and the drive the loop looked for on the training data (a
+    time shift needs time stamps).
     ``mass_matrix`` gives the smallest eigenvalue of ``d^2 L / dqd^2`` over
     the training states checked, before and after, and whether the final
     model's is positive definite there. ``statistics_seconds`` is the part of
@@ -54,7 +59,7 @@ class ResidualResult:
     train_source: str
     test_source: str | None
     validation: str = ""
-    mse_heldout_recordings: dict | None = None
+    mse_heldout_trajectories: dict | None = None
     mass_matrix: dict | None = None
     statistics_seconds: float | None = None
     budget: dict | None = None
@@ -72,6 +77,7 @@ class ResidualResult:
     heldout_holds_out: str | None = None
     loop_seconds: float | None = None
     rollout_seconds: float | None = None
+    sensor_laws_offered: list[str] | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:
@@ -79,6 +85,9 @@ class ResidualResult:
 
     @classmethod
     def from_json(cls, obj: dict) -> "ResidualResult":
+        obj = dict(obj)
+        if "mse_heldout_recordings" in obj:  # the key's name in files published before
+            obj["mse_heldout_trajectories"] = obj.pop("mse_heldout_recordings")
         return cls(**obj)
 
 

@@ -8,9 +8,9 @@ A candidate is accepted only if all hold:
   Raftery's scale);
 * its coefficient is at least :data:`MIN_T` standard errors from zero;
 * it lowers the cross-validated mean squared residual on held-out data by at
-  least :data:`MIN_HELDOUT_GAIN` of that residual: leave one recording out
-  where the training data name several recordings, contiguous blocks
-  otherwise (:mod:`bench.residual.validation`; on measured trajectories
+  least :data:`MIN_HELDOUT_GAIN` of that residual: leave one trajectory out
+  where the training data name several trajectories, contiguous spans of
+  one trajectory or blocks of independent samples otherwise (:mod:`bench.residual.validation`; on measured trajectories
   neighbouring samples are near copies, so interleaved rows would not test
   generalisation). On independent samples (generated data, no trajectory)
   a smaller gain is enough where it is :data:`MIN_HELDOUT_CHI2` in units of

@@ -29,7 +29,7 @@ import numpy as np
 from bench.core.data import Dataset
 from bench.core.regression import Compressed, least_squares
 
-#: contiguous blocks where the data name fewer than two recordings
+#: contiguous spans of one trajectory, or blocks of independent samples, where the data name fewer than two trajectories
 BLOCKS = 4
 
 

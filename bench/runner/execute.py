@@ -19,7 +19,8 @@ from typing import Callable
 import torch
 
 from bench.core.budget import STEPS
-from bench.core.data import Dataset, add_noise, generate, read_csv
+from bench.core.data import Dataset, add_noise, generate
+from bench.core.csv_format import read_csv
 from bench.core.models import NoVariant
 from bench.core.timeouts import Timeout
 from bench.core.system import System

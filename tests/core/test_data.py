@@ -7,7 +7,8 @@ import os
 import numpy as np
 import pytest
 
-from bench.core.data import DataError, Dataset, add_noise, generate, read_csv, write_csv
+from bench.core.data import DataError, Dataset, add_noise, generate
+from bench.core.csv_format import read_csv, write_csv
 
 
 def test_generation_is_a_pure_cached_function(double_pendulum, tmp_path, monkeypatch):

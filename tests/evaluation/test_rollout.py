@@ -83,5 +83,6 @@ def test_records_of_simulated_systems_carry_a_rollout(tmp_path):
     assert record.rollout["status"] == "ok" and record.rollout["q_rmse"] < 1e-6
     skipped = execute.execute(RunSpec(**{**spec.to_dict(), "rollout": False, "plugins": ()}))
     assert skipped.rollout is None
+    # a measured system's recordings carry their time: its records get rollouts driven by the measured torques
     measured = build_specs(["delan_characters"], ["sparse"], ["indirect"], [0], 5.0)[0]
-    assert execute.execute(measured).rollout is None
+    assert execute.execute(measured).rollout["kind"] == "driven"

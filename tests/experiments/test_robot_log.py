@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.core.data import read_csv
+from bench.core.csv_format import read_csv
 from bench.core.errors import ConfigError
 from bench.experiments.robot_log import columns, simulate
 from systems import get_system

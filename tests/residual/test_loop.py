@@ -184,7 +184,7 @@ def test_cli_converts_a_raw_dfki_recording(tmp_path):
 
     r = cli("convert", "--format", "dfki", str(trajectory_path("03")), "--out", str(tmp_path / "t.csv"))
     assert r.returncode == 0, r.stderr
-    from bench.core.data import read_csv
+    from bench.core.csv_format import read_csv
 
     data = read_csv(tmp_path / "t.csv", dof=2)
     expected = get_system("dfki_double_pendulum").load("test")
@@ -199,7 +199,8 @@ def test_cli_converts_a_raw_dfki_recording(tmp_path):
     assert list(convert["logs"]) == [str(trajectory_path("03"))] and len(convert["logs"][str(trajectory_path("03"))]) == 64
     # a measured system's own split: its recordings are the files
     own = ResidualJob(system="dfki_double_pendulum", method="sysid").inputs()["files"]
-    assert str(trajectory_path("03")) in own and len(own) == 6 and all(len(f["sha256"]) == 64 for f in own.values())
+    assert str(trajectory_path("03")) in own and len(own) == 7  # the declaration file and its six recordings
+    assert any(path.endswith("dfki_double_pendulum.toml") for path in own) and all(len(f["sha256"]) == 64 for f in own.values())
 
 
 def test_a_huge_symbolic_model_is_refitted_like_a_neural_one():

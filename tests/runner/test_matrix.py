@@ -136,7 +136,7 @@ def test_measured_systems_use_their_packaged_splits_and_skip_the_direct_experime
     assert record.status == "not_applicable" and "only the indirect experiment applies" in record.error
     assert preflight(indirect) is None
     train, test = load_data(indirect, make_system(indirect))
-    assert len(train) == 2459 and len(test) == 454 and "characters eqv" in test.source
+    assert len(train) == 2459 and len(test) == 454 and "trajectories e, q, v" in test.source
 
 
 def test_matrix_on_a_real_dask_local_cluster(tmp_path):
@@ -153,7 +153,8 @@ def test_matrix_on_a_real_dask_local_cluster(tmp_path):
 
 
 def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatch):
-    from bench.core.data import generate, write_csv
+    from bench.core.data import generate
+    from bench.core.csv_format import write_csv
     from systems import SYSTEMS
 
     data = generate(SYSTEMS["double_pendulum"](), 64, seed=0)

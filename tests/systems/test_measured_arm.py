@@ -43,7 +43,7 @@ def test_an_unknown_split_is_refused_in_one_line():
     # the declaration itself names no other split, rather than taking any other name as swapped
     with pytest.raises(ConfigError, match="no split 'sideways'"):
         SYSTEMS["kuka_lwr4"].measured.parts("sideways")
-    with pytest.raises(ValueError, match="part must be 'train' or 'test'"):
+    with pytest.raises(ValueError, match="part must be one of train, test, all"):
         SYSTEMS["kuka_lwr4"]().load("validation")
 
 

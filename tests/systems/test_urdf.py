@@ -13,7 +13,8 @@ import torch
 pin = pytest.importorskip("pinocchio")
 
 from bench.cli import main  # noqa: E402
-from bench.core.data import DataError, generate, mse, read_csv  # noqa: E402
+from bench.core.data import DataError, generate, mse  # noqa: E402
+from bench.core.csv_format import read_csv
 from bench.core.dynamics import euler_lagrange  # noqa: E402
 from bench.evaluation.rollout import rollout_error  # noqa: E402
 from methods import METHODS  # noqa: E402

@@ -1,0 +1,285 @@
+"""Measured systems: recordings of a real (or recorded) robot, declared by one file.
+
+A measured system's data are recordings grouped by the excitation trajectory
+each follows. A robot repeats a trajectory, and a recording of the same
+trajectory again is a near copy of the first: a model checked on a repeat of
+the trajectory it was fitted on has not been tested. So a measured system's
+splits hold out whole trajectories:
+
+* ``default``: train on every trajectory but the held-out ones (``test``),
+  test on those;
+* ``swapped``: the other way round.
+
+One TOML file declares the recordings (paths relative to it)::
+
+    columns = "time=t,q_1=pos1,qd_1=vel1,tau_1=eff1,q_2=pos2,qd_2=vel2,tau_2=eff2"
+    test = ["fast"]                          # the trajectories the default split tests on
+    time_unit = "s"                          # optional: the time column's unit, s (default), ms or us
+    degrees = false                          # optional: true where q and qd are in degrees
+    [filter]                                 # optional: bench.core.recordings.FilterSpec's fields
+    cutoff_hz = 10
+    [recordings]
+    run1 = { file = "run1.csv", trajectory = "slow" }
+    run2 = { file = "run2.csv", trajectory = "slow" }
+    run3 = { file = "run3.csv", trajectory = "fast" }
+
+or, where one file holds every recording and a column names each row's
+recording (each recording a trajectory of its own), ``recordings_in = {
+file = "all.csv", column = "character" }`` in place of ``[recordings]``.
+Each recording is a robot log in the format of ``bench convert --columns``,
+its rate checked as ``convert`` checks it and turned into samples by the
+suite's filter-and-differentiate step
+(:func:`bench.core.recordings.preprocess`); with ``as_recorded = true`` the
+log holds its accelerations too (``qdd_i`` in ``columns``) and its rows are
+the samples as they are. Each sample keeps its recording, its trajectory and
+its time, so that the residual loop validates on whole trajectories, offers
+the laws that need time (a time shift), and the driven rollouts
+(:mod:`bench.evaluation.driven`) follow a recording in time.
+
+:class:`Measured` gives a system its data from such a file; the system
+gives the model (a URDF's arm, :mod:`systems.measured_arm`, or a form of its
+own, as the DFKI double pendulum and DeLaN's characters do).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+
+from bench.core.data import Dataset, DataError
+from bench.core.csv_format import read_frame
+from bench.core.errors import ConfigError
+from bench.core.recordings import TIME_UNITS, ColumnMap, FilterSpec, joined, preprocess, read_log
+
+#: the splits of every measured system: its declared one, and train and test exchanged
+SPLITS = ("default", "swapped")
+#: the parts :meth:`Measured.load` gives: a split's two, or every trajectory
+PARTS = ("train", "test", "all")
+
+
+@dataclass(frozen=True)
+class RecordingFile:
+    """One recording: its name, the trajectory it follows, its log (and, where
+    one log holds several, the column and value that pick its rows)."""
+
+    name: str
+    trajectory: str
+    path: Path
+    column: str | None = None
+
+
+@dataclass(frozen=True)
+class MeasuredSpec:
+    """A measured system's file, read and checked (see the module docstring)."""
+
+    source: Path
+    columns: ColumnMap
+    recordings: tuple[RecordingFile, ...]
+    test: tuple[str, ...]
+    filter: FilterSpec
+    time_unit: str = "s"
+    degrees: bool = False
+    as_recorded: bool = False
+    #: a measured arm's URDF (:mod:`systems.measured_arm`); ``None`` for a system with a form of its own
+    urdf: Path | None = None
+
+    @property
+    def trajectories(self) -> tuple[str, ...]:
+        """Every trajectory, in the order the recordings name them."""
+        return tuple(dict.fromkeys(r.trajectory for r in self.recordings))
+
+    def parts(self, split: str) -> dict[str, tuple[str, ...]]:
+        """The trajectories each part of ``split`` holds: ``{"train": ..., "test": ..., "all": ...}``."""
+        if split not in SPLITS:
+            raise ConfigError(f"{self.source}: no split {split!r}; a measured system offers {', '.join(SPLITS)}")
+        test = self.test
+        train = tuple(t for t in self.trajectories if t not in test)
+        if split == "swapped":
+            train, test = test, train
+        return {"train": train, "test": test, "all": self.trajectories}
+
+    def describe(self) -> str:
+        """How the recordings become samples, in words."""
+        return "the logged rows as they are (accelerations logged)" if self.as_recorded else self.filter.describe()
+
+
+KNOWN_KEYS = ("urdf", "columns", "test", "filter", "recordings", "recordings_in", "time_unit", "degrees", "as_recorded")
+
+
+def read_spec(path: str | Path) -> MeasuredSpec:
+    """The measured system's file at ``path``, checked; :class:`DataError` naming the file otherwise."""
+    path = Path(path).expanduser().resolve()
+    try:
+        raw = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise DataError(f"{path}: no such measured-system file") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise DataError(f"{path}: not a readable TOML file ({exc})") from None
+    unknown = sorted(set(raw) - set(KNOWN_KEYS))
+    if unknown:
+        raise DataError(f"{path}: unknown key(s) {', '.join(unknown)} (a measured-system file has {', '.join(sorted(KNOWN_KEYS))})")
+    for key in ("columns", "test"):
+        if key not in raw:
+            raise DataError(f"{path}: missing {key!r} (see docs/extending.md, A measured arm)")
+    here = path.parent
+    try:
+        columns = ColumnMap.parse(str(raw["columns"]), f"{path}: columns")
+    except ConfigError as exc:
+        raise DataError(str(exc)) from None
+    as_recorded = raw.get("as_recorded", False)
+    if not isinstance(as_recorded, bool):
+        raise DataError(f"{path}: as_recorded must be true or false, got {as_recorded!r}")
+    if as_recorded and not columns.qdd:
+        raise DataError(f"{path}: as_recorded needs the logged accelerations in columns (qdd_1=..., one per joint)")
+    recordings = _recordings(path, raw)
+    test = (raw["test"],) if isinstance(raw["test"], str) else tuple(map(str, raw["test"]))
+    named = list(dict.fromkeys(r.trajectory for r in recordings))
+    missing = [t for t in test if t not in named]
+    if missing or not test:
+        raise DataError(f"{path}: test names trajectory(ies) {', '.join(missing) or '(none)'}, but the recordings "
+                        f"follow {', '.join(named)}")
+    if set(test) == set(named):
+        raise DataError(f"{path}: test holds every trajectory ({', '.join(named)}); leave at least one to train on")
+    try:
+        spec = FilterSpec(**raw.get("filter", {}))
+    except TypeError as exc:
+        raise DataError(f"{path}: [filter]: {exc} (its keys: {', '.join(f.name for f in dataclasses.fields(FilterSpec))})") from None
+    except ConfigError as exc:
+        raise DataError(f"{path}: [filter]: {exc}") from None
+    time_unit = raw.get("time_unit", "s")
+    if time_unit not in TIME_UNITS:
+        raise DataError(f"{path}: time_unit must be one of {', '.join(TIME_UNITS)}, got {time_unit!r}")
+    degrees = raw.get("degrees", False)
+    if not isinstance(degrees, bool):
+        raise DataError(f"{path}: degrees must be true or false, got {degrees!r}")
+    urdf = (here / str(raw["urdf"])).resolve() if "urdf" in raw else None
+    return MeasuredSpec(path, columns, tuple(recordings), test, spec, time_unit, degrees, as_recorded, urdf)
+
+
+def _recordings(path: Path, raw: dict) -> list[RecordingFile]:
+    """The file's recordings: from ``[recordings]``, or from ``recordings_in``'s file and column."""
+    here = path.parent
+    if ("recordings" in raw) == ("recordings_in" in raw):
+        raise DataError(f"{path}: name the recordings either in [recordings] (run1 = {{ file = ..., trajectory = ... }}) "
+                        f"or by recordings_in = {{ file = ..., column = ... }}, one of the two")
+    if "recordings_in" in raw:
+        entry = raw["recordings_in"]
+        if not isinstance(entry, dict) or not {"file", "column"} <= set(entry):
+            raise DataError(f"{path}: recordings_in needs a file and a column ({{ file = \"all.csv\", column = \"run\" }})")
+        log, column = (here / str(entry["file"])).resolve(), str(entry["column"])
+        if not log.is_file():
+            raise DataError(f"{path}: recordings_in: {log} does not exist")
+        frame = _log(log)
+        if column not in frame.columns:
+            raise DataError(f"{log}: missing column {column} that {path.name} names the recordings by")
+        names = [str(v) for v in dict.fromkeys(frame[column].astype(str))]
+        return [RecordingFile(name, name, log, column) for name in names]
+    if not isinstance(raw["recordings"], dict) or not raw["recordings"]:
+        raise DataError(f"{path}: [recordings] must name at least one recording, each {{ file = ..., trajectory = ... }}")
+    out = []
+    for name, entry in raw["recordings"].items():
+        if not isinstance(entry, dict) or "file" not in entry:
+            raise DataError(f"{path}: recording {name!r} needs a file (run1 = {{ file = \"run1.csv\", trajectory = \"A\" }})")
+        trajectory = str(entry.get("trajectory", "")).strip()
+        if not trajectory:
+            raise DataError(f"{path}: recording {name!r} ({entry['file']}) names no trajectory: say which excitation "
+                            f"trajectory it follows (trajectory = \"...\"), so that a repeat of it is never its test")
+        out.append(RecordingFile(str(name), trajectory, (here / str(entry["file"])).resolve()))
+    return out
+
+
+def check_logs(spec: MeasuredSpec, dof: int) -> None:
+    """Each log has the columns of the map, and the map names ``dof`` joints:
+    :class:`DataError` naming both files otherwise. Reads the logs' headers only."""
+    if spec.columns.dof != dof:
+        model = spec.urdf.name if spec.urdf is not None else "the system"
+        raise DataError(f"{spec.source}: {model} has {dof} joint(s), but its columns name {spec.columns.dof} "
+                        f"(q_1 .. q_{spec.columns.dof}) for the logs {', '.join(sorted({r.path.name for r in spec.recordings}))}")
+    for path in dict.fromkeys(r.path for r in spec.recordings):
+        header = read_frame(path, nrows=1).columns
+        absent = [c for c in spec.columns.columns if c not in header]
+        if absent:
+            model = f" for {spec.urdf.name}'s {dof} joint(s)" if spec.urdf is not None else ""
+            raise DataError(f"{path}: missing column(s) {', '.join(absent)} that {spec.source.name} maps{model}")
+
+
+@functools.lru_cache(maxsize=4)
+def _log(path: Path):
+    return read_frame(path)
+
+
+def samples(spec: MeasuredSpec, r: RecordingFile, filter: FilterSpec, filter_torque: bool = True) -> dict[str, np.ndarray]:
+    """Recording ``r``'s samples (:func:`~bench.core.recordings.read_log`):
+    filtered and differentiated (:func:`~bench.core.recordings.preprocess`),
+    or its rows as they are where the file says ``as_recorded``."""
+    rows = where = None
+    if r.column is not None:
+        frame = _log(r.path)
+        rows, where = frame[frame[r.column].astype(str) == r.name], f"{r.path} ({r.column} = {r.name})"
+    rec = read_log(r.path, spec.columns, None if spec.as_recorded else filter, spec.time_unit, spec.degrees, rows, where)
+    if spec.as_recorded:
+        return {"q": rec.q, "qd": rec.qd, "qdd": rec.qdd, "tau": rec.tau, "time": rec.time - rec.time[0]}
+    return preprocess(rec, filter, filter_torque=filter_torque)
+
+
+@functools.lru_cache(maxsize=16)
+def _samples(spec: MeasuredSpec, trajectories: tuple[str, ...], filter: FilterSpec,
+             filter_torque: bool) -> dict[str, np.ndarray]:
+    chosen = [r for r in spec.recordings if r.trajectory in trajectories]
+    parts = [samples(spec, r, filter, filter_torque) for r in chosen]
+    return joined(parts, [r.name for r in chosen], [r.trajectory for r in chosen])
+
+
+class Measured:
+    """A system whose data are the recordings its file declares (:attr:`measured`); mixed in before
+    :class:`~bench.core.system.System` (or a subclass that gives the model)."""
+
+    simulated = False
+    experiments = ("indirect",)
+    splits = SPLITS
+    measured: ClassVar[MeasuredSpec]
+
+    @classmethod
+    def source_files(cls) -> list[str]:
+        files = dict.fromkeys([str(cls.measured.source), *(str(r.path) for r in cls.measured.recordings)])
+        return [*files, *super().source_files()]
+
+    def load(self, part: str, filter: FilterSpec | None = None, *, filter_torque: bool = True) -> Dataset:
+        """The ``train`` or ``test`` part of the instance's split (:attr:`split`), or ``all``
+        of it: whole trajectories, each sample with its recording, trajectory
+        and time. ``filter`` replaces the file's (a study of cut-offs);
+        ``filter_torque=False`` leaves the torque unfiltered."""
+        parts = self.measured.parts(self.split)
+        if part not in parts:
+            raise ValueError(f"part must be one of {', '.join(PARTS)}, got {part!r}")
+        trajectories = parts[part]
+        filter = self.measured.filter if filter is None else filter
+        s = _samples(self.measured, trajectories, filter, filter_torque)
+        names = list(dict.fromkeys(str(r) for r in s["recording"]))
+        source = (f"{self.measured.source.name}:{part} of split {self.split} (trajectories {', '.join(trajectories)}; "
+                  f"recordings {', '.join(names)})")
+        meta = {"split": self.split} if self.measured.as_recorded else {
+            "filter": dataclasses.asdict(filter), "split": self.split, **({} if filter_torque else {"torque_filtered": False})}
+        sign = s.get("sign_qd")
+        return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,
+                       recording=s["recording"].copy(), sign_qd=None if sign is None else sign.copy(),
+                       trajectory=s["trajectory"].copy(), time=s["time"].copy())
+
+    def describe(self) -> dict:
+        m = self.measured
+        return {**super().describe(), "split": self.split, "test_trajectories": list(m.parts(self.split)["test"]),
+                "recordings": {r.name: r.trajectory for r in m.recordings}, "samples": m.describe(),
+                **({} if m.as_recorded else {"filter": dataclasses.asdict(m.filter)})}
+
+    @classmethod
+    def listing(cls) -> str:
+        """What ``bench list`` says of the recordings."""
+        m = cls.measured
+        return (f"{len(m.recordings)} recordings of {len(m.trajectories)} trajectories, the default split testing on "
+                f"{', '.join(m.test)}; time stamps: driven rollouts and the time shift")

@@ -1,0 +1,96 @@
+"""Every measured system is declared by one file of one shape
+(systems/measured.py): the KUKA, the DFKI double pendulum and DeLaN's
+characters all give named trajectories, two splits and time, so that each
+gets driven rollouts and the laws that need time."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.core.data import DataError
+from bench.residual.result import ResidualResult
+from bench.residual.sensors import Sensor
+from systems import SYSTEMS
+from systems.measured import read_spec
+
+MEASURED = ("kuka_lwr4", "dfki_double_pendulum", "delan_characters")
+
+
+@pytest.mark.parametrize("name", MEASURED)
+def test_each_measured_system_holds_out_whole_trajectories_with_time_on_both_splits(name):
+    for split in ("default", "swapped"):
+        system = SYSTEMS[name](split=split)
+        train, test = system.load("train"), system.load("test")
+        assert train.time is not None and test.time is not None
+        assert not set(train.trajectories()) & set(test.trajectories())
+        assert set(test.trajectories()) == set(system.measured.parts(split)["test"])
+        for index in test.in_time_order():  # time runs forward within each recording
+            assert np.all(np.diff(test.time[index]) > 0)
+        # a time shift is among the laws the residual loop offers on it
+        assert "time_shift" in {t.name for t in Sensor.exact(train).candidates(train)}
+    default, swapped = SYSTEMS[name](split="default"), SYSTEMS[name](split="swapped")
+    assert default.measured.parts("default")["train"] == swapped.measured.parts("swapped")["test"]
+
+
+def test_the_dfki_and_delan_splits_are_the_published_ones():
+    dfki = SYSTEMS["dfki_double_pendulum"]()
+    assert dfki.measured.parts("default") == {"train": ("00", "01", "02", "04"), "test": ("03", "05"),
+                                             "all": ("00", "01", "02", "03", "04", "05")}
+    delan = SYSTEMS["delan_characters"]().load("test")
+    assert sorted(delan.recordings()) == ["e", "q", "v"] and len(delan) + len(SYSTEMS["delan_characters"]().load("train")) == 2913
+    # DeLaN's rows are the samples as logged, accelerations included: no filter touches them
+    assert delan.sign_qd is None and "filter" not in delan.meta
+
+
+def write(tmp_path, text: str, rows: int = 40):
+    t = np.arange(rows) * 0.01
+    lines = ["run,t,q_1,qd_1,qdd_1,tau_1"] + [f"{'a' if k < rows // 2 else 'b'},{t[k % (rows // 2)]:.3f},"
+                                               f"{np.sin(t[k]):.6f},{np.cos(t[k]):.6f},{-np.sin(t[k]):.6f},{t[k]:.6f}"
+                                               for k in range(rows)]
+    (tmp_path / "all.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "system.toml").write_text(text)
+    return tmp_path / "system.toml"
+
+
+def test_one_log_may_hold_every_recording_named_by_a_column(tmp_path):
+    spec = read_spec(write(tmp_path, 'columns = "time=t,q_1=q_1,qd_1=qd_1,qdd_1=qdd_1,tau_1=tau_1"\ntest = ["b"]\n'
+                                     'as_recorded = true\nrecordings_in = { file = "all.csv", column = "run" }\n'))
+    assert [(r.name, r.trajectory) for r in spec.recordings] == [("a", "a"), ("b", "b")]
+    assert spec.parts("swapped") == {"train": ("b",), "test": ("a",), "all": ("a", "b")}
+
+
+@pytest.mark.parametrize("text, message", [
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\nas_recorded = true\n'
+     'recordings_in = { file = "all.csv", column = "run" }\n', "as_recorded needs the logged accelerations"),
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\n'
+     'recordings_in = { file = "all.csv", column = "lap" }\n', "missing column lap"),
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\n'
+     'recordings_in = { file = "all.csv", column = "run" }\n[recordings]\nr = { file = "all.csv", trajectory = "x" }\n',
+     "one of the two"),
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["c"]\n'
+     'recordings_in = { file = "all.csv", column = "run" }\n', "test names trajectory"),
+])
+def test_a_bad_declaration_is_refused_in_one_line_naming_the_file(tmp_path, text, message):
+    with pytest.raises(DataError, match=message) as caught:
+        read_spec(write(tmp_path, text))
+    assert "\n" not in str(caught.value) and ("system.toml" in str(caught.value) or "all.csv" in str(caught.value))
+
+
+def test_a_residual_file_published_under_the_old_key_still_reads():
+    result = ResidualResult(system="s", method="sysid", mse_before={}, mse_after={}, effects=[], rounds=[],
+                            lagrangian=None, seconds=0.0, budget_s=None, fit_budget_s=None, seed=0, train_source="",
+                            test_source=None, mse_heldout_trajectories={"before": 2.0, "after": 1.0})
+    old = {("mse_heldout_recordings" if k == "mse_heldout_trajectories" else k): v for k, v in result.to_json().items()}
+    del old["sensor_laws_offered"]
+    assert ResidualResult.from_json(old).mse_heldout_trajectories == {"before": 2.0, "after": 1.0}
+
+
+def test_convert_refuses_logged_accelerations_it_would_not_use(tmp_path):
+    from tests.commandline import cli
+
+    path = write(tmp_path, "")
+    r = cli("convert", "--columns", "time=t,q_1=q_1,qd_1=qd_1,qdd_1=qdd_1,tau_1=tau_1", str(tmp_path / "all.csv"),
+            "--out", str(tmp_path / "out.csv"))
+    assert r.returncode == 2 and "as_recorded" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out.csv").exists() and path.exists()
