@@ -15,7 +15,7 @@ TORCH_INDEX ?=
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: bench test benchmark paper leaderboard clean-venv
+.PHONY: bench test benchmark paper leaderboard gpu-figures gpu-prepare clean-venv
 
 $(STAMP): pyproject.toml Makefile
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -50,6 +50,19 @@ leaderboard: $(STAMP)
 	$(BIN)/python -m bench run --systems kuka_lwr4 --methods $(LEADERBOARD_HYBRIDS) --n-seeds 10 --budget $(LEADERBOARD_BUDGET) --workers 2 --out results/leaderboard
 	$(BIN)/python -m bench leaderboard results/leaderboard --commentary results/commentary.md --out results/README.md
 	$(BIN)/python -m bench index
+
+# The GPU figures of stacked seeds (results/harness/gpu.md), on a machine with CUDA:
+#   make gpu-figures
+# For a bare GPU machine without Pinocchio or network: make gpu-prepare here, carry gpu_data/ and .whl/ there,
+# and run the line it prints.
+gpu-figures: $(STAMP)
+	$(BIN)/python -m bench study gpu --device cuda --data gpu_data
+
+gpu-prepare: $(STAMP)
+	$(BIN)/python -m bench study gpu --prepare gpu_data
+	$(BIN)/python -m pip download --quiet --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+		--platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 -d .whl deap==1.4.4
+	$(BIN)/python -m bench study gpu --dry-run --data gpu_data
 
 clean-venv:
 	rm -rf $(VENV)

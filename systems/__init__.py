@@ -10,12 +10,20 @@ from systems import (  # noqa: E402,F401  (registers)
     cart_pole,
     delan_characters,
     dfki_double_pendulum,
-    measured_arm,
     double_pendulum,
     n_link_pendulum,
     single_pendulum,
     spring_pendulum,
-    urdf_arm,
 )
+
+#: why the arms from URDF files (panda, ur5, kuka_lwr4, ``urdf:`` and ``measured:`` files) are not
+#: registered, where their engine, Pinocchio, cannot be imported; ``None`` where they are
+WITHOUT_ARMS: str | None = None
+try:
+    from systems import measured_arm, urdf_arm  # noqa: E402,F401  (registers; builds the arms with Pinocchio)
+except ModuleNotFoundError as exc:
+    if exc.name is None or exc.name.split(".")[0] not in ("pinocchio", "pin"):
+        raise
+    WITHOUT_ARMS = f"the arms from URDF files need Pinocchio, which is not installed here ({exc}; pip install pin)"
 
 __all__ = ["SYSTEMS", "Domain", "ParametricForm", "System", "get_system"]

@@ -43,8 +43,6 @@ from systems.measured import Measured, MeasuredSpec, check_logs, read_spec
 from systems.urdf_arm import UrdfArm, urdf_arm
 
 DATA_DIR = Path(__file__).parent / "data"
-#: a system given by its measured-arm file: ``measured:PATH``
-MEASURED = "measured:"
 
 
 class MeasuredArm(Measured, UrdfArm):
@@ -76,7 +74,7 @@ def measured_arm(spec: MeasuredSpec | str | Path, *, name: str | None = None) ->
 def register_measured(plugin: str) -> str:
     """Register the arm of ``measured:PATH`` under ``measured_<file stem>``
     (:func:`systems.base.register_file`); returns that name."""
-    return register_file("measured", plugin[len(MEASURED):], ("measured", "arm"),
+    return register_file("measured", plugin.split(":", 1)[1], ("measured", "arm"),
                          lambda path, name: measured_arm(path, name=name),
                          lambda cls: getattr(getattr(cls, "measured", None), "source", None))
 

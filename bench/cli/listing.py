@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from bench.cli.options import add_plugin, load_plugins
+import systems
 from methods import METHODS
 from methods.hybrid import NAMING
 from systems import SYSTEMS
@@ -25,6 +26,8 @@ def main(args) -> int:
               f"tags={','.join(sorted(entry.tags))}{splits}")
         if sys_obj.listing():
             print(f"  {'':<20} {sys_obj.listing()}")
+    if systems.WITHOUT_ARMS:
+        print(f"  {'panda, ur5, kuka_lwr4':<20} unavailable: {systems.WITHOUT_ARMS}")
     print("Methods:")
     for entry in METHODS.entries():
         reason = entry.unavailable_reason()

@@ -12,14 +12,15 @@ import zlib
 from pathlib import Path
 from typing import Iterable
 
+import systems
 from bench.core.errors import UserError
-from systems.measured_arm import MEASURED, register_measured
-from systems.urdf_arm import register_urdf
 
 #: a system given by its robot description: ``urdf:PATH``
 URDF = "urdf:"
-#: the systems given by a file, by prefix, and how each is registered
-BY_FILE = {URDF: register_urdf, MEASURED: register_measured}
+#: a measured arm given by its declaration file: ``measured:PATH``
+MEASURED = "measured:"
+#: the systems given by a file, by prefix: the module and function that register each
+BY_FILE = {URDF: ("systems.urdf_arm", "register_urdf"), MEASURED: ("systems.measured_arm", "register_measured")}
 
 
 def import_plugins(plugins: Iterable[str]) -> None:
@@ -28,7 +29,7 @@ def import_plugins(plugins: Iterable[str]) -> None:
         try:
             prefix = file_prefix(plugin)
             if prefix:
-                BY_FILE[prefix](plugin)
+                register_by_file(plugin)
                 continue
             _import_plugin(plugin)
         except UserError:
@@ -68,11 +69,20 @@ def system_plugins(names: Iterable[str]) -> tuple[list[str], tuple[str, ...]]:
         prefix = file_prefix(name)
         if prefix:
             plugin = prefix + str(Path(name[len(prefix):]).expanduser().resolve())
-            out.append(BY_FILE[prefix](plugin))
+            out.append(register_by_file(plugin))
             plugins.append(plugin)
         else:
             out.append(name)
     return out, tuple(plugins)
+
+
+def register_by_file(plugin: str) -> str:
+    """Register the system of ``urdf:PATH`` or ``measured:PATH``; returns its name. A
+    :class:`UserError` where the arms' engine is missing here."""
+    if systems.WITHOUT_ARMS:
+        raise UserError(f"{plugin}: {systems.WITHOUT_ARMS}")
+    module, register = BY_FILE[file_prefix(plugin)]
+    return getattr(importlib.import_module(module), register)(plugin)
 
 
 def file_prefix(name: str) -> str | None:
