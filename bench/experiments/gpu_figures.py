@@ -48,7 +48,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bench.core.budget import Budget
 from bench.core.data import Dataset, generate, mse
 from bench.core.devices import CHOICES, describe, resolve
 from bench.core.errors import UserError
@@ -333,18 +332,29 @@ def main(args) -> int:
     out = {"versions": info, "sizes": dataclasses.asdict(sizes), "command": args.invocation}
     panda = panda_samples(args.data, sizes.n_train) if "panda" in args.parts else None  # before any long work
     if "syrenets" in args.parts:
-        out["syrenets"] = syrenets_part(sizes, device, print_now)
+        out["syrenets"] = attempt("syrenets", lambda: syrenets_part(sizes, device, print_now))
     if "panda" in args.parts:
-        out["panda"] = {m: panda_part(m, sizes, device, panda, print_now) for m in ("mlp", "delan")}
+        out["panda"] = {m: attempt(m, lambda m=m: panda_part(m, sizes, device, panda, print_now)) for m in ("mlp", "delan")}
     if "table" in args.parts:
-        out["table"] = table_part(sizes, device, print_now)
+        out["table"] = attempt("the table", lambda: table_part(sizes, device, print_now))
     out["seconds"] = time.perf_counter() - began
     args.out.mkdir(parents=True, exist_ok=True)
     atomic_write(args.out / "gpu_figures.json", lambda f: f.write(json.dumps(out, indent=1)))
     text = page(out)
     atomic_write(args.out / "gpu_figures.md", lambda f: f.write(text))
     print(text)
-    return 0
+    return 1 if "Failed here:" in text else 0
+
+
+def attempt(name: str, part) -> dict:
+    """``part()``, or where it raises, ``{"error": its line}``: on a machine lent for minutes, one part
+    that fails (a compiler missing there, say) must not take the others' figures with it."""
+    try:
+        return part()
+    except Exception as exc:  # noqa: BLE001 -- reported on the page and in the JSON, the next part runs
+        line = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
+        print_now(f"{name}: failed: {line}")
+        return {"error": line}
 
 
 def page(out: dict) -> str:
@@ -353,7 +363,12 @@ def page(out: dict) -> str:
     lines = ["# Stacked seeds on a device", "",
              f"Measured by `{out['command']}` on {v['device']} ({v['device_type']}; torch {v['torch']}, CUDA {v['cuda']}), "
              f"beside one core of its CPU ({v['cpu']}), one thread; {out['seconds']:.0f} s in all.", ""]
-    if "syrenets" in out:
+    failed = [f"{name}: {part['error']}" for name, part in
+              [("syrenets", out.get("syrenets", {})), ("table", out.get("table", {})),
+               *((m, p) for m, p in out.get("panda", {}).items())] if "error" in part]
+    if failed:
+        lines += ["Failed here: " + "; ".join(failed) + ".", ""]
+    if "syrenets" in out and "error" not in out["syrenets"]:
         s = out["syrenets"]
         lines += ["## SyReNets, indirect, double pendulum", "",
                   f"Target: each of 10 stacked seeds at ≥ {TARGET_SYRENETS:g}× the public code's {PUBLIC_STEPS_PER_S} steps/s.", "",
@@ -366,11 +381,11 @@ def page(out: dict) -> str:
                   f"Target: 100 stacked seeds at ≥ {TARGET_PANDA:g}× one CPU core's seed-steps/s (the core trains "
                   f"seeds one by one).", "",
                   "| method | seeds | stacked seed-steps/s | one CPU core seed-steps/s | × one core |", "|---|---:|---:|---:|---:|"]
-        for m, p in out["panda"].items():
+        for m, p in ((m, p) for m, p in out["panda"].items() if "error" not in p):
             lines += [f"| {m} | {r['seeds']} | {r['seed_steps_per_s']:.4g} | {p['cpu_core']['seed_steps_per_s']:.4g} "
                       f"| {r['x_cpu_core']:.3g} |" for r in p["stacked"]]
         lines.append("")
-    if "table" in out:
+    if "table" in out and "error" not in out["table"]:
         t = out["table"]
         pub = t["published"]
         full = t["steps"] == t["steps_wanted"]

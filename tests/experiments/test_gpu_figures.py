@@ -53,3 +53,15 @@ def test_the_dry_run_lists_what_travels_with_sizes_under_the_limit(tmp_path):
     assert "to fetch:" in r.stdout and "deap==" in r.stdout  # no wheels there yet: the line that fetches them
     total = float(next(line for line in r.stdout.splitlines() if "in all" in line).split()[0])
     assert 0 < total <= gpu_figures.CARRY_LIMIT_MIB
+
+
+def test_a_part_that_fails_is_named_on_the_page_and_the_others_still_run(tmp_path, monkeypatch):
+    def broken(*args):
+        raise RuntimeError("no C++ compiler here\nsecond line")
+
+    monkeypatch.setattr(gpu_figures, "table_part", broken)
+    r = cli("study", "gpu", "--device", "cpu", "--tiny", "--parts", "syrenets", "table", "--out", tmp_path)
+    assert r.returncode == 1
+    text = (tmp_path / "gpu_figures.md").read_text()
+    assert "Failed here: table: RuntimeError: no C++ compiler here." in text and "× public code" in text
+    assert json.loads((tmp_path / "gpu_figures.json").read_text())["table"] == {"error": "RuntimeError: no C++ compiler here"}
