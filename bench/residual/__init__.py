@@ -11,9 +11,10 @@ add them, refit, and report the error before and after.
   load-dependent friction), one class each, which act on the measured torque
   rather than on the arm, and the loop's handling of them;
 * :mod:`~bench.residual.strategies`: how the loop refits each kind of model;
-* :mod:`~bench.residual.pruning`, :mod:`~bench.residual.checks`,
-  :mod:`~bench.residual.beyond_data`: what follows a refit, what keeps or undoes a
-  round, and what an effect may claim beyond the data;
+* :mod:`~bench.residual.pruning`, :mod:`~bench.residual.tidying`,
+  :mod:`~bench.residual.checks`, :mod:`~bench.residual.beyond_data`: what
+  follows a refit, what keeps or undoes a round, and what an effect may
+  claim beyond the data;
 * :mod:`~bench.residual.loop`: the loop, in this process (:func:`residual_loop`);
 * :mod:`~bench.residual.job`: the loop through the runner (:func:`run_residual`);
 * :mod:`~bench.residual.result`, :mod:`~bench.residual.report`: its typed

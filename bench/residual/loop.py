@@ -90,13 +90,12 @@ from bench.evaluation.driven import driven_entry
 from bench.residual.candidates import candidates, describe_all, is_named, label, mismatch, resolved_periods, structural
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
-from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, shape_stderr, simplest_laws
-from bench.residual.beyond_data import beyond_data, earns_place, finding, not_identified
+from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
 from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, bic, trace
-from bench.residual.sensors import (Sensed, Sensor, column as sensor_column, confine as confine_sensor,
-                                    inadmissible as inadmissible_sensor, measured_rss, redundant, settle)
+from bench.residual.sensors import Sensed, Sensor, column as sensor_column, measured_rss, settle
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
+from bench.residual.tidying import Tidying
 from bench.residual.validation import describe as describe_validation
 from bench.runner.progress import Report
 from bench.runner.provenance import device_entry, provenance
@@ -159,8 +158,9 @@ class _BudgetSpent(Exception):
     """The loop's time budget ended during a round (the message says in which of its stages)."""
 
 
-class _Loop:
-    """One run of the loop: its data, budget, strategy and running figures."""
+class _Loop(Tidying):
+    """One run of the loop: its data, budget, strategy and running figures; what follows a round's
+    joint refit is :class:`~bench.residual.tidying.Tidying`'s."""
 
     def __init__(self, method: str, train: Dataset, test: Dataset | None, budget: Budget, seed: int,
                  hyperparameters: dict, report: Report, open_ended: bool | None, device: str = "cpu"):
@@ -341,44 +341,6 @@ class _Loop:
                 if resolved_periods(t, train)]
         return TermLibrary([t for t in pool if is_named(t) or self.open_ended is not False])
 
-    def settle(self, model: LoopModel):
-        """Each law its simplest (:func:`~bench.residual.pruning.simplest_laws`), then
-        no impossible coefficient (:func:`~bench.residual.pruning.drop_inadmissible`),
-        again until neither changes anything: dropping a law's impossible part can
-        leave a law that is not itself (a Stribeck hump without its Coulomb level).
-        Returns the model, the replacements and the dropped ``(term, coefficient, stderr)``."""
-        simplified, impossible = [], []
-        while True:
-            model, more = simplest_laws(self.strategy, model, self.train, self.report)
-            simplified += more
-            model, dropped = drop_inadmissible(self.strategy, model, self.train, self.report)
-            impossible += dropped
-            if not dropped:
-                return model, simplified, impossible
-
-    def confine(self, model: LoopModel):
-        """``model`` without each effect the data do not identify, and each that
-        claims beyond the training data and does not earn its place on a
-        held-out trajectory (:mod:`bench.residual.beyond_data`), dropped one at a time
-        with a refit; returns the model and the labels dropped (their findings
-        go to :attr:`beyond`)."""
-        dropped = []
-        while True:
-            suspects = [(i, why, None) for i, why in not_identified(model)] + \
-                [(i, why, self.strategy) for i, why in beyond_data(model, self.train)]
-            for index, why, strategy in suspects:
-                keep, verdict = (False, "") if strategy is None else earns_place(strategy, model, self.train, index)
-                if keep:
-                    continue
-                term = model.effects[index]
-                self.beyond[label(term)] = (term, finding(term, model.coef[index], model.stderr[index], why, verdict))
-                self.report(f"  dropping {label(term)}: {why}; {verdict}")
-                model = self.strategy.refit(model, self.train, [t for t in model.effects if t is not term])
-                dropped.append(label(term))
-                break
-            else:
-                return model, dropped
-
     def choose(self, model: LoopModel, selection, laws: dict, k: int) -> LoopModel:
         """The round's model: ``model`` refitted with what the trace accepted
         (:meth:`build`), where refitting shows it better, with a runner-up in place
@@ -409,59 +371,6 @@ class _Loop:
                                     + ", ".join(f"{n} = {v['value']:.5g} ± {v['stderr']:.2g}" for n, v in e["parameters"].items())
                                     for e in new_sensor.entries(train.dof)))
         return candidate
-
-    def tidy(self, candidate: LoopModel, findings: dict):
-        """What follows a round's joint refit: redundant effects and sensor laws
-        dropped, shapes refined, each law its simplest and possible, and what the
-        data do not identify or a held-out trajectory does not confirm dropped
-        (findings go to ``findings`` and :attr:`beyond`). Returns the model, the
-        labels removed and the laws simplified."""
-        strategy, report = self.strategy, self.report
-        candidate, removed = self.timed(prune, strategy, candidate, self.train, report)
-        self.in_budget("dropping redundant effects")
-        if self.sensor.found_any:
-            candidate, new_sensor, impossible = self.timed(inadmissible_sensor, strategy, candidate, self.measured,
-                                                           self.sensor)
-            for term, entry in impossible:
-                findings[label(term)] = entry
-                report(f"  dropping {label(term)}: {entry['finding']}")
-            if impossible:
-                self.use(new_sensor.correct(self.measured), new_sensor)
-                removed += [label(term) for term, _ in impossible]
-        if self.sensor.found_any:
-            candidate, new_sensor, new_train, gone = self.timed(redundant, strategy, candidate, self.measured,
-                                                                self.sensor, MIN_BIC_DROP)
-            for text in gone:
-                report(f"  dropping {text}: redundant after the joint refit")
-            if gone:
-                self.use(new_train, new_sensor)
-            removed += gone
-        candidate = refine_shapes(strategy, candidate, self.train, report)
-        self.in_budget("refining the laws' shapes")
-        candidate, simplified, impossible = self.timed(self.settle, candidate)
-        self.in_budget("simplifying the laws")
-        for term, c, se in impossible:
-            findings[label(term)] = structural(term, c, se)
-            removed.append(label(term))
-        candidate, beyond = self.timed(self.confine, candidate)
-        self.in_budget("checking what the data identify")
-        if self.sensor.found_any:
-            candidate, new_sensor, new_train, gone = self.timed(
-                confine_sensor, strategy, candidate, self.measured, self.sensor, self.heldout)
-            for term, entry in gone:
-                self.beyond[label(term)] = (term, entry)
-                report(f"  dropping {label(term)}: a law of the sensor that no held-out trajectory confirms")
-                beyond.append(label(term))
-            if gone:
-                self.use(new_train, new_sensor)
-        removed += beyond
-        if beyond:  # a refit without what was dropped can leave a law impossible or not itself again
-            candidate, more, impossible = self.timed(self.settle, candidate)
-            simplified += more
-            for term, c, se in impossible:
-                findings[label(term)] = structural(term, c, se)
-                removed.append(label(term))
-        return candidate, removed, simplified
 
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
         """Rounds 1 to :data:`MAX_ROUNDS`; returns the final model, its held-out
