@@ -24,8 +24,9 @@ other trajectory better than shared ones (``results/measured/``).
 
 The samples of a recording are not independent: neighbouring ones are near
 copies. An ELBO that counts each as independent evidence (GPyTorch's
-default) drives the noise towards zero and fits the training trajectory's every wiggle, which
-does not carry to another trajectory. By default (``samples="effective"``)
+default) drives the noise towards zero and fits the training trajectory's
+every wiggle, which does not carry to another trajectory. By default
+(``samples="effective"``)
 joint ``j``'s ELBO counts the independent samples its torque's
 autocorrelation says the data hold (:func:`bench.core.autocorrelation.effective_samples`,
 ``n_j``): the KL term is weighed by ``n / n_j`` (the ELBO's ``beta``), the

@@ -42,7 +42,6 @@ from systems.measured import Measured, read_spec
 DATA = Path(__file__).parent / "data" / "delan_characters.csv.gz"
 #: the characters, their split and how their rows are read
 DECLARATION = read_spec(DATA.with_name("delan_characters.toml"))
-TEST_CHARACTERS = DECLARATION.test
 PUBLISHED_TORQUE_MSE = 4.327e-4
 
 

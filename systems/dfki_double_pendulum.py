@@ -73,8 +73,6 @@ from systems.measured import Measured, read_spec
 DATA_DIR = Path(__file__).parent / "data"
 #: the recordings, their trajectories and the split
 DECLARATION = read_spec(DATA_DIR / "dfki_double_pendulum.toml")
-TRAIN_TRAJECTORIES = DECLARATION.parts("default")["train"]
-TEST_TRAJECTORIES = DECLARATION.parts("default")["test"]
 #: the lab's two column layouts of a recording
 LAYOUTS = (
     ColumnMap("time", ("pos_meas1", "pos_meas2"), ("vel_meas1", "vel_meas2"), ("tau_meas1", "tau_meas2")),

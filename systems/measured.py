@@ -261,7 +261,7 @@ class Measured:
         trajectories = parts[part]
         filter = self.measured.filter if filter is None else filter
         s = _samples(self.measured, trajectories, filter, filter_torque)
-        names = list(dict.fromkeys(str(r) for r in s["recording"]))
+        names = [r.name for r in self.measured.recordings if r.trajectory in trajectories]
         source = (f"{self.measured.source.name}:{part} of split {self.split} (trajectories {', '.join(trajectories)}; "
                   f"recordings {', '.join(names)})")
         meta = {"split": self.split} if self.measured.as_recorded else {

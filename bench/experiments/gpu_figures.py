@@ -199,7 +199,6 @@ def syrenets_part(sizes: Sizes, device: str, report) -> dict:
 def panda_part(method: str, sizes: Sizes, device: str, data: Dataset, report) -> dict:
     config = sizes.config(method)
     datasets = [data] * max(sizes.panda_seeds)  # one set of samples for every seed: a step's work does not depend on its values
-    torch.set_num_threads(1)
     warm(method, config, data, "cpu")
     cpu = alone(method, config, datasets[:sizes.cpu_seeds], sizes.cpu_steps, "cpu")
     report(f"{method} on the Panda, one CPU core one by one: {cpu['seed_steps_per_s']:.4g} seed-steps/s")

@@ -19,7 +19,8 @@ Each law gives the residual loop:
 * the values it may take (:attr:`SensorLaw.bounds`), its law in words
   (:meth:`SensorLaw.law_text`) and its JSON entry (:meth:`SensorLaw.entry`).
 
-A new law is one subclass and :func:`register`; the loop offers it wherever
+A new law is one subclass (of :class:`JointTorqueLaw` for a factor on one
+joint's torque) and :func:`register`; the loop offers it wherever
 :meth:`SensorLaw.offered` says, settles it, checks its range and asks it to
 earn its place on held-out trajectories as it does the others.
 """
@@ -161,13 +162,32 @@ class SensorLaw:
         return out
 
 
-def _on_joint(values: np.ndarray, joint: int) -> np.ndarray:
-    out = np.zeros_like(values)
-    out[:, joint] = values[:, joint]
-    return out
+class JointTorqueLaw(SensorLaw):
+    """A torque law of one joint: ``tau_measured_j = F_j(data) tau_j``, the
+    other joints' torques as they are. A subclass gives the factor on its
+    joint (:meth:`joint_factor`) and its column there (:meth:`joint_column`,
+    ``tau_hat_j d ln F_j / d theta``); this class spreads both over the joints."""
+
+    def joint_factor(self, data: Dataset) -> np.ndarray | float:
+        """``F_j`` on :attr:`joint`, per sample of ``data`` (or one for all)."""
+        raise NotImplementedError
+
+    def joint_column(self, tau_hat: np.ndarray, data: Dataset) -> np.ndarray:
+        """The column on :attr:`joint` at the model's torques ``tau_hat`` there (``(n,)``)."""
+        raise NotImplementedError
+
+    def factor(self, data):
+        out = np.ones_like(data.tau)
+        out[:, self.joint] = self.joint_factor(data)
+        return out
+
+    def column(self, tau_hat, data):
+        out = np.zeros_like(tau_hat)
+        out[:, self.joint] = self.joint_column(tau_hat[:, self.joint], data)
+        return out
 
 
-class TorqueGain(SensorLaw):
+class TorqueGain(JointTorqueLaw):
     """``tau_measured_j = g_j tau_j``: a calibration error of joint ``j``'s
     torque sensor, relative to the reference joint (whose gain is fixed at 1:
     a gain common to every joint is a rescaling of ``L``). Its coefficient is
@@ -187,13 +207,11 @@ class TorqueGain(SensorLaw):
     def law_text(cls, term, parameter):
         return f"tau_measured_{term.joint + 1} = {parameter}*tau_{term.joint + 1}"
 
-    def factor(self, data):
-        out = np.ones_like(data.tau)
-        out[:, self.joint] = self.value
-        return out
+    def joint_factor(self, data):
+        return self.value
 
-    def column(self, tau_hat, data):
-        return _on_joint(tau_hat, self.joint)
+    def joint_column(self, tau_hat, data):
+        return tau_hat
 
     def updated(self, coefficient, stderr):
         value = self.value * (1.0 + coefficient)
@@ -203,7 +221,7 @@ class TorqueGain(SensorLaw):
         return super().entry(dof, reference) | {"reference_joint": reference + 1, "reference": WHY_REFERENCE}
 
 
-class LoadFriction(SensorLaw):
+class LoadFriction(JointTorqueLaw):
     """``tau_measured_j = tau_j + mu_j |tau_j| s_j``, ``s_j`` the sign of
     ``qd_j`` (the data's, :meth:`~bench.core.data.Dataset.velocity_sign`): a
     Coulomb level that grows with the load torque the drive carries; its
@@ -222,16 +240,12 @@ class LoadFriction(SensorLaw):
         j = term.joint + 1
         return f"tau_measured_{j} = tau_{j} + {parameter}*|tau_{j}|*sign(qd_{j})"
 
-    def factor(self, data):
-        out = np.ones_like(data.tau)
+    def joint_factor(self, data):
         j = self.joint
-        out[:, j] = 1.0 + self.value * np.sign(data.tau[:, j]) * data.velocity_sign()[:, j]
-        return out
+        return 1.0 + self.value * np.sign(data.tau[:, j]) * data.velocity_sign()[:, j]
 
-    def column(self, tau_hat, data):
-        j, out = self.joint, np.zeros_like(tau_hat)
-        out[:, j] = np.abs(tau_hat[:, j]) * data.velocity_sign()[:, j] / self.factor(data)[:, j]
-        return out
+    def joint_column(self, tau_hat, data):
+        return np.abs(tau_hat) * data.velocity_sign()[:, self.joint] / self.joint_factor(data)
 
 
 def shifted(data: Dataset, delta: float) -> Dataset:

@@ -4,11 +4,11 @@ the drive"): a torque reading that grows with speed,
 
 import numpy as np
 
-from bench.residual.sensor_laws import SensorLaw, register
+from bench.residual.sensor_laws import JointTorqueLaw, register
 
 
 @register
-class SpeedLoss(SensorLaw):
+class SpeedLoss(JointTorqueLaw):
     """tau_measured_j = (1 + c_j |qd_j|) tau_j"""
 
     name, kind, parameter, neutral, bounds = "speed_loss", "drive", "c", 0.0, (0.0, 0.5)
@@ -18,13 +18,8 @@ class SpeedLoss(SensorLaw):
         j = term.joint + 1
         return f"tau_measured_{j} = (1 + {parameter}*|qd_{j}|)*tau_{j}"
 
-    def factor(self, data):
-        out = np.ones_like(data.tau)
-        out[:, self.joint] = 1 + self.value * np.abs(data.qd[:, self.joint])
-        return out
+    def joint_factor(self, data):
+        return 1 + self.value * np.abs(data.qd[:, self.joint])
 
-    def column(self, tau_hat, data):
-        out = np.zeros_like(tau_hat)
-        j = self.joint
-        out[:, j] = tau_hat[:, j] * np.abs(data.qd[:, j]) / self.factor(data)[:, j]
-        return out
+    def joint_column(self, tau_hat, data):
+        return tau_hat * np.abs(data.qd[:, self.joint]) / self.joint_factor(data)
