@@ -106,6 +106,12 @@ def test_any_urdf_registers_in_one_line_and_a_bad_one_is_refused(tmp_path):
     path.write_bytes(gzip.open(DATA_DIR / "ur5_robot.urdf.gz").read())
     name = register_urdf(f"urdf:{path}")
     assert name == "urdf_arm" and SYSTEMS[name]().dof == 6 and register_urdf(f"urdf:{path}") == name
+    other = tmp_path / "other" / "arm.urdf"  # another file whose name would be the same system's
+    other.parent.mkdir()
+    other.write_bytes(path.read_bytes())
+    with pytest.raises(DataError, match="another file is registered as 'urdf_arm' already") as caught:
+        register_urdf(f"urdf:{other}")
+    assert str(other) in str(caught.value) and "\n" not in str(caught.value)
     SYSTEMS.remove(name)
     bad = tmp_path / "bad.urdf"
     bad.write_text("<robot name='x'><link name='a'/><oops></robot>")
