@@ -52,7 +52,7 @@ from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary
 from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
 from bench.residual.basis import orthonormal_basis
-from bench.residual.validation import folds
+from bench.core.folds import folds
 from bench.runner.progress import Report
 
 #: a symbolic model with more terms than this is refitted like a neural one
@@ -435,8 +435,8 @@ def cross_fit(fitter: Fitter, fit: FittedModel, train: Dataset, report: Report) 
     The fit saw every training sample, so what it leaves on them is smaller
     than, and unlike, what it leaves on a recording it has not seen: an
     effect can fit that residual, on every recording, and still not help on
-    a new one. The validation folds (:func:`bench.residual.validation.folds`:
-    the recordings, or contiguous blocks) are dealt alternately into two
+    a new one. The validation folds (:func:`bench.core.folds.folds`:
+    the trajectories, or spans in time) are dealt alternately into two
     halves; the method is fitted on each half, with ``fitter``'s budget, and
     predicts the other (:func:`cross_fitted_mse`).
 
@@ -450,7 +450,7 @@ def cross_fit(fitter: Fitter, fit: FittedModel, train: Dataset, report: Report) 
     on the suite's test recordings).
     """
     t0 = time.perf_counter()
-    fold_masks = folds(train)
+    fold_masks = folds(train).held
     halves = [np.any(fold_masks[k::2], axis=0) for k in (0, 1)]
     torque = np.empty_like(train.tau)
     for held in halves:

@@ -15,19 +15,20 @@ from bench.core.undeclared import add_effects
 from bench.core.terms import TermLibrary
 from bench.residual import loop, residual_loop, strategies, trace
 from bench.residual import model as model_module
-from bench.residual.validation import BLOCKS, cv_mse, describe, folds
+from bench.core.folds import MAX_SPANS as BLOCKS, folds
+from bench.residual.validation import cv_mse, describe
 from systems import get_system
 from tests.residual.test_loop import SOLVED, SYSID, quiet
 
 
 def test_folds_are_whole_recordings_where_the_data_name_them_and_blocks_otherwise():
     data = generate(get_system("double_pendulum"), 1000, 0)
-    blocks = folds(data)
+    blocks = folds(data).held
     assert len(blocks) == BLOCKS and all(b.sum() == 250 for b in blocks)
     assert all(np.ptp(np.flatnonzero(b)) == 249 for b in blocks)  # contiguous
     assert describe(data) == f"{BLOCKS} contiguous blocks of samples without recordings"
     labelled = data.replace(recording=np.array(list("abc"))[np.arange(1000) % 3])
-    by_recording = folds(labelled)
+    by_recording = folds(labelled).held
     assert [int(f.sum()) for f in by_recording] == [334, 333, 333]
     assert all(len(set(labelled.recording[f])) == 1 for f in by_recording)
     assert np.logical_or.reduce(by_recording).all()  # every sample held out once
@@ -38,13 +39,13 @@ def test_recordings_of_one_trajectory_are_held_out_together():
     data = generate(get_system("double_pendulum"), 1200, 0)
     recording = np.repeat(["run1", "run2", "run3"], 400)
     grouped = data.replace(recording=recording, trajectory=np.where(recording == "run3", "B", "A"))
-    by_trajectory = folds(grouped)
+    by_trajectory = folds(grouped).held
     assert [sorted(set(grouped.recording[f])) for f in by_trajectory] == [["run1", "run2"], ["run3"]]
     assert describe(grouped) == "leave one trajectory out, over 2 trajectories (3 recordings)"
     # one trajectory: spans in time, each span of every recording of it in one fold
     one = grouped.subset(grouped.trajectory == "A")
     one = one.replace(time=np.tile(np.arange(400) * 0.01, 2)[::-1].copy())  # time runs backwards through the rows
-    spans = folds(one)
+    spans = folds(one).held
     assert len(spans) == BLOCKS and np.logical_or.reduce(spans).all() and sum(int(f.sum()) for f in spans) == 800
     for f in spans:
         assert sorted(set(one.recording[f])) == ["run1", "run2"]
