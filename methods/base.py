@@ -108,6 +108,9 @@ class Method(FittedModel):
     smoke: ClassVar[dict] = {"max_steps": 5}
     #: named configurations beside the defaults (:class:`~methods.config.Named`), chosen by ``--config NAME``
     configurations: ClassVar[dict[str, Named]] = {}
+    #: the values a tuned run tries per hyperparameter (``--tune``, :mod:`bench.evaluation.tuning`): at most
+    #: 10 combinations in all; none by default
+    search_space: ClassVar[dict[str, tuple]] = {}
     #: the experiments the method applies to
     experiments: ClassVar[tuple[str, ...]] = EXPERIMENTS
     #: whether ``fit(..., warm_start=True)`` can continue from the current state

@@ -118,6 +118,7 @@ class GaussianProcess(Method):
 
     Config = GPConfig
     experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+    search_space = {"inducing": (128, 256), "inputs": ("joint", "all"), "samples": ("effective", "all")}
     smoke = {"max_steps": 5, "inducing": 16, "batch_size": 64, "eval_samples": 128}
     falls_back_to_zero: ClassVar[bool] = True
     has_lagrangian: ClassVar[bool] = False

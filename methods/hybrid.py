@@ -32,6 +32,8 @@ How the field learns a real arm (Nguyen-Tuong & Peters, ICRA 2010; Reuss et al.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+from collections import OrderedDict
 from typing import Annotated, ClassVar
 
 import numpy as np
@@ -49,6 +51,10 @@ from methods.progress import Progress
 PRIORS = {"standard": "standard", "feasible": "default"}
 #: the method that identifies the prior
 PRIOR_METHOD = "sysid"
+#: the gate lengths a tuned hybrid tries, where its residual is gated (:mod:`bench.evaluation.tuning`)
+GATE_LENGTHS = (1.0, 3.0)
+#: priors kept for reuse: a tuned hybrid fits the same prior on each fold for every combination
+PRIOR_CACHE = 8
 #: how a hybrid is named, for ``bench list`` and errors
 NAMING = (f"a hybrid is named PRIOR+RESIDUAL: PRIOR one of {', '.join(PRIORS)} (SysId's {PRIORS['standard']} "
           f"configuration, or the feasible rigid body), RESIDUAL any method that fits torques, e.g. standard+gp, "
@@ -102,8 +108,7 @@ class Hybrid(Method):
 
     # -- the fit ---------------------------------------------------------------
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        prior = METHODS[PRIOR_METHOD](**METHODS[PRIOR_METHOD].configuration(PRIORS[self.prior_name]))
-        self.prior = prior.fit(train, "indirect", self.seed, Budget(steps=1), system=self.system)
+        self.prior = identified_prior(self.prior_name, train, self.system, self.seed)
         self._residual_data = train.replace(tau=train.tau - self.prior.predict_torque(train))
         self.gate = None if self.residual.falls_back_to_zero else TrainingStates(train)
         # the residual starts as a fit of its own would (its seed, its one-time work), on the hybrid's clock
@@ -152,6 +157,34 @@ class Hybrid(Method):
         return self.residual.size()
 
 
+_priors: "OrderedDict[tuple, Method]" = OrderedDict()
+
+
+def identified_prior(prior: str, train: Dataset, system: System | None, seed: int) -> Method:
+    """SysId in the configuration ``prior`` names, identified on ``train`` with
+    ``seed`` (one solve): the same fit for the same samples and seed, so the last
+    :data:`PRIOR_CACHE` are kept and reused (a tuned hybrid fits every
+    combination on the same folds)."""
+    key = (prior, None if system is None else system.name, seed, fingerprint(train))
+    if key in _priors:
+        _priors.move_to_end(key)
+        return _priors[key]
+    method = METHODS[PRIOR_METHOD](**METHODS[PRIOR_METHOD].configuration(PRIORS[prior]))
+    fitted = method.fit(train, "indirect", seed, Budget(steps=1), system=system)
+    _priors[key] = fitted
+    while len(_priors) > PRIOR_CACHE:
+        _priors.popitem(last=False)
+    return fitted
+
+
+def fingerprint(data: Dataset) -> str:
+    """A digest of ``data``'s samples."""
+    digest = hashlib.sha1()
+    for array in (data.q, data.qd, data.qdd, data.tau):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
 def prior_unavailable(prior: str, system: System) -> str:
     """Why the prior ``prior`` cannot be identified on ``system``."""
     return (f"the prior {prior} is SysId identified on an arm's linear form (from its URDF), and {system.name} has "
@@ -189,6 +222,7 @@ def compose(name: str) -> type | None:
         "prior_name": prior, "residual_name": residual, "Config": config, "smoke": dict(base.smoke),
         "uses_device": base.uses_device, "has_lagrangian": base.has_lagrangian,
         "configurations": dict(base.configurations), "tags": frozenset({"hybrid"}),
+        "search_space": {**base.search_space, **({} if base.falls_back_to_zero else {"gate_length": GATE_LENGTHS})},
         "__doc__": f"{prior} prior plus a {residual} residual (see methods.hybrid)",
     })
 

@@ -58,6 +58,7 @@ class OperonConfig(MethodConfig):
 class Operon(ExpressionMethod):
     Config = OperonConfig
     experiments = ("direct",)
+    search_space = {"max_length": (25, 50), "population_size": (500, 1000)}
     smoke = {"population_size": 50, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}
 
     @classmethod

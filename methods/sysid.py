@@ -187,6 +187,7 @@ def _smallest_eigenvalues(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
 @METHODS.add("sysid", "symbolic", "parametric", "baseline", "paper")
 class SysId(TorchLagrangianMethod):
     Config = SysIdConfig
+    search_space = {"feasible": (True, False), "friction": (False, True)}
     smoke = {"max_steps": 20, "eval_samples": 256}
     stackable = False  # an arm's linear form is solved, not trained; one seed's solve is the work
     configurations = {

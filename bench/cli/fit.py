@@ -7,7 +7,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget, check_names,
                                check_split, configurations, device, hyperparameters, load_plugins)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
@@ -31,6 +31,7 @@ def add_arguments(f) -> None:
     add_budget(f, "for the fit")
     add_split(f)
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
+    add_tune(f, "the run")
     add_config(f)
     add_set(f)
     f.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"generated training samples (default {N_TRAIN})")
@@ -58,6 +59,7 @@ def main(args) -> int:
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
         domain_half_width=args.domain_half_width, plugins=plugins, split=args.split,
         device=device(args.device, [args.method]),
+        tune=args.tune,
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now
@@ -92,6 +94,11 @@ def summary_line(record: Record, log: Path | None = None) -> str:
         return f"{head} ({record.error}{where})"
     test = record.test_mse
     failed = f" | failed after the fit: {', '.join(record.failed_stages)}{where}" if record.failed_stages else ""
+    tuning = (record.details or {}).get("tuning")
+    if tuning:
+        chosen = ", ".join(f"{k}={v!r}" for k, v in sorted(tuning.get("chosen", {}).items())) or "its defaults"
+        searched = f" after a search of {tuning['search_seconds']:.1f} s" if "search_seconds" in tuning else ""
+        failed = f" | tuned: chose {chosen}{searched}" + failed
     return (
         f"{head} | train MSE {record.train_mse:.4g} | test MSE {'n/a (no test data)' if test is None else f'{test:.4g}'}"
         f" | {record.steps} steps in {record.fit_seconds:.1f} s ({record.stop_reason}){failed}"

@@ -47,6 +47,16 @@ def add_set(parser, what: str = "the method") -> None:
                              "only, e.g. mlp.hidden=64 (repeatable)")
 
 
+def add_tune(parser, what: str = "each run") -> None:
+    """``--tune``: choose the method's hyperparameters on the training data (:mod:`bench.evaluation.tuning`)."""
+    parser.add_argument("--tune", action="store_true",
+                        help=f"{what} chooses its method's hyperparameters from the method's search space (python -m "
+                             "bench list shows it) by validation on the training data alone (whole trajectories, or "
+                             "spans in time of one), within its budget: the final fit has half of a time budget, the "
+                             "search the rest; under --steps every fit does the steps. The record keeps every "
+                             "combination's validation MSE; tables show the tuned runs beside the others")
+
+
 def add_config(parser, what: str = "the method") -> None:
     """``--config NAME`` and ``--config METHOD=NAME``, repeatable, with ``--smoke`` for ``--config smoke``."""
     parser.add_argument("--config", dest="configs", action="append", default=[], metavar="[METHOD=]NAME",

@@ -7,7 +7,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_budget, add_ignore_limits, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+from bench.cli.options import (UsageError, add_budget, add_ignore_limits, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget, check_names,
                                check_split, configurations, device, hyperparameters, load_plugins)
 from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
@@ -41,6 +41,7 @@ def add_arguments(r) -> None:
                         "plugin's) as one stacked model in one process: each seed's record is what its fit alone "
                         "gives, to rounding; fast on a GPU (--device cuda), no faster on a CPU; SysId and SyReNets' "
                         "compiled configuration train alone")
+    add_tune(r)
     add_config(r, "each method in the run that offers it")
     add_set(r, "every method in the run")
     r.add_argument("--n-train", type=positive_int, default=N_TRAIN, help=f"training samples (default {N_TRAIN})")
@@ -83,6 +84,7 @@ def main(args) -> int:
         rollout=not args.no_rollout,
         split=args.split,
         device=where,
+        tune=args.tune,
     )
     specs = [dataclasses.replace(s, profile=chosen[s.method],
                                  hyperparameters=hyperparameters(args.overrides, s.method, methods)) for s in specs]
@@ -92,6 +94,9 @@ def main(args) -> int:
     if not args.ignore_limits:  # a measured arm's log in degrees, say: one line, before any run starts
         for spec in {(s.system, s.split): s for s in specs}.values():
             given_data(make_system(spec), None, None, check_limits=True)
+    if args.stack_seeds and args.tune:
+        raise UsageError("--stack-seeds trains the seeds as one model; --tune searches each seed's hyperparameters "
+                         "on its own: give one of them")
     if args.stack_seeds and args.cluster:
         raise UsageError("--stack-seeds runs the stacked seeds on the local pool; with --cluster each run is a task of its own")
     records = matrix.run_matrix(specs, args.out, workers=args.workers, resume=not args.no_resume,

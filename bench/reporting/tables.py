@@ -229,6 +229,24 @@ def _overrides(records: list[Record]) -> str:
     return f"Hyperparameters set beside each method's own: {'; '.join(parts)}."
 
 
+def _tuning(records: list[Record]) -> list[str]:
+    """For tuned runs: the protocol, and what each tuned method chose over its seeds."""
+    tuned = [r for r in records if r.tuned and (r.details or {}).get("tuning")]
+    if not tuned:
+        return []
+    by_method = defaultdict(Counter)
+    folds = set()
+    for r in tuned:
+        t = r.details["tuning"]
+        by_method[r.method][", ".join(f"{k}={v!r}" for k, v in sorted(t.get("chosen", {}).items())) or "defaults"] += 1
+        if "folds" in t:
+            folds.add(t["folds"]["description"])
+    chose = "; ".join(f"{m}: " + ", ".join(f"{c} ({n})" for c, n in sorted(counts.items(), key=lambda kv: -kv[1]))
+                      for m, counts in sorted(by_method.items()))
+    return [f"Tuned: the columns marked *tuned* are {tuned[0].details['tuning']['protocol']} (validation folds: "
+            f"{'; '.join(sorted(folds)) or 'none'}), within each run's budget; chosen (seeds): {chose}."]
+
+
 def _configurations(records: list[Record]) -> str:
     """The methods' named configurations: ``default`` where every run used its
     method's defaults, else the named ones by method (``default; syrenets: best-300s``)."""
@@ -267,6 +285,7 @@ def _header(records: list[Record]) -> list[str]:
         + _preparation(records),
         _data(records),
         _overrides(records),
+        *_tuning(records),
         f"Machine: {'; '.join(cpus)}; {per_run}; torch {', '.join(torch_versions)}.",
         f"Commit: {', '.join(commits)}; run {dates[0]}{'' if dates[0] == dates[-1] else ' to ' + dates[-1]}.",
     ]
@@ -373,10 +392,22 @@ def build_table(records: list[Record]) -> str:
     return "\n".join(lines)
 
 
+#: how a tuned run's column is named: ``<method> tuned``
+TUNED = " tuned"
+
+
+def label(record: Record) -> str:
+    """The column a run's record goes to: its method, ``<method> tuned`` where the
+    run chose its hyperparameters on its training data (beside the method's own)."""
+    return record.method + (TUNED if record.tuned else "")
+
+
 def expand_variants(records: list[Record]) -> list[Record]:
-    """Add one pseudo-record ``<method>+<variant>`` per variant a run reported."""
+    """Each record under its column (:func:`label`), and one pseudo-record
+    ``<column>+<variant>`` per variant a run reported."""
     out = []
     for r in records:
+        r = r.replace(method=label(r)) if r.tuned else r
         out.append(r)
         for name, scores in (r.details or {}).get("variants", {}).items():
             blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None,

@@ -28,6 +28,7 @@ from bench.evaluation.driven import driven_entry
 from bench.evaluation.forces import forces_entry
 from bench.evaluation.reference import against, applies as has_standard_model, constant_reference, standard_reference
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
+from bench.evaluation.tuning import tune
 from bench.runner.plugins import import_plugins
 from bench.runner.provenance import device_entry
 from bench.runner.records import Record
@@ -160,11 +161,17 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         timing = {"load_s": time.perf_counter() - clock}
         memory = {"start_mb": resident_mb()}
         prepared = None
+        tuning = None
         if fitted is None:
             phase("prepare")
             prepared = method.prepare(train, spec.experiment)
             phase("fit")
-            method.fit(train, spec.experiment, spec.seed, budget, system=system)
+            if spec.tune:
+                tuned = tune(METHODS[spec.method], method_config(spec), train, spec.experiment, spec.seed, budget,
+                             system=system, device=spec.device, report=lambda line: print(line, flush=True))
+                method, tuning = tuned.method, tuned.details
+            else:
+                method.fit(train, spec.experiment, spec.seed, budget, system=system)
         phase("evaluate")
         info = method.fit_info
         fields.update(
@@ -200,6 +207,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             **stages.run("details", method.record_details, default={}),
             "variants": variants,
             **({"exact_not_judged": not_judged(system)} if not_judged(system) else {}),
+            **({"tuning": tuning} if tuning is not None else {}),
             **exact,
         }
         if system.simulated and test is not None and spec.rollout:

@@ -105,11 +105,16 @@ class Record:
         fields.setdefault("budget", RunSpec.from_dict(spec).budget.to_json())
         return cls(
             schema=SCHEMA,
-            run_id=run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], noise),
+            run_id=run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], noise, spec.get("tune", False)),
             system=spec["system"], method=spec["method"], experiment=spec["experiment"], seed=spec["seed"],
             budget_s=spec["budget_s"], noise=noise, target="L" if spec["experiment"] == "direct" else "tau",
             spec=spec, status=status, provenance=provenance(spec.get("threads", 1) if elsewhere else None), **fields,
         )
+
+    @property
+    def tuned(self) -> bool:
+        """Whether the run chose its hyperparameters on its training data (:mod:`bench.evaluation.tuning`)."""
+        return bool(self.spec.get("tune"))
 
     @property
     def budget_kind(self) -> str:
@@ -136,8 +141,9 @@ class Record:
         parts = parse_run_id(rid)
         if parts is None:
             return None
+        tuned = parts.pop("tuned")
         return cls(schema=SCHEMA, run_id=rid, target="L" if parts["experiment"] == "direct" else "tau", budget_s=math.nan,
-                   spec={}, status=MISSING, error=why, **parts)
+                   spec={"tune": True} if tuned else {}, status=MISSING, error=why, **parts)
 
     def replace(self, **changes) -> "Record":
         return dataclasses.replace(self, **changes)

@@ -2,6 +2,7 @@
 
 A run under a work budget is replayed by running its spec again. A run
 under a time budget is replayed under the work budget its record gives
+(a tuned run: the hyperparameters its search chose, and its final fit's work)
 (``replay``: the steps it reached, the steps of its evaluations and its
 reading of the clock, :class:`~bench.core.budget.Schedule`), with the same
 data, seed and configuration. Either way the replay repeats the fit step for
@@ -49,6 +50,9 @@ def replay_spec(record: Record, source: str = "record", ceiling_s: float | None 
     if "unavailable" in replay:
         raise UserError(f"{source}: {record.method} cannot be replayed: {replay['unavailable']}")
     schedule = Schedule.from_json(replay)
+    if spec.tune:  # the search read the clock: its choice is replayed, and the final fit step for step
+        chosen = (record.details.get("tuning") or {}).get("chosen", {})
+        spec = dataclasses.replace(spec, tune=False, hyperparameters={**spec.hyperparameters, **chosen})
     return dataclasses.replace(spec, budget_s=ceiling_s, steps=schedule.steps, schedule=schedule.to_json())
 
 

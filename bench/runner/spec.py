@@ -28,13 +28,15 @@ TEST_SEED_OFFSET = 1000
 N_TRAIN, N_TEST = 32000, 10000
 
 
-def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 0.0) -> str:
-    """``system__method__experiment__seedN``, with ``__noiseX`` when the targets are noisy."""
-    return f"{system}__{method}__{experiment}__seed{seed}" + (f"__noise{noise:g}" if noise else "")
+def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 0.0, tuned: bool = False) -> str:
+    """``system__method__experiment__seedN``, with ``__noiseX`` when the targets are noisy
+    and ``__tuned`` when the run chose its hyperparameters (:mod:`bench.evaluation.tuning`)."""
+    return (f"{system}__{method}__{experiment}__seed{seed}" + (f"__noise{noise:g}" if noise else "")
+            + ("__tuned" if tuned else ""))
 
 
 _RUN_ID = re.compile(r"^(?P<system>\w+?)__(?P<method>\w+?)__(?P<experiment>direct|indirect)__seed(?P<seed>\d+)"
-                     r"(?:__noise(?P<noise>[0-9.e+-]+))?$")
+                     r"(?:__noise(?P<noise>[0-9.e+-]+?))?(?P<tuned>__tuned)?$")
 
 
 def parse_run_id(rid: str) -> dict | None:
@@ -48,7 +50,7 @@ def parse_run_id(rid: str) -> dict | None:
     except ValueError:
         return None
     return {"system": m["system"], "method": m["method"], "experiment": m["experiment"], "seed": int(m["seed"]),
-            "noise": noise}
+            "noise": noise, "tuned": m["tuned"] is not None}
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,9 @@ class RunSpec:
     device
         Where a torch method trains: ``cpu`` or ``cuda`` (resolved from
         ``--device``, :mod:`bench.core.devices`); other methods run on the CPU.
+    tune
+        Choose the method's hyperparameters from its search space on the
+        training data, within the run's budget (:mod:`bench.evaluation.tuning`).
     budget_s, steps, schedule
         The budget (:mod:`bench.core.budget`): ``budget_s`` seconds of
         wall-clock time; or, with ``steps``, that many steps of the method's
@@ -112,13 +117,14 @@ class RunSpec:
     schedule: dict | None = None
     split: str | None = None
     device: str = "cpu"
+    tune: bool = False
 
     def __post_init__(self):
         _ = self.budget  # a spec without a valid budget is refused where it is made (ConfigError)
 
     @property
     def run_id(self) -> str:
-        return run_id(self.system, self.method, self.experiment, self.seed, self.noise)
+        return run_id(self.system, self.method, self.experiment, self.seed, self.noise, self.tune)
 
     @property
     def budget(self) -> Budget:
@@ -135,6 +141,7 @@ class RunSpec:
     def from_dict(cls, d: dict) -> "RunSpec":
         d = dict(d)
         d["plugins"] = tuple(d.get("plugins", ()))
+        d.setdefault("tune", False)
         return cls(**d)
 
 

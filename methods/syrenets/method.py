@@ -35,6 +35,7 @@ class SyReNets(Equations, TorchLagrangianMethod):
 
     stackable = True  # its own stacked loop: methods.syrenets.stacked
     Config = SyReNetsConfig
+    search_space = {"layers": (2, 3), "heads": (6, 12)}
     smoke = {"layers": 2, "heads": 3, "latent": 4, "ae_hidden": 8, "head_hidden": 8, "max_steps": 10,
              "eval_samples": 128, "refine": False}
     configurations = {

@@ -1,0 +1,202 @@
+"""A method's hyperparameters chosen on the training data alone, by the
+suite's one validation protocol (:mod:`bench.core.folds`).
+
+Each method declares a small search space (:attr:`methods.base.Method.search_space`:
+values per hyperparameter, at most :data:`MAX_COMBINATIONS` combinations in
+all, as SRBench allows: La Cava et al., 2021). A tuned fit
+
+1. folds the training data (:func:`bench.core.folds.folds`, at most
+   :data:`MAX_FOLDS` folds of whole trajectories, or spans in time of one
+   trajectory with the torque's autocorrelation time between what a fold
+   fits and what it scores);
+2. fits every combination on every fold and scores it on the fold's scored
+   samples: scikit-learn's ``GridSearchCV``, with the folds as its ``cv``;
+3. chooses the combination with the lowest validation MSE (the mean over the
+   folds; a combination that fails or predicts non-finite torques on any fold
+   is not chosen), and fits it on all the training data.
+
+The fit's budget covers all of it. Under a time budget the final fit has
+:data:`FINAL_SHARE` of the seconds and each fit of the search an equal part of
+the rest; under a work budget every fit, in the search and the final one, does
+the budget's steps (the work a method is compared by), so that a tuned run is
+as replayable as any. What it chose, every combination's validation MSE per
+fold, and the folds are the record's ``details.tuning``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from sklearn.base import BaseEstimator
+from sklearn.model_selection import GridSearchCV, ParameterGrid
+
+from bench.core.budget import Budget
+from bench.core.data import Dataset, mse
+from bench.core.errors import ConfigError
+from bench.core.folds import folds
+from bench.core.system import System
+
+#: at most this many combinations a method's search space may hold
+MAX_COMBINATIONS = 10
+#: folds of whole trajectories the search uses at most
+MAX_FOLDS = 4
+#: the share of a time budget the final fit has; the search has the rest
+FINAL_SHARE = 0.5
+#: what the record and the tables call a tuned run
+PROTOCOL = "tuned on the training trajectories"
+
+
+def combinations(method_cls) -> list[dict]:
+    """The combinations of ``method_cls``'s search space, in a fixed order
+    (scikit-learn's ``ParameterGrid``); ``[]`` where it declares none."""
+    space = getattr(method_cls, "search_space", {}) or {}
+    if not space:
+        return []
+    return [dict(c) for c in ParameterGrid({k: list(v) for k, v in space.items()})]
+
+
+def check_space(method_cls) -> None:
+    """A :class:`ConfigError` where ``method_cls``'s search space holds too many
+    combinations or a value its ``Config`` refuses."""
+    grid = combinations(method_cls)
+    if len(grid) > MAX_COMBINATIONS:
+        raise ConfigError(f"{method_cls.name}: its search space holds {len(grid)} combinations, at most "
+                          f"{MAX_COMBINATIONS} allowed")
+    for choice in grid:
+        method_cls(**choice)
+
+
+class _Shared:
+    """What every candidate of one search shares (the data, the budget): one
+    object, not copied when scikit-learn clones a candidate."""
+
+    def __init__(self, make: Callable[[dict], object], train: Dataset, experiment: str, seed: int, budget: Budget,
+                 system: System | None):
+        self.make, self.train, self.experiment, self.seed = make, train, experiment, seed
+        self.budget, self.system = budget, system
+        self.failures: dict[tuple, str] = {}
+
+    def __deepcopy__(self, memo):
+        return self
+
+
+class _Candidate(BaseEstimator):
+    """One combination as a scikit-learn estimator: ``X`` holds sample indices."""
+
+    def __init__(self, shared: _Shared | None = None, choice: dict | None = None):
+        self.shared = shared
+        self.choice = choice
+
+    def fit(self, X, y=None):
+        s = self.shared
+        self.method_ = None
+        try:
+            method = s.make(self.choice)
+            method.fit(s.train.subset(np.asarray(X)[:, 0]), s.experiment, s.seed, s.budget, system=s.system)
+            self.method_ = method
+        except Exception as exc:  # a combination that fails is not chosen; the record says why
+            s.failures[_key(self.choice)] = f"{type(exc).__name__}: {exc}"[:300]
+        return self
+
+
+def _key(choice: dict) -> tuple:
+    return tuple(sorted((k, repr(v)) for k, v in choice.items()))
+
+
+def _score(candidate: _Candidate, X, y=None) -> float:
+    """Minus the candidate's MSE on the samples ``X``; ``nan`` where it failed or predicts non-finite values."""
+    if candidate.method_ is None:
+        return math.nan
+    s = candidate.shared
+    part = s.train.subset(np.asarray(X)[:, 0])
+    return -mse(candidate.method_.predict(part, s.experiment), part.target(s.experiment))
+
+
+@dataclass
+class Tuned:
+    """A tuned fit: the method fitted on all the training data with the chosen
+    hyperparameters, and the record's ``details.tuning``."""
+
+    method: object
+    details: dict
+
+
+def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int, budget: Budget,
+         system: System | None = None, device: str = "cpu", report: Callable[[str], None] | None = None) -> Tuned:
+    """Choose ``method_cls``'s hyperparameters from its search space on ``train``
+    (see the module docstring), on top of ``settings`` (its configuration and
+    the user's ``--set``; a searched hyperparameter the user set stays as set and
+    is not searched), and fit the choice on all of ``train``. ``report`` is
+    given a line as the search goes."""
+    say = report or (lambda line: None)
+    fixed = dict(settings)
+    space = {k: v for k, v in _space(method_cls).items() if k not in fixed}
+    searched = sorted(space)
+    grid = [dict(c) for c in ParameterGrid(space)] if space else []
+
+    def make(choice: dict):
+        return method_cls(**{**fixed, **choice}).use_device(device)
+
+    t0 = time.perf_counter()
+    if len(grid) < 2:
+        method = make(grid[0] if grid else {})
+        method.fit(train, experiment, seed, budget, system=system)
+        why = "nothing to tune: the method declares no search space" if not _space(method_cls) else \
+            "nothing to tune: the hyperparameters of its search space are set"
+        return Tuned(method, {"protocol": PROTOCOL, "note": why, "chosen": grid[0] if grid else {},
+                              "space": _space(method_cls)})
+    fold_set = folds(train, max_folds=MAX_FOLDS)
+    fits = len(grid) * len(fold_set)
+    each = budget.scaled((1.0 - FINAL_SHARE) / fits)
+    say(f"tuning {method_cls.name}: {len(grid)} combinations x {len(fold_set)} folds ({fold_set.describe()}), "
+        f"{each.describe()} a fit")
+    shared = _Shared(make, train, experiment, seed, each, system)
+    search = GridSearchCV(_Candidate(shared), {"choice": grid}, scoring=_score, cv=fold_set.indices(), refit=False,
+                          error_score=math.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a failed or non-finite combination is recorded, not warned about
+        search.fit(np.arange(len(train))[:, None])
+    results = search.cv_results_
+    rows = []
+    for i, choice in enumerate(results["param_choice"]):
+        per_fold = [-float(results[f"split{k}_test_score"][i]) for k in range(len(fold_set))]
+        finite = all(math.isfinite(v) for v in per_fold)
+        row = {"hyperparameters": dict(choice), "validation_mse": float(np.mean(per_fold)) if finite else None,
+               "fold_mse": [v if math.isfinite(v) else None for v in per_fold],
+               "fit_seconds": round(float(results["mean_fit_time"][i]) * len(fold_set), 3)}
+        failure = shared.failures.get(_key(choice))
+        if failure or not finite:
+            row["failed"] = failure or "non-finite validation MSE"
+        rows.append(row)
+        say(f"  {_words(choice)}: validation MSE "
+            f"{'failed' if row['validation_mse'] is None else format(row['validation_mse'], '.4g')}")
+    usable = [r for r in rows if r["validation_mse"] is not None]
+    search_seconds = time.perf_counter() - t0
+    if not usable:
+        chosen, note = {}, "every combination failed in the search: the method's own defaults are fitted"
+    else:
+        chosen, note = min(usable, key=lambda r: r["validation_mse"])["hyperparameters"], None
+    final = budget.scaled(FINAL_SHARE)
+    say(f"tuning {method_cls.name}: chose {_words(chosen) or 'its defaults'}; fitting it on all the training data "
+        f"({final.describe()})")
+    method = make(chosen)
+    method.fit(train, experiment, seed, final, system=system)
+    details = {"protocol": PROTOCOL, "space": _space(method_cls), "searched": searched, "chosen": chosen,
+               "folds": fold_set.to_json(), "fit_budget": each.to_json(), "final_budget": final.to_json(),
+               "combinations": rows, "search_seconds": round(search_seconds, 3)}
+    if note:
+        details["note"] = note
+    return Tuned(method, details)
+
+
+def _space(method_cls) -> dict:
+    return {k: list(v) for k, v in (getattr(method_cls, "search_space", {}) or {}).items()}
+
+
+def _words(choice: dict) -> str:
+    return ", ".join(f"{k}={v!r}" for k, v in sorted(choice.items()))
