@@ -1,0 +1,171 @@
+"""Tuning on the training data alone: every combination scored by the one
+validation protocol, the best validated one chosen and fitted on all the
+training data, a user's own setting left alone, a tuned run's record, table
+column and replay."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Annotated, ClassVar
+
+import numpy as np
+import pytest
+
+from bench.core.budget import Budget
+from bench.core.data import Dataset, mse
+from bench.core.errors import ConfigError
+from bench.core.folds import folds
+from bench.evaluation.tuning import MAX_COMBINATIONS, MAX_FOLDS, PROTOCOL, check_space, combinations, tune
+from bench.runner.records import Record
+from bench.runner.spec import RunSpec, parse_run_id, run_id
+from methods import METHODS
+from methods.base import Method
+from methods.config import MethodConfig, Range
+from tests.commandline import cli
+
+
+@dataclass(frozen=True)
+class PolyConfig(MethodConfig):
+    degree: Annotated[int, Range(0)] = 0
+    ridge: Annotated[float, Range(0)] = 0.0
+
+
+class Poly(Method):
+    """Each joint's torque as a polynomial of its own q, by least squares: one solve."""
+
+    name = "toy_poly"
+    Config = PolyConfig
+    experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+    has_lagrangian: ClassVar[bool] = False
+    search_space = {"degree": (0, 1, 3, 9), "ridge": (0.0, 1e3)}
+
+    def _columns(self, data):
+        return [np.vander(data.q[:, j], self.config.degree + 1) for j in range(data.dof)]
+
+    def _fit(self, train, experiment, progress):
+        self.coef = [np.zeros(self.config.degree + 1) for _ in range(train.dof)]
+        while progress.step():
+            self.coef = [np.linalg.solve(X.T @ X + self.config.ridge * np.eye(X.shape[1]), X.T @ train.tau[:, j])
+                         for j, X in enumerate(self._columns(train))]
+            progress.stop("solved")
+
+    def _get_state(self):
+        return self.coef
+
+    def _set_state(self, state):
+        self.coef = state
+
+    def predict_torque(self, data):
+        return np.stack([X @ c for X, c in zip(self._columns(data), self.coef)], axis=1)
+
+    def predict_lagrangian(self, data):
+        return np.full(len(data), np.nan)
+
+
+def _trajectories(seed: int = 0) -> Dataset:
+    """Three trajectories of a cubic torque law, with noise."""
+    rng = np.random.default_rng(seed)
+    n = 300
+    q = np.concatenate([np.sin(np.linspace(0, 6, n) + k)[:, None] * [1.0, 0.7] for k in range(3)])
+    tau = q ** 3 - 0.5 * q + 0.05 * rng.normal(size=q.shape)
+    labels = np.repeat(["a", "b", "c"], n)
+    return Dataset(q, q, q, tau, recording=labels, time=np.tile(np.arange(n) * 0.01, 3))
+
+
+def _by_hand(train: Dataset, choice: dict) -> float:
+    out = []
+    for fold in folds(train, max_folds=MAX_FOLDS):
+        m = Poly(**choice).fit(train.subset(fold.fit), "indirect", 0, steps=1)
+        part = train.subset(fold.score)
+        out.append(mse(m.predict_torque(part), part.tau))
+    return float(np.mean(out))
+
+
+def test_the_best_validated_combination_is_chosen_and_fitted_on_all_the_training_data():
+    train = _trajectories()
+    tuned = tune(Poly, {}, train, "indirect", 0, Budget(steps=1))
+    d = tuned.details
+    assert d["protocol"] == PROTOCOL and d["folds"]["kind"] == "trajectories" and d["folds"]["folds"] == 3
+    assert len(d["combinations"]) == len(combinations(Poly)) == 8
+    for row in d["combinations"]:
+        assert row["validation_mse"] == pytest.approx(_by_hand(train, row["hyperparameters"]), rel=1e-9)
+        assert len(row["fold_mse"]) == 3
+    best = min(d["combinations"], key=lambda r: r["validation_mse"])
+    assert d["chosen"] == best["hyperparameters"] == {"degree": 3, "ridge": 0.0}
+    again = Poly(**d["chosen"]).fit(train, "indirect", 0, steps=1)
+    np.testing.assert_array_equal(tuned.method.predict_torque(train), again.predict_torque(train))
+    assert tuned.method.hyperparameters()["degree"] == 3
+
+
+def test_a_hyperparameter_the_user_set_is_not_searched():
+    tuned = tune(Poly, {"degree": 1}, _trajectories(), "indirect", 0, Budget(steps=1))
+    assert tuned.details["searched"] == ["ridge"] and len(tuned.details["combinations"]) == 2
+    assert tuned.method.config.degree == 1
+    alone = tune(Poly, {"degree": 1, "ridge": 0.0}, _trajectories(), "indirect", 0, Budget(steps=1))
+    assert "nothing to tune" in alone.details["note"] and alone.method.config.ridge == 0.0
+
+
+def test_a_combination_that_fails_is_recorded_and_not_chosen():
+    class Fragile(Poly):
+        name = "toy_fragile"
+
+        def _fit(self, train, experiment, progress):
+            if self.config.degree == 3:
+                raise RuntimeError("the toy fell over")
+            super()._fit(train, experiment, progress)
+
+    d = tune(Fragile, {}, _trajectories(), "indirect", 0, Budget(steps=1)).details
+    failed = [r for r in d["combinations"] if "failed" in r]
+    assert len(failed) == 2 and all("the toy fell over" in r["failed"] for r in failed)
+    assert d["chosen"]["degree"] != 3
+
+
+def test_every_method_and_hybrid_declares_a_small_search_space_its_config_accepts():
+    names = [n for n in METHODS.names() if METHODS.entry(n).available]
+    for name in names + ["feasible+gp", "standard+mlp", "feasible+delan", "standard+sparse_torque"]:
+        check_space(METHODS[name])
+        assert len(combinations(METHODS[name])) <= MAX_COMBINATIONS
+    assert "gate_length" in METHODS["standard+mlp"].search_space
+    assert "gate_length" not in METHODS["feasible+gp"].search_space  # the GP falls back to zero by itself
+
+    class Wide(Poly):
+        search_space = {"degree": tuple(range(11))}
+
+    with pytest.raises(ConfigError, match="11 combinations"):
+        check_space(Wide)
+
+    class Wrong(Poly):
+        search_space = {"degree": (-1, 1)}
+
+    with pytest.raises(ConfigError, match="degree"):
+        check_space(Wrong)
+
+
+def test_a_tuned_run_id_round_trips_and_its_missing_record_stays_tuned():
+    rid = run_id("kuka_lwr4", "mlp", "indirect", 3, 0.0, tuned=True)
+    assert rid.endswith("__tuned") and parse_run_id(rid)["tuned"] and not parse_run_id(rid[: -len("__tuned")])["tuned"]
+    assert parse_run_id(run_id("p", "mlp", "indirect", 3, 0.01, tuned=True)) == {
+        "system": "p", "method": "mlp", "experiment": "indirect", "seed": 3, "noise": 0.01, "tuned": True}
+    assert Record.missing(rid, "corrupt").tuned
+    assert RunSpec("kuka_lwr4", "mlp", "indirect", 3, None, steps=5, tune=True).run_id == rid
+
+
+def test_a_tuned_matrix_sits_beside_the_default_one_and_replays(tmp_path):
+    out = tmp_path / "m"
+    common = ["run", "--systems", "double_pendulum", "--methods", "sysid", "--experiments", "indirect", "--smoke",
+              "--steps", "5", "--n-seeds", "1", "--n-train", "200", "--n-test", "64", "--no-rollout", "--out", out]
+    assert cli(*common).returncode == 0
+    r = cli(*common, "--tune")
+    assert r.returncode == 0, r.stderr
+    text = (out / "tables.md").read_text()
+    assert "| sysid | sysid tuned |" in text and f"*tuned* are {PROTOCOL}" in text
+    path = out / "records" / "double_pendulum__sysid__indirect__seed0__tuned.json"
+    record = json.loads(path.read_text())
+    tuning = record["details"]["tuning"]
+    assert len(tuning["combinations"]) == 4 and tuning["folds"]["kind"] == "blocks"
+    assert record["hyperparameters"]["feasible"] == tuning["chosen"]["feasible"]
+    again = cli("rerun", path)
+    assert again.returncode == 0 and "the same up to a relative 1e-09" in again.stdout
+    refused = cli(*common, "--tune", "--stack-seeds")
+    assert refused.returncode == 2 and "--stack-seeds" in refused.stderr and len(refused.stderr.splitlines()) == 1
