@@ -31,6 +31,7 @@ import abc
 import contextlib
 import dataclasses
 import gc
+import json
 import random
 import time
 from typing import Any, ClassVar
@@ -420,6 +421,25 @@ class FitStart:
 METHODS: Registry[type[Method]] = Registry("method")
 
 
+def saved_hyperparameters(method) -> dict:
+    """A method's hyperparameters as JSON (tuples as lists)."""
+    return json_safe(method.hyperparameters())
+
+
+def json_safe(value):
+    """``value`` as JSON holds it (tuples as lists)."""
+    return json.loads(json.dumps(value))
+
+
+def restored(tree: dict, context: dict):
+    """The method a saved tree names, built with its hyperparameters, for ``context``'s system and joints."""
+    hyperparameters = {k: tuple(v) if isinstance(v, list) else v for k, v in tree["hyperparameters"].items()}
+    method = METHODS[tree["method"]](**hyperparameters)
+    method.dof, method.system, method.experiment = int(context["dof"]), context.get("system"), "indirect"
+    method.seed = 0  # a network is built, then given its saved weights
+    return method
+
+
 class ExpressionMethod(Method):
     """A method whose fitted state is one :class:`ExpressionModel`.
 
@@ -437,6 +457,10 @@ class ExpressionMethod(Method):
 
     def expression(self):
         return self.model.expr
+
+    def saved(self, packer):
+        """Its expression (:meth:`~bench.core.models.ExpressionModel.saved`)."""
+        return self.model.saved(packer)
 
     def predict_lagrangian(self, data):
         return self.model.predict_lagrangian(data)

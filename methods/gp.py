@@ -55,7 +55,8 @@ import torch
 
 from bench.core.autocorrelation import effective_samples
 from bench.core.data import Dataset
-from methods.base import METHODS, Method
+from bench.core.modelfile import Packer, Unpacker, loader
+from methods.base import METHODS, Method, restored, saved_hyperparameters
 from methods.config import POSITIVE, MethodConfig, Range
 from methods.progress import Progress
 from methods.torch_method import Feed, fused_adam_ok
@@ -75,6 +76,16 @@ class GPConfig(MethodConfig):
     lr: Annotated[float, POSITIVE] = 0.01
     inputs: typing.Literal["joint", "all", "all_qdd"] = "joint"
     samples: typing.Literal["effective", "all"] = "effective"
+
+
+@loader("gp")
+def _load_gp(tree: dict, unpacker: Unpacker, context: dict) -> "GaussianProcess":
+    """A GP's predictive mean from its saved weights."""
+    method = restored(tree, context)
+    method.x_scale, method.y_scale = unpacker.array(tree["x_scale"]), unpacker.array(tree["y_scale"])
+    method._weights = tuple(torch.from_numpy(np.array(unpacker.array(tree[k]))) for k in
+                            ("inducing_points", "lengthscale", "outputscale", "alpha"))
+    return method
 
 
 def _gpytorch():
@@ -221,6 +232,16 @@ class GaussianProcess(Method):
         finally:
             model.train()
         return out.T.cpu().numpy() * self.y_scale
+
+    def saved(self, packer: Packer) -> dict:
+        """What its predictive mean needs (:meth:`_mean_weights`): the inducing
+        points, the kernel's lengths and scale, the weights and the scales of
+        its inputs and targets."""
+        Z, length, scale, alpha = self._weights if self._weights is not None else self._mean_weights()
+        return {"kind": "gp", "method": self.name, "hyperparameters": saved_hyperparameters(self),
+                "inducing_points": packer.array(Z.numpy()), "lengthscale": packer.array(length.numpy()),
+                "outputscale": packer.array(scale.numpy()), "alpha": packer.array(alpha.numpy()),
+                "x_scale": packer.array(self.x_scale), "y_scale": packer.array(self.y_scale)}
 
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         """A GP of the torque has no Lagrangian: ``nan``."""

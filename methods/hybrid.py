@@ -41,9 +41,10 @@ import numpy as np
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
+from bench.core.modelfile import Unpacker, build, loader
 from bench.core.registry import RegistryError
 from bench.core.system import System
-from methods.base import METHODS, Method
+from methods.base import METHODS, Method, restored, saved_hyperparameters
 from methods.config import POSITIVE
 from methods.progress import Progress
 
@@ -149,12 +150,30 @@ class Hybrid(Method):
     def references(self) -> dict:
         return {"prior": self.prior}
 
+    def saved(self, packer) -> dict:
+        """Its prior, its residual and its gate (the training states, scaled), each as saved."""
+        gate = None if self.gate is None else {"states": packer.array(self.gate.tree.data),
+                                               "scale": packer.array(self.gate.scale)}
+        return {"kind": "hybrid", "method": self.name, "hyperparameters": saved_hyperparameters(self),
+                "prior": self.prior.saved(packer), "residual": self.residual.saved(packer), "gate": gate}
+
     def record_details(self) -> dict:
         return {"prior": f"{PRIOR_METHOD} ({PRIORS[self.prior_name]} configuration)",
                 "gated": self.gate is not None, "residual": self.residual.record_details(), "size": self.residual.size()}
 
     def size(self) -> dict:
         return self.residual.size()
+
+
+@loader("hybrid")
+def _load(tree: dict, unpacker: Unpacker, context: dict) -> Hybrid:
+    method = restored(tree, context)
+    method.prior = build(tree["prior"], unpacker, context)
+    method.residual = build(tree["residual"], unpacker, context)
+    gate = tree.get("gate")
+    method.gate = None if gate is None else TrainingStates.scaled(unpacker.array(gate["states"]),
+                                                                  unpacker.array(gate["scale"]))
+    return method
 
 
 _priors: "OrderedDict[tuple, Method]" = OrderedDict()

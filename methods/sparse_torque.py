@@ -29,7 +29,8 @@ import numpy as np
 
 from bench.core import regression
 from bench.core.data import Dataset
-from methods.base import METHODS, Method
+from bench.core.modelfile import loader
+from methods.base import METHODS, Method, restored, saved_hyperparameters
 from methods.config import MethodConfig, Range
 from methods.progress import Progress
 
@@ -90,6 +91,11 @@ class SparseTorque(Method):
         """A regression of the torque has no Lagrangian: ``nan``."""
         return np.full(len(data), math.nan)
 
+    def saved(self, packer) -> dict:
+        """Each joint's coefficients, with the hyperparameters."""
+        return {"kind": "sparse_torque", "method": self.name, "hyperparameters": saved_hyperparameters(self),
+                "coef": [packer.array(c) for c in self.coef]}
+
     def equations(self) -> list[str]:
         """Each joint's torque as the sum of its kept terms."""
         out = []
@@ -108,6 +114,15 @@ class SparseTorque(Method):
         if coef is None or self.dof is None:
             return {}
         return {"terms": int(sum(np.count_nonzero(c) for c in coef)), "equations": self.equations()}
+
+
+@loader("sparse_torque")
+def _load(tree: dict, unpacker, context: dict) -> SparseTorque:
+    method = restored(tree, context)
+    method.coef = [np.array(unpacker.array(c), dtype=np.float64) for c in tree["coef"]]
+    if len(method.coef) != method.dof:
+        raise ValueError(f"{len(method.coef)} joints' coefficients for {method.dof} joints")
+    return method
 
 
 def terms_names(dof: int, j: int) -> list[str]:

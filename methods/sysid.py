@@ -239,6 +239,10 @@ class SysId(TorchLagrangianMethod):
             self._facts["mass_matrix_states"] = len(smallest)  # every training state
             self._facts["mass_matrix_indefinite_states"] = int(np.sum(~(smallest > 0)))
 
+    def saved(self, packer):
+        """The linear model (:meth:`~bench.core.models.LinearParametricModel.saved`), or the parameter network."""
+        return self.linear.saved(packer) if self.linear is not None else super().saved(packer)
+
     def predict_lagrangian(self, data):
         return self.linear.predict_lagrangian(data) if self.linear is not None else super().predict_lagrangian(data)
 

@@ -13,12 +13,14 @@ import typing
 from dataclasses import dataclass
 from typing import Annotated, ClassVar
 
+import numpy as np
 import torch
 
 from bench.core.data import Dataset
 from bench.core.dynamics import euler_lagrange
+from bench.core.modelfile import Packer, Unpacker, loader
 from bench.core.models import LagrangianFunction
-from methods.base import Method
+from methods.base import Method, restored, saved_hyperparameters
 from methods.config import POSITIVE, MethodConfig, Range
 from methods.progress import Progress
 from methods.stacking import prepare_lagrangians, train_lagrangians
@@ -249,6 +251,24 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
 
     def _set_state(self, state) -> None:
         self.model.load_state_dict(state)
+
+    def saved(self, packer: Packer) -> dict:
+        """The network's weights, with the method and hyperparameters that build it (:func:`_load_network`)."""
+        return {"kind": "network", "method": self.name, "hyperparameters": saved_hyperparameters(self),
+                "state": packer.tensors(self.model.state_dict())}
+
+
+@loader("network")
+def _load_network(tree: dict, unpacker: Unpacker, context: dict):
+    """A torch method's network, built for the joints and given its saved weights, evaluated in float64 on the CPU."""
+    method = restored(tree, context)
+    dof = method.dof
+    zeros = np.zeros((1, dof))
+    method.model = method.build_model(Dataset(zeros, zeros, zeros, zeros, system=getattr(method.system, "name", None)))
+    method.model.to("cpu", torch.float64)
+    method.model.load_state_dict(unpacker.tensors(tree["state"]))
+    method._trained = True
+    return method
 
 
 def fused_adam_ok(dtype: torch.dtype, device: torch.device = torch.device("cpu")) -> bool:

@@ -4,6 +4,7 @@ CSV data or on generated data, summarised in one line."""
 from __future__ import annotations
 
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -31,6 +32,9 @@ def add_arguments(f) -> None:
     add_budget(f, "for the fit")
     add_split(f)
     f.add_argument("--json", type=Path, default=None, help="write the run's record here")
+    f.add_argument("--save", type=Path, default=None, metavar="FILE",
+                   help="write the fitted model to FILE, a model file that python -m bench predict reads (numbers "
+                        "and expressions only, no code); it is checked to give the fitted model's torques back first")
     add_tune(f, "the run")
     add_config(f)
     add_set(f)
@@ -44,8 +48,9 @@ def add_arguments(f) -> None:
 
 
 def main(args) -> int:
-    if args.json:
-        check_output(args.json)
+    for path in (args.json, args.save):
+        if path:
+            check_output(path)
     (name,), plugins = load_plugins(args, [args.system])
     check_names(args, [name], [args.method], [args.experiment])
     check_split(args.split, [name])
@@ -59,7 +64,7 @@ def main(args) -> int:
         train_path=str(args.train) if args.train else None, test_path=str(args.test) if args.test else None,
         domain_half_width=args.domain_half_width, plugins=plugins, split=args.split,
         device=device(args.device, [args.method]),
-        tune=args.tune,
+        tune=args.tune, save=str(args.save.resolve()) if args.save else None,
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now
@@ -72,6 +77,11 @@ def main(args) -> int:
     if args.json:
         write_json(args.json, record.to_json())
     print(summary_line(record, log))
+    if args.save and record.status == "ok":
+        if "save" in record.failed_stages:
+            print(f"error: {args.save}: not written: {record.failed_stages['save'].splitlines()[0]}", file=sys.stderr)
+            return 1
+        print(f"model written to {args.save}")
     return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
 
 

@@ -158,8 +158,11 @@ def numeric_column(frame, col: str, path: Path) -> np.ndarray:
     return values
 
 
-def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | None = None) -> Dataset:
-    """Load a CSV in the suite's format, checking it thoroughly.
+def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | None = None,
+             torque_optional: bool = False) -> Dataset:
+    """Load a CSV in the suite's format, checking it thoroughly. With
+    ``torque_optional``, a file without ``tau_i`` columns is read with zero
+    torques and ``meta["no_torque"]`` set (states to predict the torques of).
 
     Raises :class:`DataError` with a one-line message naming the file and the
     problem for: an unreadable or empty file, missing columns, a number of
@@ -180,14 +183,18 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
         who = f"system {system!r}" if system else "the model"
         raise DataError(f"{path}: the file has {file_dof} degrees of freedom (q_1..q_{file_dof}) but {who} has {dof}")
     need = columns(file_dof, False)
-    missing = [c for c in need if c not in frame.columns]
+    no_torque = torque_optional and not found["tau"]
+    missing = [c for c in need if c not in frame.columns and not (no_torque and c.startswith("tau_"))]
     if missing:
         raise DataError(f"{path}: missing column(s) {', '.join(missing)}")
 
     def numeric(col: str) -> np.ndarray:
         return numeric_column(frame, col, path)
 
-    arrays = {k: np.stack([numeric(f"{k}_{i}") for i in range(1, file_dof + 1)], axis=1) for k in found}
+    arrays = {k: np.stack([numeric(f"{k}_{i}") for i in range(1, file_dof + 1)], axis=1) for k in found
+              if not (no_torque and k == "tau")}
+    if no_torque:
+        arrays["tau"] = np.zeros_like(arrays["q"])
     L = numeric("L") if "L" in frame.columns else None
     trajectory = label_column(frame, TRAJECTORY, path) if TRAJECTORY in frame.columns else None
     recording = label_column(frame, RECORDING, path) if RECORDING in frame.columns else None
@@ -207,7 +214,7 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
                         f"(the filtered velocity signs come for every joint or for none)")
     sign_qd = np.stack([numeric(c) for c in signs], axis=1) if present else None
     return Dataset(arrays["q"], arrays["qd"], arrays["qdd"], arrays["tau"], L, system, str(path), recording=recording,
-                   sign_qd=sign_qd, trajectory=trajectory, time=time)
+                   sign_qd=sign_qd, trajectory=trajectory, time=time, meta={"no_torque": True} if no_torque else {})
 
 
 def _check_nesting(recording: np.ndarray, trajectory: np.ndarray, path: Path) -> None:

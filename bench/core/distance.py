@@ -25,6 +25,14 @@ class TrainingStates:
         self.scale = np.maximum(states.std(axis=0), 1e-12)
         self.tree = cKDTree(states / self.scale)
 
+    @classmethod
+    def scaled(cls, states: np.ndarray, scale: np.ndarray) -> "TrainingStates":
+        """The training states already divided by their ``scale`` (as a saved model holds them)."""
+        out = cls.__new__(cls)
+        out.scale = np.asarray(scale, dtype=np.float64)
+        out.tree = cKDTree(np.asarray(states, dtype=np.float64))
+        return out
+
     def distance(self, data: Dataset) -> np.ndarray:
         """Each state of ``data``'s distance to the nearest training state, shape ``(n,)``."""
         if not len(data):

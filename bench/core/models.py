@@ -40,7 +40,8 @@ import torch
 from bench.core import symbolic
 from bench.core.data import Dataset, check_experiment
 from bench.core.dynamics import euler_lagrange_chunked
-from bench.core.terms import TermLibrary
+from bench.core.modelfile import ModelFileError, Packer, Unpacker, expression_from_json, expression_to_json, loader
+from bench.core.terms import Term, TermLibrary
 
 #: rows per call when a model's Lagrangian is evaluated on a large data set
 CHUNK = 8192
@@ -117,6 +118,18 @@ class FittedModel(abc.ABC):
         its expression cannot be judged against a Lagrangian."""
         return None
 
+    def saved(self, packer: Packer) -> dict:
+        """The model as a model file holds it (:mod:`bench.core.modelfile`): a
+        JSON tree with its ``kind`` (which :data:`~bench.core.modelfile.LOADERS`
+        loads) and references to the arrays put in ``packer``. By default its
+        expression, where predictions come from one; a ``ValueError`` says why
+        a model cannot be saved."""
+        if self.structure() == "expression" and self.not_a_lagrangian() is None:
+            expr = self.expression()
+            if expr is not None:
+                return {"kind": "expression", "expression": expression_to_json(expr)}
+        raise ValueError(f"a {type(self).__name__} model cannot be saved to a model file yet")
+
     def predict(self, data: Dataset, experiment: str) -> np.ndarray:
         """The prediction in the experiment's own target: ``L`` (direct) or ``tau`` (indirect)."""
         check_experiment(experiment)
@@ -160,6 +173,11 @@ class ExpressionModel(LagrangianFunction):
 
     def expression(self) -> sympy.Expr:
         return self.expr
+
+
+@loader("expression")
+def _load_expression(tree: dict, unpacker: Unpacker, context: dict) -> ExpressionModel:
+    return ExpressionModel(expression_from_json(tree["expression"], unpacker.source), int(context["dof"]))
 
 
 class ParametricModel(LagrangianFunction):
@@ -348,6 +366,64 @@ class LinearParametricModel(FittedModel):
         """``"feasible"`` for a model whose parameters are held physically
         feasible (:attr:`feasible`), ``"linear"`` otherwise."""
         return "linear" if self.feasible is None else "feasible"
+
+    def saved(self, packer: Packer) -> dict:
+        """Its coefficients, the form's further terms, and the form's regressor
+        at :data:`PROBE_STATES` fixed states, by which loading checks that the
+        system gives the same form."""
+        extra = len(self.form.terms)
+        return {"kind": "linear", "columns": packer.array(self.columns), "coef": packer.array(self.coef),
+                "names": list(self.names), "offset": self.offset,
+                "terms": [term_to_json(t) for t in self.form.terms],
+                "term_names": list(self.form.names[len(self.form.names) - extra:]),
+                "feasible": None if self.feasible is None else {
+                    "bodies": self.feasible.bodies, "prior": packer.array(self.feasible.prior),
+                    "regularisation": self.feasible.regularisation},
+                "probe": packer.array(_probe(self.form))}
+
+
+#: the states at which a saved linear model's form is checked against the system's when it is loaded
+PROBE_STATES = 3
+
+
+def _probe(form) -> np.ndarray:
+    """``form``'s torque regressor at :data:`PROBE_STATES` fixed states."""
+    rng = np.random.default_rng(0)
+    q, qd, qdd = (rng.uniform(-1.0, 1.0, (PROBE_STATES, form.dof)) for _ in range(3))
+    return torque_regressor(form, Dataset(q, qd, qdd, np.zeros_like(q)))
+
+
+def term_to_json(term) -> dict:
+    """A :class:`~bench.core.terms.Term` as JSON (its expression by :func:`~bench.core.modelfile.expression_to_json`)."""
+    return {"expr": expression_to_json(term.expr), "place": term.place, "name": term.name, "joint": term.joint,
+            "shape": term.shape}
+
+
+def term_from_json(obj: dict, source: str):
+    """The :class:`~bench.core.terms.Term` of :func:`term_to_json`."""
+    joint, shape = obj.get("joint"), obj.get("shape")
+    return Term(expression_from_json(obj["expr"], source), str(obj["place"]), str(obj.get("name", "")),
+                None if joint is None else int(joint), None if shape is None else float(shape))
+
+
+@loader("linear")
+def _load_linear(tree: dict, unpacker: Unpacker, context: dict) -> "LinearParametricModel":
+    system = context.get("system")
+    form = None if system is None else system.linear_form()
+    if form is None:
+        raise ModelFileError(f"{unpacker.source}: its model is an arm's linear form, and "
+                             f"{getattr(system, 'name', 'no system')} gives none")
+    terms = [term_from_json(t, unpacker.source) for t in tree["terms"]]
+    form = form.with_terms(terms[len(form.terms):], tree["term_names"][len(form.terms):])
+    probe = unpacker.array(tree["probe"])
+    if probe.shape != _probe(form).shape or not np.allclose(_probe(form), probe, rtol=1e-9, atol=1e-12):
+        raise ModelFileError(f"{unpacker.source}: {system.name}'s model is not the one this model was fitted on "
+                             f"(its regressor differs at the probe states)")
+    feasible = tree.get("feasible")
+    return LinearParametricModel(
+        form, unpacker.array(tree["columns"]), unpacker.array(tree["coef"]), tree["names"], float(tree["offset"]),
+        None if feasible is None else FeasibleSet(int(feasible["bodies"]), tuple(unpacker.array(feasible["prior"])),
+                                                  float(feasible["regularisation"])))
 
 
 @dataclass(frozen=True)

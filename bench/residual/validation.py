@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.folds import Folds, folds
+from bench.core.folds import Fold, Folds, folds
 from bench.core.regression import Compressed, least_squares
 
 
@@ -31,7 +31,6 @@ def as_folds(held: "Folds | list[np.ndarray]") -> Folds:
     """``held`` as :class:`~bench.core.folds.Folds`: held-out row masks, each scored whole, as they are."""
     if isinstance(held, Folds):
         return held
-    from bench.core.folds import Fold
     return Folds(tuple(Fold(m, m) for m in held), "given")
 
 

@@ -30,10 +30,12 @@ from bench.evaluation.reference import against, applies as has_standard_model, c
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
 from bench.evaluation.tuning import tune
 from bench.runner.plugins import import_plugins
-from bench.runner.provenance import device_entry
+from bench.runner.provenance import device_entry, provenance
 from bench.runner.records import Record
 from bench.runner.spec import TEST_SEED_OFFSET, RunSpec
 from methods import METHODS
+from methods.base import json_safe
+from methods.saving import save_model
 from systems import SYSTEMS
 
 #: how a failed record's error begins where the fit diverged (its MSE is NaN or inf): an outcome a
@@ -219,6 +221,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             clock = time.perf_counter()  # measured recordings: driven by their torques
             fields["rollout"] = stages.run("rollout", driven_entry, method, test)
             timing["rollout_s"] = time.perf_counter() - clock
+        if spec.save:
+            fields["details"]["saved"] = stages.run("save", save_fitted, method, spec, train, system)
         if not system.simulated and spec.experiment == "indirect":
             fields["details"]["constant_model"] = constant_reference(train, test)
         references = {name: stages.run(f"reference {name}", against, method, ref, train, test)
@@ -252,6 +256,16 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         kept = _kept(fields)
         kept["details"] = {**kept.get("details", {}), "traceback": tb}
         return Record.new(spec, "failed", error=f"{type(exc).__name__}: {exc}", **kept)
+
+
+def save_fitted(method, spec: RunSpec, train: Dataset, system: System) -> dict:
+    """Write the run's fitted model to ``spec.save`` (:func:`methods.saving.save_model`),
+    its header saying how it was fitted; returns the record's ``details.saved``."""
+    header = {"method": spec.method, "system": spec.system, "plugins": list(spec.plugins), "split": spec.split,
+              "experiment": spec.experiment, "seed": spec.seed, "hyperparameters": json_safe(method.hyperparameters()),
+              "budget": spec.budget.to_json(), "train_source": train.source, "n_train": len(train),
+              "tuned": spec.tune, "provenance": provenance(spec.threads)}
+    return {"path": str(spec.save), **save_model(method, spec.save, header, train, system)}
 
 
 def raised(record: Record) -> bool:

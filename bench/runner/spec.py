@@ -89,6 +89,9 @@ class RunSpec:
     tune
         Choose the method's hyperparameters from its search space on the
         training data, within the run's budget (:mod:`bench.evaluation.tuning`).
+    save
+        Write the fitted model to this model file (:mod:`methods.saving`);
+        ``None``: do not.
     budget_s, steps, schedule
         The budget (:mod:`bench.core.budget`): ``budget_s`` seconds of
         wall-clock time; or, with ``steps``, that many steps of the method's
@@ -118,6 +121,7 @@ class RunSpec:
     split: str | None = None
     device: str = "cpu"
     tune: bool = False
+    save: str | None = None
 
     def __post_init__(self):
         _ = self.budget  # a spec without a valid budget is refused where it is made (ConfigError)
@@ -142,6 +146,7 @@ class RunSpec:
         d = dict(d)
         d["plugins"] = tuple(d.get("plugins", ()))
         d.setdefault("tune", False)
+        d.setdefault("save", None)
         return cls(**d)
 
 

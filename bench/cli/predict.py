@@ -1,0 +1,54 @@
+"""``python -m bench predict``: a saved model's torques on a log, and their MSE where the log has torques."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from bench.cli.options import UsageError, add_plugin, load_plugins
+from bench.core.csv_format import read_csv
+from bench.core.data import mse
+from bench.core.fileio import atomic_write, check_output
+from bench.core.modelfile import ModelFileError, read
+from methods.saving import load_model
+from systems import SYSTEMS
+
+HELP = "a saved model's torques on a log in the suite's format; prints their MSE where the log has torques"
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--model", type=Path, required=True, help="a model file (python -m bench fit --save, bench select)")
+    p.add_argument("--log", type=Path, required=True,
+                   help="a CSV in the suite's format (q_i, qd_i, qdd_i, and tau_i where known: python -m bench "
+                        "convert makes one from a robot's log)")
+    p.add_argument("--out", type=Path, required=True,
+                   help="write the predicted torques here: a CSV of tau_hat_1..tau_hat_n, one row per sample of the log")
+    add_plugin(p)
+
+
+def main(args) -> int:
+    check_output(args.out)
+    header, _ = read(args.model)  # a file that is no model: one line, before anything else is read
+    # the arm's URDF or declaration the model was fitted on (data, read as such); a method's plugin (code) only
+    # where the command line gives it
+    arms = [p for p in header.get("plugins", []) if isinstance(p, str) and p.startswith(("urdf:", "measured:"))]
+    load_plugins(args, arms)
+    name = header.get("system")
+    if name is not None and name not in SYSTEMS:
+        raise UsageError(f"{args.model}: its system {name!r} is not registered here; give the file that declares it "
+                         f"with --plugin")
+    model, header = load_model(args.model)
+    log = read_csv(args.log, dof=int(header["dof"]), system=name, torque_optional=True)
+    tau = np.asarray(model.predict_torque(log), dtype=np.float64)
+    if not np.isfinite(tau).all():
+        raise ModelFileError(f"{args.model}: predicts non-finite torques on {args.log}")
+    frame = pd.DataFrame(tau, columns=[f"tau_hat_{j + 1}" for j in range(tau.shape[1])])
+    atomic_write(args.out, lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
+    what = f"{header.get('method')} on {name}" if name else str(header.get("method"))
+    print(f"{what}: {len(log)} samples' torques written to {args.out}")
+    if not log.meta.get("no_torque"):
+        per_joint = np.mean((tau - log.tau) ** 2, axis=0)
+        print(f"torque MSE {mse(tau, log.tau):.6g} (per joint: {', '.join(f'{v:.4g}' for v in per_joint)})")
+    return 0

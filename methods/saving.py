@@ -1,0 +1,75 @@
+"""Saving a fitted model to a model file (:mod:`bench.core.modelfile`) and loading it back.
+
+:func:`save_model` writes what a model's :meth:`~bench.core.models.FittedModel.saved`
+gives, then loads the file it wrote and checks that it predicts the fitted
+model's torques on the samples it is given (at most :data:`CHECK_SAMPLES`) to
+:data:`TOLERANCE`; only then is the file put in place, so that no file is
+kept that would not give the fitted model back.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from bench.core import modelfile
+from bench.core.data import Dataset
+from bench.core.modelfile import ModelFileError, Packer
+from bench.core.system import SYSTEMS, System
+
+#: samples a saved model is checked on
+CHECK_SAMPLES = 256
+#: the largest difference of a loaded model's torques from the fitted one's, relative to their scale
+TOLERANCE = 1e-10
+
+
+def save_model(model, path: str | Path, header: dict, check: Dataset, system: System | None) -> dict:
+    """Write ``model`` (fitted on data of ``check``'s joints) to ``path`` with
+    ``header`` (what it was fitted with); returns the check's figures. A
+    ``ValueError`` where the model cannot be saved or does not load back the same."""
+    packer = Packer()
+    tree = model.saved(packer)
+    path = Path(path)
+    header = {**header, "dof": int(check.dof), "kind": tree["kind"]}
+    fd, tmp = tempfile.mkstemp(dir=path.parent if path.parent.exists() else None, prefix=f".{path.name}.",
+                               suffix=".check")
+    os.close(fd)
+    try:
+        modelfile.save(tmp, header, tree, packer)
+        loaded, _ = load_model(tmp, system)
+        part = check.subset(slice(0, CHECK_SAMPLES))
+        before = np.asarray(model.predict_torque(part), dtype=np.float64)
+        after = np.asarray(loaded.predict_torque(part), dtype=np.float64)
+        scale = max(float(np.max(np.abs(before), initial=0.0)), 1e-300)
+        difference = float(np.max(np.abs(after - before), initial=0.0)) / scale
+        if not difference <= TOLERANCE:
+            raise ValueError(f"the {tree['kind']} model loaded back predicts torques {difference:.2g} apart "
+                             f"(relative to their largest) from the fitted one's; not saved")
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return {"checked_samples": len(part), "largest_relative_difference": difference}
+
+
+def load_model(path: str | Path, system: System | None = None):
+    """The fitted model in the file ``path`` and the file's header; ``system``
+    is the model's system (by default the one the file names, from the
+    registry). :class:`~bench.core.modelfile.ModelFileError` in one line for
+    a file that is not such a model."""
+    header, unpacker = modelfile.read(path)
+    if system is None:
+        name = header.get("system")
+        if name is not None and name not in SYSTEMS:
+            raise ModelFileError(f"{path}: its system {name!r} is not registered here (a measured arm's or a URDF's "
+                                 f"file is given to the command that reads the model)")
+        system = None if name is None else SYSTEMS[name]()
+    try:
+        dof = int(header["dof"])
+    except (KeyError, TypeError, ValueError):
+        raise ModelFileError(f"{path}: not a model file of this suite (no joints in it)") from None
+    model = modelfile.build(header["model"], unpacker, {"system": system, "dof": dof})
+    return model, header

@@ -1,0 +1,152 @@
+"""A model to keep: saved models give the fitted model's torques back, files
+that are not such models are refused in one line with nothing written, and the
+expressions in a file are read without eval."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+import sympy
+from hypothesis import given, settings, strategies as st
+
+from bench.core import modelfile
+from bench.core.csv_format import write_csv
+from bench.core.data import generate
+from bench.core.modelfile import ModelFileError, expression_from_json, expression_to_json
+from methods import METHODS
+from methods.saving import TOLERANCE, load_model, save_model
+from systems import SYSTEMS
+from tests.commandline import cli
+
+
+@pytest.fixture(scope="module")
+def kuka():
+    system = SYSTEMS["kuka_lwr4"]()
+    return system, system.load("train").subset(slice(0, 600)), system.load("test").subset(slice(0, 300))
+
+
+@pytest.mark.parametrize("name,settings_,steps", [
+    ("sysid", {}, 1), ("sysid", {"feasible": False, "friction": True}, 1), ("feasible+gp", {"inducing": 8}, 3),
+    ("standard+mlp", {"hidden": 8, "layers": 2}, 3), ("feasible+delan", {"hidden": 8, "compile": False}, 3),
+    ("standard+sparse_torque", {}, 1)])
+def test_a_saved_arm_model_predicts_the_fitted_torques(tmp_path, kuka, name, settings_, steps):
+    system, train, test = kuka
+    fitted = METHODS[name](**settings_).fit(train, "indirect", 0, steps=steps, system=system)
+    check = save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": name}, train, system)
+    assert check["largest_relative_difference"] <= TOLERANCE
+    loaded, header = load_model(tmp_path / "m.npz")
+    expected = fitted.predict_torque(test)
+    assert np.max(np.abs(loaded.predict_torque(test) - expected)) <= TOLERANCE * np.max(np.abs(expected))
+    assert header["method"] == name and header["dof"] == 7
+
+
+@pytest.mark.parametrize("name", ["sparse", "mggp", "mlp", "delan"])
+def test_a_saved_lagrangian_predicts_the_fitted_torques(tmp_path, name):
+    system = SYSTEMS["double_pendulum"]()
+    train, test = generate(system, 200, 0), generate(system, 100, 1)
+    smoke = {**METHODS[name].smoke_config(), **({"samples": 64} if name == "sparse" else {})}
+    fitted = METHODS[name](**smoke).fit(train, "indirect", 0, steps=smoke["max_steps"])
+    save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": name}, train, system)
+    loaded, _ = load_model(tmp_path / "m.npz")
+    expected = fitted.predict_torque(test)
+    assert np.max(np.abs(loaded.predict_torque(test) - expected)) <= TOLERANCE * np.max(np.abs(expected))
+
+
+def test_a_model_that_cannot_be_saved_writes_nothing(tmp_path):
+    system = SYSTEMS["double_pendulum"]()
+    train = generate(system, 64, 0)
+    smoke = METHODS["syrenets"].smoke_config()
+    fitted = METHODS["syrenets"](**smoke).fit(train, "indirect", 0, steps=2)
+    with pytest.raises(ValueError, match="cannot be saved"):
+        save_model(fitted, tmp_path / "m.npz", {"system": system.name}, train, system)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory):
+    """A saved model of the double pendulum, the generated test log, and the run's record."""
+    folder = tmp_path_factory.mktemp("saved")
+    for part, seed in (("train", 0), ("test", 1000)):
+        assert cli("data", "--system", "double_pendulum", "--n", 300, "--seed", seed, "--out",
+                   folder / f"{part}.csv").returncode == 0
+    r = cli("fit", "--system", "double_pendulum", "--method", "sparse", "--experiment", "indirect", "--train",
+            folder / "train.csv", "--test", folder / "test.csv", "--steps", 1, "--set", "samples=128",
+            "--save", folder / "model.npz", "--json", folder / "run.json")
+    assert r.returncode == 0 and "model written to" in r.stdout, r.stderr
+    return folder
+
+
+def test_predict_gives_the_runs_test_mse_and_writes_the_torques(saved, tmp_path):
+    r = cli("predict", "--model", saved / "model.npz", "--log", saved / "test.csv", "--out", tmp_path / "p.csv")
+    assert r.returncode == 0, r.stderr
+    record = json.loads((saved / "run.json").read_text())
+    shown = float(r.stdout.split("torque MSE ")[1].split()[0])
+    assert shown == pytest.approx(record["test_mse"], rel=1e-5)
+    assert record["details"]["saved"]["largest_relative_difference"] <= TOLERANCE
+    header = (tmp_path / "p.csv").read_text().splitlines()[0]
+    assert header == "tau_hat_1,tau_hat_2" and len((tmp_path / "p.csv").read_text().splitlines()) == 301
+
+
+def _refused(path, log, tmp_path):
+    out = tmp_path / "p.csv"
+    r = cli("predict", "--model", path, "--log", log, "--out", out)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and str(path) in r.stderr
+    assert not out.exists()
+    return r.stderr
+
+
+def test_a_truncated_a_broken_and_a_foreign_file_are_each_refused_in_one_line(saved, tmp_path):
+    whole = (saved / "model.npz").read_bytes()
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(whole[: len(whole) // 2])
+    assert "truncated" in _refused(truncated, saved / "test.csv", tmp_path)
+    broken = tmp_path / "broken.npz"  # the archive is whole, its description no longer parses
+    with zipfile.ZipFile(saved / "model.npz") as src, zipfile.ZipFile(broken, "w") as dst:
+        for item in src.namelist():
+            data = src.read(item)
+            dst.writestr(item, data[:-20] if item == modelfile.HEADER else data)
+    assert "does not parse" in _refused(broken, saved / "test.csv", tmp_path)
+    foreign = tmp_path / "foreign.npz"
+    np.savez(foreign, weights=np.ones(3))
+    assert "not a model file" in _refused(foreign, saved / "test.csv", tmp_path)
+    assert "not a model file" in _refused(saved / "test.csv", saved / "test.csv", tmp_path)
+    hostile = tmp_path / "hostile.npz"  # an expression naming a function outside the fixed list
+    with zipfile.ZipFile(saved / "model.npz") as src, zipfile.ZipFile(hostile, "w") as dst:
+        for item in src.namelist():
+            data = src.read(item)
+            if item == modelfile.HEADER:
+                header = json.loads(data)
+                header["model"]["expression"] = {"op": "__import__", "args": [{"symbol": "os"}]}
+                data = json.dumps(header).encode()
+            dst.writestr(item, data)
+    assert "which is no operation a model file may hold" in _refused(hostile, saved / "test.csv", tmp_path)
+
+
+_symbols = [sympy.Symbol(n, real=True) for n in ("q_1", "q_2", "qd_1", "qd_2")]
+_leaves = st.one_of(st.sampled_from(_symbols), st.floats(-1e6, 1e6, allow_nan=False).map(sympy.Float),
+                    st.integers(-50, 50).map(sympy.Integer), st.fractions(max_denominator=9).map(sympy.Rational))
+_expressions = st.recursive(_leaves, lambda inner: st.one_of(
+    st.tuples(inner, inner).map(lambda a: a[0] + a[1]), st.tuples(inner, inner).map(lambda a: a[0] * a[1]),
+    st.tuples(inner, st.integers(-3, 3)).map(lambda a: a[0] ** a[1]),
+    st.tuples(st.sampled_from(sorted(modelfile.FUNCTIONS)), inner).map(lambda a: modelfile.FUNCTIONS[a[0]](a[1]))),
+    max_leaves=8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(expr=_expressions)
+def test_an_expression_reads_back_exactly_from_its_json(expr):
+    try:
+        tree = expression_to_json(expr)
+    except ValueError:  # zoo, nan: no number, refused by name
+        return
+    assert expression_from_json(json.loads(json.dumps(tree))) == expr
+
+
+def test_an_expression_node_outside_the_fixed_list_is_refused():
+    for tree in ({"op": "eval", "args": []}, {"symbol": "__class__.__bases__"}, {"float": "1e999x"}, [1, 2],
+                 {"symbol": "q_1", "assumptions": {"commutative": "yes"}}):
+        with pytest.raises(ModelFileError):
+            expression_from_json(tree)
