@@ -34,7 +34,8 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 from collections import OrderedDict
-from typing import Annotated, ClassVar
+from dataclasses import dataclass
+from typing import Annotated, Callable, ClassVar
 
 import numpy as np
 
@@ -42,24 +43,84 @@ from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
 from bench.core.modelfile import Unpacker, build, loader
+from bench.core.models import FittedModel
 from bench.core.registry import RegistryError
 from bench.core.system import System
 from methods.base import METHODS, Method, restored, saved_hyperparameters
 from methods.config import POSITIVE
 from methods.progress import Progress
 
-#: the priors a hybrid may name: SysId's configurations
-PRIORS = {"standard": "standard", "feasible": "default"}
 #: the method that identifies the prior
 PRIOR_METHOD = "sysid"
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A prior a hybrid may name: how it is identified on the training data
+    (``identify(train, system, seed, budget)``, a fitted model; ``budget`` is
+    :attr:`share` of a time budget, or the work budget's steps) and what it
+    is, in words. ``module`` is the module that registers it, which a run's
+    own process imports before it composes the hybrid's name."""
+
+    name: str
+    words: str
+    identify: Callable[[Dataset, "System | None", int, Budget], FittedModel]
+    share: float = 0.0
+    module: str = __name__
+
+
+#: the priors a hybrid may name, by name (:func:`register_prior`)
+PRIORS: dict[str, Prior] = {}
+
+
+def register_prior(prior: Prior) -> Prior:
+    """Let hybrids name ``prior`` (``NAME+RESIDUAL``); a name taken already is refused."""
+    if prior.name in PRIORS and PRIORS[prior.name] != prior:
+        raise RegistryError(f"a prior named {prior.name!r} is registered already")
+    PRIORS[prior.name] = prior
+    return prior
+
+
+def sysid_prior(configuration: str):
+    """The identification of SysId's configuration ``configuration`` (one solve, whatever the budget)."""
+    def identify(train: Dataset, system, seed: int, budget: Budget) -> FittedModel:
+        method = METHODS[PRIOR_METHOD](**METHODS[PRIOR_METHOD].configuration(configuration))
+        return method.fit(train, "indirect", seed, Budget(steps=1), system=system)
+    return identify
+
+
+register_prior(Prior("standard", "SysId's standard configuration", sysid_prior("standard")))
+register_prior(Prior("feasible", "SysId's feasible rigid body", sysid_prior("default")))
+
 #: the gate lengths a tuned hybrid tries, where its residual is gated (:mod:`bench.evaluation.tuning`)
 GATE_LENGTHS = (1.0, 3.0)
 #: priors kept for reuse: a tuned hybrid fits the same prior on each fold for every combination
 PRIOR_CACHE = 8
-#: how a hybrid is named, for ``bench list`` and errors
-NAMING = (f"a hybrid is named PRIOR+RESIDUAL: PRIOR one of {', '.join(PRIORS)} (SysId's {PRIORS['standard']} "
-          f"configuration, or the feasible rigid body), RESIDUAL any method that fits torques, e.g. standard+gp, "
-          f"feasible+delan")
+
+
+def modules_for(names) -> tuple[str, ...]:
+    """The modules a run's own process imports before it resolves ``names``:
+    those of the suite outside ``methods`` that register a hybrid's prior, or
+    a method, among them (the residual loop's)."""
+    out = []
+    for name in names:
+        prior, plus, _ = name.partition("+")
+        if plus and prior in PRIORS:
+            module = PRIORS[prior].module
+        elif not plus and name in METHODS.names():
+            module = METHODS[name].__module__
+        else:
+            continue
+        if module.startswith("bench.") and module not in out:
+            out.append(module)
+    return tuple(out)
+
+
+def naming() -> str:
+    """How a hybrid is named, for ``bench list`` and errors."""
+    priors = "; ".join(f"{name}: {prior.words}" for name, prior in PRIORS.items())
+    return (f"a hybrid is named PRIOR+RESIDUAL: PRIOR one of {', '.join(PRIORS)} ({priors}), RESIDUAL any method that "
+            f"fits torques, e.g. standard+gp, feasible+delan")
 
 
 class Hybrid(Method):
@@ -109,7 +170,7 @@ class Hybrid(Method):
 
     # -- the fit ---------------------------------------------------------------
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        self.prior = identified_prior(self.prior_name, train, self.system, self.seed)
+        self.prior = identified_prior(self.prior_name, train, self.system, self.seed, self.budget)
         self._residual_data = train.replace(tau=train.tau - self.prior.predict_torque(train))
         self.gate = None if self.residual.falls_back_to_zero else TrainingStates(train)
         # the residual starts as a fit of its own would (its seed, its one-time work), on the hybrid's clock
@@ -158,7 +219,7 @@ class Hybrid(Method):
                 "prior": self.prior.saved(packer), "residual": self.residual.saved(packer), "gate": gate}
 
     def record_details(self) -> dict:
-        return {"prior": f"{PRIOR_METHOD} ({PRIORS[self.prior_name]} configuration)",
+        return {"prior": PRIORS[self.prior_name].words,
                 "gated": self.gate is not None, "residual": self.residual.record_details(), "size": self.residual.size()}
 
     def size(self) -> dict:
@@ -179,17 +240,18 @@ def _load(tree: dict, unpacker: Unpacker, context: dict) -> Hybrid:
 _priors: "OrderedDict[tuple, Method]" = OrderedDict()
 
 
-def identified_prior(prior: str, train: Dataset, system: System | None, seed: int) -> Method:
-    """SysId in the configuration ``prior`` names, identified on ``train`` with
-    ``seed`` (one solve): the same fit for the same samples and seed, so the last
-    :data:`PRIOR_CACHE` are kept and reused (a tuned hybrid fits every
-    combination on the same folds)."""
-    key = (prior, None if system is None else system.name, seed, fingerprint(train))
+def identified_prior(prior: str, train: Dataset, system: System | None, seed: int, budget: Budget) -> FittedModel:
+    """The prior ``prior`` identified on ``train`` with ``seed`` within its
+    share of ``budget`` (:class:`Prior`): the same fit for the same samples,
+    seed and budget, so the last :data:`PRIOR_CACHE` are kept and reused (a
+    tuned hybrid fits every combination on the same folds)."""
+    entry = PRIORS[prior]
+    share = budget.scaled(entry.share) if entry.share else budget
+    key = (prior, None if system is None else system.name, seed, repr(share.to_json()), fingerprint(train))
     if key in _priors:
         _priors.move_to_end(key)
         return _priors[key]
-    method = METHODS[PRIOR_METHOD](**METHODS[PRIOR_METHOD].configuration(PRIORS[prior]))
-    fitted = method.fit(train, "indirect", seed, Budget(steps=1), system=system)
+    fitted = entry.identify(train, system, seed, share)
     _priors[key] = fitted
     while len(_priors) > PRIOR_CACHE:
         _priors.popitem(last=False)
@@ -220,7 +282,7 @@ def compose(name: str) -> type | None:
     if prior not in PRIORS:
         if prior in METHODS:  # a variant of a method's fit (syrenets+pruned) is no hybrid
             return None
-        raise RegistryError(f"unknown prior {prior!r} in {name!r}: {NAMING}")
+        raise RegistryError(f"unknown prior {prior!r} in {name!r}: {naming()}")
     try:
         entry = METHODS.entry(residual)
     except RegistryError as exc:

@@ -34,8 +34,8 @@ def save_model(model, path: str | Path, header: dict, check: Dataset, system: Sy
     tree = model.saved(packer)
     path = Path(path)
     header = {**header, "dof": int(check.dof), "kind": tree["kind"]}
-    fd, tmp = tempfile.mkstemp(dir=path.parent if path.parent.exists() else None, prefix=f".{path.name}.",
-                               suffix=".check")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".check")
     os.close(fd)
     try:
         modelfile.save(tmp, header, tree, packer)

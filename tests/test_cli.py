@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 #: the user's verbs, and the one verb of the project's studies
-COMMANDS = ("list", "run", "table", "data", "fit", "predict", "residual", "convert", "robot-log", "rerun", "leaderboard", "index",
+COMMANDS = ("list", "run", "table", "data", "fit", "predict", "select", "residual", "convert", "robot-log", "rerun", "leaderboard", "index",
             "study")
 STUDIES = ("gpu", "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling", "syrenets-speed",
            "syrenets-profile", "stacking-speed", "generalisation")

@@ -20,7 +20,7 @@ import argparse
 import shlex
 import sys
 
-from bench.cli import convert, data, fit, index, leaderboard, listing, predict, rerun, residual, run, study, table
+from bench.cli import convert, data, fit, index, leaderboard, listing, predict, rerun, residual, run, select, study, table
 from bench.cli.options import Parser
 from bench.core.errors import UserError
 from bench.experiments import robot_log
@@ -30,7 +30,7 @@ EXIT_USAGE = 2
 
 #: the commands, by name: the user's, then the project's studies under one verb
 COMMANDS = {
-    "list": listing, "run": run, "table": table, "data": data, "fit": fit, "predict": predict, "residual": residual,
+    "list": listing, "run": run, "table": table, "data": data, "fit": fit, "predict": predict, "select": select, "residual": residual,
     "convert": convert, "robot-log": robot_log, "rerun": rerun, "leaderboard": leaderboard, "index": index,
     "study": study,
 }

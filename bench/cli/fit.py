@@ -51,7 +51,7 @@ def main(args) -> int:
     for path in (args.json, args.save):
         if path:
             check_output(path)
-    (name,), plugins = load_plugins(args, [args.system])
+    (name,), plugins = load_plugins(args, [args.system], [args.method])
     check_names(args, [name], [args.method], [args.experiment])
     check_split(args.split, [name])
     if args.test and not args.train:

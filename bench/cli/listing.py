@@ -5,7 +5,7 @@ from __future__ import annotations
 from bench.cli.options import add_plugin, load_plugins
 import systems
 from methods import METHODS
-from methods.hybrid import NAMING
+from methods.hybrid import naming
 from systems import SYSTEMS
 
 HELP = "list systems and methods, with availability"
@@ -37,6 +37,6 @@ def main(args) -> int:
         for name, named in entry.obj.configurations.items():
             print(f"  {'':<20} --config {name}: {named.summary}")
     print("Hybrids (an identified rigid body plus a learned residual of the torque):")
-    print(f"  {NAMING}; a residual that does not fall back to zero far from the training states by itself is gated "
+    print(f"  {naming()}; a residual that does not fall back to zero far from the training states by itself is gated "
           f"towards zero there (methods/hybrid.py)")
     return 0

@@ -17,8 +17,10 @@ from bench.core.data import check_experiment
 from bench.core.devices import CHOICES, resolve as resolve_device
 from bench.core.errors import UserError
 from bench.core.registry import RegistryError
+import bench.residual.prior  # noqa: F401  (registers the loop prior: loop+RESIDUAL)
 from bench.runner.plugins import import_plugins, system_plugins
 from methods import METHODS
+from methods.hybrid import modules_for
 from systems import SYSTEMS
 
 #: seconds per run where neither --budget nor --steps is given
@@ -175,12 +177,13 @@ def hyperparameters(overrides: list[tuple[str, object]], method: str, methods: l
     return {**common, **own}
 
 
-def load_plugins(args, systems: list[str] = ()) -> tuple[list[str], tuple[str, ...]]:
+def load_plugins(args, systems: list[str] = (), methods: list[str] = ()) -> tuple[list[str], tuple[str, ...]]:
     """Import ``--plugin`` files and register any ``urdf:PATH`` system; returns
-    the systems' names and the plugins a run's own process needs."""
+    the systems' names and the plugins a run's own process needs (with the
+    modules that register the priors of the hybrids among ``methods``)."""
     import_plugins(args.plugin)
     names, arms = system_plugins(systems)
-    return names, plugin_paths(args.plugin) + arms
+    return names, plugin_paths(args.plugin) + arms + modules_for(methods)
 
 
 def plugin_paths(plugins: list[str]) -> tuple[str, ...]:

@@ -67,7 +67,8 @@ def add_arguments(r) -> None:
 
 def main(args) -> int:
     check_output(args.out, folder=True)
-    systems, plugins = load_plugins(args, SYSTEMS.names() if args.systems == ["all"] else args.systems)
+    systems, plugins = load_plugins(args, SYSTEMS.names() if args.systems == ["all"] else args.systems,
+                                    args.methods or [])
     methods = args.methods or METHODS.names()
     check_names(args, systems, methods, args.experiments)
     check_split(args.split, systems)

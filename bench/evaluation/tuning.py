@@ -13,7 +13,9 @@ all, as SRBench allows: La Cava et al., 2021). A tuned fit
    samples: scikit-learn's ``GridSearchCV``, with the folds as its ``cv``;
 3. chooses the combination with the lowest validation MSE (the mean over the
    folds; a combination that fails or predicts non-finite torques on any fold
-   is not chosen), and fits it on all the training data.
+   is not chosen), and fits it on all the training data. A method with
+   nothing to search has its one configuration validated the same way, so
+   that every tuned run says what validation made of it.
 
 The fit's budget covers all of it. Under a time budget the final fit has
 :data:`FINAL_SHARE` of the seconds and each fit of the search an equal part of
@@ -143,13 +145,7 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
         return method_cls(**{**fixed, **choice}).use_device(device)
 
     t0 = time.perf_counter()
-    if len(grid) < 2:
-        method = make(grid[0] if grid else {})
-        method.fit(train, experiment, seed, budget, system=system)
-        why = "nothing to tune: the method declares no search space" if not _space(method_cls) else \
-            "nothing to tune: the hyperparameters of its search space are set"
-        return Tuned(method, {"protocol": PROTOCOL, "note": why, "chosen": grid[0] if grid else {},
-                              "space": _space(method_cls)})
+    grid = grid or [{}]  # nothing to search: the one configuration is still validated
     fold_set = folds(train, max_folds=MAX_FOLDS)
     fits = len(grid) * len(fold_set)
     each = budget.scaled((1.0 - FINAL_SHARE) / fits)
@@ -186,9 +182,13 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
         f"({final.describe()})")
     method = make(chosen)
     method.fit(train, experiment, seed, final, system=system)
+    validation = next((r["validation_mse"] for r in rows if r["hyperparameters"] == chosen), None)
     details = {"protocol": PROTOCOL, "space": _space(method_cls), "searched": searched, "chosen": chosen,
-               "folds": fold_set.to_json(), "fit_budget": each.to_json(), "final_budget": final.to_json(),
-               "combinations": rows, "search_seconds": round(search_seconds, 3)}
+               "validation_mse": validation, "folds": fold_set.to_json(), "fit_budget": each.to_json(),
+               "final_budget": final.to_json(), "combinations": rows, "search_seconds": round(search_seconds, 3)}
+    if len(rows) == 1 and not note:
+        note = ("nothing to tune: the method declares no search space" if not _space(method_cls) else
+                "nothing to tune: the hyperparameters of its search space are set") + "; its configuration is validated"
     if note:
         details["note"] = note
     return Tuned(method, details)

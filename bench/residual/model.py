@@ -15,7 +15,8 @@ import numpy as np
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset
-from bench.core.models import FittedModel
+from bench.core.modelfile import Packer, Unpacker, build, loader
+from bench.core.models import FittedModel, term_from_json, term_to_json
 from bench.core.terms import Term, TermLibrary
 from methods import METHODS
 
@@ -61,6 +62,10 @@ class CrossFitted(FittedModel):
     def readable_expression(self):
         return self.fit.readable_expression()
 
+    def saved(self, packer: Packer) -> dict:
+        """The fit on all the training data (what it predicts with)."""
+        return self.fit.saved(packer)
+
 
 class LoopModel(FittedModel):
     """``tau_hat = g(L_hat) + Phi c``: a fitted Lagrangian plus accepted effects."""
@@ -90,6 +95,20 @@ class LoopModel(FittedModel):
 
     def expression(self):
         return self.rigid.expression()
+
+    def saved(self, packer: Packer) -> dict:
+        """The rigid model as saved, and each effect's term, coefficient and standard error."""
+        return {"kind": "loop", "rigid": self.rigid.saved(packer), "effects": [term_to_json(t) for t in self.effects],
+                "coef": packer.array(self.coef), "stderr": packer.array(self.stderr)}
+
+
+@loader("loop")
+def _load(tree: dict, unpacker: Unpacker, context: dict) -> LoopModel:
+    effects = [term_from_json(t, unpacker.source) for t in tree["effects"]]
+    coef, stderr = unpacker.array(tree["coef"]), unpacker.array(tree["stderr"])
+    if not len(effects) == len(coef) == len(stderr):
+        raise ValueError(f"{len(effects)} effects with {len(coef)} coefficients")
+    return LoopModel(build(tree["rigid"], unpacker, context), effects, coef, stderr)
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.core.data import Dataset
+from bench.core.modelfile import Packer, Unpacker, build, loader
 from bench.core.models import FittedModel
 from bench.core.regression import fit_statistics
 from bench.core.terms import Term
@@ -290,3 +291,21 @@ class Sensed(FittedModel):
 
     def expression(self):
         return self.model.expression()
+
+    def saved(self, packer: Packer) -> dict:
+        """The arm's model as saved, and the sensor: its reference joint and each law at its value."""
+        return {"kind": "sensed", "model": self.model.saved(packer), "reference": self.sensor.reference,
+                "laws": [{"name": law.name, "joint": law.joint, "value": law.value, "stderr": law.stderr}
+                         for law in self.sensor.laws]}
+
+
+@loader("sensed")
+def _load(tree: dict, unpacker: Unpacker, context: dict) -> Sensed:
+    laws = []
+    for entry in tree["laws"]:
+        if entry["name"] not in LAWS:
+            raise ValueError(f"a law of the sensor or the drive named {entry['name']!r}, which is not registered here")
+        joint = entry["joint"]
+        laws.append(LAWS[entry["name"]](None if joint is None else int(joint), float(entry["value"]),
+                                        float(entry["stderr"])))
+    return Sensed(build(tree["model"], unpacker, context), Sensor(int(tree["reference"]), tuple(laws)))

@@ -1,0 +1,56 @@
+"""``python -m bench select``: one model of a measured arm, chosen by validation
+on the training data alone (:mod:`bench.experiments.selection`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bench.cli.options import UsageError, add_budget, add_plugin, add_split, budget, check_names, check_split, load_plugins
+from bench.core.arguments import csv_list, positive_int, seed
+from bench.core.fileio import check_output
+from bench.experiments.selection import CANDIDATES, select
+from systems import SYSTEMS
+
+HELP = "choose a model of a measured arm by validation on its training data; write it, and a page of every candidate"
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--system", required=True, help="a measured arm (kuka_lwr4, measured:PATH)")
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder: select.md, select.json, model.npz, and the candidates' runs (a rerun resumes)")
+    add_budget(p, "per candidate")
+    add_split(p)
+    p.add_argument("--seed", type=seed, default=0, help="the candidates' seed (default 0)")
+    p.add_argument("--workers", type=positive_int, default=None, help="candidates at a time (default: one per core)")
+    p.add_argument("--candidates", type=csv_list, default=None,
+                   help=f"only these candidates (default: all of {', '.join(c.name for c in CANDIDATES)})")
+    p.add_argument("--no-rollout", action="store_true", help="skip the candidates' driven rollouts of the test recordings")
+    add_plugin(p)
+
+
+def main(args) -> int:
+    check_output(args.out, folder=True)
+    known = {c.name: c for c in CANDIDATES}
+    unknown = [n for n in args.candidates or [] if n not in known]
+    if unknown:
+        raise UsageError(f"--candidates: unknown candidate(s) {', '.join(unknown)}; they are {', '.join(known)}")
+    candidates = [known[n] for n in args.candidates] if args.candidates else list(CANDIDATES)
+    names = sorted({c.method for c in candidates})
+    (name,), plugins = load_plugins(args, [args.system], names)
+    check_names(args, [name], names)
+    check_split(args.split, [name])
+    system = SYSTEMS[name]()
+    if system.simulated or system.linear_form() is None:
+        raise UsageError(f"{name}: bench select chooses among models of a measured arm (its recordings and its "
+                         f"URDF's rigid body); {name} is {'simulated' if system.simulated else 'not an arm'}")
+    budget_s, steps = budget(args)
+    result = select(name, args.out, split=args.split, budget_s=budget_s, steps=steps, seed=args.seed,
+                    workers=args.workers, plugins=plugins, command=args.invocation, candidates=candidates,
+                    rollout=not args.no_rollout)
+    chosen = result["chosen"]
+    if chosen is None:
+        print(f"nothing chosen: no candidate ran and validated (see {args.out / 'select.md'})")
+        return 1
+    print(f"chosen: {chosen['name']} (validation MSE {chosen['validation_mse']:.4g}, test MSE {chosen['test_mse']:.4g}); "
+          f"model in {args.out / 'model.npz'}, page in {args.out / 'select.md'}")
+    return 0

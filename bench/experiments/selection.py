@@ -1,0 +1,173 @@
+"""``python -m bench select``: one model of a measured arm, chosen by validation
+on its training data alone, fitted on all of it and scored on the test data once.
+
+The candidates (:data:`CANDIDATES`) are the field's models of a real arm: the
+standard model, the feasible rigid body, hybrids of either with a learned
+residual, the residual loop's model from SysId, and the loop's model with a
+Gaussian process of what it leaves. Each is one run of the matrix with
+``--tune`` (:mod:`bench.evaluation.tuning`): its hyperparameters chosen by the
+suite's validation protocol (:mod:`bench.core.folds`) on the training
+trajectories, within the run's budget, then fitted on all the training data
+and saved (:mod:`methods.saving`). The candidate chosen is the one with the
+lowest validation MSE; the test data are read by each run to score it, and
+nothing is chosen on them. The runs' records are kept, so that the same
+command resumes where it stopped, as a matrix does.
+
+Writes ``DIR/select.json`` (``chosen`` and ``candidates``, each with its
+``name``, ``validation_mse`` and ``test_mse``), ``DIR/select.md`` (every
+candidate's validation and test figures side by side, ranked by each) and
+``DIR/model.npz``, the chosen model (``python -m bench predict``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from bench.core.fileio import atomic_write, write_json
+from bench.evaluation.tuning import PROTOCOL
+from bench.runner import matrix
+from bench.runner.records import Record, record_path
+from bench.runner.spec import RunSpec
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A candidate: its name on the page, the method, its configuration and the hyperparameters it fixes."""
+
+    name: str
+    method: str
+    profile: str = "default"
+    fixed: tuple[tuple[str, object], ...] = ()
+
+
+#: the candidates, in the page's order
+CANDIDATES = (
+    Candidate("standard", "sysid", "standard"),
+    Candidate("feasible", "sysid", fixed=(("feasible", True), ("friction", False))),
+    Candidate("standard+gp", "standard+gp"),
+    Candidate("feasible+gp", "feasible+gp"),
+    Candidate("standard+mlp", "standard+mlp"),
+    Candidate("feasible+delan", "feasible+delan"),
+    Candidate("feasible+sparse_torque", "feasible+sparse_torque"),
+    Candidate("loop", "loop"),
+    Candidate("loop+gp", "loop+gp"),
+)
+
+
+def specs(system: str, split: str | None, budget_s: float | None, steps: int | None, seed: int, out: Path,
+          plugins: tuple[str, ...], candidates=CANDIDATES, rollout: bool = True) -> list[tuple[Candidate, RunSpec, Path]]:
+    """Each candidate's tuned run, the folder its record goes to, and its model file under ``out/models``."""
+    out = Path(out).resolve()
+    folders = {}
+    rows = []
+    for c in candidates:
+        # two candidates of one method (SysId's standard and feasible bodies) keep their records apart
+        folder = out / "runs" if c.method not in folders else out / f"runs_{c.name.replace('+', '_')}"
+        folders.setdefault(c.method, folder)
+        spec = RunSpec(system=system, method=c.method, experiment="indirect", seed=seed, budget_s=budget_s,
+                       steps=steps, profile=c.profile, hyperparameters=dict(c.fixed), split=split, plugins=plugins,
+                       tune=True, rollout=rollout, save=str(out / "models" / f"{c.name.replace('+', '_')}.npz"))
+        rows.append((c, spec, folder))
+    return rows
+
+
+def run(rows, workers: int | None, report=print) -> list[tuple[Candidate, Record]]:
+    """The candidates' runs, one matrix per folder (resumed from their records)."""
+    records = {}
+    by_folder: dict[Path, list] = {}
+    for c, spec, folder in rows:
+        by_folder.setdefault(folder, []).append((c, spec))
+    for folder, items in by_folder.items():
+        for _, spec in items:  # a run whose model file is missing is redone: the file is part of its result
+            path = record_path(folder, spec.run_id)
+            if path.exists() and not Path(spec.save).exists():
+                path.unlink()
+        report(f"select: {len(items)} candidate(s) in {folder}: {', '.join(c.name for c, _ in items)}")
+        done = matrix.run_matrix([s for _, s in items], folder, workers=workers)
+        for (c, _), record in zip(items, done):
+            records[c.name] = record
+    return [(c, records[c.name]) for c, _, _ in rows]
+
+
+def entry(candidate: Candidate, record: Record) -> dict:
+    """A candidate's line of ``select.json``."""
+    details = record.details or {}
+    tuning = details.get("tuning") or {}
+    standard = (details.get("standard_model") or {}).get("test_mse")
+    return {"name": candidate.name, "method": record.method, "status": record.status,
+            "validation_mse": tuning.get("validation_mse"), "test_mse": record.test_mse,
+            "train_mse": record.train_mse, "test_over_standard": None if not (standard and record.test_mse) else
+            record.test_mse / standard, "hyperparameters": tuning.get("chosen", {}),
+            "model": (details.get("saved") or {}).get("path"), "error": record.error_line or
+            (record.failed_stages.get("save") if record.failed_stages else None), "run_id": record.run_id}
+
+
+def choose(entries: list[dict]) -> dict | None:
+    """The candidate with the lowest validation MSE among those that ran and saved their model."""
+    usable = [e for e in entries if e["status"] == "ok" and e["validation_mse"] is not None
+              and math.isfinite(e["validation_mse"]) and e["model"]]
+    return min(usable, key=lambda e: e["validation_mse"]) if usable else None
+
+
+def page(result: dict) -> str:
+    """``select.md``: every candidate's validation and test figures side by side."""
+    entries = result["candidates"]
+    ok = [e for e in entries if e["validation_mse"] is not None and e["test_mse"] is not None]
+    by_validation = {e["name"]: i + 1 for i, e in enumerate(sorted(ok, key=lambda e: e["validation_mse"]))}
+    by_test = {e["name"]: i + 1 for i, e in enumerate(sorted(ok, key=lambda e: e["test_mse"]))}
+    chosen = result["chosen"]
+    lines = [f"# A model of {result['system']}, chosen by validation", "",
+             f"Command: `{result['command']}`", "",
+             f"Split: {result['split'] or 'default'}; budget per candidate: {result['budget']}; seed {result['seed']}. "
+             f"Each candidate is {PROTOCOL} (validation folds: {result['folds'] or 'none'}), then fitted on all the "
+             f"training data; the one with the lowest validation MSE is chosen, and the test data are read only to "
+             f"score. The test columns are there to show whether validation chose well.", "",
+             "| candidate | hyperparameters chosen | validation MSE | test MSE | test / standard model | rank by "
+             "validation | rank by test |", "|---|---|---|---|---|---|---|"]
+    for e in entries:
+        mark = " **(chosen)**" if chosen and e["name"] == chosen["name"] else ""
+        hp = ", ".join(f"{k}={v}" for k, v in sorted(e["hyperparameters"].items())) or "—"
+        if e["status"] != "ok" or e["validation_mse"] is None:
+            lines.append(f"| {e['name']}{mark} | {hp} | {e['status']}: {e['error'] or 'no validation'} | | | | |")
+            continue
+        ratio = "—" if e["test_over_standard"] is None else f"{e['test_over_standard']:.3f}x"
+        lines.append(f"| {e['name']}{mark} | {hp} | {e['validation_mse']:.4g} | {e['test_mse']:.4g} | {ratio} | "
+                     f"{by_validation.get(e['name'], '—')} | {by_test.get(e['name'], '—')} |")
+    lines.append("")
+    if chosen:
+        best = min(ok, key=lambda e: e["test_mse"]) if ok else None
+        verdict = ("validation chose the candidate with the lowest test MSE too" if best and best["name"] == chosen["name"]
+                   else f"the lowest test MSE was {best['name']}'s ({best['test_mse']:.4g})" if best else "")
+        lines += [f"Chosen: **{chosen['name']}**, validation MSE {chosen['validation_mse']:.4g}, test MSE "
+                  f"{chosen['test_mse']:.4g}" + (f" ({chosen['test_over_standard']:.3f}x the standard model)"
+                                                  if chosen["test_over_standard"] else "") + f"; {verdict}. "
+                  f"Its model: `model.npz` (`python -m bench predict --model model.npz --log LOG.csv --out PRED.csv`)."]
+    else:
+        lines.append("No candidate ran and validated: nothing chosen.")
+    return "\n".join(lines) + "\n"
+
+
+def select(system: str, out: Path, *, split: str | None, budget_s: float | None, steps: int | None, seed: int,
+           workers: int | None, plugins: tuple[str, ...], command: str, candidates=CANDIDATES, rollout: bool = True,
+           report=print) -> dict:
+    """Run the candidates, choose one, write ``select.json``, ``select.md`` and ``model.npz`` into ``out``."""
+    out = Path(out)
+    rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout)
+    done = run(rows, workers, report)
+    entries = [entry(c, r) for c, r in done]
+    chosen = choose(entries)
+    folds = next(((r.details or {}).get("tuning", {}).get("folds", {}).get("description") for _, r in done
+                  if (r.details or {}).get("tuning", {}).get("folds")), None)
+    budget = rows[0][1].budget.describe()
+    result = {"system": system, "split": split, "seed": seed, "budget": budget, "command": command,
+              "protocol": PROTOCOL, "folds": folds, "chosen": chosen, "candidates": entries}
+    if chosen:
+        content = Path(chosen["model"]).read_bytes()
+        atomic_write(out / "model.npz", lambda f: f.write(content), binary=True)
+        result["model"] = str(out / "model.npz")
+    write_json(out / "select.json", result)
+    text = page(result)
+    atomic_write(out / "select.md", lambda f: f.write(text))
+    return result

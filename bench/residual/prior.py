@@ -1,0 +1,93 @@
+"""The residual loop's final model as a method, ``loop``, and as a hybrid's
+prior, ``loop+RESIDUAL`` (``loop+gp``), wherever a method name goes.
+
+The loop (:func:`bench.residual.loop.residual_loop`) fits SysId's feasible
+rigid body on the training data and adds the laws of the arm, the sensor and
+the drive that the data identify; its final model (the rigid body, its named
+laws, read through the sensor's laws) is the prior, and the residual learner
+of :mod:`methods.hybrid` is fitted to what it leaves. Both are fitted within
+the hybrid's one budget: under a time budget the loop has :data:`LOOP_SHARE`
+of it and the residual the rest; under a work budget the loop's fit and
+rounds are bounded by the steps as ``bench residual --steps`` bounds them.
+
+Registering the method and the prior is importing this module: a run's own
+process imports it before it resolves the name (:func:`methods.hybrid.modules_for`).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from bench.core.budget import Budget
+from bench.core.data import Dataset
+from bench.core.models import FittedModel
+from bench.residual.loop import residual_loop
+from methods.base import METHODS, Method
+from methods.hybrid import Prior, prior_unavailable, register_prior
+from methods.progress import Progress
+
+#: the share of a hybrid's time budget the loop has
+LOOP_SHARE = 0.5
+#: the method whose model the loop extends
+METHOD = "sysid"
+
+
+def identify(train: Dataset, system, seed: int, budget: Budget) -> FittedModel:
+    """The loop's final model on ``train`` within ``budget``, its progress printed line by line."""
+    result = residual_loop(METHOD, train, None, budget_s=None if budget.steps is not None else budget.seconds,
+                           steps=budget.steps, seed=seed, report=lambda line: print(f"prior: {line}", flush=True))
+    return result.models[1]
+
+
+PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the feasible rigid body and its named laws)",
+                             identify, share=LOOP_SHARE, module=__name__))
+
+
+@METHODS.add("loop", "symbolic", "residual")
+class Loop(Method):
+    """The residual loop's final model from SysId as a method of its own
+    (``bench run --methods loop``, a candidate of ``bench select``): fitted by
+    :func:`identify` within the run's whole budget."""
+
+    experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+    smoke = {"max_steps": 1, "eval_samples": 128}
+
+    @classmethod
+    def not_applicable_reason(cls, experiment: str, system=None) -> str | None:
+        if experiment != "indirect":
+            return "the residual loop traces torques: the direct experiment has none"
+        if system is not None and system.linear_form() is None:
+            return prior_unavailable("loop", system)
+        return None
+
+    @classmethod
+    def refused_on(cls, system) -> str | None:
+        return None if system.linear_form() is not None else f"loop: {prior_unavailable('loop', system)}"
+
+    def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
+        self.model = identify(train, self.system, self.seed, self.budget)
+        while progress.step():
+            progress.stop("solved")
+
+    def _get_state(self):
+        return self.model
+
+    def _set_state(self, state) -> None:
+        self.model = state
+
+    def predict_torque(self, data: Dataset) -> np.ndarray:
+        return self.model.predict_torque(data)
+
+    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
+        return self.model.predict_lagrangian(data)
+
+    def saved(self, packer) -> dict:
+        return self.model.saved(packer)
+
+    def size(self) -> dict:
+        model = getattr(self, "model", None)
+        inner = getattr(getattr(model, "model", None), "effects", None)
+        return {} if inner is None else {"laws": len(inner)}
+
