@@ -177,6 +177,10 @@ class Hybrid(Method):
         self.residual.begin_fit(self._residual_data, "indirect", self.seed, self.budget, system=self.system)
         self.residual._fit(self._residual_data, "indirect", progress)
 
+    def _prepare(self, train: Dataset, experiment: str) -> None:
+        """The residual's one-time work (compiling its step) for data of ``train``'s shape, before the budget starts."""
+        self.residual.prepare(train, "indirect")
+
     def _post_fit(self, train: Dataset, experiment: str, seconds_left: float) -> None:
         self.residual._post_fit(self._residual_data, "indirect", seconds_left)
 

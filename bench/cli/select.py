@@ -37,12 +37,13 @@ def main(args) -> int:
     candidates = [known[n] for n in args.candidates] if args.candidates else list(CANDIDATES)
     names = sorted({c.method for c in candidates})
     (name,), plugins = load_plugins(args, [args.system], names)
-    check_names(args, [name], names)
-    check_split(args.split, [name])
+    check_names(args, [name])
     system = SYSTEMS[name]()
     if system.simulated or system.linear_form() is None:
         raise UsageError(f"{name}: bench select chooses among models of a measured arm (its recordings and its "
                          f"URDF's rigid body); {name} is {'simulated' if system.simulated else 'not an arm'}")
+    check_names(args, [name], names)
+    check_split(args.split, [name])
     budget_s, steps = budget(args)
     result = select(name, args.out, split=args.split, budget_s=budget_s, steps=steps, seed=args.seed,
                     workers=args.workers, plugins=plugins, command=args.invocation, candidates=candidates,

@@ -62,6 +62,18 @@ def combinations(method_cls) -> list[dict]:
     return [dict(c) for c in ParameterGrid({k: list(v) for k, v in space.items()})]
 
 
+def prepare(method_cls, settings: dict, train: Dataset, experiment: str, device: str = "cpu") -> float:
+    """The one-time work of every combination of the search (compiling a step
+    for its shapes, once a process: :meth:`methods.base.Method.prepare`), done
+    before the run's budget starts as a fit's own is; returns its seconds."""
+    t0 = time.perf_counter()
+    fixed = dict(settings)
+    space = {k: v for k, v in _space(method_cls).items() if k not in fixed}
+    for choice in ([dict(c) for c in ParameterGrid(space)] if space else [{}]):
+        method_cls(**{**fixed, **choice}).use_device(device).prepare(train, experiment)
+    return round(time.perf_counter() - t0, 3)
+
+
 def check_space(method_cls) -> None:
     """A :class:`ConfigError` where ``method_cls``'s search space holds too many
     combinations or a value its ``Config`` refuses."""

@@ -28,7 +28,7 @@ from bench.evaluation.driven import driven_entry
 from bench.evaluation.forces import forces_entry
 from bench.evaluation.reference import against, applies as has_standard_model, constant_reference, standard_reference
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
-from bench.evaluation.tuning import tune
+from bench.evaluation.tuning import prepare as prepare_search, tune
 from bench.runner.plugins import import_plugins
 from bench.runner.provenance import device_entry, provenance
 from bench.runner.records import Record
@@ -167,6 +167,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         if fitted is None:
             phase("prepare")
             prepared = method.prepare(train, spec.experiment)
+            if spec.tune:
+                prepared += prepare_search(METHODS[spec.method], method_config(spec), train, spec.experiment, spec.device)
             phase("fit")
             if spec.tune:
                 tuned = tune(METHODS[spec.method], method_config(spec), train, spec.experiment, spec.seed, budget,

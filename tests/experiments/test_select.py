@@ -1,0 +1,58 @@
+"""``bench select``: candidates tuned on the training data, one chosen by
+validation alone, its page, its JSON and its model file; a second call resumes."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from bench.experiments.selection import choose, page
+from systems import SYSTEMS
+from bench.core.csv_format import write_csv
+from tests.commandline import cli
+
+
+def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
+    out = tmp_path / "sel"
+    args = ("select", "--system", "kuka_lwr4", "--candidates", "standard,feasible,feasible+sparse_torque",
+            "--steps", "1", "--no-rollout", "--out", out)
+    r = cli(*args)
+    assert r.returncode == 0, r.stderr
+    result = json.loads((out / "select.json").read_text())
+    names = [c["name"] for c in result["candidates"]]
+    assert names == ["standard", "feasible", "feasible+sparse_torque"]
+    for c in result["candidates"]:
+        assert c["validation_mse"] > 0 and c["test_mse"] > 0
+    best = min(result["candidates"], key=lambda c: c["validation_mse"])
+    assert result["chosen"]["name"] == best["name"] and set(result["chosen"]) >= {"name", "validation_mse", "test_mse"}
+    text = (out / "select.md").read_text()
+    assert f"| {best['name']} **(chosen)** |" in text and "rank by validation" in text
+    write_csv(SYSTEMS["kuka_lwr4"]().load("test"), tmp_path / "test.csv")
+    p = cli("predict", "--model", out / "model.npz", "--log", tmp_path / "test.csv", "--out", tmp_path / "p.csv")
+    assert p.returncode == 0
+    assert float(p.stdout.split("torque MSE ")[1].split()[0]) == pytest.approx(result["chosen"]["test_mse"], rel=1e-5)
+    again = cli(*args)  # resumes: every candidate has its record and its model
+    assert again.returncode == 0 and "0 run(s) to do" in again.stdout
+    assert json.loads((out / "select.json").read_text())["chosen"] == result["chosen"]
+
+
+def test_select_refuses_in_one_line_what_it_cannot_choose_among(tmp_path):
+    r = cli("select", "--system", "double_pendulum", "--out", tmp_path / "s")
+    assert r.returncode == 2 and "measured arm" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = cli("select", "--system", "kuka_lwr4", "--candidates", "standard,nonsense", "--out", tmp_path / "s")
+    assert r.returncode == 2 and "nonsense" in r.stderr
+    assert not (tmp_path / "s" / "select.json").exists()
+
+
+def test_a_candidate_that_failed_or_saved_nothing_is_not_chosen():
+    entries = [{"name": "a", "status": "ok", "validation_mse": 0.1, "test_mse": 1.0, "model": None,
+                "hyperparameters": {}, "test_over_standard": None, "error": "save failed"},
+               {"name": "b", "status": "timeout", "validation_mse": None, "test_mse": None, "model": None,
+                "hyperparameters": {}, "test_over_standard": None, "error": "killed"},
+               {"name": "c", "status": "ok", "validation_mse": 0.3, "test_mse": 0.2, "model": "c.npz",
+                "hyperparameters": {"x": 1}, "test_over_standard": 0.5, "error": None}]
+    assert choose(entries)["name"] == "c"
+    text = page({"system": "arm", "command": "cmd", "split": None, "budget": "1 steps", "seed": 0, "folds": "f",
+                 "chosen": entries[2], "candidates": entries})
+    assert "| c **(chosen)** | x=1 |" in text and "timeout: killed" in text

@@ -1,0 +1,50 @@
+"""The residual loop's model as a method (``loop``) and as a hybrid's prior
+(``loop+RESIDUAL``), fitted within one budget and kept in a model file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import bench.residual.prior  # noqa: F401  (registers the loop)
+from bench.residual.loop import residual_loop
+from methods import METHODS
+from methods.hybrid import PRIORS, modules_for
+from methods.saving import TOLERANCE, load_model, save_model
+from systems import SYSTEMS
+
+
+@pytest.fixture(scope="module")
+def arm():
+    system = SYSTEMS["kuka_lwr4"]()
+    train = system.load("train")
+    part = train.subset(np.sort(np.concatenate([index[:400] for index in train.in_time_order()])))
+    return system, part, system.load("test").subset(slice(0, 400))
+
+
+def test_the_loop_method_is_the_loops_final_model(arm, capsys):
+    system, train, test = arm
+    fitted = METHODS["loop"]().fit(train, "indirect", 0, steps=1, system=system)
+    result = residual_loop("sysid", train, None, steps=1, seed=0, report=lambda line: None)
+    np.testing.assert_array_equal(fitted.predict_torque(test), result.models[1].predict_torque(test))
+    assert "prior: round 0" in capsys.readouterr().out  # the loop's progress, line by line
+
+
+def test_a_loop_hybrid_fits_its_residual_to_what_the_loop_leaves_and_saves(arm, tmp_path):
+    system, train, test = arm
+    hybrid = METHODS["loop+sparse_torque"]().fit(train, "indirect", 0, steps=1, system=system)
+    loop = METHODS["loop"]().fit(train, "indirect", 0, steps=1, system=system)
+    np.testing.assert_allclose(hybrid.prior.predict_torque(test), loop.predict_torque(test), rtol=1e-12, atol=1e-12)
+    assert np.mean((hybrid.predict_torque(train) - train.tau) ** 2) < np.mean((loop.predict_torque(train) - train.tau) ** 2)
+    assert hybrid.record_details()["prior"].startswith("the residual loop's model")
+    save_model(hybrid, tmp_path / "h.npz", {"system": system.name}, train, system)
+    loaded, header = load_model(tmp_path / "h.npz")
+    expected = hybrid.predict_torque(test)
+    assert np.max(np.abs(loaded.predict_torque(test) - expected)) <= TOLERANCE * np.max(np.abs(expected))
+    assert header["kind"] == "hybrid"
+
+
+def test_a_runs_process_is_told_to_import_the_loop():
+    assert PRIORS["loop"].module == "bench.residual.prior"
+    assert modules_for(["loop+gp", "loop", "feasible+gp", "mlp"]) == ("bench.residual.prior",)
+    assert "loop" in METHODS["loop"].not_applicable_reason("indirect", SYSTEMS["double_pendulum"]())
