@@ -109,7 +109,10 @@ def expression_to_json(expr) -> object:
     if isinstance(expr, sympy.Rational):
         return {"rational": [str(expr.p), str(expr.q)]}
     if isinstance(expr, sympy.Float):
-        return {"float": repr(float(expr))}
+        value = float(expr)
+        if not (np.isfinite(value) and sympy.Float(value) == expr):
+            raise ValueError(f"the expression holds {expr}, which a double cannot hold exactly")
+        return {"float": repr(value)}
     for name, value in CONSTANTS.items():
         if expr == value:
             return {"constant": name}
