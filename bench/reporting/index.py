@@ -28,7 +28,7 @@ from pathlib import Path
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
 from bench.reporting.groups import GROUPS, HALVES_FROM, TESTED_GROUP, group_stats
-from bench.reporting import measured, panda_log  # noqa: F401  (the pages' generated blocks)
+from bench.reporting import measured, panda_log, tuned  # noqa: F401  (the pages' generated blocks)
 from bench.reporting.pages import rewrite, stale_blocks
 from bench.runner.records import read_records
 
@@ -133,8 +133,9 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
                             f"{figure.json['key']} ({type(exc).__name__}: {exc})") from None
     want = figure.records
     records = [r for r in (records or _Records(root))(entry.path)
-               if (r.system, r.experiment, r.method, r.noise) == (want["system"], want["experiment"], want["method"],
-                                                                  float(want.get("noise", 0.0)))]
+               if (r.system, r.experiment, r.method, r.noise, r.tuned) == (
+                   want["system"], want["experiment"], want["method"], float(want.get("noise", 0.0)),
+                   bool(want.get("tuned", False)))]
     if not records:
         raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: no records of {want} in {entry.path}")
     group = want.get("group", TESTED_GROUP)

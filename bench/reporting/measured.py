@@ -44,8 +44,11 @@ def _ratio(x: float) -> str:
     return f"{x:.0f}×" if x >= 100 else f"{x:.3g}×"
 
 
-def _records(root: Path, folder: str) -> list[Record]:
-    return [r for r in read_records(Path(root) / folder) if r.experiment == "indirect"]
+def _records(root: Path, folder: str, tuned: bool | None = False) -> list[Record]:
+    """The folder's indirect records: those with each method's own hyperparameters by
+    default, the tuned ones with ``tuned=True``, all with ``None``."""
+    return [r for r in read_records(Path(root) / folder) if r.experiment == "indirect"
+            and (tuned is None or r.tuned == tuned)]
 
 
 def _standard(records: list[Record]) -> dict | None:
