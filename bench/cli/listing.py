@@ -36,7 +36,11 @@ def main(args) -> int:
         print(f"  {entry.name:<20} {state}  experiments={exps}  tags={','.join(sorted(entry.tags))}")
         for name, named in entry.obj.configurations.items():
             print(f"  {'':<20} --config {name}: {named.summary}")
+        if entry.obj.search_space:
+            space = ", ".join(f"{k} in {{{', '.join(map(str, v))}}}" for k, v in entry.obj.search_space.items())
+            print(f"  {'':<20} --tune searches {space}")
     print("Hybrids (an identified rigid body plus a learned residual of the torque):")
     print(f"  {naming()}; a residual that does not fall back to zero far from the training states by itself is gated "
-          f"towards zero there (methods/hybrid.py)")
+          f"towards zero there (methods/hybrid.py), and --tune searches its gate_length in {{1.0, 3.0}} beside the "
+          f"residual's own space")
     return 0
