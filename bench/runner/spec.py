@@ -35,7 +35,7 @@ def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 
             + ("__tuned" if tuned else ""))
 
 
-_RUN_ID = re.compile(r"^(?P<system>\w+?)__(?P<method>\w+?)__(?P<experiment>direct|indirect)__seed(?P<seed>\d+)"
+_RUN_ID = re.compile(r"^(?P<system>\w+?)__(?P<method>[\w+]+?)__(?P<experiment>direct|indirect)__seed(?P<seed>\d+)"
                      r"(?:__noise(?P<noise>[0-9.e+-]+?))?(?P<tuned>__tuned)?$")
 
 

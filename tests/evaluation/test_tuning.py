@@ -148,6 +148,8 @@ def test_a_tuned_run_id_round_trips_and_its_missing_record_stays_tuned():
     assert parse_run_id(run_id("p", "mlp", "indirect", 3, 0.01, tuned=True)) == {
         "system": "p", "method": "mlp", "experiment": "indirect", "seed": 3, "noise": 0.01, "tuned": True}
     assert Record.missing(rid, "corrupt").tuned
+    hybrid = run_id("kuka_lwr4", "feasible+gp", "indirect", 0, 0.0, tuned=True)  # a hybrid's id parses too
+    assert parse_run_id(hybrid)["method"] == "feasible+gp" and Record.missing(hybrid, "corrupt").method == "feasible+gp"
     assert RunSpec("kuka_lwr4", "mlp", "indirect", 3, None, steps=5, tune=True).run_id == rid
 
 
