@@ -20,7 +20,8 @@ itself in the direct experiment).
 
 Fit: sequentially thresholded least squares, on ``g(library)`` against
 ``tau`` (indirect) or on the library against ``L`` (direct), with the
-threshold chosen on held-out samples (:func:`bench.core.regression.fit_columns`).
+threshold chosen on held-out samples (:func:`bench.core.regression.fit_columns`: the validation
+protocol's folds, :mod:`bench.core.folds`, where the data name trajectories; a 3:1 split of independent samples).
 It is the "knows a good basis" reference: when the true Lagrangian lies in
 the library's span, it is recovered exactly.
 
@@ -42,6 +43,7 @@ import numpy as np
 import sympy
 
 from bench.core import regression
+from bench.core.folds import folds
 from bench.core.data import Dataset
 from bench.core.models import ExpressionModel
 from bench.core.terms import TermLibrary, lagrangian_library, lagrangian_library_size
@@ -93,7 +95,8 @@ class SparseLagrangian(ExpressionMethod):
             F = self.library.design(sub, experiment, deadline=progress.deadline)
             keep = regression.independent_columns(F, deadline=progress.deadline)
             y = sub.target(experiment).ravel()
-            coef = regression.fit_columns(F[:, keep], y, len(sub), self.config.threshold, deadline=progress.deadline)
+            coef = regression.fit_columns(F[:, keep], y, len(sub), self.config.threshold, deadline=progress.deadline,
+                                          folds=folds(sub).indices() if sub.trajectories() else None)
             self.kept_terms = len(keep)
             kept = TermLibrary(self.library[k] for k in keep)
             self.model = ExpressionModel(kept.lagrangian(coef), train.dof)

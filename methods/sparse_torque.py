@@ -12,7 +12,8 @@ another trajectory (a library with every joint's ``sin q_i`` and ``cos q_i``
 gave the KUKA LWR4+'s default split 351 times the standard model's test MSE),
 
 fitted by sequentially thresholded least squares with the sparsity chosen on
-held-out samples (:func:`bench.core.regression.fit_columns`), one solve a
+held-out samples (:func:`bench.core.regression.fit_columns`, on the validation
+protocol's folds, :mod:`bench.core.folds`), one solve a
 joint: the method's one step. Its result is one equation a joint, in those
 names (``record_details``). Its torque takes no accelerations: beside a prior
 the hybrid's mass matrix is the prior's. It has no Lagrangian: offsets and
@@ -28,6 +29,7 @@ from typing import Annotated, ClassVar
 import numpy as np
 
 from bench.core import regression
+from bench.core.folds import folds
 from bench.core.data import Dataset
 from bench.core.modelfile import loader
 from methods.base import METHODS, Method, restored, saved_hyperparameters
@@ -68,11 +70,12 @@ class SparseTorque(Method):
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         self.coef = [np.zeros(len(terms_names(train.dof, j))) for j in range(train.dof)]
+        held = folds(train).indices() if train.trajectories() else None
         while progress.step():
             for j in range(train.dof):
                 _, F = terms(train, j)
                 self.coef[j] = regression.fit_columns(F, train.tau[:, j], len(train), self.config.threshold,
-                                                      deadline=progress.deadline)
+                                                      deadline=progress.deadline, folds=held)
             progress.stop("solved")
 
     def _get_state(self):

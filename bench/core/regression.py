@@ -22,6 +22,7 @@ import scipy.linalg
 import sympy
 
 from bench.core.data import Dataset
+from bench.core.folds import folds
 from bench.core.terms import TermLibrary
 from bench.core.timeouts import Timeout
 
@@ -142,27 +143,36 @@ def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, thres
     """Fit coefficients of the Lagrangian terms ``basis`` on ``data``; returns ``(expression, coef)``.
 
     With ``threshold=None`` the sparsity threshold is chosen on held-out
-    data: the samples are split 3:1, every threshold of :data:`THRESHOLDS` is
-    fitted on the first part, and the largest one whose held-out MSE is within
-    10 % of the best is refitted on all samples (the sparsest model that
-    predicts as well).
+    data: where the data name trajectories, on the validation protocol's folds
+    (:mod:`bench.core.folds`); otherwise (independent samples) the samples are
+    split 3:1. Every threshold of :data:`THRESHOLDS` is fitted on each fold,
+    and the largest one whose held-out MSE is within 10 % of the best is
+    refitted on all samples (the sparsest model that predicts as well).
     """
     basis = list(basis)
     if experiment == "direct" and not any(f.is_number for f in basis):
         basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
     library = TermLibrary.of_lagrangian(basis)
     F = library.design(data, experiment, deadline)
-    coef = fit_columns(F, data.target(experiment).ravel(), len(data), threshold, deadline)
+    held = folds(data).indices() if data.trajectories() else None
+    coef = fit_columns(F, data.target(experiment).ravel(), len(data), threshold, deadline, held)
     return library.lagrangian(coef), coef
 
 
 def fit_columns(F: np.ndarray, y: np.ndarray, n_samples: int, threshold: float | None = None,
-                deadline: float | None = None) -> np.ndarray:
+                deadline: float | None = None, folds: list[tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
     """Sparse coefficients for a design matrix of ``n_samples`` samples (rows
-    grouped by sample); the threshold is validated when not given. Raises
-    :class:`~bench.core.timeouts.Timeout` past ``deadline``."""
+    grouped by sample); the threshold is validated when not given: on
+    ``folds`` where given (``(fitted, scored)`` sample indices each, the
+    validation protocol's: :meth:`bench.core.folds.Folds.indices`), else on the
+    last quarter of the samples. Raises :class:`~bench.core.timeouts.Timeout`
+    past ``deadline``."""
     if threshold is None:
-        threshold = _validated_threshold(F, y, n_samples, len(y) // max(n_samples, 1), deadline)
+        rows = len(y) // max(n_samples, 1)
+        if folds is None:
+            cut = 3 * n_samples // 4
+            folds = [(np.arange(cut), np.arange(cut, n_samples))] if 0 < cut < n_samples else []
+        threshold = _validated_threshold(F, y, rows, folds, deadline)
     return thresholded_least_squares(F, y, threshold, deadline=deadline)
 
 
@@ -225,16 +235,26 @@ def independent_columns(F: np.ndarray, tol: float = 1e-8, deadline: float | None
     return np.asarray(kept, dtype=int)
 
 
-def _validated_threshold(F: np.ndarray, y: np.ndarray, n: int, rows_per_sample: int,
-                         deadline: float | None = None) -> float:
-    cut = (3 * n // 4) * rows_per_sample  # split by sample, not by row
-    if cut == 0 or cut >= len(y):
+def _validated_threshold(F: np.ndarray, y: np.ndarray, rows_per_sample: int,
+                         folds: list[tuple[np.ndarray, np.ndarray]], deadline: float | None = None) -> float:
+    """The largest threshold whose held-out MSE over ``folds`` (sample indices)
+    is within 10 % of the best (:func:`fit_basis`)."""
+    folds = [(f, s) for f, s in folds if len(f) and len(s)]
+    if not folds:
         return THRESHOLDS[0]
+
+    def rows(index):  # a sample's rows, in order
+        return (np.asarray(index)[:, None] * rows_per_sample + np.arange(rows_per_sample)).ravel()
+
+    folds = [(rows(f), rows(s)) for f, s in folds]
     errors = []
     for threshold in THRESHOLDS:
-        coef = thresholded_least_squares(F[:cut], y[:cut], threshold, deadline=deadline)
-        residual = F[cut:] @ coef - y[cut:]
-        errors.append(float(np.mean(residual * residual)))
+        total, count = 0.0, 0
+        for fit, score in folds:
+            coef = thresholded_least_squares(F[fit], y[fit], threshold, deadline=deadline)
+            residual = F[score] @ coef - y[score]
+            total, count = total + float(residual @ residual), count + len(score)
+        errors.append(total / count)
     best = min(errors)
     scale = float(np.mean(y * y)) or 1.0
     ok = [t for t, e in zip(THRESHOLDS, errors) if e <= 1.1 * best + 1e-14 * scale]

@@ -113,3 +113,18 @@ def test_the_compressed_folds_score_the_gapped_spans_as_a_fit_per_fold_does():
         total, rows = total + r @ r, rows + fold.score.sum()
     assert cv_mse(np.hstack([D, G]), y, out) == pytest.approx(total / rows, rel=1e-10)
     assert FoldFits(D, y, out).cv(G) == pytest.approx(total / rows, rel=1e-10)
+
+
+def test_a_sparse_threshold_is_validated_on_the_protocols_folds_where_the_data_name_trajectories():
+    from bench.core import regression
+
+    rng = np.random.default_rng(0)
+    F = rng.normal(size=(400, 3))
+    y = F @ [1.0, 0.0, 0.5] + 0.01 * rng.normal(size=400)
+    cut = regression.fit_columns(F, y, 400)  # independent samples: the last quarter held out, as before
+    held = [(np.arange(300), np.arange(300, 400))]
+    assert np.array_equal(cut, regression.fit_columns(F, y, 400, folds=held))
+    data = _recordings([200, 200], ["A", "B"], smooth=5.0)
+    by_trajectory = folds(data).indices()
+    coef = regression.fit_columns(F, y, 400, folds=by_trajectory)
+    assert coef[1] == 0.0 and abs(coef[0] - 1.0) < 0.01
