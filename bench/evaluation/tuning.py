@@ -17,11 +17,13 @@ all, as SRBench allows: La Cava et al., 2021). A tuned fit
    nothing to search has its one configuration validated the same way, so
    that every tuned run says what validation made of it.
 
-The fit's budget covers all of it. Under a time budget the final fit has
-:data:`FINAL_SHARE` of the seconds and each fit of the search an equal part of
-the rest; under a work budget every fit, in the search and the final one, does
-the budget's steps (the work a method is compared by), so that a tuned run is
-as replayable as any. What it chose, every combination's validation MSE per
+The fit's budget covers all of it. Under a time budget each fit of the search
+has an equal part of ``1 - FINAL_SHARE`` of the seconds, no fit starts once
+that share has passed (a combination left unfitted is recorded so and not
+chosen), and the final fit has what is left, at least :data:`MIN_FINAL_SHARE`
+of the budget; under a work budget every fit, in the search and the final
+one, does the budget's steps (the work a method is compared by), so that a
+tuned run is as replayable as any. What it chose, every combination's validation MSE per
 fold, and the folds are the record's ``details.tuning``.
 """
 
@@ -37,7 +39,7 @@ import numpy as np
 from sklearn.base import BaseEstimator
 from sklearn.model_selection import GridSearchCV, ParameterGrid
 
-from bench.core.budget import Budget
+from bench.core.budget import SECONDS, Budget
 from bench.core.data import Dataset, mse
 from bench.core.errors import ConfigError
 from bench.core.folds import folds
@@ -49,6 +51,10 @@ MAX_COMBINATIONS = 10
 MAX_FOLDS = 4
 #: the share of a time budget the final fit has; the search has the rest
 FINAL_SHARE = 0.5
+#: the least share of a time budget the final fit has where the search took more than its own
+MIN_FINAL_SHARE = 0.25
+#: why a combination was not fitted where the search's share of a time budget ended first
+OUT_OF_TIME = "not fitted: the search's share of the budget ended before it"
 #: what the record and the tables call a tuned run
 PROTOCOL = "tuned on the training trajectories"
 
@@ -90,9 +96,9 @@ class _Shared:
     object, not copied when scikit-learn clones a candidate."""
 
     def __init__(self, make: Callable[[dict], object], train: Dataset, experiment: str, seed: int, budget: Budget,
-                 system: System | None):
+                 system: System | None, deadline: float = math.inf):
         self.make, self.train, self.experiment, self.seed = make, train, experiment, seed
-        self.budget, self.system = budget, system
+        self.budget, self.system, self.deadline = budget, system, deadline
         self.failures: dict[tuple, str] = {}
 
     def __deepcopy__(self, memo):
@@ -109,6 +115,9 @@ class _Candidate(BaseEstimator):
     def fit(self, X, y=None):
         s = self.shared
         self.method_ = None
+        if time.perf_counter() > s.deadline:
+            s.failures[_key(self.choice)] = OUT_OF_TIME
+            return self
         try:
             method = s.make(self.choice)
             method.fit(s.train.subset(np.asarray(X)[:, 0]), s.experiment, s.seed, s.budget, system=s.system)
@@ -163,7 +172,10 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
     each = budget.scaled((1.0 - FINAL_SHARE) / fits)
     say(f"tuning {method_cls.name}: {len(grid)} combinations x {len(fold_set)} folds ({fold_set.describe()}), "
         f"{each.describe()} a fit")
-    shared = _Shared(make, train, experiment, seed, each, system)
+    # under a time budget no fit of the search starts past its share (each fit's own work, a hybrid's prior
+    # say, may take longer than its part of it)
+    deadline = t0 + (1.0 - FINAL_SHARE) * budget.seconds if budget.kind == SECONDS else math.inf
+    shared = _Shared(make, train, experiment, seed, each, system, deadline)
     search = GridSearchCV(_Candidate(shared), {"choice": grid}, scoring=_score, cv=fold_set.indices(), refit=False,
                           error_score=math.nan)
     with warnings.catch_warnings():
@@ -189,7 +201,11 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
         chosen, note = {}, "every combination failed in the search: the method's own defaults are fitted"
     else:
         chosen, note = min(usable, key=lambda r: r["validation_mse"])["hyperparameters"], None
-    final = budget.scaled(FINAL_SHARE)
+    if budget.kind == SECONDS:  # the final fit has what is left of the budget, and at least MIN_FINAL_SHARE of it
+        left = budget.seconds - (time.perf_counter() - t0)
+        final = Budget(seconds=max(left, MIN_FINAL_SHARE * budget.seconds))
+    else:
+        final = budget.scaled(FINAL_SHARE)
     say(f"tuning {method_cls.name}: chose {_words(chosen) or 'its defaults'}; fitting it on all the training data "
         f"({final.describe()})")
     method = make(chosen)

@@ -171,3 +171,23 @@ def test_a_tuned_matrix_sits_beside_the_default_one_and_replays(tmp_path):
     assert again.returncode == 0 and "the same up to a relative 1e-09" in again.stdout
     refused = cli(*common, "--tune", "--stack-seeds")
     assert refused.returncode == 2 and "--stack-seeds" in refused.stderr and len(refused.stderr.splitlines()) == 1
+
+
+def test_no_fit_starts_past_the_searchs_share_of_a_time_budget(monkeypatch):
+    from bench.evaluation import tuning
+
+    class Clock:  # one second passes each time the search looks at the clock
+        def __init__(self):
+            self.now = 0.0
+
+        def perf_counter(self):
+            self.now += 1.0
+            return self.now
+
+    monkeypatch.setattr(tuning, "time", Clock())
+    d = tune(Poly, {}, _trajectories(), "indirect", 0, Budget(seconds=20.0)).details
+    skipped = [r for r in d["combinations"] if r.get("failed") == tuning.OUT_OF_TIME]
+    fitted = [r for r in d["combinations"] if r["validation_mse"] is not None]
+    assert skipped and fitted and len(skipped) + len(fitted) == 8
+    assert d["chosen"] == min(fitted, key=lambda r: r["validation_mse"])["hyperparameters"]
+    assert d["final_budget"]["seconds"] >= tuning.MIN_FINAL_SHARE * 20.0
