@@ -153,6 +153,17 @@ class Dataset:
             out.append(index)
         return out
 
+    def thinned(self, limit: int) -> tuple["Dataset", int]:
+        """At most about ``limit`` samples and the step ``k`` taken: every
+        ``k``-th sample of each recording in time order (of the samples, where
+        there are no recordings), ``k`` the smallest that leaves ``limit`` or
+        fewer (and one more a recording); ``(self, 1)`` where there are that few already."""
+        step = max(1, math.ceil(len(self) / max(limit, 1)))
+        if step == 1:
+            return self, 1
+        order = self.in_time_order() or [np.arange(len(self))]
+        return self.subset(np.sort(np.concatenate([index[::step] for index in order]))), step
+
     def trajectory_labels(self) -> np.ndarray | None:
         """``(n,)``: the trajectory of each sample, its recording's label where
         every recording is a trajectory of its own; ``None`` for independent samples."""

@@ -116,6 +116,13 @@ TRACE_SHARE = 0.85
 CROSS_FIT_SHARE = 0.15
 
 
+#: the training samples the loop works on at most: a longer log is thinned to every k-th sample of each
+#: recording (:meth:`bench.core.data.Dataset.thinned`). On a 7-joint log of 71,388 samples the loop's
+#: statistics took 340 of its 356 s, most of it projecting candidates' columns off the design; on one
+#: sample in 5 they took 43 of 46 s, with the same test MSE to four figures (results/measured/README.md)
+MAX_SAMPLES = 16384
+
+
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float | None = None,
                   steps: int | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
                   fitted: FittedModel | None = None, open_ended: bool | None = None,
@@ -147,9 +154,14 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     """
     if budget_s is None and steps is None:
         budget_s = DEFAULT_BUDGET_S
+    train, thinned = train.thinned(MAX_SAMPLES)
+    if thinned > 1:
+        report(f"the loop works on one sample in {thinned} of each training recording, {len(train)} samples: "
+               f"neighbouring samples are near copies, and its statistics grow with the rows (at most {MAX_SAMPLES})")
     with remembered_columns(train, test):  # each candidate's and effect's columns once, for every round
         loop = _Loop(method, train, test, Budget(seconds=budget_s, steps=steps), seed, dict(hyperparameters or {}),
                      report, open_ended, device)
+        loop.thinned = thinned
         loop.checkpoint, loop.on_phase = checkpoint or (lambda result: None), on_phase or (lambda phase: None)
         return loop.run(fitted)
 
@@ -176,6 +188,7 @@ class _Loop(Tidying):
         self.start = time.perf_counter()
         self.beyond: dict[str, tuple] = {}  # effects dropped for claiming beyond the data: label -> (term, entry)
         self.unnamed: dict[str, dict] = {}  # open-ended terms taken where a named law was only the nearest: label -> entry
+        self.thinned = 1  # the loop works on one training sample in this many (residual_loop)
         self.statistics = 0.0  # seconds in selection, pruning and the held-out and mass-matrix checks
         # the share of the held-out error a round must save: on trajectories, whose held-out spans are not
         # independent of the rest, what each candidate must (a smaller gain is a fit to the one motion)
@@ -281,7 +294,7 @@ class _Loop(Tidying):
             effects=describe_all(model.effects, model.coef, model.stderr, self.timed(shape_stderr, strategy, model, train))
             + self.sensor.entries(train.dof) + list(findings.values()) + list(self.unnamed.values())
             + [entry for _, entry in self.beyond.values()],
-            rounds=[r.to_json() for r in rounds], validation=describe_validation(train),
+            rounds=[r.to_json() for r in rounds], validation=describe_validation(train), thinned=self.thinned,
             mass_matrix={"smallest_eigenvalue_before": self.mass_before, "smallest_eigenvalue_after": mass,
                          "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
             mse_heldout_trajectories={"before": rounds[0].heldout_mse, "after": held} if len(train.recordings()) >= 2 else None,

@@ -78,6 +78,8 @@ class ResidualResult:
     loop_seconds: float | None = None
     rollout_seconds: float | None = None
     sensor_laws_offered: list[str] | None = None
+    #: the loop worked on every ``thinned``-th sample of each training recording (:data:`bench.residual.loop.MAX_SAMPLES`)
+    thinned: int = 1
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:

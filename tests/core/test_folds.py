@@ -128,3 +128,14 @@ def test_a_sparse_threshold_is_validated_on_the_protocols_folds_where_the_data_n
     by_trajectory = folds(data).indices()
     coef = regression.fit_columns(F, y, 400, folds=by_trajectory)
     assert coef[1] == 0.0 and abs(coef[0] - 1.0) < 0.01
+
+
+def test_a_long_log_is_thinned_within_each_recording_in_time_order():
+    data = _recordings([1000, 600], ["A", "B"], smooth=3.0)
+    same, step = data.thinned(5000)
+    assert same is data and step == 1
+    thin, step = data.thinned(400)
+    assert step == 4 and len(thin) == 250 + 150
+    for index, kept in zip(data.in_time_order(), thin.in_time_order()):
+        np.testing.assert_array_equal(thin.time[kept], data.time[index][::4])
+    assert thin.recordings() == data.recordings()

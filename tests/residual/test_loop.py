@@ -12,7 +12,7 @@ import pytest
 from bench.core.data import add_noise, generate
 from bench.core.undeclared import add_effects
 from bench.core.models import ExpressionModel
-from bench.residual import residual_loop, trace, candidates
+from bench.residual import loop as loop_module, residual_loop, trace, candidates
 from systems import get_system
 from tests.commandline import cli
 
@@ -418,3 +418,12 @@ def test_a_spring_with_a_rest_angle_is_one_law_with_its_stiffness_and_rest_angle
     assert spring["name"] == "offset_spring" and spring["joints"] == [2]
     assert {k: p["value"] for k, p in spring["parameters"].items()} == pytest.approx({"k": 2.0, "q0": 0.3}, rel=1e-6)
     assert sorted(p["name"] for p in spring["parts"]) == ["offset", "spring"]
+
+
+def test_a_long_log_is_thinned_and_the_result_says_so(monkeypatch):
+    train = generate(get_system("double_pendulum"), 800, 0)
+    lines = []
+    monkeypatch.setattr(loop_module, "MAX_SAMPLES", 200)
+    out = residual_loop("sparse", train, None, steps=SOLVED, report=lines.append)
+    assert out.thinned == 4 and out.to_json()["thinned"] == 4
+    assert any("one sample in 4" in line and "200 samples" in line for line in lines)
