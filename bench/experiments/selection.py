@@ -22,6 +22,7 @@ candidate's validation and test figures side by side, ranked by each) and
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -91,16 +92,18 @@ def run(rows, workers: int | None, report=print) -> list[tuple[Candidate, Record
     return [(c, records[c.name]) for c, _, _ in rows]
 
 
-def entry(candidate: Candidate, record: Record) -> dict:
-    """A candidate's line of ``select.json``."""
+def entry(candidate: Candidate, record: Record, out: Path) -> dict:
+    """A candidate's line of ``select.json`` (its model file's path relative to ``out``)."""
     details = record.details or {}
+    saved = (details.get("saved") or {}).get("path")
     tuning = details.get("tuning") or {}
     standard = (details.get("standard_model") or {}).get("test_mse")
     return {"name": candidate.name, "method": record.method, "status": record.status,
             "validation_mse": tuning.get("validation_mse"), "test_mse": record.test_mse,
             "train_mse": record.train_mse, "test_over_standard": None if not (standard and record.test_mse) else
             record.test_mse / standard, "hyperparameters": tuning.get("chosen", {}),
-            "model": (details.get("saved") or {}).get("path"), "error": record.error_line or
+            "model": None if saved is None else os.path.relpath(saved, Path(out).resolve()),
+            "error": record.error_line or
             (record.failed_stages.get("save") if record.failed_stages else None), "run_id": record.run_id}
 
 
@@ -156,7 +159,7 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
     out = Path(out)
     rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout)
     done = run(rows, workers, report)
-    entries = [entry(c, r) for c, r in done]
+    entries = [entry(c, r, out) for c, r in done]
     chosen = choose(entries)
     folds = next(((r.details or {}).get("tuning", {}).get("folds", {}).get("description") for _, r in done
                   if (r.details or {}).get("tuning", {}).get("folds")), None)
@@ -164,9 +167,9 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
     result = {"system": system, "split": split, "seed": seed, "budget": budget, "command": command,
               "protocol": PROTOCOL, "folds": folds, "chosen": chosen, "candidates": entries}
     if chosen:
-        content = Path(chosen["model"]).read_bytes()
+        content = (out / chosen["model"]).read_bytes()
         atomic_write(out / "model.npz", lambda f: f.write(content), binary=True)
-        result["model"] = str(out / "model.npz")
+        result["model"] = "model.npz"
     write_json(out / "select.json", result)
     text = page(result)
     atomic_write(out / "select.md", lambda f: f.write(text))

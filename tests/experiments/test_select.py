@@ -25,6 +25,7 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     for c in result["candidates"]:
         assert c["validation_mse"] > 0 and c["test_mse"] > 0
     best = min(result["candidates"], key=lambda c: c["validation_mse"])
+    assert result["model"] == "model.npz" and (out / result["chosen"]["model"]).exists()  # paths relative to DIR
     assert result["chosen"]["name"] == best["name"] and set(result["chosen"]) >= {"name", "validation_mse", "test_mse"}
     text = (out / "select.md").read_text()
     assert f"| {best['name']} **(chosen)** |" in text and "rank by validation" in text
