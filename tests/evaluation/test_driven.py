@@ -90,3 +90,24 @@ def test_a_window_that_blows_up_on_a_stiff_damper_is_integrated_again_at_a_finer
     assert out["diverged"] == 0 and out["median_q_rmse"] is not None
     monkeypatch.setattr(driven, "REFINEMENTS", 0)
     assert driven_rollout(damped, data, 0.25)["diverged"] > 0
+
+
+def test_a_long_test_log_is_rolled_out_over_evenly_spread_windows(monkeypatch):
+    from bench.evaluation import driven
+    from bench.core.data import Dataset
+
+    n = 1000
+    t = np.arange(n) * 0.01
+    q = np.zeros((n, 1))
+    data = Dataset(q, q, q, q, recording=np.array(["r"] * n), time=t)
+
+    class Still:  # a unit mass at rest under no torque: it stays where it is
+        def not_a_lagrangian(self):
+            return None
+
+        def predict_torque(self, d):
+            return d.qdd.copy()
+
+    monkeypatch.setattr(driven, "MAX_SAMPLES", 260)
+    out = driven.driven_rollout(Still(), data, 0.25)
+    assert out["windows_available"] == 39 and out["windows"] == 10 and out["median_q_rmse"] == 0.0
