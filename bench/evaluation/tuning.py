@@ -73,11 +73,16 @@ def prepare(method_cls, settings: dict, train: Dataset, experiment: str, device:
     for its shapes, once a process: :meth:`methods.base.Method.prepare`), done
     before the run's budget starts as a fit's own is; returns its seconds."""
     t0 = time.perf_counter()
-    fixed = dict(settings)
-    space = {k: v for k, v in _space(method_cls).items() if k not in fixed}
-    for choice in ([dict(c) for c in ParameterGrid(space)] if space else [{}]):
-        method_cls(**{**fixed, **choice}).use_device(device).prepare(train, experiment)
+    for choice in _grid(method_cls, settings)[1]:
+        method_cls(**{**settings, **choice}).use_device(device).prepare(train, experiment)
     return round(time.perf_counter() - t0, 3)
+
+
+def _grid(method_cls, settings: dict) -> tuple[list[str], list[dict]]:
+    """The hyperparameters searched (those of the space that ``settings`` does not set)
+    and their combinations; ``[{}]`` where nothing is searched."""
+    space = {k: v for k, v in _space(method_cls).items() if k not in settings}
+    return sorted(space), ([dict(c) for c in ParameterGrid(space)] if space else [{}])
 
 
 def check_space(method_cls) -> None:
@@ -158,15 +163,12 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
     given a line as the search goes."""
     say = report or (lambda line: None)
     fixed = dict(settings)
-    space = {k: v for k, v in _space(method_cls).items() if k not in fixed}
-    searched = sorted(space)
-    grid = [dict(c) for c in ParameterGrid(space)] if space else []
+    searched, grid = _grid(method_cls, fixed)  # nothing to search: the one configuration is still validated
 
     def make(choice: dict):
         return method_cls(**{**fixed, **choice}).use_device(device)
 
     t0 = time.perf_counter()
-    grid = grid or [{}]  # nothing to search: the one configuration is still validated
     fold_set = folds(train, max_folds=MAX_FOLDS)
     fits = len(grid) * len(fold_set)
     each = budget.scaled((1.0 - FINAL_SHARE) / fits)
