@@ -90,16 +90,21 @@ def write_csv(data: Dataset, path: str | os.PathLike) -> None:
     atomic_write(Path(path), lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
 
 
-#: the separators besides the comma that a CSV file may use, tried where its header has no comma
-OTHER_SEPARATORS = (";", "\t")
+#: the separators besides the comma that a CSV file may use, tried in turn where its header has no comma:
+#: a semicolon, a tab, or any run of spaces and tabs (a logger's aligned columns), each by pandas' reader
+OTHER_SEPARATORS = (";", "\t", r"\s+")
+#: how an error names the separators it tried
+SEPARATOR_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", r"\s+": "whitespace"}
 
 
 def read_frame(path: Path, nrows: int | None = None):
-    """A CSV file (optionally compressed) as a DataFrame with at least one row
-    and distinct column names (its first ``nrows`` rows only, where given);
-    :class:`DataError` naming the file otherwise. A file whose header is one
-    name holding semicolons or tabs is read with that separator (a spreadsheet's
-    export in a locale whose decimal mark is the comma)."""
+    """A CSV file (optionally compressed) as a DataFrame with at least one row,
+    two columns or more and distinct column names (its first ``nrows`` rows
+    only, where given); :class:`DataError` naming the file otherwise. A file
+    whose header is one name holding semicolons, tabs or spaces is read with
+    that separator (a spreadsheet's export in a locale whose decimal mark is
+    the comma; a logger's space-separated columns, CRLF line ends included);
+    a header that stays one column is refused naming the separators tried."""
     import pandas as pd
 
     path = Path(path)
@@ -111,9 +116,15 @@ def read_frame(path: Path, nrows: int | None = None):
         header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False)
         sep = ","
         if header.shape[1] == 1 and len(header):
-            sep = next((s for s in OTHER_SEPARATORS if s in str(header.iloc[0, 0])), ",")
-            if sep != ",":
-                header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False, sep=sep)
+            for other in OTHER_SEPARATORS:
+                split = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False, sep=other)
+                if split.shape[1] > 1:
+                    sep, header = other, split
+                    break
+            else:
+                tried = ", ".join(SEPARATOR_NAMES[s] for s in (",", *OTHER_SEPARATORS))
+                raise DataError(f"{path}: its header reads as one column ({str(header.iloc[0, 0]).strip()!r:.60}); "
+                                f"tried the separators {tried}")
         frame = pd.read_csv(path, nrows=nrows, sep=sep)
     except pd.errors.EmptyDataError:
         raise DataError(f"{path}: the file is empty") from None

@@ -73,7 +73,8 @@ class FilterSpec:
     def describe(self) -> str:
         return (f"resampled to {self.dt * 1000:g} ms, zero-phase Butterworth low-pass of order {self.order} at "
                 f"{self.cutoff_hz:g} Hz on q, qd and tau, qdd by central differences of qd, {self.trim_s:g} s trimmed "
-                f"from each end, every {self.decimate}th sample kept")
+                f"from each end, " + ("every sample kept" if self.decimate == 1 else
+                                      f"one sample in {self.decimate} kept"))
 
 
 DEFAULT_FILTER = FilterSpec()

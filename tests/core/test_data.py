@@ -245,3 +245,23 @@ def test_a_csv_separated_by_semicolons_or_tabs_reads_as_with_commas(tmp_path, se
     other.write_text(GOOD.replace(",", sep).replace("0.7", "0,7", 1))
     with pytest.raises(DataError, match="column tau_1 has a non-numeric value '0,7' in data row 1"):
         read_csv(other, dof=2)
+
+
+def test_a_space_separated_log_with_crlf_line_ends_reads_as_with_commas(tmp_path):
+    comma, spaced = tmp_path / "comma.csv", tmp_path / "spaced.txt"
+    comma.write_text(GOOD)
+    lines = ["  ".join(line.split(",")) for line in GOOD.strip().splitlines()]
+    spaced.write_bytes(("\r\n".join(lines) + "\r\n").encode())
+    a, b = read_csv(comma, dof=2), read_csv(spaced, dof=2)
+    np.testing.assert_array_equal(a.tau, b.tau)
+    np.testing.assert_array_equal(a.qd, b.qd)
+
+
+def test_a_header_that_stays_one_column_names_the_separators_tried(tmp_path):
+    path = tmp_path / "glued.csv"
+    path.write_text("q_1|qd_1|qdd_1|tau_1\n1|2|3|4\n")
+    with pytest.raises(DataError) as err:
+        read_csv(path)
+    text = str(err.value)
+    assert str(path) in text and "tried the separators comma, semicolon, tab, whitespace" in text
+    assert len(text.splitlines()) == 1
