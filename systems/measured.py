@@ -15,6 +15,7 @@ One TOML file declares the recordings (paths relative to it)::
     columns = "time=t,q_1=pos1,qd_1=vel1,tau_1=eff1,q_2=pos2,qd_2=vel2,tau_2=eff2"
     test = ["fast"]                          # the trajectories the default split tests on
     time_unit = "s"                          # optional: the time column's unit, s (default), ms or us
+    rate_hz = 100                            # optional, for logs without a time column (no time= in columns)
     degrees = false                          # optional: true where q and qd are in degrees
     [filter]                                 # optional: bench.core.recordings.FilterSpec's fields
     cutoff_hz = 10
@@ -88,6 +89,8 @@ class MeasuredSpec:
     as_recorded: bool = False
     #: a measured arm's URDF (:mod:`systems.measured_arm`); ``None`` for a system with a form of its own
     urdf: Path | None = None
+    #: the logs' rate, Hz, where they have no time column
+    rate_hz: float | None = None
 
     @property
     def trajectories(self) -> tuple[str, ...]:
@@ -109,7 +112,8 @@ class MeasuredSpec:
         return "the logged rows as they are (accelerations logged)" if self.as_recorded else self.filter.describe()
 
 
-KNOWN_KEYS = ("urdf", "columns", "test", "filter", "recordings", "recordings_in", "time_unit", "degrees", "as_recorded")
+KNOWN_KEYS = ("urdf", "columns", "test", "filter", "recordings", "recordings_in", "time_unit", "degrees", "as_recorded",
+              "rate_hz")
 
 
 def read_spec(path: str | Path) -> MeasuredSpec:
@@ -159,7 +163,15 @@ def read_spec(path: str | Path) -> MeasuredSpec:
     if not isinstance(degrees, bool):
         raise DataError(f"{path}: degrees must be true or false, got {degrees!r}")
     urdf = (here / str(raw["urdf"])).resolve() if "urdf" in raw else None
-    return MeasuredSpec(path, columns, tuple(recordings), test, spec, time_unit, degrees, as_recorded, urdf)
+    rate = raw.get("rate_hz")
+    if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float)) or not rate > 0):
+        raise DataError(f"{path}: rate_hz must be a positive number of Hz, got {rate!r}")
+    if columns.time is None and rate is None:
+        raise DataError(f"{path}: columns name no time column: name it (time=COLUMN) or give the logs' rate (rate_hz)")
+    if columns.time is not None and rate is not None:
+        raise DataError(f"{path}: columns name a time column ({columns.time}) and rate_hz is {rate:g}: give one of them")
+    return MeasuredSpec(path, columns, tuple(recordings), test, spec, time_unit, degrees, as_recorded, urdf,
+                        None if rate is None else float(rate))
 
 
 def _recordings(path: Path, raw: dict) -> list[RecordingFile]:
@@ -222,7 +234,8 @@ def samples(spec: MeasuredSpec, r: RecordingFile, filter: FilterSpec, filter_tor
     if r.column is not None:
         frame = _log(r.path)
         rows, where = frame[frame[r.column].astype(str) == r.name], f"{r.path} ({r.column} = {r.name})"
-    rec = read_log(r.path, spec.columns, None if spec.as_recorded else filter, spec.time_unit, spec.degrees, rows, where)
+    rec = read_log(r.path, spec.columns, None if spec.as_recorded else filter, spec.time_unit, spec.degrees, rows, where,
+                   spec.rate_hz)
     if spec.as_recorded:
         return {"q": rec.q, "qd": rec.qd, "qdd": rec.qdd, "tau": rec.tau, "time": rec.time - rec.time[0]}
     return preprocess(rec, filter, filter_torque=filter_torque)

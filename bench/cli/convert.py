@@ -47,6 +47,10 @@ def add_arguments(cv) -> None:
                     help=f"seconds cut from each end, the filter's start-up (default {DEFAULT_FILTER.trim_s:g})")
     cv.add_argument("--decimate", type=positive_int, default=DEFAULT_FILTER.decimate,
                     help=f"keep every N-th sample (default {DEFAULT_FILTER.decimate})")
+    cv.add_argument("--rate", type=positive, default=None, metavar="HZ",
+                    help="the rate of a log without a time column, Hz (leave time= out of --columns): its rows are "
+                         "1/HZ s apart; a rate more than 5 %% off the one its positions and velocities imply stops the "
+                         "conversion with a line giving the interval they suggest")
     cv.add_argument("--time-unit", choices=sorted(TIME_UNITS), default="s",
                     help="the unit of the log's time column (default s); rows further apart than a robot logs, or "
                          "too slow a rate for the cut-off, stop the conversion with a line naming the column")
@@ -64,13 +68,18 @@ def main(args) -> int:
         raise UsageError(f"two logs would be the same recording {repeated[0]!r}: give files with distinct names")
     # one column map for every log, so they share their joints; each is read and checked before anything is written
     columns = ColumnMap.parse(args.columns) if args.columns else None
+    if columns is not None and columns.time is None and args.rate is None:
+        raise UsageError("--columns names no time column: name it (time=COLUMN) or give the log's rate (--rate HZ)")
+    if args.rate is not None and (columns is None or columns.time is not None):
+        raise UsageError("--rate is the rate of a log without a time column: leave time= out of --columns, or --rate out")
     if columns is not None and columns.qdd:
         raise UsageError("--columns: convert differentiates the filtered velocity and would not use logged qdd_i "
                          "columns; leave them out (a measured system's file with as_recorded = true takes logged "
                          "accelerations as they are)")
     trajectories = trajectory_names(args.trajectory, names, need=columns is not None and not args.distinct)
     system = None if columns else "dfki_double_pendulum"
-    recordings, warnings = zip(*(log_with_warnings(path, columns, spec, args.time_unit, args.degrees) for path in args.raw))
+    recordings, warnings = zip(*(log_with_warnings(path, columns, spec, args.time_unit, args.degrees, args.rate)
+                                 for path in args.raw))
     parts = [preprocess(r, spec) for r in recordings]
     s = joined(parts, names, trajectories)
     for line in (w for group in warnings for w in group):  # once every log is read: an error is the one line
@@ -81,6 +90,7 @@ def main(args) -> int:
     write_json(settings_path(args.out), {
         "logs": {str(p): file_digest(p) for p in args.raw},
         "columns": args.columns, "format": args.format, "time_unit": args.time_unit, "degrees": args.degrees,
+        "rate_hz": args.rate,
         "filter": dataclasses.asdict(spec), "trajectories": trajectories, "command": args.invocation,
     })
     print(f"wrote {len(s['q'])} samples of {s['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
@@ -89,13 +99,13 @@ def main(args) -> int:
 
 
 def log_with_warnings(path: Path, columns: ColumnMap | None, spec: FilterSpec, time_unit: str,
-                      degrees: bool) -> tuple[Recording, list[str]]:
+                      degrees: bool, rate_hz: float | None = None) -> tuple[Recording, list[str]]:
     """One log as the suite takes it (:func:`~bench.core.recordings.read_log`;
     ``columns`` ``None``: a DFKI recording in either of the lab's layouts), and
     its warnings: one naming degrees for each q that leaves ±2π where
     ``degrees`` was not given."""
     columns = columns or layout_of(path)
-    recording = read_log(path, columns, spec, time_unit, degrees)
+    recording = read_log(path, columns, spec, time_unit, degrees, rate_hz=rate_hz)
     warnings = []
     for j, lo, hi in ([] if degrees else beyond_a_turn(recording)):
         name = columns.q[j]

@@ -49,6 +49,8 @@ MAX_GRID = 10_000_000
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
 #: the longest median step between a robot log's rows, s: slower is a time column in other units
 MAX_MEDIAN_STEP = 0.5
+#: how far a log's stated rate may lie from the one its positions and velocities imply (:func:`check_stated_rate`)
+RATE_TOLERANCE = 0.05
 
 
 @dataclass(frozen=True)
@@ -95,9 +97,10 @@ class Recording:
 @dataclass(frozen=True)
 class ColumnMap:
     """Which columns of a log hold time and each joint's q, qd and tau (and
-    qdd, where the log holds accelerations)."""
+    qdd, where the log holds accelerations). ``time`` is ``None`` for a log
+    without a time column, whose rate is stated instead (:func:`read_log`)."""
 
-    time: str
+    time: str | None
     q: tuple[str, ...]
     qd: tuple[str, ...]
     tau: tuple[str, ...]
@@ -117,8 +120,6 @@ class ColumnMap:
             if role in roles:
                 raise ConfigError(f"{source}: {role} is given twice")
             roles[role] = column
-        if "time" not in roles:
-            raise ConfigError(f"{source}: name the time column (time=COLUMN)")
         joints = sorted({int(r.rsplit("_", 1)[1]) for r in roles if r != "time" and r.rsplit("_", 1)[-1].isdigit()})
         unknown = [r for r in roles if r != "time" and not (r.rsplit("_", 1)[0] in ("q", "qd", "qdd", "tau")
                                                               and r.rsplit("_", 1)[-1].isdigit())]
@@ -135,7 +136,7 @@ class ColumnMap:
             raise ConfigError(f"{source}: qdd is given for joint(s) {', '.join(map(str, given))} only; give it for every "
                               f"joint from 1 to {dof} or for none")
         kinds = ("q", "qd", "tau", "qdd") if given else ("q", "qd", "tau")
-        return cls(roles["time"], *(tuple(roles[f"{k}_{i}"] for i in range(1, dof + 1)) for k in kinds))
+        return cls(roles.get("time"), *(tuple(roles[f"{k}_{i}"] for i in range(1, dof + 1)) for k in kinds))
 
     @property
     def dof(self) -> int:
@@ -143,17 +144,24 @@ class ColumnMap:
 
     @property
     def columns(self) -> tuple[str, ...]:
-        return (self.time, *self.q, *self.qd, *self.tau, *self.qdd)
+        return (*((self.time,) if self.time else ()), *self.q, *self.qd, *self.tau, *self.qdd)
 
-    def take(self, frame, path: Path | str = "recording") -> Recording:
+    def take(self, frame, path: Path | str = "recording", rate_hz: float | None = None) -> Recording:
         """The recording in ``frame`` (a DataFrame), checked: the columns
-        present, numeric and finite, and time strictly increasing."""
+        present, numeric and finite, and time strictly increasing; without a
+        time column, the rows ``1 / rate_hz`` apart."""
         missing = [c for c in self.columns if c not in frame.columns]
         if missing:
             raise DataError(f"{path}: missing column(s) {', '.join(missing)}")
         if len(frame) < MIN_ROWS:
             raise DataError(f"{path}: {len(frame)} rows are too few for a trajectory (at least {MIN_ROWS})")
-        time = numeric_column(frame, self.time, path)
+        if self.time is None:
+            if rate_hz is None:
+                raise DataError(f"{path}: the log has no time column (time=COLUMN) and no rate is stated "
+                                f"(--rate HZ, or rate_hz in a measured system's file)")
+            time = np.arange(len(frame)) / float(rate_hz)
+        else:
+            time = numeric_column(frame, self.time, path)
         steps = np.diff(time)
         if np.any(steps <= 0):
             row = int(np.flatnonzero(steps <= 0)[0]) + 2
@@ -200,24 +208,60 @@ def beyond_a_turn(recording: Recording) -> list[tuple[int, float, float]]:
     return out
 
 
-def read_recording(path: str | Path, columns: ColumnMap) -> Recording:
+def read_recording(path: str | Path, columns: ColumnMap, rate_hz: float | None = None) -> Recording:
     """A log file's recording, checked (:meth:`ColumnMap.take`); :class:`DataError` naming the file otherwise."""
     path = Path(path)
-    return columns.take(read_frame(path), path)
+    return columns.take(read_frame(path), path, rate_hz)
+
+
+def implied_step(recording: Recording) -> float | None:
+    """The interval between rows that best matches the differentiated positions
+    to the logged velocities: ``dt`` minimising ``|Δq - dt (qd_k + qd_k+1)/2|²``
+    over every joint and row (least squares); ``None`` where the velocities are
+    all but zero (a log at rest says nothing of its rate)."""
+    dq = np.diff(recording.q, axis=0)
+    v = 0.5 * (recording.qd[1:] + recording.qd[:-1])
+    vv = float(np.sum(v * v))
+    if not vv > 1e-12 * max(len(v), 1):
+        return None
+    return float(np.sum(dq * v) / vv)
+
+
+def check_stated_rate(recording: Recording, rate_hz: float, path: Path | str) -> None:
+    """A :class:`DataError` naming the file where a log's stated rate lies more
+    than :data:`RATE_TOLERANCE` from the one its positions and velocities
+    imply (:func:`implied_step`), with the interval the data suggest."""
+    step = implied_step(recording)
+    if step is None or not step > 0:
+        return
+    stated = 1.0 / rate_hz
+    if abs(stated - step) > RATE_TOLERANCE * step:
+        raise DataError(f"{path}: the stated rate of {rate_hz:g} Hz puts rows {stated * 1000:.4g} ms apart, but its "
+                        f"positions and velocities say {step * 1000:.4g} ms ({1.0 / step:.4g} Hz)")
 
 
 def read_log(path: str | Path, columns: ColumnMap, spec: FilterSpec | None, time_unit: str = "s",
-             degrees: bool = False, rows=None, where: str | None = None) -> Recording:
+             degrees: bool = False, rows=None, where: str | None = None, rate_hz: float | None = None) -> Recording:
     """A robot log's recording as the suite takes it: checked
     (:meth:`ColumnMap.take`), in seconds and radians (:func:`in_units`), and
     its rate checked against ``spec``'s filter (:func:`check_rate`; ``None``:
     its rows are the samples, no filter). ``rows`` (a DataFrame) are the
     log's rows of this recording where the log holds several, ``where`` how
-    an error names them."""
-    raw = read_recording(path, columns) if rows is None else columns.take(rows, where or path)
-    recording = in_units(raw, time_unit, degrees)
+    an error names them. A log without a time column has its rows
+    ``1 / rate_hz`` apart, the rate checked against its velocities
+    (:func:`check_stated_rate`); a log with one takes no stated rate."""
+    where = where or path
+    if rate_hz is not None and columns.time is not None:
+        raise DataError(f"{where}: the log has a time column ({columns.time}) and a stated rate of {rate_hz:g} Hz: "
+                        f"give one of them")
+    if rate_hz is not None and not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise DataError(f"{where}: the stated rate must be a positive number of Hz, got {rate_hz!r}")
+    raw = read_recording(path, columns, rate_hz) if rows is None else columns.take(rows, where, rate_hz)
+    recording = in_units(raw, time_unit if columns.time is not None else "s", degrees)
+    if rate_hz is not None:
+        check_stated_rate(recording, rate_hz, where)
     if spec is not None:
-        check_rate(recording, spec, where or path, columns.time)
+        check_rate(recording, spec, where, columns.time or f"(rows at {rate_hz:g} Hz)")
     return recording
 
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from bench.core.data import DataError
 from bench.core.errors import ConfigError
+from tests.commandline import cli
 from bench.core.recordings import ColumnMap, FilterSpec, Recording, preprocess
 
 
@@ -15,8 +17,12 @@ def test_a_column_map_names_every_joints_columns():
     assert m == ColumnMap("t", ("p1", "p2"), ("v1", "v2"), ("e1", "e2")) and m.dof == 2
 
 
+def test_a_column_map_without_time_is_a_log_whose_rate_is_stated():
+    m = ColumnMap.parse("q_1=p,qd_1=v,tau_1=e")
+    assert m.time is None and m.columns == ("p", "v", "e")
+
+
 @pytest.mark.parametrize("text, message", [
-    ("q_1=p,qd_1=v,tau_1=e", "name the time column"),
     ("time=t,q_1=p,qd_1=v,tau_1=e,q_3=x,qd_3=y,tau_3=z", "missing q_2, qd_2, tau_2"),
     ("time=t,q_1=p,qd_1=v,tau_1=e,acc_1=a", "unknown role"),
     ("time=t,time=s,q_1=p,qd_1=v,tau_1=e", "time is given twice"),
@@ -50,3 +56,61 @@ def test_the_filtered_velocity_sign_keeps_viscous_friction_unbiased():
 
     assert abs(fit(np.sign(s["qd"]))[1] / b - 1) > 0.05  # the bias the filtered sign removes
     np.testing.assert_allclose(fit(s["sign_qd"]), [F_c, b], rtol=2e-3)
+
+
+@pytest.fixture(scope="module")
+def log_at_100hz(tmp_path_factory):
+    """A simulated double pendulum's 100 Hz log, with its time column and without it."""
+    folder = tmp_path_factory.mktemp("log")
+    assert cli("robot-log", "--system", "double_pendulum", "--recordings", "1", "--seconds", "6", "--rate-hz", "100",
+               "--out", folder).returncode == 0
+    timed = folder / "recording_0.csv"
+    frame = pd.read_csv(timed)
+    frame.drop(columns=["time"]).to_csv(folder / "timeless.csv", index=False)
+    columns = [c for c in frame.columns if c != "time"]
+    mapping = ",".join(f"{role}_{j}={c}" for j in (1, 2) for role, c in
+                       zip(("q", "qd", "tau"), [c for c in columns if c.startswith(f"joint{j}_")]))
+    return folder, mapping
+
+
+def test_a_log_without_time_converts_at_its_stated_rate_as_with_its_time_column(log_at_100hz, tmp_path):
+    folder, mapping = log_at_100hz
+    common = ["--dt", "0.01", "--decimate", "1", "--cutoff-hz", "10", "--trajectory", "a"]
+    assert cli("convert", "--columns", f"time=time,{mapping}", *common, "--out", tmp_path / "timed.csv",
+               folder / "recording_0.csv").returncode == 0
+    r = cli("convert", "--columns", mapping, "--rate", "100", *common, "--out", tmp_path / "rated.csv",
+            folder / "timeless.csv")
+    assert r.returncode == 0, r.stderr
+    timed, rated = pd.read_csv(tmp_path / "timed.csv"), pd.read_csv(tmp_path / "rated.csv")
+    for column in ("q_1", "qd_2", "qdd_1", "tau_2", "time"):
+        np.testing.assert_allclose(rated[column], timed[column], rtol=1e-9, atol=1e-9)
+
+
+def test_a_stated_rate_its_velocities_deny_is_refused_with_the_interval_they_suggest(log_at_100hz, tmp_path):
+    folder, mapping = log_at_100hz
+    out = tmp_path / "rated.csv"
+    r = cli("convert", "--columns", mapping, "--rate", "200", "--trajectory", "a", "--out", out, folder / "timeless.csv")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "timeless.csv: the stated rate of 200 Hz puts rows 5 ms apart, but its positions and velocities say " \
+           "10 ms (100 Hz)" in r.stderr
+    assert not out.exists()
+    r = cli("convert", "--columns", mapping, "--trajectory", "a", "--out", out, folder / "timeless.csv")
+    assert r.returncode == 2 and "no time column" in r.stderr and not out.exists()
+
+
+def test_a_measured_systems_file_states_the_rate_of_logs_without_time(log_at_100hz, tmp_path):
+    from systems.measured import read_spec
+
+    folder, mapping = log_at_100hz
+    body = (f'columns = "{mapping}"\ntest = ["b"]\n[recordings]\n'
+            f'a = {{ file = "{folder / "timeless.csv"}", trajectory = "a" }}\n'
+            f'b = {{ file = "{folder / "timeless.csv"}", trajectory = "b" }}\n')
+    path = tmp_path / "arm.toml"
+    path.write_text(body)
+    with pytest.raises(DataError, match="columns name no time column: name it .* or give the logs' rate .rate_hz."):
+        read_spec(path)
+    path.write_text("rate_hz = 100\n" + body)
+    assert read_spec(path).rate_hz == 100.0
+    path.write_text("rate_hz = 100\n" + body.replace(f'columns = "', 'columns = "time=time,'))
+    with pytest.raises(DataError, match="give one of them"):
+        read_spec(path)
