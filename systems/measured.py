@@ -91,6 +91,12 @@ class MeasuredSpec:
     urdf: Path | None = None
     #: the logs' rate, Hz, where they have no time column
     rate_hz: float | None = None
+    #: the arm within a larger robot's URDF: its root and tip links, or its joints in the logs' order
+    root: str | None = None
+    tip: str | None = None
+    joints: tuple[str, ...] | None = None
+    #: where the URDF's other joints are locked, where not at their neutral positions: ``((joint, value), ...)``
+    locked_at: tuple[tuple[str, float], ...] = ()
 
     @property
     def trajectories(self) -> tuple[str, ...]:
@@ -113,7 +119,7 @@ class MeasuredSpec:
 
 
 KNOWN_KEYS = ("urdf", "columns", "test", "filter", "recordings", "recordings_in", "time_unit", "degrees", "as_recorded",
-              "rate_hz")
+              "rate_hz", "root", "tip", "joints", "locked_at")
 
 
 def read_spec(path: str | Path) -> MeasuredSpec:
@@ -170,8 +176,30 @@ def read_spec(path: str | Path) -> MeasuredSpec:
         raise DataError(f"{path}: columns name no time column: name it (time=COLUMN) or give the logs' rate (rate_hz)")
     if columns.time is not None and rate is not None:
         raise DataError(f"{path}: columns name a time column ({columns.time}) and rate_hz is {rate:g}: give one of them")
+    root, tip, joints, locked_at = _chain_keys(path, raw)
     return MeasuredSpec(path, columns, tuple(recordings), test, spec, time_unit, degrees, as_recorded, urdf,
-                        None if rate is None else float(rate))
+                        None if rate is None else float(rate), root, tip, joints, locked_at)
+
+
+def _chain_keys(path: Path, raw: dict):
+    """``root``, ``tip``, ``joints`` and ``locked_at`` of a measured arm's file, checked for their types."""
+    for key in ("root", "tip"):
+        if key in raw and not isinstance(raw[key], str):
+            raise DataError(f"{path}: {key} must be a link's name, got {raw[key]!r}")
+    joints = raw.get("joints")
+    if joints is not None:
+        if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
+            raise DataError(f"{path}: joints must be a list of the arm's joint names in the logs' order, got {joints!r}")
+        if "root" in raw or "tip" in raw:
+            raise DataError(f"{path}: give the arm's root and tip links, or its joints, not both")
+        joints = tuple(joints)
+    if ("root" in raw or "tip" in raw or joints) and "urdf" not in raw:
+        raise DataError(f"{path}: root, tip and joints pick an arm within a URDF; the file names none (urdf = ...)")
+    locked = raw.get("locked_at", {})
+    if not isinstance(locked, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                for v in locked.values()):
+        raise DataError(f"{path}: locked_at must map joint names to positions, e.g. {{ head_pan = 0.0 }}, got {locked!r}")
+    return raw.get("root"), raw.get("tip"), joints, tuple((str(k), float(v)) for k, v in locked.items())
 
 
 def _recordings(path: Path, raw: dict) -> list[RecordingFile]:

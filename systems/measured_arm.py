@@ -14,7 +14,13 @@ them out whole, time). Its file is a measured system's file with a
     run2 = { file = "run2.csv", trajectory = "slow" }
     run3 = { file = "run3.csv", trajectory = "fast" }
 
-and ``--systems measured:my_arm.toml`` (:func:`register_measured`) makes it a
+An arm within a larger robot (one arm of two, with a head and grippers) names
+its chain: ``root`` and ``tip`` links (``tip`` alone: from the robot's base),
+or ``joints``, its joint names in the logs' order; every other joint is
+locked, at its neutral position or where ``locked_at = { joint = value }``
+says (Pinocchio's reduced model, :func:`systems.urdf_arm.chain`).
+
+``--systems measured:my_arm.toml`` (:func:`register_measured`) makes it a
 system named ``measured_my_arm``. The file is checked when it is registered,
 before anything runs: every recording names a trajectory, the column map
 names as many joints as the URDF has, every log has its columns, and the
@@ -40,7 +46,7 @@ from bench.core.data import DataError
 from bench.core.system import LinearForm
 from systems.base import SYSTEMS, register_file
 from systems.measured import Measured, MeasuredSpec, check_logs, read_spec
-from systems.urdf_arm import UrdfArm, urdf_arm
+from systems.urdf_arm import UrdfArm, chain, urdf_arm
 
 DATA_DIR = Path(__file__).parent / "data"
 
@@ -62,7 +68,20 @@ def measured_arm(spec: MeasuredSpec | str | Path, *, name: str | None = None) ->
         raise DataError(f"{spec.source}: missing 'urdf' (a measured arm's file names its URDF: urdf = \"my_arm.urdf\")")
     if not spec.urdf.is_file():
         raise DataError(f"{spec.source}: its URDF {spec.urdf} does not exist")
-    arm = urdf_arm(spec.urdf, name=name or spec.source.stem)
+    locked = ()
+    if spec.tip is not None or spec.root is not None or spec.joints is not None:
+        try:
+            picked, locked = chain(spec.urdf, spec.root, spec.tip, spec.joints)
+        except DataError as exc:
+            raise DataError(f"{spec.source}: {exc}") from None
+        if len(picked) != spec.columns.dof:
+            what = (f"the chain from {spec.root or 'the base'} to {spec.tip}" if spec.joints is None
+                    else "the joints named")
+            raise DataError(f"{spec.source}: {what} in {spec.urdf.name} has {len(picked)} joint(s) "
+                            f"({', '.join(picked)}), but its columns name {spec.columns.dof}")
+    elif spec.locked_at:
+        raise DataError(f"{spec.source}: locked_at holds the joints outside the arm; name the arm (root and tip, or joints)")
+    arm = urdf_arm(spec.urdf, name=name or spec.source.stem, locked=locked, locked_at=spec.locked_at)
     check_logs(spec, len(arm.coordinates))
     test = ", ".join(spec.test)
     return type(f"Measured_{arm.__name__}", (MeasuredArm, arm), {

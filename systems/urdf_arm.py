@@ -78,19 +78,32 @@ def _pinocchio():
     return pinocchio
 
 
-@functools.lru_cache(maxsize=16)
-def _model(text: str, locked: tuple[str, ...], g: float):
-    """The Pinocchio model of a URDF text, with ``locked`` joints fixed at their neutral position."""
+def _full_model(text: str):
+    """The Pinocchio model of a URDF text, every joint in it; a :class:`DataError` where Pinocchio cannot read it."""
     pin = _pinocchio()
     try:
-        model = pin.buildModelFromXML(text)
+        return pin.buildModelFromXML(text)
     except (RuntimeError, ValueError) as exc:
         raise DataError(f"not a URDF Pinocchio can read: {str(exc).strip().splitlines()[0]}") from None
+
+
+@functools.lru_cache(maxsize=16)
+def _model(text: str, locked: tuple[str, ...], g: float, locked_at: tuple[tuple[str, float], ...] = ()):
+    """The Pinocchio model of a URDF text, with ``locked`` joints fixed: at their
+    neutral position, or at the position ``locked_at`` gives (Pinocchio's
+    ``buildReducedModel``)."""
+    pin = _pinocchio()
+    model = _full_model(text)
     if locked:
         unknown = [j for j in locked if not model.existJointName(j)]
         if unknown:
             raise DataError(f"no joint(s) {', '.join(unknown)} in the URDF")
-        model = pin.buildReducedModel(model, [model.getJointId(j) for j in locked], pin.neutral(model))
+        reference = pin.neutral(model)
+        for joint, value in locked_at:
+            if not model.existJointName(joint) or joint not in locked:
+                raise DataError(f"locked_at names {joint!r}, which is no locked joint of the URDF")
+            reference[model.joints[model.getJointId(joint)].idx_q] = value
+        model = pin.buildReducedModel(model, [model.getJointId(j) for j in locked], reference)
     if model.nq != model.nv:
         raise DataError("the URDF has joints with more than one coordinate (continuous or floating); "
                         "only revolute and prismatic joints are supported")
@@ -122,6 +135,8 @@ class UrdfArm(System):
     urdf_text: ClassVar[str] = ""
     urdf_source: ClassVar[str] = ""
     locked_joints: ClassVar[tuple[str, ...]] = ()
+    #: the positions the locked joints are held at, where not their neutral one: ``((joint, value), ...)``
+    locked_at: ClassVar[tuple[tuple[str, float], ...]] = ()
 
     @classmethod
     def source_files(cls) -> list[str]:
@@ -129,7 +144,7 @@ class UrdfArm(System):
 
     @property
     def model(self):
-        return _model(self.urdf_text, self.locked_joints, self.params.g)
+        return _model(self.urdf_text, self.locked_joints, self.params.g, self.locked_at)
 
     @functools.cached_property
     def _data(self):
@@ -237,13 +252,15 @@ def physically_consistent(parameters: np.ndarray, tol: float = 1e-12) -> list[st
     return problems
 
 
-def urdf_arm(urdf: str | Path, *, locked: Sequence[str] = (), name: str | None = None) -> type[UrdfArm]:
+def urdf_arm(urdf: str | Path, *, locked: Sequence[str] = (), name: str | None = None,
+             locked_at: Sequence[tuple[str, float]] = ()) -> type[UrdfArm]:
     """The System class of the arm in the URDF file ``urdf`` (optionally
-    gzipped), with the joints ``locked`` fixed at their neutral position."""
+    gzipped), with the joints ``locked`` fixed at their neutral position or at
+    the position ``locked_at`` gives."""
     path = Path(urdf)
     text = _read(path)
-    locked = tuple(locked)
-    model = _model(text, locked, ArmParams.g)
+    locked, locked_at = tuple(locked), tuple((str(j), float(v)) for j, v in locked_at)
+    model = _model(text, locked, ArmParams.g, locked_at)
     joints = [model.joints[i] for i in range(1, model.njoints)]
     kinds = tuple("linear" if "P" in j.shortname().replace("JointModel", "")[:1] else "angle" for j in joints)
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
@@ -266,9 +283,55 @@ def urdf_arm(urdf: str | Path, *, locked: Sequence[str] = (), name: str | None =
         "urdf_text": text,
         "urdf_source": str(path),
         "locked_joints": locked,
+        "locked_at": locked_at,
         "__module__": __name__,
     })
     return cls
+
+
+def chain(urdf: str | Path, root: str | None = None, tip: str | None = None,
+          joints: Sequence[str] | None = None) -> tuple[list[str], list[str]]:
+    """The arm within a larger robot's URDF: the movable joints from the link
+    ``root`` to the link ``tip``, root first, or the ``joints`` named (checked
+    to form one chain, each the parent of the next); and every other movable
+    joint, to lock. A :class:`DataError` naming the file and the link or joint
+    where a link or joint is unknown, or the joints do not form a chain."""
+    path = Path(urdf)
+    model = _full_model(_read(path))
+    movable = [model.names[i] for i in range(1, model.njoints)]
+    if joints is not None:
+        unknown = [j for j in joints if not model.existJointName(j)]
+        if unknown:
+            raise DataError(f"{path}: no joint(s) {', '.join(unknown)} (its joints: {', '.join(movable)})")
+        ids = [model.getJointId(j) for j in joints]
+        for parent, child in zip(ids, ids[1:]):
+            if model.parents[child] != parent:
+                raise DataError(f"{path}: the joints do not form a chain: {model.names[child]} does not follow "
+                                f"{model.names[parent]} (its parent joint is {model.names[model.parents[child]]})")
+        picked = list(joints)
+    else:
+        def joint_of(link: str, key: str) -> int:
+            if not model.existFrame(link) or model.frames[model.getFrameId(link)].type != _pinocchio().FrameType.BODY:
+                raise DataError(f"{path}: no link {link!r} ({key})")
+            return int(model.frames[model.getFrameId(link)].parentJoint)
+
+        top = joint_of(root, "root") if root is not None else 0
+        bottom = joint_of(tip, "tip") if tip is not None else None
+        if bottom is None:
+            raise DataError(f"{path}: name the arm's tip link (tip) beside its root, or its joints")
+        if root is not None:  # the root link on the links' path from the tip to the base
+            frame, target = model.getFrameId(tip), model.getFrameId(root)
+            while frame != target:
+                if frame == 0:
+                    raise DataError(f"{path}: the links {root!r} (root) and {tip!r} (tip) do not form a chain: "
+                                    f"{root!r} is not on the path from the robot's base to {tip!r}")
+                frame = int(model.frames[frame].parentFrame)
+        picked, at = [], bottom
+        while at != top:
+            picked.append(model.names[at])
+            at = model.parents[at]
+        picked.reverse()
+    return picked, [j for j in movable if j not in picked]
 
 
 def register_urdf(spec: str) -> str:
