@@ -60,7 +60,7 @@ def arm(tmp_path_factory):
                        zip(("q", "qd", "tau"), [c for c in names if c.startswith(f"joint{j}_")]))
     body = "\n".join([
         f'urdf = "{urdf.name}"', 'root = "left_panda_link0"', 'tip = "left_panda_link7"', f'columns = "{columns}"',
-        "rate_hz = 100", 'test = ["c"]', "[filter]", "dt = 0.01", "cutoff_hz = 10.0", "decimate = 1", "[recordings]",
+        "rate_hz = 100", 'test = ["c"]', "[filter]", "cutoff_hz = 10.0", "[recordings]",
         *(f'r{k} = {{ file = "log_{k}.txt", trajectory = "{t}" }}' for k, t in enumerate("abc"))]) + "\n"
     declaration = folder / "left_arm.toml"
     declaration.write_text(body)
@@ -74,6 +74,9 @@ def test_one_arm_of_a_two_arm_robot_is_fitted_and_traced_from_one_declaration(ar
     assert r.returncode == 0, r.stderr
     record = json.loads((tmp_path / "fit.json").read_text())
     assert record["status"] == "ok" and record["test_mse"] < 1e-3 * record["details"]["constant_model"]["test_mse"]
+    # the 100 Hz rows are kept as they are: 4 s less the 0.25 s trimmed from each end, 10 ms apart, nothing resampled
+    assert "resampled" not in record["details"]["train_source"] and "interpolated" not in record["details"]["train_source"]
+    assert record["details"]["n_train"] == 2 * (400 - 2 * 25)
     r = cli("residual", "--system", f"measured:{declaration}", "--method", "sysid", "--steps", "1",
             "--json", tmp_path / "loop.json")
     assert r.returncode == 0, r.stderr
