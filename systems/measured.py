@@ -317,6 +317,11 @@ class Measured:
                        recording=s["recording"].copy(), sign_qd=None if sign is None else sign.copy(),
                        trajectory=s["trajectory"].copy(), time=s["time"].copy())
 
+    def logged_torque(self, part: str) -> np.ndarray:
+        """The torque of ``part`` as logged, at the samples :meth:`load` gives (the filter's q and qd, its grid and
+        trim), before the low-pass; the logged rows as they are where the file says ``as_recorded``."""
+        return self.load(part, filter_torque=False).tau
+
     def describe(self) -> dict:
         m = self.measured
         return {**super().describe(), "split": self.split, "test_trajectories": list(m.parts(self.split)["test"]),
