@@ -56,7 +56,7 @@ import numpy as np
 from bench.core.data import Dataset, DataError
 from bench.core.csv_format import read_frame
 from bench.core.errors import ConfigError
-from bench.core.recordings import TIME_UNITS, ColumnMap, FilterSpec, joined, preprocess, read_log
+from bench.core.recordings import TIME_UNITS, ColumnMap, FilterSpec, joined, preprocess, read_log, resampling
 
 #: the splits of every measured system: its declared one, and train and test exchanged
 SPLITS = ("default", "swapped")
@@ -254,10 +254,13 @@ def _log(path: Path):
     return read_frame(path)
 
 
-def samples(spec: MeasuredSpec, r: RecordingFile, filter: FilterSpec, filter_torque: bool = True) -> dict[str, np.ndarray]:
+def samples(spec: MeasuredSpec, r: RecordingFile, filter: FilterSpec,
+            filter_torque: bool = True) -> tuple[dict[str, np.ndarray], str | None]:
     """Recording ``r``'s samples (:func:`~bench.core.recordings.read_log`):
     filtered and differentiated (:func:`~bench.core.recordings.preprocess`),
-    or its rows as they are where the file says ``as_recorded``."""
+    or its rows as they are where the file says ``as_recorded``; and how its
+    rows were moved in time (:func:`~bench.core.recordings.resampling`;
+    ``None``: not at all)."""
     rows = where = None
     if r.column is not None:
         frame = _log(r.path)
@@ -265,16 +268,17 @@ def samples(spec: MeasuredSpec, r: RecordingFile, filter: FilterSpec, filter_tor
     rec = read_log(r.path, spec.columns, None if spec.as_recorded else filter, spec.time_unit, spec.degrees, rows, where,
                    spec.rate_hz)
     if spec.as_recorded:
-        return {"q": rec.q, "qd": rec.qd, "qdd": rec.qdd, "tau": rec.tau, "time": rec.time - rec.time[0]}
-    return preprocess(rec, filter, filter_torque=filter_torque)
+        return {"q": rec.q, "qd": rec.qd, "qdd": rec.qdd, "tau": rec.tau, "time": rec.time - rec.time[0]}, None
+    return preprocess(rec, filter, filter_torque=filter_torque), resampling(rec, filter)
 
 
 @functools.lru_cache(maxsize=16)
 def _samples(spec: MeasuredSpec, trajectories: tuple[str, ...], filter: FilterSpec,
-             filter_torque: bool) -> dict[str, np.ndarray]:
+             filter_torque: bool) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     chosen = [r for r in spec.recordings if r.trajectory in trajectories]
-    parts = [samples(spec, r, filter, filter_torque) for r in chosen]
-    return joined(parts, [r.name for r in chosen], [r.trajectory for r in chosen])
+    parts, moved = zip(*(samples(spec, r, filter, filter_torque) for r in chosen))
+    return (joined(list(parts), [r.name for r in chosen], [r.trajectory for r in chosen]),
+            {r.name: w for r, w in zip(chosen, moved) if w is not None})
 
 
 class Measured:
@@ -301,16 +305,22 @@ class Measured:
             raise ValueError(f"part must be one of {', '.join(PARTS)}, got {part!r}")
         trajectories = parts[part]
         filter = self.measured.filter if filter is None else filter
-        s = _samples(self.measured, trajectories, filter, filter_torque)
+        s, moved = _samples(self.measured, trajectories, filter, filter_torque)
         names = [r.name for r in self.measured.recordings if r.trajectory in trajectories]
         source = (f"{self.measured.source.name}:{part} of split {self.split} (trajectories {', '.join(trajectories)}; "
-                  f"recordings {', '.join(names)})")
+                  f"recordings {', '.join(names)}" + "".join(f"; {n} {w}" for n, w in moved.items()) + ")")
         meta = {"split": self.split} if self.measured.as_recorded else {
-            "filter": dataclasses.asdict(filter), "split": self.split, **({} if filter_torque else {"torque_filtered": False})}
+            "filter": dataclasses.asdict(filter), "split": self.split, **({"resampled": moved} if moved else {}),
+            **({} if filter_torque else {"torque_filtered": False})}
         sign = s.get("sign_qd")
         return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,
                        recording=s["recording"].copy(), sign_qd=None if sign is None else sign.copy(),
                        trajectory=s["trajectory"].copy(), time=s["time"].copy())
+
+    def logged_torque(self, part: str) -> np.ndarray:
+        """The torque of ``part`` as logged, at the samples :meth:`load` gives (the filter's q and qd, its grid and
+        trim), before the low-pass; the logged rows as they are where the file says ``as_recorded``."""
+        return self.load(part, filter_torque=False).tau
 
     def describe(self) -> dict:
         m = self.measured

@@ -174,3 +174,35 @@ def test_the_table_command_never_counts_a_broken_record_as_ok(tmp_path, capsys):
 @pytest.fixture(autouse=True)
 def _quiet_matplotlib(monkeypatch):
     monkeypatch.setenv("MPLBACKEND", "Agg")
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(sep=st.sampled_from([",", ";", "\t", " ", "  ", " \t "]), crlf=st.booleans(), n=st.integers(60, 200),
+       seed=st.integers(0, 2**16), glue=st.sampled_from(["", "|", ":"]))
+def test_a_log_converts_alike_whatever_common_separator_it_uses_or_names_those_tried(tmp_path, capsys, sep, crlf, n,
+                                                                                    seed, glue):
+    rng = np.random.default_rng(seed)
+    values = rng.normal(size=(n, 3)).round(6)
+    end = "\r\n" if crlf else "\n"
+    rows = [repr(i * 0.01) for i in range(n)]
+
+    def text(s):
+        return end.join([s.join(["time", "q_1", "qd_1", "tau_1"])] +
+                        [s.join([t, *(repr(float(x)) for x in v)]) for t, v in zip(rows, values)]) + end
+
+    args = ["convert", "--columns", "time=time,q_1=q_1,qd_1=qd_1,tau_1=tau_1", "--cutoff-hz", "10", "--trim", "0.1"]
+    (tmp_path / "comma.csv").write_text(text(","), newline="")
+    (tmp_path / "log.txt").write_text(text(glue or sep), newline="")
+    for name in ("comma.csv", "log.txt"):
+        (tmp_path / f"{name}.out.csv").unlink(missing_ok=True)
+    assert main([*args, str(tmp_path / "comma.csv"), "--out", str(tmp_path / "comma.csv.out.csv")]) == 0
+    code = main([*args, str(tmp_path / "log.txt"), "--out", str(tmp_path / "log.txt.out.csv")])
+    err = capsys.readouterr().err
+    if glue:  # no common separator: one line naming the ones tried, nothing written
+        assert code == 2 and err.count("\n") == 1 and "log.txt" in err and "tried the separators" in err
+        assert not (tmp_path / "log.txt.out.csv").exists()
+        return
+    assert code == 0, err
+    a, b = read_csv(tmp_path / "comma.csv.out.csv", dof=1), read_csv(tmp_path / "log.txt.out.csv", dof=1)
+    np.testing.assert_array_equal(a.tau, b.tau)
+    np.testing.assert_array_equal(a.qdd, b.qdd)

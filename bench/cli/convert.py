@@ -13,7 +13,7 @@ from bench.core.data import Dataset
 from bench.core.csv_format import write_csv
 from bench.core.fileio import check_output, file_digest, settings_path, write_json
 from bench.core.recordings import (DEFAULT_FILTER, TIME_UNITS, ColumnMap, FilterSpec, Recording, beyond_a_turn, joined,
-                                   preprocess, read_log)
+                                   preprocess, read_log, resampling)
 from systems.dfki_double_pendulum import layout_of
 
 HELP = "turn a robot's log into the suite's CSV format: resample, low-pass, differentiate"
@@ -37,7 +37,8 @@ def add_arguments(cv) -> None:
                          "needed; DFKI recordings are each a trajectory of their own")
     cv.add_argument("--out", type=Path, required=True, help="CSV file to write")
     cv.add_argument("--dt", type=positive, default=DEFAULT_FILTER.dt,
-                    help=f"the uniform time step the log is resampled to, s (default {DEFAULT_FILTER.dt:g})")
+                    help="resample the log to this uniform time step, s (default: none, the log's own step is kept; "
+                         "rows whose steps vary are interpolated onto their median step, and the output says so)")
     cv.add_argument("--cutoff-hz", type=positive, default=DEFAULT_FILTER.cutoff_hz,
                     help=f"the zero-phase Butterworth low-pass's cut-off on q, qd and tau, Hz "
                          f"(default {DEFAULT_FILTER.cutoff_hz:g}, measured for the DFKI robot)")
@@ -81,6 +82,7 @@ def main(args) -> int:
     recordings, warnings = zip(*(log_with_warnings(path, columns, spec, args.time_unit, args.degrees, args.rate)
                                  for path in args.raw))
     parts = [preprocess(r, spec) for r in recordings]
+    moved = {n: w for n, w in ((n, resampling(r, spec)) for n, r in zip(names, recordings)) if w is not None}
     s = joined(parts, names, trajectories)
     for line in (w for group in warnings for w in group):  # once every log is read: an error is the one line
         print(line, file=sys.stderr)
@@ -91,10 +93,13 @@ def main(args) -> int:
         "logs": {str(p): file_digest(p) for p in args.raw},
         "columns": args.columns, "format": args.format, "time_unit": args.time_unit, "degrees": args.degrees,
         "rate_hz": args.rate,
-        "filter": dataclasses.asdict(spec), "trajectories": trajectories, "command": args.invocation,
+        "filter": dataclasses.asdict(spec), "resampled": moved, "trajectories": trajectories,
+        "command": args.invocation,
     })
     print(f"wrote {len(s['q'])} samples of {s['q'].shape[1]} joint(s) from {len(parts)} recording(s) to {args.out} "
           f"({spec.describe()}); its settings to {settings_path(args.out)}")
+    for name, words in moved.items():
+        print(f"  recording {name}: {words}")
     return 0
 
 

@@ -12,6 +12,7 @@ from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_co
                                check_split, configurations, device, hyperparameters, load_plugins)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
+from bench.evaluation.per_joint import against, percent
 from bench.runner import matrix
 from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.records import Record
@@ -77,6 +78,8 @@ def main(args) -> int:
     if args.json:
         write_json(args.json, record.to_json())
     print(summary_line(record, log))
+    for line in per_joint_summary(record):
+        print(line)
     if args.save and record.status == "ok":
         if "save" in record.failed_stages:
             print(f"error: {args.save}: not written: {record.failed_stages['save'].splitlines()[0]}", file=sys.stderr)
@@ -95,6 +98,20 @@ def run_one(spec: RunSpec) -> tuple[Record, Path | None]:
         return record, matrix.log_path(work, spec.run_id)
     shutil.rmtree(work, ignore_errors=True)
     return record, None
+
+
+def per_joint_summary(record: Record) -> list[str]:
+    """One line per test trajectory of a run on a measured system: each joint's
+    nMSE against the logged torque (else the scored one), with the filter's noise floor."""
+    entry = (record.details or {}).get("per_joint") if record.status == "ok" else None
+    lines = []
+    for name, t in (entry or {}).get("trajectories", {}).items():
+        key, words = against(t)
+        floor = ("; the filter's noise floor " + ", ".join(percent(x) for x in t["noise_floor_nmse"])
+                 if "noise_floor_nmse" in t else "")
+        lines.append(f"  test trajectory {name} ({t['n']} samples), nMSE per joint against {words}, %: "
+                     + ", ".join(percent(x) for x in t[key]) + floor)
+    return lines
 
 
 def summary_line(record: Record, log: Path | None = None) -> str:

@@ -137,6 +137,8 @@ def read_frame(path: Path, nrows: int | None = None):
         raise DataError(f"{path}: column name(s) {', '.join(map(repr, repeated))} appear more than once")
     if len(frame) == 0:
         raise DataError(f"{path}: the file has a header but no rows")
+    if sep != ",":  # spaces around a name beside a semicolon or tab (" \t ") are not part of it
+        frame.columns = [str(c).strip() for c in frame.columns]
     return frame
 
 

@@ -7,7 +7,10 @@ and per joint a position, a velocity and a torque column; a
 Robots rarely log accelerations, and their clocks and encoders are not
 clean, so :func:`preprocess` turns a recording into samples in four steps:
 
-1. linear interpolation of q, qd and tau onto a uniform grid of ``dt``;
+1. the rows as they are where they lie a uniform step apart and ``dt`` is
+   not given (the default); else linear interpolation of q, qd and tau onto
+   a uniform grid of ``dt`` (or of the log's median step, for rows whose
+   steps vary), which :func:`resampling` states in words for the record;
 2. a zero-phase Butterworth low-pass (``order``, run forwards and backwards,
    cut-off ``cutoff_hz``) applied alike to q, qd and tau, so that no signal
    is delayed against another and both sides of ``tau = g(L)`` see one filter;
@@ -24,9 +27,11 @@ friction column keeps a fitted viscous coefficient from absorbing it. The
 rest of a model's columns are smooth functions of the filtered state, which
 the low-pass passes as they are.
 
-The defaults (:data:`DEFAULT_FILTER`) are those measured for the DFKI
-double pendulum (``python -m bench study dfki-filter``); a robot of its own wants
-its own cut-off, chosen the same way.
+The defaults (:data:`DEFAULT_FILTER`) keep the log's own step and every
+sample, with the cut-off measured for the DFKI double pendulum (``python -m
+bench study dfki-filter``); a robot of its own wants its own cut-off, chosen
+the same way. Resampling happens only where ``dt`` asks for it, and
+:func:`resampling` says so.
 """
 
 from __future__ import annotations
@@ -57,23 +62,25 @@ RATE_TOLERANCE = 0.05
 class FilterSpec:
     """How a recording becomes samples; see the module docstring."""
 
-    dt: float = 0.002
+    #: the step to resample to, s; ``None`` keeps the log's own
+    dt: float | None = None
     cutoff_hz: float = 6.0
     order: int = 4
     trim_s: float = 0.25
-    decimate: int = 5
+    decimate: int = 1
 
     def __post_init__(self):
-        if not self.dt > 0:
+        if self.dt is not None and not self.dt > 0:
             raise ConfigError(f"dt must be positive, got {self.dt}")
-        nyquist = 0.5 / self.dt
+        nyquist = math.inf if self.dt is None else 0.5 / self.dt
         if not 0 < self.cutoff_hz < nyquist:
             raise ConfigError(f"cutoff_hz must lie in (0, {nyquist:g}) for dt = {self.dt:g}, got {self.cutoff_hz}")
         if self.order < 1 or self.decimate < 1 or self.trim_s < 0:
             raise ConfigError("order and decimate must be >= 1 and trim_s >= 0")
 
     def describe(self) -> str:
-        return (f"resampled to {self.dt * 1000:g} ms, zero-phase Butterworth low-pass of order {self.order} at "
+        step = "at the log's own step" if self.dt is None else f"resampled to {self.dt * 1000:g} ms"
+        return (f"{step}, zero-phase Butterworth low-pass of order {self.order} at "
                 f"{self.cutoff_hz:g} Hz on q, qd and tau, qdd by central differences of qd, {self.trim_s:g} s trimmed "
                 f"from each end, " + ("every sample kept" if self.decimate == 1 else
                                       f"one sample in {self.decimate} kept"))
@@ -265,27 +272,60 @@ def read_log(path: str | Path, columns: ColumnMap, spec: FilterSpec | None, time
     return recording
 
 
+#: how far a row's step may lie from the median step, as a fraction of it, for the rows to count as uniform
+UNIFORM_STEP = 0.01
+
+
+def _grid(t: np.ndarray, spec: FilterSpec) -> tuple[np.ndarray, float, str | None]:
+    """The times the samples are taken at, their step, and :func:`resampling`'s words."""
+    steps = np.diff(t)
+    own = float(np.median(steps))
+    uniform = bool(np.max(np.abs(steps - own)) <= UNIFORM_STEP * own)
+    near = spec.dt is None or abs(spec.dt - own) <= UNIFORM_STEP * own
+    if near and uniform:
+        return t, own, None
+    step = own if spec.dt is None else spec.dt
+    span = float(t[-1] - t[0])
+    if span / step > MAX_GRID:
+        raise DataError(f"the recording spans {span:.6g} s: at a step of {step:g} s that is more than "
+                        f"{MAX_GRID:,} samples (is the time column in seconds?)")
+    if near:
+        words = (f"rows {float(steps.min()) * 1000:.4g} to {float(steps.max()) * 1000:.4g} ms apart interpolated "
+                 f"onto a uniform {step * 1000:.4g} ms")
+    else:
+        words = f"resampled from the log's {own * 1000:.4g} ms (median step) to {spec.dt * 1000:g} ms"
+    return np.arange(t[0], t[-1], step), step, words
+
+
+def resampling(recording: Recording, spec: FilterSpec) -> str | None:
+    """In words, how :func:`preprocess` moves ``recording``'s rows in time:
+    ``None`` where it keeps them as they are (their steps uniform to
+    :data:`UNIFORM_STEP`, and ``dt`` not given or equal to their step)."""
+    return _grid(recording.time, spec)[2]
+
+
 def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> dict[str, np.ndarray]:
     """Samples ``q, qd, qdd, tau`` and ``sign_qd`` (each ``(n, dof)``) of one
     recording; see the module docstring for the steps. ``filter_torque=False``
-    keeps the measured torque unfiltered (it is still resampled), for judging
+    keeps the measured torque unfiltered (on the same grid), for judging
     a filter; ``sign_qd`` is then ``sign(qd)``."""
     from scipy.signal import butter, sosfiltfilt  # 0.3 s to import: only conversions need it
 
     t = recording.time
-    span = float(t[-1] - t[0])
-    if span / spec.dt > MAX_GRID:
-        raise DataError(f"the recording spans {span:.6g} s: at a step of {spec.dt:g} s that is more than "
-                        f"{MAX_GRID:,} samples (is the time column in seconds?)")
-    grid = np.arange(t[0], t[-1], spec.dt)
-    trim = int(round(spec.trim_s / spec.dt))
-    sos = butter(spec.order, spec.cutoff_hz, fs=1.0 / spec.dt, output="sos")
+    grid, dt, moved = _grid(t, spec)
+    if not spec.cutoff_hz < 0.5 / dt:
+        raise DataError(f"a cut-off of {spec.cutoff_hz:g} Hz is not below the Nyquist frequency of rows "
+                        f"{dt * 1000:.4g} ms apart ({0.5 / dt:.4g} Hz)")
+    trim = int(round(spec.trim_s / dt))
+    sos = butter(spec.order, spec.cutoff_hz, fs=1.0 / dt, output="sos")
     padding = 3 * (2 * len(sos) + 1)  # what sosfiltfilt extends each end by
     if len(grid) <= max(2 * trim + 2, padding):
         raise DataError(f"a recording of {t[-1] - t[0]:.3g} s is too short for the filter "
-                        f"(twice the trim of {spec.trim_s:g} s, and at least {padding} steps of {spec.dt:g} s)")
+                        f"(twice the trim of {spec.trim_s:g} s, and at least {padding} steps of {dt:.4g} s)")
 
     def resampled(values: np.ndarray) -> np.ndarray:
+        if moved is None:
+            return np.array(values, dtype=float)
         return np.stack([np.interp(grid, t, values[:, i]) for i in range(values.shape[1])], axis=1)
 
     q = sosfiltfilt(sos, resampled(recording.q), axis=0)
@@ -295,7 +335,7 @@ def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filte
     if filter_torque:
         tau = sosfiltfilt(sos, tau, axis=0)
         sign_qd = sosfiltfilt(sos, sign_qd, axis=0)
-    qdd = np.gradient(qd, spec.dt, axis=0)
+    qdd = np.gradient(qd, grid, axis=0) if moved is None else np.gradient(qd, dt, axis=0)
     keep = slice(trim, len(grid) - trim, spec.decimate)
     return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep], "sign_qd": sign_qd[keep],
             "time": grid[keep] - t[0]}

@@ -290,6 +290,12 @@ class System(abc.ABC):
         the instance's :attr:`split` where it offers several)."""
         raise NotImplementedError(f"{self.name} is simulated: generate its data with bench.core.data.generate")
 
+    def logged_torque(self, part: str):
+        """The torque of :meth:`load`'s ``part`` as logged, before any filter,
+        at the same samples; ``None`` where the data have no filter (a
+        simulated system's)."""
+        return None
+
     def nonconservative_torque(self, q: torch.Tensor, qd: torch.Tensor, qdd: torch.Tensor) -> torch.Tensor | None:
         """Torque added to ``g(L)`` by non-conservative effects (``None``: none)."""
         return None

@@ -196,7 +196,7 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
             row["failed"] = failure or "non-finite validation MSE"
         rows.append(row)
         say(f"  {_words(choice)}: validation MSE "
-            f"{'failed' if row['validation_mse'] is None else format(row['validation_mse'], '.4g')}")
+            + (f"failed ({row['failed']})" if row["validation_mse"] is None else format(row["validation_mse"], ".4g")))
     usable = [r for r in rows if r["validation_mse"] is not None]
     search_seconds = time.perf_counter() - t0
     if not usable:

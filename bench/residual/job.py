@@ -14,6 +14,7 @@ from typing import Callable
 from bench.core.data import Dataset
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest, read_settings, write_json
+from bench.evaluation.per_joint import per_joint, per_joint_lines
 from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
@@ -83,6 +84,12 @@ class ResidualJob:
                                hyperparameters=self.hyperparameters, report=report, device=self.device,
                                checkpoint=checkpoint, on_phase=on_phase)
         result.inputs = inputs
+        if test is not None and result.models is not None:
+            logged = None if self.train_path else SYSTEMS[self.system](split=self.split).logged_torque("test")
+            result.per_joint = {name: per_joint(model.predict_torque(test), test, logged)
+                                for name, model in zip(("before", "after"), result.models)}
+            for line in per_joint_lines(result.per_joint):
+                report(line)
         write_outputs(result, train, test, self.json_path, self.report_path)
         return result
 

@@ -8,6 +8,7 @@ from pathlib import Path
 from bench.core.data import Dataset
 from bench.core.fileio import atomic_write, write_json
 from bench.evaluation.driven import describe as describe_driven, pooled
+from bench.evaluation.per_joint import percent
 from bench.reporting.plots import residual_plot
 from bench.residual.result import ResidualResult
 
@@ -72,6 +73,7 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         f"| after ÷ before | {ratio(a['train'], b['train'])} | {ratio(a['test'], b['test'])} |",
         "",
     ]
+    lines += per_joint_table(result.per_joint)
     mass = result.mass_matrix
     if mass and not mass["positive_definite"]:
         lines += [f"The final model's mass matrix is not positive definite at the {mass['states']} training states "
@@ -151,3 +153,32 @@ def _budget(result: ResidualResult) -> str:
     if (result.budget or {}).get("kind") == "steps":
         return f"a work budget of {result.budget['steps']} steps for the method's fit (and each cross-fit)"
     return f"{result.budget_s:g} s for the loop ({result.fit_budget_s:g} s of it the method's fit)"
+
+
+def per_joint_table(before_after: dict | None) -> list[str]:
+    """Per test trajectory, each joint's test MSE and nMSE before and after the
+    loop, against the logged torque too where it is known, with the filter's noise floor."""
+    if not before_after:
+        return []
+    lines = []
+    for name, b in before_after["before"]["trajectories"].items():
+        a = before_after["after"]["trajectories"][name]
+        logged = "mse_logged" in b
+        head = "| joint | MSE before | after | nMSE % before | after |"
+        rule = "|---:|---:|---:|---:|---:|"
+        if logged:
+            head += " logged: MSE before | after | nMSE % before | after | noise floor MSE | nMSE % |"
+            rule += "---:|---:|---:|---:|---:|---:|"
+        lines += [f"Test trajectory {name} ({b['n']} samples), per joint: against the scored torque"
+                  + (", and against the logged torque, unfiltered, beside the filter's noise floor (the MSE "
+                     "between the two torques)" if logged else "") + ".", "", head, rule]
+        for j in range(len(b["mse"])):
+            row = (f"| {j + 1} | {b['mse'][j]:.4g} | {a['mse'][j]:.4g} | {percent(b['nmse'][j])} | "
+                   f"{percent(a['nmse'][j])} |")
+            if logged:
+                row += (f" {b['mse_logged'][j]:.4g} | {a['mse_logged'][j]:.4g} | {percent(b['nmse_logged'][j])} | "
+                        f"{percent(a['nmse_logged'][j])} | {b['noise_floor'][j]:.4g} | "
+                        f"{percent(b['noise_floor_nmse'][j])} |")
+            lines.append(row)
+        lines.append("")
+    return lines

@@ -41,6 +41,10 @@ class ResidualResult:
     it, or the process killed), else ``None``. ``loop_seconds`` is the time of
     the fit and the rounds, the part the budget bounds; ``rollout_seconds``
     that of the driven rollouts after them.
+    ``per_joint`` gives the test error per joint and per test trajectory
+    before and after the loop (:func:`bench.evaluation.per_joint.per_joint`:
+    MSE and nMSE, against the logged torque too for a measured system's own
+    data); ``None`` without test data or models.
     ``models`` holds the fitted models before and after the loop, for the
     report's residual plots; it is not part of the JSON.
     """
@@ -80,6 +84,7 @@ class ResidualResult:
     sensor_laws_offered: list[str] | None = None
     #: the loop worked on every ``thinned``-th sample of each training recording (:data:`bench.residual.loop.MAX_SAMPLES`)
     thinned: int = 1
+    per_joint: dict | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:

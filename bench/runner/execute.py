@@ -26,6 +26,7 @@ from bench.core.timeouts import Timeout
 from bench.core.system import System
 from bench.evaluation.driven import driven_entry
 from bench.evaluation.forces import forces_entry
+from bench.evaluation.per_joint import per_joint_entry
 from bench.evaluation.reference import against, applies as has_standard_model, constant_reference, standard_reference
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
 from bench.evaluation.tuning import prepare as prepare_search, tune
@@ -227,6 +228,9 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             fields["details"]["saved"] = stages.run("save", save_fitted, method, spec, train, system)
         if not system.simulated and spec.experiment == "indirect":
             fields["details"]["constant_model"] = constant_reference(train, test)
+            by_joint = stages.run("per joint", per_joint_entry, method, system, test)
+            if by_joint is not None:
+                fields["details"]["per_joint"] = by_joint
         references = {name: stages.run(f"reference {name}", against, method, ref, train, test)
                       for name, ref in method.references().items()}
         if references:

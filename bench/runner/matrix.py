@@ -33,6 +33,7 @@ from bench.runner.code import code_hash
 from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, map_interruptibly, run_call
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now
+from bench.runner.provenance import CODE_FOLDERS, code_state
 from bench.runner.records import Record, RecordError, quarantine, read_record, record_path, write_record
 from bench.runner.spec import RunSpec
 from bench.runner.stacked import groups, run_stacked, stack_name
@@ -234,6 +235,17 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
     if report and cannot_run:
         report(f"{cannot_run} run(s) recorded without running (method unavailable here or not applicable)")
     tracker = MatrixProgress(len(todo), resumed, workers, report)
+    started = code_state()
+
+    def unchanged(spec: RunSpec) -> RunSpec:
+        """``spec``, where the code is still the code the matrix started with; else
+        :class:`UserError`: a run started now would record the new files' hash
+        beside the old commit, in a process whose code is partly the old."""
+        if started is not None and code_state() != started:
+            raise UserError(f"{out_dir}: the code changed while this matrix ran (a commit, a merge or an edit in "
+                            f"{', '.join(CODE_FOLDERS)}); stopped before {spec.run_id}: run the command again, "
+                            f"and it redoes on the new code the runs whose record was made by other code")
+        return spec
 
     def done(record: Record, log: Path | None = None) -> Record:
         tracker.done(record.status == "ok", _describe(record, log))
@@ -244,13 +256,15 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
             results[record.run_id] = done(record)
     elif todo and stack:
         def job(group: list[RunSpec]) -> list[Record]:
+            unchanged(group[0])
             out = run_stacked(group, out_dir, lambda s: run_isolated(s, out_dir), phase_limits(group[0]))
             return [done(r, log_path(out_dir, stack_name(group) if r.details.get("stacked") else r.run_id)) for r in out]
 
         for records in map_interruptibly(job, groups(todo, report), workers):
             results.update((r.run_id, r) for r in records)
     elif todo:
-        for record in map_interruptibly(lambda s: done(run_isolated(s, out_dir), log_path(out_dir, s.run_id)), todo, workers):
+        for record in map_interruptibly(lambda s: done(run_isolated(unchanged(s), out_dir), log_path(out_dir, s.run_id)),
+                                        todo, workers):
             results[record.run_id] = record
     tracker.summary()
     return [results[s.run_id] for s in specs]

@@ -39,6 +39,27 @@ def git_state() -> dict:
         return {"commit": "unknown", "dirty": None}
 
 
+#: the folders of the checkout that hold the suite's code
+CODE_FOLDERS = ("bench", "methods", "systems")
+
+
+def code_state() -> str | None:
+    """The code of the checkout now (results/ and docs excluded): the
+    committed trees of :data:`CODE_FOLDERS` and their uncommitted changes,
+    as one text; ``None`` outside a git checkout. Unlike :func:`git_state`
+    it is read afresh on each call, for a matrix to notice code that
+    changed under it."""
+    try:
+        def git(*args: str) -> str:
+            return subprocess.run(["git", "-C", str(PROJECT_ROOT), *args], capture_output=True, text=True,
+                                  timeout=20, check=True).stdout
+
+        trees = git("rev-parse", *(f"HEAD:{f}" for f in CODE_FOLDERS))
+        return trees + git("diff", "HEAD", "--", *CODE_FOLDERS)
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
 @functools.lru_cache(maxsize=1)
 def _cpuinfo() -> str | None:
     """The text of ``/proc/cpuinfo``, read once; ``None`` where it cannot be read."""

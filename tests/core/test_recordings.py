@@ -9,7 +9,7 @@ import pytest
 from bench.core.data import DataError
 from bench.core.errors import ConfigError
 from tests.commandline import cli
-from bench.core.recordings import ColumnMap, FilterSpec, Recording, preprocess
+from bench.core.recordings import ColumnMap, FilterSpec, Recording, preprocess, resampling
 
 
 def test_a_column_map_names_every_joints_columns():
@@ -114,3 +114,31 @@ def test_a_measured_systems_file_states_the_rate_of_logs_without_time(log_at_100
     path.write_text("rate_hz = 100\n" + body.replace(f'columns = "', 'columns = "time=time,'))
     with pytest.raises(DataError, match="give one of them"):
         read_spec(path)
+
+
+def _uniform_recording(dt: float, seconds: float = 4.0) -> Recording:
+    t = np.arange(0.0, seconds, dt)
+    q = np.sin(2 * np.pi * 0.5 * t)[:, None]
+    return Recording(t, q, np.gradient(q[:, 0], t)[:, None], np.cos(t)[:, None])
+
+
+def test_a_log_keeps_its_own_step_unless_asked_and_a_resampling_is_stated():
+    rec = _uniform_recording(0.01)
+    kept = preprocess(rec)
+    assert resampling(rec, FilterSpec()) is None
+    np.testing.assert_allclose(np.diff(kept["time"]), 0.01)
+    np.testing.assert_allclose(kept["time"], rec.time[25:-25] - rec.time[0])  # 0.25 s trimmed from each end
+    asked = FilterSpec(dt=0.002)
+    assert resampling(rec, asked) == "resampled from the log's 10 ms (median step) to 2 ms"
+    assert len(preprocess(rec, asked)["q"]) == pytest.approx(5 * len(kept["q"]), abs=10)
+    assert resampling(rec, FilterSpec(dt=0.01)) is None  # asking for the log's own step moves nothing
+
+
+def test_rows_whose_steps_vary_are_put_on_their_median_step_and_it_is_said():
+    rec = _uniform_recording(0.01)
+    t = rec.time.copy()
+    t[1::7] += 0.004
+    moved = Recording(t, rec.q, rec.qd, rec.tau)
+    words = resampling(moved, FilterSpec())
+    assert words.startswith("rows 6 to 14 ms apart interpolated onto a uniform 10 ms")
+    np.testing.assert_allclose(np.diff(preprocess(moved)["time"]), 0.01)

@@ -182,8 +182,11 @@ def test_cli_refuses_bad_input_in_one_line(tmp_path):
 def test_cli_converts_a_raw_dfki_recording(tmp_path):
     from systems.dfki_double_pendulum import trajectory_path
 
-    r = cli("convert", "--format", "dfki", str(trajectory_path("03")), "--out", str(tmp_path / "t.csv"))
+    # the DFKI file's filter: the lab's 2 ms, every fifth sample kept
+    r = cli("convert", "--format", "dfki", str(trajectory_path("03")), "--out", str(tmp_path / "t.csv"),
+            "--dt", "0.002", "--decimate", "5")
     assert r.returncode == 0, r.stderr
+    assert "recording dfki_trajectory_03: rows 2 to 3.597 ms apart interpolated onto a uniform 2 ms" in r.stdout
     from bench.core.csv_format import read_csv
 
     data = read_csv(tmp_path / "t.csv", dof=2)
@@ -195,6 +198,7 @@ def test_cli_converts_a_raw_dfki_recording(tmp_path):
     inputs = ResidualJob(system="dfki_double_pendulum", method="sysid", train_path=str(tmp_path / "t.csv")).inputs()
     convert = inputs["files"][str(tmp_path / "t.csv")]["convert"]
     assert convert["format"] == "dfki" and convert["filter"]["cutoff_hz"] == 6.0 and convert["time_unit"] == "s"
+    assert list(convert["resampled"]) == ["dfki_trajectory_03"]
     assert convert["command"].startswith("python -m bench convert --format dfki")
     assert list(convert["logs"]) == [str(trajectory_path("03"))] and len(convert["logs"][str(trajectory_path("03"))]) == 64
     # a measured system's own split: its recordings are the files

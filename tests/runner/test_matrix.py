@@ -378,3 +378,14 @@ def test_seeds_group_where_their_configuration_stacks_and_run_alone_where_it_doe
     assert sorted(len(g) for g in groups(plain)) == [1, 1, 1, 3]  # SyReNets' three seeds together, SysId's alone
     compiled = build_specs(["double_pendulum"], ["syrenets"], ["indirect"], [0, 1], None, profile="best-300s", **common)
     assert [len(g) for g in groups(compiled)] == [1, 1]  # compile=True: one network's compiled pass, each seed alone
+
+
+def test_a_matrix_whose_code_changes_under_it_stops_before_its_next_run(tmp_path, monkeypatch):
+    from bench.core.errors import UserError
+    states = iter(["the code at the start", "the code at the start", "the code after a merge"])
+    monkeypatch.setattr(matrix, "code_state", lambda: next(states))
+    todo = specs(["toy_constant"], seeds=(0, 1))
+    with pytest.raises(UserError, match=r"the code changed while this matrix ran .*stopped before "
+                                        r"double_pendulum__toy_constant__indirect__seed1"):
+        matrix.run_matrix(todo, tmp_path, workers=1, report=quiet)
+    assert [p.name for p in (tmp_path / "records").glob("*.json")] == ["double_pendulum__toy_constant__indirect__seed0.json"]

@@ -11,6 +11,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pandas as pd
+import numpy as np
 import pytest
 
 from systems.urdf_arm import chain
@@ -60,7 +61,7 @@ def arm(tmp_path_factory):
                        zip(("q", "qd", "tau"), [c for c in names if c.startswith(f"joint{j}_")]))
     body = "\n".join([
         f'urdf = "{urdf.name}"', 'root = "left_panda_link0"', 'tip = "left_panda_link7"', f'columns = "{columns}"',
-        "rate_hz = 100", 'test = ["c"]', "[filter]", "dt = 0.01", "cutoff_hz = 10.0", "decimate = 1", "[recordings]",
+        "rate_hz = 100", 'test = ["c"]', "[filter]", "cutoff_hz = 10.0", "[recordings]",
         *(f'r{k} = {{ file = "log_{k}.txt", trajectory = "{t}" }}' for k, t in enumerate("abc"))]) + "\n"
     declaration = folder / "left_arm.toml"
     declaration.write_text(body)
@@ -74,11 +75,20 @@ def test_one_arm_of_a_two_arm_robot_is_fitted_and_traced_from_one_declaration(ar
     assert r.returncode == 0, r.stderr
     record = json.loads((tmp_path / "fit.json").read_text())
     assert record["status"] == "ok" and record["test_mse"] < 1e-3 * record["details"]["constant_model"]["test_mse"]
+    # the 100 Hz rows are kept as they are: 4 s less the 0.25 s trimmed from each end, 10 ms apart, nothing resampled
+    assert "resampled" not in record["details"]["train_source"] and "interpolated" not in record["details"]["train_source"]
+    assert record["details"]["n_train"] == 2 * (400 - 2 * 25)
+    assert "  test trajectory c (350 samples), nMSE per joint against the logged torque, %: " in r.stdout
     r = cli("residual", "--system", f"measured:{declaration}", "--method", "sysid", "--steps", "1",
             "--json", tmp_path / "loop.json")
     assert r.returncode == 0, r.stderr
     loop = json.loads((tmp_path / "loop.json").read_text())
     assert loop["mse_after"]["test"] < loop["mse_before"]["test"]
+    # per joint, before and after, against the logged torque beside the filter's noise floor
+    before, after = (loop["per_joint"][k]["trajectories"]["c"] for k in ("before", "after"))
+    assert len(after["nmse_logged"]) == 7 and np.mean(after["mse"]) == pytest.approx(loop["mse_after"]["test"], rel=1e-4)
+    assert np.mean(after["nmse_logged"]) < np.mean(before["nmse_logged"])
+    assert "test trajectory c (350 samples), nMSE per joint against the logged torque, %, before → after: 1: " in r.stdout
     assert {e["name"] for e in loop["effects"] if e["kind"] not in ("structural", "beyond_data", "not_identified")} \
         >= {"viscous_friction"}
 

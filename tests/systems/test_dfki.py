@@ -36,7 +36,7 @@ def synthetic_recording(rng, seconds=6.0, quantum=0.011):
 def test_preprocess_recovers_accelerations_without_delay():
     frame, amp, w = synthetic_recording(np.random.default_rng(0))
     s = preprocess(LAYOUTS[0].take(frame))
-    t = frame["time"].iloc[0] + DEFAULT_FILTER.trim_s + np.arange(len(s["q"])) * DEFAULT_FILTER.dt * DEFAULT_FILTER.decimate
+    t = frame["time"].iloc[0] + s["time"]
     qdd_true = -amp * w**2 * np.sin(w * t[:, None])
     q_true = amp * np.sin(w * t[:, None])
     # a delayed filter would miss by amp * w * delay; 1 ms of delay at 1.3 Hz is 0.0065 rad
@@ -47,7 +47,7 @@ def test_preprocess_recovers_accelerations_without_delay():
 
 def test_preprocess_with_a_too_high_cutoff_is_refused():
     with pytest.raises(ConfigError, match="cutoff_hz"):
-        FilterSpec(cutoff_hz=300.0)
+        FilterSpec(dt=0.002, cutoff_hz=300.0)
 
 
 @pytest.mark.parametrize(
@@ -73,6 +73,8 @@ def test_packaged_recordings_have_the_raw_columns():
     assert set(RAW_COLUMNS) <= set(pd.read_csv(system_path("00")).columns)
     assert 3500 < len(train) < 4000 and 1700 < len(test) < 2000
     assert train.meta["filter"]["cutoff_hz"] == DEFAULT_FILTER.cutoff_hz
+    # the lab's rows, 2 ms apart with gaps, are put on a uniform 2 ms grid, and the data's source says so
+    assert "00 rows 2 to 3." in train.source and "ms apart interpolated onto a uniform 2 ms" in train.source
 
 
 def system_path(name):
