@@ -11,3 +11,9 @@ class DataError(UserError, ValueError):
 
 class ConfigError(UserError, TypeError):
     """A bad hyperparameter or option."""
+
+
+def first_line(exc: BaseException, limit: int = 200) -> str:
+    """The first line of ``exc``'s message, at most ``limit`` characters, for a report's one line."""
+    text = str(exc).strip()
+    return text.splitlines()[0][:limit] if text else "no message"

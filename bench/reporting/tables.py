@@ -167,6 +167,14 @@ def standard_line(records: list[Record]) -> str:
     return text + "."
 
 
+def per_joint_line(records: list[Record]) -> str:
+    """Where the runs recorded their test error per joint (runs on a measured system), where to find it."""
+    if not any((r.details or {}).get("per_joint") for r in records):
+        return ""
+    return ("Per joint and per test trajectory (MSE and nMSE, against the logged and the filtered torque, beside the "
+            "filter's noise floor): `per_joint.md`, written by `python -m bench table DIR --per-joint`.")
+
+
 def build_table(records: list[Record]) -> str:
     """One markdown table for records of a single (system, experiment)."""
     if not records:
@@ -302,7 +310,7 @@ def build_tables(records: list[Record], plots: dict[tuple, str] | None = None, p
         reference = _reference(system)
         if reference:
             parts += ["", f"Reference: {reference}"]
-        for line in (standard_line(recs), constant_line(recs)):
+        for line in (standard_line(recs), constant_line(recs), per_joint_line(recs)):
             if line:
                 parts += ["", line]
         parts += ["", build_table(recs), ""]

@@ -78,12 +78,14 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import time
+import traceback
 from typing import Callable
 
 import numpy as np
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
+from bench.core.errors import first_line
 from bench.core.models import FittedModel
 from bench.core.terms import Term, TermLibrary, remembered_columns, share_columns
 from bench.evaluation.driven import driven_entry
@@ -275,9 +277,17 @@ class _Loop(Tidying):
             report("driven rollouts of the test recordings, before and after (after the budget: their work is the "
                    "data's and the models')")
             t0 = time.perf_counter()
-            # after: the arm's model under the arm's torques, as the sensor's laws correct the measured ones
-            result.rollout = {"before": driven_entry(first, self.test, report=_indented(report, "before")),
-                              "after": driven_entry(model, self.sensor.correct(self.test), report=_indented(report, "after"))}
+            try:
+                # after: the arm's model under the arm's torques, as the sensor's laws correct the measured ones
+                result.rollout = {"before": driven_entry(first, self.test, report=_indented(report, "before")),
+                                  "after": driven_entry(model, self.sensor.correct(self.test),
+                                                        report=_indented(report, "after"))}
+            except Exception as exc:  # the rounds stand without their rollouts
+                traceback.print_exc()
+                failed = (f"the driven rollouts after the rounds failed ({type(exc).__name__}: {first_line(exc)}): "
+                          f"the rounds are kept")
+                result.stopped = failed if result.stopped is None else f"{result.stopped}; {failed}"
+                report(f"stopped: {failed}")
             result.rollout_seconds = round(time.perf_counter() - t0, 2)
         result.seconds = round(time.perf_counter() - self.start, 2)
         result.models = (first, Sensed(model, self.sensor))
@@ -402,11 +412,15 @@ class _Loop(Tidying):
             before_round = (self.train, self.sensor, dict(self.beyond), dict(self.unnamed))
             try:
                 model, held, mass, findings, done = self.round(k, model, held, mass, pool, rounds)
-            except _BudgetSpent as spent:
+            except Exception as exc:  # the budget ran out, or the round failed: the rounds before it stand
                 self.use(*before_round[:2])
                 self.beyond, self.unnamed = before_round[2], before_round[3]
-                self.stopped = (f"the budget of {self.budget.describe()} ran out in round {k}, while {spent}: "
-                                f"the round is undone, and the rounds before it are kept")
+                if isinstance(exc, _BudgetSpent):
+                    why = f"the budget of {self.budget.describe()} ran out in round {k}, while {exc}"
+                else:
+                    traceback.print_exc()  # to the loop's log
+                    why = f"round {k} failed ({type(exc).__name__}: {first_line(exc)})"
+                self.stopped = f"{why}: the round is undone, and the rounds before it are kept"
                 rounds.append(Round(k, self.scores(model), held, stop=f"stopped: {self.stopped}", seconds=self.elapsed()))
                 report(f"round {k}: stopped, {self.stopped}")
                 done = True

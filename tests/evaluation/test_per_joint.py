@@ -68,3 +68,4 @@ def test_a_run_on_a_measured_arm_records_its_error_per_joint_and_the_page_gives_
     floor = " | ".join(f"{100 * x:.3g}" for x in entry["05"]["noise_floor_nmse"])
     assert f"| the filter's noise floor | — | {floor} |" in page
     assert f"| sysid | 1 | {entry['03']['mse'][0]:.4g} | {entry['03']['mse'][1]:.4g} |" in page
+    assert "Per joint and per test trajectory" in (out / "tables.md").read_text()  # the headline table points to it

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import bench.residual.job as job_module
@@ -108,3 +109,32 @@ def test_a_fit_slower_than_expected_still_returns_the_rounds_that_finished(tmp_p
     assert out["rounds"][0]["round"] == 0 and (tmp_path / "out.md").is_file()
     finished = out["rounds"][-1].get("stop") is None and "nothing significant left" in r.stdout
     assert finished or (f"stopped early: {out['stopped']}" in r.stdout and "the budget of 2 s" in out["stopped"])
+
+
+def test_an_error_in_a_later_round_or_the_rollouts_keeps_the_rounds_that_finished(monkeypatch):
+    train, test = data_with(FRICTION, n=1000)
+    real_round = loop_module._Loop.round
+
+    def round_(self, k, *args, **kwargs):
+        if k == 2:
+            raise RuntimeError("a term's column overflowed\nsecond line")
+        return real_round(self, k, *args, **kwargs)
+
+    monkeypatch.setattr(loop_module._Loop, "round", round_)
+    lines = []
+    out = residual_loop("sysid", train, test, steps=SYSID, report=lines.append)
+    assert [r["round"] for r in out.rounds] == [0, 1, 2] and out.effects  # round 1's laws stand
+    assert out.stopped == ("round 2 failed (RuntimeError: a term's column overflowed): the round is undone, and the "
+                           "rounds before it are kept")
+    assert out.mse_after["test"] < out.mse_before["test"] and any(l.startswith("round 2: stopped,") for l in lines)
+    monkeypatch.setattr(loop_module._Loop, "round", real_round)
+
+    def broken(*args, **kwargs):
+        raise ValueError("no windows")
+
+    monkeypatch.setattr(loop_module, "driven_entry", broken)
+    n = len(test)  # test data with a recording's times, so that the loop runs its driven rollouts after the rounds
+    timed = test.replace(recording=np.full(n, "r0"), trajectory=np.full(n, "b"), time=np.arange(n) * 0.01)
+    out = residual_loop("sysid", train, timed, steps=SYSID, report=quiet)
+    assert out.effects and out.rollout is None and out.mse_after["test"] < out.mse_before["test"]
+    assert out.stopped == "the driven rollouts after the rounds failed (ValueError: no windows): the rounds are kept"
