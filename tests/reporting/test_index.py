@@ -14,6 +14,8 @@ import pytest
 from bench.core.errors import UserError
 from bench.reporting.index import INDEX, build_index, figures, read_manifest, stale_figures, unlisted, write_index
 from bench.reporting.pages import stale_blocks
+from bench.reporting.tables import label
+from bench.runner.records import read_records
 from tests.commandline import cli
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -147,4 +149,12 @@ def test_a_table_names_each_run_that_is_not_ok_with_its_reason(tmp_path):
     shutil.copytree(RESULTS / "measured" / "kuka_swapped_60s" / "records", tmp_path / "records")
     text = write_tables(tmp_path)
     assert "- **syrenets**, seed 1: timeout: fit still running at 1.5 x its 60 s budget; killed" in text
-    assert text.count("- **") == 1  # the runs that are ok are not named
+    records = read_records(tmp_path)
+    bad = [r for r in records if r.status != "ok"]
+    named = [line for line in text.splitlines() if line.startswith("- **")]
+    assert bad and 1 <= len(named) <= len(bad)
+    for r in bad:  # each run that is not ok is named, under its column, with its seed and its reason
+        assert any(line.startswith(f"- **{label(r)}**, seed") and str(r.seed) in line and r.status in line
+                   for line in named), r.run_id
+    ok_only = {label(r) for r in records} - {label(r) for r in bad}
+    assert not any(f"**{m}**" in line for m in ok_only for line in named)  # the runs that are ok are not named
