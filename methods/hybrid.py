@@ -42,11 +42,6 @@ import numpy as np
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
-
-#: where the gate is taken as closed, in gate lengths: exp(-GATE_REACH^2 / 2) < 1e-12 of the residual, and the
-#: nearest-state search stops there (on a 7-joint arm's 71,000 training states a query beyond it took 1 ms, and a
-#: driven rollout asks it of thousands of states at every step)
-GATE_REACH = 7.5
 from bench.core.modelfile import Unpacker, build, loader
 from bench.core.models import FittedModel
 from bench.core.registry import RegistryError
@@ -200,7 +195,7 @@ class Hybrid(Method):
         """The residual's weight at each state of ``data``: the gate, or 1 where the residual needs none."""
         if self.gate is None:
             return np.ones(len(data))
-        d = self.gate.distance(data, beyond=GATE_REACH * self.config.gate_length)
+        d = self.gate.distance(data)
         return np.exp(-0.5 * (d / self.config.gate_length) ** 2)
 
     def residual_torque(self, data: Dataset) -> np.ndarray:

@@ -33,11 +33,9 @@ class TrainingStates:
         out.tree = cKDTree(np.asarray(states, dtype=np.float64))
         return out
 
-    def distance(self, data: Dataset, beyond: float = np.inf) -> np.ndarray:
-        """Each state of ``data``'s distance to the nearest training state, shape ``(n,)``;
-        ``inf`` for a state further than ``beyond`` from every one (the tree
-        stops searching there: in 14 dimensions a far state's query is what costs)."""
+    def distance(self, data: Dataset) -> np.ndarray:
+        """Each state of ``data``'s distance to the nearest training state, shape ``(n,)``."""
         if not len(data):
             return np.zeros(0)
-        distance, _ = self.tree.query(np.hstack([data.q, data.qd]) / self.scale, distance_upper_bound=beyond)
+        distance, _ = self.tree.query(np.hstack([data.q, data.qd]) / self.scale)
         return np.asarray(distance, dtype=np.float64)
