@@ -74,7 +74,8 @@ class FilterSpec:
             raise ConfigError(f"dt must be positive, got {self.dt}")
         nyquist = math.inf if self.dt is None else 0.5 / self.dt
         if not 0 < self.cutoff_hz < nyquist:
-            raise ConfigError(f"cutoff_hz must lie in (0, {nyquist:g}) for dt = {self.dt:g}, got {self.cutoff_hz}")
+            bound = "be positive" if self.dt is None else f"lie in (0, {nyquist:g}) for dt = {self.dt:g}"
+            raise ConfigError(f"cutoff_hz must {bound}, got {self.cutoff_hz}")
         if self.order < 1 or self.decimate < 1 or self.trim_s < 0:
             raise ConfigError("order and decimate must be >= 1 and trim_s >= 0")
 

@@ -48,6 +48,8 @@ def test_preprocess_recovers_accelerations_without_delay():
 def test_preprocess_with_a_too_high_cutoff_is_refused():
     with pytest.raises(ConfigError, match="cutoff_hz"):
         FilterSpec(dt=0.002, cutoff_hz=300.0)
+    with pytest.raises(ConfigError, match=r"^cutoff_hz must be positive, got 0$"):  # at the log's own step
+        FilterSpec(cutoff_hz=0)
 
 
 @pytest.mark.parametrize(
