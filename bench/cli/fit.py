@@ -12,7 +12,7 @@ from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_co
                                check_split, configurations, device, hyperparameters, load_plugins)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
-from bench.evaluation.per_joint import against, percent
+from bench.evaluation.per_joint import per_joint_lines
 from bench.runner import matrix
 from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.records import Record
@@ -104,14 +104,7 @@ def per_joint_summary(record: Record) -> list[str]:
     """One line per test trajectory of a run on a measured system: each joint's
     nMSE against the logged torque (else the scored one), with the filter's noise floor."""
     entry = (record.details or {}).get("per_joint") if record.status == "ok" else None
-    lines = []
-    for name, t in (entry or {}).get("trajectories", {}).items():
-        key, words = against(t)
-        floor = ("; the filter's noise floor " + ", ".join(percent(x) for x in t["noise_floor_nmse"])
-                 if "noise_floor_nmse" in t else "")
-        lines.append(f"  test trajectory {name} ({t['n']} samples), nMSE per joint against {words}, %: "
-                     + ", ".join(percent(x) for x in t[key]) + floor)
-    return lines
+    return [f"  {line}" for line in per_joint_lines(entry)] if entry else []
 
 
 def summary_line(record: Record, log: Path | None = None) -> str:

@@ -52,13 +52,13 @@ def per_joint(predicted: np.ndarray, data: Dataset, logged: np.ndarray | None = 
     return {"trajectories": out}
 
 
-def per_joint_entry(model, system, test: Dataset) -> dict | None:
-    """:func:`per_joint` of ``model``'s torque on ``test``, against the logged
-    torque too where ``system`` gives it (the record's ``details.per_joint``);
-    ``None`` where ``test`` holds no torque."""
-    if test is None or test.tau is None:
+def per_joint_entry(predicted: np.ndarray | None, system, test: Dataset | None) -> dict | None:
+    """:func:`per_joint` of a model's torque ``predicted`` on ``test``, against
+    the logged torque too where ``system`` gives it (the record's
+    ``details.per_joint``); ``None`` where ``test`` holds no torque."""
+    if test is None or test.tau is None or predicted is None:
         return None
-    return per_joint(model.predict(test, "indirect"), test, None if system is None else system.logged_torque("test"))
+    return per_joint(predicted, test, None if system is None else system.logged_torque("test"))
 
 
 def percent(value: float) -> str:
@@ -72,17 +72,21 @@ def against(entry: dict) -> tuple[str, str]:
     return ("nmse_logged", "the logged torque") if "nmse_logged" in entry else ("nmse", "the scored torque")
 
 
-def per_joint_lines(before_after: dict) -> list[str]:
-    """One line per test trajectory: each joint's nMSE before → after (in %),
-    and the filter's noise floor where the logged torque is known."""
+def per_joint_lines(before: dict, after: dict | None = None) -> list[str]:
+    """One line per test trajectory of :func:`per_joint`'s ``before``: each
+    joint's nMSE (in %), or before → after where ``after`` is given, and the
+    filter's noise floor where the logged torque is known."""
     lines = []
-    before, after = before_after["before"]["trajectories"], before_after["after"]["trajectories"]
-    for name, b in before.items():
-        a = after[name]
+    for name, b in before["trajectories"].items():
         key, words = against(b)
-        joints = ", ".join(f"{j + 1}: {percent(x)} → {percent(y)}" for j, (x, y) in enumerate(zip(b[key], a[key])))
-        floor = (f"; the filter's noise floor " + ", ".join(percent(x) for x in b["noise_floor_nmse"])
+        if after is None:
+            what, values = "", ", ".join(percent(x) for x in b[key])
+        else:
+            a = after["trajectories"][name][key]
+            what = ", before → after"
+            values = ", ".join(f"{j + 1}: {percent(x)} → {percent(y)}" for j, (x, y) in enumerate(zip(b[key], a)))
+        floor = ("; the filter's noise floor " + ", ".join(percent(x) for x in b["noise_floor_nmse"])
                  if "noise_floor_nmse" in b else "")
-        lines.append(f"test trajectory {name} ({b['n']} samples), nMSE per joint against {words}, %, before → after: "
-                     f"{joints}{floor}")
+        lines.append(f"test trajectory {name} ({b['n']} samples), nMSE per joint against {words}, %{what}: "
+                     f"{values}{floor}")
     return lines

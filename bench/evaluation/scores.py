@@ -19,6 +19,8 @@ from __future__ import annotations
 import traceback
 from typing import Any, Callable
 
+import numpy as np
+
 from bench.core.data import Dataset, mse
 from bench.core.models import FittedModel
 from bench.core.system import System
@@ -53,11 +55,15 @@ class Stages:
             return default
 
 
-def errors(model: FittedModel, experiment: str, train: Dataset, test: Dataset | None) -> dict:
-    """``train_mse`` and ``test_mse`` (``None`` without test data)."""
+def errors(model: FittedModel, experiment: str, train: Dataset, test: Dataset | None,
+           test_prediction: np.ndarray | None = None) -> dict:
+    """``train_mse`` and ``test_mse`` (``None`` without test data); ``test_prediction``
+    is the model's prediction on ``test`` where the caller has made it already."""
+    if test is not None and test_prediction is None:
+        test_prediction = model.predict(test, experiment)
     return {
         "train_mse": mse(model.predict(train, experiment), train.target(experiment)),
-        "test_mse": mse(model.predict(test, experiment), test.target(experiment)) if test is not None else None,
+        "test_mse": mse(test_prediction, test.target(experiment)) if test is not None else None,
     }
 
 

@@ -61,9 +61,10 @@ class ResidualJob:
     #: where the loop's process keeps the result as it stands after each round (set by :func:`run_residual`)
     checkpoint_path: str | None = None
 
-    def data(self) -> tuple[Dataset, Dataset | None]:
-        data = given_data(SYSTEMS[self.system](split=self.split), self.train_path, self.test_path,
-                          check_limits=self.check_limits)
+    def data(self, system=None) -> tuple[Dataset, Dataset | None]:
+        """The train and test data: the given CSVs, else ``system``'s (by default, the job's system and split)."""
+        system = SYSTEMS[self.system](split=self.split) if system is None else system
+        data = given_data(system, self.train_path, self.test_path, check_limits=self.check_limits)
         if data is None:
             raise UserError(f"{self.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
         return data
@@ -72,7 +73,8 @@ class ResidualJob:
         """The loop in this process, with its outputs written; ``on_phase`` hears
         when the rounds end and the driven rollouts begin (``"evaluate"``)."""
         import_plugins(self.plugins)
-        train, test = self.data()
+        system = SYSTEMS[self.system](split=self.split)
+        train, test = self.data(system)
         inputs = self.inputs()
 
         def checkpoint(result: ResidualResult) -> None:
@@ -85,10 +87,10 @@ class ResidualJob:
                                checkpoint=checkpoint, on_phase=on_phase)
         result.inputs = inputs
         if test is not None and result.models is not None:
-            logged = None if self.train_path else SYSTEMS[self.system](split=self.split).logged_torque("test")
+            logged = None if self.train_path else system.logged_torque("test")
             result.per_joint = {name: per_joint(model.predict_torque(test), test, logged)
                                 for name, model in zip(("before", "after"), result.models)}
-            for line in per_joint_lines(result.per_joint):
+            for line in per_joint_lines(result.per_joint["before"], result.per_joint["after"]):
                 report(line)
         write_outputs(result, train, test, self.json_path, self.report_path)
         return result

@@ -184,7 +184,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             curve=_thin(info.get("curve", [])), hyperparameters=method.hyperparameters(), replay=info.get("schedule"),
         )
         clock = time.perf_counter()
-        fields.update(errors(method, spec.experiment, train, test))
+        test_prediction = None if test is None else method.predict(test, spec.experiment)
+        fields.update(errors(method, spec.experiment, train, test, test_prediction))
         stages = Stages()
         fields["expression"] = stages.run("expression", expression_entry, method)
         exact = stages.run("exact", exact_entry, method, spec.experiment, system, default={"exact": None})
@@ -228,7 +229,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             fields["details"]["saved"] = stages.run("save", save_fitted, method, spec, train, system)
         if not system.simulated and spec.experiment == "indirect":
             fields["details"]["constant_model"] = constant_reference(train, test)
-            by_joint = stages.run("per joint", per_joint_entry, method, system, test)
+            by_joint = stages.run("per joint", per_joint_entry, test_prediction, system, test)
             if by_joint is not None:
                 fields["details"]["per_joint"] = by_joint
         references = {name: stages.run(f"reference {name}", against, method, ref, train, test)
