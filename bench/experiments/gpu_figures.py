@@ -71,8 +71,9 @@ TARGET_SYRENETS, TARGET_PANDA = 100.0, 30.0
 TABLE_RECORDS = ROOT / "results" / "syrenets" / "studies" / "syrenets_300s_compiled_best" / "records"
 #: the closest stackable configuration to best-300s: its settings, not compiled, no refinement after training
 TABLE_CONFIG = {**METHODS["syrenets"].configurations["best-300s"].values, "compile": False, "refine": False}
-#: what a bare machine lacks that the suite imports, as pip pins; fetched here into ``.whl`` (see --dry-run)
-WHEELS = ("deap==1.4.4",)
+#: what a bare machine lacks that the suite imports, as pip pins, with what they need that the machine's image
+#: lacks (deap imports moocore, which needs cffi, pycparser and platformdirs); fetched here into ``.whl``
+WHEELS = ("deap==1.4.4", "moocore==0.3.2", "cffi==2.1.1", "pycparser==3.12", "platformdirs==4.14.8")
 #: the prepared Panda samples, in ``--data``
 PANDA_FILE = "panda.npz"
 #: what may travel to a device machine, MiB
