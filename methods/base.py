@@ -377,7 +377,7 @@ class Method(FittedModel):
 
     def variants(self) -> dict[str, "FittedModel | NoVariant"]:
         """Further fitted models derived from this one (for example a refined
-        equation), each reported by the harness as ``<method>+<variant>``.
+        equation), each reported by the harness as ``<method>@<variant>`` (:mod:`bench.core.names`).
 
         A variant that could not be made is a :class:`~bench.core.models.NoVariant`
         saying why, with its outcome (out of budget, not applicable, failed);

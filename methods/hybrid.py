@@ -44,6 +44,7 @@ from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
 from bench.core.modelfile import Unpacker, build, loader
 from bench.core.models import FittedModel
+from bench.core.names import MethodName, MethodNameError
 from bench.core.registry import RegistryError
 from bench.core.system import System
 from methods.base import METHODS, Method, restored, saved_hyperparameters
@@ -104,10 +105,13 @@ def modules_for(names) -> tuple[str, ...]:
     a method, among them (the residual loop's)."""
     out = []
     for name in names:
-        prior, plus, _ = name.partition("+")
-        if plus and prior in PRIORS:
-            module = PRIORS[prior].module
-        elif not plus and name in METHODS.names():
+        try:
+            parsed = MethodName.parse(name)
+        except MethodNameError:
+            continue
+        if parsed.hybrid and parsed.prior in PRIORS:
+            module = PRIORS[parsed.prior].module
+        elif not parsed.hybrid and name in METHODS.names():
             module = METHODS[name].__module__
         else:
             continue
@@ -280,19 +284,19 @@ def compose(name: str) -> type | None:
     """The hybrid named ``name`` (``PRIOR+RESIDUAL``), or ``None`` for a name that
     is no hybrid; a hybrid name that is wrong raises :class:`RegistryError` in one
     line: an unknown prior, an unknown residual, or one that fits no torques."""
-    prior, plus, residual = name.partition("+")
-    if not plus:
+    try:
+        parsed = MethodName.parse(name)
+    except MethodNameError as exc:
+        raise RegistryError(str(exc)) from None
+    if not parsed.hybrid or parsed.variant or parsed.tuned:
         return None
+    prior, residual = parsed.prior, parsed.method
     if prior not in PRIORS:
-        if prior in METHODS:  # a variant of a method's fit (syrenets+pruned) is no hybrid
-            return None
         raise RegistryError(f"unknown prior {prior!r} in {name!r}: {naming()}")
     try:
         entry = METHODS.entry(residual)
     except RegistryError as exc:
         raise RegistryError(f"{name}: unknown residual learner: {exc}") from None
-    if "+" in residual:
-        raise RegistryError(f"{name}: the residual of a hybrid cannot be a hybrid")
     reason = entry.obj.not_applicable_reason("indirect")
     if reason:
         raise RegistryError(f"{name}: {residual} cannot learn a residual torque: {reason}")
@@ -304,7 +308,7 @@ def compose(name: str) -> type | None:
                       "that does not fall back to zero by itself to zero away from the training states, in training "
                       "standard deviations")
     return type(f"Hybrid_{prior}_{residual}", (Hybrid,), {
-        "prior_name": prior, "residual_name": residual, "Config": config, "smoke": dict(base.smoke),
+        "prior_name": prior, "residual_name": residual, "made_of": parsed.parts, "Config": config, "smoke": dict(base.smoke),
         "uses_device": base.uses_device, "has_lagrangian": base.has_lagrangian,
         "configurations": dict(base.configurations), "tags": frozenset({"hybrid"}),
         "search_space": {**base.search_space, **({} if base.falls_back_to_zero else {"gate_length": GATE_LENGTHS})},

@@ -38,6 +38,8 @@ class Entry(Generic[T]):
     name: str
     obj: T
     tags: frozenset[str] = field(default_factory=frozenset)
+    #: the entries a composed entry is made of (its object's ``made_of``)
+    made_of: tuple[str, ...] = ()
 
     def unavailable_reason(self) -> str | None:
         """``None`` when the entry can run, else why it cannot."""
@@ -61,7 +63,8 @@ class Registry(Generic[T]):
     object for a name no decorator registered (a method made of two others,
     ``standard+gp``), or ``None``; the object is registered under that name
     the first time it is asked for, and raises :class:`RegistryError` itself
-    for a composed name that is wrong.
+    for a composed name that is wrong. An object's ``made_of`` names the entries
+    it is made of, so that removing one removes it.
     """
 
     def __init__(self, kind: str):
@@ -98,7 +101,7 @@ class Registry(Generic[T]):
     def remove(self, name: str) -> None:
         """Drop an entry (used by tests that register toys), and what was composed of it."""
         self._entries.pop(name, None)
-        self._composed = {k: v for k, v in self._composed.items() if k != name and name not in k.split("+")}
+        self._composed = {k: v for k, v in self._composed.items() if k != name and name not in v.made_of}
 
     def entry(self, name: str) -> Entry[T]:
         try:
@@ -111,7 +114,7 @@ class Registry(Generic[T]):
                     setattr(composed, "name", name)
                 except (AttributeError, TypeError):
                     pass
-                self._composed[name] = Entry(name, composed, tags)
+                self._composed[name] = Entry(name, composed, tags, tuple(getattr(composed, "made_of", ())))
                 return self._composed[name]
             close = difflib.get_close_matches(name, list(self._entries), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""

@@ -25,7 +25,7 @@ Learners:
   SyReNets runs without its exact-recovery refinement (``refine=False``,
   ``post_fraction=0``): its frozen equation is what is scored, at every
   checkpoint.
-* ``sysid+residual``: at the switch, the residual loop
+* ``sysid then loop``: SysId's fit, and at the switch the residual loop
   (:func:`bench.residual.residual_loop`) starts from the pre-switch SysId fit
   and runs on the new stream (polish, trace, add, refit, repeat). Its error
   is the pre-switch model's until the loop's round 0 (the polished declared
@@ -62,7 +62,9 @@ from bench.runner.spec import TEST_SEED_OFFSET
 from methods import METHODS
 from systems import SYSTEMS
 
-LEARNERS = ("sysid", "mlp", "syrenets", "sysid+residual")
+#: each learner's label: the method fitted before the switch, and whether the residual loop takes over at it
+LEARNERS = {"sysid": ("sysid", False), "mlp": ("mlp", False), "syrenets": ("syrenets", False),
+            "sysid then loop": ("sysid", True)}
 #: hyperparameters on top of each method's defaults
 HYPERPARAMETERS = {"syrenets": {"refine": False, "post_fraction": 0.0}}
 #: seeds of the switched stream are offset from the ones before it
@@ -111,7 +113,7 @@ def streams(setup: Setup, seed: int):
 def run_learner(learner: str, setup: Setup, seed: int) -> dict:
     """One learner on one seed: its errors before the switch and its curve after."""
     train_a, test_a, train_b, test_b = streams(setup, seed)
-    base = learner.split("+")[0]
+    base, loop = LEARNERS[learner]
     method = METHODS[base](**HYPERPARAMETERS.get(base, {}))
     method.fit(train_a, "indirect", seed, None if setup.steps else setup.before_s, steps=setup.steps)
 
@@ -120,7 +122,7 @@ def run_learner(learner: str, setup: Setup, seed: int) -> dict:
 
     out = {"learner": learner, "seed": seed, "before": error(test_a), "fit_before_s": method.fit_info["fit_seconds"]}
     curve = [[0.0, error(test_b)]]
-    if learner == "sysid+residual":
+    if loop:
         result = residual_loop(base, train_b, test_b, seed=seed, fitted=method, report=quiet,
                                budget_s=None if setup.steps else LOOP_BUDGET_S, steps=setup.steps)
         curve += [[r["seconds"], r["mse"]["test"]] for r in result.rounds if "seconds" in r]
@@ -160,7 +162,7 @@ def run(setup: Setup, seeds: list[int], workers: int, report: Report = print) ->
         return f"before {r['before']:.3g}, at the switch {r['curve'][0][1]:.3g}, last {r['curve'][-1][1]:.3g}"
 
     results = run_jobs("bench.experiments.adaptation:run_payload", payloads, limit, workers, describe, report)
-    return sorted(results.values(), key=lambda r: (LEARNERS.index(r["learner"]), r["seed"]))
+    return sorted(results.values(), key=lambda r: (list(LEARNERS).index(r["learner"]), r["seed"]))
 
 
 def table(results: list[dict], setup: Setup) -> str:

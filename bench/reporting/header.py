@@ -71,7 +71,7 @@ def _overrides(records: list[Record]) -> str:
     by_method = defaultdict(dict)
     for r in records:
         for key, value in (r.spec.get("hyperparameters") or {}).items():
-            by_method[r.method.split("+")[0]][key] = value
+            by_method[str(r.name.run)][key] = value
     if not by_method:
         return "Hyperparameters: each method's own (none set)."
     parts = [f"{m}: {', '.join(f'{k}={v!r}' for k, v in sorted(kv.items()))}" for m, kv in sorted(by_method.items())]
@@ -101,7 +101,7 @@ def _configurations(records: list[Record]) -> str:
     method's defaults, else the named ones by method (``default; syrenets: best-300s``)."""
     by_method = defaultdict(set)
     for r in records:
-        by_method[r.method.split("+")[0]].add(r.spec.get("profile", "default"))
+        by_method[str(r.name.run)].add(r.spec.get("profile", "default"))
     names = {n for v in by_method.values() for n in v}
     if len(names) == 1:
         return names.pop()

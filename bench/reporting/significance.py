@@ -25,7 +25,7 @@ summaries say which are:
   of whether the ranks differ at all, over the methods with results in
   every section.
 
-A method's variants (``syrenets+refined``) are post-processings of its own
+A method's variants (``syrenets@pruned``) are post-processings of its own
 runs, not independent methods; they are left out of both rank summaries.
 """
 
@@ -36,6 +36,8 @@ from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
+
+from bench.core.names import MethodName
 
 #: the family-wise error rate of each row's comparisons with the best
 ALPHA = 0.05
@@ -99,7 +101,7 @@ def ties_with_best(samples: dict[str, list[float]]) -> tuple[str | None, dict[st
 
 
 def _is_variant(method: str) -> bool:
-    return "+" in method
+    return MethodName.parse(method).variant is not None
 
 
 def seed_ranks(test_mse: dict[str, dict[int, float]]) -> tuple[dict[str, float], int]:

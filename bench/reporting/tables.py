@@ -254,29 +254,26 @@ def build_table(records: list[Record]) -> str:
     return "\n".join(lines)
 
 
-#: how a tuned run's column is named: ``<method> tuned``
-TUNED = " tuned"
-
-
 def label(record: Record) -> str:
     """The column a run's record goes to: its method, ``<method> tuned`` where the
     run chose its hyperparameters on its training data (beside the method's own)."""
-    return record.method + (TUNED if record.tuned else "")
+    return str(record.name.with_tuned(record.tuned))
 
 
 def expand_variants(records: list[Record]) -> list[Record]:
     """Each record under its column (:func:`label`), and one pseudo-record
-    ``<column>+<variant>`` per variant a run reported."""
+    ``<method>@<variant>`` per variant a run reported (:mod:`bench.core.names`)."""
     out = []
     for r in records:
-        r = r.replace(method=label(r)) if r.tuned else r
+        column = r.name.with_tuned(r.tuned)
+        r = r.replace(method=str(column)) if r.tuned else r
         out.append(r)
         for name, scores in (r.details or {}).get("variants", {}).items():
             blank = {"train_mse": None, "test_mse": None, "expression": None, "exact": None, "error": None,
                      "curve": [], "rollout": None}  # a variant has no training curve or rollout of its own
             fields = dict(scores)  # a stopped or inapplicable exact check goes to details, as execute puts a run's own
             details = {k: fields.pop(k) for k in list(fields) if k.startswith("exact_")}
-            out.append(r.replace(**{**blank, "method": f"{r.method}+{name}", "status": "ok", **fields, "details": details}))
+            out.append(r.replace(**{**blank, "method": str(column.with_variant(name)), "status": "ok", **fields, "details": details}))
     return out
 
 
@@ -293,7 +290,7 @@ def build_tables(records: list[Record], plots: dict[tuple, str] | None = None, p
     markdown document.
 
     A method's variants (such as a refined equation) get columns of their own,
-    named ``<method>+<variant>``. ``plots`` maps a section's key to an image
+    named ``<method>@<variant>``. ``plots`` maps a section's key to an image
     file (relative to the document) embedded under its table; ``page`` is
     where the document will be written, for its link to :data:`GUIDE`.
     """

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
+import functools
 import json
 import math
 import os
@@ -42,6 +43,7 @@ from bench.core.budget import Budget
 from bench.core.data import EXPERIMENTS
 from bench.core.errors import UserError
 from bench.core.fileio import write_json
+from bench.core.names import MethodName, MethodNameError
 from bench.runner.provenance import provenance
 from bench.runner.spec import RunSpec, parse_run_id, run_id
 
@@ -111,6 +113,11 @@ class Record:
             spec=spec, status=status, provenance=provenance(spec.get("threads", 1) if elsewhere else None), **fields,
         )
 
+    @functools.cached_property
+    def name(self) -> MethodName:
+        """The parts of the run's method's name (:class:`bench.core.names.MethodName`)."""
+        return MethodName.parse(self.method)
+
     @property
     def tuned(self) -> bool:
         """Whether the run chose its hyperparameters on its training data (:mod:`bench.evaluation.tuning`)."""
@@ -174,6 +181,10 @@ class Record:
         for name in ("run_id", "system", "method", "target"):
             if not isinstance(obj[name], str) or not obj[name]:
                 raise bad(name, "must be a non-empty string")
+        try:
+            MethodName.parse(obj["method"])
+        except MethodNameError as exc:
+            raise bad("method", f"is not a method's name ({exc})") from None
         if obj["status"] not in STATUSES:
             raise bad("status", f"must be one of {', '.join(STATUSES)}")
         if obj["experiment"] not in EXPERIMENTS:

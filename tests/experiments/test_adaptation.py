@@ -73,7 +73,7 @@ def test_a_continued_learner_reaches_each_checkpoint_within_a_fifth_of_a_second(
 
 
 def test_residual_driven_sysid_names_the_new_spring_and_reaches_round_off():
-    r = adaptation.run_learner("sysid+residual", dataclasses.replace(SMALL, steps=300), seed=0)
+    r = adaptation.run_learner("sysid then loop", dataclasses.replace(SMALL, steps=300), seed=0)
     (effect,) = r["effects"]
     assert effect["name"] == "spring" and effect["joints"] == [1]
     assert effect["parameters"]["k"]["value"] == pytest.approx(5.0, rel=0.05)
@@ -85,12 +85,12 @@ def test_outputs_table_plot_and_json(tmp_path):
     setup = adaptation.Setup(checkpoints=(0.0, 1.0))
     results = [
         {"learner": "mlp", "seed": s, "before": 1.0, "curve": [[0.0, 4.0], [0.9, 2.0 + s]]} for s in range(2)
-    ] + [{"learner": "sysid+residual", "seed": 0, "before": 1.0, "curve": [[0.0, 4.0], [3.0, 1e-20]],
+    ] + [{"learner": "sysid then loop", "seed": 0, "before": 1.0, "curve": [[0.0, 4.0], [3.0, 1e-20]],
           "effects": [{"name": "spring", "joints": [1], "law": "L += -k*q_1**2/2", "parameters": {"k": {"value": 5.0, "stderr": 1e-9}}}]}]
     path = adaptation.write(results, setup, [0, 1], tmp_path, "python -m bench study adaptation")
     text = path.read_text()
     assert "| mlp | 1 | 4 | 2.5 | 2.5 | 0.9 | 0.625 |" in text  # medians over the two seeds
-    assert "| sysid+residual | 1 | 4 | 4 | 1e-20 | 3.0 | 2.5e-21 |" in text  # the loop ends after the last checkpoint
+    assert "| sysid then loop | 1 | 4 | 4 | 1e-20 | 3.0 | 2.5e-21 |" in text  # the loop ends after the last checkpoint
     assert "spring on joint 1: k = 5 ± 1e-09" in text
     assert (tmp_path / "adaptation.png").stat().st_size > 10000
     assert (tmp_path / "adaptation.json").exists()

@@ -141,3 +141,13 @@ class ToyUnstackable(TorchLagrangianMethod):
 
     def build_model(self, train):
         return _Unstackable(train.dof)
+
+
+@METHODS.add("toy_variant", "toy")
+class ToyVariant(_Constant):
+    """Fits, and derives a variant of its fit: the same constant shifted by 1."""
+
+    def variants(self):
+        shifted = ToyConstant()
+        shifted.L0, shifted.tau0 = self.L0 + 1.0, self.tau0 + 1.0
+        return {"shifted": shifted}

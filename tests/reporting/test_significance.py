@@ -63,7 +63,7 @@ def test_holm_adjusts_like_its_definition():
 
 
 def test_seed_ranks_use_the_seeds_every_method_completed():
-    ranks, n = seed_ranks({"a": {0: 1.0, 1: 1.0, 2: 9.0}, "b": {0: 2.0, 1: 2.0}, "b+refined": {0: 0.1}})
+    ranks, n = seed_ranks({"a": {0: 1.0, 1: 1.0, 2: 9.0}, "b": {0: 2.0, 1: 2.0}, "b@refined": {0: 0.1}})
     assert n == 2 and ranks == {"a": 1.0, "b": 2.0}  # seed 2 is a's alone; a variant is not ranked
     table = build_table(_records("a", [1.0] * 3) + _records("b", [2.0] * 3))
     assert "Mean rank by test MSE over the 3 seed(s) every method completed (1 = best): a 1.0, b 2.0." in table

@@ -97,7 +97,7 @@ def test_variants_get_columns_of_their_own():
     base = rec("syrenets", 0, 1.0, 2.0)
     base = base.replace(details={"variants": {"refined": {"train_mse": 1e-20, "test_mse": 2e-20, "expression": "x"}}})
     table = build_table(expand_variants([base]))
-    assert "| Group | Split | syrenets | syrenets+refined |" in table
+    assert "| Group | Split | syrenets | syrenets@refined |" in table
     assert "| Best | train | 1.00e+00 | **1.00e-20** |" in table
 
 
@@ -200,5 +200,5 @@ def test_a_variant_out_of_budget_reads_as_a_budget_outcome_with_its_reason():
                for k in range(2)]
     table = build_table(expand_variants(records))
     assert "| Runs | | 2/2 ok | 0/2 ok (2 timeout) |" in table
-    assert "- **s+refined**, seeds 0, 1: timeout: no refit finished: 8 terms: out of budget" in table
+    assert "- **s@refined**, seeds 0, 1: timeout: no refit finished: 8 terms: out of budget" in table
     assert "failed" not in table
