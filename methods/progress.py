@@ -8,10 +8,10 @@ clock it reads, recorded so that a time-budgeted fit can be replayed.
 from __future__ import annotations
 
 import math
-import time
 from typing import Any, Callable
 
 from bench.core.budget import Schedule
+from bench.core.budget import now as _now
 
 
 class Progress:
@@ -72,7 +72,7 @@ class Progress:
         tolerance: float = 0.0,
         overhead: float = 0.1,
     ):
-        self.start = time.perf_counter()
+        self.start = _now()
         self.deadline = self.start + float(budget_s)
         self._evaluate = evaluate
         self._snapshot = snapshot
@@ -111,10 +111,10 @@ class Progress:
         return len(self.measured)
 
     def elapsed(self) -> float:
-        return time.perf_counter() - self.start
+        return _now() - self.start
 
     def remaining(self) -> float:
-        return self.deadline - time.perf_counter()
+        return self.deadline - _now()
 
     def overrun(self) -> bool:
         """Whether the deadline has passed (never under a work budget): for a
@@ -122,7 +122,7 @@ class Progress:
         state is then the last finished step's, and :attr:`steps` counts the
         finished steps only, so that a replay of those steps ends in the same
         state."""
-        if time.perf_counter() > self.deadline:
+        if _now() > self.deadline:
             self.stop("budget")
             return True
         return False
@@ -138,9 +138,9 @@ class Progress:
         evaluations (a new lowest value keeps the state), but a non-finite
         value does not stop the loop: for a method that compares several
         states and drops the ones that failed."""
-        t0 = time.perf_counter()
+        t0 = _now()
         value = float(self._evaluate())
-        cost = time.perf_counter() - t0
+        cost = _now() - t0
         self._last_eval_cost = cost
         self.eval_seconds += cost
         self.measured.append(value)
@@ -150,8 +150,8 @@ class Progress:
             self.best_state = self._snapshot()
             self.best_step = self.steps
         if math.isfinite(self.best_mse):
-            self.curve.append((time.perf_counter() - self.start, self.best_mse))
-        now = time.perf_counter()
+            self.curve.append((_now() - self.start, self.best_mse))
+        now = _now()
         gap = max(cost / self.overhead, 0.1 * (now - self.start), 1e-3)
         self._next_eval = now + gap
         self._next_eval_step = self.steps + max(1, math.ceil(0.1 * self.steps))
@@ -170,7 +170,7 @@ class Progress:
         The loop is stopped early enough that one more step and the final
         evaluation still fit in the budget.
         """
-        now = time.perf_counter()
+        now = _now()
         if self._calls:
             self.steps += 1
             took = now - self._last_call
@@ -183,7 +183,7 @@ class Progress:
             if self._wall_clock:
                 self._read_clock(now)
             self.evaluate_now()
-            now = time.perf_counter()
+            now = _now()
             if self.stop_reason:
                 return False
         if self.best_mse <= self.tolerance:
@@ -192,7 +192,7 @@ class Progress:
             self.stop_reason = "max_steps"
         elif now + self._step_time + self._last_eval_cost >= self.deadline:
             self.stop_reason = "budget"
-        self._last_call = time.perf_counter()
+        self._last_call = _now()
         return self.stop_reason is None
 
     def _read_clock(self, now: float) -> None:

@@ -21,12 +21,21 @@ ends where the original ended (``python -m bench rerun``).
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 from bench.core.errors import ConfigError
 
 #: the kinds of budget
 SECONDS, STEPS = "seconds", "steps"
+
+#: the clock every time budget is read on; the budget tests put a clock of their own here
+_clock = time.perf_counter
+
+
+def now() -> float:
+    """Seconds on the clock that time budgets are read on (:func:`time.perf_counter`)."""
+    return _clock()
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import zipfile
 from pathlib import Path
 from typing import Callable
@@ -110,7 +111,11 @@ def expression_to_json(expr) -> object:
         return {"rational": [str(expr.p), str(expr.q)]}
     if isinstance(expr, sympy.Float):
         value = float(expr)
-        if not (np.isfinite(value) and sympy.Float(value) == expr):
+        if not np.isfinite(value):  # its decimal digits are not written: a float of 10^(10^9) takes hours to print
+            sign, mantissa, exponent, bits = expr._mpf_
+            size = f"about 10^{(exponent + bits) * math.log10(2):.0f}" if mantissa else "infinite"
+            raise ValueError(f"the expression holds a float {size}, beyond a double")
+        if sympy.Float(value) != expr:
             raise ValueError(f"the expression holds {expr}, which a double cannot hold exactly")
         return {"float": repr(value)}
     for name, value in CONSTANTS.items():

@@ -77,13 +77,12 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import time
 import traceback
 from typing import Callable
 
 import numpy as np
 
-from bench.core.budget import Budget
+from bench.core.budget import Budget, now
 from bench.core.data import Dataset, mse
 from bench.core.errors import first_line
 from bench.core.models import FittedModel
@@ -187,7 +186,7 @@ class _Loop(Tidying):
         self.checkpoint, self.on_phase = (lambda result: None), (lambda phase: None)
         self.stopped: str | None = None  # where the budget ended the loop early
         self.fitter = Fitter(method, seed, budget.scaled(FIT_SHARE), hyperparameters, device)
-        self.start = time.perf_counter()
+        self.start = now()
         self.beyond: dict[str, tuple] = {}  # effects dropped for claiming beyond the data: label -> (term, entry)
         self.unnamed: dict[str, dict] = {}  # open-ended terms taken where a named law was only the nearest: label -> entry
         self.thinned = 1  # the loop works on one training sample in this many (residual_loop)
@@ -197,11 +196,11 @@ class _Loop(Tidying):
         self.round_gain = MIN_HELDOUT_GAIN if train.trajectories() else 0.0
 
     def timed(self, fn, *args, **kwargs):
-        t0 = time.perf_counter()
+        t0 = now()
         try:
             return fn(*args, **kwargs)
         finally:
-            self.statistics += time.perf_counter() - t0
+            self.statistics += now() - t0
 
     def scores(self, model: FittedModel) -> dict:
         """Torque MSEs in the measured torque's units: the model read through the sensor."""
@@ -224,13 +223,13 @@ class _Loop(Tidying):
         self.train, self.sensor = train, sensor
 
     def elapsed(self) -> float:
-        return round(time.perf_counter() - self.start, 3)
+        return round(now() - self.start, 3)
 
     def in_budget(self, stage: str) -> None:
         """Raise :class:`_BudgetSpent` where the loop's time budget has ended
         (never under a work budget), naming ``stage``, the part of the round
         that was running."""
-        if time.perf_counter() - self.start > self.horizon:
+        if now() - self.start > self.horizon:
             raise _BudgetSpent(stage)
 
     def run(self, fitted: FittedModel | None) -> ResidualResult:
@@ -276,7 +275,7 @@ class _Loop(Tidying):
         if self.test is not None and self.test.time is not None and self.test.recording is not None:
             report("driven rollouts of the test recordings, before and after (after the budget: their work is the "
                    "data's and the models')")
-            t0 = time.perf_counter()
+            t0 = now()
             try:
                 # after: the arm's model under the arm's torques, as the sensor's laws correct the measured ones
                 result.rollout = {"before": driven_entry(first, self.test, report=_indented(report, "before")),
@@ -288,8 +287,8 @@ class _Loop(Tidying):
                           f"the rounds are kept")
                 result.stopped = failed if result.stopped is None else f"{result.stopped}; {failed}"
                 report(f"stopped: {failed}")
-            result.rollout_seconds = round(time.perf_counter() - t0, 2)
-        result.seconds = round(time.perf_counter() - self.start, 2)
+            result.rollout_seconds = round(now() - t0, 2)
+        result.seconds = round(now() - self.start, 2)
         result.models = (first, Sensed(model, self.sensor))
         return result
 
@@ -309,7 +308,7 @@ class _Loop(Tidying):
                          "positive_definite": mass > 0, "states": min(MASS_STATES, len(train))},
             mse_heldout_trajectories={"before": rounds[0].heldout_mse, "after": held} if len(train.recordings()) >= 2 else None,
             lagrangian=None if expr is None else str(expr),
-            seconds=round(time.perf_counter() - self.start, 2), statistics_seconds=round(self.statistics, 2),
+            seconds=round(now() - self.start, 2), statistics_seconds=round(self.statistics, 2),
             budget_s=budget.seconds, fit_budget_s=self.fitter.budget.seconds if budget.kind == "seconds" else None,
             device=device_entry(self.trained_on),
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
@@ -401,7 +400,7 @@ class _Loop(Tidying):
         report = self.report
         pool, findings, longest = self.candidates(), {}, 0.0
         for k in range(1, MAX_ROUNDS + 1):
-            began = time.perf_counter()
+            began = now()
             if began - self.start + longest >= self.horizon:
                 rounds.append(Round(k, self.scores(model), held, stop=f"the budget of {self.budget.seconds:g} s would "
                                     f"be spent before a round ended", seconds=self.elapsed()))
@@ -424,7 +423,7 @@ class _Loop(Tidying):
                 rounds.append(Round(k, self.scores(model), held, stop=f"stopped: {self.stopped}", seconds=self.elapsed()))
                 report(f"round {k}: stopped, {self.stopped}")
                 done = True
-            longest = max(longest, time.perf_counter() - began)
+            longest = max(longest, now() - began)
             if done:
                 break
             self.save(model, held, mass, rounds, findings)

@@ -44,7 +44,6 @@ a linear form's dozens of base columns).
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,6 +52,7 @@ from bench.core.data import Dataset
 from bench.core.effects import EFFECTS
 from bench.core.laws import led_by
 from bench.core.terms import Term, TermLibrary
+from bench.core.budget import now
 from bench.residual.basis import extend_basis, orthonormal_basis, project_off
 from bench.residual.candidates import admissible, is_named, label
 from bench.residual.shapes import SHAPE_LIMITS, at_limit, refinable, refined_shape
@@ -111,7 +111,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     ``fixed`` columns (the model's own terms and effects already accepted)
     stay in every fit, so a candidate that only repeats them gains nothing.
     At most ``max_steps`` candidates (or laws) are accepted, where given, and
-    no step starts after ``deadline`` (``time.perf_counter()``).
+    no step starts after ``deadline`` (:func:`bench.core.budget.now`).
     ``given`` adds candidates whose columns depend on more than the data (a
     sensor's laws, linearised at the model: :mod:`bench.residual.sensors`),
     with those columns; they are named candidates like the effects.
@@ -277,7 +277,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         if rss_now / n_rows <= floor:
             steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
             break
-        if time.perf_counter() > deadline:
+        if now() > deadline:
             steps.append({"stop": BUDGET_STOP})
             break
         chosen = inadmissible = before = None

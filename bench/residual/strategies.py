@@ -38,7 +38,6 @@ from __future__ import annotations
 import abc
 import functools
 import math
-import time
 from typing import ClassVar
 
 import numpy as np
@@ -53,6 +52,7 @@ from bench.core.terms import Term, TermLibrary
 from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
 from bench.residual.basis import orthonormal_basis
 from bench.core.folds import folds
+from bench.core.budget import now
 from bench.runner.progress import Report
 
 #: a symbolic model with more terms than this is refitted like a neural one
@@ -387,7 +387,7 @@ def polish(rigid: ParametricModel, train: Dataset, seed: int, deadline: float = 
     :data:`POLISH_STARTS` log-uniform starts in [0.01, 10], each fitted on
     :data:`POLISH_SAMPLES` random training samples; the best of them is then
     refitted on all of ``train``. No start begins after ``deadline``
-    (``time.perf_counter()``) but the first; the final refit always runs.
+    (:func:`bench.core.budget.now`) but the first; the final refit always runs.
 
     Screening the starts on a subsample makes each about ``len(train) /
     POLISH_SAMPLES`` times cheaper. Fitted on all the samples, a start from
@@ -414,7 +414,7 @@ def _best_fit(rigid: ParametricModel, starts: list, data: Dataset, deadline: flo
     (``None`` if no start gave a finite one); no start but the first begins after ``deadline``."""
     best, best_rss = None, math.inf
     for i, theta in enumerate(starts):
-        if i and time.perf_counter() > deadline:
+        if i and now() > deadline:
             break
         try:
             fit = nonlinear_fit(rigid.with_parameters(theta), data, [], [])
@@ -449,7 +449,7 @@ def cross_fit(fitter: Fitter, fit: FittedModel, train: Dataset, report: Report) 
     shortfall, not the kept fit's (fitted so, the MLP ended 1.19 times worse
     on the suite's test recordings).
     """
-    t0 = time.perf_counter()
+    t0 = now()
     fold_masks = folds(train).held
     halves = [np.any(fold_masks[k::2], axis=0) for k in (0, 1)]
     torque = np.empty_like(train.tau)
@@ -458,7 +458,7 @@ def cross_fit(fitter: Fitter, fit: FittedModel, train: Dataset, report: Report) 
         torque[held] = np.asarray(other.predict_torque(train.subset(np.flatnonzero(held))), dtype=np.float64)
     info = {"in_sample_mse": mse(rigid_torque(fit, train), train.tau), "out_of_fold_mse": mse(torque, train.tau),
             "fit_budget_s": fitter.budget.seconds if fitter.budget.steps is None else None,
-            "fit_budget": fitter.budget.to_json(), "seconds": round(time.perf_counter() - t0, 3)}
+            "fit_budget": fitter.budget.to_json(), "seconds": round(now() - t0, 3)}
     report(f"round 0: {fitter.method} cross-fitted on two halves of the training data ({fitter.budget.describe()} each): "
            f"torque MSE {info['out_of_fold_mse']:.4g} on the half it did not see, "
            f"{info['in_sample_mse']:.4g} for the fit on all of it")

@@ -155,6 +155,12 @@ def test_an_expression_reads_back_exactly_from_its_json(expr):
     assert expression_from_json(json.loads(json.dumps(tree))) == expr
 
 
+def test_a_float_beyond_a_double_is_refused_at_once_without_its_digits():
+    huge = sympy.Float(1e6) ** 3 ** 6  # a float of 10^4374: printing its digits takes minutes
+    with pytest.raises(ValueError, match=r"holds a float about 10\^4374, beyond a double"):
+        expression_to_json(huge * _symbols[0])
+
+
 def test_an_expression_node_outside_the_fixed_list_is_refused():
     for tree in ({"op": "eval", "args": []}, {"symbol": "__class__.__bases__"}, {"float": "1e999x"}, [1, 2],
                  {"symbol": "q_1", "assumptions": {"commutative": "yes"}}):

@@ -1,24 +1,34 @@
 """The residual loop keeps its budget on any machine: a round the budget ends in
-is undone and the rounds before it are kept, a killed loop returns its last
-checkpoint, and a fit slower than expected still gives a result."""
+is undone and the rounds before it are kept; a loop whose process is killed
+returns the checkpoint that process wrote, under the limit of the phase it was
+killed in; and a fit slower than expected still gives a result. The tests
+control the clocks rather than rely on the machine's speed."""
 
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+import bench.core.budget as budget_module
 import bench.residual.job as job_module
 import bench.residual.loop as loop_module
+import bench.runner.isolation as isolation
+from bench.core.csv_format import write_csv
 from bench.residual import residual_loop
 from bench.residual.job import ResidualJob, run_residual
-from bench.runner.isolation import CallFailed, Outcome
-from tests.commandline import cli
+from bench.residual.model import Fitter
+from bench.runner.isolation import CallFailed
 from tests.residual.test_loop import SYSID, data_with, quiet
 
 ROOT = Path(__file__).resolve().parents[2]
+HANG = str(ROOT / "tests" / "plugins" / "hang.py")
+#: how much longer than its budget each fit takes in the slow machine's test
+SLOWER = 1.6
 FRICTION = {"viscous_friction": (0.8, 0.5), "coulomb_friction": (1.5, 0.7)}
 
 
@@ -54,61 +64,87 @@ def test_a_round_the_budget_ends_in_is_undone_and_the_rounds_before_it_are_kept(
     assert all(c.rollout is None for c in saved)
 
 
-def _killed_in(phase: str, checkpoint: dict | None):
-    """A ``run_call`` whose child left ``checkpoint`` and was killed in ``phase``."""
+def _jump_when_hanging(monkeypatch, folder: Path) -> None:
+    """The runner's clock: the real one, until the loop's process marks that it hangs
+    (tests/plugins/hang.py); from then on each reading is a day past the one before,
+    so that the runner kills it at its next look, whatever the phase's limit."""
+    real, mark, jumped = time.monotonic, folder / "hanging", [0.0]
 
-    def run_call(call, result_file, work, name, limits, echo=None):
-        if checkpoint is not None:
-            Path(call.payload["checkpoint_path"]).write_text(json.dumps(checkpoint))
-        return Outcome(None, phase, killed=True)
+    def monotonic():
+        if mark.exists():
+            jumped[0] += 86400.0
+        return real() + jumped[0]
 
-    return run_call
+    monkeypatch.setattr(isolation, "time", SimpleNamespace(monotonic=monotonic, sleep=time.sleep))
 
 
-def test_a_killed_loop_returns_the_rounds_that_finished_with_where_it_stopped(monkeypatch, tmp_path):
+def _hanging_job(tmp_path: Path, place: str, monkeypatch) -> ResidualJob:
+    """A loop on the double pendulum with friction, by work, whose process hangs at ``place``."""
+    folder = tmp_path / place
+    folder.mkdir()
     train, test = data_with(FRICTION, n=1000)
-    saved = []
-    residual_loop("sysid", train, test, steps=SYSID, report=quiet, checkpoint=saved.append)
-    job = ResidualJob("double_pendulum", "sysid", budget_s=10.0, json_path=str(tmp_path / "out.json"),
-                      report_path=str(tmp_path / "out.md"))
+    n = len(test)  # test data with a recording's times, so that the loop runs its driven rollouts after the rounds
+    write_csv(train, folder / "train.csv")
+    write_csv(test.replace(recording=np.full(n, "r0"), trajectory=np.full(n, "b"), time=np.arange(n) * 0.01),
+              folder / "test.csv")
+    _jump_when_hanging(monkeypatch, folder)
+    return ResidualJob("double_pendulum", "sysid", train_path=str(folder / "train.csv"),
+                       test_path=str(folder / "test.csv"), budget_s=600.0, steps=SYSID, plugins=(HANG,),
+                       json_path=str(folder / "out.json"), report_path=str(folder / "out.md"))
+
+
+def test_a_loop_killed_in_a_round_returns_the_rounds_its_process_saved(monkeypatch, tmp_path):
     lines = []
-    monkeypatch.setattr(job_module, "run_call", _killed_in("loop", saved[1].to_json()))
-    out = run_residual(job, lines.append)
-    assert "was still running at 1.5 x its budget of 10 s, in round 2, and was killed" in out.stopped
-    assert "the rounds up to round 1 are kept" in out.stopped and lines[-1] == f"stopped: {out.stopped}"
-    written = json.loads((tmp_path / "out.json").read_text())
+    out = run_residual(_hanging_job(tmp_path, "round2", monkeypatch), lines.append)
+    assert [r["round"] for r in out.rounds] == [0, 1] and out.effects and out.rollout is None
+    assert out.stopped == ("the loop was still running at its ceiling of 600 s, in round 2, and was killed: the "
+                           "rounds up to round 1 are kept")
+    assert lines[-1] == f"stopped: {out.stopped}"
+    written = json.loads((tmp_path / "round2" / "out.json").read_text())
     assert written["stopped"] == out.stopped and [r["round"] for r in written["rounds"]] == [0, 1]
-    report = (tmp_path / "out.md").read_text()
+    report = (tmp_path / "round2" / "out.md").read_text()
     assert "**Stopped early:**" in report and "![residuals" not in report  # no models: no plot
-    assert not (tmp_path / "out_residuals.png").exists()
-    # killed in the driven rollouts: every round, no rollouts
-    monkeypatch.setattr(job_module, "run_call", _killed_in("evaluate", saved[-1].to_json()))
-    out = run_residual(job, quiet)
-    assert out.rounds == saved[-1].to_json()["rounds"] and out.rollout is None
-    assert out.stopped.startswith("the driven rollouts after the rounds were still running after 120 s")
-    # killed before round 0 ended: nothing to return
-    monkeypatch.setattr(job_module, "run_call", _killed_in("loop", None))
+
+
+def test_a_loop_killed_in_its_driven_rollouts_keeps_every_round_under_the_rollouts_own_limit(monkeypatch, tmp_path):
+    out = run_residual(_hanging_job(tmp_path, "rollouts", monkeypatch), quiet)
+    assert out.rounds[-1].get("stop") is None and out.effects and out.rollout is None
+    assert out.stopped == (f"the driven rollouts after the rounds were still running after "
+                           f"{job_module.evaluation_limit(600.0):g} s; killed: the result has every round and no rollouts")
+
+
+def test_a_loop_killed_before_round_0_ended_has_nothing_to_return(monkeypatch, tmp_path):
     with pytest.raises(CallFailed, match="in round 0; killed"):
-        run_residual(job, quiet)
+        run_residual(_hanging_job(tmp_path, "round0", monkeypatch), quiet)
+    assert not (tmp_path / "round0" / "out.json").exists()
 
 
-def test_a_fit_slower_than_expected_still_returns_the_rounds_that_finished(tmp_path):
-    # the fit takes 1.4 x its half of the budget, so the rounds have less than a third of it: the loop
-    # returns the rounds that finished in time, and where the budget ended it early it says where. How
-    # many rounds finish depends on the machine; that a result comes back does not
-    for name, n, seed in (("train", 1000, 0), ("test", 500, 1000)):
-        r = cli("data", "--system", "double_pendulum", "--n", str(n), "--seed", str(seed),
-                "--out", str(tmp_path / f"{name}.csv"), "--effects", "viscous_friction=0.8,0.5", "coulomb_friction=1.5,0.7")
-        assert r.returncode == 0, r.stderr
-    r = cli("residual", "--system", "double_pendulum", "--method", "slow_sysid", "--plugin",
-            str(ROOT / "tests" / "plugins" / "slow.py"), "--train", str(tmp_path / "train.csv"),
-            "--test", str(tmp_path / "test.csv"), "--budget", "2", "--json", str(tmp_path / "out.json"),
-            "--report", str(tmp_path / "out.md"))
-    assert r.returncode == 0, r.stdout + r.stderr
-    out = json.loads((tmp_path / "out.json").read_text())
-    assert out["rounds"][0]["round"] == 0 and (tmp_path / "out.md").is_file()
-    finished = out["rounds"][-1].get("stop") is None and "nothing significant left" in r.stdout
-    assert finished or (f"stopped early: {out['stopped']}" in r.stdout and "the budget of 2 s" in out["stopped"])
+def test_a_fit_slower_than_expected_still_returns_the_rounds_that_finished(monkeypatch):
+    # the clock moves a millisecond each time it is read, and each fit takes 1.6 x its budget on it: the loop
+    # stops itself where the budget ends, with the rounds that finished, the same on any machine
+    train, test = data_with(FRICTION, n=1000)
+    clock = [0.0]
+
+    def tick():
+        clock[0] += 1e-3
+        return clock[0]
+
+    monkeypatch.setattr(budget_module, "_clock", tick)
+    real_fit = Fitter.fit
+
+    def slow_fit(self, data):
+        began = clock[0]
+        fitted = real_fit(self, data)
+        clock[0] = max(clock[0], began + SLOWER * self.budget.seconds)
+        return fitted
+
+    monkeypatch.setattr(Fitter, "fit", slow_fit)
+    lines = []
+    out = residual_loop("sysid", train, test, budget_s=2.0, report=lines.append)
+    last = out.rounds[-1]["round"]
+    assert [r["round"] for r in out.rounds] == list(range(last + 1)) and last >= 2 and out.effects
+    assert out.stopped.startswith(f"the budget of 2 s ran out in round {last}'s trace before it found anything")
+    assert lines[-1].startswith(f"round {last}: the loop's budget ran out before the trace found anything")
 
 
 def test_an_error_in_a_later_round_or_the_rollouts_keeps_the_rounds_that_finished(monkeypatch):
