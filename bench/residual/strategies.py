@@ -1,7 +1,8 @@
 """How the residual loop treats each kind of fitted model: one refit strategy per kind.
 
 A fitted model declares its structure (:meth:`bench.core.models.FittedModel.structure`),
-and :func:`strategy_for` picks the strategy once, at the start of the loop.
+and :func:`strategy_for` picks the strategy registered for it (:data:`STRATEGIES`,
+:func:`refits`) once, at the start of the loop.
 A strategy owns what differs between kinds of model:
 
 * :meth:`Strategy.start`: what the loop's round 0 does with the fit (a
@@ -36,7 +37,6 @@ strategy               models                            refit with effects
 from __future__ import annotations
 
 import abc
-import functools
 import math
 from typing import ClassVar
 
@@ -51,15 +51,11 @@ from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary
 from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
 from bench.residual.basis import orthonormal_basis
+from bench.residual.expression_terms import MAX_SYMBOLIC_TERMS, expression_terms
 from bench.core.folds import folds
 from bench.core.budget import now
 from bench.runner.progress import Report
 
-#: a symbolic model with more terms than this is refitted like a neural one
-#: (a least-squares refit of thousands of terms is neither fast nor meaningful)
-MAX_SYMBOLIC_TERMS = 200
-#: an expression with more nodes than this is not expanded into terms at all
-MAX_SYMBOLIC_NODES = 50 * MAX_SYMBOLIC_TERMS
 #: random starts of the parametric polish, beside the method's own parameters
 POLISH_STARTS = 16
 #: training samples each start of the polish is fitted on (the best start is
@@ -67,11 +63,33 @@ POLISH_STARTS = 16
 POLISH_SAMPLES = 256
 
 
+#: the refit strategy of each structure a model declares (:meth:`~bench.core.models.FittedModel.structure`);
+#: a new kind of model declares a structure of its own and registers its strategy with :func:`refits`
+STRATEGIES: dict[str, type["Strategy"]] = {}
+
+
+def refits(structure: str):
+    """Register the decorated strategy for the models that declare ``structure``."""
+
+    def register(cls: type["Strategy"]) -> type["Strategy"]:
+        if STRATEGIES.get(structure, cls) is not cls:
+            raise ValueError(f"the structure {structure!r} already has a refit strategy, {STRATEGIES[structure].__name__}")
+        STRATEGIES[structure] = cls
+        return cls
+
+    return register
+
+
 class Strategy(abc.ABC):
     """How the loop refits one kind of model; see the module docstring."""
 
     #: the strategy's name, as the loop's JSON gives it
     name: ClassVar[str]
+
+    @classmethod
+    def of(cls, fitted: FittedModel) -> "Strategy | None":
+        """The strategy for ``fitted``, or ``None`` where it cannot take it."""
+        return cls()
     #: candidates a trace step may accept (``None``: as many as pass)
     trace_steps: ClassVar[int | None] = None
     #: whether the model's own columns span its torque, so that tracing fits the torque itself
@@ -145,6 +163,7 @@ class Start:
         self.polish_deadline, self.report = polish_deadline, report
 
 
+@refits("parametric")
 class Parametric(Strategy):
     """A form with nonlinear parameters (:class:`~bench.core.models.ParametricModel`)."""
 
@@ -175,6 +194,7 @@ class Parametric(Strategy):
         return nonlinear_fit(model.rigid, train, effects, coef)
 
 
+@refits("linear")
 class Linear(Strategy):
     """A model linear in its parameters (:class:`~bench.core.models.LinearParametricModel`):
     least squares has reached its optimum already, so round 0 keeps it."""
@@ -199,6 +219,7 @@ class Linear(Strategy):
         return feasibility_of(model.rigid, train)
 
 
+@refits("feasible")
 class Feasible(Linear):
     """A model linear in its parameters held physically feasible
     (:class:`~bench.core.models.FeasibleSet`): refitted with the effects
@@ -222,6 +243,7 @@ class Feasible(Linear):
         return LoopModel(model.rigid.with_coefficients(coef[:k]), effects, coef[k:], stderr[k:])
 
 
+@refits("expression")
 class Expression(Strategy):
     """A symbolic model of at most :data:`MAX_SYMBOLIC_TERMS` terms: its terms'
     coefficients are refitted with the effects (``g`` is linear in ``L``).
@@ -238,6 +260,12 @@ class Expression(Strategy):
 
     def __init__(self, basis: tuple[sympy.Expr, ...]):
         self.basis = TermLibrary.of_lagrangian(basis)
+
+    @classmethod
+    def of(cls, fitted: FittedModel) -> "Expression | None":
+        """Its terms' strategy, ``None`` where the expression is too large to expand into terms."""
+        basis = expression_terms(fitted)
+        return None if basis is None else cls(basis)
 
     def kinetic(self, dof: int) -> None:
         """Add each ``qd_j^2`` the basis lacks (see the class docstring)."""
@@ -260,6 +288,7 @@ class Expression(Strategy):
         return LoopModel(ExpressionModel(expr, train.dof), effects, coef[k:], stderr[k:])
 
 
+@refits("opaque")
 class KeptFit(Strategy):
     """A model the loop does not refit (a network, or SyReNets' full equation):
     only the effects are fitted to what it leaves. Its own terms therefore
@@ -306,53 +335,10 @@ class KeptFit(Strategy):
 
 def strategy_for(fitted: FittedModel) -> Strategy:
     """The strategy for ``fitted``, chosen once from its declared structure
-    (:meth:`~bench.core.models.FittedModel.structure`); an expression too
-    large to expand into terms is kept like a network."""
-    structure = fitted.structure()
-    if structure == "parametric":
-        return Parametric()
-    if structure == "linear":
-        return Linear()
-    if structure == "feasible":
-        return Feasible()
-    if structure == "expression":
-        basis = expression_terms(fitted)
-        if basis is not None:
-            return Expression(basis)
-    return KeptFit()
-
-
-def expression_terms(model: FittedModel) -> tuple[sympy.Expr, ...] | None:
-    """The coefficient-free terms of the model's expanded expression that act on
-    the torque; ``None`` where the model says its terms exceed
-    :data:`MAX_SYMBOLIC_TERMS` (without building it), where it has no
-    expression, or where its expression is too large to expand or has more terms."""
-    bound = model.expression_terms_bound()
-    if bound is not None and bound > MAX_SYMBOLIC_TERMS:
-        return None
-    expr = model.expression()
-    return None if expr is None else _terms(expr)
-
-
-def _small(expr: sympy.Expr) -> bool:
-    """Whether ``expr`` has at most :data:`MAX_SYMBOLIC_NODES` nodes, found
-    without expanding it (counting stops at the limit)."""
-    for i, _ in enumerate(sympy.preorder_traversal(expr)):
-        if i >= MAX_SYMBOLIC_NODES:
-            return False
-    return True
-
-
-@functools.lru_cache(maxsize=16)
-def _terms(expr: sympy.Expr) -> tuple[sympy.Expr, ...] | None:
-    if not _small(expr):
-        return None
-    out = []
-    for term in sympy.Add.make_args(sympy.expand(expr)):
-        _, rest = term.as_coeff_Mul()
-        if rest.free_symbols and rest not in out:
-            out.append(rest)
-    return tuple(out) if len(out) <= MAX_SYMBOLIC_TERMS else None
+    (:meth:`~bench.core.models.FittedModel.structure`) in :data:`STRATEGIES`;
+    a model the strategy cannot take (an expression too large to expand into
+    terms) is kept like a network."""
+    return STRATEGIES.get(fitted.structure(), KeptFit).of(fitted) or KeptFit()
 
 
 # -- the parametric strategy's fits ------------------------------------------------------

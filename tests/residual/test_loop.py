@@ -431,3 +431,18 @@ def test_a_long_log_is_thinned_and_the_result_says_so(monkeypatch):
     out = residual_loop("sparse", train, None, steps=SOLVED, report=lines.append)
     assert out.thinned == 4 and out.to_json()["thinned"] == 4
     assert any("one sample in 4" in line and "200 samples" in line for line in lines)
+
+
+def test_a_model_of_a_structure_of_its_own_gets_the_strategy_registered_for_it(monkeypatch):
+    from types import SimpleNamespace
+
+    from bench.residual import strategies
+
+    class Mine(strategies.KeptFit):
+        name = "mine"
+
+    monkeypatch.setitem(strategies.STRATEGIES, "mine", Mine)
+    assert type(strategies.strategy_for(SimpleNamespace(structure=lambda: "mine"))) is Mine
+    assert type(strategies.strategy_for(SimpleNamespace(structure=lambda: "unheard of"))) is strategies.KeptFit
+    with pytest.raises(ValueError, match="'linear' already has a refit strategy, Linear"):
+        strategies.refits("linear")(Mine)
