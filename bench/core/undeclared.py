@@ -5,11 +5,10 @@ as ``bench data --effects`` names them.
 * a one-joint effect: one coefficient per joint (``viscous_friction=0.8,0.5``);
 * a coupled effect: ``i-j:c`` items, joints from 1 (``coupled_spring=1-2:3.0``);
 * an effect of the whole system: one number (``tip_payload=0.3``);
-* a torque sensor's gain: one per joint, applied to the torque the arm and
-  every other effect make (``torque_gain=1,0.96``);
-* a drive's load-dependent friction: one ``mu`` per joint, applied to the
-  torque the arm and every other effect make, before a gain
-  (``load_friction=0,0.1``);
+* a law of the torque sensor or the drive (:data:`bench.core.sensor_laws.SENSOR_LAWS`,
+  a plugin's too): one value per joint, applied with the law's own class to the
+  torque the arm and every other effect make (``torque_gain=1,0.96``,
+  ``load_friction=0,0.1``);
 * a law of several parameters: ``j:p1,...,pk`` items, ``;``-separated, in the
   order of its parameters (``stribeck_friction=1:1.0,2.0,0.5,0.3``,
   ``smooth_coulomb=2:0.7,0.05``).
@@ -25,9 +24,17 @@ from bench.core.data import Dataset
 from bench.core.effects import EFFECTS
 from bench.core.errors import ConfigError
 from bench.core.laws import LAWS
+from bench.core.sensor_laws import SENSOR_LAWS, JointTorqueLaw
 
 #: the laws the generator takes as ``j:p1,...,pk`` items: those of several parameters, or a shaped one
 GENERATOR_LAWS = {name: law for name, law in LAWS.items() if law.composite}
+
+
+def torque_laws() -> dict[str, type[JointTorqueLaw]]:
+    """The registered laws of the sensor or the drive that multiply one joint's torque
+    (:data:`bench.core.sensor_laws.SENSOR_LAWS`, a plugin's among them): the generator
+    applies each with the class the residual loop fits."""
+    return {name: law for name, law in SENSOR_LAWS.items() if issubclass(law, JointTorqueLaw)}
 
 
 def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict[str, dict[tuple[int, ...], float]]:
@@ -41,7 +48,8 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
         name = name.strip()
         if not sep:
             raise ConfigError(f"{source}: expected NAME=c1,...,c{dof} or NAME=i-j:c, got {item!r}")
-        known = [n for n, e in EFFECTS.items() if e.shaped is None and n != "time_shift"] + list(GENERATOR_LAWS)
+        sensor = torque_laws()
+        known = [n for n, e in EFFECTS.items() if e.shaped is None and not e.sensor] + list(GENERATOR_LAWS) + list(sensor)
         if name == "time_shift":
             raise ConfigError(f"{source}: time_shift needs recordings with time stamps; generated samples have none "
                               f"(bench robot-log --torque-delay SECONDS records one)")
@@ -49,6 +57,18 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
             raise ConfigError(f"{source}: unknown effect {name!r}; known: {', '.join(known)}")
         if name in GENERATOR_LAWS:
             out[name] = _parse_law(name, values, dof, source)
+            continue
+        if name in sensor:
+            law = sensor[name]
+            try:
+                values_ = tuple(float(v) for v in values.split(","))
+            except ValueError:
+                values_ = ()
+            condition = law.generable(law.neutral)[1]
+            if len(values_) != dof or not all(map(math.isfinite, values_)) or not all(law.generable(v)[0] for v in values_):
+                raise ConfigError(f"{source}: {name} needs {dof} coefficients with {condition}, one per joint "
+                                  f"({law.parameter} = {law.neutral:g}: none), got {values!r}")
+            out[name] = {(j,): c for j, c in enumerate(values_)}
             continue
         if EFFECTS[name].arity == 0:
             try:
@@ -67,11 +87,6 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
                 raise ConfigError(f"{source}: {name} needs numbers, got {values!r}") from None
             if len(coefs) != dof or not all(np.isfinite(coefs)):
                 raise ConfigError(f"{source}: {name} needs {dof} finite coefficient(s), one per joint, got {values!r}")
-            if name == "torque_gain" and not min(coefs) > 0:
-                raise ConfigError(f"{source}: torque_gain needs {dof} gains > 0, one per joint (1: exact), got {values!r}")
-            if name == "load_friction" and not all(EFFECTS[name].admissible(c) for c in coefs):
-                raise ConfigError(f"{source}: load_friction needs {dof} coefficients with "
-                                  f"{EFFECTS[name].condition}, one per joint (0: none), got {values!r}")
             out[name] = {(j,): c for j, c in enumerate(coefs)}
             _physical(name, out[name], source)
             continue
@@ -139,7 +154,7 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
     effects = {name: coefs if isinstance(coefs, dict) else {(j,): c for j, c in enumerate(coefs)}
                for name, coefs in effects.items()}
     for name, coefs in effects.items():
-        if EFFECTS.get(name) is not None and EFFECTS[name].sensor:  # they act on the arm's torque: after the arm's effects
+        if name in SENSOR_LAWS:  # they act on the arm's torque: after the arm's effects
             continue
         for joints, c in coefs.items():
             if name in GENERATOR_LAWS:
@@ -156,11 +171,9 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
                 if L is not None and term.in_lagrangian:
                     L += coef * term.value(data)
 
-    if "load_friction" in effects:  # the drive carries the arm's torque; its friction grows with it
-        mu = np.asarray([effects["load_friction"].get((j,), 0.0) for j in range(data.dof)])
-        tau += mu * np.abs(tau) * data.velocity_sign()
-    if "torque_gain" in effects:
-        tau *= np.asarray([effects["torque_gain"].get((j,), 1.0) for j in range(data.dof)])
+    for name, law in torque_laws().items():  # each multiplies a joint's torque, so their order does not matter
+        for (j,), c in effects.get(name, {}).items():
+            tau[:, j] *= law(j, c).joint_factor(data.replace(tau=tau.copy()))
 
     def value(c):
         return ",".join(f"{x:g}" for x in c) if isinstance(c, tuple) else f"{c:g}"

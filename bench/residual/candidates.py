@@ -39,7 +39,7 @@ from bench.core.effects import EFFECTS
 from bench.core.laws import FAMILIES, Part, group
 from bench.core.symbolic import coordinate_symbols
 from bench.core.terms import Term, TermLibrary, lagrangian_library, lagrangian_library_size
-from bench.residual.sensor_laws import law_of
+from bench.core.sensor_laws import law_of
 
 
 #: the most Lagrangian terms the open-ended library may have (see the module docstring)

@@ -116,11 +116,11 @@ def test_progress_evaluations_are_spaced():
 def test_a_step_limited_run_evaluates_the_same_steps_at_any_speed(monkeypatch, max_steps):
     """Which states are compared must not depend on how fast the machine is,
     or a seed's result changes with the load (seen on a busy machine)."""
-    import methods.progress
+    import bench.core.budget
 
     def evaluated_steps(step_seconds):
         clock = iter(np.cumsum(step_seconds)).__next__
-        monkeypatch.setattr(methods.progress.time, "perf_counter", clock)
+        monkeypatch.setattr(bench.core.budget, "_clock", clock)
         seen = []
         p = Progress(1e9, evaluate=lambda: seen.append(p.steps) or 1.0 / (1 + p.steps), snapshot=lambda: None,
                      max_steps=max_steps)
@@ -140,10 +140,10 @@ def test_a_step_limited_run_evaluates_the_same_steps_at_any_speed(monkeypatch, m
 def _timed_loop(monkeypatch, step_seconds, budget_s=None, schedule=None):
     """A loop under a scripted clock that reads the fraction of its budget at every step, as a
     cosine schedule or a multi-start selection does; returns what it read, evaluated and did."""
-    import methods.progress
+    import bench.core.budget
 
     clock = iter(np.cumsum(step_seconds)).__next__
-    monkeypatch.setattr(methods.progress.time, "perf_counter", clock)
+    monkeypatch.setattr(bench.core.budget, "_clock", clock)
     evaluated, read = [], []
     p = Progress(np.inf if budget_s is None else budget_s, evaluate=lambda: evaluated.append(p.steps) or 1.0,
                  snapshot=lambda: None, schedule=schedule)

@@ -14,7 +14,7 @@ import pytest
 
 from bench.core.data import generate
 from bench.residual import residual_loop
-from bench.residual.sensor_laws import LAWS, SensorLaw, register
+from bench.core.sensor_laws import SENSOR_LAWS, SensorLaw, register
 from bench.residual.sensors import Sensed, Sensor
 from systems import get_system
 
@@ -28,9 +28,11 @@ def speed_loss():
     sys.modules.pop("speed_loss_plugin", None)
     spec = importlib.util.spec_from_file_location("speed_loss_plugin", PLUGIN)
     module = importlib.util.module_from_spec(spec)
+    sys.modules["speed_loss_plugin"] = module  # as a plugin is imported: once, so that --plugin finds it imported
     spec.loader.exec_module(module)
     yield module.SpeedLoss
-    del LAWS[module.SpeedLoss.name]
+    del SENSOR_LAWS[module.SpeedLoss.name]
+    sys.modules.pop("speed_loss_plugin", None)
 
 
 def drive(data, c):
@@ -78,3 +80,21 @@ def test_a_law_needs_a_name_of_its_own():
         register(type("Gain", (SensorLaw,), {"name": "torque_gain"}))
     with pytest.raises(ValueError, match="name of its own"):
         register(type("Offset", (SensorLaw,), {"name": "offset"}))
+
+
+def test_a_registered_law_of_the_drive_goes_into_generated_data_as_the_loop_reads_it(speed_loss, tmp_path):
+    from bench.core.csv_format import read_csv
+    from bench.core.undeclared import add_effects, parse_effects
+    from tests.commandline import cli
+
+    s = get_system("double_pendulum")
+    clean = generate(s, 64, 0)
+    np.testing.assert_allclose(add_effects(clean, parse_effects(["speed_loss=0.1,0"], 2), s).tau, drive(clean, [0.1, 0]).tau)
+    r = cli("data", "--system", "double_pendulum", "--n", "64", "--seed", "0", "--plugin", PLUGIN,
+            "--effects", "speed_loss=0.1,0", "--out", tmp_path / "d.csv")
+    assert r.returncode == 0, r.stderr
+    np.testing.assert_allclose(read_csv(tmp_path / "d.csv").tau, drive(clean, [0.1, 0]).tau, rtol=1e-9)
+    bad = cli("data", "--system", "double_pendulum", "--n", "64", "--seed", "0", "--plugin", PLUGIN, "--effects", "speed_loss=0.9,0",
+              "--out", tmp_path / "e.csv")
+    assert bad.returncode == 2 and "speed_loss needs 2 coefficients with 0 <= c <= 0.5" in bad.stderr
+    assert not (tmp_path / "e.csv").exists()

@@ -13,7 +13,7 @@ from bench.core.undeclared import add_effects, parse_effects
 from bench.core.errors import ConfigError
 from bench.experiments.robot_log import simulate
 from bench.residual import residual_loop
-from bench.residual.sensor_laws import shifted
+from bench.core.sensor_laws import shifted
 from bench.residual.sensors import Sensed, Sensor
 from systems import get_system
 
@@ -47,7 +47,7 @@ def test_the_generator_applies_a_gain_to_the_torque_of_the_arm_and_its_other_eff
     np.testing.assert_allclose(both.tau[:, 0], clean.tau[:, 0])
     np.testing.assert_allclose(both.tau[:, 1], 1.05 * (clean.tau[:, 1] + 0.2))
     np.testing.assert_allclose(both.L, clean.L)  # a sensor does not change the arm's L
-    with pytest.raises(ConfigError, match="gains > 0"):
+    with pytest.raises(ConfigError, match=r"torque_gain needs 2 coefficients with g > 0, one per joint \(g = 1: none\)"):
         parse_effects(["torque_gain=1,0"], 2)
     with pytest.raises(ConfigError, match="robot-log --torque-delay"):
         parse_effects(["time_shift=0.01"], 2)

@@ -1,5 +1,5 @@
 r"""The laws that act between the arm's torque and the measured one, one class
-each, and their registry (:data:`LAWS`).
+each, and their registry (:data:`SENSOR_LAWS`).
 
 A law either moves the states at which a torque was measured (a *state
 law*: the time shift) or multiplies the arm's torque on a joint by a factor
@@ -111,6 +111,12 @@ class SensorLaw:
         return cls.bounds is None or cls.bounds[0] <= value <= cls.bounds[1]
 
     @classmethod
+    def generable(cls, value: float) -> tuple[bool, str]:
+        """Whether the data generator may apply the law at ``value``, and the
+        condition in words: by default the values the law admits (:meth:`admissible_value`)."""
+        return cls.admissible_value(value), cls.condition() or "any value"
+
+    @classmethod
     def condition(cls) -> str:
         """What :meth:`admissible_value` asks, in words."""
         return "" if cls.bounds is None else f"{cls.bounds[0]:g} <= {cls.parameter} <= {cls.bounds[1]:g}"
@@ -198,6 +204,11 @@ class TorqueGain(JointTorqueLaw):
     @classmethod
     def offered(cls, train, reference):
         return [j for j in range(train.dof) if j != reference]
+
+    @classmethod
+    def generable(cls, value):
+        """Any positive gain: data whose gain lies outside the range the loop admits test that it says so."""
+        return value > 0, f"{cls.parameter} > 0"
 
     @classmethod
     def term(cls, joint, dof):
@@ -324,17 +335,20 @@ class TimeShift(SensorLaw):
 
 
 #: every law of the sensor and the drive the loop looks for, by name, in the order it offers them
-LAWS: dict[str, type[SensorLaw]] = {law.name: law for law in (TorqueGain, LoadFriction, TimeShift)}
+SENSOR_LAWS: dict[str, type[SensorLaw]] = {law.name: law for law in (TorqueGain, LoadFriction, TimeShift)}
 
 
 def register(law: type[SensorLaw]) -> type[SensorLaw]:
-    """Add ``law`` to :data:`LAWS` (usable as a class decorator); a name taken already is refused."""
-    if not law.name or law.name in LAWS or law.name in EFFECTS and EFFECTS[law.name].place != "sensor":
+    """Add ``law`` to :data:`SENSOR_LAWS` (usable as a class decorator); a name another law has taken is
+    refused (the same class imported again, as a plugin file may be, takes its place)."""
+    known = SENSOR_LAWS.get(law.name)
+    again = known is not None and (known.__module__, known.__qualname__) == (law.__module__, law.__qualname__)
+    if not law.name or (known is not None and not again) or law.name in EFFECTS and EFFECTS[law.name].place != "sensor":
         raise ValueError(f"a law of the sensor or the drive needs a name of its own, got {law.name!r}")
-    LAWS[law.name] = law
+    SENSOR_LAWS[law.name] = law
     return law
 
 
 def law_of(term: Term) -> type[SensorLaw]:
     """The class of the law ``term`` (place ``sensor``) stands for."""
-    return LAWS[term.name]
+    return SENSOR_LAWS[term.name]
