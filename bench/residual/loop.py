@@ -87,12 +87,12 @@ from bench.core.data import Dataset, mse
 from bench.core.errors import first_line
 from bench.core.models import FittedModel
 from bench.core.terms import Term, TermLibrary, remembered_columns, share_columns
-from bench.evaluation.driven import driven_entry
 from bench.residual.candidates import candidates, describe_all, is_named, label, mismatch, resolved_periods, structural
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
+from bench.residual.rollouts import driven_rollouts
 from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, bic, trace
 from bench.residual.sensors import Sensed, Sensor, column as sensor_column, measured_rss, settle
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
@@ -273,21 +273,7 @@ class _Loop(Tidying):
         result.loop_seconds = loop_seconds
         self.checkpoint(result)
         if self.test is not None and self.test.time is not None and self.test.recording is not None:
-            report("driven rollouts of the test recordings, before and after (after the budget: their work is the "
-                   "data's and the models')")
-            t0 = now()
-            try:
-                # after: the arm's model under the arm's torques, as the sensor's laws correct the measured ones
-                result.rollout = {"before": driven_entry(first, self.test, report=_indented(report, "before")),
-                                  "after": driven_entry(model, self.sensor.correct(self.test),
-                                                        report=_indented(report, "after"))}
-            except Exception as exc:  # the rounds stand without their rollouts
-                traceback.print_exc()
-                failed = (f"the driven rollouts after the rounds failed ({type(exc).__name__}: {first_line(exc)}): "
-                          f"the rounds are kept")
-                result.stopped = failed if result.stopped is None else f"{result.stopped}; {failed}"
-                report(f"stopped: {failed}")
-            result.rollout_seconds = round(now() - t0, 2)
+            driven_rollouts(result, first, model, self.sensor, self.test, report)
         result.seconds = round(now() - self.start, 2)
         result.models = (first, Sensed(model, self.sensor))
         return result
@@ -494,11 +480,6 @@ class _Loop(Tidying):
             return candidate, candidate_held, candidate_mass, findings, True
         report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {candidate_held:.4g}")
         return candidate, candidate_held, candidate_mass, findings, False
-
-
-def _indented(report: Report, what: str) -> Report:
-    """``report`` with each line indented and prefixed by ``what``."""
-    return lambda line: report(f"  {what}: {line}")
 
 
 def _fmt(x) -> str:

@@ -11,12 +11,13 @@ from pathlib import Path
 
 import bench.residual.job as job
 import bench.residual.loop as loop
+import bench.residual.rollouts as rollouts
 from bench.residual.model import Fitter
 
 #: the mark a hanging process leaves beside its training file
 MARK = "hanging"
 
-_given_data, _round, _fit, _driven = job.given_data, loop._Loop.round, Fitter.fit, loop.driven_entry
+_given_data, _round, _fit, _driven = job.given_data, loop._Loop.round, Fitter.fit, rollouts.driven_entry
 _where: dict[str, Path] = {}
 
 
@@ -47,4 +48,4 @@ def driven_entry(*args, **kwargs):
     return _driven(*args, **kwargs)
 
 
-job.given_data, loop._Loop.round, Fitter.fit, loop.driven_entry = given_data, round_, fit, driven_entry
+job.given_data, loop._Loop.round, Fitter.fit, rollouts.driven_entry = given_data, round_, fit, driven_entry

@@ -17,6 +17,7 @@ import pytest
 import bench.core.budget as budget_module
 import bench.residual.job as job_module
 import bench.residual.loop as loop_module
+import bench.residual.rollouts as rollouts_module
 import bench.runner.isolation as isolation
 from bench.core.csv_format import write_csv
 from bench.residual import residual_loop
@@ -168,7 +169,7 @@ def test_an_error_in_a_later_round_or_the_rollouts_keeps_the_rounds_that_finishe
     def broken(*args, **kwargs):
         raise ValueError("no windows")
 
-    monkeypatch.setattr(loop_module, "driven_entry", broken)
+    monkeypatch.setattr(rollouts_module, "driven_entry", broken)
     n = len(test)  # test data with a recording's times, so that the loop runs its driven rollouts after the rounds
     timed = test.replace(recording=np.full(n, "r0"), trajectory=np.full(n, "b"), time=np.arange(n) * 0.01)
     out = residual_loop("sysid", train, timed, steps=SYSID, report=quiet)

@@ -1,0 +1,42 @@
+"""The driven rollouts the residual loop runs after its rounds, on test data
+with recordings and time stamps: the model of round 0 and the loop's final
+model, each driven by the recorded torques (:func:`bench.evaluation.driven.driven_entry`).
+Their work is the data's and the models', not the budget's; where they fail,
+the rounds stand without them."""
+
+from __future__ import annotations
+
+import traceback
+
+from bench.core.budget import now
+from bench.core.data import Dataset
+from bench.core.errors import first_line
+from bench.core.models import FittedModel
+from bench.evaluation.driven import driven_entry
+from bench.residual.result import ResidualResult
+from bench.residual.sensors import Sensor
+from bench.runner.progress import Report
+
+
+def driven_rollouts(result: ResidualResult, first: FittedModel, model: FittedModel, sensor: Sensor, test: Dataset,
+                    report: Report) -> None:
+    """Set ``result.rollout`` (``before``: ``first`` on the test recordings; ``after``:
+    ``model``, the arm's model, under the arm's torques as ``sensor``'s laws correct the
+    measured ones) and ``result.rollout_seconds``; where they fail, add why to ``result.stopped``."""
+    report("driven rollouts of the test recordings, before and after (after the budget: their work is the "
+           "data's and the models')")
+    t0 = now()
+    try:
+        result.rollout = {"before": driven_entry(first, test, report=_indented(report, "before")),
+                          "after": driven_entry(model, sensor.correct(test), report=_indented(report, "after"))}
+    except Exception as exc:  # the rounds stand without their rollouts
+        traceback.print_exc()
+        failed = f"the driven rollouts after the rounds failed ({type(exc).__name__}: {first_line(exc)}): the rounds are kept"
+        result.stopped = failed if result.stopped is None else f"{result.stopped}; {failed}"
+        report(f"stopped: {failed}")
+    result.rollout_seconds = round(now() - t0, 2)
+
+
+def _indented(report: Report, what: str) -> Report:
+    """``report`` with each line indented and prefixed by ``what``."""
+    return lambda line: report(f"  {what}: {line}")
