@@ -24,11 +24,8 @@ from bench.core.csv_format import read_csv
 from bench.core.models import NoVariant
 from bench.core.timeouts import Timeout
 from bench.core.system import System
-from bench.evaluation.driven import driven_entry
-from bench.evaluation.forces import forces_entry
-from bench.evaluation.per_joint import per_joint_entry
-from bench.evaluation.reference import against, applies as has_standard_model, constant_reference, standard_reference
-from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, rollout_entry, scores
+from bench.evaluation.assessment import assess
+from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, scores
 from bench.evaluation.tuning import prepare as prepare_search, tune
 from bench.runner.plugins import import_plugins
 from bench.runner.provenance import device_entry, provenance
@@ -42,10 +39,6 @@ from systems import SYSTEMS
 #: how a failed record's error begins where the fit diverged (its MSE is NaN or inf): an outcome a
 #: benchmark records, not an error of the method's code (:func:`raised`)
 DIVERGED = "non-finite"
-#: test samples the force decomposition is scored on (:mod:`bench.evaluation.forces`)
-FORCES_SAMPLES = 2000
-#: seconds a rollout of a time-budgeted run may take (under a work budget only its count of evaluations bounds it)
-ROLLOUT_LIMIT_S = 120.0
 
 
 def method_config(spec: RunSpec) -> dict:
@@ -136,6 +129,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     ``data`` (one seed of a stack, :mod:`bench.runner.stacked`): the run then
     evaluates it.
 
+    Which scores apply beyond the train and test MSE (rollouts, references, the
+    force decomposition) is the policy of :func:`bench.evaluation.assessment.assess`.
     What follows the fit runs in stages (:class:`~bench.evaluation.scores.Stages`):
     a stage that fails (the expression, exact recovery, a variant, the
     rollout, the force decomposition (:mod:`bench.evaluation.forces`), the
@@ -216,37 +211,11 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             **({"tuning": tuning} if tuning is not None else {}),
             **exact,
         }
-        if system.simulated and test is not None and spec.rollout:
-            clock = time.perf_counter()
-            limit = None if budget.kind == STEPS else ROLLOUT_LIMIT_S  # a work budget's results do not depend on time
-            fields["rollout"] = stages.run("rollout", rollout_entry, method, system, test, limit)
-            timing["rollout_s"] = time.perf_counter() - clock
-        elif test is not None and test.time is not None and spec.rollout and spec.experiment == "indirect":
-            clock = time.perf_counter()  # measured recordings: driven by their torques
-            fields["rollout"] = stages.run("rollout", driven_entry, method, test)
-            timing["rollout_s"] = time.perf_counter() - clock
+        fields["rollout"], assessed = assess(method, spec.experiment, system, train, test, test_prediction, stages,
+                                             rollout=spec.rollout, timed=budget.kind != STEPS, timing=timing)
+        fields["details"].update(assessed)
         if spec.save:
             fields["details"]["saved"] = stages.run("save", save_fitted, method, spec, train, system)
-        if not system.simulated and spec.experiment == "indirect":
-            fields["details"]["constant_model"] = constant_reference(train, test)
-            by_joint = stages.run("per joint", per_joint_entry, test_prediction, system, test)
-            if by_joint is not None:
-                fields["details"]["per_joint"] = by_joint
-        references = {name: stages.run(f"reference {name}", against, method, ref, train, test)
-                      for name, ref in method.references().items()}
-        if references:
-            fields["details"]["references"] = references
-        if has_standard_model(system) and spec.experiment == "indirect":
-            clock = time.perf_counter()
-            fields["details"]["standard_model"] = stages.run("standard model", standard_reference, system, train, test)
-            timing["standard_model_s"] = time.perf_counter() - clock
-        if test is not None:
-            clock = time.perf_counter()
-            part = test.subset(slice(0, FORCES_SAMPLES))
-            forces = stages.run("forces", forces_entry, method, system, part)
-            if forces is not None:
-                fields["details"]["forces"] = {"n": len(part), **forces}
-            timing["forces_s"] = time.perf_counter() - clock
         fields["details"]["timing"] = {k: round(v, 3) for k, v in timing.items()}
         memory["peak_mb"] = peak_resident_mb()
         fields["details"]["memory"] = {k: round(v, 1) for k, v in memory.items()}
