@@ -286,8 +286,10 @@ def compose(name: str) -> type | None:
     line: an unknown prior, an unknown residual, or one that fits no torques."""
     try:
         parsed = MethodName.parse(name)
-    except MethodNameError as exc:
-        raise RegistryError(str(exc)) from None
+    except MethodNameError as exc:  # a wrong hybrid's name is refused here; any other is the registry's unknown name
+        if exc.hybrid:
+            raise RegistryError(str(exc)) from None
+        return None
     if not parsed.hybrid or parsed.variant or parsed.tuned:
         return None
     prior, residual = parsed.prior, parsed.method

@@ -29,12 +29,18 @@ TUNED = " tuned"
 
 
 class MethodNameError(UserError, ValueError):
-    """A method name that does not parse; the message says which part is wrong."""
+    """A method name that does not parse; the message says which part is wrong, and
+    ``hybrid`` whether the name joins a prior to a method (``PRIOR+...``)."""
+
+    def __init__(self, message: str, hybrid: bool = False):
+        super().__init__(message)
+        self.hybrid = hybrid
 
 
-def _part(text: str, what: str, name: str) -> str:
+def _part(text: str, what: str, name: str, hybrid: bool) -> str:
     if not text or not text.replace("_", "").isalnum():
-        raise MethodNameError(f"method name {name!r}: its {what} {text!r} is not a name (letters, digits and '_')")
+        raise MethodNameError(f"method name {name!r}: its {what} {text!r} is not a name (letters, digits and '_')",
+                              hybrid)
     return text
 
 
@@ -57,14 +63,15 @@ class MethodName:
         text, tuned = (name[: -len(TUNED)], True) if name.endswith(TUNED) else (name, False)
         run, at, variant = text.partition(VARIANT)
         prior, plus, method = run.partition(HYBRID)
-        if not plus:
+        hybrid = bool(plus)
+        if not hybrid:
             prior, method = None, run
         elif HYBRID in method:
-            raise MethodNameError(f"method name {name!r}: the residual of a hybrid cannot be a hybrid")
+            raise MethodNameError(f"method name {name!r}: the residual of a hybrid cannot be a hybrid", hybrid)
         return cls(
-            method=_part(method, "method", name),
-            prior=_part(prior, "prior", name) if prior is not None else None,
-            variant=_part(variant, "variant", name) if at else None,
+            method=_part(method, "method", name, hybrid),
+            prior=_part(prior, "prior", name, hybrid) if hybrid else None,
+            variant=_part(variant, "variant", name, hybrid) if at else None,
             tuned=tuned,
         )
 
@@ -87,7 +94,7 @@ class MethodName:
         return (self.prior, self.method) if self.prior else (self.method,)
 
     def with_variant(self, variant: str) -> "MethodName":
-        return replace(self, variant=_part(variant, "variant", f"{self}{VARIANT}{variant}"))
+        return replace(self, variant=_part(variant, "variant", f"{self}{VARIANT}{variant}", self.hybrid))
 
     def with_tuned(self, tuned: bool = True) -> "MethodName":
         return replace(self, tuned=tuned)

@@ -32,3 +32,4 @@ def test_a_wrong_name_is_refused_naming_its_part(text, says):
     with pytest.raises(MethodNameError) as exc:
         MethodName.parse(text)
     assert says in str(exc.value) and "\n" not in str(exc.value)
+    assert exc.value.hybrid == (text.count("+") > 0)  # whether the name meant a hybrid

@@ -61,7 +61,9 @@ def test_hybrid_names_are_refused_in_one_line_and_nothing_is_written(tmp_path):
     for method, words in (("foo+gp", "unknown prior 'foo' in 'foo+gp'"),
                           ("standard+operon", "operon cannot learn a residual torque"),
                           ("standard+nothing", "unknown residual learner"),
-                          ("standard+gp", "the prior standard is SysId identified on an arm's linear form")):
+                          ("standard+gp", "the prior standard is SysId identified on an arm's linear form"),
+                          ("standard+gp+mlp", "the residual of a hybrid cannot be a hybrid"),
+                          ("sys-id", "unknown method 'sys-id'; did you mean 'sysid'?")):  # no hybrid: the registry's words
         r = cli("fit", "--system", "double_pendulum", "--experiment", "indirect", "--method", method, "--steps", "1",
                 "--json", out)
         assert r.returncode == 2 and r.stderr.count("\n") == 1 and words in r.stderr, (method, r.stderr)
