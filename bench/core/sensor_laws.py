@@ -111,10 +111,15 @@ class SensorLaw:
         return cls.bounds is None or cls.bounds[0] <= value <= cls.bounds[1]
 
     @classmethod
-    def generable(cls, value: float) -> tuple[bool, str]:
-        """Whether the data generator may apply the law at ``value``, and the
-        condition in words: by default the values the law admits (:meth:`admissible_value`)."""
-        return cls.admissible_value(value), cls.condition() or "any value"
+    def generable(cls, value: float) -> bool:
+        """Whether the data generator may apply the law at ``value``: by default
+        a value the law admits (:meth:`admissible_value`)."""
+        return cls.admissible_value(value)
+
+    @classmethod
+    def generable_condition(cls) -> str:
+        """What :meth:`generable` asks, in words."""
+        return cls.condition() or "any value"
 
     @classmethod
     def condition(cls) -> str:
@@ -208,7 +213,11 @@ class TorqueGain(JointTorqueLaw):
     @classmethod
     def generable(cls, value):
         """Any positive gain: data whose gain lies outside the range the loop admits test that it says so."""
-        return value > 0, f"{cls.parameter} > 0"
+        return value > 0
+
+    @classmethod
+    def generable_condition(cls):
+        return f"{cls.parameter} > 0"
 
     @classmethod
     def term(cls, joint, dof):

@@ -60,15 +60,11 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
             continue
         if name in sensor:
             law = sensor[name]
-            try:
-                values_ = tuple(float(v) for v in values.split(","))
-            except ValueError:
-                values_ = ()
-            condition = law.generable(law.neutral)[1]
-            if len(values_) != dof or not all(map(math.isfinite, values_)) or not all(law.generable(v)[0] for v in values_):
-                raise ConfigError(f"{source}: {name} needs {dof} coefficients with {condition}, one per joint "
-                                  f"({law.parameter} = {law.neutral:g}: none), got {values!r}")
-            out[name] = {(j,): c for j, c in enumerate(values_)}
+            coefs = _per_joint(name, values, dof, source)
+            if not all(map(law.generable, coefs)):
+                raise ConfigError(f"{source}: {name} needs {dof} coefficients with {law.generable_condition()}, one per "
+                                  f"joint ({law.parameter} = {law.neutral:g}: none), got {values!r}")
+            out[name] = {(j,): c for j, c in enumerate(coefs)}
             continue
         if EFFECTS[name].arity == 0:
             try:
@@ -81,12 +77,7 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
             out[name] = {(): value}
             continue
         if EFFECTS[name].arity == 1:
-            try:
-                coefs = tuple(float(v) for v in values.split(","))
-            except ValueError:
-                raise ConfigError(f"{source}: {name} needs numbers, got {values!r}") from None
-            if len(coefs) != dof or not all(np.isfinite(coefs)):
-                raise ConfigError(f"{source}: {name} needs {dof} finite coefficient(s), one per joint, got {values!r}")
+            coefs = _per_joint(name, values, dof, source)
             out[name] = {(j,): c for j, c in enumerate(coefs)}
             _physical(name, out[name], source)
             continue
@@ -105,6 +96,17 @@ def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict
         _physical(name, pairs, source)
         out[name] = pairs
     return out
+
+
+def _per_joint(name: str, values: str, dof: int, source: str) -> tuple[float, ...]:
+    """``c1,...,cn`` -> one finite coefficient per joint; a :class:`ConfigError` naming ``source`` otherwise."""
+    try:
+        coefs = tuple(float(v) for v in values.split(","))
+    except ValueError:
+        raise ConfigError(f"{source}: {name} needs numbers, got {values!r}") from None
+    if len(coefs) != dof or not all(np.isfinite(coefs)):
+        raise ConfigError(f"{source}: {name} needs {dof} finite coefficient(s), one per joint, got {values!r}")
+    return coefs
 
 
 def _physical(name: str, coefficients: dict[tuple[int, ...], float], source: str) -> None:
@@ -173,7 +175,7 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
 
     for name, law in torque_laws().items():  # each multiplies a joint's torque, so their order does not matter
         for (j,), c in effects.get(name, {}).items():
-            tau[:, j] *= law(j, c).joint_factor(data.replace(tau=tau.copy()))
+            tau[:, j] *= law(j, c).joint_factor(data.replace(tau=tau))
 
     def value(c):
         return ",".join(f"{x:g}" for x in c) if isinstance(c, tuple) else f"{c:g}"
