@@ -257,7 +257,7 @@ def test_an_output_path_under_a_file_is_refused_before_any_work(tmp_path, monkey
     from bench.runner import matrix
 
     (tmp_path / "f").write_text("x")
-    monkeypatch.setattr(matrix, "run_isolated", lambda *a, **k: pytest.fail("a run started before the refusal"))
+    monkeypatch.setattr(matrix, "run_one", lambda *a, **k: pytest.fail("a run started before the refusal"))
     code = main(["fit", "--system", "double_pendulum", "--method", "sysid", "--experiment", "indirect", "--budget", "60",
                  "--json", str(tmp_path / "f" / "run.json")])
     err = capsys.readouterr().err

@@ -93,7 +93,7 @@ def run_one(spec: RunSpec) -> tuple[Record, Path | None]:
     matrix), in a scratch folder; returns its record and, where something
     failed, the log that holds the traceback (the folder is then kept)."""
     work = Path(tempfile.mkdtemp(prefix="bench-fit-"))
-    record = matrix.run_isolated(spec, work)
+    record = matrix.run_one(spec, work)
     if record.status in ("failed", "timeout") or record.failed_stages:
         return record, matrix.log_path(work, spec.run_id)
     shutil.rmtree(work, ignore_errors=True)

@@ -5,15 +5,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_ignore_limits, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
+from bench.cli.options import (add_ignore_limits, add_config, add_device, add_plugin, add_set, add_split, budget, check_names,
                                check_split, configurations, device, hyperparameters, load_plugins, number)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
 from bench.residual.job import ResidualJob, run_residual
 from bench.residual.loop import FIT_SHARE, MAX_ROUNDS
-from bench.runner import matrix
+from bench.runner.job import KILL_FACTOR
 from methods import METHODS
-from systems import SYSTEMS
 
 HELP = "fit, trace the torque residual to missing effects, add them, refit; report the error before and after"
 
@@ -27,7 +26,7 @@ def add_arguments(res) -> None:
                      help=f"seconds for the fit and the rounds (default 60): the method's fit has {FIT_SHARE:.0%}% of "
                           f"it, no round starts that would end past it, a round still running at its end is undone, "
                           f"and the result keeps the rounds before it; the driven rollouts after the rounds are not "
-                          f"charged to it. The loop's process is killed only at {matrix.KILL_FACTOR} x it (the rounds "
+                          f"charged to it. The loop's process is killed only at {KILL_FACTOR} x it (the rounds "
                           f"that finished are kept); with --steps, only a ceiling past which the loop is killed "
                           f"(default: none)")
     res.add_argument("--steps", type=positive_int, default=None,
@@ -52,22 +51,10 @@ def main(args) -> int:
     (name,), plugins = load_plugins(args, [args.system])
     check_names(args, [name], [args.method])
     check_split(args.split, [name])
-    system = SYSTEMS[name](split=args.split)
-    entry = METHODS.entry(args.method)
-    if not entry.available:
-        raise UsageError(f"method {args.method} is unavailable: {entry.unavailable_reason()}")
-    reason = entry.obj.not_applicable_reason("indirect")
-    if reason:
-        raise UsageError(f"method {args.method} cannot run the loop, which fits torques: {reason}")
     configuration = configurations(args, [args.method])[args.method]
     named = METHODS[args.method].configuration(configuration)
     overrides = hyperparameters(args.overrides, args.method, [args.method])
     settings = {**named, **overrides}
-    METHODS[args.method](**settings)  # bad hyperparameters: exit 2 now
-    if not args.train and system.simulated:
-        raise UsageError(f"{name} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
-    if args.json is None and args.report is None:
-        print("note: neither --json nor --report given; the result is only printed")
     job = ResidualJob(
         system=name, method=args.method,
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
@@ -76,7 +63,10 @@ def main(args) -> int:
         plugins=plugins, split=args.split, device=device(args.device, [args.method]), check_limits=not args.ignore_limits,
         command=args.invocation, overrides=overrides, configuration=configuration,
     )
-    result = run_residual(job)
+    job.check()  # the method, its hyperparameters and the data given: one line, before the note below
+    if args.json is None and args.report is None:
+        print("note: neither --json nor --report given; the result is only printed")
+    result = run_residual(job, checked=True)
     if result.stopped:
         print(f"stopped early: {result.stopped}")
     b, a = result.mse_before, result.mse_after

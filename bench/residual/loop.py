@@ -269,14 +269,11 @@ class _Loop(Tidying):
         model, held, mass, findings = self.rounds(model, held, mass, rounds)
         loop_seconds = self.elapsed()
         self.on_phase("evaluate")
-        result = self.result(model, held, mass, rounds, findings)
-        result.loop_seconds = loop_seconds
+        result = dataclasses.replace(self.result(model, held, mass, rounds, findings), loop_seconds=loop_seconds)
         self.checkpoint(result)
         if self.test is not None and self.test.time is not None and self.test.recording is not None:
-            driven_rollouts(result, first, model, self.sensor, self.test, report)
-        result.seconds = round(now() - self.start, 2)
-        result.models = (first, Sensed(model, self.sensor))
-        return result
+            result = driven_rollouts(result, first, model, self.sensor, self.test, report)
+        return dataclasses.replace(result, seconds=round(now() - self.start, 2), models=(first, Sensed(model, self.sensor)))
 
     def result(self, model: LoopModel, held: float, mass: float, rounds: list[Round], findings: dict) -> ResidualResult:
         """The result as it stands with ``model`` as the loop's model (no driven rollouts)."""

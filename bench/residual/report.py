@@ -11,6 +11,7 @@ from bench.evaluation.driven import describe as describe_driven, pooled
 from bench.evaluation.per_joint import percent
 from bench.reporting.plots import residual_plot
 from bench.residual.result import ResidualResult
+from bench.runner.provenance import made_at
 
 
 def write_outputs(result: ResidualResult, train: Dataset, test: Dataset | None, json_path=None, report_path=None) -> None:
@@ -139,8 +140,8 @@ def _inputs(inputs: dict | None, provenance: dict) -> list[str]:
         return []
     lines = ["", "## Made from", "", f"    {inputs['command']}" if inputs.get("command") else "    (no command line)", ""]
     given = ", ".join(f"{k}={v}" for k, v in inputs.get("set", {}).items()) or "none"
-    lines.append(f"- configuration `{inputs.get('configuration', 'default')}`; --set: {given}; commit "
-                 f"{str(provenance.get('commit', '?'))[:10]}")
+    lines.append(f"- configuration `{inputs.get('configuration', 'default')}`; --set: {given}; "
+                 f"{made_at(provenance, 10)}")
     for path, entry in inputs.get("files", {}).items():
         convert = entry.get("convert")
         made = "" if not convert else f"; converted by `{convert.get('command', 'convert')}`"

@@ -6,12 +6,15 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from bench.core.models import FittedModel
+from bench.runner.provenance import Provenanced
 
 
-@dataclass
-class ResidualResult:
+@dataclass(frozen=True)
+class ResidualResult(Provenanced):
     """What the loop found; :meth:`to_json` is the JSON contract of
-    ``python -m bench residual --json``.
+    ``python -m bench residual --json``. Frozen, like a
+    :class:`~bench.runner.records.Record`, with which it shares how its
+    provenance and budget are read (:class:`~bench.runner.provenance.Provenanced`).
 
     ``validation`` says how held-out data were formed (:mod:`bench.residual.validation`);
     ``mse_heldout_trajectories`` is the cross-validated torque MSE before and

@@ -6,6 +6,7 @@ the rounds stand without them."""
 
 from __future__ import annotations
 
+import dataclasses
 import traceback
 
 from bench.core.budget import now
@@ -19,22 +20,22 @@ from bench.runner.progress import Report
 
 
 def driven_rollouts(result: ResidualResult, first: FittedModel, model: FittedModel, sensor: Sensor, test: Dataset,
-                    report: Report) -> None:
-    """Set ``result.rollout`` (``before``: ``first`` on the test recordings; ``after``:
+                    report: Report) -> ResidualResult:
+    """``result`` with its ``rollout`` (``before``: ``first`` on the test recordings; ``after``:
     ``model``, the arm's model, under the arm's torques as ``sensor``'s laws correct the
-    measured ones) and ``result.rollout_seconds``; where they fail, add why to ``result.stopped``."""
+    measured ones) and ``rollout_seconds``; where they fail, with why added to ``stopped``."""
     report("driven rollouts of the test recordings, before and after (after the budget: their work is the "
            "data's and the models')")
     t0 = now()
     try:
-        result.rollout = {"before": driven_entry(first, test, report=_indented(report, "before")),
-                          "after": driven_entry(model, sensor.correct(test), report=_indented(report, "after"))}
+        changed = {"rollout": {"before": driven_entry(first, test, report=_indented(report, "before")),
+                               "after": driven_entry(model, sensor.correct(test), report=_indented(report, "after"))}}
     except Exception as exc:  # the rounds stand without their rollouts
         traceback.print_exc()
         failed = f"the driven rollouts after the rounds failed ({type(exc).__name__}: {first_line(exc)}): the rounds are kept"
-        result.stopped = failed if result.stopped is None else f"{result.stopped}; {failed}"
+        changed = {"stopped": failed if result.stopped is None else f"{result.stopped}; {failed}"}
         report(f"stopped: {failed}")
-    result.rollout_seconds = round(now() - t0, 2)
+    return dataclasses.replace(result, **changed, rollout_seconds=round(now() - t0, 2))
 
 
 def _indented(report: Report, what: str) -> Report:

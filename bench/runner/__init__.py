@@ -2,8 +2,9 @@
 in this process (:mod:`~bench.runner.execute`), its typed record
 (:mod:`~bench.runner.records`) and provenance
 (:mod:`~bench.runner.provenance`), thread pinning
-(:mod:`~bench.runner.threads`), process isolation and the fork server
-(:mod:`~bench.runner.isolation`, :mod:`~bench.runner.worker`,
+(:mod:`~bench.runner.threads`), the one kind of job run in its own process
+and the limits jobs share (:mod:`~bench.runner.job`), process isolation and
+the fork server (:mod:`~bench.runner.isolation`, :mod:`~bench.runner.worker`,
 :mod:`~bench.runner.preload`), and the matrix, locally or on Dask
 (:mod:`~bench.runner.matrix`, :mod:`~bench.runner.progress`).
 

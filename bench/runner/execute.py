@@ -2,8 +2,8 @@
 within the budget, score, and return the :class:`~bench.runner.records.Record`.
 
 :func:`execute` never raises for a method's faults: a crash or a NaN result
-is a record with status ``failed`` and the reason. :func:`run_payload` is the
-entry point of a run in its own process (:mod:`bench.runner.isolation`).
+is a record with status ``failed`` and the reason. A run in its own process
+is a :class:`bench.runner.matrix.RunJob`.
 """
 
 from __future__ import annotations
@@ -115,7 +115,7 @@ def preflight(spec: RunSpec) -> Record | None:
 
 
 def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: tuple | None = None,
-            fitted=None) -> Record:
+            fitted=None, checked: bool = False) -> Record:
     """Run ``spec`` in this process and return its record (never raises for the method's faults).
 
     Variants a method derives from its fit (:meth:`methods.base.Method.variants`)
@@ -127,7 +127,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     ended. ``data`` is an already loaded ``(train, test)`` pair, else it is
     loaded from the spec. ``fitted`` is the spec's method already fitted on
     ``data`` (one seed of a stack, :mod:`bench.runner.stacked`): the run then
-    evaluates it.
+    evaluates it. ``checked``: the caller has made :func:`preflight`'s checks
+    (:meth:`bench.runner.matrix.RunJob.check`), which are then not repeated.
 
     Which scores apply beyond the train and test MSE (rollouts, references, the
     force decomposition) is the policy of :func:`bench.evaluation.assessment.assess`.
@@ -144,7 +145,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     fields: dict = {}
     try:
         import_plugins(spec.plugins)
-        early = preflight(spec)
+        early = None if checked else preflight(spec)
         if early:
             return early
         clock = time.perf_counter()
@@ -257,12 +258,6 @@ def _kept(fields: dict) -> dict:
     whatever MSE was computed (a record of status ``failed`` or ``timeout``)."""
     return {k: v for k, v in fields.items() if k in ("steps", "fit_seconds", "stop_reason", "curve", "hyperparameters",
                                                       "replay", "train_mse", "test_mse", "details")}
-
-
-def run_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
-    """The entry point of a run in its own process: ``payload`` is a
-    :meth:`RunSpec.to_dict`; returns the record's JSON."""
-    return execute(RunSpec.from_dict(payload), on_phase).to_json()
 
 
 def resident_mb() -> float:

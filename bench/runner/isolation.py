@@ -1,8 +1,7 @@
 """Process isolation: a call runs in its own process, under time limits per phase.
 
-Every run of the suite goes through :func:`run_call`: a matrix run
-(:func:`bench.runner.matrix.run_isolated`), the residual loop, and the
-experiments' jobs (:func:`run_jobs`). A :class:`Call` names a function by its import path and
+Every job of the suite (:mod:`bench.runner.job`) runs through :func:`run_call`.
+A :class:`Call` names a function by its import path and
 gives it a JSON payload; the child (:mod:`bench.runner.worker`) reports
 the phases it enters, and the parent kills its whole process group when it
 stays in a phase longer than that phase's limit.
@@ -23,7 +22,6 @@ import os
 import signal
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -244,37 +242,6 @@ def run_call(call: Call, result_file: str | os.PathLike, log_dir: str | os.PathL
     if result is None:
         return Outcome(None, phase, exit_code=child.returncode, log_tail=_tail(log_file))
     return Outcome(result, phase, exit_code=child.returncode)
-
-
-def run_jobs(target: str, payloads: Mapping[str, dict], limit: float, workers: int,
-             describe: Callable[[dict], str], report: Callable[[str], None]) -> dict[str, dict]:
-    """Run ``target(payload, on_phase)`` for each named payload, ``workers``
-    at a time, each in its own process; returns the results by name, in the
-    order given.
-
-    A job that calls ``on_phase("run")`` is killed after ``limit`` seconds in
-    that phase. Each finished job is reported in one line, ``[k/n, t s] name:
-    describe(result)``; jobs that did not finish raise :class:`CallFailed`,
-    named, once all have ended.
-    """
-    start = time.monotonic()
-    finished: list[str] = []
-
-    def one(name: str, result_file: Path, log_dir: str) -> Outcome:
-        outcome = run_call(Call(target, payloads[name]), result_file, log_dir, name, {"run": limit})
-        finished.append(name)
-        what = describe(outcome.result) if outcome.result is not None else \
-            f"did not finish ({'killed' if outcome.killed else outcome.log_tail})"
-        report(f"[{len(finished)}/{len(payloads)}, {time.monotonic() - start:.0f} s] {name}: {what}")
-        return outcome
-
-    with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work:
-        items = [(name, Path(work) / f"{i}.json", work) for i, name in enumerate(payloads)]
-        outcomes = dict(zip(payloads, map_interruptibly(lambda item: one(*item), items, workers)))
-    failed = [name for name, outcome in outcomes.items() if outcome.result is None]
-    if failed:
-        raise CallFailed(f"{len(failed)} of {len(payloads)} job(s) did not finish: {', '.join(failed)}")
-    return {name: outcome.result for name, outcome in outcomes.items()}
 
 
 def map_interruptibly(fn: Callable, items: list, workers: int) -> Iterator:

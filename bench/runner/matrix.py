@@ -1,12 +1,13 @@
 """The matrix: systems x methods x experiments x seeds under a wall-clock budget.
 
-* :func:`run_isolated` runs one :class:`~bench.runner.spec.RunSpec` in its
-  own process (:mod:`bench.runner.isolation`), with torch and BLAS threads
-  pinned, and writes its record. Its fit is killed at :data:`KILL_FACTOR` x
-  its budget, and what follows the fit (scores on the full data, variants,
-  the exact-recovery judgement, the rollout) at :func:`evaluation_limit`;
-  either gives status ``timeout``. A crash or a non-finite result gives
-  status ``failed`` with the reason.
+* :class:`RunJob` is one :class:`~bench.runner.spec.RunSpec` as a job
+  (:mod:`bench.runner.job`), run in its own process with torch and BLAS
+  threads pinned (:func:`run_one`), which writes its record. Its fit is
+  killed at :func:`~bench.runner.job.fit_limit`, and what follows the fit
+  (scores on the full data, variants, the exact-recovery judgement, the
+  rollout) at :func:`~bench.runner.job.evaluation_limit`; either gives
+  status ``timeout``. A crash or a non-finite result gives status
+  ``failed`` with the reason.
 * :func:`run_matrix` runs many specs on a pool of worker processes, or on
   Dask distributed, writes one record per run atomically, and skips runs that
   already have a valid record, so a killed matrix loses no finished run and
@@ -18,19 +19,19 @@
 from __future__ import annotations
 
 import fcntl
-import math
 import os
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
-from bench.core.budget import SECONDS
 from bench.core.errors import UserError
 from bench.core.processes import process_alive
-from bench.runner.execute import preflight
 from bench.runner.code import code_hash
-from bench.runner.isolation import STARTUP_TIMEOUT_S, Call, map_interruptibly, run_call
+from bench.runner.execute import execute, preflight
+from bench.runner.isolation import STARTUP_TIMEOUT_S, Outcome, map_interruptibly
+from bench.runner.job import PREPARE_MIN_S, Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now
 from bench.runner.provenance import CODE_FOLDERS, code_state
@@ -38,30 +39,12 @@ from bench.runner.records import Record, RecordError, quarantine, read_record, r
 from bench.runner.spec import RunSpec
 from bench.runner.stacked import groups, run_stacked, stack_name
 
-#: A run's fit is killed at this multiple of its time budget.
-KILL_FACTOR = 1.5
-#: What follows a run's fit (evaluation on the full data, variants, exact
-#: recovery, rollout) may take its budget, and at least this many seconds.
-EVALUATION_MIN_S = 120.0
-#: The method's one-time work before its budget starts (compiling for the
-#: data's shapes, :meth:`methods.base.Method.prepare`) may take its budget,
-#: and at least this many seconds.
-PREPARE_MIN_S = 900.0
-
-
-def evaluation_limit(budget_s: float | None) -> float:
-    """Seconds a run may take after its fit: ``max(EVALUATION_MIN_S, budget_s)``
-    (no limit for a work budget without a ceiling)."""
-    return math.inf if budget_s is None else max(EVALUATION_MIN_S, budget_s)
-
-
 def phase_limits(spec: RunSpec) -> dict[str, float]:
-    """Seconds a run may spend in each phase: preparing, fitting (its time
-    budget times :data:`KILL_FACTOR`, or a work budget's ceiling) and after
-    the fit."""
-    budget = spec.budget
-    fit = KILL_FACTOR * budget.seconds if budget.kind == SECONDS else budget.ceiling_s
-    return {"prepare": max(PREPARE_MIN_S, spec.budget_s or 0.0), "fit": fit, "evaluate": evaluation_limit(spec.budget_s)}
+    """Seconds a run may spend in each phase: preparing, fitting
+    (:func:`~bench.runner.job.fit_limit`) and after the fit
+    (:func:`~bench.runner.job.evaluation_limit`)."""
+    return {"prepare": max(PREPARE_MIN_S, spec.budget_s or 0.0), "fit": fit_limit(spec.budget),
+            "evaluate": evaluation_limit(spec.budget_s)}
 
 
 def log_path(out_dir: str | os.PathLike, rid: str) -> Path:
@@ -69,42 +52,80 @@ def log_path(out_dir: str | os.PathLike, rid: str) -> Path:
     return Path(out_dir) / "logs" / f"{rid}.log"
 
 
-def run_isolated(spec: RunSpec, out_dir: str | os.PathLike, *, poll_s: float = 0.05, fresh: bool = False) -> Record:
-    """Run ``spec`` in its own process; write and return its record.
+@dataclass(frozen=True)
+class RunJob(Job):
+    """One run of the matrix as a :class:`~bench.runner.job.Job`: its spec,
+    and the folder its record goes to (``OUT/records/<run id>.json``, its
+    output to ``OUT/logs/``).
 
-    From the start of its fit the run has ``KILL_FACTOR * budget_s`` seconds
-    to finish the fit, then :func:`evaluation_limit` seconds for what follows;
-    past either it is killed and recorded as ``timeout``. A child that dies
-    without writing a record is recorded as ``failed`` with the tail of its
-    log. ``fresh=True`` starts a fresh interpreter instead of forking from the
-    fork server.
+    From the start of its fit the run has :func:`~bench.runner.job.fit_limit`
+    seconds to finish the fit, then :func:`~bench.runner.job.evaluation_limit`
+    seconds for what follows; past either it is killed and recorded as
+    ``timeout``. A child that dies without writing a record is recorded as
+    ``failed`` with the tail of its log. :meth:`finish` writes the record.
     """
-    out_dir = Path(out_dir)
-    path = record_path(out_dir, spec.run_id)
-    limits = phase_limits(spec)
-    code = code_hash(spec.method, spec.system, spec.plugins)
-    call = Call("bench.runner.execute:run_payload", spec.to_dict(), spec.threads)
-    outcome = run_call(call, path, out_dir / "logs", spec.run_id, limits, fresh=fresh, poll_s=poll_s)
-    if outcome.interrupted:  # no record: the resume runs it again
-        raise KeyboardInterrupt(f"{spec.run_id} interrupted")
-    if outcome.result is not None:
-        record = Record.from_json(outcome.result, str(path)).replace(code=code)
-    elif not outcome.killed:
-        error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
-        record = Record.new(spec, "failed", elsewhere=True, error=error, code=code)
-    elif outcome.phase == "fit":
-        what = (f"{KILL_FACTOR} x its {spec.budget_s:g} s budget" if spec.budget.kind == SECONDS
-                else f"its ceiling of {spec.budget_s:g} s")
-        record = Record.new(spec, "timeout", elsewhere=True, error=f"fit still running at {what}; killed", code=code)
-    elif outcome.phase in ("evaluate", "prepare"):
-        what = "evaluation after the fit" if outcome.phase == "evaluate" else "preparation before the fit (compiling)"
-        record = Record.new(spec, "timeout", elsewhere=True,
-                            error=f"{what} still running after {limits[outcome.phase]:g} s; killed", code=code)
-    else:
-        record = Record.new(spec, "failed", elsewhere=True, error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed",
-                            code=code)
-    write_record(path, record)
-    return record
+
+    spec: dict
+    out_dir: str
+
+    @classmethod
+    def of(cls, spec: RunSpec, out_dir: str | os.PathLike) -> "RunJob":
+        return cls(spec.to_dict(), str(out_dir))
+
+    @property
+    def run_spec(self) -> RunSpec:
+        return RunSpec.from_dict(self.spec)
+
+    @property
+    def threads(self) -> int:
+        return self.run_spec.threads
+
+    def check(self) -> Record | None:
+        """The record of a run that cannot start (:func:`~bench.runner.execute.preflight`), written; else ``None``."""
+        spec = self.run_spec
+        early = preflight(spec)
+        if early is None:
+            return None
+        early = early.replace(code=code_hash(spec.method, spec.system, spec.plugins))
+        write_record(record_path(self.out_dir, spec.run_id), early)
+        return early
+
+    def limits(self) -> dict[str, float]:
+        return phase_limits(self.run_spec)
+
+    def run(self, on_phase) -> dict:
+        return execute(self.run_spec, on_phase, checked=True).to_json()
+
+    def result_file(self, work: Path, name: str) -> Path:
+        return record_path(self.out_dir, name)
+
+    def finish(self, outcome: Outcome, report) -> Record:
+        spec = self.run_spec
+        path = record_path(self.out_dir, spec.run_id)
+        limits = self.limits()
+        code = code_hash(spec.method, spec.system, spec.plugins)
+        if outcome.result is not None:
+            record = Record.from_json(outcome.result, str(path)).replace(code=code)
+        elif not outcome.killed:
+            error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
+            record = Record.new(spec, "failed", elsewhere=True, error=error, code=code)
+        elif outcome.phase == "fit":
+            record = Record.new(spec, "timeout", elsewhere=True, code=code,
+                                error=f"fit still running at {fit_limit_words(spec.budget)}; killed")
+        elif outcome.phase in ("evaluate", "prepare"):
+            what = "evaluation after the fit" if outcome.phase == "evaluate" else "preparation before the fit (compiling)"
+            record = Record.new(spec, "timeout", elsewhere=True,
+                                error=f"{what} still running after {limits[outcome.phase]:g} s; killed", code=code)
+        else:
+            record = Record.new(spec, "failed", elsewhere=True, code=code,
+                                error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
+        write_record(path, record)
+        return record
+
+
+def run_one(spec: RunSpec, out_dir: str | os.PathLike, *, checked: bool = False, fresh: bool = False) -> Record:
+    """``spec`` run as a :class:`RunJob` by :func:`~bench.runner.job.run_isolated`; its record, written."""
+    return run_isolated(RunJob.of(spec, out_dir), Path(out_dir) / "logs", spec.run_id, checked=checked, fresh=fresh)
 
 
 class FolderLock:
@@ -172,7 +193,7 @@ def run_matrix(
     ``"local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
     processes; a scheduler address (``"tcp://host:8786"``), a Dask cluster
     object (``dask_jobqueue.SLURMCluster(...)``) or a ``Client`` uses that.
-    Each Dask task runs :func:`run_isolated` on its worker, in a scratch
+    Each Dask task runs :func:`run_one` on its worker, in a scratch
     directory there, and returns the record, which is written here; workers
     need the suite installed, not a shared file system.
 
@@ -220,10 +241,8 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
                     resumed += 1
                     continue
                 redone[why] = redone.get(why, 0) + 1
-        early = preflight(spec)
+        early = RunJob.of(spec, out_dir).check()
         if early:
-            early = early.replace(code=code_hash(spec.method, spec.system, spec.plugins))
-            write_record(path, early)
             results[spec.run_id] = early
             cannot_run += 1
             continue
@@ -257,13 +276,13 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
     elif todo and stack:
         def job(group: list[RunSpec]) -> list[Record]:
             unchanged(group[0])
-            out = run_stacked(group, out_dir, lambda s: run_isolated(s, out_dir), phase_limits(group[0]))
+            out = run_stacked(group, out_dir, lambda s: run_one(s, out_dir, checked=True), phase_limits(group[0]))
             return [done(r, log_path(out_dir, stack_name(group) if r.details.get("stacked") else r.run_id)) for r in out]
 
         for records in map_interruptibly(job, groups(todo, report), workers):
             results.update((r.run_id, r) for r in records)
     elif todo:
-        for record in map_interruptibly(lambda s: done(run_isolated(unchanged(s), out_dir), log_path(out_dir, s.run_id)),
+        for record in map_interruptibly(lambda s: done(run_one(unchanged(s), out_dir, checked=True), log_path(out_dir, s.run_id)),
                                         todo, workers):
             results[record.run_id] = record
     tracker.summary()
@@ -282,9 +301,9 @@ def _describe(record: Record, log: Path | None = None) -> str:
 
 
 def run_remote(spec_dict: dict) -> dict:
-    """A Dask task: :func:`run_isolated` in a scratch directory; returns the record's JSON."""
+    """A Dask task: :func:`run_one` in a scratch directory; returns the record's JSON."""
     with tempfile.TemporaryDirectory(prefix="syrenets-bench-") as scratch:
-        return run_isolated(RunSpec.from_dict(spec_dict), scratch).to_json()
+        return run_one(RunSpec.from_dict(spec_dict), scratch, checked=True).to_json()
 
 
 def _run_on_dask(todo: list[RunSpec], out_dir: Path, cluster, workers: int) -> Iterable[Record]:

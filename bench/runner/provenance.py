@@ -13,6 +13,7 @@ import sys
 from importlib import metadata
 from pathlib import Path
 
+from bench.core.budget import Budget
 from bench.core.devices import describe
 
 #: the checkout the suite runs from
@@ -165,3 +166,33 @@ def provenance(threads: int | None = None) -> dict:
     }
 
 
+
+
+def made_at(prov: dict, digits: int = 7) -> str:
+    """Where a provenance's code was, in words: ``commit 1a2b3c4`` and, for a
+    tree with uncommitted changes, ``, dirty tree``."""
+    return f"commit {str(prov.get('commit', '?'))[:digits]}{', dirty tree' if prov.get('dirty') else ''}"
+
+
+class Provenanced:
+    """What the suite's two result types share, :class:`bench.runner.records.Record`
+    (a run of the matrix) and :class:`bench.residual.result.ResidualResult` (a
+    run of the loop): a ``provenance`` (:func:`provenance`) and a ``budget``
+    (:meth:`bench.core.budget.Budget.to_json`), read through these methods."""
+
+    provenance: dict
+    budget: dict | None
+
+    @property
+    def made_at(self) -> str:
+        """:func:`made_at` of the result's provenance."""
+        return made_at(self.provenance)
+
+    @property
+    def clean(self) -> bool:
+        """Whether the result was made by committed code (a tree without uncommitted changes)."""
+        return self.provenance.get("dirty") is False
+
+    def work(self) -> Budget | None:
+        """The budget the result was made under (``None``: a record from before budgets were recorded)."""
+        return None if self.budget is None else Budget.from_json(self.budget)

@@ -44,7 +44,7 @@ from bench.core.data import EXPERIMENTS
 from bench.core.errors import UserError
 from bench.core.fileio import write_json
 from bench.core.names import MethodName, MethodNameError
-from bench.runner.provenance import provenance
+from bench.runner.provenance import Provenanced, provenance
 from bench.runner.spec import RunSpec, parse_run_id, run_id
 
 SCHEMA = "syrenets-bench/record/1"
@@ -64,7 +64,7 @@ class RecordError(UserError, ValueError):
 
 
 @dataclass(frozen=True)
-class Record:
+class Record(Provenanced):
     """One run's record; fields in the order of the JSON file."""
 
     schema: str

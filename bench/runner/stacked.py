@@ -4,7 +4,7 @@ written as ordinary records.
 
 * :func:`groups`: the runs to do, each seed of a stackable method's run
   grouped with the seeds whose specs equal it in all else;
-* :func:`run_stacked`: one group in its own process, killed like any run
+* :func:`run_stacked`: one group in its own process (:class:`StackedJob`), killed like any run
   (its fit shares one limit, its evaluations have one each); each seed's
   record is then what :func:`~bench.runner.execute.execute` writes for a fit
   made alone, its ``details.stacked`` the number of seeds that trained with it.
@@ -15,13 +15,15 @@ written as ordinary records.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from bench.core.errors import UserError
 from bench.runner.code import code_hash
 from bench.runner.execute import execute, load_data, make_method, make_system, warm_up_torch
-from bench.runner.isolation import Call, run_call
+from bench.runner.isolation import Outcome
+from bench.runner.job import Job, run_isolated
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record, record_path, write_record
 from bench.runner.spec import RunSpec
@@ -56,22 +58,40 @@ def _unstackable(spec: RunSpec) -> str | None:
         return ""
 
 
-def run_stacked_payload(payload: dict, on_phase: Callable[[str], None]) -> dict:
-    """The entry point of a group's process: ``payload["specs"]`` are the specs
-    (:meth:`RunSpec.to_dict`); returns ``{"records": [...]}``, one record's JSON a seed."""
-    specs = [RunSpec.from_dict(d) for d in payload["specs"]]
-    import_plugins(specs[0].plugins)
-    first = specs[0]
-    system = make_system(first)
-    data = [load_data(spec, system) for spec in specs]
-    methods = [make_method(spec) for spec in specs]
-    warm_up_torch()
-    on_phase("prepare")
-    fit_stacked(methods, [train for train, _ in data], first.experiment, [s.seed for s in specs], first.budget,
-                system=system, on_fit=lambda: on_phase("fit"))
-    on_phase("evaluate")
-    return {"records": [execute(spec, data=pair, fitted=method).to_json()
-                        for spec, pair, method in zip(specs, data, methods)]}
+@dataclass(frozen=True)
+class StackedJob(Job):
+    """A group of seeds (:meth:`RunSpec.to_dict` each) trained stacked in one process, as a
+    :class:`~bench.runner.job.Job`; its result is one record's JSON a seed, or ``None``
+    where the process failed or was killed (each seed then runs alone)."""
+
+    specs: tuple
+    phase_limits: dict
+
+    @property
+    def threads(self) -> int:
+        return RunSpec.from_dict(self.specs[0]).threads
+
+    def limits(self) -> dict[str, float]:
+        """One run's limits, the evaluation's times the seeds."""
+        return {**self.phase_limits, "evaluate": self.phase_limits["evaluate"] * len(self.specs)}
+
+    def run(self, on_phase: Callable[[str], None]) -> dict:
+        specs = [RunSpec.from_dict(d) for d in self.specs]
+        import_plugins(specs[0].plugins)
+        first = specs[0]
+        system = make_system(first)
+        data = [load_data(spec, system) for spec in specs]
+        methods = [make_method(spec) for spec in specs]
+        warm_up_torch()
+        on_phase("prepare")
+        fit_stacked(methods, [train for train, _ in data], first.experiment, [s.seed for s in specs], first.budget,
+                    system=system, on_fit=lambda: on_phase("fit"))
+        on_phase("evaluate")
+        return {"records": [execute(spec, data=pair, fitted=method, checked=True).to_json()
+                            for spec, pair, method in zip(specs, data, methods)]}
+
+    def finish(self, outcome: Outcome, report) -> list[dict] | None:
+        return None if outcome.result is None else outcome.result["records"]
 
 
 def stack_name(group: list[RunSpec]) -> str:
@@ -89,16 +109,13 @@ def run_stacked(group: list[RunSpec], out_dir: str | Path, run_alone: Callable[[
         return [run_alone(group[0])]
     out_dir = Path(out_dir)
     name = stack_name(group)
-    limits = {**limits, "evaluate": limits["evaluate"] * len(group)}
-    call = Call("bench.runner.stacked:run_stacked_payload", {"specs": [s.to_dict() for s in group]}, group[0].threads)
-    outcome = run_call(call, out_dir / "logs" / f"{name}.result.json", out_dir / "logs", name, limits)
-    if outcome.interrupted:
-        raise KeyboardInterrupt(f"{name} interrupted")
-    if outcome.result is None:  # the stack failed or was killed: each seed on its own
+    job = StackedJob(tuple(s.to_dict() for s in group), limits)
+    results = run_isolated(job, out_dir / "logs", name, checked=True)
+    if results is None:  # the stack failed or was killed: each seed on its own
         return [run_alone(spec) for spec in group]
     code = code_hash(group[0].method, group[0].system, group[0].plugins)
     records = []
-    for spec, obj in zip(group, outcome.result["records"]):
+    for spec, obj in zip(group, results):
         record = Record.from_json(obj, f"{name}: {spec.run_id}").replace(code=code)
         write_record(record_path(out_dir, spec.run_id), record)
         records.append(record)

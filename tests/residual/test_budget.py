@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 import bench.core.budget as budget_module
-import bench.residual.job as job_module
 import bench.residual.loop as loop_module
 import bench.residual.rollouts as rollouts_module
 import bench.runner.isolation as isolation
@@ -111,7 +110,7 @@ def test_a_loop_killed_in_its_driven_rollouts_keeps_every_round_under_the_rollou
     out = run_residual(_hanging_job(tmp_path, "rollouts", monkeypatch), quiet)
     assert out.rounds[-1].get("stop") is None and out.effects and out.rollout is None
     assert out.stopped == (f"the driven rollouts after the rounds were still running after "
-                           f"{job_module.evaluation_limit(600.0):g} s; killed: the result has every round and no rollouts")
+                           f"{ResidualJob('double_pendulum', 'sysid', budget_s=600.0).limits()['evaluate']:g} s; killed: the result has every round and no rollouts")
 
 
 def test_a_loop_killed_before_round_0_ended_has_nothing_to_return(monkeypatch, tmp_path):

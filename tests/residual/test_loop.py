@@ -3,6 +3,7 @@ leaves clean and noise-only data alone, and keeps its output contract."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -318,6 +319,24 @@ def test_the_result_is_typed_and_its_json_is_plain():
     assert final.predict_torque(test).shape == test.tau.shape and "models" not in out.to_json()
     assert json.loads(json.dumps(out.to_json())) == out.to_json()
     assert [(e["name"], e["joint"]) for e in out.effects] == [("offset", 1)]
+    with pytest.raises(dataclasses.FrozenInstanceError):  # a result is what the loop made, as a record is
+        out.stopped = "changed afterwards"
+    assert out.clean == (out.provenance["dirty"] is False) and out.made_at.startswith("commit ")
+    assert out.work().steps == SOLVED
+
+
+def test_the_loops_job_checks_its_input_once_before_its_process_starts(monkeypatch):
+    from bench.core.errors import UserError
+    from bench.residual.job import ResidualJob, run_residual
+    from bench.runner import job as runner_job
+
+    monkeypatch.setattr(runner_job, "run_call", lambda *a, **k: pytest.fail("a process started before the refusal"))
+    for job, words in ((ResidualJob("double_pendulum", "sysid"), "double_pendulum is simulated: give --train"),
+                       (ResidualJob("double_pendulum", "operon", train_path="t.csv"), "operon cannot run the loop"),
+                       (ResidualJob("double_pendulum", "sysid", train_path="t.csv", hyperparameters={"nope": 1}),
+                        "nope")):
+        with pytest.raises(UserError, match=words):
+            run_residual(job, quiet)
 
 
 def test_friction_on_every_joint_of_the_panda_is_found_beside_its_base_parameters():

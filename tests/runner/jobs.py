@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
+
+from bench.runner.job import Job
 
 
 def echo(payload, on_phase):
@@ -15,3 +18,30 @@ def sleep(payload, on_phase):
     on_phase("run")
     time.sleep(payload["seconds"])
     return {"slept": payload["seconds"]}
+
+
+@dataclass(frozen=True)
+class Echo(Job):
+    """:func:`echo` as a job, under a limit of 60 s."""
+
+    x: int
+
+    def limits(self):
+        return {"run": 60.0}
+
+    def run(self, on_phase):
+        return echo({"x": self.x}, on_phase)
+
+
+@dataclass(frozen=True)
+class Sleep(Job):
+    """:func:`sleep` as a job, killed after ``limit`` seconds."""
+
+    seconds: float
+    limit: float
+
+    def limits(self):
+        return {"run": self.limit}
+
+    def run(self, on_phase):
+        return sleep({"seconds": self.seconds}, on_phase)

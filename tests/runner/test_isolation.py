@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from bench.runner.isolation import Call, CallFailed, run_call, run_jobs
+from bench.runner.isolation import Call, CallFailed, run_call
+from bench.runner.job import run_isolated, run_jobs
+from tests.runner.jobs import Echo, Sleep
 
 
 def test_a_call_returns_its_result_and_echoes_its_output(tmp_path):
@@ -24,11 +26,18 @@ def test_a_call_is_killed_at_its_phases_limit(tmp_path):
 
 def test_jobs_run_side_by_side_and_those_that_did_not_finish_are_named(tmp_path):
     lines = []
-    results = run_jobs("tests.runner.jobs:echo", {"a": {"x": 1}, "b": {"x": 2}}, 60, 2, lambda r: f"x^2 = {r['squared']}",
-                       lines.append)
+    results = run_jobs({"a": Echo(1), "b": Echo(2)}, 2, lambda r: f"x^2 = {r['squared']}", lines.append)
     assert results == {"a": {"x": 1, "squared": 1}, "b": {"x": 2, "squared": 4}} and list(results) == ["a", "b"]
     assert sorted(line.split("] ")[1] for line in lines) == ["a: x^2 = 1", "b: x^2 = 4"]
     assert lines[-1].startswith("[2/2, ")
     with pytest.raises(CallFailed, match="1 of 2 job.s. did not finish: slow"):
-        run_jobs("tests.runner.jobs:sleep", {"quick": {"seconds": 0}, "slow": {"seconds": 60}}, 1.0, 2, str, lines.append)
-    assert any("slow: did not finish (killed)" in line for line in lines)
+        run_jobs({"quick": Sleep(0, 60.0), "slow": Sleep(60, 1.0)}, 2, str, lines.append)
+    assert any("slow: did not finish (killed in its run phase)" in line for line in lines)
+
+
+def test_a_job_is_made_again_from_its_fields_in_its_own_process_and_finishes_in_the_callers(tmp_path):
+    lines = []
+    assert run_isolated(Echo(5), tmp_path, "five", echo=lines.append) == {"x": 5, "squared": 25}
+    assert "working on 5" in lines and (tmp_path / "five.call.json").is_file()
+    with pytest.raises(CallFailed, match="killed in its run phase"):
+        run_isolated(Sleep(60, 0.5))

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from bench.evaluation.scores import MAX_EXPRESSION_CHARS, clip
-from bench.runner import matrix
+from bench.runner import job, matrix
 from bench.runner.execute import execute, load_data, make_system, preflight, raised
 from bench.runner.isolation import fork_server
 from bench.runner.progress import print_now, quiet
@@ -165,15 +165,15 @@ def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatc
     assert r.status == "ok", r.error
     assert r.details["train_source"].endswith("train.csv")
     assert fork_server() is not None
-    fresh = matrix.run_isolated(spec, "fresh", fresh=True)
+    fresh = matrix.run_one(spec, "fresh", fresh=True)
     assert fresh.status == "ok" and fresh.train_mse == r.train_mse
 
 
 def test_a_hang_after_the_fit_is_a_timeout_at_the_evaluation_limit(tmp_path, monkeypatch):
-    monkeypatch.setattr(matrix, "EVALUATION_MIN_S", 2.0)
+    monkeypatch.setattr(job, "EVALUATION_MIN_S", 2.0)
     (r,) = matrix.run_matrix(specs(["toy_slow_judge"]), tmp_path, workers=1, report=quiet)
     assert r.status == "timeout" and "evaluation after the fit still running after 2 s" in r.error  # not an hour
-    assert matrix.evaluation_limit(60.0) == 60.0 and matrix.evaluation_limit(1.0) == 2.0
+    assert job.evaluation_limit(60.0) == 60.0 and job.evaluation_limit(1.0) == 2.0
 
 
 def test_records_made_outside_a_run_state_the_runs_threads(tmp_path):
