@@ -18,7 +18,7 @@ Euler–Lagrange transform). The base class owns the protocol:
               ...one step...
 
 Each method declares a tiny ``smoke`` configuration next to its real one.
-A fitted method is a :class:`~bench.core.models.FittedModel`: it predicts
+A fitted method is a :class:`~bench.physics.models.FittedModel`: it predicts
 ``L`` and ``tau`` and, where it has one, gives its expression. Every hook a
 method writes or may write, and what uses it, is listed in docs/extending.md.
 :mod:`methods.torch_method` is the base of methods whose model is a torch
@@ -42,9 +42,9 @@ import torch
 from bench.core.budget import Budget
 from bench.core.data import EXPERIMENTS, Dataset, check_experiment, mse
 from bench.core.errors import ConfigError, DataError
-from bench.core.models import ExpressionModel, FittedModel, NoVariant
+from bench.physics.models import ExpressionModel, FittedModel, NoVariant
 from bench.core.registry import Registry
-from bench.core.system import SYSTEMS, System
+from bench.physics.system import SYSTEMS, System
 from methods.config import MethodConfig, Named, build_config
 from methods.progress import Progress
 
@@ -99,7 +99,7 @@ class Method(FittedModel):
     """Base class of every learning method. See the module docstring.
 
     A method writes :meth:`_fit`, :meth:`_get_state`, :meth:`_set_state` and
-    the predictions of :class:`~bench.core.models.FittedModel`.
+    the predictions of :class:`~bench.physics.models.FittedModel`.
     """
 
     name: ClassVar[str] = "unnamed"
@@ -379,7 +379,7 @@ class Method(FittedModel):
         """Further fitted models derived from this one (for example a refined
         equation), each reported by the harness as ``<method>@<variant>`` (:mod:`bench.core.names`).
 
-        A variant that could not be made is a :class:`~bench.core.models.NoVariant`
+        A variant that could not be made is a :class:`~bench.physics.models.NoVariant`
         saying why, with its outcome (out of budget, not applicable, failed);
         every seed stays counted.
         """
@@ -459,7 +459,7 @@ class ExpressionMethod(Method):
         return self.model.expr
 
     def saved(self, packer):
-        """Its expression (:meth:`~bench.core.models.ExpressionModel.saved`)."""
+        """Its expression (:meth:`~bench.physics.models.ExpressionModel.saved`)."""
         return self.model.saved(packer)
 
     def predict_lagrangian(self, data):

@@ -16,7 +16,7 @@ construction, so the learned model always has forward dynamics.
 
 The model is a Lagrangian of ``(q, qd)`` like every method's; its torques
 come from the suite's one Euler–Lagrange transform
-(:func:`bench.core.dynamics.euler_lagrange`), which gives
+(:func:`bench.physics.dynamics.euler_lagrange`), which gives
 :math:`H\ddot q + \dot H \dot q - \tfrac12 \partial_q(\dot q^\top H \dot q) + \partial_q V`,
 the torque DeLaN's own code writes out term by term. The direct experiment
 fits ``L`` itself.
@@ -102,7 +102,7 @@ import numpy as np
 import torch
 
 from bench.core.compiled import compiled_once
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from methods.base import METHODS
 from methods.config import POSITIVE, Named, Range
 from methods.torch_method import TorchConfig, TorchLagrangianMethod, Warmup
@@ -221,7 +221,7 @@ class DeepLagrangian(torch.nn.Module):
         along ``(dq, dqd)``: the Jacobian of the network in ``q`` is carried
         forward through its layers (as DeLaN's own code does), so that a
         loss on the torques needs one ordinary backward pass
-        (:class:`bench.core.dynamics.TangentLagrangian`)."""
+        (:class:`bench.physics.dynamics.TangentLagrangian`)."""
         h, jac = self._features_and_jacobian(self.trunk, q)
         hv, jac_v = (h, jac) if self.potential_trunk is None else self._features_and_jacobian(self.potential_trunk, q)
         a_diag = self.diagonal(h) + self.shift

@@ -43,10 +43,10 @@ from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
 from bench.core.modelfile import Unpacker, build, loader
-from bench.core.models import FittedModel
+from bench.physics.models import FittedModel
 from bench.core.names import MethodName, MethodNameError
 from bench.core.registry import RegistryError
-from bench.core.system import System
+from bench.physics.system import System
 from methods.base import METHODS, Method, restored, saved_hyperparameters
 from methods.config import POSITIVE
 from methods.progress import Progress

@@ -3,7 +3,7 @@
 A Lagrangian term ``f(z)``, ``z = (q, qd)``, is evaluated together with its
 gradient ``G = df/dz`` and the Hessian-vector product ``Hu = (d2f/dz2) u``
 along ``u = (qd, qdd)``. Its Euler–Lagrange image follows without autograd:
-the suite's one transform (:func:`bench.core.dynamics.euler_lagrange`) takes
+the suite's one transform (:func:`bench.physics.dynamics.euler_lagrange`) takes
 ``G`` and ``Hu`` from the jet (:meth:`JetAlgebra.torque`) and forms
 
     g(f)_i = Hu[qd_i] - G[q_i]
@@ -28,7 +28,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 
 
 @dataclass
@@ -140,14 +140,14 @@ class JetAlgebra:
         return Jet(v, _scale(d1, a.G), Hu)
 
     def torque(self, f: Jet) -> np.ndarray:
-        """``g(f)`` of shape ``(N, dof)``, by :func:`~bench.core.dynamics.euler_lagrange`
+        """``g(f)`` of shape ``(N, dof)``, by :func:`~bench.physics.dynamics.euler_lagrange`
         from the jet's own derivatives."""
         return euler_lagrange(_JetLagrangian(self, f), *self.states).numpy()
 
 
 class _JetLagrangian:
     """A jet of :class:`JetAlgebra` as a Lagrangian that gives its own
-    derivatives (:class:`bench.core.dynamics.TangentLagrangian`): known at
+    derivatives (:class:`bench.physics.dynamics.TangentLagrangian`): known at
     the algebra's states only, and along its direction ``u = (qd, qdd)``
     only, which is the direction the transform asks for."""
 

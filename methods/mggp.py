@@ -70,10 +70,11 @@ import numpy as np
 import sympy
 from deap import gp
 
-from bench.core import regression, symbolic
+from bench.core import symbolic
+from bench.physics import regression
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
-from bench.core.models import ExpressionModel
+from bench.physics.models import ExpressionModel
 from methods.base import METHODS, ExpressionMethod
 from methods.config import FRACTION, MethodConfig, Range
 from methods.progress import Progress

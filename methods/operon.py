@@ -28,7 +28,7 @@ import sympy
 
 from bench.core import symbolic
 from bench.core.data import Dataset
-from bench.core.models import ExpressionModel
+from bench.physics.models import ExpressionModel
 from methods.base import METHODS, ExpressionMethod
 from methods.config import MethodConfig, Range
 from methods.progress import Progress

@@ -1,6 +1,6 @@
 """Saving a fitted model to a model file (:mod:`bench.core.modelfile`) and loading it back.
 
-:func:`save_model` writes what a model's :meth:`~bench.core.models.FittedModel.saved`
+:func:`save_model` writes what a model's :meth:`~bench.physics.models.FittedModel.saved`
 gives, then loads the file it wrote and checks that it predicts the fitted
 model's torques on the samples it is given (at most :data:`CHECK_SAMPLES`) to
 :data:`TOLERANCE`; only then is the file put in place, so that no file is
@@ -18,7 +18,7 @@ import numpy as np
 from bench.core import modelfile
 from bench.core.data import Dataset
 from bench.core.modelfile import ModelFileError, Packer
-from bench.core.system import SYSTEMS, System
+from bench.physics.system import SYSTEMS, System
 
 #: samples a saved model is checked on
 CHECK_SAMPLES = 256

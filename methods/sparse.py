@@ -14,13 +14,13 @@ generically from the system's coordinates:
 Gauge: in the indirect experiment the library is mapped through ``g``, and
 terms whose image is zero (constants, total time derivatives such as
 ``qd_i cos q_i``) or a combination of earlier terms' images are removed
-(:func:`bench.core.regression.independent_columns`), so the fit is unique. Columns
+(:func:`bench.physics.regression.independent_columns`), so the fit is unique. Columns
 are scaled to unit RMS (the scale of ``L`` is fixed by ``tau``, or by ``L``
 itself in the direct experiment).
 
 Fit: sequentially thresholded least squares, on ``g(library)`` against
 ``tau`` (indirect) or on the library against ``L`` (direct), with the
-threshold chosen on held-out samples (:func:`bench.core.regression.fit_columns`: the validation
+threshold chosen on held-out samples (:func:`bench.physics.regression.fit_columns`: the validation
 protocol's folds, :mod:`bench.core.folds`, where the data name trajectories; a 3:1 split of independent samples).
 It is the "knows a good basis" reference: when the true Lagrangian lies in
 the library's span, it is recovered exactly.
@@ -42,11 +42,11 @@ from typing import Annotated
 import numpy as np
 import sympy
 
-from bench.core import regression
+from bench.physics import regression
 from bench.core.folds import folds
 from bench.core.data import Dataset
-from bench.core.models import ExpressionModel
-from bench.core.terms import TermLibrary, lagrangian_library, lagrangian_library_size
+from bench.physics.models import ExpressionModel
+from bench.physics.terms import TermLibrary, lagrangian_library, lagrangian_library_size
 from methods.base import METHODS, ExpressionMethod
 from methods.config import MethodConfig, Range
 from methods.progress import Progress

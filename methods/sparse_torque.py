@@ -12,7 +12,7 @@ another trajectory (a library with every joint's ``sin q_i`` and ``cos q_i``
 gave the KUKA LWR4+'s default split 351 times the standard model's test MSE),
 
 fitted by sequentially thresholded least squares with the sparsity chosen on
-held-out samples (:func:`bench.core.regression.fit_columns`, on the validation
+held-out samples (:func:`bench.physics.regression.fit_columns`, on the validation
 protocol's folds, :mod:`bench.core.folds`), one solve a
 joint: the method's one step. Its result is one equation a joint, in those
 names (``record_details``). Its torque takes no accelerations: beside a prior
@@ -28,7 +28,7 @@ from typing import Annotated, ClassVar
 
 import numpy as np
 
-from bench.core import regression
+from bench.physics import regression
 from bench.core.folds import folds
 from bench.core.data import Dataset
 from bench.core.modelfile import loader

@@ -56,7 +56,7 @@ from torch.func import functional_call, stack_module_state, vmap
 
 from bench.core.compiled import compiled_once
 from bench.core.data import Dataset
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from bench.core.errors import ConfigError
 from methods.base import gc_frozen
 
@@ -168,7 +168,7 @@ class StackedLagrangian(Stack):
     """``(q, qd) -> L`` of S networks of one shape on S seeds' samples,
     concatenated seed by seed (each seed ``rows`` samples); with a
     ``tangent`` where the networks give their own derivatives
-    (:class:`~bench.core.dynamics.TangentLagrangian`)."""
+    (:class:`~bench.physics.dynamics.TangentLagrangian`)."""
 
     def __init__(self, networks: list[torch.nn.Module]):
         super().__init__(networks)

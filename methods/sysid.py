@@ -12,25 +12,25 @@ Choices the paper leaves open
 -----------------------------
 * The constant input has one element.
 * The output layer keeps its bias.
-* The parametric form comes from the system (:meth:`bench.core.system.System.parametric_form`),
+* The parametric form comes from the system (:meth:`bench.physics.system.System.parametric_form`),
   so any registered system that declares one can be identified.
 
 Systems linear in their parameters (robot arms)
 -----------------------------------------------
 A system given by an engine (an arm from its URDF) has no symbolic form but
-a :class:`~bench.core.system.LinearForm`: ``tau = Y pi``, linear in each
+a :class:`~bench.physics.system.LinearForm`: ``tau = Y pi``, linear in each
 link's 10 inertial parameters. There SysId does what the field does instead
 of the paper's network (whose optimum this is, reached in one step): it
 stacks the regressor over up to ``linear_samples`` training samples, finds
 the base parameters, the identifiable combinations, by QR with column
-pivoting (:func:`bench.core.regression.base_columns`), and fits them by
+pivoting (:func:`bench.physics.regression.base_columns`), and fits them by
 least squares. The record gives the base parameters' relative error against
 the true ones (from the URDF's parameters) and whether the identified mass
 matrix is positive definite at the training states (up to :data:`MASS_STATES` of them, evenly spread; and at how many it is not).
 
 By default (``feasible=True``) the arm's parameters are then identified
 under the constraint that each link's pseudo-inertia is positive
-semidefinite (Wensing, Kim & Slotine 2017; :func:`bench.core.feasible.feasible_fit`),
+semidefinite (Wensing, Kim & Slotine 2017; :func:`bench.physics.feasible.feasible_fit`),
 which is least squares' optimum wherever that is a rigid body's. On the
 generated Panda this cost about 0.9 s more per fit and was never worse on
 held-out data (results/arms/README.md); with 5 % torque noise least
@@ -63,12 +63,12 @@ import torch
 
 from bench.core.data import Dataset
 from bench.core.errors import DataError
-from bench.core.effects import EFFECTS
-from bench.core.models import (FeasibleSet, LinearParametricModel, ParametricModel, lagrangian_regressor, mass_and_bias,
+from bench.physics.effects import EFFECTS
+from bench.physics.models import (FeasibleSet, LinearParametricModel, ParametricModel, lagrangian_regressor, mass_and_bias,
                                torque_regressor)
-from bench.core.feasible import Feasibility, feasible_fit, nearest_completion
-from bench.core.regression import Compressed, base_columns, least_squares
-from bench.core.system import LinearForm
+from bench.physics.feasible import Feasibility, feasible_fit, nearest_completion
+from bench.physics.regression import Compressed, base_columns, least_squares
+from bench.physics.system import LinearForm
 from methods.base import METHODS
 from methods.config import Named, Range
 from methods.torch_method import TorchConfig, TorchLagrangianMethod
@@ -81,7 +81,7 @@ class SysIdConfig(TorchConfig):
     ``feasible``: a rigid-body form's parameters identified with each body's
     pseudo-inertia positive semidefinite, the directions the data do not
     identify pulled toward the form's prior (the URDF) with weight
-    ``regularisation`` (:mod:`bench.core.feasible`); ``False`` gives the
+    ``regularisation`` (:mod:`bench.physics.feasible`); ``False`` gives the
     base parameters by least squares. ``friction``: a linear form fitted
     with Coulomb and viscous friction on each joint (:func:`with_friction`)."""
 
@@ -110,10 +110,10 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
 
     With ``feasible`` (a form of rigid bodies with a prior), every
     parameter instead, each body's pseudo-inertia held positive
-    semidefinite (:func:`bench.core.feasible.feasible_fit`). Either way the
+    semidefinite (:func:`bench.physics.feasible.feasible_fit`). Either way the
     facts say whether the identified set is a rigid body's (``feasibility``):
     the least-squares base parameters are judged by the full set nearest
-    the prior with their torques (:func:`~bench.core.feasible.nearest_completion`)."""
+    the prior with their torques (:func:`~bench.physics.feasible.nearest_completion`)."""
     if experiment == "direct":
         W = np.column_stack([lagrangian_regressor(form, data), np.ones(len(data))])  # L up to a constant
         y = data.target(experiment)
@@ -244,7 +244,7 @@ class SysId(TorchLagrangianMethod):
             self._facts["mass_matrix_indefinite_states"] = int(np.sum(~(smallest > 0)))
 
     def saved(self, packer):
-        """The linear model (:meth:`~bench.core.models.LinearParametricModel.saved`), or the parameter network."""
+        """The linear model (:meth:`~bench.physics.models.LinearParametricModel.saved`), or the parameter network."""
         return self.linear.saved(packer) if self.linear is not None else super().saved(packer)
 
     def predict_lagrangian(self, data):

@@ -17,9 +17,9 @@ import numpy as np
 import torch
 
 from bench.core.data import Dataset
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from bench.core.modelfile import Packer, Unpacker, loader
-from bench.core.models import LagrangianFunction
+from bench.physics.models import LagrangianFunction
 from methods.base import Method, restored, saved_hyperparameters
 from methods.config import POSITIVE, MethodConfig, Range
 from methods.progress import Progress
@@ -183,7 +183,7 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
     @property
     def lagrangian(self):
         """The model: a module ``(q, qd) -> L``. One with a ``tangent`` method
-        (:class:`bench.core.dynamics.TangentLagrangian`) gives the
+        (:class:`bench.physics.dynamics.TangentLagrangian`) gives the
         Euler–Lagrange transform its own derivatives."""
         return self.model
 

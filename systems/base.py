@@ -1,5 +1,5 @@
 """The system contract, for the modules of this package: it lives in
-:mod:`bench.core.system` (below ``methods/``, which reads systems' declared
+:mod:`bench.physics.system` (below ``methods/``, which reads systems' declared
 forms) and is re-exported here; and :func:`register_file`, how a system
 given by a file (``urdf:PATH``, ``measured:PATH``) is registered."""
 
@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Callable
 
 from bench.core.errors import DataError
-from bench.core.system import HALF_PI, SYSTEMS, Domain, ParametricForm, System, get_system
+from bench.physics.system import HALF_PI, SYSTEMS, Domain, ParametricForm, System, get_system
 
 __all__ = ["HALF_PI", "SYSTEMS", "Domain", "ParametricForm", "System", "get_system", "register_file"]
 

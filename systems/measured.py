@@ -283,7 +283,7 @@ def _samples(spec: MeasuredSpec, trajectories: tuple[str, ...], filter: FilterSp
 
 class Measured:
     """A system whose data are the recordings its file declares (:attr:`measured`); mixed in before
-    :class:`~bench.core.system.System` (or a subclass that gives the model)."""
+    :class:`~bench.physics.system.System` (or a subclass that gives the model)."""
 
     simulated = False
     experiments = ("indirect",)

@@ -30,7 +30,7 @@ The URDF's masses and inertias are the robot description's, often
 placeholders: nothing here needs them. They are not a truth (the form's
 ``true_values`` are ``None``, so no parameter error is claimed); feasible
 identification uses them only as the point its unidentified directions are
-pulled to (:func:`bench.core.feasible.feasible_fit`), which leaves every
+pulled to (:func:`bench.physics.feasible.feasible_fit`), which leaves every
 torque unchanged.
 
 ``kuka_lwr4``: a real KUKA LWR4+ (FloBaRoID's recordings; LGPL-3.0,
@@ -43,7 +43,7 @@ import dataclasses
 from pathlib import Path
 
 from bench.core.data import DataError
-from bench.core.system import LinearForm
+from bench.physics.system import LinearForm
 from systems.base import SYSTEMS, register_file
 from systems.measured import Measured, MeasuredSpec, check_logs, read_spec
 from systems.urdf_arm import UrdfArm, chain, urdf_arm

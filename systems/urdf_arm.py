@@ -10,7 +10,7 @@ library", SII 2019), the rigid-body library of the robotics field:
 * the true motion of a rollout from its forward dynamics (``pin.aba``);
 * for SysId, the torque and energy regressors linear in the 10 inertial
   parameters of each link (``m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy,
-  I_xz, I_yz, I_zz`` about the joint frame), :class:`~bench.core.system.LinearForm`.
+  I_xz, I_yz, I_zz`` about the joint frame), :class:`~bench.physics.system.LinearForm`.
 
 No closed-form Lagrangian exists, so no learned equation can be judged
 exact (the tables say "not judged"). Pinocchio is independent of the suite:
@@ -60,7 +60,7 @@ import numpy as np
 import torch
 
 from bench.core.data import DataError
-from bench.core.system import Domain, LinearForm
+from bench.physics.system import Domain, LinearForm
 from systems.base import SYSTEMS, System, register_file
 
 DATA_DIR = Path(__file__).parent / "data"

@@ -17,7 +17,7 @@ from torch.utils._pytree import tree_leaves
 from bench.core import symbolic
 from bench.core.budget import Budget, Schedule
 from bench.core.data import Dataset, generate
-from bench.core.models import mass_and_bias
+from bench.physics.models import mass_and_bias
 from methods.stacking import fit_stacked
 from systems import SYSTEMS, Domain
 

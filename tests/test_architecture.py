@@ -53,7 +53,7 @@ def test_an_upward_import_breaks_the_layers_contract(tmp_path):
 def test_bench_holds_only_its_entry_points_and_the_layers():
     assert sorted(p.name for p in (ROOT / "bench").glob("*.py")) == ["__init__.py", "__main__.py"]
     layers = sorted(p.name for p in (ROOT / "bench").iterdir() if (p / "__init__.py").is_file())
-    assert layers == ["cli", "core", "evaluation", "experiments", "reporting", "residual", "runner"]
+    assert layers == ["cli", "core", "evaluation", "experiments", "physics", "reporting", "residual", "runner"]
 
 
 def test_no_module_cycles_and_no_imports_hidden_in_functions(measured):
@@ -63,8 +63,8 @@ def test_no_module_cycles_and_no_imports_hidden_in_functions(measured):
     assert [f"{i.importer}:{i.line} {i.target}" for i in measured["in-function imports of suite modules"]] == []
 
 
-def test_methods_and_systems_use_only_the_core_of_bench(measured):
-    assert measured["imports from methods/ or systems/ into bench outside bench.core"] == []
+def test_methods_and_systems_use_only_the_core_and_the_physics_of_bench(measured):
+    assert measured["imports from methods/ or systems/ into bench outside bench.core and bench.physics"] == []
 
 
 def test_the_repository_root_holds_only_the_layouts_files():

@@ -16,7 +16,7 @@ import sympy
 # the README's imports
 from bench.core import symbolic
 from bench.core.data import generate
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from bench.reporting.tables import write_tables
 from bench.runner.matrix import run_matrix
 from bench.runner.progress import quiet

@@ -9,9 +9,9 @@ from bench.cli.options import UsageError, add_plugin, check_names, load_plugins
 from bench.core.arguments import noise_level, positive, positive_int, seed
 from bench.core.data import add_noise, generate
 from bench.core.csv_format import write_csv
-from bench.core.effects import EFFECTS
+from bench.physics.effects import EFFECTS
 from bench.core.fileio import check_output
-from bench.core.undeclared import GENERATOR_LAWS, add_effects, parse_effects
+from bench.physics.undeclared import GENERATOR_LAWS, add_effects, parse_effects
 from systems import SYSTEMS
 
 HELP = "generate data in the suite's CSV format"

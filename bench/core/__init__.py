@@ -1,21 +1,20 @@
-"""The foundation every other part of the suite stands on.
+"""The foundation every other part of the suite stands on: its infrastructure.
 
-Nothing here imports from the rest of the suite; ``methods/`` and
-``systems/`` import from ``bench`` only what is here.
+Nothing here imports from the rest of the suite.
 
 * :mod:`~bench.core.errors`: errors caused by the user's input;
 * :mod:`~bench.core.fileio`: atomic writes;
 * :mod:`~bench.core.registry`: named registries with tags;
-* :mod:`~bench.core.data`: the one data format, :class:`~bench.core.data.Dataset`;
-* :mod:`~bench.core.dynamics`: the one Euler–Lagrange transform;
+* :mod:`~bench.core.processes`, :mod:`~bench.core.timeouts`: child processes and
+  a hard time limit for pure-Python work;
+* :mod:`~bench.core.budget`: budgets of time or work, and the one clock they read;
+* :mod:`~bench.core.names`: a method's name, parsed once;
+* :mod:`~bench.core.data`: the one data format, :class:`~bench.core.data.Dataset`,
+  its CSV form (:mod:`~bench.core.csv_format`) and measured recordings
+  (:mod:`~bench.core.recordings`);
+* :mod:`~bench.core.folds`: the one validation protocol;
 * :mod:`~bench.core.symbolic`: the coordinate symbols and sympy compilation;
-* :mod:`~bench.core.terms`: the one term-library type;
-* :mod:`~bench.core.regression`: least squares over terms;
-* :mod:`~bench.core.effects`: the joint effects a rigid-body model lacks;
-* :mod:`~bench.core.models`: the one fitted-model interface and the
-  expression-backed and parametric models;
-* :mod:`~bench.core.system`: what a physical system is, and the system
-  registry (here, below ``methods/``, because a method reads a system's
-  declared form and coordinate kinds);
-* :mod:`~bench.core.timeouts`: a hard time limit for pure-Python work.
+* :mod:`~bench.core.modelfile`: the model file.
+
+The physics built on it is :mod:`bench.physics`.
 """

@@ -206,7 +206,7 @@ def _cache_key(system, n: int, seed: int) -> str:
 
 
 def generate(system, n: int, seed: int, *, cache: bool = True) -> Dataset:
-    """Sample ``n`` states of ``system`` with ``seed``; torques from :mod:`bench.core.dynamics`.
+    """Sample ``n`` states of ``system`` with ``seed``; torques from :mod:`bench.physics.dynamics`.
 
     ``q``, ``qd`` and ``qdd`` are drawn independently and uniformly from the
     system's domain, in that order, from ``numpy.random.default_rng(seed)``.

@@ -10,7 +10,7 @@ node by node from a fixed list of operations and functions, never through
 ``eval``. Floats keep all their digits, so a loaded model predicts what the
 fitted one did to round-off.
 
-A model says how it is saved (:meth:`~bench.core.models.FittedModel.saved`:
+A model says how it is saved (:meth:`~bench.physics.models.FittedModel.saved`:
 a kind and a JSON tree holding :class:`Packer` references to arrays), and
 each kind has a loader (:data:`LOADERS`, :func:`loader`), registered beside
 the model it loads. A file that is not such a model, is truncated or does not
@@ -187,7 +187,7 @@ def loader(kind: str):
 
 def save(path: str | Path, header: dict, model_tree: dict, packer: Packer) -> None:
     """Write a model file: ``header`` (what it was fitted with), the model's
-    tree (:meth:`~bench.core.models.FittedModel.saved`) and its arrays, atomically."""
+    tree (:meth:`~bench.physics.models.FittedModel.saved`) and its arrays, atomically."""
     text = json.dumps({"format": FORMAT, **header, "model": model_tree}, indent=1, sort_keys=True)
 
     def write(f):

@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 
 from bench.core.data import Dataset
-from bench.core.system import System
+from bench.physics.system import System
 from bench.evaluation.driven import driven_entry
 from bench.evaluation.forces import forces_entry
 from bench.evaluation.per_joint import per_joint_entry

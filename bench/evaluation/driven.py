@@ -42,7 +42,7 @@ from typing import Callable
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.models import FittedModel
+from bench.physics.models import FittedModel
 from bench.evaluation.rollout import BLOW_UP, accelerations
 
 #: the windows' lengths, s

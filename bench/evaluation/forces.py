@@ -9,7 +9,7 @@ torques, with no access to its insides:
 * ``c = tau(q, qd, 0) - g``;
 * ``M qdd = tau(q, 0, qdd) - g``.
 
-The system gives its true parts (:meth:`bench.core.system.System.forces`);
+The system gives its true parts (:meth:`bench.physics.system.System.forces`);
 a model that is no Lagrangian of ``(q, qd)`` (its torque is not affine in
 ``qdd``) has no such split and is not scored.
 """
@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from bench.core.data import Dataset, mse
-from bench.core.models import FittedModel
-from bench.core.system import FORCES, System
+from bench.physics.models import FittedModel
+from bench.physics.system import FORCES, System
 
 
 def decomposition(model: FittedModel, data: Dataset) -> dict[str, np.ndarray]:

@@ -27,7 +27,7 @@ import sympy
 import torch
 
 from bench.core import symbolic
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from bench.core.timeouts import call_with_timeout
 
 #: relative size below which a coefficient of the difference counts as zero
@@ -135,7 +135,7 @@ def judge(L_hat: sympy.Expr, L_true: sympy.Expr, dof: int, experiment: str, *,
 
 
 def _samples(dof, domain, seed):
-    """Fresh states from ``domain`` (a :class:`~bench.core.system.Domain`, or None for U(-pi/2, pi/2))."""
+    """Fresh states from ``domain`` (a :class:`~bench.physics.system.Domain`, or None for U(-pi/2, pi/2))."""
     g = np.random.default_rng(seed)
     if domain is None:
         return [torch.from_numpy(g.uniform(-np.pi / 2, np.pi / 2, size=(2000, dof))) for _ in range(3)]

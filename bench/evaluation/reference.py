@@ -22,7 +22,7 @@ import numpy as np
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
-from bench.core.system import System
+from bench.physics.system import System
 from bench.evaluation.driven import driven_entry
 from methods import METHODS
 

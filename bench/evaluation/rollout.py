@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.models import FittedModel, mass_and_bias
+from bench.physics.models import FittedModel, mass_and_bias
 
 HORIZON_S = 1.0
 N_INITIAL = 8

@@ -22,8 +22,8 @@ from typing import Any, Callable
 import numpy as np
 
 from bench.core.data import Dataset, mse
-from bench.core.models import FittedModel
-from bench.core.system import System
+from bench.physics.models import FittedModel
+from bench.physics.system import System
 from bench.core.timeouts import Timeout
 from bench.evaluation.recovery import judge
 from bench.evaluation.rollout import rollout_error

@@ -43,7 +43,7 @@ from bench.core.budget import SECONDS, Budget
 from bench.core.data import Dataset, mse
 from bench.core.errors import ConfigError
 from bench.core.folds import folds
-from bench.core.system import System
+from bench.physics.system import System
 
 #: at most this many combinations a method's search space may hold
 MAX_COMBINATIONS = 10

@@ -26,9 +26,9 @@ own precision cannot tell from the truth.
 
 from __future__ import annotations
 
-from bench.core.effects import EFFECTS
-from bench.core.laws import FAMILIES, LAWS, Part, group
-from bench.core.undeclared import GENERATOR_LAWS
+from bench.physics.effects import EFFECTS
+from bench.physics.laws import FAMILIES, LAWS, Part, group
+from bench.physics.undeclared import GENERATOR_LAWS
 
 #: a parameter is right within this share of its true value
 WITHIN = 0.10
@@ -129,7 +129,7 @@ def put_in(key: tuple, want: dict) -> bool:
     viscous friction was put in: an incomplete finding, which recall counts,
     not a false one)."""
     name, joints = key
-    return key in want or any(j == joints and name in contained(n) for n, j in want if n in LAWS)
+    return key in want or any(j == joints and name in contained(n) for n, j in want if n in LAWS.arm)
 
 
 def contained(law: str) -> set[str]:
@@ -137,9 +137,9 @@ def contained(law: str) -> set[str]:
     limits leave, and theirs in turn."""
     out, todo = set(), [law]
     while todo:
-        entry = LAWS[todo.pop()]
+        entry = LAWS.arm[todo.pop()]
         found = set(entry.members) | set(entry.simpler) | {p for limits in entry.limits.values() for parts in limits
                                                            for p in parts}
-        todo += [n for n in found - out if n in LAWS]
+        todo += [n for n in found - out if n in LAWS.arm]
         out |= found
     return out

@@ -49,7 +49,7 @@ from pathlib import Path
 
 from bench.core.arguments import positive, positive_int
 from bench.core.data import generate, mse
-from bench.core.undeclared import add_effects, parse_effects
+from bench.physics.undeclared import add_effects, parse_effects
 from bench.core.errors import ConfigError
 from bench.core.fileio import atomic_write, check_output, link, write_json
 from bench.reporting.plots import adaptation_plot, step_values

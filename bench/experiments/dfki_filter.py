@@ -12,7 +12,7 @@ least-squares models are fitted on the training trajectories:
 Their torque MSE on the test trajectories is measured against the measured
 torque *without* the low-pass (resampled only), so a lower cut-off cannot win
 by smoothing its own target; the MSE against the filtered torque is printed
-beside it. Both models are term libraries (:class:`~bench.core.terms.TermLibrary`).
+beside it. Both models are term libraries (:class:`~bench.physics.terms.TermLibrary`).
 Usage::
 
     python -m bench study dfki-filter [--out results/measured/dfki_filter.md]
@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-from bench.core import regression
+from bench.physics import regression
 from bench.core.data import Dataset
 from bench.core.fileio import atomic_write, check_output
 from bench.core.recordings import FilterSpec
 from bench.core.symbolic import coordinate_symbols
-from bench.core.terms import Term, TermLibrary
+from bench.physics.terms import Term, TermLibrary
 from systems.dfki_double_pendulum import LAB_FRICTION, DfkiDoublePendulum, lab_parameters
 
 #: the filter the DFKI's file declares, whose cut-off the study varies

@@ -5,7 +5,7 @@ on a development set and on an evaluation set held out from development
 
 For each case (an effect, a chosen pair of effects, or clean data), each
 noise level, each data seed and each method, the double pendulum's torques
-get the effects (:func:`bench.core.undeclared.add_effects`) and Gaussian
+get the effects (:func:`bench.physics.undeclared.add_effects`) and Gaussian
 noise on train and test torques (a fraction of each joint's torque standard
 deviation); the loop (:func:`bench.residual.residual_loop`) runs, each case in
 its own process through the runner, under a work budget, and its report is
@@ -41,7 +41,7 @@ import numpy as np
 from bench.core.budget import Budget
 from bench.core.arguments import noise_level, positive, positive_int, seed_list
 from bench.core.data import add_noise, generate
-from bench.core.undeclared import add_effects, parse_effects
+from bench.physics.undeclared import add_effects, parse_effects
 from bench.core.fileio import atomic_write, check_output, link, write_json
 from bench.experiments.acceptance_cases import (CASES, DEVELOPMENT, DEVELOPMENT_SEEDS, EVALUATION, EVALUATION_CASES,
                                                 EVALUATION_SEEDS, SETS, effects)

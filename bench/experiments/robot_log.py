@@ -8,8 +8,8 @@ finite Fourier series of :data:`HARMONICS` harmonics of a base frequency,
 with random coefficients, so that ``q``, ``qd`` and ``qdd`` are exact and
 smooth. Each joint's amplitude keeps it within :data:`REACH` of the system's
 own range of positions and of velocities. The torque is the system's (:meth:`System.torque
-<bench.core.system.System.torque>`) plus the undeclared effects
-(:func:`bench.core.undeclared.add_effects`) plus Gaussian noise of a
+<bench.physics.system.System.torque>`) plus the undeclared effects
+(:func:`bench.physics.undeclared.add_effects`) plus Gaussian noise of a
 fraction of each joint's torque standard deviation (:func:`bench.core.data.add_noise`),
 sampled at ``rate_hz``. The log has a time column and, per joint, position,
 velocity and torque columns under the names a robot's software uses
@@ -35,7 +35,7 @@ from bench.core.arguments import noise_level, nonnegative, positive, positive_in
 from bench.core.data import Dataset, add_noise
 from bench.core.errors import ConfigError
 from bench.core.fileio import atomic_write
-from bench.core.undeclared import add_effects, parse_effects
+from bench.physics.undeclared import add_effects, parse_effects
 from systems import get_system
 
 #: harmonics of each joint's Fourier series

@@ -40,7 +40,7 @@ from bench.runner.provenance import machine, provenance
 from bench.runner.records import Record, read_records
 from bench.runner.spec import SEEDS, build_specs, seed_count
 from methods import METHODS
-from bench.core.terms import lagrangian_library_size as library_size
+from bench.physics.terms import lagrangian_library_size as library_size
 from systems import SYSTEMS
 
 #: the pendulums' sizes (as in the plugin)

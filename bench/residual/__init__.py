@@ -6,7 +6,7 @@ add them, refit, and report the error before and after.
 * :mod:`~bench.residual.selection`: stepwise selection with its statistics,
   on :mod:`~bench.residual.basis` (projections off the design) and
   :mod:`~bench.residual.shapes` (a shaped effect's nonlinear parameter);
-* :mod:`~bench.core.sensor_laws`, :mod:`~bench.residual.sensors`: the
+* :mod:`~bench.physics.sensor_laws`, :mod:`~bench.residual.sensors`: the
   laws of the torque sensor and the drive (a gain, a time shift, a
   load-dependent friction), one class each, which act on the measured torque
   rather than on the arm, and the loop's handling of them;

@@ -37,7 +37,7 @@ from __future__ import annotations
 from typing import Callable
 
 from bench.core.data import Dataset
-from bench.core.effects import EFFECTS
+from bench.physics.effects import EFFECTS
 from bench.residual.candidates import is_named, label, law_text
 from bench.residual.checks import heldout
 from bench.residual.model import LoopModel

@@ -1,7 +1,7 @@
 """The residual loop's candidates: terms of the suite's term library
-(:class:`~bench.core.terms.TermLibrary`), each one physical cause.
+(:class:`~bench.physics.terms.TermLibrary`), each one physical cause.
 
-* the named effects of :mod:`bench.core.effects` on every joint (viscous and
+* the named effects of :mod:`bench.physics.effects` on every joint (viscous and
   Coulomb friction, armature, spring, offset) and the coupled ones on every
   pair of coordinates (a spring or damper on their difference);
 * on a planar chain, the general Lagrangian terms of the whole system that a
@@ -11,7 +11,7 @@
   ``symbolic`` with their expression:
 
   - terms of ``L``: sparse regression's library
-    (:func:`~bench.core.terms.lagrangian_library`) with velocity degree 0
+    (:func:`~bench.physics.terms.lagrangian_library`) with velocity degree 0
     (potentials ``p(q)``) and 2 (kinetic terms ``qd_i qd_j p(q)``), less the
     constant and what a named effect already is; degree 1 is left out, its
     terms being gyroscopic or, like ``qd_i cos q_i``, total derivatives with
@@ -35,11 +35,11 @@ import math
 
 import sympy
 
-from bench.core.effects import EFFECTS
-from bench.core.laws import FAMILIES, Part, group
+from bench.physics.effects import EFFECTS
+from bench.physics.laws import FAMILIES, Part, group
 from bench.core.symbolic import coordinate_symbols
-from bench.core.terms import Term, TermLibrary, lagrangian_library, lagrangian_library_size
-from bench.core.sensor_laws import law_of
+from bench.physics.terms import Term, TermLibrary, lagrangian_library, lagrangian_library_size
+from bench.physics.sensor_laws import law_of
 
 
 #: the most Lagrangian terms the open-ended library may have (see the module docstring)
@@ -176,7 +176,7 @@ def law_text(term: Term, parameter: str) -> str:
 
 def describe_all(terms: list[Term], coef, stderr, shape_stderr: dict[Term, float]) -> list[dict]:
     """The JSON entries of the accepted effects, one per law
-    (:func:`bench.core.laws.group`): the named effects on one joint that
+    (:func:`bench.physics.laws.group`): the named effects on one joint that
     make a law of several parts (Coulomb plus viscous friction; a Stribeck
     hump with the Coulomb and viscous friction on its joint) or a shaped
     one (smoothed Coulomb friction) are one entry with the law's parameters

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.models import FittedModel, mass_and_bias
+from bench.physics.models import FittedModel, mass_and_bias
 from bench.residual.model import LoopModel
 from bench.residual.strategies import Strategy
 from bench.residual.validation import cv_mse, row_folds

@@ -9,7 +9,7 @@ import functools
 
 import sympy
 
-from bench.core.models import FittedModel
+from bench.physics.models import FittedModel
 
 #: a symbolic model with more terms than this is refitted like a neural one
 #: (a least-squares refit of thousands of terms is neither fast nor meaningful)

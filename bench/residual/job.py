@@ -13,7 +13,7 @@ from typing import Callable
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset
-from bench.core.system import System
+from bench.physics.system import System
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest, read_settings, write_json
 from bench.evaluation.per_joint import per_joint, per_joint_lines
@@ -41,7 +41,7 @@ class ResidualJob(Job):
     measured system without them uses its own split ``split`` (``None``: its default). ``json_path`` and
     ``report_path`` are written by the loop's process, atomically.
     ``check_limits`` stops the loop where the files' positions leave the
-    arm's joint limits (:meth:`~bench.core.system.System.check_positions`).
+    arm's joint limits (:meth:`~bench.physics.system.System.check_positions`).
     """
 
     system: str

@@ -44,7 +44,7 @@ can undo a round) is the model's refit strategy, chosen once from the model
    whose rest angle the arm never visited) without earning its place on a
    held-out trajectory, is dropped and reported as a finding
    (:mod:`bench.residual.beyond_data`). The JSON reports the effects as laws
-   (:mod:`bench.core.laws`).
+   (:mod:`bench.physics.laws`).
 6. **Keep the round only if it generalises.** The round's model is scored by
    cross-validation over whole trajectories (:mod:`bench.residual.validation`:
    leave one trajectory out, contiguous spans of the one trajectory the
@@ -85,8 +85,8 @@ import numpy as np
 from bench.core.budget import Budget, now
 from bench.core.data import Dataset, mse
 from bench.core.errors import first_line
-from bench.core.models import FittedModel
-from bench.core.terms import Term, TermLibrary, remembered_columns, share_columns
+from bench.physics.models import FittedModel
+from bench.physics.terms import Term, TermLibrary, remembered_columns, share_columns
 from bench.residual.candidates import candidates, describe_all, is_named, label, mismatch, resolved_periods, structural
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel

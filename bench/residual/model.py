@@ -16,8 +16,8 @@ import numpy as np
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.modelfile import Packer, Unpacker, build, loader
-from bench.core.models import FittedModel, term_from_json, term_to_json
-from bench.core.terms import Term, TermLibrary
+from bench.physics.models import FittedModel, term_from_json, term_to_json
+from bench.physics.terms import Term, TermLibrary
 from methods import METHODS
 
 #: the last rigid-model torques computed, ``(rigid, data, tau)`` (see :func:`rigid_torque`)

@@ -22,7 +22,7 @@ import numpy as np
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset
-from bench.core.models import FittedModel
+from bench.physics.models import FittedModel
 from bench.residual.loop import residual_loop
 from methods.base import METHODS, Method
 from methods.hybrid import Prior, prior_unavailable, register_prior

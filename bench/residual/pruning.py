@@ -11,10 +11,10 @@ import math
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.effects import EFFECTS
-from bench.core.laws import FAMILIES, led_by, one_law_per_family
-from bench.core.regression import Compressed
-from bench.core.terms import Term
+from bench.physics.effects import EFFECTS
+from bench.physics.laws import FAMILIES, led_by, one_law_per_family
+from bench.physics.regression import Compressed
+from bench.physics.terms import Term
 from bench.residual.candidates import admissible, label
 from bench.residual.model import LoopModel
 from bench.residual.basis import extend_basis
@@ -28,7 +28,7 @@ def prune(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) 
     """Backward elimination after a joint refit: drop an effect whose removal
     raises the BIC by less than :data:`MIN_BIC_DROP` (it became redundant with
     the refitted model), then refit; repeat until every effect holds. Each
-    pass compresses the linear problem once (:class:`~bench.core.regression.Compressed`)
+    pass compresses the linear problem once (:class:`~bench.physics.regression.Compressed`)
     and fits it without each effect from that."""
     removed = []
     while model.effects:
@@ -126,10 +126,10 @@ def simplest_laws(strategy: Strategy, model: LoopModel, train: Dataset, report: 
     what was replaced by what and why.
 
     A shaped part (a Stribeck hump, smoothed Coulomb friction) is replaced by
-    the parts its law's limits give (:attr:`bench.core.laws.Law.limits`; the
+    the parts its law's limits give (:attr:`bench.physics.laws.Law.limits`; the
     limit whose fit has the least BIC) where its shape's or its coefficient's
     standard error is at least its value, where an essential part of its law
-    is missing (:attr:`~bench.core.laws.Law.essential`: a Stribeck law's
+    is missing (:attr:`~bench.physics.laws.Law.essential`: a Stribeck law's
     Coulomb level, then ``0 ± 0``), where its shape sits at an end of
     :data:`~bench.residual.shapes.SHAPE_LIMITS`, or where that limit's BIC
     is not above the law's by more than :data:`MIN_BIC_DROP` (the loop's own
@@ -154,7 +154,7 @@ def simplest_laws(strategy: Strategy, model: LoopModel, train: Dataset, report: 
 class _Fits:
     """The BIC of the model's linear problem (:meth:`Strategy.problem`) with
     some effects' columns left out or some of ``extra`` added, from one
-    compressed problem (:class:`~bench.core.regression.Compressed`)."""
+    compressed problem (:class:`~bench.physics.regression.Compressed`)."""
 
     def __init__(self, strategy: Strategy, model: LoopModel, train: Dataset, extra: list[Term] = ()):
         target, F = strategy.problem(model, train)

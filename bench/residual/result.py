@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from bench.core.models import FittedModel
+from bench.physics.models import FittedModel
 from bench.runner.provenance import Provenanced
 
 
@@ -34,7 +34,7 @@ class ResidualResult(Provenanced):
     ``budget_s`` is its ceiling (``None``: none) and ``fit_budget_s`` is ``None``.
     ``feasibility`` says, for a model of rigid bodies (SysId on an arm),
     whether its inertial parameters are a rigid body's before and after the
-    loop (:func:`bench.core.feasible.feasibility_of`): the masses and each
+    loop (:func:`bench.physics.feasible.feasibility_of`): the masses and each
     body's smallest pseudo-inertia eigenvalue; ``None`` for other models.
     ``rollout`` gives, where the test data name their recordings' times
     (measured data), the driven rollouts of the test recordings before and

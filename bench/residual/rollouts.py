@@ -12,7 +12,7 @@ import traceback
 from bench.core.budget import now
 from bench.core.data import Dataset
 from bench.core.errors import first_line
-from bench.core.models import FittedModel
+from bench.physics.models import FittedModel
 from bench.evaluation.driven import driven_entry
 from bench.residual.result import ResidualResult
 from bench.residual.sensors import Sensor

@@ -49,9 +49,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.effects import EFFECTS
-from bench.core.laws import led_by
-from bench.core.terms import Term, TermLibrary
+from bench.physics.effects import EFFECTS
+from bench.physics.laws import led_by
+from bench.physics.terms import Term, TermLibrary
 from bench.core.budget import now
 from bench.residual.basis import extend_basis, orthonormal_basis, project_off
 from bench.residual.candidates import admissible, is_named, label
@@ -176,7 +176,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
 
     def group(c: Term) -> list[Term]:
         """A shaped candidate with the other parts of the law it leads
-        (:func:`bench.core.laws.led_by`; a Stribeck hump comes with Coulomb
+        (:func:`bench.physics.laws.led_by`; a Stribeck hump comes with Coulomb
         and viscous friction on its joint), where those are not in the model yet."""
         law = led_by(c.name) if c.shape is not None else None
         if law is None or not law.optional:
@@ -243,7 +243,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
 
     def limit(c: Term, k_now: int, rss_now: float) -> dict | None:
         """The statistics of the limit law a shaped candidate at an end of its
-        range stands for (:attr:`bench.core.laws.Law.limits`: the first at the
+        range stands for (:attr:`bench.physics.laws.Law.limits`: the first at the
         low end, the second at the high end) with the companions of the law it
         leads; ``None`` where that limit adds nothing new."""
         law = led_by(c.name)

@@ -1,5 +1,5 @@
 r"""The residual loop's handling of the laws between the arm's torque and
-the measured one (:mod:`bench.core.sensor_laws`: a sensor's gain, a time
+the measured one (:mod:`bench.physics.sensor_laws`: a sensor's gain, a time
 shift between torque and state, a drive's load-dependent friction, and any
 law registered there), which act on the measured torque rather than on the
 arm's Lagrangian.
@@ -39,13 +39,14 @@ import numpy as np
 
 from bench.core.data import Dataset
 from bench.core.modelfile import Packer, Unpacker, build, loader
-from bench.core.models import FittedModel
-from bench.core.regression import fit_statistics
-from bench.core.terms import Term
+from bench.physics.models import FittedModel
+from bench.physics.regression import fit_statistics
+from bench.physics.terms import Term
 from bench.residual.beyond_data import held_out_verdict
 from bench.residual.candidates import law_text, structural
 from bench.residual.selection import bic
-from bench.core.sensor_laws import SENSOR_LAWS, SensorLaw, has_time, law_of
+from bench.physics.laws import LAWS
+from bench.physics.sensor_laws import SensorLaw, has_time, law_of
 
 #: the fixed point of :func:`settle` is reached when no gain changes by more than this share and
 #: the shift by no more than this share of the median sample step
@@ -57,8 +58,8 @@ MAX_STEPS = 12
 @dataclass(frozen=True)
 class Sensor:
     """What the loop knows of the path from the arm's torque to the measured
-    one: the laws found (:mod:`bench.core.sensor_laws`, in the order of
-    :data:`~bench.core.sensor_laws.SENSOR_LAWS`, then by joint), each at its
+    one: the laws found (:mod:`bench.physics.sensor_laws`, in the order of
+    :attr:`bench.physics.laws.LAWS.sensor <bench.physics.laws.Laws.sensor>`, then by joint), each at its
     value, and the reference joint whose gain is fixed at 1."""
 
     reference: int
@@ -93,7 +94,7 @@ class Sensor:
 
     def with_laws(self, laws) -> "Sensor":
         """``self`` with ``laws`` (instances) put in their places."""
-        order = list(SENSOR_LAWS)
+        order = list(LAWS.sensor)
         keyed = {(law.name, law.joint): law for law in self.laws} | {(law.name, law.joint): law for law in laws}
         ranked = sorted(keyed.values(), key=lambda law: (order.index(law.name), -1 if law.joint is None else law.joint))
         return dataclasses.replace(self, laws=tuple(ranked))
@@ -141,10 +142,10 @@ class Sensor:
 
     def candidates(self, train: Dataset) -> list[Term]:
         """The laws not yet found, wherever each is offered on ``train``
-        (:meth:`~bench.core.sensor_laws.SensorLaw.offered`: a gain on each
+        (:meth:`~bench.physics.sensor_laws.SensorLaw.offered`: a gain on each
         joint but the reference, a load-dependent friction on each joint, a
         time shift where ``train`` has time stamps, and any law registered)."""
-        return [t for law in SENSOR_LAWS.values() for joint in law.offered(train, self.reference)
+        return [t for law in LAWS.sensor.values() for joint in law.offered(train, self.reference)
                 if self.law(t := law.term(joint, train.dof)) is None]
 
     def entries(self, dof: int) -> list[dict]:
@@ -154,7 +155,7 @@ class Sensor:
 
 def column(term: Term, model: FittedModel, train: Dataset, sensor: Sensor | None = None) -> np.ndarray:
     """A law's column linearised at ``model`` on ``train``, the law as
-    ``sensor`` has it (see :meth:`~bench.core.sensor_laws.SensorLaw.column`),
+    ``sensor`` has it (see :meth:`~bench.physics.sensor_laws.SensorLaw.column`),
     flattened sample-major."""
     tau = np.asarray(model.predict_torque(train), dtype=np.float64)
     law = law_of(term).start(term.joint) if sensor is None else sensor.at(term)
@@ -198,8 +199,8 @@ def measured_rss(model: FittedModel, sensor: Sensor, measured: Dataset) -> float
 
 def inadmissible(strategy, model, measured: Dataset, sensor: Sensor):
     """The laws whose settled parameter left its admissible range
-    (:attr:`~bench.core.sensor_laws.SensorLaw.bounds`: a gain outside
-    :data:`~bench.core.effects.GAIN_RANGE`, a load-dependent friction outside
+    (:attr:`~bench.physics.sensor_laws.SensorLaw.bounds`: a gain outside
+    :data:`~bench.physics.effects.GAIN_RANGE`, a load-dependent friction outside
     ``0 <= mu <= 0.5``), each dropped with the others settled again: the fixed
     point may take a law there that entered inside it. Returns the model, the
     sensor and, per law dropped, ``(term, structural finding)``."""
@@ -303,9 +304,9 @@ class Sensed(FittedModel):
 def _load(tree: dict, unpacker: Unpacker, context: dict) -> Sensed:
     laws = []
     for entry in tree["laws"]:
-        if entry["name"] not in SENSOR_LAWS:
+        if entry["name"] not in LAWS.sensor:
             raise ValueError(f"a law of the sensor or the drive named {entry['name']!r}, which is not registered here")
         joint = entry["joint"]
-        laws.append(SENSOR_LAWS[entry["name"]](None if joint is None else int(joint), float(entry["value"]),
+        laws.append(LAWS.sensor[entry["name"]](None if joint is None else int(joint), float(entry["value"]),
                                         float(entry["stderr"])))
     return Sensed(build(tree["model"], unpacker, context), Sensor(int(tree["reference"]), tuple(laws)))

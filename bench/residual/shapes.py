@@ -12,8 +12,8 @@ import math
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.effects import EFFECTS
-from bench.core.terms import Term
+from bench.physics.effects import EFFECTS
+from bench.physics.terms import Term
 from bench.residual.basis import project_off
 from bench.residual.candidates import SHAPE_GRID
 
@@ -87,7 +87,7 @@ def refined_shape(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset) -> fl
 
 def refinable(term: Term) -> bool:
     """Whether ``term``'s shape is on a continuous scale, to refine (a Stribeck
-    velocity), rather than one of its effect's :attr:`~bench.core.effects.Effect.grid`
+    velocity), rather than one of its effect's :attr:`~bench.physics.effects.Effect.grid`
     (a whole number of periods, each value a candidate of its own)."""
     return term.shape is not None and EFFECTS[term.name].grid is None
 

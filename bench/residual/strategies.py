@@ -1,6 +1,6 @@
 """How the residual loop treats each kind of fitted model: one refit strategy per kind.
 
-A fitted model declares its structure (:meth:`bench.core.models.FittedModel.structure`),
+A fitted model declares its structure (:meth:`bench.physics.models.FittedModel.structure`),
 and :func:`strategy_for` picks the strategy registered for it (:data:`STRATEGIES`,
 :func:`refits`) once, at the start of the loop.
 A strategy owns what differs between kinds of model:
@@ -44,11 +44,11 @@ import numpy as np
 import sympy
 
 from bench.core.data import Dataset, mse
-from bench.core.models import ExpressionModel, FittedModel, ParametricModel
-from bench.core.feasible import feasibility_of, feasible_fit
-from bench.core.regression import Compressed, fit_statistics
+from bench.physics.models import ExpressionModel, FittedModel, ParametricModel
+from bench.physics.feasible import feasibility_of, feasible_fit
+from bench.physics.regression import Compressed, fit_statistics
 from bench.core.symbolic import coordinate_symbols
-from bench.core.terms import Term, TermLibrary
+from bench.physics.terms import Term, TermLibrary
 from bench.residual.model import CrossFitted, Fitter, LoopModel, rigid_torque
 from bench.residual.basis import orthonormal_basis
 from bench.residual.expression_terms import MAX_SYMBOLIC_TERMS, expression_terms
@@ -63,7 +63,7 @@ POLISH_STARTS = 16
 POLISH_SAMPLES = 256
 
 
-#: the refit strategy of each structure a model declares (:meth:`~bench.core.models.FittedModel.structure`);
+#: the refit strategy of each structure a model declares (:meth:`~bench.physics.models.FittedModel.structure`);
 #: a new kind of model declares a structure of its own and registers its strategy with :func:`refits`
 STRATEGIES: dict[str, type["Strategy"]] = {}
 
@@ -140,7 +140,7 @@ class Strategy(abc.ABC):
 
     def feasibility(self, model: LoopModel, train: Dataset) -> dict | None:
         """Whether the model's inertial parameters are a rigid body's
-        (:func:`bench.core.feasible.feasibility_of`), for a model of rigid bodies; else ``None``."""
+        (:func:`bench.physics.feasible.feasibility_of`), for a model of rigid bodies; else ``None``."""
         return None
 
     def holds_out(self) -> str:
@@ -165,7 +165,7 @@ class Start:
 
 @refits("parametric")
 class Parametric(Strategy):
-    """A form with nonlinear parameters (:class:`~bench.core.models.ParametricModel`)."""
+    """A form with nonlinear parameters (:class:`~bench.physics.models.ParametricModel`)."""
 
     name = "parametric"
     fixed_freedom = False
@@ -196,7 +196,7 @@ class Parametric(Strategy):
 
 @refits("linear")
 class Linear(Strategy):
-    """A model linear in its parameters (:class:`~bench.core.models.LinearParametricModel`):
+    """A model linear in its parameters (:class:`~bench.physics.models.LinearParametricModel`):
     least squares has reached its optimum already, so round 0 keeps it."""
 
     name = "linear"
@@ -222,8 +222,8 @@ class Linear(Strategy):
 @refits("feasible")
 class Feasible(Linear):
     """A model linear in its parameters held physically feasible
-    (:class:`~bench.core.models.FeasibleSet`): refitted with the effects
-    under the same constraints (:func:`bench.core.feasible.feasible_fit`),
+    (:class:`~bench.physics.models.FeasibleSet`): refitted with the effects
+    under the same constraints (:func:`bench.physics.feasible.feasible_fit`),
     so that the effects are not judged beside a rigid model no rigid body
     has. Tracing, pruning and the held-out checks judge candidates by
     unconstrained least squares, as for :class:`Linear`; the effects'
@@ -335,7 +335,7 @@ class KeptFit(Strategy):
 
 def strategy_for(fitted: FittedModel) -> Strategy:
     """The strategy for ``fitted``, chosen once from its declared structure
-    (:meth:`~bench.core.models.FittedModel.structure`) in :data:`STRATEGIES`;
+    (:meth:`~bench.physics.models.FittedModel.structure`) in :data:`STRATEGIES`;
     a model the strategy cannot take (an expression too large to expand into
     terms) is kept like a network."""
     return STRATEGIES.get(fitted.structure(), KeptFit).of(fitted) or KeptFit()
@@ -346,7 +346,7 @@ def strategy_for(fitted: FittedModel) -> Strategy:
 def nonlinear_fit(rigid: ParametricModel, train: Dataset, effects: list[Term], coef0) -> LoopModel:
     """Parameters and effects' coefficients together, by nonlinear least squares
     (trust-region reflective, analytic effect columns, the form's parameter
-    Jacobian, :meth:`~bench.core.models.ParametricModel.jacobian`)."""
+    Jacobian, :meth:`~bench.physics.models.ParametricModel.jacobian`)."""
     from scipy.optimize import least_squares  # 0.7 s to import: only parametric models need it
 
     Phi = TermLibrary(effects).design(train, "indirect")

@@ -14,7 +14,7 @@ import numpy as np
 
 from bench.core.data import Dataset
 from bench.core.folds import Fold, Folds, folds
-from bench.core.regression import Compressed, least_squares
+from bench.physics.regression import Compressed, least_squares
 
 
 def describe(data: Dataset) -> str:
@@ -42,7 +42,7 @@ def cv_fold_mse(F: np.ndarray, y: np.ndarray, held: "Folds | list[np.ndarray]") 
 
     Where the folds' held-out rows split the rows (each row in one fold, as
     :func:`~bench.core.folds.folds` gives them), each fold's rows are
-    compressed once (:class:`~bench.core.regression.Compressed`) and the fit
+    compressed once (:class:`~bench.physics.regression.Compressed`) and the fit
     without a fold is that of the others' factors stacked: one QR of the
     whole problem in all, not one per fold, with the same fits."""
     fold_list = as_folds(held)
@@ -114,7 +114,7 @@ class FoldFits:
     columns ``G``, where the folds' held-out rows split the rows: each fold's
     QR of ``[D | y]`` (and of its scored rows, where it does not score them
     all) is kept, and added columns cost their projection on it (:class:`_Part`),
-    rather than a QR of the whole design (:class:`~bench.core.regression.Compressed`
+    rather than a QR of the whole design (:class:`~bench.physics.regression.Compressed`
     then stacks the folds' factors)."""
 
     def __init__(self, D: np.ndarray, y: np.ndarray, held: "Folds | list[np.ndarray]"):

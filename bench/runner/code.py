@@ -4,10 +4,10 @@
 and the system's class hierarchies that the suite or a plugin defines
 (``methods/mlp.py``, ``methods/torch_method.py`` and ``methods/base.py`` for the MLP;
 every module of ``methods/syrenets/`` for SyReNets;
-``systems/double_pendulum.py`` and ``bench/core/system.py`` for the double
+``systems/double_pendulum.py`` and ``bench/physics/system.py`` for the double
 pendulum), a plugin's file where it defines one of those classes, and the
 robot description or measured-arm file a plugin gives the run's system
-(:meth:`~bench.core.system.System.source_files`). A record carries it
+(:meth:`~bench.physics.system.System.source_files`). A record carries it
 (``code``); a resumed matrix redoes a run whose record was made by other
 code (:func:`bench.runner.matrix.run_matrix`), so an edited plugin or method
 is run again instead of being reported from its old record, and only its

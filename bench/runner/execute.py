@@ -21,9 +21,9 @@ import torch
 from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate
 from bench.core.csv_format import read_csv
-from bench.core.models import NoVariant
+from bench.physics.models import NoVariant
 from bench.core.timeouts import Timeout
-from bench.core.system import System
+from bench.physics.system import System
 from bench.evaluation.assessment import assess
 from bench.evaluation.scores import Stages, errors, exact_entry, expression_entry, not_judged, scores
 from bench.evaluation.tuning import prepare as prepare_search, tune
@@ -84,7 +84,7 @@ def given_data(system: System, train_path: str | None, test_path: str | None, *,
     format (checked against the system), else a measured system's own splits;
     ``None`` for a simulated system without files. With ``check_limits``, their
     positions are checked against the system's position limits
-    (:meth:`~bench.core.system.System.check_positions`)."""
+    (:meth:`~bench.physics.system.System.check_positions`)."""
     if train_path:
         train = read_csv(train_path, dof=system.dof, system=system.name)
         test = read_csv(test_path, dof=system.dof, system=system.name) if test_path else None

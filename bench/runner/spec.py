@@ -81,7 +81,7 @@ class RunSpec:
         Python files or modules to import before resolving names, for methods
         and systems registered outside the suite.
     split
-        Which of a measured system's splits (:attr:`~bench.core.system.System.splits`)
+        Which of a measured system's splits (:attr:`~bench.physics.system.System.splits`)
         its data come from; ``None``: its default.
     device
         Where a torch method trains: ``cpu`` or ``cuda`` (resolved from

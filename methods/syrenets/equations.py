@@ -12,9 +12,10 @@ import numpy as np
 import sympy
 import torch
 
-from bench.core import regression, symbolic
+from bench.core import symbolic
+from bench.physics import regression
 from bench.core.data import mse
-from bench.core.models import ExpressionModel, FittedModel, NoVariant
+from bench.physics.models import ExpressionModel, FittedModel, NoVariant
 from bench.core.timeouts import Timeout, call_with_timeout
 
 #: the refinement gives up on pruned equations that expand into more terms

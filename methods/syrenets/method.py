@@ -11,8 +11,8 @@ import time
 import numpy as np
 import torch
 
-from bench.core.dynamics import euler_lagrange
-from bench.core.models import NoVariant
+from bench.physics.dynamics import euler_lagrange
+from bench.physics.models import NoVariant
 from methods.base import METHODS
 from methods.config import Named
 from methods.syrenets.config import SyReNetsConfig

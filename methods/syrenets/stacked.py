@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import torch
 
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from methods.stacking import SHARED_BUDGET, Stack
 from methods.syrenets.training import Fixed, inputs_of
 

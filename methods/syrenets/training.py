@@ -13,7 +13,7 @@ from typing import Any
 import torch
 
 from bench.core.compiled import compiled_once
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from methods.syrenets.network import SyReNet
 
 

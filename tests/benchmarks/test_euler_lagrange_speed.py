@@ -1,7 +1,7 @@
 """One training step of the paper's 5x300 MLP Lagrangian at batch 32, indirect loss.
 
 ``ours``: the suite's batched Hessian-vector product by double backward
-(:func:`bench.core.dynamics.euler_lagrange`).
+(:func:`bench.physics.dynamics.euler_lagrange`).
 
 Baselines, per sample and vectorised with ``torch.func.vmap``:
 
@@ -20,7 +20,7 @@ import pytest
 import torch
 from torch.func import functional_call, jacfwd, jacrev, vmap
 
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from methods.mlp import LagrangianMLP
 
 pytestmark = pytest.mark.benchmark

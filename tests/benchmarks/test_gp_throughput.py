@@ -20,7 +20,7 @@ import pytest
 import torch
 
 from bench.core.data import generate
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from bench.core import symbolic
 from methods import METHODS
 from methods.jets import JetAlgebra

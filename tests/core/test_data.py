@@ -29,7 +29,7 @@ def test_generation_is_a_pure_cached_function(double_pendulum, tmp_path, monkeyp
 def test_torques_come_from_the_suites_transform(double_pendulum):
     import torch
 
-    from bench.core.dynamics import euler_lagrange
+    from bench.physics.dynamics import euler_lagrange
 
     d = generate(double_pendulum, 64, 9, cache=False)
     t = d.tensors()

@@ -116,7 +116,7 @@ def test_the_compressed_folds_score_the_gapped_spans_as_a_fit_per_fold_does():
 
 
 def test_a_sparse_threshold_is_validated_on_the_protocols_folds_where_the_data_name_trajectories():
-    from bench.core import regression
+    from bench.physics import regression
 
     rng = np.random.default_rng(0)
     F = rng.normal(size=(400, 3))

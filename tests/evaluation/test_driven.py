@@ -8,7 +8,7 @@ import sympy
 from scipy.integrate import solve_ivp
 
 from bench.core.data import Dataset
-from bench.core.models import ExpressionModel, mass_and_bias
+from bench.physics.models import ExpressionModel, mass_and_bias
 from bench.evaluation.driven import driven_entry, driven_rollout, summary, windows
 from bench.evaluation.rollout import TrueModel, forward_dynamics
 from systems import get_system
@@ -78,7 +78,7 @@ def test_a_window_records_when_it_diverged_and_a_diverged_window_counts_as_infin
 
 
 def test_a_window_that_blows_up_on_a_stiff_damper_is_integrated_again_at_a_finer_step(monkeypatch):
-    from bench.core.effects import EFFECTS
+    from bench.physics.effects import EFFECTS
     from bench.evaluation import driven
     from bench.residual.model import LoopModel
 

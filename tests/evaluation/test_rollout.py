@@ -10,9 +10,9 @@ from bench.core import symbolic
 from bench.runner import execute
 from bench.runner.spec import RunSpec, build_specs
 from bench.core.data import generate
-from bench.core.models import mass_and_bias
+from bench.physics.models import mass_and_bias
 from bench.evaluation.rollout import TrueModel, forward_dynamics, rollout, rollout_error
-from bench.core.models import ExpressionModel
+from bench.physics.models import ExpressionModel
 from systems import get_system
 
 

@@ -7,7 +7,7 @@ import time
 import sympy
 
 from bench.core.data import generate
-from bench.core.models import ExpressionModel
+from bench.physics.models import ExpressionModel
 from bench.evaluation import recovery
 from bench.evaluation import scores as scores_module
 from bench.runner import execute

@@ -9,7 +9,7 @@ import pytest
 
 from bench.cli import main
 from bench.core.data import generate, mse
-from bench.core.undeclared import add_effects
+from bench.physics.undeclared import add_effects
 from bench.core.errors import ConfigError
 from bench.experiments import adaptation
 from methods import METHODS

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from bench.core.undeclared import parse_effects
+from bench.physics.undeclared import parse_effects
 from bench.experiments.acceptance_scoring import expected, score
 from bench.experiments.acceptance_cases import DEVELOPMENT, DEVELOPMENT_CASES, EVALUATION, effects
 from bench.experiments.residual_acceptance import run_case, worth

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from bench.core.data import generate, mse
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from bench.evaluation.forces import decomposition
 from methods import METHODS
 from methods.delan import DeepLagrangian, DeLaNConfig

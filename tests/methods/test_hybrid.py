@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bench.core.data import generate, mse
-from bench.core.undeclared import add_effects
+from bench.physics.undeclared import add_effects
 from methods import METHODS
 from systems import get_system
 from tests.commandline import cli

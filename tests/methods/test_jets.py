@@ -8,7 +8,7 @@ import sympy
 import torch
 
 from bench.core import symbolic
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from methods.jets import JetAlgebra
 
 

@@ -10,7 +10,7 @@ import sympy
 
 from bench.core import symbolic
 from bench.core.data import generate, mse
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from methods import METHODS
 from methods import pysr_adapter
 from methods.pysr_adapter import _parse, lagrangian_template

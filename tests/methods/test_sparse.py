@@ -10,7 +10,7 @@ from bench.core import symbolic
 from bench.core.data import generate, mse
 from bench.evaluation.recovery import judge
 from methods import METHODS
-from bench.core.terms import lagrangian_library as library
+from bench.physics.terms import lagrangian_library as library
 
 
 def test_library_is_built_from_the_coordinates():

@@ -9,7 +9,7 @@ import torch
 
 from bench.core import symbolic
 from bench.core.data import generate, mse
-from bench.core.dynamics import euler_lagrange
+from bench.physics.dynamics import euler_lagrange
 from methods import METHODS
 from methods.syrenets.candidates import CandidateSpec
 from methods.syrenets.config import SyReNetsConfig

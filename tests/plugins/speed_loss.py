@@ -4,7 +4,7 @@ the drive"): a torque reading that grows with speed,
 
 import numpy as np
 
-from bench.core.sensor_laws import JointTorqueLaw, register
+from bench.physics.sensor_laws import JointTorqueLaw, register
 
 
 @register

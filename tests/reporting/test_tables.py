@@ -190,7 +190,7 @@ def test_measured_tables_give_driven_rollouts_the_standard_model_and_each_learne
 
 
 def test_a_variant_out_of_budget_reads_as_a_budget_outcome_with_its_reason():
-    from bench.core.models import NoVariant
+    from bench.physics.models import NoVariant
 
     why = NoVariant("no refit finished: 8 terms: out of budget", "timeout")
     assert why.status == "timeout" and str(why) == why.reason

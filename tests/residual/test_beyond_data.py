@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from bench.core.data import add_noise, generate
-from bench.core.effects import EFFECTS
-from bench.core.terms import Term
+from bench.physics.effects import EFFECTS
+from bench.physics.terms import Term
 from bench.residual.model import LoopModel
 from bench.residual.beyond_data import beyond_data, earns_place, not_identified
 from bench.residual.strategies import strategy_for
-from bench.core.models import ExpressionModel
+from bench.physics.models import ExpressionModel
 from systems import get_system
 
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from bench.core.data import add_noise, generate
-from bench.core.undeclared import add_effects
-from bench.core.models import ExpressionModel
+from bench.physics.undeclared import add_effects
+from bench.physics.models import ExpressionModel
 from bench.residual import loop as loop_module, residual_loop, trace, candidates
 from systems import get_system
 from tests.commandline import cli
@@ -76,7 +76,7 @@ def test_each_effect_is_named_on_its_joint_with_its_coefficient(effects):
 @pytest.mark.parametrize("spec", ["coupled_spring=1-2:3.0", "coupled_damper=1-2:0.6"], ids=["elbow spring", "elbow damper"])
 def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec):
     # absolute angles: the elbow's relative angle is q_1 - q_2, and its law is one term of L or D
-    from bench.core.undeclared import parse_effects
+    from bench.physics.undeclared import parse_effects
 
     effects = parse_effects([spec], 2)
     train, test = data_with(effects)
@@ -256,7 +256,7 @@ def test_open_ended_search_names_a_lagrangian_term_the_declared_form_lacks():
     # an inertia coupling the rod form has no freedom for: L += 0.3 qd_1^2 cos(q_2)
     import sympy
 
-    from bench.core.terms import Term
+    from bench.physics.terms import Term
 
     q2, v1 = sympy.symbols("q_2 qd_1", real=True)
     extra = Term.lagrangian(0.3 * v1**2 * sympy.cos(q2))
@@ -359,7 +359,7 @@ def test_the_polish_screens_its_starts_on_a_subsample_and_refines_the_best_on_al
     # parameters an optimiser cut short once left (negative masses and lengths): fitted on all 3000
     # samples, this start alone took the whole polish's time and ended in a local minimum
     import bench.residual.strategies as strategies
-    from bench.core.models import ParametricModel
+    from bench.physics.models import ParametricModel
 
     train, _ = data_with({})
     form = get_system("double_pendulum").parametric_form()
@@ -384,7 +384,7 @@ def _without_timings(obj):
 def test_a_loop_bounded_by_work_gives_the_same_json_apart_from_its_timings():
     # SysId stopped short of its optimum: the polish's starts, the trace and the rounds decide what is
     # found, and under a time budget how many of them ran depended on the machine's load
-    from bench.core.undeclared import parse_effects
+    from bench.physics.undeclared import parse_effects
 
     s = get_system("double_pendulum")
     fx = parse_effects(["tip_payload=0.5"], 2)
@@ -414,7 +414,7 @@ def test_noisy_coulomb_and_viscous_friction_is_that_law_never_a_stribeck_hump(me
 def test_a_hump_the_data_cannot_tell_from_coulomb_friction_is_replaced_by_it():
     # a Stribeck hump whose velocity is far above every speed in the data is Coulomb friction
     from bench.core.budget import Budget
-    from bench.core.effects import EFFECTS
+    from bench.physics.effects import EFFECTS
     from bench.residual.model import LoopModel
     from bench.residual.pruning import simplest_laws
     from bench.residual.strategies import strategy_for
@@ -433,7 +433,7 @@ def test_a_hump_the_data_cannot_tell_from_coulomb_friction_is_replaced_by_it():
 
 
 def test_a_spring_with_a_rest_angle_is_one_law_with_its_stiffness_and_rest_angle():
-    from bench.core.undeclared import parse_effects
+    from bench.physics.undeclared import parse_effects
 
     train, test = data_with(parse_effects(["offset_spring=2:2.0,0.3"], 2))
     out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)

@@ -14,7 +14,8 @@ import pytest
 
 from bench.core.data import generate
 from bench.residual import residual_loop
-from bench.core.sensor_laws import SENSOR_LAWS, SensorLaw, register
+from bench.physics.laws import LAWS
+from bench.physics.sensor_laws import SensorLaw, register
 from bench.residual.sensors import Sensed, Sensor
 from systems import get_system
 
@@ -31,7 +32,7 @@ def speed_loss():
     sys.modules["speed_loss_plugin"] = module  # as a plugin is imported: once, so that --plugin finds it imported
     spec.loader.exec_module(module)
     yield module.SpeedLoss
-    del SENSOR_LAWS[module.SpeedLoss.name]
+    LAWS.remove(module.SpeedLoss.name)
     sys.modules.pop("speed_loss_plugin", None)
 
 
@@ -84,7 +85,7 @@ def test_a_law_needs_a_name_of_its_own():
 
 def test_a_registered_law_of_the_drive_goes_into_generated_data_as_the_loop_reads_it(speed_loss, tmp_path):
     from bench.core.csv_format import read_csv
-    from bench.core.undeclared import add_effects, parse_effects
+    from bench.physics.undeclared import add_effects, parse_effects
     from tests.commandline import cli
 
     s = get_system("double_pendulum")

@@ -9,10 +9,10 @@ import torch
 
 from bench.core.budget import Budget
 from bench.core.data import generate
-from bench.core.effects import EFFECTS
-from bench.core.laws import LAWS
-from bench.core.undeclared import add_effects
-from bench.core.terms import TermLibrary
+from bench.physics.effects import EFFECTS
+from bench.physics.laws import LAWS
+from bench.physics.undeclared import add_effects
+from bench.physics.terms import TermLibrary
 from bench.residual import loop, residual_loop, strategies, trace
 from bench.residual import model as model_module
 from bench.core.folds import MAX_SPANS as BLOCKS, folds
@@ -111,7 +111,7 @@ def _with_force(data, term):
 def test_a_tip_payload_under_the_rod_form_is_found_as_one_payload_with_its_mass():
     # a point mass at the tip of link 2: the rod form alone explains it only with a negative rotor
     # inertia; the payload's own L-term explains it with one admissible parameter
-    from bench.core.undeclared import parse_effects
+    from bench.physics.undeclared import parse_effects
 
     s = get_system("double_pendulum")
     fx = parse_effects(["tip_payload=0.5"], 2)
@@ -133,7 +133,7 @@ def test_a_lighter_tip_than_the_rod_form_allows_is_a_structural_finding():
     out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
     for e in out.effects:
         if e["kind"] != "structural":
-            assert LAWS[e["name"]].check(tuple(v["value"] for v in e["parameters"].values())), e
+            assert LAWS.arm[e["name"]].check(tuple(v["value"] for v in e["parameters"].values())), e
     findings = [e for e in out.effects if e["kind"] == "structural"]
     assert findings and all(f["parameters"] == {} and "lacks this freedom" in f["finding"] for f in findings)
     assert findings[0]["name"] in ("armature", "tip_payload")
@@ -142,7 +142,7 @@ def test_a_lighter_tip_than_the_rod_form_allows_is_a_structural_finding():
 
 @pytest.mark.parametrize("alpha", [0.05, -0.12])
 def test_a_gravity_tilt_is_found_as_one_tilt_with_its_angle(alpha):
-    from bench.core.undeclared import parse_effects
+    from bench.physics.undeclared import parse_effects
 
     s = get_system("double_pendulum")
     fx = parse_effects([f"gravity_tilt={alpha}"], 2)
@@ -156,7 +156,7 @@ def test_a_gravity_tilt_is_found_as_one_tilt_with_its_angle(alpha):
 
 @pytest.mark.parametrize("method", ["sparse", "sysid"])
 def test_stribeck_friction_is_found_as_its_law_with_its_four_parameters(method):
-    from bench.core.undeclared import parse_effects
+    from bench.physics.undeclared import parse_effects
 
     s = get_system("double_pendulum")
     fx = parse_effects(["stribeck_friction=1:1.0,2.0,0.5,0.3"], 2)
@@ -173,7 +173,7 @@ def test_friction_outside_the_laws_is_never_reported_with_an_impossible_coeffici
     # a friction curve that rises with speed below 0.5 rad/s (no law here has that shape)
     import sympy
 
-    from bench.core.terms import Term
+    from bench.physics.terms import Term
 
     qd = sympy.Symbol("qd_1", real=True)
     rising = Term.force((1.5 - sympy.exp(-(qd / 0.5) ** 2)) * sympy.sign(qd) + 0.3 * qd, 0)
@@ -183,8 +183,8 @@ def test_friction_outside_the_laws_is_never_reported_with_an_impossible_coeffici
     for e in out.effects:
         if e["kind"] == "structural":
             assert e["parameters"] == {} and "not physical" in e["finding"]
-        elif e["name"] in LAWS:  # each law by its own condition (the Stribeck law's F_s >= F_c >= 0, say)
-            assert LAWS[e["name"]].check(tuple(v["value"] for v in e["parameters"].values())), e
+        elif e["name"] in LAWS.arm:  # each law by its own condition (the Stribeck law's F_s >= F_c >= 0, say)
+            assert LAWS.arm[e["name"]].check(tuple(v["value"] for v in e["parameters"].values())), e
     assert out.mse_after["test"] <= out.mse_before["test"]
 
 
@@ -196,7 +196,7 @@ class _Memoriser:
     bias = 0.0
 
     def fit(self, train, experiment, seed, budget_s):
-        from bench.core.models import LagrangianFunction
+        from bench.physics.models import LagrangianFunction
 
         system = get_system(train.system)
         memory = {row.tobytes(): tau - [self.bias, 0.0] for row, tau in zip(train.q, train.tau)}

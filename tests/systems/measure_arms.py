@@ -7,8 +7,8 @@ import numpy as np, torch, sys
 sys.path.insert(0, ".")
 from tests.systems.test_urdf import pin, pinocchio_panda, pinocchio_pendulum
 from bench.core.data import generate, mse
-from bench.core.dynamics import euler_lagrange
-from bench.core.undeclared import add_effects
+from bench.physics.dynamics import euler_lagrange
+from bench.physics.undeclared import add_effects
 from bench.residual import residual_loop
 from methods import METHODS
 from systems import get_system

@@ -97,7 +97,7 @@ def test_the_labs_model_explains_the_measured_torque():
 def test_rigid_body_form_at_the_labs_values_matches_the_lab_model_without_rotor_and_friction():
     system = get_system("dfki_double_pendulum")
     test = system.load("test").subset(slice(0, 200))
-    from bench.core.dynamics import euler_lagrange_chunked
+    from bench.physics.dynamics import euler_lagrange_chunked
 
     t = test.tensors()
     tau, _ = euler_lagrange_chunked(system.lagrangian, t["q"], t["qd"], t["qdd"])

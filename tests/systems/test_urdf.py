@@ -15,7 +15,7 @@ pin = pytest.importorskip("pinocchio")
 from bench.cli import main  # noqa: E402
 from bench.core.data import DataError, generate, mse  # noqa: E402
 from bench.core.csv_format import read_csv
-from bench.core.dynamics import euler_lagrange  # noqa: E402
+from bench.physics.dynamics import euler_lagrange  # noqa: E402
 from bench.evaluation.rollout import rollout_error  # noqa: E402
 from methods import METHODS  # noqa: E402
 from systems import SYSTEMS, get_system  # noqa: E402
@@ -126,7 +126,7 @@ def test_a_tip_payload_and_a_gravity_tilt_agree_with_pinocchio(system_name):
     """``bench data --effects tip_payload=m`` and ``gravity_tilt=alpha`` against
     RNEA on the same chain with a point mass at its tip, and with gravity
     turned by alpha in the plane (equilibrium at q = alpha)."""
-    from bench.core.undeclared import add_effects, parse_effects
+    from bench.physics.undeclared import add_effects, parse_effects
 
     system = SYSTEMS[system_name]()
     n = system.dof

@@ -1,5 +1,6 @@
 r"""The laws that act between the arm's torque and the measured one, one class
-each, and their registry (:data:`SENSOR_LAWS`).
+each, registered in the suite's one registry of laws (:data:`bench.physics.laws.LAWS`, its
+:attr:`~bench.physics.laws.Laws.sensor` laws).
 
 A law either moves the states at which a torque was measured (a *state
 law*: the time shift) or multiplies the arm's torque on a joint by a factor
@@ -35,9 +36,10 @@ import numpy as np
 import sympy
 
 from bench.core.data import Dataset
-from bench.core.effects import EFFECTS, GAIN_RANGE
-from bench.core.regression import fit_statistics
-from bench.core.terms import Term
+from bench.physics.effects import EFFECTS, GAIN_RANGE
+from bench.physics.laws import LAWS
+from bench.physics.regression import fit_statistics
+from bench.physics.terms import Term
 
 #: why the reference joint is the one it is, in the loop's JSON
 WHY_REFERENCE = ("a gain common to every joint rescales L and no torque data identify it, so one joint's gain is "
@@ -59,7 +61,7 @@ class SensorLaw:
     value: float
     stderr: float = 0.0
 
-    #: the law's name, in the JSON and in :class:`~bench.core.terms.Term`
+    #: the law's name, in the JSON and in :class:`~bench.physics.terms.Term`
     name: ClassVar[str] = ""
     #: ``"sensor"`` or ``"drive"``: the JSON's word for where it acts
     kind: ClassVar[str] = "sensor"
@@ -343,21 +345,24 @@ class TimeShift(SensorLaw):
             "per_recording": {k: {"value": v, "stderr": e} for k, (v, e) in (self.per_recording or {}).items()}}
 
 
-#: every law of the sensor and the drive the loop looks for, by name, in the order it offers them
-SENSOR_LAWS: dict[str, type[SensorLaw]] = {law.name: law for law in (TorqueGain, LoadFriction, TimeShift)}
-
-
 def register(law: type[SensorLaw]) -> type[SensorLaw]:
-    """Add ``law`` to :data:`SENSOR_LAWS` (usable as a class decorator); a name another law has taken is
-    refused (the same class imported again, as a plugin file may be, takes its place)."""
-    known = SENSOR_LAWS.get(law.name)
-    again = known is not None and (known.__module__, known.__qualname__) == (law.__module__, law.__qualname__)
-    if not law.name or (known is not None and not again) or law.name in EFFECTS and EFFECTS[law.name].place != "sensor":
-        raise ValueError(f"a law of the sensor or the drive needs a name of its own, got {law.name!r}")
-    SENSOR_LAWS[law.name] = law
-    return law
+    """Add ``law`` to the one registry of laws, :data:`bench.physics.laws.LAWS`
+    (usable as a class decorator); a name another law or an arm's effect has
+    taken is refused (the same class imported again, as a plugin file may be,
+    takes its place)."""
+    if not isinstance(law, type) or not issubclass(law, SensorLaw) or \
+            law.name in EFFECTS and EFFECTS[law.name].place != "sensor":
+        raise ValueError(f"a law of the sensor or the drive needs a name of its own, got {getattr(law, 'name', law)!r}")
+    try:
+        return LAWS.register(law)
+    except ValueError:
+        raise ValueError(f"a law of the sensor or the drive needs a name of its own, got {law.name!r}") from None
+
+
+for _law in (TorqueGain, LoadFriction, TimeShift):  # in the order the loop offers them
+    register(_law)
 
 
 def law_of(term: Term) -> type[SensorLaw]:
     """The class of the law ``term`` (place ``sensor``) stands for."""
-    return SENSOR_LAWS[term.name]
+    return LAWS.sensor[term.name]

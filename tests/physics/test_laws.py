@@ -4,17 +4,17 @@ import numpy as np
 import pytest
 
 from bench.core.data import generate
-from bench.core.effects import EFFECTS
+from bench.physics.effects import EFFECTS
 from bench.core.errors import ConfigError
-from bench.core.laws import FAMILIES, LAWS, Part, group, led_by, one_law_per_family
-from bench.core.undeclared import GENERATOR_LAWS, add_effects, parse_effects
+from bench.physics.laws import FAMILIES, LAWS, Part, group, led_by, one_law_per_family
+from bench.physics.undeclared import GENERATOR_LAWS, add_effects, parse_effects
 from systems import get_system
 
 
 def test_every_law_is_made_of_named_effects_and_its_simpler_laws_exist():
-    for law in LAWS.values():
+    for law in LAWS.arm.values():
         assert set(law.members) <= set(EFFECTS), law.name
-        assert set(law.simpler) <= set(LAWS), law.name
+        assert set(law.simpler) <= set(LAWS.arm), law.name
         for part, limits in law.limits.items():
             assert EFFECTS[part].shaped and part in law.required
             assert all(set(limit) <= set(EFFECTS) for limit in limits)
@@ -22,9 +22,9 @@ def test_every_law_is_made_of_named_effects_and_its_simpler_laws_exist():
 
 
 def test_only_the_stribeck_law_names_stribeck():
-    named = [n for n in list(LAWS) + list(EFFECTS) if "stribeck" in n]
+    named = [n for n in list(LAWS.arm) + list(EFFECTS) if "stribeck" in n]
     assert named == ["stribeck_friction", "stribeck_hump"]
-    assert led_by("stribeck_hump") is LAWS["stribeck_friction"] and led_by("coulomb_friction") is None
+    assert led_by("stribeck_hump") is LAWS.arm["stribeck_friction"] and led_by("coulomb_friction") is None
 
 
 @pytest.mark.parametrize(
@@ -51,10 +51,10 @@ def test_two_friction_laws_on_one_joint_are_flagged():
 
 
 def test_the_reported_parameters_come_from_the_parts():
-    stribeck = LAWS["stribeck_friction"].parameters_of({
+    stribeck = LAWS.arm["stribeck_friction"].parameters_of({
         "coulomb_friction": Part("coulomb_friction", 1.0, stderr=0.03), "stribeck_hump": Part("stribeck_hump", 1.0, 0.5, 0.04, 0.01)})
     assert stribeck["F_s"] == (2.0, pytest.approx(0.05)) and stribeck["b"] == (0.0, 0.0) and stribeck["v_s"] == (0.5, 0.01)
-    spring = LAWS["offset_spring"].parameters_of({"spring": Part("spring", 2.0, stderr=0.1), "offset": Part("offset", -0.6)})
+    spring = LAWS.arm["offset_spring"].parameters_of({"spring": Part("spring", 2.0, stderr=0.1), "offset": Part("offset", -0.6)})
     assert spring["k"] == (2.0, 0.1) and spring["q0"][0] == pytest.approx(0.3)
     assert spring["q0"][1] == pytest.approx(math.hypot(0, 0.6 * 0.1 / 4))
 
@@ -84,7 +84,7 @@ def test_a_law_with_wrong_parameters_is_refused_with_one_line(items, message):
 
 
 def test_a_periodic_torque_is_amplitude_periods_and_phase_of_its_two_parts():
-    law = LAWS["periodic_torque"]
+    law = LAWS.arm["periodic_torque"]
     parts = {p.name: p for p in law.parts(0.3, 6, 0.5)}
     assert parts["periodic_sin"].shape == parts["periodic_cos"].shape == 6
     got = law.parameters_of(parts)

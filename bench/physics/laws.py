@@ -1,7 +1,9 @@
 r"""Physical laws on one joint, each made of the effects of
-:mod:`bench.core.effects` (its *parts*), with its parameters, its
+:mod:`bench.physics.effects` (its *parts*), with its parameters, its
 admissibility and the simpler laws it contains as limits.
 
+Every law is in the suite's one registry, :data:`LAWS` (:class:`Laws`): these,
+the arm's, and the sensor's and the drive's (:mod:`bench.physics.sensor_laws`).
 The data generator adds laws (``bench data --effects``); the residual loop
 reports what it found as laws, one per physical family and joint, and
 replaces a law by a simpler one it contains where the data do not identify
@@ -36,7 +38,7 @@ revolution (the cogging torque of a permanent-magnet motor has the period of
 the least common multiple of its slots and poles: Jahns & Soong, "Pulsating
 torque minimization techniques for permanent magnet AC motor drives", IEEE
 Trans. Ind. Electron. 43(2), 1996). Its parts are ``a sin(N q)`` and
-``b cos(N q)`` (:mod:`bench.core.effects`), ``A = sqrt(a^2 + b^2)`` and
+``b cos(N q)`` (:mod:`bench.physics.effects`), ``A = sqrt(a^2 + b^2)`` and
 ``phi = atan2(b, a)``, ``phi`` in ``(-pi, pi]``. A spring and an offset are
 what it looks like on a joint that moves over a small part of one period,
 so the loop offers it only for the ``N`` whose period the joint's recorded
@@ -53,9 +55,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from types import MappingProxyType
+from typing import Callable, Iterator, Mapping
 
-from bench.core.effects import EFFECTS
+from bench.physics.effects import EFFECTS
 
 
 @dataclass(frozen=True)
@@ -162,9 +165,60 @@ def _single(name: str, family: str) -> Law:
                parameters_of=lambda parts: {effect.parameter: _value(parts[name])})
 
 
-LAWS: dict[str, Law] = {
-    law.name: law
-    for law in (
+class Laws:
+    """The suite's one registry of laws, by name: the arm's laws on one joint
+    (:class:`Law`, :attr:`arm`) and the laws between the arm's torque and the
+    measured one (:class:`~bench.physics.sensor_laws.SensorLaw` classes,
+    :attr:`sensor`, registered by :mod:`bench.physics.sensor_laws` and by
+    plugins). A name names one law of either place; the order is the order
+    of registration, in which the loop offers them."""
+
+    def __init__(self):
+        self._arm: dict[str, Law] = {}
+        self._sensor: dict[str, type] = {}
+
+    def register(self, law):
+        """Add ``law`` (a :class:`Law`, or a sensor law's class); a name another
+        law has taken is refused, but the same class registered again (a plugin
+        file imported twice) takes its place. Returns ``law``, so that it serves
+        as a class decorator."""
+        place = self._arm if isinstance(law, Law) else self._sensor
+        known = self._arm.get(law.name) or self._sensor.get(law.name)
+        again = isinstance(law, type) and isinstance(known, type) and \
+            (known.__module__, known.__qualname__) == (law.__module__, law.__qualname__)
+        if not law.name or (known is not None and not again):
+            raise ValueError(f"a law needs a name of its own, got {law.name!r}")
+        place[law.name] = law
+        return law
+
+    def remove(self, name: str) -> None:
+        """Take the law ``name`` out (a test's plugin, once the test is done)."""
+        self._arm.pop(name, None)
+        self._sensor.pop(name, None)
+
+    @property
+    def arm(self) -> Mapping[str, Law]:
+        """The arm's laws on one joint, by name."""
+        return MappingProxyType(self._arm)
+
+    @property
+    def sensor(self) -> Mapping[str, type]:
+        """The laws of the sensor and the drive, by name, in the order the loop offers them."""
+        return MappingProxyType(self._sensor)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._arm or name in self._sensor
+
+    def __getitem__(self, name: str):
+        return self._arm[name] if name in self._arm else self._sensor[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter([*self._arm, *self._sensor])
+
+
+#: every law of the suite, by name (see :class:`Laws`)
+LAWS = Laws()
+for _law in (
         _single("viscous_friction", "friction"),
         _single("coulomb_friction", "friction"),
         Law("coulomb_viscous_friction", "friction", ("F_c", "b"), "D = F_c*Abs(qd_{n}) + b*qd_{n}**2/2", "dissipative",
@@ -198,18 +252,18 @@ LAWS: dict[str, Law] = {
             condition="A >= 0, N a whole number >= 1",
             parts=lambda A, N, phi: [Part("periodic_sin", A * math.cos(phi), N), Part("periodic_cos", A * math.sin(phi), N)],
             parameters_of=_periodic),
-    )
-}
+):
+    LAWS.register(_law)
 
 #: which parts belong to which physical family: a joint carries at most one law of each
-FAMILIES: dict[str, str] = {part: law.family for law in LAWS.values() for part in law.members if part != "offset"}
+FAMILIES: dict[str, str] = {part: law.family for law in LAWS.arm.values() for part in law.members if part != "offset"}
 FAMILIES["offset"] = "offset"
 
 
 def led_by(part: str) -> Law | None:
     """The law whose one required part is the shaped ``part`` (a Stribeck hump
     leads the Stribeck law, a sine part the periodic torque), or ``None``."""
-    for law in LAWS.values():
+    for law in LAWS.arm.values():
         if law.required == (part,) and EFFECTS[part].shaped is not None:
             return law
     return None
@@ -219,7 +273,7 @@ def part_of(part: str) -> Law:
     """The law ``part`` stands for where it is the only part of its law left:
     the law it leads, its own one-parameter law, or else the law it is a part of
     (a periodic torque's cosine part alone)."""
-    return led_by(part) or LAWS.get(part) or next(law for law in LAWS.values() if part in law.members)
+    return led_by(part) or LAWS.arm.get(part) or next(law for law in LAWS.arm.values() if part in law.members)
 
 
 def group(parts: dict[str, Part]) -> list[tuple[Law, dict[str, Part]]]:
@@ -228,7 +282,7 @@ def group(parts: dict[str, Part]) -> list[tuple[Law, dict[str, Part]]]:
     its own one-parameter law (or, for a shaped part, the law it leads)."""
     left, out = dict(parts), []
     while left:
-        fits = [(len(set(law.members) & set(left)), law) for law in LAWS.values() if set(law.required) <= set(left)]
+        fits = [(len(set(law.members) & set(left)), law) for law in LAWS.arm.values() if set(law.required) <= set(left)]
         if not fits:
             name = next(iter(left))
             law = part_of(name)

@@ -9,7 +9,7 @@ import sympy
 
 from bench.core import symbolic
 from bench.core.data import generate
-from bench.core.terms import Term, TermLibrary
+from bench.physics.terms import Term, TermLibrary
 from bench.evaluation.recovery import euler_lagrange_symbolic
 from systems import get_system
 
@@ -60,7 +60,7 @@ def test_design_matrices_in_either_experiment(data):
 
 
 def test_remembered_columns_are_computed_once_read_only_and_dropped_with_the_outermost_block(data, monkeypatch):
-    from bench.core import terms
+    from bench.physics import terms
 
     term = Term.lagrangian(sympy.Symbol("qd_1", real=True) ** 2 / 2)
     calls = []
@@ -78,7 +78,7 @@ def test_remembered_columns_are_computed_once_read_only_and_dropped_with_the_out
 
 
 def test_smoothed_coulomb_friction_stays_finite_far_beyond_its_velocity(data):
-    from bench.core.effects import EFFECTS
+    from bench.physics.effects import EFFECTS
 
     tau = EFFECTS["smooth_coulomb"].term(0, shape=1e-3).torque(data)  # qd / v_s up to about 1500: cosh overflows
     np.testing.assert_allclose(tau[:, 0], np.tanh(data.qd[:, 0] / 1e-3), rtol=0, atol=1e-15)

@@ -11,9 +11,9 @@ from hypothesis import strategies as st
 
 from bench.core import symbolic
 from bench.core.data import generate
-from bench.core.dynamics import euler_lagrange_chunked
-from bench.core.effects import EFFECTS
-from bench.core.undeclared import add_effects, parse_effects
+from bench.physics.dynamics import euler_lagrange_chunked
+from bench.physics.effects import EFFECTS
+from bench.physics.undeclared import add_effects, parse_effects
 from bench.core.errors import ConfigError
 from systems import get_system
 
@@ -86,7 +86,7 @@ def test_the_tilt_term_is_the_exact_tilt_with_sin_alpha_once_the_gravity_terms_a
     gravity = sympy.Add(*[t for t in sympy.Add.make_args(s.lagrangian_sympy) if not t.free_symbols & set(s.symbols[1])])
     tilt = EFFECTS["gravity_tilt"].term(system=s)
     exact = add_effects(data, {"gravity_tilt": {(): alpha}}, s).L
-    from bench.core.terms import Term
+    from bench.physics.terms import Term
     rebuilt = data.L + (np.cos(alpha) - 1) * Term.lagrangian(gravity).value(data) + np.sin(alpha) * tilt.value(data)
     np.testing.assert_allclose(exact, rebuilt, atol=1e-12)
     assert EFFECTS["gravity_tilt"].parameter_from(np.sin(alpha), 1e-3) == pytest.approx((alpha, 1e-3 / np.cos(alpha)))

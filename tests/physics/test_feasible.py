@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.core.data import add_noise, generate, mse
-from bench.core.feasible import (Feasibility, feasible_fit, from_pseudo_inertia, nearest_completion, project,
+from bench.physics.feasible import (Feasibility, feasible_fit, from_pseudo_inertia, nearest_completion, project,
                                  pseudo_inertia, smallest_eigenvalues)
-from bench.core.regression import Compressed, base_columns, least_squares
+from bench.physics.regression import Compressed, base_columns, least_squares
 from methods import METHODS
 from systems import get_system
 from systems.urdf_arm import physically_consistent

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 import sympy
 
-from bench.core import regression, symbolic
+from bench.core import symbolic
+from bench.physics import regression
 from bench.core.data import generate
-from bench.core.terms import TermLibrary
+from bench.physics.terms import TermLibrary
 
 
 def _basis():
@@ -62,7 +63,7 @@ def test_independent_columns_drop_gauge_duplicates(double_pendulum):
 def test_a_compressed_problem_fits_any_subset_of_columns_and_stacks_by_rows():
     from hypothesis import given, settings, strategies as st
 
-    from bench.core.regression import Compressed, least_squares
+    from bench.physics.regression import Compressed, least_squares
 
     @settings(max_examples=40, deadline=None)
     @given(seed=st.integers(0, 10_000), n=st.integers(3, 60), k=st.integers(1, 6), dependent=st.booleans())

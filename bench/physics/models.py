@@ -39,9 +39,9 @@ import torch
 
 from bench.core import symbolic
 from bench.core.data import Dataset, check_experiment
-from bench.core.dynamics import euler_lagrange_chunked
+from bench.physics.dynamics import euler_lagrange_chunked
 from bench.core.modelfile import ModelFileError, Packer, Unpacker, expression_from_json, expression_to_json, loader
-from bench.core.terms import Term, TermLibrary
+from bench.physics.terms import Term, TermLibrary
 
 #: rows per call when a model's Lagrangian is evaluated on a large data set
 CHUNK = 8192
@@ -181,7 +181,7 @@ def _load_expression(tree: dict, unpacker: Unpacker, context: dict) -> Expressio
 
 
 class ParametricModel(LagrangianFunction):
-    """A system's parametric form (:class:`~bench.core.system.ParametricForm`)
+    """A system's parametric form (:class:`~bench.physics.system.ParametricForm`)
     at the parameter values ``theta``."""
 
     def __init__(self, form, theta: Sequence[float]):
@@ -300,7 +300,7 @@ _REGRESSORS: "weakref.WeakKeyDictionary[Dataset, dict]" = weakref.WeakKeyDiction
 
 def torque_regressor(form, data: Dataset) -> np.ndarray:
     """``form.torque_regressor`` at the states of ``data``, with the form's
-    further :attr:`~bench.core.system.LinearForm.terms`' columns, computed once
+    further :attr:`~bench.physics.system.LinearForm.terms`' columns, computed once
     per form and data set (read-only): the residual loop refits a linear model's
     coefficients many times on the same data, and an arm's regressor costs
     a pass of its rigid-body algorithm per sample."""
@@ -317,7 +317,7 @@ def torque_regressor(form, data: Dataset) -> np.ndarray:
 
 def lagrangian_regressor(form, data: Dataset) -> np.ndarray:
     """``form.lagrangian_regressor`` at the states of ``data``, with each of
-    the form's further :attr:`~bench.core.system.LinearForm.terms`' value in
+    the form's further :attr:`~bench.physics.system.LinearForm.terms`' value in
     ``L`` (zero for friction): ``(n, p)``."""
     Y = form.lagrangian_regressor(data.q, data.qd)
     if not form.terms:
@@ -326,7 +326,7 @@ def lagrangian_regressor(form, data: Dataset) -> np.ndarray:
 
 
 class LinearParametricModel(FittedModel):
-    """A :class:`~bench.core.system.LinearForm` at fitted values of some of its
+    """A :class:`~bench.physics.system.LinearForm` at fitted values of some of its
     columns (its base parameters): ``tau = Y[:, :, columns] @ coef`` and
     ``L = Y_L[:, columns] @ coef + offset``.
 
@@ -394,13 +394,13 @@ def _probe(form) -> np.ndarray:
 
 
 def term_to_json(term) -> dict:
-    """A :class:`~bench.core.terms.Term` as JSON (its expression by :func:`~bench.core.modelfile.expression_to_json`)."""
+    """A :class:`~bench.physics.terms.Term` as JSON (its expression by :func:`~bench.core.modelfile.expression_to_json`)."""
     return {"expr": expression_to_json(term.expr), "place": term.place, "name": term.name, "joint": term.joint,
             "shape": term.shape}
 
 
 def term_from_json(obj: dict, source: str):
-    """The :class:`~bench.core.terms.Term` of :func:`term_to_json`."""
+    """The :class:`~bench.physics.terms.Term` of :func:`term_to_json`."""
     joint, shape = obj.get("joint"), obj.get("shape")
     return Term(expression_from_json(obj["expr"], source), str(obj["place"]), str(obj.get("name", "")),
                 None if joint is None else int(joint), None if shape is None else float(shape))
@@ -428,7 +428,7 @@ def _load_linear(tree: dict, unpacker: Unpacker, context: dict) -> "LinearParame
 
 @dataclass(frozen=True)
 class FeasibleSet:
-    """How a linear model's parameters are held feasible (:func:`bench.core.feasible.feasible_fit`):
+    """How a linear model's parameters are held feasible (:func:`bench.physics.feasible.feasible_fit`):
     its first ``bodies`` blocks of 10 columns are rigid bodies', pulled toward
     ``prior`` with weight ``regularisation``."""
 

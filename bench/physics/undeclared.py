@@ -1,11 +1,11 @@
 """What the data generator adds that a system does not declare: the
-effects of :mod:`bench.core.effects` and the laws of :mod:`bench.core.laws`,
+effects of :mod:`bench.physics.effects` and the laws of :mod:`bench.physics.laws`,
 as ``bench data --effects`` names them.
 
 * a one-joint effect: one coefficient per joint (``viscous_friction=0.8,0.5``);
 * a coupled effect: ``i-j:c`` items, joints from 1 (``coupled_spring=1-2:3.0``);
 * an effect of the whole system: one number (``tip_payload=0.3``);
-* a law of the torque sensor or the drive (:data:`bench.core.sensor_laws.SENSOR_LAWS`,
+* a law of the torque sensor or the drive (:attr:`bench.physics.laws.LAWS.sensor <bench.physics.laws.Laws.sensor>`,
   a plugin's too): one value per joint, applied with the law's own class to the
   torque the arm and every other effect make (``torque_gain=1,0.96``,
   ``load_friction=0,0.1``);
@@ -21,20 +21,20 @@ import math
 import numpy as np
 
 from bench.core.data import Dataset
-from bench.core.effects import EFFECTS
+from bench.physics.effects import EFFECTS
 from bench.core.errors import ConfigError
-from bench.core.laws import LAWS
-from bench.core.sensor_laws import SENSOR_LAWS, JointTorqueLaw
+from bench.physics.laws import LAWS
+from bench.physics.sensor_laws import JointTorqueLaw
 
 #: the laws the generator takes as ``j:p1,...,pk`` items: those of several parameters, or a shaped one
-GENERATOR_LAWS = {name: law for name, law in LAWS.items() if law.composite}
+GENERATOR_LAWS = {name: law for name, law in LAWS.arm.items() if law.composite}
 
 
 def torque_laws() -> dict[str, type[JointTorqueLaw]]:
     """The registered laws of the sensor or the drive that multiply one joint's torque
-    (:data:`bench.core.sensor_laws.SENSOR_LAWS`, a plugin's among them): the generator
+    (:attr:`bench.physics.laws.LAWS.sensor <bench.physics.laws.Laws.sensor>`, a plugin's among them): the generator
     applies each with the class the residual loop fits."""
-    return {name: law for name, law in SENSOR_LAWS.items() if issubclass(law, JointTorqueLaw)}
+    return {name: law for name, law in LAWS.sensor.items() if issubclass(law, JointTorqueLaw)}
 
 
 def parse_effects(items: list[str], dof: int, source: str = "--effects") -> dict[str, dict[tuple[int, ...], float]]:
@@ -156,7 +156,7 @@ def add_effects(data: Dataset, effects: dict, system=None) -> Dataset:
     effects = {name: coefs if isinstance(coefs, dict) else {(j,): c for j, c in enumerate(coefs)}
                for name, coefs in effects.items()}
     for name, coefs in effects.items():
-        if name in SENSOR_LAWS:  # they act on the arm's torque: after the arm's effects
+        if name in LAWS.sensor:  # they act on the arm's torque: after the arm's effects
             continue
         for joints, c in coefs.items():
             if name in GENERATOR_LAWS:

@@ -44,7 +44,7 @@ import sympy
 import torch
 
 from bench.core import symbolic
-from bench.core.dynamics import euler_lagrange_chunked
+from bench.physics.dynamics import euler_lagrange_chunked
 from bench.core.errors import ConfigError, DataError
 from bench.core.registry import Registry
 
@@ -144,16 +144,16 @@ class LinearForm:
         The parameters of the simulated system (``None`` where unknown).
     bodies
         How many rigid bodies' 10 inertial parameters (Pinocchio's order,
-        :mod:`bench.core.feasible`) are the first columns; ``0`` for a form
+        :mod:`bench.physics.feasible`) are the first columns; ``0`` for a form
         whose parameters are not a rigid body's.
     prior
         The parameters' nominal values (an arm's URDF), which a feasible fit
         falls back on where the data do not decide; ``None`` where none are known.
     terms
         Further columns after the regressors' (:meth:`with_terms`): terms of
-        the suite's term library (:class:`~bench.core.terms.Term`), such as
+        the suite's term library (:class:`~bench.physics.terms.Term`), such as
         joint friction, each with one coefficient; the regressors above do
-        not give them, :func:`bench.core.models.torque_regressor` does.
+        not give them, :func:`bench.physics.models.torque_regressor` does.
     """
 
     names: tuple[str, ...]
@@ -213,7 +213,7 @@ class System(abc.ABC):
     #: angles from the downward vertical, with gravity in its plane, so that a
     #: gravity direction that is off (:meth:`tilt_direction`) and, given
     #: :attr:`link_lengths`, a payload at its tip (:meth:`tip_position`) can be
-    #: placed on it (:mod:`bench.core.effects`)
+    #: placed on it (:mod:`bench.physics.effects`)
     planar_chain: ClassVar[bool] = False
     #: the ``Params`` fields of a planar chain's link lengths, base first;
     #: empty where they are not known

@@ -8,7 +8,7 @@ import sympy
 import torch
 
 from bench.core import symbolic
-from bench.core.dynamics import euler_lagrange, euler_lagrange_chunked
+from bench.physics.dynamics import euler_lagrange, euler_lagrange_chunked
 
 
 def sympy_torques(expr: sympy.Expr, dof: int):

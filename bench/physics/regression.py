@@ -2,7 +2,7 @@
 
 The Euler–Lagrange transform ``g`` is linear in ``L``, so a Lagrangian
 ``L = sum_k c_k f_k(q, qd)`` has torques ``tau = sum_k c_k g(f_k)``. Fitting
-the coefficients of a :class:`~bench.core.terms.TermLibrary` is therefore
+the coefficients of a :class:`~bench.physics.terms.TermLibrary` is therefore
 linear in both experiments:
 
 * direct: columns ``f_k`` evaluated on the data, target ``L``;
@@ -23,7 +23,7 @@ import sympy
 
 from bench.core.data import Dataset
 from bench.core.folds import folds
-from bench.core.terms import TermLibrary
+from bench.physics.terms import TermLibrary
 from bench.core.timeouts import Timeout
 
 

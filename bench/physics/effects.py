@@ -4,7 +4,7 @@
 Each effect has one coefficient and acts on one joint or, for the coupled
 ones, on a pair of coordinates ``i, j`` through their difference. Its torque
 is *added* to the rigid-body torque ``g(L)``, so friction coefficients are
-positive. An effect is a :class:`~bench.core.terms.Term` in one of three
+positive. An effect is a :class:`~bench.physics.terms.Term` in one of three
 places, which the loop's JSON names by the kind of effect:
 
 * ``L``, **conservative**: a term of the Lagrangian, its torque through the
@@ -14,7 +14,7 @@ places, which the loop's JSON names by the kind of effect:
 * ``force``: a generalized force that is neither (a constant offset: a
   sensor or cable bias).
 
-Effects are the parts of physical laws (:mod:`bench.core.laws`): a law is
+Effects are the parts of physical laws (:mod:`bench.physics.laws`): a law is
 one effect, or several on one joint (Coulomb plus viscous friction; the
 Stribeck law).
 
@@ -38,9 +38,9 @@ name                   kind           term per unit coefficient                 
 velocity ``v_s`` (a recording's low-pass filter, or a real drive's
 compliance, rounds the sign function off); ``stribeck_hump`` is the hump
 of Stribeck friction at low speed, its velocity ``v_s`` fixed in the term
-(:attr:`~bench.core.terms.Term.shape`) and its coefficient ``dF = F_s - F_c``.
+(:attr:`~bench.physics.terms.Term.shape`) and its coefficient ``dF = F_s - F_c``.
 With Coulomb and viscous friction on the same joint it makes the Stribeck
-law (:data:`bench.core.laws.LAWS`)::
+law (:attr:`bench.physics.laws.LAWS.arm <bench.physics.laws.Laws.arm>`)::
 
     tau = (F_c + (F_s - F_c) exp(-(qd / v_s)^2)) sign(qd) + b qd,
 
@@ -89,7 +89,7 @@ between links ``i`` and ``j``: an elbow spring or damper is one coupled
 effect with one coefficient, not a spring on each joint and cross terms.
 
 Two effects belong to a whole planar chain (:attr:`System.planar_chain
-<bench.core.system.System.planar_chain>`) and are built from the system's
+<bench.physics.system.System.planar_chain>`) and are built from the system's
 own geometry and declared Lagrangian, at its parameters:
 
 =================  ============  ===========================================================
@@ -123,7 +123,7 @@ import sympy
 
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
-from bench.core.terms import PLACES, Term
+from bench.physics.terms import PLACES, Term
 
 
 @dataclass(frozen=True)
@@ -136,7 +136,7 @@ class Effect:
         ``expr(q, qd) -> sympy``: the term per unit coefficient, given the
         symbols of the effect's coordinates (one, or a pair ``i, j``).
     place
-        Where its term acts (:attr:`Term.place <bench.core.terms.Term.place>`):
+        Where its term acts (:attr:`Term.place <bench.physics.terms.Term.place>`):
         ``L`` (conservative), ``D`` (dissipative) or ``force`` (a generalized
         force on the joint).
     parameter

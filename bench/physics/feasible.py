@@ -37,8 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.core.errors import DataError
-from bench.core.models import torque_regressor
-from bench.core.regression import Compressed
+from bench.physics.models import torque_regressor
+from bench.physics.regression import Compressed
 
 #: parameters per rigid body
 BODY = 10
@@ -177,7 +177,7 @@ def nearest_completion(W: np.ndarray, columns: np.ndarray, coef: np.ndarray, pri
     as ``coef`` on the columns ``columns`` of the regressor ``W`` (rows of
     samples and joints): a fit of base parameters completed. The directions
     ``W`` does not see are the prior's. ``W`` may be the regressor's
-    triangular factor (:class:`~bench.core.regression.Compressed`'s ``R``
+    triangular factor (:class:`~bench.physics.regression.Compressed`'s ``R``
     without its last column): ``W = Q R`` with ``Q`` orthonormal gives the
     same solution from a problem of as many rows as columns."""
     step, *_ = np.linalg.lstsq(W, W[:, columns] @ coef - W @ prior, rcond=None)
@@ -185,7 +185,7 @@ def nearest_completion(W: np.ndarray, columns: np.ndarray, coef: np.ndarray, pri
 
 
 def feasibility_of(model, data) -> dict | None:
-    """Whether a :class:`~bench.core.models.LinearParametricModel` of rigid
+    """Whether a :class:`~bench.physics.models.LinearParametricModel` of rigid
     bodies is a rigid body's (:meth:`Feasibility.as_dict`): its parameters
     where it holds all of them, else the full set nearest its form's prior
     that gives the same torques at the states of ``data``

@@ -9,8 +9,8 @@ import sympy
 
 from bench.core import symbolic
 from bench.core.data import generate
-from bench.core.models import ExpressionModel, FittedModel, ParametricModel
-from bench.core.system import ParametricForm
+from bench.physics.models import ExpressionModel, FittedModel, ParametricModel
+from bench.physics.system import ParametricForm
 from methods import METHODS, Method
 from systems import get_system
 
@@ -83,7 +83,7 @@ def test_sysid_gives_its_fit_as_a_parametric_model():
 def test_a_separated_form_gives_the_torch_functions_torques_and_an_exact_jacobian(name):
     """tau(theta) = sum_k c_k(theta) g(phi_k): against the form's torch function
     through the transform, and the Jacobian against central differences of it."""
-    from bench.core.models import LagrangianFunction, separate
+    from bench.physics.models import LagrangianFunction, separate
 
     s = get_system(name)
     form = s.parametric_form()
@@ -109,7 +109,7 @@ def test_a_separated_form_gives_the_torch_functions_torques_and_an_exact_jacobia
 
 
 def test_a_form_whose_unknown_sits_inside_a_function_of_the_coordinates_is_not_separated():
-    from bench.core.models import separate
+    from bench.physics.models import separate
 
     (q,), (qd,) = symbolic.coordinate_symbols(1)
     w = sympy.Symbol("w")
@@ -126,8 +126,8 @@ def test_a_linear_models_regressor_is_computed_once_per_data_set():
     import dataclasses
 
     from bench.core.data import generate
-    from bench.core.models import LinearParametricModel
-    from bench.core.system import LinearForm
+    from bench.physics.models import LinearParametricModel
+    from bench.physics.system import LinearForm
 
     calls = []
 

@@ -38,7 +38,7 @@ import sympy
 
 from bench.core import symbolic
 from bench.core.data import Dataset, check_experiment
-from bench.core.dynamics import euler_lagrange_chunked
+from bench.physics.dynamics import euler_lagrange_chunked
 from bench.core.timeouts import Timeout
 
 
