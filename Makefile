@@ -62,7 +62,7 @@ gpu-prepare: $(STAMP)
 	$(BIN)/python -m bench study gpu --prepare gpu_data
 	$(BIN)/python -m pip download --quiet --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
 		--platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 -d .whl \
-		$$($(BIN)/python -c "from bench.experiments.gpu_figures import WHEELS; print(*WHEELS)")
+		$$($(BIN)/python -c "from bench.studies.gpu_figures import WHEELS; print(*WHEELS)")
 	$(BIN)/python -m bench study gpu --dry-run --data gpu_data
 
 clean-venv:

@@ -4,7 +4,7 @@ The package is built in layers, and imports point down only
 (``tests/test_architecture.py`` enforces it)::
 
     bench.cli                       the one command line
-    bench.experiments               measurement scripts run as subcommands
+    bench.studies               measurement scripts run as subcommands
     bench.reporting, bench.residual tables, plots, leaderboard; the residual loop
     bench.evaluation, bench.runner  scores, recovery, rollouts; runs, records, isolation, the matrix
     methods, systems                the registries (top-level packages)

@@ -40,7 +40,8 @@ import numpy as np
 import torch
 
 from bench.core.budget import Budget
-from bench.core.data import EXPERIMENTS, Dataset, check_experiment, mse
+from bench.core.data import Dataset, mse
+from bench.core.experiment import EXPERIMENTS, INDIRECT, Experiment
 from bench.core.errors import ConfigError, DataError
 from bench.physics.models import ExpressionModel, FittedModel, NoVariant
 from bench.core.registry import Registry
@@ -130,13 +131,23 @@ class Method(FittedModel):
 
     def __init__(self, **hyperparameters):
         self.config = build_config(self.Config, dict(hyperparameters), self.name)
-        self.experiment: str | None = None
+        self.experiment = None
         self.warm_start = False
         self.seed: int | None = None
         self.dof: int | None = None
         self.system = None
         self.fit_info: dict = {}
         self.train_device = "cpu"
+
+    @property
+    def experiment(self) -> Experiment | None:
+        """The experiment of the last fit (an :class:`~bench.core.experiment.Experiment`,
+        whatever its name was given as), ``None`` before one."""
+        return self._experiment
+
+    @experiment.setter
+    def experiment(self, value: "str | Experiment | None") -> None:
+        self._experiment = None if value is None else Experiment.of(value)
 
     def use_device(self, device: str) -> "Method":
         """Train on ``device`` (``cpu`` or ``cuda``, :func:`bench.core.devices.resolve`)
@@ -240,7 +251,7 @@ class Method(FittedModel):
         """
         started = self.begin_fit(train, experiment, seed, budget_s, steps=steps, warm_start=warm_start, system=system)
         with gc_frozen():
-            self._fit(train, experiment, started.progress)
+            self._fit(train, self.experiment, started.progress)
         return self.end_fit(started, train)
 
     def begin_fit(self, train: Dataset, experiment: str, seed: int, budget_s: "float | Budget | None" = None, *,
@@ -253,6 +264,7 @@ class Method(FittedModel):
         after the loop, a fit whose loop runs elsewhere (several seeds' networks
         trained as one, :mod:`methods.stacking`) is the same as :meth:`fit`."""
         budget = as_budget(budget_s, steps)
+        experiment = Experiment.of(experiment)
         if warm_start and not self.supports_warm_start:
             raise ConfigError(f"{self.name} cannot continue a fit (warm_start)")
         if warm_start and self.experiment is None:
@@ -261,7 +273,6 @@ class Method(FittedModel):
             raise ConfigError(f"{self.name}: warm_start continues a {self.experiment} fit of {self.dof} DoF; "
                               f"got {experiment} data of {train.dof} DoF")
         self.warm_start = warm_start
-        check_experiment(experiment)
         reason = self.not_applicable_reason(experiment, system if system is not None else self._resolve_system(train))
         if reason:
             raise ConfigError(reason)
@@ -326,7 +337,7 @@ class Method(FittedModel):
         if getattr(self, "_prepared", None) == key:
             return 0.0
         t0 = time.perf_counter()
-        self._prepare(train, experiment)
+        self._prepare(train, Experiment.of(experiment))
         self._prepared = key
         return round(time.perf_counter() - t0, 3)
 
@@ -435,7 +446,7 @@ def restored(tree: dict, context: dict):
     """The method a saved tree names, built with its hyperparameters, for ``context``'s system and joints."""
     hyperparameters = {k: tuple(v) if isinstance(v, list) else v for k, v in tree["hyperparameters"].items()}
     method = METHODS[tree["method"]](**hyperparameters)
-    method.dof, method.system, method.experiment = int(context["dof"]), context.get("system"), "indirect"
+    method.dof, method.system, method.experiment = int(context["dof"]), context.get("system"), INDIRECT
     method.seed = 0  # a network is built, then given its saved weights
     return method
 

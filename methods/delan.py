@@ -101,6 +101,7 @@ from typing import Annotated
 import numpy as np
 import torch
 
+from bench.core.experiment import Experiment
 from bench.core.compiled import compiled_once
 from bench.physics.dynamics import euler_lagrange
 from methods.base import METHODS
@@ -282,7 +283,7 @@ class DeLaN(TorchLagrangianMethod):
 
     def loss(self, prediction, target, experiment):
         """DeLaN's torque loss sums the squared error over the joints (:func:`torque_loss`)."""
-        if experiment == "direct":
+        if not Experiment.of(experiment).learns_torque:
             return super().loss(prediction, target, experiment)
         return ((prediction - target) ** 2).sum(1).mean()
 
@@ -290,20 +291,20 @@ class DeLaN(TorchLagrangianMethod):
     stacked_loss_is_batch_loss = True
 
     def batch_loss(self, batch, experiment):
-        if experiment == "direct":
+        if not Experiment.of(experiment).learns_torque:
             return super().batch_loss(batch, experiment)
         loss = compiled_torque_loss() if self.config.compile else torque_loss
         return loss(self.model, batch["q"], batch["qd"], batch["qdd"], batch["tau"])
 
     def compiles_stacked_step(self, experiment: str) -> bool:
         """With ``compile``, a stacked fit's indirect step is compiled too (:mod:`methods.stacking`)."""
-        return self.config.compile and experiment == "indirect"
+        return self.config.compile and Experiment.of(experiment).learns_torque
 
     def _prepare(self, train, experiment) -> None:
         """With ``compile``, compile the indirect loss for the fit's batch on a
         network of the fit's shapes before the budget starts (the runner
         records the time as ``prepare_seconds``); the fit's network reuses it."""
-        if not self.config.compile or experiment != "indirect":
+        if not self.config.compile or not experiment.learns_torque:
             return
         bs = min(self.config.batch_size, len(train))
         dtype, device = getattr(torch, self.config.dtype), torch.device(self.train_device)

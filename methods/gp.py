@@ -53,6 +53,7 @@ from typing import Annotated, ClassVar
 import numpy as np
 import torch
 
+from bench.core.experiment import INDIRECT
 from bench.core.autocorrelation import effective_samples
 from bench.core.data import Dataset
 from bench.core.modelfile import Packer, Unpacker, loader
@@ -128,7 +129,7 @@ class GaussianProcess(Method):
     """A sparse GP per joint of the torque (see the module docstring)."""
 
     Config = GPConfig
-    experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+    experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     search_space = {"inducing": (128, 256), "inputs": ("joint", "all"), "samples": ("effective", "all")}
     smoke = {"max_steps": 5, "inducing": 16, "batch_size": 64, "eval_samples": 128}
     falls_back_to_zero: ClassVar[bool] = True
@@ -144,7 +145,7 @@ class GaussianProcess(Method):
 
     @classmethod
     def not_applicable_reason(cls, experiment, system=None):
-        if experiment != "indirect":
+        if experiment not in cls.experiments:
             return "a GP of the torque learns torques: the direct experiment has no torques, and the GP no L"
         return None
 

@@ -39,6 +39,7 @@ from typing import Annotated, Callable, ClassVar
 
 import numpy as np
 
+from bench.core.experiment import INDIRECT
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
@@ -86,7 +87,7 @@ def sysid_prior(configuration: str):
     """The identification of SysId's configuration ``configuration`` (one solve, whatever the budget)."""
     def identify(train: Dataset, system, seed: int, budget: Budget) -> FittedModel:
         method = METHODS[PRIOR_METHOD](**METHODS[PRIOR_METHOD].configuration(configuration))
-        return method.fit(train, "indirect", seed, Budget(steps=1), system=system)
+        return method.fit(train, INDIRECT, seed, Budget(steps=1), system=system)
     return identify
 
 
@@ -135,7 +136,7 @@ class Hybrid(Method):
 
     prior_name: ClassVar[str] = ""
     residual_name: ClassVar[str] = ""
-    experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+    experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
 
     def __init__(self, **hyperparameters):
         super().__init__(**hyperparameters)
@@ -151,11 +152,11 @@ class Hybrid(Method):
 
     @classmethod
     def not_applicable_reason(cls, experiment: str, system: System | None = None) -> str | None:
-        if experiment != "indirect":
+        if experiment not in cls.experiments:
             return f"{cls.name} learns the residual of the torque of its prior: the {experiment} experiment has no torques"
         if system is not None and system.linear_form() is None:
             return prior_unavailable(cls.prior_name, system)
-        return METHODS[cls.residual_name].not_applicable_reason("indirect", system)
+        return METHODS[cls.residual_name].not_applicable_reason(INDIRECT, system)
 
     @classmethod
     def refused_on(cls, system: System) -> str | None:
@@ -178,15 +179,15 @@ class Hybrid(Method):
         self._residual_data = train.replace(tau=train.tau - self.prior.predict_torque(train))
         self.gate = None if self.residual.falls_back_to_zero else TrainingStates(train)
         # the residual starts as a fit of its own would (its seed, its one-time work), on the hybrid's clock
-        self.residual.begin_fit(self._residual_data, "indirect", self.seed, self.budget, system=self.system)
-        self.residual._fit(self._residual_data, "indirect", progress)
+        self.residual.begin_fit(self._residual_data, INDIRECT, self.seed, self.budget, system=self.system)
+        self.residual._fit(self._residual_data, INDIRECT, progress)
 
     def _prepare(self, train: Dataset, experiment: str) -> None:
         """The residual's one-time work (compiling its step) for data of ``train``'s shape, before the budget starts."""
-        self.residual.prepare(train, "indirect")
+        self.residual.prepare(train, INDIRECT)
 
     def _post_fit(self, train: Dataset, experiment: str, seconds_left: float) -> None:
-        self.residual._post_fit(self._residual_data, "indirect", seconds_left)
+        self.residual._post_fit(self._residual_data, INDIRECT, seconds_left)
 
     def _get_state(self):
         return self.residual._get_state()
@@ -299,7 +300,7 @@ def compose(name: str) -> type | None:
         entry = METHODS.entry(residual)
     except RegistryError as exc:
         raise RegistryError(f"{name}: unknown residual learner: {exc}") from None
-    reason = entry.obj.not_applicable_reason("indirect")
+    reason = entry.obj.not_applicable_reason(INDIRECT)
     if reason:
         raise RegistryError(f"{name}: {residual} cannot learn a residual torque: {reason}")
     base = entry.obj

@@ -70,6 +70,7 @@ import numpy as np
 import sympy
 from deap import gp
 
+from bench.core.experiment import Experiment
 from bench.core import symbolic
 from bench.physics import regression
 from bench.core.data import Dataset
@@ -219,7 +220,7 @@ class MGGP(ExpressionMethod):
             cache.move_to_end(key)
             return cache[key]
         jet = self._evaluate_tree(gene, algebra)
-        col = jet.v if self.experiment == "direct" else algebra.torque(jet).ravel()
+        col = algebra.torque(jet).ravel() if self.experiment.learns_torque else jet.v
         if cache is not None:
             cache[key] = col
             if len(cache) > self.config.gene_cache:
@@ -245,7 +246,7 @@ class MGGP(ExpressionMethod):
 
     def _design(self, genes, algebra: JetAlgebra, cache) -> np.ndarray:
         cols = [self._column(g, algebra, cache) for g in genes]
-        if self.experiment == "direct":
+        if not self.experiment.learns_torque:  # L up to a constant
             cols = [np.ones(algebra.n)] + cols
         return np.stack(cols, axis=1)
 
@@ -314,7 +315,7 @@ class MGGP(ExpressionMethod):
         rng = np.random.default_rng(self.seed)
         idx = np.sort(rng.choice(len(train), min(len(train), cfg.fitness_samples), replace=False))
         fit = train.subset(idx)
-        algebra = JetAlgebra(fit.q, fit.qd, fit.qdd, order=0 if experiment == "direct" else 2)
+        algebra = JetAlgebra(fit.q, fit.qd, fit.qdd, order=experiment.order)
         y = fit.target(experiment).ravel()
         cache: OrderedDict = OrderedDict()
         pop = [self._new_individual() for _ in range(cfg.population)]
@@ -365,7 +366,7 @@ class MGGP(ExpressionMethod):
         rng = np.random.default_rng(self.seed + 1)
         idx = np.sort(rng.choice(len(train), min(len(train), 8192), replace=False))
         sub = train.subset(idx)
-        algebra = JetAlgebra(sub.q, sub.qd, sub.qdd, order=0 if experiment == "direct" else 2)
+        algebra = JetAlgebra(sub.q, sub.qd, sub.qdd, order=Experiment.of(experiment).order)
         with np.errstate(all="ignore"):
             F = self._design(self.best.genes, algebra, None)
             if np.isfinite(F).all():
@@ -400,7 +401,7 @@ class MGGP(ExpressionMethod):
         """The best individual's model ``a0 + sum_k a_k gene_k`` (no ``a0`` indirectly)."""
         coef = self.best.coef if self.best.coef is not None else np.zeros(len(self.best.genes) + 1)
         terms = [self._gene_sympy(g) for g in self.best.genes]
-        if self.experiment == "direct":
+        if not self.experiment.learns_torque:
             return sympy.Float(float(coef[0])) + sum(sympy.Float(float(c)) * t for c, t in zip(coef[1:], terms))
         return sum((sympy.Float(float(c)) * t for c, t in zip(coef, terms)), sympy.Integer(0))
 

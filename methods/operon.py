@@ -26,6 +26,7 @@ from typing import Annotated
 import numpy as np
 import sympy
 
+from bench.core.experiment import DIRECT
 from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.physics.models import ExpressionModel
@@ -57,7 +58,7 @@ class OperonConfig(MethodConfig):
 @METHODS.add("operon", "symbolic", "genetic")
 class Operon(ExpressionMethod):
     Config = OperonConfig
-    experiments = ("direct",)
+    experiments = (DIRECT,)
     search_space = {"max_length": (25, 50), "population_size": (500, 1000)}
     smoke = {"population_size": 50, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}
 
@@ -69,7 +70,7 @@ class Operon(ExpressionMethod):
 
     @classmethod
     def not_applicable_reason(cls, experiment, system=None):
-        return None if experiment == "direct" else NOT_APPLICABLE
+        return None if experiment in cls.experiments else NOT_APPLICABLE
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         from pyoperon.sklearn import SymbolicRegressor

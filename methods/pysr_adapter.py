@@ -129,7 +129,7 @@ class PySR(ExpressionMethod):
         while progress.step():
             remaining = progress.remaining()  # under a work budget its iterations bound it, and time does not
             seconds = max(1.0, remaining * 0.9) if math.isfinite(remaining) else None
-            if experiment == "direct":
+            if not experiment.learns_torque:
                 reg = PySRRegressor(timeout_in_seconds=seconds, **common)
                 reg.fit(np.concatenate([sub.q, sub.qd], axis=1), sub.L,
                         variable_names=[f"q{i}" for i in range(1, train.dof + 1)] + [f"qd{i}" for i in range(1, train.dof + 1)])

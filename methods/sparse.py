@@ -85,7 +85,7 @@ class SparseLagrangian(ExpressionMethod):
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         kinds = self.system.kinds if self.system is not None else ("angle",) * train.dof
         self.library = lagrangian_library(train.dof, kinds)
-        rows = 1 if experiment == "direct" else train.dof
+        rows = experiment.rows(train.dof)
         fits = max(1, MAX_DESIGN_BYTES // (8 * len(self.library) * rows))  # samples whose design fits in memory
         self.samples = min(len(train), self.config.samples, fits)
         rng = np.random.default_rng(self.seed)

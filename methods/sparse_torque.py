@@ -28,6 +28,7 @@ from typing import Annotated, ClassVar
 
 import numpy as np
 
+from bench.core.experiment import INDIRECT
 from bench.physics import regression
 from bench.core.folds import folds
 from bench.core.data import Dataset
@@ -58,13 +59,13 @@ class SparseTorque(Method):
     """Sparse regression of each joint's torque (see the module docstring)."""
 
     Config = SparseTorqueConfig
-    experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+    experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     smoke = {"max_steps": 1, "eval_samples": 128}
     has_lagrangian: ClassVar[bool] = False
 
     @classmethod
     def not_applicable_reason(cls, experiment, system=None):
-        if experiment != "indirect":
+        if experiment not in cls.experiments:
             return "a sparse regression of the torque learns torques: the direct experiment has none"
         return None
 

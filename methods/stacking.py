@@ -54,6 +54,7 @@ import numpy as np
 import torch
 from torch.func import functional_call, stack_module_state, vmap
 
+from bench.core.experiment import Experiment
 from bench.core.compiled import compiled_once
 from bench.core.data import Dataset
 from bench.physics.dynamics import euler_lagrange
@@ -247,7 +248,7 @@ def train_lagrangians(methods: list, starts: list, datasets: list[Dataset], expe
         with slot:
             loops.append(method.start_loop(data))  # its network from its own seeded generators, as alone
     stack = StackedLagrangian([m.model for m in methods])
-    direct = experiment == "direct"
+    experiment = Experiment.of(experiment)
     compiled = methods[0].compiles_stacked_step(experiment)
     while True:
         going = [s.progress.step() for s in starts]
@@ -261,13 +262,13 @@ def train_lagrangians(methods: list, starts: list, datasets: list[Dataset], expe
             idx = feed.next()
             batches.append({k: v[idx] for k, v in tensors.items()})
         q, qd, qdd = (torch.cat([b[k] for b in batches]) for k in ("q", "qd", "qdd"))
-        if direct:
-            pred = stack(q, qd)
-        else:
+        if experiment.learns_torque:
             pred = stack.compiled_torques(q, qd, qdd) if compiled else euler_lagrange(stack, q, qd, qdd, create_graph=True)
+        else:
+            pred = stack(q, qd)
         losses, row = [], 0
         for method, batch in zip(methods, batches):
-            target = batch["L" if direct else "tau"]
+            target = batch[experiment.target]
             losses.append(method.loss(pred[row:row + len(target)], target, experiment))
             row += len(target)
         stack.zero_grad()
@@ -299,6 +300,7 @@ def fit_stacked(methods: list, datasets: list[Dataset], experiment: str, seeds: 
     reason = methods[0].stacking_unavailable_reason()
     if reason:
         raise ConfigError(reason)
+    experiment = Experiment.of(experiment)
     began = time.perf_counter()
     kind.prepare_stacked(methods, datasets, experiment)
     prepared = round(time.perf_counter() - began, 3)

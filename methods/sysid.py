@@ -61,6 +61,7 @@ import numpy as np
 import sympy
 import torch
 
+from bench.core.experiment import Experiment
 from bench.core.data import Dataset
 from bench.core.errors import DataError
 from bench.physics.effects import EFFECTS
@@ -114,7 +115,8 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
     facts say whether the identified set is a rigid body's (``feasibility``):
     the least-squares base parameters are judged by the full set nearest
     the prior with their torques (:func:`~bench.physics.feasible.nearest_completion`)."""
-    if experiment == "direct":
+    experiment = Experiment.of(experiment)
+    if not experiment.learns_torque:
         W = np.column_stack([lagrangian_regressor(form, data), np.ones(len(data))])  # L up to a constant
         y = data.target(experiment)
     else:
@@ -134,7 +136,7 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
         true = np.asarray(form.true_values + (0.0,))  # the constant's true value is unknown: 0 is not used below
         base_true = (true[independent] + beta @ true[dependent])[keep]
         facts["parameter_error"] = float(np.linalg.norm(model.coef - base_true) / np.linalg.norm(base_true))
-    if form.bodies and form.prior is not None and experiment == "indirect":
+    if form.bodies and form.prior is not None and experiment.learns_torque:
         prior = form.full_prior()
         start = time.perf_counter()
         problem = Compressed(W, y)  # one QR of the regressor: the completion and the feasible fit use its factor
@@ -202,7 +204,7 @@ class SysId(TorchLagrangianMethod):
     def _fit(self, train, experiment, progress):
         form = self.system.linear_form() if self.system is not None else None
         if form is not None and self.config.friction:
-            if experiment == "direct":
+            if not experiment.learns_torque:
                 raise DataError("sysid's friction columns act on torques: the direct experiment (samples of L) has none")
             form = with_friction(form)
         if form is None and self.config.friction:

@@ -16,6 +16,7 @@ from typing import Annotated, ClassVar
 import numpy as np
 import torch
 
+from bench.core.experiment import Experiment
 from bench.core.data import Dataset
 from bench.physics.dynamics import euler_lagrange
 from bench.core.modelfile import Packer, Unpacker, loader
@@ -192,11 +193,12 @@ class TorchLagrangianMethod(Method, LagrangianFunction):
         return torch.mean((prediction - target) ** 2)
 
     def batch_loss(self, batch: dict[str, torch.Tensor], experiment: str) -> torch.Tensor:
-        if experiment == "direct":
-            pred, target = self.lagrangian(batch["q"], batch["qd"]), batch["L"]
-        else:
+        experiment = Experiment.of(experiment)
+        if experiment.learns_torque:
             pred = euler_lagrange(self.lagrangian, batch["q"], batch["qd"], batch["qdd"], create_graph=True)
-            target = batch["tau"]
+        else:
+            pred = self.lagrangian(batch["q"], batch["qd"])
+        target = batch[experiment.target]
         return self.loss(pred, target, experiment) + self.extra_loss()
 
     def _start_training(self) -> None:

@@ -53,6 +53,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from bench.core.experiment import INDIRECT
 from bench.core.data import Dataset, DataError
 from bench.core.csv_format import read_frame
 from bench.core.errors import ConfigError
@@ -286,7 +287,7 @@ class Measured:
     :class:`~bench.physics.system.System` (or a subclass that gives the model)."""
 
     simulated = False
-    experiments = ("indirect",)
+    experiments = (INDIRECT,)
     splits = SPLITS
     measured: ClassVar[MeasuredSpec]
 

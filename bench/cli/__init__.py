@@ -8,7 +8,7 @@ text (``python -m bench COMMAND --help``).
 Each command is one module with ``HELP``, ``add_arguments(parser)`` and
 ``main(args) -> exit code``: the user's commands here, in :data:`COMMANDS`,
 and the project's studies under one of them, ``study`` (:mod:`bench.cli.study`,
-the measurement scripts of :mod:`bench.experiments`). What several
+the measurement scripts of :mod:`bench.studies`). What several
 commands share (``--set``, ``--plugin``, ``--budget`` with ``--steps``) is in
 :mod:`bench.cli.options`; the option values' types are in
 :mod:`bench.core.arguments`.
@@ -23,7 +23,7 @@ import sys
 from bench.cli import convert, data, fit, index, leaderboard, listing, predict, rerun, residual, run, select, study, table
 from bench.cli.options import Parser
 from bench.core.errors import UserError
-from bench.experiments import robot_log
+from bench.studies import robot_log
 from bench.runner.isolation import CallFailed
 
 EXIT_USAGE = 2

@@ -13,7 +13,7 @@ import re
 from pathlib import Path
 
 from bench.core.arguments import assignment, positive, positive_int
-from bench.core.data import check_experiment
+from bench.core.experiment import Experiment
 from bench.core.devices import CHOICES, resolve as resolve_device
 from bench.core.errors import UserError
 from bench.core.registry import RegistryError
@@ -202,7 +202,7 @@ def check_names(args, systems=(), methods=(), experiments=()) -> None:
                 unknown = str(exc).startswith("unknown ") and "unknown prior" not in str(exc) or "unknown residual" in str(exc)
                 raise UsageError(f"{exc}{_plugin_hint(name, args.plugin) if unknown else ''}") from None
     for name in experiments:
-        check_experiment(name)
+        Experiment.of(name)
     for method in methods:
         refused = [METHODS[method].refused_on(SYSTEMS[s]()) for s in systems]
         reason = next((r for r in refused if r), None)

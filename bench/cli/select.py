@@ -1,5 +1,5 @@
 """``python -m bench select``: one model of a measured arm, chosen by validation
-on the training data alone (:mod:`bench.experiments.selection`)."""
+on the training data alone (:mod:`bench.studies.selection`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 from bench.cli.options import UsageError, add_budget, add_plugin, add_split, budget, check_names, check_split, load_plugins
 from bench.core.arguments import csv_list, positive_int, seed
 from bench.core.fileio import check_output
-from bench.experiments.selection import CANDIDATES, select
+from bench.studies.selection import CANDIDATES, select
 from systems import SYSTEMS
 
 HELP = "choose a model of a measured arm by validation on its training data; write it, and a page of every candidate"

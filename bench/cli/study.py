@@ -1,11 +1,11 @@
 """``python -m bench study NAME``: the project's own studies, each a
 measurement that writes one of the project's published pages under
-``results/`` by default (:mod:`bench.experiments`)."""
+``results/`` by default (:mod:`bench.studies`)."""
 
 from __future__ import annotations
 
 from bench.cli.options import Parser
-from bench.experiments import (adaptation, dfki_filter, generalisation, gpu_figures, overhead, residual_acceptance,
+from bench.studies import (adaptation, dfki_filter, generalisation, gpu_figures, overhead, residual_acceptance,
                                residual_dfki, scaling, stacking_speed, syrenets_profile, syrenets_speed)
 
 HELP = "the project's studies: measurements that write its published pages (python -m bench study --help lists them)"

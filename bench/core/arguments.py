@@ -1,7 +1,7 @@
 """Types of command-line numbers: each rejects a bad value in one line.
 
 Every option of :mod:`bench.cli` and of the measurement scripts in
-:mod:`bench.experiments` that takes a count, a duration or a fraction uses
+:mod:`bench.studies` that takes a count, a duration or a fraction uses
 one of these as its ``argparse`` type, so ``--rounds 0`` or ``--budget nan``
 ends with ``error: argument --rounds: must be a positive integer, got 0``
 and exit code 2 instead of a traceback from deep inside the run.

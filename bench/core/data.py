@@ -30,10 +30,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bench.core.errors import ConfigError, DataError
+from bench.core.errors import DataError
+from bench.core.experiment import Experiment
 from bench.core.fileio import atomic_write
-
-EXPERIMENTS = ("direct", "indirect")
 #: bump when the generator changes what it produces for the same key
 GENERATOR_VERSION = 1
 
@@ -110,14 +109,14 @@ class Dataset:
     def dof(self) -> int:
         return self.q.shape[1]
 
-    def target(self, experiment: str) -> np.ndarray:
-        """The experiment's target: ``L`` (direct, shape (n,)) or ``tau`` (indirect)."""
-        check_experiment(experiment)
-        if experiment == "direct":
-            if self.L is None:
-                raise DataError(f"{self.source}: the direct experiment needs column 'L', which this data lacks")
-            return self.L
-        return self.tau
+    def target(self, experiment: "str | Experiment") -> np.ndarray:
+        """The experiment's target (:attr:`Experiment.target`): ``L`` (direct, shape (n,)) or ``tau`` (indirect)."""
+        experiment = Experiment.of(experiment)
+        targets = experiment.targets(self)
+        if targets is None:
+            raise DataError(f"{self.source}: the {experiment} experiment needs column '{experiment.target}', "
+                            f"which this data lacks")
+        return targets
 
     def subset(self, index) -> "Dataset":
         return Dataset(
@@ -189,11 +188,6 @@ def _in_order(labels: np.ndarray | None) -> list[str]:
     return [str(unique[i]) for i in np.argsort(first)]
 
 
-def check_experiment(experiment: str) -> None:
-    if experiment not in EXPERIMENTS:
-        raise ConfigError(f"unknown experiment {experiment!r}; choose one of {', '.join(EXPERIMENTS)}")
-
-
 # -- generation ------------------------------------------------------------------
 
 def cache_dir() -> Path:
@@ -241,18 +235,16 @@ def add_noise(data: Dataset, experiment: str, level: float, seed: int) -> Datase
     deviation. It is drawn from its own stream of ``seed``, so the samples
     stay those of the clean data.
     """
-    check_experiment(experiment)
+    experiment = Experiment.of(experiment)
     if not (level >= 0 and math.isfinite(level)):
         raise ValueError(f"noise level must be a finite number >= 0, got {level}")
     rng = np.random.default_rng([seed, 0x6E6F6973])  # "nois"
-    L, tau = data.L, data.tau
-    if experiment == "direct":
-        target = data.target(experiment)
-        L = target + rng.normal(0.0, level * target.std(), target.shape)
-    else:
-        tau = tau + rng.normal(0.0, 1.0, tau.shape) * (level * tau.std(axis=0))
+    target = data.target(experiment)
+    # L: one standard deviation over the samples; torques: each joint's own
+    scale = level * (target.std(axis=0) if experiment.learns_torque else target.std())
+    noisy = target + rng.normal(0.0, 1.0, target.shape) * scale
     meta = {**data.meta, "noise": level}
-    return data.replace(tau=tau, L=L, source=f"{data.source} + {level:g} x std noise on {experiment} targets", meta=meta)
+    return data.replace(**{experiment.target: noisy}, source=f"{data.source} + {level:g} x std noise on {experiment} targets", meta=meta)
 
 
 # -- helpers -------------------------------------------------------------------------

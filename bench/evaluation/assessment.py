@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 
+from bench.core.experiment import Experiment
 from bench.core.data import Dataset
 from bench.physics.system import System
 from bench.evaluation.driven import driven_entry
@@ -41,7 +42,7 @@ def assess(method, experiment: str, system: System, train: Dataset, test: Datase
     of ``stages``: one that fails is named there, and the others still run. ``timed``:
     the run has a time budget; the seconds of each part go into ``timing``."""
     details, entry = {}, None
-    indirect = experiment == "indirect"
+    indirect = Experiment.of(experiment).learns_torque
     if test is not None and rollout and (system.simulated or (test.time is not None and indirect)):
         clock = time.perf_counter()
         if system.simulated:

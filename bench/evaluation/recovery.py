@@ -26,6 +26,7 @@ import numpy as np
 import sympy
 import torch
 
+from bench.core.experiment import Experiment
 from bench.core import symbolic
 from bench.physics.dynamics import euler_lagrange
 from bench.core.timeouts import call_with_timeout
@@ -114,6 +115,7 @@ def judge(L_hat: sympy.Expr, L_true: sympy.Expr, dof: int, experiment: str, *,
     process, and :class:`~bench.core.timeouts.Timeout` is raised when it has
     not ended in that time.
     """
+    experiment = Experiment.of(experiment)
     L_hat = _even_functions(symbolic.numeric_subexpressions_to_floats(sympy.sympify(L_hat)))
     if up_to_scale:
         L_hat = _best_scale(L_hat, L_true, dof, domain, seed) * L_hat
@@ -121,7 +123,7 @@ def judge(L_hat: sympy.Expr, L_true: sympy.Expr, dof: int, experiment: str, *,
         return Verdict(exact=False, symbolic=False, numeric=False, residual="differs numerically on fresh samples")
 
     def symbolic_check() -> tuple[bool, str]:
-        if experiment == "direct":
+        if not experiment.learns_torque:
             scale = max(_coefficients(_canonical(L_true)), default=1.0)
             ok, residual = _vanishes(L_hat - L_true, scale, tolerance, allow_constant=True)
             return bool(ok), str(residual)
@@ -153,7 +155,7 @@ def _best_scale(L_hat, L_true, dof, domain, seed) -> sympy.Float:
 def _numerically_equal(L_hat, L_true, dof, experiment, tolerance, domain, seed) -> bool:
     q, qd, qdd = _samples(dof, domain, seed)
     f_hat, f_true = symbolic.to_torch(L_hat, dof), symbolic.to_torch(L_true, dof)
-    if experiment == "direct":
+    if not experiment.learns_torque:
         d = (f_hat(q, qd) - f_true(q, qd)).numpy()
         d = d - d.mean()
         ref = f_true(q, qd).numpy()

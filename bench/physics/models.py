@@ -38,7 +38,8 @@ import sympy
 import torch
 
 from bench.core import symbolic
-from bench.core.data import Dataset, check_experiment
+from bench.core.data import Dataset
+from bench.core.experiment import Experiment
 from bench.physics.dynamics import euler_lagrange_chunked
 from bench.core.modelfile import ModelFileError, Packer, Unpacker, expression_from_json, expression_to_json, loader
 from bench.physics.terms import Term, TermLibrary
@@ -132,8 +133,7 @@ class FittedModel(abc.ABC):
 
     def predict(self, data: Dataset, experiment: str) -> np.ndarray:
         """The prediction in the experiment's own target: ``L`` (direct) or ``tau`` (indirect)."""
-        check_experiment(experiment)
-        return self.predict_lagrangian(data) if experiment == "direct" else self.predict_torque(data)
+        return Experiment.of(experiment).predict(self, data)
 
 
 class LagrangianFunction(FittedModel):

@@ -21,6 +21,7 @@ import numpy as np
 import scipy.linalg
 import sympy
 
+from bench.core.experiment import Experiment
 from bench.core.data import Dataset
 from bench.core.folds import folds
 from bench.physics.terms import TermLibrary
@@ -150,7 +151,7 @@ def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, thres
     refitted on all samples (the sparsest model that predicts as well).
     """
     basis = list(basis)
-    if experiment == "direct" and not any(f.is_number for f in basis):
+    if not Experiment.of(experiment).learns_torque and not any(f.is_number for f in basis):
         basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
     library = TermLibrary.of_lagrangian(basis)
     F = library.design(data, experiment, deadline)

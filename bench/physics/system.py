@@ -43,6 +43,7 @@ import numpy as np
 import sympy
 import torch
 
+from bench.core.experiment import EXPERIMENTS
 from bench.core import symbolic
 from bench.physics.dynamics import euler_lagrange_chunked
 from bench.core.errors import ConfigError, DataError
@@ -230,7 +231,7 @@ class System(abc.ABC):
     #: split offers ``("default",)``
     splits: ClassVar[tuple[str, ...]] = ("default",)
     #: the experiments the system's data allow (measured trajectories have no L)
-    experiments: ClassVar[tuple[str, ...]] = ("direct", "indirect")
+    experiments: ClassVar[tuple[str, ...]] = EXPERIMENTS
     #: why an experiment missing from ``experiments`` does not apply
     not_applicable: ClassVar[str] = ""
     #: a published figure to read the tables against (printed above them)

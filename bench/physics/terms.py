@@ -37,7 +37,8 @@ import numpy as np
 import sympy
 
 from bench.core import symbolic
-from bench.core.data import Dataset, check_experiment
+from bench.core.data import Dataset
+from bench.core.experiment import Experiment
 from bench.physics.dynamics import euler_lagrange_chunked
 from bench.core.timeouts import Timeout
 
@@ -151,13 +152,13 @@ class Term:
         """The term's column in ``experiment``'s target: ``L`` (``(n,)``) or
         ``tau`` flattened sample-major (``(n * dof,)``); computed once per
         term and data set inside :func:`remembered_columns` (read-only then)."""
-        check_experiment(experiment)
-        if experiment == "direct" and not self.in_lagrangian:
+        experiment = Experiment.of(experiment)
+        if not experiment.learns_torque and not self.in_lagrangian:
             raise ValueError(f"{self.label} acts on the torque only: it has no value in L (direct experiment)")
         kept = _REMEMBERED.get(data)
         if kept is not None and (self, experiment) in kept[1]:
             return kept[1][(self, experiment)]
-        column = self.value(data) if experiment == "direct" else self.torque(data).ravel()
+        column = self.torque(data).ravel() if experiment.learns_torque else self.value(data)
         if kept is not None:
             column.setflags(write=False)
             kept[1][(self, experiment)] = column
@@ -291,13 +292,13 @@ class TermLibrary(Sequence[Term]):
         :class:`~bench.core.timeouts.Timeout` once ``time.perf_counter()``
         passes ``deadline``.
         """
-        check_experiment(experiment)
+        experiment = Experiment.of(experiment)
         cols = []
         for term in self.terms:
             if deadline is not None and time.perf_counter() > deadline:
                 raise Timeout(f"design matrix: {len(cols)} of {len(self)} columns done")
             cols.append(term.column(data, experiment))
-        rows = len(data) * (1 if experiment == "direct" else data.dof)
+        rows = len(data) * experiment.rows(data.dof)
         return np.stack(cols, axis=1) if cols else np.zeros((rows, 0))
 
     def lagrangian(self, coef: Sequence[float]) -> sympy.Expr:

@@ -9,6 +9,7 @@ import json
 import re
 from pathlib import Path
 
+from bench.core.experiment import INDIRECT
 from bench.evaluation.driven import describe as describe_driven, pooled
 from bench.reporting.groups import group_stats
 from bench.reporting.pages import block
@@ -47,7 +48,7 @@ def _ratio(x: float) -> str:
 def _records(root: Path, folder: str, tuned: bool | None = False) -> list[Record]:
     """The folder's indirect records: those with each method's own hyperparameters by
     default, the tuned ones with ``tuned=True``, all with ``None``."""
-    return [r for r in read_records(Path(root) / folder) if r.experiment == "indirect"
+    return [r for r in read_records(Path(root) / folder) if r.experiment == INDIRECT
             and (tuned is None or r.tuned == tuned)]
 
 

@@ -130,7 +130,7 @@ def residual_plot(data, residual: np.ndarray, path: Path, title: str = "", after
 
 def adaptation_plot(results: list[dict], checkpoints, path: Path, title: str = "") -> Path:
     """Test MSE against fitting time after a switch in the system
-    (:mod:`bench.experiments.adaptation`): one colour per learner, each seed a faint step
+    (:mod:`bench.studies.adaptation`): one colour per learner, each seed a faint step
     line, the median over seeds at the checkpoints a solid line inside its
     interquartile band. The time axis is symmetric-log, so that t = 0 (the
     model at the switch) is drawn. Errors more than 1e4 times below the

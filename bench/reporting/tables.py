@@ -55,6 +55,7 @@ from typing import Callable
 
 import numpy as np
 
+from bench.core.experiment import EXPERIMENTS, Experiment
 from bench.core.fileio import atomic_write, link
 from bench.evaluation.driven import describe as describe_driven, pooled
 from bench.evaluation.scores import MEASURED
@@ -296,11 +297,11 @@ def build_tables(records: list[Record], plots: dict[tuple, str] | None = None, p
     """
     plots = plots or {}
     groups = section_groups(records)
-    order = {"direct": 0, "indirect": 1}
+    order = {e: k for k, e in enumerate(EXPERIMENTS)}
     parts = ["# Results", "", guide_line(page), ""]
     for (system, experiment, noise) in sorted(groups, key=lambda k: (k[0], order.get(k[1], 9), k[1], k[2])):
         recs = groups[(system, experiment, noise)]
-        target = "L" if experiment == "direct" else "τ"
+        target = Experiment.of(experiment).symbol
         noisy = f", training targets with {noise * 100:g} % noise (test targets clean)" if noise else ""
         parts += [f"## {system}, {experiment} experiment (MSE of {target}){noisy}", ""]
         parts += [line + "  " for line in header(recs)]

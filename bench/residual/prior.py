@@ -20,6 +20,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from bench.core.experiment import INDIRECT
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.physics.models import FittedModel
@@ -51,12 +52,12 @@ class Loop(Method):
     (``bench run --methods loop``, a candidate of ``bench select``): fitted by
     :func:`identify` within the run's whole budget."""
 
-    experiments: ClassVar[tuple[str, ...]] = ("indirect",)
+    experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     smoke = {"max_steps": 1, "eval_samples": 128}
 
     @classmethod
     def not_applicable_reason(cls, experiment: str, system=None) -> str | None:
-        if experiment != "indirect":
+        if experiment not in cls.experiments:
             return "the residual loop traces torques: the direct experiment has none"
         if system is not None and system.linear_form() is None:
             return prior_unavailable("loop", system)

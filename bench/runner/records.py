@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Callable
 
 from bench.core.budget import Budget
-from bench.core.data import EXPERIMENTS
+from bench.core.experiment import EXPERIMENTS, Experiment
 from bench.core.errors import UserError
 from bench.core.fileio import write_json
 from bench.core.names import MethodName, MethodNameError
@@ -109,7 +109,7 @@ class Record(Provenanced):
             schema=SCHEMA,
             run_id=run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], noise, spec.get("tune", False)),
             system=spec["system"], method=spec["method"], experiment=spec["experiment"], seed=spec["seed"],
-            budget_s=spec["budget_s"], noise=noise, target="L" if spec["experiment"] == "direct" else "tau",
+            budget_s=spec["budget_s"], noise=noise, target=Experiment.of(spec["experiment"]).target,
             spec=spec, status=status, provenance=provenance(spec.get("threads", 1) if elsewhere else None), **fields,
         )
 
@@ -149,7 +149,7 @@ class Record(Provenanced):
         if parts is None:
             return None
         tuned = parts.pop("tuned")
-        return cls(schema=SCHEMA, run_id=rid, target="L" if parts["experiment"] == "direct" else "tau", budget_s=math.nan,
+        return cls(schema=SCHEMA, run_id=rid, target=Experiment.of(parts["experiment"]).target, budget_s=math.nan,
                    spec={"tune": True} if tuned else {}, status=MISSING, error=why, **parts)
 
     def replace(self, **changes) -> "Record":

@@ -11,6 +11,7 @@ import time
 import numpy as np
 import torch
 
+from bench.core.experiment import Experiment
 from bench.physics.dynamics import euler_lagrange
 from bench.physics.models import NoVariant
 from methods.base import METHODS
@@ -128,9 +129,10 @@ class SyReNets(Equations, TorchLagrangianMethod):
     def _pass(self, batch: dict[str, torch.Tensor], experiment: str):
         """:func:`~methods.syrenets.training.training_pass` of the network in place, compiled with ``compile``."""
         cfg = self.config
-        target = batch["L"] if experiment == "direct" else batch["tau"]
+        experiment = Experiment.of(experiment)
         return (compiled_pass() if cfg.compile else training_pass)(
-            self.model, batch["q"], batch["qd"], batch["qdd"], target, experiment, cfg.inputs, cfg.compile)
+            self.model, batch["q"], batch["qd"], batch["qdd"], batch[experiment.target], experiment.learns_torque,
+            cfg.inputs, cfg.compile)
 
     def stacking_unavailable_reason(self) -> str | None:
         if self.config.compile:
@@ -202,8 +204,8 @@ class SyReNets(Equations, TorchLagrangianMethod):
             for size in sorted({bs, bs + cfg.replay}):
                 idx = torch.arange(size) % len(train)
                 b = {k: v[idx] for k, v in t.items()}
-                target = b["L"] if experiment == "direct" else b["tau"]
-                compiled_pass()(model, b["q"], b["qd"], b["qdd"], target, experiment, cfg.inputs, True)[0].backward()
+                compiled_pass()(model, b["q"], b["qd"], b["qdd"], b[experiment.target], experiment.learns_torque,
+                                cfg.inputs, True)[0].backward()
         self._compile_seconds = round(time.perf_counter() - start, 2)
 
     def _train(self, t, experiment, progress, feed: Feed, until: float = math.inf) -> bool:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import torch
 
+from bench.core.experiment import Experiment
 from bench.physics.dynamics import euler_lagrange
 from methods.stacking import SHARED_BUDGET, Stack
 from methods.syrenets.training import Fixed, inputs_of
@@ -49,13 +50,14 @@ def stacked_pass(stack: Stack, batches: list[dict], experiment: str, inputs: str
     """Each seed's (loss, squared errors, frozen weights) of its batch, as
     :func:`~methods.syrenets.training.training_pass` gives them for one network."""
     q, qd, qdd = (torch.cat([b[k] for b in batches]) for k in ("q", "qd", "qdd"))
-    target = torch.cat([b["L" if experiment == "direct" else "tau"] for b in batches])
+    experiment = Experiment.of(experiment)
+    target = torch.cat([b[experiment.target] for b in batches])
     x = stack.split(inputs_of(q, qd, qdd, inputs))[0]
     if probes is None:
         out, weights, aux = stack.vmapped("select", (0, None))(x, None)
     else:
         out, weights, aux = stack.vmapped("select")(x, probes)
-    if experiment == "direct":
+    if not experiment.learns_torque:
         err = (out.reshape(-1) - target) ** 2
     else:
         tau = euler_lagrange(StackedFixed(stack, stack.networks[0], inputs, weights, qdd), q, qd, qdd, create_graph=True)

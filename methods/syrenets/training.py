@@ -49,12 +49,13 @@ def inputs_of(q, qd, qdd, inputs: str) -> torch.Tensor:
     return torch.cat([q, qd] if inputs == "q_qd" else [q, qd, qdd], dim=1)
 
 
-def training_pass(model: SyReNet, q, qd, qdd, target, experiment: str, inputs: str, tangent: bool):
+def training_pass(model: SyReNet, q, qd, qdd, target, torque: bool, inputs: str, tangent: bool):
     """(loss, each sample's squared error, frozen weights) of one batch, the
-    last two detached; with ``tangent`` the indirect torques come from
-    derivatives propagated forward."""
+    last two detached; ``torque``: the targets are torques
+    (:attr:`bench.core.experiment.Experiment.learns_torque`), which with
+    ``tangent`` come from derivatives propagated forward."""
     out, weights, aux = model.select(inputs_of(q, qd, qdd, inputs))
-    if experiment == "direct":
+    if not torque:
         err = (out - target) ** 2
     else:
         # the torques of the fixed function the batch selected: gradients flow

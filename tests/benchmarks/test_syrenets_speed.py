@@ -18,7 +18,7 @@ import pytest
 import torch
 
 from bench.core.data import generate
-from bench.experiments.syrenets_speed import CONFIGS
+from bench.studies.syrenets_speed import CONFIGS
 from methods import METHODS
 from systems import get_system
 

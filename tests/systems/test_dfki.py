@@ -9,7 +9,7 @@ import pytest
 
 from bench.core.data import DataError
 from bench.core.errors import ConfigError
-from bench.experiments.dfki_filter import lab_coefficients, lab_design
+from bench.studies.dfki_filter import lab_coefficients, lab_design
 from systems import get_system
 from bench.core.recordings import DEFAULT_FILTER, FilterSpec, preprocess
 from systems.dfki_double_pendulum import LAYOUTS, RAW_COLUMNS, read_raw

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from bench.experiments.selection import choose, page
+from bench.studies.selection import choose, page
 from systems import SYSTEMS
 from bench.core.csv_format import write_csv
 from tests.commandline import cli

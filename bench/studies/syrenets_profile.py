@@ -74,7 +74,7 @@ from torch.utils._python_dispatch import TorchDispatchMode
 from bench.core.arguments import positive_int
 from bench.core.data import generate
 from bench.core.fileio import atomic_write, check_output
-from bench.experiments import syrenets_speed
+from bench.studies import syrenets_speed
 from bench.runner.provenance import machine, provenance
 from methods import METHODS
 from methods.base import gc_frozen

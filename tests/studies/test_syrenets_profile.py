@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from bench.core.data import generate
-from bench.experiments import syrenets_profile
+from bench.studies import syrenets_profile
 from methods import METHODS
 from methods.syrenets.network import HeadsOutput
 from systems import get_system

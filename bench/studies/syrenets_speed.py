@@ -37,6 +37,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from bench.core.experiment import EXPERIMENTS
 from bench.core.arguments import positive, positive_int
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, check_output
@@ -50,7 +51,6 @@ CONFIGS = {
     "public": {"hyperparameters": METHODS["syrenets"].configuration("public"), "batch": 48},
     "default": {"hyperparameters": {}, "batch": 32},
 }
-EXPERIMENTS = ("direct", "indirect")
 
 #: run in the tree being timed: steps per second of one configuration
 WORKER = r"""

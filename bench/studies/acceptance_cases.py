@@ -1,5 +1,5 @@
 """The cases of the benchmark of undeclared effects
-(:mod:`bench.experiments.residual_acceptance`), in two sets.
+(:mod:`bench.studies.residual_acceptance`), in two sets.
 
 * The **development set** (:data:`DEVELOPMENT`, data seeds
   :data:`DEVELOPMENT_SEEDS`): each case's effects at fixed values. These are

@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 
-from bench.experiments import gpu_figures
+from bench.studies import gpu_figures
 from tests.commandline import cli
 
 

@@ -1,4 +1,4 @@
-"""Warm starts and the adaptation-to-change experiment (bench.experiments.adaptation)."""
+"""Warm starts and the adaptation-to-change experiment (bench.studies.adaptation)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from bench.cli import main
 from bench.core.data import generate, mse
 from bench.physics.undeclared import add_effects
 from bench.core.errors import ConfigError
-from bench.experiments import adaptation
+from bench.studies import adaptation
 from methods import METHODS
 from systems import SYSTEMS
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.experiments.generalisation import BINS, CONSTANT, STANDARD, run_case
+from bench.studies.generalisation import BINS, CONSTANT, STANDARD, run_case
 
 
 def test_each_bin_holds_a_share_of_the_test_samples_and_the_bins_make_the_whole():

@@ -1,7 +1,7 @@
 """The residual loop's benchmark of undeclared effects: recall, precision and
 confusion, per effect and noise level, over several data seeds and methods,
 on a development set and on an evaluation set held out from development
-(:mod:`bench.experiments.acceptance_cases`).
+(:mod:`bench.studies.acceptance_cases`).
 
 For each case (an effect, a chosen pair of effects, or clean data), each
 noise level, each data seed and each method, the double pendulum's torques
@@ -9,7 +9,7 @@ get the effects (:func:`bench.physics.undeclared.add_effects`) and Gaussian
 noise on train and test torques (a fraction of each joint's torque standard
 deviation); the loop (:func:`bench.residual.residual_loop`) runs, each case in
 its own process through the runner, under a work budget, and its report is
-scored (:mod:`bench.experiments.acceptance_scoring`):
+scored (:mod:`bench.studies.acceptance_scoring`):
 
 * **recall**: of the laws put in, the share found as the right law on the
   right joints with every parameter within 10 %;
@@ -43,9 +43,9 @@ from bench.core.arguments import noise_level, positive, positive_int, seed_list
 from bench.core.data import add_noise, generate
 from bench.physics.undeclared import add_effects, parse_effects
 from bench.core.fileio import atomic_write, check_output, link, write_json
-from bench.experiments.acceptance_cases import (CASES, DEVELOPMENT, DEVELOPMENT_SEEDS, EVALUATION, EVALUATION_CASES,
+from bench.studies.acceptance_cases import (CASES, DEVELOPMENT, DEVELOPMENT_SEEDS, EVALUATION, EVALUATION_CASES,
                                                 EVALUATION_SEEDS, SETS, effects)
-from bench.experiments.acceptance_scoring import CONSISTENT, GAIN_WITHIN, WITHIN, expected, reported, score
+from bench.studies.acceptance_scoring import CONSISTENT, GAIN_WITHIN, WITHIN, expected, reported, score
 from bench.residual.beyond_data import MIN_GAIN as BEYOND_GAIN
 from bench.residual.selection import AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T
 from bench.residual.loop import residual_loop
@@ -60,7 +60,7 @@ def run_case(case: str, noise: float, method: str, n_train: int, n_test: int, bu
     """One run: the loop on ``case`` of the set ``set`` at ``noise`` with ``method``,
     on the data of ``seed`` (training samples from ``seed``, test samples from
     ``1000 + seed``, the noise from their own streams of them; the effects as
-    :func:`~bench.experiments.acceptance_cases.effects` gives them), within
+    :func:`~bench.studies.acceptance_cases.effects` gives them), within
     ``budget`` seconds or, with ``steps``, that work budget; scored against
     what was put in."""
     system = SYSTEMS["double_pendulum"]()
@@ -322,7 +322,7 @@ def main(args) -> int:
         "",
         f"The double pendulum, {args.n_train} training and {args.n_test} test samples per run; noise on train and test "
         f"torques as a fraction of each joint's torque standard deviation; {budget_words}. The cases are in two sets "
-        f"([bench/experiments/acceptance_cases.py]({link(Path(__file__).with_name('acceptance_cases.py'), args.out)})):",
+        f"([bench/studies/acceptance_cases.py]({link(Path(__file__).with_name('acceptance_cases.py'), args.out)})):",
         "",
         f"- the **{DEVELOPMENT} set**: each case's effects at fixed values, data seeds "
         f"{', '.join(map(str, chosen[DEVELOPMENT]))} here. The tests and the loop's rules were made with these cases "
@@ -347,7 +347,7 @@ def main(args) -> int:
         "Where the data do not pin a parameter to 10 %, no method can be right by that rule: the column \"within "
         f"{CONSISTENT:g} standard errors\" also counts a law found on its joints whose parameters are each within 10 % "
         f"or within {CONSISTENT:g} of the standard errors the loop reports for them (N still exact). How each is "
-        "scored: [bench/experiments/acceptance_scoring.py](" + link(Path(__file__).with_name("acceptance_scoring.py"), args.out) + ").",
+        "scored: [bench/studies/acceptance_scoring.py](" + link(Path(__file__).with_name("acceptance_scoring.py"), args.out) + ").",
         "",
         "## Over every case",
         "",

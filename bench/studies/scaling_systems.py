@@ -1,4 +1,4 @@
-"""The n-link pendulums of the scaling study (:mod:`bench.experiments.scaling`),
+"""The n-link pendulums of the scaling study (:mod:`bench.studies.scaling`),
 registered as ``pendulum_<n>link`` when this module is imported: the study
 imports it as a plugin, in its own process and in each run's, so that the
 rest of the suite does not list them."""

@@ -1,4 +1,4 @@
-"""How the undeclared-effects benchmark (:mod:`bench.experiments.residual_acceptance`)
+"""How the undeclared-effects benchmark (:mod:`bench.studies.residual_acceptance`)
 scores a residual loop's report against the effects that were put in.
 
 * :func:`expected`: the laws put in, ``{(name, joints from 1): {parameter: value}}``,

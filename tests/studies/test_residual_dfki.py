@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.experiments.residual_dfki import run_case, split
+from bench.studies.residual_dfki import run_case, split
 
 
 def test_leaving_a_recording_out_trains_on_the_five_others_and_tests_on_it():

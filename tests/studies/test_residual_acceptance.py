@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from bench.physics.undeclared import parse_effects
-from bench.experiments.acceptance_scoring import expected, score
-from bench.experiments.acceptance_cases import DEVELOPMENT, DEVELOPMENT_CASES, EVALUATION, effects
-from bench.experiments.residual_acceptance import run_case, worth
+from bench.studies.acceptance_scoring import expected, score
+from bench.studies.acceptance_cases import DEVELOPMENT, DEVELOPMENT_CASES, EVALUATION, effects
+from bench.studies.residual_acceptance import run_case, worth
 
 
 def test_each_case_expects_its_effects_under_the_names_and_joints_the_loop_reports():
@@ -78,7 +78,7 @@ def test_the_evaluation_set_draws_each_case_from_its_ranges_and_no_test_reads_it
         assert case == "clean" or drawn[0] != drawn[1] != DEVELOPMENT_CASES[case]
     assert effects(DEVELOPMENT, "spring", 5) == DEVELOPMENT_CASES["spring"]
     # the evaluation seeds, read from the module's text, appear in no test
-    source = (root / "bench" / "experiments" / "acceptance_cases.py").read_text()
+    source = (root / "bench" / "studies" / "acceptance_cases.py").read_text()
     names = ["EVALUATION" + "_SEEDS", "EVALUATION" + "_CASES"]  # spelled so that this file does not hold them
     held_out = re.search(rf"^{names[0]} = \((.*?)\)", source, re.M)[1].split(",")
     assert len(held_out) == 3

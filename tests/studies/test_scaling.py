@@ -6,7 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from bench.experiments import scaling
+from bench.studies import scaling
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record
 from systems import SYSTEMS

@@ -7,7 +7,7 @@ import argparse
 import pytest
 
 from bench.core.errors import UserError
-from bench.experiments import syrenets_speed
+from bench.studies import syrenets_speed
 
 
 def test_an_unknown_revision_is_one_clear_error(tmp_path):
