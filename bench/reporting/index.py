@@ -45,14 +45,17 @@ class Figure:
     """One headline number: ``records`` (system, experiment, method, and
     optionally group, split and noise; ``quantity`` ``standard.KEY`` reads
     ``KEY`` of the standard model the records carry, ``ratio`` the group's
-    test MSE over the standard model's) or ``json`` (a file and a dotted key,
-    whose parts may index a list)."""
+    test MSE over the standard model's; ``relative_to`` names a method whose
+    value of the same group and split divides it, a hybrid's prior) or ``json`` (a file and a dotted key,
+    whose parts may index a list). ``over`` names another figure, of any result, that divides
+    the value: a loop's test MSE (a JSON) over the standard model's (records)."""
 
     name: str
     label: str
     format: str = ".2g"
     records: dict | None = None
     json: dict | None = None
+    over: str | None = None
 
 
 @dataclass(frozen=True)
@@ -97,13 +100,17 @@ def read_manifest(root: Path) -> list[Entry]:
                 raise UserError(f"{where}: a figure needs a 'name' and a 'label'")
             if ("records" in f) == ("json" in f):
                 raise UserError(f"{where}: figure {f['name']} takes its value from 'records' or from 'json'")
-            figures.append(Figure(f["name"], f["label"], f.get("format", ".2g"), f.get("records"), f.get("json")))
+            figures.append(Figure(f["name"], f["label"], f.get("format", ".2g"), f.get("records"), f.get("json"),
+                                  f.get("over")))
         entries.append(Entry(item["path"], item["group"], item["title"], item["status"], item["command"],
                              tuple(item.get("also", ())), item.get("superseded_by"), item.get("commit"), tuple(figures)))
     names = Counter(f.name for e in entries for f in e.figures)
     twice = sorted(n for n, k in names.items() if k > 1)
     if twice:
         raise UserError(f"{path}: the figure name {twice[0]!r} is used twice")
+    unknown = sorted(f.over for e in entries for f in e.figures if f.over is not None and f.over not in names)
+    if unknown:
+        raise UserError(f"{path}: a figure is over {unknown[0]!r}, which no figure is named")
     return entries
 
 
@@ -131,8 +138,8 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
         except (KeyError, IndexError, ValueError, TypeError) as exc:
             raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: {figure.json['file']} has no number at "
                             f"{figure.json['key']} ({type(exc).__name__}: {exc})") from None
-    want = figure.records
-    records = [r for r in (records or _Records(root))(entry.path)
+    want = {k: v for k, v in figure.records.items() if v is not None}
+    source, records = records, [r for r in (records or _Records(root))(entry.path)
                if (r.system, r.experiment, r.method, r.noise, r.tuned) == (
                    want["system"], want["experiment"], want["method"], float(want.get("noise", 0.0)),
                    bool(want.get("tuned", False)))]
@@ -152,6 +159,11 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
         raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: its records have no {group!r} group "
                         f"(fewer than {HALVES_FROM} seeds, or none ok)")
     value = stats[group][want.get("split", "test")][0]
+    if "relative_to" in want:  # over another method's value of the same group and split: a hybrid's over its prior's
+        other = figure_value(root, entry, Figure(figure.name, figure.label, figure.format,
+                                                 {**want, "method": want["relative_to"], "relative_to": None}), source)
+        value = value / other
+        want = {k: v for k, v in want.items() if k != "relative_to"}
     if quantity == "ratio":
         if standard is None or not standard.get("test_mse"):
             raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: the records carry no standard model")
@@ -175,7 +187,9 @@ def figures(root: Path, entries: list[Entry] | None = None, records: _Records | 
     """Every named figure, formatted as pages show it."""
     entries = read_manifest(root) if entries is None else entries
     records = records or _Records(root)
-    return {f.name: format(figure_value(root, e, f, records), f.format) for e in entries for f in e.figures}
+    raw = {f.name: figure_value(root, e, f, records) for e in entries for f in e.figures}
+    shown = [f for e in entries for f in e.figures]
+    return {f.name: format(raw[f.name] / raw[f.over] if f.over else raw[f.name], f.format) for f in shown}
 
 
 def build_index(root: Path, entries: list[Entry] | None = None, values: dict[str, str] | None = None,

@@ -102,6 +102,28 @@ def test_a_figure_typed_by_hand_is_found_and_rewritten_from_the_records(tmp_path
     assert "| [study](study): a study | current | All 10 0.0081 | `make it` | 50baa511b5 |" in (root / INDEX).read_text()
 
 
+def test_a_figure_over_another_and_one_relative_to_a_method_are_computed_from_both(tmp_path):
+    root = _small_results(tmp_path, "0.0081")
+    manifest = root / "manifest.toml"
+    manifest.write_text(manifest.read_text() + (
+        '[[result.figure]]\nname = "study.train"\nlabel = "train"\nformat = ".6g"\n'
+        'records = { system = "double_pendulum", experiment = "indirect", method = "syrenets", split = "train" }\n'
+        '[[result.figure]]\nname = "study.test"\nlabel = "test"\nformat = ".6g"\n'
+        'records = { system = "double_pendulum", experiment = "indirect", method = "syrenets" }\n'
+        '[[result.figure]]\nname = "study.generalises"\nlabel = "test over train"\nformat = ".6g"\n'
+        'records = { system = "double_pendulum", experiment = "indirect", method = "syrenets" }\nover = "study.train"\n'
+        '[[result.figure]]\nname = "study.itself"\nlabel = "over its own"\nformat = ".3f"\n'
+        'records = { system = "double_pendulum", experiment = "indirect", method = "syrenets", '
+        'relative_to = "syrenets" }\n'))
+    values = figures(root)
+    ratio = float(values["study.test"]) / float(values["study.train"])
+    assert values["study.test"] != values["study.train"] and abs(float(values["study.generalises"]) / ratio - 1) < 1e-5
+    assert values["study.itself"] == "1.000"
+    manifest.write_text(manifest.read_text().replace('over = "study.train"', 'over = "study.nothing"'))
+    with pytest.raises(UserError, match="over 'study.nothing', which no figure is named"):
+        read_manifest(root)
+
+
 def test_a_file_in_no_result_stops_the_index_in_one_line(tmp_path):
     root = _small_results(tmp_path, "0.0081")
     (root / "stray.md").write_text("# a result nobody listed\n")
