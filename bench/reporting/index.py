@@ -12,7 +12,10 @@ there are) or, for a page without records, the manifest's.
 A figure also has a name. Wherever a page (README.md, or any page under
 results/) marks a number as ``<!-- figure NAME -->0.0081<!-- /figure -->``,
 :func:`write_index` rewrites it from the records, and :func:`stale_figures`
-lists the marks that disagree with them. A page's generated tables and lists
+lists the marks that disagree with them. A number in prose may also be named by
+the records it comes from, without a manifest entry:
+``<!-- figure records/leaderboard/cart_pole/direct/delan/all -->2.0e-5<!-- /figure -->``
+(:data:`INLINE`); it is checked and rewritten in the style it is typed in. A page's generated tables and lists
 (:mod:`bench.reporting.pages`) are rewritten and checked the same way.
 """
 
@@ -37,7 +40,11 @@ INDEX = "index.md"
 STATUSES = ("current", "superseded")
 #: the scratch folder ``make bench`` writes into (ignored by git): no published result
 SCRATCH = "quick"
-MARK = re.compile(r"<!-- figure (?P<name>[\w.-]+) -->(?P<value>.*?)<!-- /figure -->")
+MARK = re.compile(r"<!-- figure (?P<name>[\w.+@/-]+) -->(?P<value>.*?)<!-- /figure -->")
+#: a figure named by its records: ``records/FOLDER/SYSTEM/EXPERIMENT/METHOD/GROUP[/train]``, FOLDER under
+#: results/, GROUP one of :data:`~bench.reporting.groups.GROUPS` with ``_`` for a space (:func:`inline_value`)
+INLINE = re.compile(r"records/(?P<folder>[\w./-]+)/(?P<system>\w+)/(?P<experiment>direct|indirect)/"
+                    r"(?P<method>[\w+@-]+)/(?P<group>best|best_half|all|worse_half)(?:/(?P<split>train))?")
 
 
 @dataclass(frozen=True)
@@ -236,14 +243,46 @@ def _pages(root: Path) -> list[Path]:
     return ([top] if top.is_file() else []) + sorted(pages)
 
 
+def format_like(value: float, shown: str) -> str:
+    """``value`` written as ``shown`` is: as many decimals, or in the same
+    scientific notation (``2.0e-5``), so that a figure typed in prose is
+    checked, and rewritten, in its own style."""
+    if "e" in shown:
+        mantissa = shown.split("e")[0]
+        digits = len(mantissa.split(".")[1]) if "." in mantissa else 0
+        text = f"{value:.{digits}e}"
+        mantissa, exponent = text.split("e")
+        return f"{mantissa}e{int(exponent)}"
+    digits = len(shown.split(".")[1]) if "." in shown else 0
+    return f"{value:,.{digits}f}" if "," in shown else f"{value:.{digits}f}"
+
+
+def inline_value(root: Path, name: str, shown: str, records: _Records) -> str | None:
+    """A figure named by its records (:data:`INLINE`) in the style it is shown
+    in (:func:`format_like`); ``None`` for another name, or where the records
+    give no such figure."""
+    m = INLINE.fullmatch(name)
+    if m is None:
+        return None
+    want = {k: m[k] for k in ("system", "experiment", "method")} | {"group": m["group"].replace("_", " ")}
+    if m["split"]:
+        want["split"] = m["split"]
+    entry = Entry(m["folder"], "", "", "current", "")
+    try:
+        return format_like(figure_value(root, entry, Figure(name, name, records=want), records), shown)
+    except (UserError, OSError):
+        return None
+
+
 def stale_figures(root: Path) -> list[str]:
     """``page: name shows X, records give Y`` for each marked figure that disagrees
     (or has no entry), and each generated block that is not what its records
     give (:func:`bench.reporting.pages.stale_blocks`)."""
-    values, out = figures(root), []
+    records = _Records(root)
+    values, out = figures(root, records=records), []
     for page in _pages(root):
         for m in MARK.finditer(page.read_text()):
-            want = values.get(m["name"])
+            want = values.get(m["name"]) or inline_value(root, m["name"], m["value"], records)
             if want != m["value"]:
                 out.append(f"{page}: {m['name']} shows {m['value']}, the records give {want or 'no such figure'}")
     return out + stale_blocks(root, _pages(root))
@@ -263,7 +302,9 @@ def write_index(root: Path) -> tuple[Path, list[Path]]:
     changed, made = [], {}
     for page in _pages(root):
         old = page.read_text()
-        new = MARK.sub(lambda m: f"<!-- figure {m['name']} -->{values.get(m['name'], m['value'])}<!-- /figure -->", old)
+        new = MARK.sub(lambda m: f"<!-- figure {m['name']} -->"
+                       f"{values.get(m['name']) or inline_value(root, m['name'], m['value'], records) or m['value']}"
+                       f"<!-- /figure -->", old)
         new = rewrite(new, root, made)
         if new != old:
             atomic_write(page, lambda f, t=new: f.write(t))

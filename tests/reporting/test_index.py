@@ -102,6 +102,20 @@ def test_a_figure_typed_by_hand_is_found_and_rewritten_from_the_records(tmp_path
     assert "| [study](study): a study | current | All 10 0.0081 | `make it` | 50baa511b5 |" in (root / INDEX).read_text()
 
 
+def test_a_number_named_by_its_records_is_checked_and_rewritten_in_its_own_style(tmp_path):
+    root = _small_results(tmp_path, "0.0081")
+    name = "records/study/double_pendulum/indirect/syrenets"
+    (tmp_path / "README.md").write_text(
+        f"All 10 <!-- figure {name}/all -->0.00806<!-- /figure -->, typed by hand as "
+        f"<!-- figure {name}/all -->8.0e-3<!-- /figure -->; no such method <!-- figure records/study/double_pendulum/"
+        f"indirect/mlp/all -->1.0<!-- /figure -->.\n")
+    stale = stale_figures(root)
+    assert len(stale) == 2 and "all shows 8.0e-3, the records give 8.1e-3" in stale[0] and "no such figure" in stale[1]
+    assert cli("index", root).returncode == 0
+    text = (tmp_path / "README.md").read_text()
+    assert f"{name}/all -->0.00806<" in text and f"{name}/all -->8.1e-3<" in text and "mlp/all -->1.0<" in text
+
+
 def test_a_figure_over_another_and_one_relative_to_a_method_are_computed_from_both(tmp_path):
     root = _small_results(tmp_path, "0.0081")
     manifest = root / "manifest.toml"
