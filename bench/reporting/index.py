@@ -28,6 +28,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
 from bench.reporting.groups import GROUPS, HALVES_FROM, TESTED_GROUP, group_stats
@@ -36,15 +38,18 @@ from bench.reporting.pages import rewrite, stale_blocks
 from bench.runner.records import read_records
 
 MANIFEST = "manifest.toml"
+#: what a figure may give besides a group of seeds: the median seed's MSE, and the worst seed's (the highest)
+SEED_STATISTICS = ("median", "worst")
 INDEX = "index.md"
 STATUSES = ("current", "superseded")
 #: the scratch folder ``make bench`` writes into (ignored by git): no published result
 SCRATCH = "quick"
 MARK = re.compile(r"<!-- figure (?P<name>[\w.+@/-]+) -->(?P<value>.*?)<!-- /figure -->")
 #: a figure named by its records: ``records/FOLDER/SYSTEM/EXPERIMENT/METHOD/GROUP[/train]``, FOLDER under
-#: results/, GROUP one of :data:`~bench.reporting.groups.GROUPS` with ``_`` for a space (:func:`inline_value`)
+#: results/, GROUP one of :data:`~bench.reporting.groups.GROUPS` with ``_`` for a space or of
+#: :data:`SEED_STATISTICS` (:func:`inline_value`)
 INLINE = re.compile(r"records/(?P<folder>[\w./-]+)/(?P<system>\w+)/(?P<experiment>direct|indirect)/"
-                    r"(?P<method>[\w+@-]+)/(?P<group>best|best_half|all|worse_half)(?:/(?P<split>train))?")
+                    r"(?P<method>[\w+@-]+)/(?P<group>best|best_half|all|worse_half|median|worst)(?:/(?P<split>train))?")
 
 
 @dataclass(frozen=True)
@@ -153,15 +158,23 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
     if not records:
         raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: no records of {want} in {entry.path}")
     group = want.get("group", TESTED_GROUP)
-    if group not in GROUPS:
-        raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: group {group!r} is none of {', '.join(GROUPS)}")
+    if group not in GROUPS + SEED_STATISTICS:
+        raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: group {group!r} is none of "
+                        f"{', '.join(GROUPS + SEED_STATISTICS)}")
     quantity = want.get("quantity", "")
     standard = next((r.details["standard_model"] for r in records if (r.details or {}).get("standard_model")), None)
     if quantity.startswith("standard."):
         if standard is None or standard.get(quantity[len("standard."):]) is None:
             raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: the records carry no {quantity}")
         return float(standard[quantity[len("standard."):]])
-    stats = group_stats(records)
+    if group in SEED_STATISTICS:  # over every ok seed's own MSE
+        values = [getattr(r, f"{want.get('split', 'test')}_mse") for r in records if r.status == "ok"]
+        values = [v for v in values if v is not None]
+        if not values:
+            raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: no seed of its records is ok")
+        stats = {group: {want.get("split", "test"): [float(np.median(values) if group == "median" else max(values))]}}
+    else:
+        stats = group_stats(records)
     if group not in stats:
         raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: its records have no {group!r} group "
                         f"(fewer than {HALVES_FROM} seeds, or none ok)")

@@ -9,6 +9,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bench.core.errors import UserError
@@ -114,6 +115,14 @@ def test_a_number_named_by_its_records_is_checked_and_rewritten_in_its_own_style
     assert cli("index", root).returncode == 0
     text = (tmp_path / "README.md").read_text()
     assert f"{name}/all -->0.00806<" in text and f"{name}/all -->8.1e-3<" in text and "mlp/all -->1.0<" in text
+    tests = sorted(r.test_mse for r in read_records(root / "study") if r.status == "ok" and r.experiment == "indirect"
+                   and r.method == "syrenets")
+    (tmp_path / "README.md").write_text(f"<!-- figure {name}/median -->1.00e0<!-- /figure --> <!-- figure {name}/worst -->"
+                                        f"1.00e0<!-- /figure -->")
+    stale = stale_figures(root)
+    median, worst = (f"{v:.2e}".replace("e-0", "e-") for v in (float(np.median(tests)), tests[-1]))
+    assert len(stale) == 2 and f"the records give {median}" in stale[0] and f"the records give {worst}" in stale[1]
+    assert cli("index", root).returncode == 0 and stale_figures(root) == []
 
 
 def test_a_figure_over_another_and_one_relative_to_a_method_are_computed_from_both(tmp_path):
