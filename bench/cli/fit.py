@@ -69,12 +69,13 @@ def main(args) -> int:
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now
+    runs = preflight(spec) is None  # else its record says why not (the run's job writes it)
     given = given_data(make_system(spec), spec.train_path, spec.test_path, check_limits=not args.ignore_limits) \
-        if preflight(spec) is None else None
+        if runs else None
     for part in given or ():
         if part is not None:
             part.target(args.experiment)  # bad files: exit 2 now, before the run's process starts
-    record, log = run_one(spec)
+    record, log = run_one(spec, checked=runs)
     if args.json:
         write_json(args.json, record.to_json())
     print(summary_line(record, log))
@@ -88,12 +89,13 @@ def main(args) -> int:
     return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
 
 
-def run_one(spec: RunSpec) -> tuple[Record, Path | None]:
+def run_one(spec: RunSpec, checked: bool = False) -> tuple[Record, Path | None]:
     """One run in its own process (threads pinned, killed like any run of a
     matrix), in a scratch folder; returns its record and, where something
-    failed, the log that holds the traceback (the folder is then kept)."""
+    failed, the log that holds the traceback (the folder is then kept).
+    ``checked``: the caller made the run job's checks, which are not repeated."""
     work = Path(tempfile.mkdtemp(prefix="bench-fit-"))
-    record = matrix.run_one(spec, work)
+    record = matrix.run_one(spec, work, checked=checked)
     if record.status in ("failed", "timeout") or record.failed_stages:
         return record, matrix.log_path(work, spec.run_id)
     shutil.rmtree(work, ignore_errors=True)
