@@ -115,6 +115,8 @@ class Method(FittedModel):
     search_space: ClassVar[dict[str, tuple]] = {}
     #: the experiments the method applies to
     experiments: ClassVar[tuple[str, ...]] = EXPERIMENTS
+    #: why it does not apply to the others, for the tables' notes (``""``: that it does not)
+    not_applicable: ClassVar[str] = ""
     #: whether ``fit(..., warm_start=True)`` can continue from the current state
     supports_warm_start: ClassVar[bool] = False
     #: whether the method trains on the device a run names (``--device``, :mod:`bench.core.devices`):
@@ -188,7 +190,7 @@ class Method(FittedModel):
         """Why the method cannot run ``experiment`` (on ``system``, where one is
         given); ``None`` when it can."""
         if experiment not in cls.experiments:
-            return f"{cls.name} does not apply to the {experiment} experiment"
+            return cls.not_applicable or f"{cls.name} does not apply to the {experiment} experiment"
         return None
 
     @classmethod

@@ -130,6 +130,7 @@ class GaussianProcess(Method):
 
     Config = GPConfig
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
+    not_applicable: ClassVar[str] = "a GP of the torque learns torques: the direct experiment has no torques, and the GP no L"
     search_space = {"inducing": (128, 256), "inputs": ("joint", "all"), "samples": ("effective", "all")}
     smoke = {"max_steps": 5, "inducing": 16, "batch_size": 64, "eval_samples": 128}
     falls_back_to_zero: ClassVar[bool] = True
@@ -141,12 +142,6 @@ class GaussianProcess(Method):
             _gpytorch()
         except ImportError as exc:
             return f"gpytorch is not installed ({exc})"
-        return None
-
-    @classmethod
-    def not_applicable_reason(cls, experiment, system=None):
-        if experiment not in cls.experiments:
-            return "a GP of the torque learns torques: the direct experiment has no torques, and the GP no L"
         return None
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:

@@ -59,6 +59,7 @@ class OperonConfig(MethodConfig):
 class Operon(ExpressionMethod):
     Config = OperonConfig
     experiments = (DIRECT,)
+    not_applicable = NOT_APPLICABLE
     search_space = {"max_length": (25, 50), "population_size": (500, 1000)}
     smoke = {"population_size": 50, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}
 
@@ -67,10 +68,6 @@ class Operon(ExpressionMethod):
         if importlib.util.find_spec("pyoperon") is None:
             return "pyoperon is not installed (pip install pyoperon)"
         return None
-
-    @classmethod
-    def not_applicable_reason(cls, experiment, system=None):
-        return None if experiment in cls.experiments else NOT_APPLICABLE
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         from pyoperon.sklearn import SymbolicRegressor

@@ -60,14 +60,9 @@ class SparseTorque(Method):
 
     Config = SparseTorqueConfig
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
+    not_applicable: ClassVar[str] = "a sparse regression of the torque learns torques: the direct experiment has none"
     smoke = {"max_steps": 1, "eval_samples": 128}
     has_lagrangian: ClassVar[bool] = False
-
-    @classmethod
-    def not_applicable_reason(cls, experiment, system=None):
-        if experiment not in cls.experiments:
-            return "a sparse regression of the torque learns torques: the direct experiment has none"
-        return None
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         self.coef = [np.zeros(len(terms_names(train.dof, j))) for j in range(train.dof)]

@@ -112,7 +112,7 @@ class Dataset:
     def target(self, experiment: "str | Experiment") -> np.ndarray:
         """The experiment's target (:attr:`Experiment.target`): ``L`` (direct, shape (n,)) or ``tau`` (indirect)."""
         experiment = Experiment.of(experiment)
-        targets = experiment.targets(self)
+        targets = getattr(self, experiment.target)
         if targets is None:
             raise DataError(f"{self.source}: the {experiment} experiment needs column '{experiment.target}', "
                             f"which this data lacks")

@@ -70,17 +70,9 @@ class Experiment(str):
         """Targets per state: one sample of ``L``, or ``dof`` torques."""
         return dof if self.learns_torque else 1
 
-    def targets(self, data) -> Any:
-        """The targets of ``data`` (a :class:`~bench.core.data.Dataset`), ``None`` where it has none."""
-        return getattr(data, self.target)
-
     def predict(self, model, data) -> Any:
         """``model``'s prediction of the targets of ``data``: its ``predict_lagrangian`` or ``predict_torque``."""
         return model.predict_torque(data) if self.learns_torque else model.predict_lagrangian(data)
-
-    def choose(self, lagrangian, torque):
-        """Of two things, the one for this experiment: ``lagrangian`` for samples of ``L``, ``torque`` for torques."""
-        return torque if self.learns_torque else lagrangian
 
 
 #: learning L from samples of L

@@ -56,7 +56,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Callable, Iterator, Mapping
+from typing import Callable, Mapping
 
 from bench.physics.effects import EFFECTS
 
@@ -205,15 +205,6 @@ class Laws:
     def sensor(self) -> Mapping[str, type]:
         """The laws of the sensor and the drive, by name, in the order the loop offers them."""
         return MappingProxyType(self._sensor)
-
-    def __contains__(self, name: object) -> bool:
-        return name in self._arm or name in self._sensor
-
-    def __getitem__(self, name: str):
-        return self._arm[name] if name in self._arm else self._sensor[name]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter([*self._arm, *self._sensor])
 
 
 #: every law of the suite, by name (see :class:`Laws`)

@@ -353,10 +353,7 @@ def register(law: type[SensorLaw]) -> type[SensorLaw]:
     if not isinstance(law, type) or not issubclass(law, SensorLaw) or \
             law.name in EFFECTS and EFFECTS[law.name].place != "sensor":
         raise ValueError(f"a law of the sensor or the drive needs a name of its own, got {getattr(law, 'name', law)!r}")
-    try:
-        return LAWS.register(law)
-    except ValueError:
-        raise ValueError(f"a law of the sensor or the drive needs a name of its own, got {law.name!r}") from None
+    return LAWS.register(law)
 
 
 for _law in (TorqueGain, LoadFriction, TimeShift):  # in the order the loop offers them

@@ -57,10 +57,9 @@ class Figure:
     """One headline number: ``records`` (system, experiment, method, and
     optionally group, split and noise; ``quantity`` ``standard.KEY`` reads
     ``KEY`` of the standard model the records carry, ``ratio`` the group's
-    test MSE over the standard model's; ``relative_to`` names a method whose
-    value of the same group and split divides it, a hybrid's prior) or ``json`` (a file and a dotted key,
+    test MSE over the standard model's) or ``json`` (a file and a dotted key,
     whose parts may index a list). ``over`` names another figure, of any result, that divides
-    the value: a loop's test MSE (a JSON) over the standard model's (records)."""
+    the value: a hybrid's test MSE over its prior's, a loop's (a JSON) over the standard model's."""
 
     name: str
     label: str
@@ -150,8 +149,8 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
         except (KeyError, IndexError, ValueError, TypeError) as exc:
             raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: {figure.json['file']} has no number at "
                             f"{figure.json['key']} ({type(exc).__name__}: {exc})") from None
-    want = {k: v for k, v in figure.records.items() if v is not None}
-    source, records = records, [r for r in (records or _Records(root))(entry.path)
+    want = figure.records
+    records = [r for r in (records or _Records(root))(entry.path)
                if (r.system, r.experiment, r.method, r.noise, r.tuned) == (
                    want["system"], want["experiment"], want["method"], float(want.get("noise", 0.0)),
                    bool(want.get("tuned", False)))]
@@ -167,23 +166,18 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
         if standard is None or standard.get(quantity[len("standard."):]) is None:
             raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: the records carry no {quantity}")
         return float(standard[quantity[len("standard."):]])
+    split = want.get("split", "test")
     if group in SEED_STATISTICS:  # over every ok seed's own MSE
-        values = [getattr(r, f"{want.get('split', 'test')}_mse") for r in records if r.status == "ok"]
-        values = [v for v in values if v is not None]
+        values = [v for v in (getattr(r, f"{split}_mse") for r in records if r.status == "ok") if v is not None]
         if not values:
             raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: no seed of its records is ok")
-        stats = {group: {want.get("split", "test"): [float(np.median(values) if group == "median" else max(values))]}}
+        value = float(np.median(values)) if group == "median" else max(values)
     else:
         stats = group_stats(records)
-    if group not in stats:
-        raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: its records have no {group!r} group "
-                        f"(fewer than {HALVES_FROM} seeds, or none ok)")
-    value = stats[group][want.get("split", "test")][0]
-    if "relative_to" in want:  # over another method's value of the same group and split: a hybrid's over its prior's
-        other = figure_value(root, entry, Figure(figure.name, figure.label, figure.format,
-                                                 {**want, "method": want["relative_to"], "relative_to": None}), source)
-        value = value / other
-        want = {k: v for k, v in want.items() if k != "relative_to"}
+        if group not in stats:
+            raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: its records have no {group!r} group "
+                            f"(fewer than {HALVES_FROM} seeds, or none ok)")
+        value = stats[group][split][0]
     if quantity == "ratio":
         if standard is None or not standard.get("test_mse"):
             raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: the records carry no standard model")

@@ -53,12 +53,14 @@ class Loop(Method):
     :func:`identify` within the run's whole budget."""
 
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
+    not_applicable: ClassVar[str] = "the residual loop traces torques: the direct experiment has none"
     smoke = {"max_steps": 1, "eval_samples": 128}
 
     @classmethod
     def not_applicable_reason(cls, experiment: str, system=None) -> str | None:
-        if experiment not in cls.experiments:
-            return "the residual loop traces torques: the direct experiment has none"
+        reason = super().not_applicable_reason(experiment, system)
+        if reason:
+            return reason
         if system is not None and system.linear_form() is None:
             return prior_unavailable("loop", system)
         return None

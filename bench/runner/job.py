@@ -16,7 +16,7 @@ as JSON. Its life has four steps, each a method it may override:
 :func:`run_isolated` runs one job this way and :func:`run_jobs` runs many
 side by side: a matrix's runs (:class:`bench.runner.matrix.RunJob`), its
 stacked groups, the residual loop (:class:`bench.residual.job.ResidualJob`)
-and the studies' cases. The process itself, its fork server and the
+and the studies' cases (:class:`CaseJob`). The process itself, its fork server and the
 killing at a phase's limit are :mod:`bench.runner.isolation`'s.
 
 The limits every job shares are here: a fit is killed at
@@ -109,6 +109,24 @@ class Job:
         fields = {f.name: f for f in dataclasses.fields(cls)}
         return cls(**{k: tuple(v) if isinstance(v, list) and "tuple" in str(fields[k].type) else v
                       for k, v in obj.items()})
+
+
+class CaseJob(Job):
+    """A study's case: all one phase, ``"run"``, killed at :meth:`run_limit`
+    seconds in it; :meth:`compute` does the work in the child."""
+
+    def run_limit(self) -> float:
+        raise NotImplementedError
+
+    def compute(self) -> dict:
+        raise NotImplementedError
+
+    def limits(self) -> dict[str, float]:
+        return {"run": self.run_limit()}
+
+    def run(self, on_phase: Callable[[str], None]) -> dict:
+        on_phase("run")
+        return self.compute()
 
 
 def run_job(payload: dict, on_phase: Callable[[str], None]) -> dict:

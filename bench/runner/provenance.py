@@ -188,11 +188,6 @@ class Provenanced:
         """:func:`made_at` of the result's provenance."""
         return made_at(self.provenance)
 
-    @property
-    def clean(self) -> bool:
-        """Whether the result was made by committed code (a tree without uncommitted changes)."""
-        return self.provenance.get("dirty") is False
-
     def work(self) -> Budget | None:
         """The budget the result was made under (``None``: a record from before budgets were recorded)."""
         return None if self.budget is None else Budget.from_json(self.budget)

@@ -136,9 +136,8 @@ class Record(Provenanced):
 
     def describe_budget(self) -> str:
         """The budget in words: ``60 s`` or ``5000 steps``."""
-        if self.budget is None:
-            return f"{self.budget_s:g} s"
-        return Budget.from_json(self.budget).describe()
+        work = self.work()
+        return f"{self.budget_s:g} s" if work is None else work.describe()
 
     @classmethod
     def missing(cls, rid: str, why: str) -> "Record | None":

@@ -54,7 +54,7 @@ from bench.core.errors import ConfigError
 from bench.core.fileio import atomic_write, check_output, link, write_json
 from bench.reporting.plots import adaptation_plot, step_values
 from bench.residual.loop import residual_loop
-from bench.runner.job import KILL_FACTOR, Job, run_jobs
+from bench.runner.job import KILL_FACTOR, CaseJob, run_jobs
 from bench.runner.progress import Report, quiet
 from bench.runner.provenance import machine, made_at, provenance
 from bench.runner.spec import TEST_SEED_OFFSET
@@ -143,7 +143,7 @@ def at(curve: list, t: float) -> float:
 
 
 @dataclass(frozen=True)
-class LearnerJob(Job):
+class LearnerJob(CaseJob):
     """One learner on one seed in its own process (:func:`run_learner`), killed
     at 1.5 x its fitting time plus its loop's budget."""
 
@@ -160,11 +160,10 @@ class LearnerJob(Job):
         return cls(obj["learner"], Setup(**{**setup, "effects": tuple(setup["effects"]),
                                             "checkpoints": tuple(setup["checkpoints"])}), obj["seed"])
 
-    def limits(self) -> dict[str, float]:
-        return {"run": KILL_FACTOR * (self.setup.before_s + self.setup.checkpoints[-1] + LOOP_BUDGET_S)}
+    def run_limit(self) -> float:
+        return KILL_FACTOR * (self.setup.before_s + self.setup.checkpoints[-1] + LOOP_BUDGET_S)
 
-    def run(self, on_phase) -> dict:
-        on_phase("run")
+    def compute(self) -> dict:
         return run_learner(self.learner, self.setup, self.seed)
 
 

@@ -32,7 +32,7 @@ from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, check_output, write_json
 from bench.evaluation.reference import CONFIGURATION, METHOD as STANDARD_METHOD
 from bench.reporting.plots import line_plot
-from bench.runner.job import KILL_FACTOR, Job, run_jobs
+from bench.runner.job import KILL_FACTOR, CaseJob, run_jobs
 from bench.runner.progress import print_now
 from bench.runner.provenance import made_at, provenance
 from methods import METHODS
@@ -81,7 +81,7 @@ def run_case(system: str, split: str, method: str, seed: int, budget: float | No
 
 
 @dataclass(frozen=True)
-class Case(Job):
+class Case(CaseJob):
     """One learner (or reference) on one split in its own process (:func:`run_case`),
     killed at 1.5 x its time budget plus 300 s for its predictions (under a work budget, never)."""
 
@@ -92,11 +92,10 @@ class Case(Job):
     budget: float | None
     steps: int | None
 
-    def limits(self) -> dict[str, float]:
-        return {"run": math.inf if self.steps is not None else KILL_FACTOR * self.budget + 300.0}
+    def run_limit(self) -> float:
+        return math.inf if self.steps is not None else KILL_FACTOR * self.budget + 300.0
 
-    def run(self, on_phase) -> dict:
-        on_phase("run")
+    def compute(self) -> dict:
         return run_case(**self.payload())
 
 

@@ -50,7 +50,7 @@ from bench.residual.beyond_data import MIN_GAIN as BEYOND_GAIN
 from bench.residual.selection import AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T
 from bench.residual.loop import residual_loop
 from bench.residual.sensors import Sensor
-from bench.runner.job import Job, fit_limit, run_jobs
+from bench.runner.job import CaseJob, fit_limit, run_jobs
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance
 from systems import SYSTEMS
@@ -202,7 +202,7 @@ def confusion(rows: list[dict], cases: list[str], method: str) -> str:
 
 
 @dataclass(frozen=True)
-class Case(Job):
+class Case(CaseJob):
     """One run in its own process (:func:`run_case`), killed at
     :func:`~bench.runner.job.fit_limit` of its budget."""
 
@@ -216,11 +216,10 @@ class Case(Job):
     steps: int | None
     seed: int
 
-    def limits(self) -> dict[str, float]:
-        return {"run": fit_limit(Budget(seconds=self.budget, steps=self.steps))}
+    def run_limit(self) -> float:
+        return fit_limit(Budget(seconds=self.budget, steps=self.steps))
 
-    def run(self, on_phase) -> dict:
-        on_phase("run")
+    def compute(self) -> dict:
         return run_case(**self.payload())
 
 

@@ -30,7 +30,7 @@ from bench.core.arguments import positive, positive_int
 from bench.core.fileio import atomic_write, check_output, link
 from bench.residual import validation
 from bench.residual.loop import residual_loop
-from bench.runner.job import Job, fit_limit, run_jobs
+from bench.runner.job import CaseJob, fit_limit, run_jobs
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance
 from systems import SYSTEMS
@@ -74,7 +74,7 @@ def run_case(method: str, held_out: str | None, budget: float | None, seed: int 
 
 
 @dataclass(frozen=True)
-class Loop(Job):
+class Loop(CaseJob):
     """One loop in its own process (:func:`run_case`), killed at
     :func:`~bench.runner.job.fit_limit` of its budget (a work budget's ceiling)."""
 
@@ -83,11 +83,10 @@ class Loop(Job):
     budget: float
     steps: int | None
 
-    def limits(self) -> dict[str, float]:
-        return {"run": fit_limit(Budget(seconds=self.budget, steps=self.steps))}
+    def run_limit(self) -> float:
+        return fit_limit(Budget(seconds=self.budget, steps=self.steps))
 
-    def run(self, on_phase) -> dict:
-        on_phase("run")
+    def compute(self) -> dict:
         return run_case(**self.payload())
 
 

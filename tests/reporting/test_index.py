@@ -125,7 +125,7 @@ def test_a_number_named_by_its_records_is_checked_and_rewritten_in_its_own_style
     assert cli("index", root).returncode == 0 and stale_figures(root) == []
 
 
-def test_a_figure_over_another_and_one_relative_to_a_method_are_computed_from_both(tmp_path):
+def test_a_figure_over_another_is_computed_from_both(tmp_path):
     root = _small_results(tmp_path, "0.0081")
     manifest = root / "manifest.toml"
     manifest.write_text(manifest.read_text() + (
@@ -136,8 +136,7 @@ def test_a_figure_over_another_and_one_relative_to_a_method_are_computed_from_bo
         '[[result.figure]]\nname = "study.generalises"\nlabel = "test over train"\nformat = ".6g"\n'
         'records = { system = "double_pendulum", experiment = "indirect", method = "syrenets" }\nover = "study.train"\n'
         '[[result.figure]]\nname = "study.itself"\nlabel = "over its own"\nformat = ".3f"\n'
-        'records = { system = "double_pendulum", experiment = "indirect", method = "syrenets", '
-        'relative_to = "syrenets" }\n'))
+        'records = { system = "double_pendulum", experiment = "indirect", method = "syrenets" }\nover = "study.test"\n'))
     values = figures(root)
     ratio = float(values["study.test"]) / float(values["study.train"])
     assert values["study.test"] != values["study.train"] and abs(float(values["study.generalises"]) / ratio - 1) < 1e-5
