@@ -15,7 +15,9 @@ results/) marks a number as ``<!-- figure NAME -->0.0081<!-- /figure -->``,
 lists the marks that disagree with them. A number in prose may also be named by
 the records it comes from, without a manifest entry:
 ``<!-- figure records/leaderboard/cart_pole/direct/delan/all -->2.0e-5<!-- /figure -->``
-(:data:`INLINE`); it is checked and rewritten in the style it is typed in. A page's generated tables and lists
+(:data:`INLINE`), or by a JSON file under results/ and a dotted key in it:
+``<!-- figure json/measured/kuka_loop/sysid_default.json/mse_after.test -->0.336<!-- /figure -->``
+(:data:`INLINE_JSON`; a record is such a file too); it is checked and rewritten in the style it is typed in. A page's generated tables and lists
 (:mod:`bench.reporting.pages`) are rewritten and checked the same way.
 """
 
@@ -40,6 +42,8 @@ from bench.runner.records import read_records
 MANIFEST = "manifest.toml"
 #: what a figure may give besides a group of seeds: the median seed's MSE, and the worst seed's (the highest)
 SEED_STATISTICS = ("median", "worst")
+#: what an inline figure may count instead: how many seeds' expressions are exactly the true L
+EXACT = "exact"
 INDEX = "index.md"
 STATUSES = ("current", "superseded")
 #: the scratch folder ``make bench`` writes into (ignored by git): no published result
@@ -49,7 +53,10 @@ MARK = re.compile(r"<!-- figure (?P<name>[\w.+@/-]+) -->(?P<value>.*?)<!-- /figu
 #: results/, GROUP one of :data:`~bench.reporting.groups.GROUPS` with ``_`` for a space or of
 #: :data:`SEED_STATISTICS` (:func:`inline_value`)
 INLINE = re.compile(r"records/(?P<folder>[\w./-]+)/(?P<system>\w+)/(?P<experiment>direct|indirect)/"
-                    r"(?P<method>[\w+@-]+)/(?P<group>best|best_half|all|worse_half|median|worst)(?:/(?P<split>train))?")
+                    r"(?P<method>[\w+@-]+)/(?P<group>best|best_half|all|worse_half|median|worst|exact)(?:/(?P<split>train))?")
+#: a figure named by a JSON file under results/ and a dotted key in it (a part may index a list), with
+#: ``/percent`` where a fraction is shown in %: ``json/FILE.json/KEY[/percent]``
+INLINE_JSON = re.compile(r"json/(?P<file>[\w./+@-]+?\.json)/(?P<key>[\w.+@-]+?)(?P<percent>/percent)?")
 
 
 @dataclass(frozen=True)
@@ -138,17 +145,22 @@ class _Records:
         return self._read[path]
 
 
+def json_number(root: Path, file: str, key: str, name: str) -> float:
+    """The number at dotted ``key`` of JSON ``file`` under ``root`` (a part may index a list)."""
+    value = json.loads((Path(root) / file).read_text())
+    try:
+        for part in key.split("."):
+            value = value[int(part)] if isinstance(value, list) else value[part]
+        return float(value)
+    except (KeyError, IndexError, ValueError, TypeError) as exc:
+        raise UserError(f"{Path(root) / MANIFEST}: figure {name}: {file} has no number at "
+                        f"{key} ({type(exc).__name__}: {exc})") from None
+
+
 def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | None = None) -> float:
     """A figure's value, from the entry's records or from its JSON file."""
     if figure.json is not None:
-        value = json.loads((Path(root) / figure.json["file"]).read_text())
-        try:
-            for key in figure.json["key"].split("."):
-                value = value[int(key)] if isinstance(value, list) else value[key]
-            return float(value)
-        except (KeyError, IndexError, ValueError, TypeError) as exc:
-            raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: {figure.json['file']} has no number at "
-                            f"{figure.json['key']} ({type(exc).__name__}: {exc})") from None
+        return json_number(root, figure.json["file"], figure.json["key"], figure.name)
     want = figure.records
     records = [r for r in (records or _Records(root))(entry.path)
                if (r.system, r.experiment, r.method, r.noise, r.tuned) == (
@@ -157,9 +169,11 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
     if not records:
         raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: no records of {want} in {entry.path}")
     group = want.get("group", TESTED_GROUP)
-    if group not in GROUPS + SEED_STATISTICS:
+    if group not in GROUPS + SEED_STATISTICS + (EXACT,):
         raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: group {group!r} is none of "
-                        f"{', '.join(GROUPS + SEED_STATISTICS)}")
+                        f"{', '.join(GROUPS + SEED_STATISTICS + (EXACT,))}")
+    if group == EXACT:
+        return float(sum(bool(r.exact) for r in records if r.status == "ok"))
     quantity = want.get("quantity", "")
     standard = next((r.details["standard_model"] for r in records if (r.details or {}).get("standard_model")), None)
     if quantity.startswith("standard."):
@@ -265,9 +279,16 @@ def format_like(value: float, shown: str) -> str:
 
 
 def inline_value(root: Path, name: str, shown: str, records: _Records) -> str | None:
-    """A figure named by its records (:data:`INLINE`) in the style it is shown
+    """A figure named by its records (:data:`INLINE`) or by a JSON file (:data:`INLINE_JSON`) in the style it is shown
     in (:func:`format_like`); ``None`` for another name, or where the records
     give no such figure."""
+    m = INLINE_JSON.fullmatch(name)
+    if m is not None:
+        try:
+            value = json_number(root, m["file"], m["key"], name)
+        except (UserError, OSError, ValueError):
+            return None
+        return format_like(100 * value if m["percent"] else value, shown)
     m = INLINE.fullmatch(name)
     if m is None:
         return None

@@ -125,6 +125,28 @@ def test_a_number_named_by_its_records_is_checked_and_rewritten_in_its_own_style
     assert cli("index", root).returncode == 0 and stale_figures(root) == []
 
 
+def test_a_number_named_by_a_json_key_or_by_its_exact_seeds_is_checked_and_rewritten(tmp_path):
+    root = _small_results(tmp_path, "0.0081")
+    (root / "study" / "loop.json").write_text('{"mse_after": {"test": 0.33561}, "per_joint": [0.5, 0.0123]}')
+    exact = sum(bool(r.exact) for r in read_records(root / "study") if r.status == "ok"
+                and (r.experiment, r.method) == ("indirect", "syrenets"))
+    (tmp_path / "README.md").write_text(
+        "<!-- figure json/study/loop.json/mse_after.test -->0.34<!-- /figure --> "
+        "<!-- figure json/study/loop.json/per_joint.1/percent -->1.2<!-- /figure --> % "
+        "<!-- figure json/study/loop.json/mse_before.test -->1.0<!-- /figure --> "
+        f"<!-- figure records/study/double_pendulum/indirect/syrenets/exact -->{exact + 1}<!-- /figure -->/10\n")
+    stale = stale_figures(root)
+    assert len(stale) == 2, stale
+    assert "mse_before.test shows 1.0, the records give no such figure" in stale[0]
+    assert f"exact shows {exact + 1}, the records give {exact}" in stale[1]
+    assert cli("index", root).returncode == 0
+    text = (tmp_path / "README.md").read_text()
+    assert "test -->0.34<" in text and "percent -->1.2<" in text and f"exact -->{exact}<" in text
+    (tmp_path / "README.md").write_text("<!-- figure json/study/loop.json/per_joint.1/percent -->1.5<!-- /figure -->\n")
+    (stale,) = stale_figures(root)
+    assert "shows 1.5, the records give 1.2" in stale
+
+
 def test_a_figure_over_another_is_computed_from_both(tmp_path):
     root = _small_results(tmp_path, "0.0081")
     manifest = root / "manifest.toml"
