@@ -35,7 +35,7 @@ import numpy as np
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
 from bench.reporting.groups import GROUPS, HALVES_FROM, TESTED_GROUP, group_stats
-from bench.reporting import measured, panda_log, tuned  # noqa: F401  (the pages' generated blocks)
+from bench.reporting import arms, measured, panda_log, tuned  # noqa: F401  (the pages' generated blocks)
 from bench.reporting.pages import rewrite, stale_blocks
 from bench.runner.records import read_records
 
