@@ -37,6 +37,7 @@ from bench.core.fileio import atomic_write
 from bench.reporting.groups import GROUPS, HALVES_FROM, TESTED_GROUP, group_stats
 from bench.reporting import arms, measured, panda_log, tuned  # noqa: F401  (the pages' generated blocks)
 from bench.reporting.pages import rewrite, stale_blocks
+from bench.reporting.tables import expand_variants
 from bench.runner.records import read_records
 
 MANIFEST = "manifest.toml"
@@ -44,6 +45,8 @@ MANIFEST = "manifest.toml"
 SEED_STATISTICS = ("median", "worst")
 #: what an inline figure may count instead: how many seeds' expressions are exactly the true L
 EXACT = "exact"
+#: an inline figure's All n test MSE over the standard model's the records carry
+RATIO = "ratio"
 INDEX = "index.md"
 STATUSES = ("current", "superseded")
 #: the scratch folder ``make bench`` writes into (ignored by git): no published result
@@ -51,9 +54,9 @@ SCRATCH = "quick"
 MARK = re.compile(r"<!-- figure (?P<name>[\w.+@/-]+) -->(?P<value>.*?)<!-- /figure -->")
 #: a figure named by its records: ``records/FOLDER/SYSTEM/EXPERIMENT/METHOD/GROUP[/train]``, FOLDER under
 #: results/, GROUP one of :data:`~bench.reporting.groups.GROUPS` with ``_`` for a space or of
-#: :data:`SEED_STATISTICS` (:func:`inline_value`)
+#: :data:`SEED_STATISTICS`, or :data:`EXACT` or :data:`RATIO` (:func:`inline_value`)
 INLINE = re.compile(r"records/(?P<folder>[\w./-]+)/(?P<system>\w+)/(?P<experiment>direct|indirect)/"
-                    r"(?P<method>[\w+@-]+)/(?P<group>best|best_half|all|worse_half|median|worst|exact)(?:/(?P<split>train))?")
+                    r"(?P<method>[\w+@-]+)/(?P<group>best|best_half|all|worse_half|median|worst|exact|ratio)(?:/(?P<split>train))?")
 #: a figure named by a JSON file under results/ and a dotted key in it (a part may index a list), with
 #: ``/percent`` where a fraction is shown in %: ``json/FILE.json/KEY[/percent]``
 INLINE_JSON = re.compile(r"json/(?P<file>[\w./+@-]+?\.json)/(?P<key>[\w.+@-]+?)(?P<percent>/percent)?")
@@ -134,14 +137,15 @@ def read_manifest(root: Path) -> list[Entry]:
 
 class _Records:
     """Each result folder's records, read once however many figures and
-    commits ask for them."""
+    commits ask for them, with a record per variant a run reported
+    (``METHOD@VARIANT``, as the tables have them)."""
 
     def __init__(self, root: Path):
         self.root, self._read = Path(root), {}
 
     def __call__(self, path: str) -> list:
         if path not in self._read:
-            self._read[path] = read_records(self.root / path)
+            self._read[path] = expand_variants(read_records(self.root / path))
         return self._read[path]
 
 
@@ -293,6 +297,8 @@ def inline_value(root: Path, name: str, shown: str, records: _Records) -> str | 
     if m is None:
         return None
     want = {k: m[k] for k in ("system", "experiment", "method")} | {"group": m["group"].replace("_", " ")}
+    if m["group"] == RATIO:  # All n's test MSE over the standard model's
+        want |= {"group": TESTED_GROUP, "quantity": "ratio"}
     if m["split"]:
         want["split"] = m["split"]
     entry = Entry(m["folder"], "", "", "current", "")
