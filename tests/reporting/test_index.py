@@ -4,6 +4,7 @@ page's marked figure disagrees with its records."""
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -213,8 +214,14 @@ def test_a_table_names_each_run_that_is_not_ok_with_its_reason(tmp_path):
     from bench.reporting.tables import write_tables
 
     shutil.copytree(RESULTS / "measured" / "kuka_swapped_60s" / "records", tmp_path / "records")
+    killed = tmp_path / "records" / "kuka_lwr4__syrenets__indirect__seed1.json"
+    record = json.loads(killed.read_text())
+    record |= {"status": "timeout", "error": "fit still running at 1.5 x its 60 s budget; killed\nTraceback ...",
+               "train_mse": None, "test_mse": None}
+    killed.write_text(json.dumps(record))
     text = write_tables(tmp_path)
     assert "- **syrenets**, seed 1: timeout: fit still running at 1.5 x its 60 s budget; killed" in text
+    assert "Traceback" not in text  # the first line of its reason
     records = read_records(tmp_path)
     bad = [r for r in records if r.status != "ok"]
     named = [line for line in text.splitlines() if line.startswith("- **")]
