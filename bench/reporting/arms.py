@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.core.experiment import INDIRECT
-from bench.reporting.groups import group_stats
+from bench.reporting.groups import group_stats, seed_statistic
 from bench.reporting.pages import block
 from bench.runner.records import Record, read_records
 
@@ -54,8 +54,8 @@ def table(root: Path, folder: str, system: str) -> str:
     by = {m: [r for r in records if r.method == m and r.status == "ok"] for m, _ in learners}
     rows = [("test MSE, All n (the mean over the seeds)", lambda rs: _fmt(group_stats(rs)["all"]["test"][0])),
             ("test MSE, Best (lowest training MSE)", lambda rs: _fmt(group_stats(rs)["best"]["test"][0])),
-            ("test MSE, median seed", lambda rs: _fmt(float(np.median([r.test_mse for r in rs])))),
-            ("test MSE, worst seed", lambda rs: _fmt(max(r.test_mse for r in rs))),
+            ("test MSE, median seed", lambda rs: _fmt(seed_statistic(rs, "median"))),
+            ("test MSE, worst seed", lambda rs: _fmt(seed_statistic(rs, "worst"))),
             ("steps in the budget (mean)", _steps),
             ("rollouts of 1 s", _rollouts)]
     for key, name in PARTS:

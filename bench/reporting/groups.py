@@ -1,7 +1,8 @@
 """The groups of seeds a table's rows are made of (Valle & Haddadin, 2021,
 Tables 1 and 2): the best seed, the best and the worse half, and all of them,
 ranked by training MSE (:func:`group_members`), and each row's label for
-the table's number of seeds (:func:`group_label`)."""
+the table's number of seeds (:func:`group_label`); and the median or worst
+seed's own MSE (:func:`seed_statistic`)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,8 @@ GROUPS = ("best", "best half", "all", "worse half")
 TESTED_GROUP = "all"
 #: the fewest seeds whose halves are rows of their own
 HALVES_FROM = 4
+#: what a figure may give besides a group of seeds: the median seed's MSE, and the worst seed's (the highest)
+SEED_STATISTICS = ("median", "worst")
 
 
 def half(n: int) -> int:
@@ -67,3 +70,12 @@ def member_stats(members: dict[str, dict[str, list[float]]]) -> dict[str, dict[s
     return {group: {split: (float(np.mean(vals)), None if group == "best" else float(np.std(vals)))
                     for split, vals in splits.items()}
             for group, splits in members.items()}
+
+
+def seed_statistic(records: list[Record], statistic: str, split: str = "test") -> float | None:
+    """The median or the worst (highest) of the ``ok`` seeds' own MSEs on ``split``
+    (:data:`SEED_STATISTICS`); ``None`` where no seed has one."""
+    values = [v for v in (getattr(r, f"{split}_mse") for r in records if r.status == "ok") if v is not None]
+    if not values:
+        return None
+    return float(np.median(values)) if statistic == "median" else float(max(values))

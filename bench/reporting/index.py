@@ -30,19 +30,15 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
-from bench.reporting.groups import GROUPS, HALVES_FROM, TESTED_GROUP, group_stats
+from bench.reporting.groups import GROUPS, HALVES_FROM, SEED_STATISTICS, TESTED_GROUP, group_stats, seed_statistic
 from bench.reporting import arms, measured, panda_log, tuned  # noqa: F401  (the pages' generated blocks)
 from bench.reporting.pages import rewrite, stale_blocks
 from bench.reporting.tables import expand_variants
 from bench.runner.records import read_records
 
 MANIFEST = "manifest.toml"
-#: what a figure may give besides a group of seeds: the median seed's MSE, and the worst seed's (the highest)
-SEED_STATISTICS = ("median", "worst")
 #: what an inline figure may count instead: how many seeds' expressions are exactly the true L
 EXACT = "exact"
 #: an inline figure's All n test MSE over the standard model's the records carry
@@ -54,7 +50,7 @@ SCRATCH = "quick"
 MARK = re.compile(r"<!-- figure (?P<name>[\w.+@/-]+) -->(?P<value>.*?)<!-- /figure -->")
 #: a figure named by its records: ``records/FOLDER/SYSTEM/EXPERIMENT/METHOD/GROUP[/train]``, FOLDER under
 #: results/, GROUP one of :data:`~bench.reporting.groups.GROUPS` with ``_`` for a space or of
-#: :data:`SEED_STATISTICS`, or :data:`EXACT` or :data:`RATIO` (:func:`inline_value`)
+#: :data:`~bench.reporting.groups.SEED_STATISTICS`, or :data:`EXACT` or :data:`RATIO` (:func:`inline_value`)
 INLINE = re.compile(r"records/(?P<folder>[\w./-]+)/(?P<system>\w+)/(?P<experiment>direct|indirect)/"
                     r"(?P<method>[\w+@-]+)/(?P<group>best|best_half|all|worse_half|median|worst|exact|ratio)(?:/(?P<split>train))?")
 #: a figure named by a JSON file under results/ and a dotted key in it (a part may index a list), with
@@ -186,10 +182,9 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
         return float(standard[quantity[len("standard."):]])
     split = want.get("split", "test")
     if group in SEED_STATISTICS:  # over every ok seed's own MSE
-        values = [v for v in (getattr(r, f"{split}_mse") for r in records if r.status == "ok") if v is not None]
-        if not values:
+        value = seed_statistic(records, group, split)
+        if value is None:
             raise UserError(f"{Path(root) / MANIFEST}: figure {figure.name}: no seed of its records is ok")
-        value = float(np.median(values)) if group == "median" else max(values)
     else:
         stats = group_stats(records)
         if group not in stats:

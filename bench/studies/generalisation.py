@@ -46,21 +46,22 @@ METHODS_DEFAULT = ["sysid", "delan", "mlp", "syrenets", "mggp", "standard+gp", "
                    "feasible+delan"]
 
 
-def _data(system: str, split: str):
+def split_data(system: str, split: str):
+    """A measured system's split (``default`` or a named one), its training and its test data."""
     s = SYSTEMS[system](split=None if split == "default" else split)
     return s, s.load("train"), s.load("test")
 
 
 def edges(system: str, split: str) -> list[float]:
     """The bins' edges in distance: quantiles of the test samples' distances."""
-    _, train, test = _data(system, split)
+    _, train, test = split_data(system, split)
     d = TrainingStates(train).distance(test)
     return [float(x) for x in np.quantile(d, np.linspace(0, 1, BINS + 1))]
 
 
 def run_case(system: str, split: str, method: str, seed: int, budget: float | None, steps: int | None) -> dict:
     """One learner (or reference) on one split: its test MSE, and its MSE in each distance bin."""
-    s, train, test = _data(system, split)
+    s, train, test = split_data(system, split)
     start = time.perf_counter()
     if method == CONSTANT:
         tau, done = np.broadcast_to(train.tau.mean(axis=0), test.tau.shape), None

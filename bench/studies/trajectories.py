@@ -23,6 +23,7 @@ from bench.core.distance import TrainingStates
 from bench.core.fileio import check_output, write_json
 from bench.core.folds import folds
 from bench.runner.provenance import provenance
+from bench.studies.generalisation import split_data
 from systems import SYSTEMS
 
 HELP = "how far a measured arm's test trajectory and its validation folds lie from the states they were fitted on"
@@ -30,13 +31,11 @@ HELP = "how far a measured arm's test trajectory and its validation folds lie fr
 
 def split_figures(system: str, split: str) -> dict:
     """One split's figures: the test trajectory's and each fold's median distance, the folds' gap."""
-    s = SYSTEMS[system](split=None if split == "default" else split)
-    train, test = s.load("train"), s.load("test")
+    _, train, test = split_data(system, split)
     cut = folds(train)
     per_fold = [float(np.median(TrainingStates(train.subset(np.flatnonzero(f.fit)))
                                 .distance(train.subset(np.flatnonzero(f.score))))) for f in cut]
     return {"split": split, "train_samples": len(train), "test_samples": len(test),
-            "sample_interval_s": None if train.time is None else float(np.median(np.diff(train.time[:100]))),
             "test_median_distance": float(np.median(TrainingStates(train).distance(test))),
             "folds": cut.to_json(), "fold_median_distance": per_fold,
             "fold_median_distance_median": float(np.median(per_fold))}
