@@ -75,7 +75,7 @@ def main(args) -> int:
     for part in given or ():
         if part is not None:
             part.target(args.experiment)  # bad files: exit 2 now, before the run's process starts
-    record, log = run_one(spec, checked=runs)
+    record, log = run_one(spec, checked=runs, data=given)
     if args.json:
         write_json(args.json, record.to_json())
     print(summary_line(record, log))
@@ -89,13 +89,15 @@ def main(args) -> int:
     return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
 
 
-def run_one(spec: RunSpec, checked: bool = False) -> tuple[Record, Path | None]:
+def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None) -> tuple[Record, Path | None]:
     """One run in its own process (threads pinned, killed like any run of a
     matrix), in a scratch folder; returns its record and, where something
     failed, the log that holds the traceback (the folder is then kept).
-    ``checked``: the caller made the run job's checks, which are not repeated."""
+    ``checked``: the caller made the run job's checks, which are not repeated;
+    ``data``: the ``(train, test)`` pair the caller read, handed to the run's
+    process so that it does not read the files again."""
     work = Path(tempfile.mkdtemp(prefix="bench-fit-"))
-    record = matrix.run_one(spec, work, checked=checked)
+    record = matrix.run_one(spec, work, checked=checked, data=data)
     if record.status in ("failed", "timeout") or record.failed_stages:
         return record, matrix.log_path(work, spec.run_id)
     shutil.rmtree(work, ignore_errors=True)

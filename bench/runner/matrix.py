@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import pickle
 import tempfile
 import time
 from dataclasses import dataclass
@@ -67,10 +68,11 @@ class RunJob(Job):
 
     spec: dict
     out_dir: str
+    data_file: str | None = None
 
     @classmethod
-    def of(cls, spec: RunSpec, out_dir: str | os.PathLike) -> "RunJob":
-        return cls(spec.to_dict(), str(out_dir))
+    def of(cls, spec: RunSpec, out_dir: str | os.PathLike, data_file: str | None = None) -> "RunJob":
+        return cls(spec.to_dict(), str(out_dir), data_file)
 
     @property
     def run_spec(self) -> RunSpec:
@@ -94,7 +96,11 @@ class RunJob(Job):
         return phase_limits(self.run_spec)
 
     def run(self, on_phase) -> dict:
-        return execute(self.run_spec, on_phase, checked=True).to_json()
+        data = None
+        if self.data_file:
+            with open(self.data_file, "rb") as f:
+                data = pickle.load(f)
+        return execute(self.run_spec, on_phase, data=data, checked=True).to_json()
 
     def result_file(self, work: Path, name: str) -> Path:
         return record_path(self.out_dir, name)
@@ -123,9 +129,25 @@ class RunJob(Job):
         return record
 
 
-def run_one(spec: RunSpec, out_dir: str | os.PathLike, *, checked: bool = False, fresh: bool = False) -> Record:
-    """``spec`` run as a :class:`RunJob` by :func:`~bench.runner.job.run_isolated`; its record, written."""
-    return run_isolated(RunJob.of(spec, out_dir), Path(out_dir) / "logs", spec.run_id, checked=checked, fresh=fresh)
+def run_one(spec: RunSpec, out_dir: str | os.PathLike, *, checked: bool = False, fresh: bool = False,
+            data: tuple | None = None) -> Record:
+    """``spec`` run as a :class:`RunJob` by :func:`~bench.runner.job.run_isolated`; its record, written.
+
+    ``data``: the spec's ``(train, test)`` pair, already read (and checked) by
+    the caller; the run's process is handed it through a file in
+    ``out_dir``, removed after the run, instead of reading the spec's files again."""
+    data_file = None
+    if data is not None:
+        data_file = Path(out_dir) / f"{spec.run_id}.data.pickle"
+        data_file.parent.mkdir(parents=True, exist_ok=True)
+        with open(data_file, "wb") as f:
+            pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
+    try:
+        return run_isolated(RunJob.of(spec, out_dir, data_file and str(data_file)), Path(out_dir) / "logs",
+                            spec.run_id, checked=checked, fresh=fresh)
+    finally:
+        if data_file is not None:
+            data_file.unlink(missing_ok=True)
 
 
 class FolderLock:

@@ -169,6 +169,21 @@ def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatc
     assert fresh.status == "ok" and fresh.train_mse == r.train_mse
 
 
+def test_data_the_caller_read_is_handed_to_the_run_which_reads_no_file(tmp_path):
+    from bench.core.data import generate
+    from systems import SYSTEMS
+
+    system = SYSTEMS["double_pendulum"]()
+    train, test = generate(system, 48, seed=1), generate(system, 24, seed=2)
+    (spec,) = specs(["toy_constant"], train_path=str(tmp_path / "absent.csv"), test_path=str(tmp_path / "absent.csv"))
+    r = matrix.run_one(spec, tmp_path, checked=True, data=(train, test))
+    assert r.status == "ok", r.error
+    assert r.details["n_train"] == 48 and r.details["n_test"] == 24
+    assert not list(tmp_path.glob("*.pickle"))  # the hand-off file is gone after the run
+    unread = matrix.run_one(spec, tmp_path / "again", checked=True)  # without it, the run reads the (absent) file
+    assert unread.status == "failed" and "absent.csv" in unread.error
+
+
 def test_a_hang_after_the_fit_is_a_timeout_at_the_evaluation_limit(tmp_path, monkeypatch):
     monkeypatch.setattr(job, "EVALUATION_MIN_S", 2.0)
     (r,) = matrix.run_matrix(specs(["toy_slow_judge"]), tmp_path, workers=1, report=quiet)
