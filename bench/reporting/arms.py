@@ -10,19 +10,14 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.core.experiment import INDIRECT
 from bench.reporting.groups import group_stats, seed_statistic
-from bench.reporting.pages import block
-from bench.runner.records import Record, read_records
+from bench.reporting.pages import block, figure, indirect_records
+from bench.runner.records import Record
 
 #: the learners in the table's order, and their names there
 LEARNERS = (("delan", "DeLaN"), ("mlp", "MLP"), ("syrenets", "SyReNets"))
 #: the parts of the torque a record's ``details.forces`` holds, and their names in the table
 PARTS = (("inertial", "inertial part"), ("coriolis", "Coriolis part"), ("gravity", "gravity part"))
-
-
-def _fmt(x: float) -> str:
-    return f"{x:.3g}"
 
 
 def _rollouts(records: list[Record]) -> str:
@@ -47,19 +42,18 @@ def _steps(records: list[Record]) -> str:
 
 def table(root: Path, folder: str, system: str) -> str:
     """DeLaN, the MLP and SyReNets on ``system`` (those the folder has): one column each, from its records."""
-    records = [r for r in read_records(Path(root) / folder) if r.experiment == INDIRECT and r.system == system
-               and not r.tuned]
+    records = [r for r in indirect_records(root, folder) if r.system == system]
     present = {r.method for r in records}
     learners = [(m, name) for m, name in LEARNERS if m in present]
     by = {m: [r for r in records if r.method == m and r.status == "ok"] for m, _ in learners}
-    rows = [("test MSE, All n (the mean over the seeds)", lambda rs: _fmt(group_stats(rs)["all"]["test"][0])),
-            ("test MSE, Best (lowest training MSE)", lambda rs: _fmt(group_stats(rs)["best"]["test"][0])),
-            ("test MSE, median seed", lambda rs: _fmt(seed_statistic(rs, "median"))),
-            ("test MSE, worst seed", lambda rs: _fmt(seed_statistic(rs, "worst"))),
+    rows = [("test MSE, All n (the mean over the seeds)", lambda rs: figure(group_stats(rs)["all"]["test"][0])),
+            ("test MSE, Best (lowest training MSE)", lambda rs: figure(group_stats(rs)["best"]["test"][0])),
+            ("test MSE, median seed", lambda rs: figure(seed_statistic(rs, "median"))),
+            ("test MSE, worst seed", lambda rs: figure(seed_statistic(rs, "worst"))),
             ("steps in the budget (mean)", _steps),
             ("rollouts of 1 s", _rollouts)]
     for key, name in PARTS:
-        rows.append((f"{name}'s MSE (mean)", lambda rs, k=key: _fmt(np.mean([r.details["forces"][f"{k}_mse"] for r in rs]))))
+        rows.append((f"{name}'s MSE (mean)", lambda rs, k=key: figure(np.mean([r.details["forces"][f"{k}_mse"] for r in rs]))))
     lines = ["| | " + " | ".join(name for _, name in learners) + " |", "|---|" + "---:|" * len(learners)]
     for head, cell in rows:
         lines.append(f"| {head} | " + " | ".join(cell(by[m]) if by[m] else "—" for m, _ in learners) + " |")

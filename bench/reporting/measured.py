@@ -9,11 +9,10 @@ import json
 import re
 from pathlib import Path
 
-from bench.core.experiment import INDIRECT
 from bench.evaluation.driven import describe as describe_driven, pooled
 from bench.reporting.groups import group_stats
-from bench.reporting.pages import block
-from bench.runner.records import Record, read_records
+from bench.reporting.pages import block, figure, indirect_records
+from bench.runner.records import Record
 
 #: the two splits' matrices, and how the page heads them
 MATRICES = (("measured/kuka_60s", "train A, test B"), ("measured/kuka_swapped_60s", "train B, test A"))
@@ -36,23 +35,13 @@ SPLIT_NAMES = ("default", "swapped")
 FINDINGS = ("structural", "beyond_data", "not_identified")
 
 
-def _fmt(x: float) -> str:
-    return f"{x:.3g}"
-
-
-def _ratio(x: float) -> str:
+def times(x: float) -> str:
     """A ratio to the standard model: three figures, whole above 100."""
     return f"{x:.0f}×" if x >= 100 else f"{x:.3g}×"
 
 
-def _records(root: Path, folder: str, tuned: bool | None = False) -> list[Record]:
-    """The folder's indirect records: those with each method's own hyperparameters by
-    default, the tuned ones with ``tuned=True``, all with ``None``."""
-    return [r for r in read_records(Path(root) / folder) if r.experiment == INDIRECT
-            and (tuned is None or r.tuned == tuned)]
-
-
-def _standard(records: list[Record]) -> dict | None:
+def standard_model(records: list[Record]) -> dict | None:
+    """The standard model's scores (``details.standard_model``) that the records carry, else ``None``."""
     return next((r.details["standard_model"] for r in records if (r.details or {}).get("standard_model")), None)
 
 
@@ -62,7 +51,7 @@ def _constant(records: list[Record]) -> dict | None:
 
 def _driven(entries: list[dict], length: str) -> str:
     windows = [e["windows"][length] for e in entries if e and length in e.get("windows", {})]
-    return describe_driven(*pooled(windows), _fmt) if windows else "—"
+    return describe_driven(*pooled(windows), figure) if windows else "—"
 
 
 _STATUS_WORDS = {"timeout": "timed out", "failed": "failed", "unavailable": "unavailable",
@@ -80,31 +69,31 @@ def _learner_cells(records: list[Record], standard: dict | None, constant: dict 
         return [f"{len(records)} of {len(records)} runs {_STATUS_WORDS.get(status, status)}", ""] + [""] * len(WINDOWS)
     mean = group_stats(records)["all"]["test"][0]
     runs = "" if len(ok) == len(records) else f" ({len(ok)} of {len(records)} runs)"
-    ratio = _ratio(mean / standard['test_mse']) if standard and standard.get("test_mse") else "—"
+    ratio = times(mean / standard['test_mse']) if standard and standard.get("test_mse") else "—"
     above = " ‡" if constant and constant.get("test_mse") is not None and mean > constant["test_mse"] else ""
-    return [f"{_fmt(mean)}{above}{runs}", ratio] + [_driven([r.rollout for r in ok], w) for w in WINDOWS]
+    return [f"{figure(mean)}{above}{runs}", ratio] + [_driven([r.rollout for r in ok], w) for w in WINDOWS]
 
 
 @block("measured.kuka.learners")
 def learners(root: Path) -> str:
     """Every learner's All-n test MSE on each split, its ratio to the standard model,
     and its driven rollouts pooled over every seed's windows."""
-    matrices = [_records(root, folder) for folder, _ in MATRICES]
+    matrices = [indirect_records(root, folder) for folder, _ in MATRICES]
     head = "| |" + "".join(f" {title} | ratio |" + "".join(f" driven {w} s |" for w in WINDOWS)
                            for _, title in MATRICES)
     lines = [head, "|---|" + "---:|---:|" + "---|" * len(WINDOWS) + ("---:|---:|" + "---|" * len(WINDOWS)) * (len(MATRICES) - 1)]
-    standard = [_standard(records) for records in matrices]
+    standard = [standard_model(records) for records in matrices]
     row = "| standard model |"
     for s in standard:
         row += (" — | | " + " | ".join([""] * len(WINDOWS)) + " |") if s is None else \
-            (f" {_fmt(s['test_mse'])} | 1 | " + " | ".join(_driven([s.get("rollout")], w) for w in WINDOWS) + " |")
+            (f" {figure(s['test_mse'])} | 1 | " + " | ".join(_driven([s.get("rollout")], w) for w in WINDOWS) + " |")
     lines.append(row)
     constant = [_constant(records) for records in matrices]
     if any(constant):
         row = "| constant (each joint's training-mean torque) |"
         for c, s in zip(constant, standard):
-            row += (" — | |" if not c else f" {_fmt(c['test_mse'])} | "
-                    + (_ratio(c['test_mse'] / s['test_mse']) if s else "—") + " |") + " |" * len(WINDOWS)
+            row += (" — | |" if not c else f" {figure(c['test_mse'])} | "
+                    + (times(c['test_mse'] / s['test_mse']) if s else "—") + " |") + " |" * len(WINDOWS)
         lines.append(row)
     for method, label in LEARNERS + HYBRIDS:
         if not any(r.method == method for records in matrices for r in records):
@@ -129,17 +118,17 @@ def hybrids(root: Path) -> str:
              "|---|---|---:|---:|---:|---:|---:|---:|"]
     for method, label in HYBRIDS:
         for (folder, _), split in zip(MATRICES, SPLIT_NAMES):
-            records = [r for r in _records(root, folder) if r.method == method and r.status == "ok"]
-            s = _standard(_records(root, folder))
+            records = [r for r in indirect_records(root, folder) if r.method == method and r.status == "ok"]
+            s = standard_model(indirect_records(root, folder))
             if not records or not s:
                 continue
             tests = [r.test_mse for r in records]
             priors = [r.details["references"]["prior"] for r in records]
             windows = [x for r in records for x in (r.rollout or {}).get("windows", {}).get(WINDOWS[0], {}).get("q_rmse", [])]
             finite = f"{sum(x is not None for x in windows) / len(windows):.0%}" if windows else "—"
-            lines.append(f"| {label} | {split} | {_ratio(sum(tests) / len(tests) / s['test_mse'])} "
-                         f"| {_ratio(max(tests) / s['test_mse'])} "
-                         f"| {_ratio(sum(tests) / sum(p['test_mse'] for p in priors))} "
+            lines.append(f"| {label} | {split} | {times(sum(tests) / len(tests) / s['test_mse'])} "
+                         f"| {times(max(tests) / s['test_mse'])} "
+                         f"| {times(sum(tests) / sum(p['test_mse'] for p in priors))} "
                          f"| {sum(p['ratio'] > 1 for p in priors)} of {len(priors)} "
                          f"| {sorted(p['worse_share'] for p in priors)[len(priors) // 2]:.0%} | {finite} |")
     return "\n".join(lines)
@@ -162,14 +151,14 @@ def residuals(root: Path) -> str:
     lines = ["| what learns the residual | split | test MSE | / standard | " + " | ".join(f"driven {w} s" for w in WINDOWS)
              + " | what it learned |", "|---|---|---:|---:|" + "---|" * len(WINDOWS) + "---|"]
     for (folder, _), split in zip(MATRICES, SPLIT_NAMES):
-        records = _records(root, folder)
-        s = _standard(records)
+        records = indirect_records(root, folder)
+        s = standard_model(records)
         loop = _loop(root, "sysid", split)
         if loop is not None and s:
             laws = [e for e in loop["effects"] if e["kind"] not in FINDINGS]
             parameters = sum(len([p for p in e["parameters"].values() if p["value"] or p.get("stderr")]) for e in laws)
             lines.append(f"| the residual loop from SysId: named laws | {split} | {loop['mse_after']['test']:.3g} "
-                         f"| {_ratio(loop['mse_after']['test'] / s['test_mse'])} | "
+                         f"| {times(loop['mse_after']['test'] / s['test_mse'])} | "
                          + " | ".join(_driven([loop["rollout"]["after"]], w) for w in WINDOWS)
                          + f" | {len(laws)} laws, {parameters} parameters |")
         for method, label in HYBRIDS:
@@ -177,7 +166,7 @@ def residuals(root: Path) -> str:
             if not mine or not s:
                 continue
             mean = sum(r.test_mse for r in mine) / len(mine)
-            lines.append(f"| {label} (All {len(mine)}) | {split} | {mean:.3g} | {_ratio(mean / s['test_mse'])} | "
+            lines.append(f"| {label} (All {len(mine)}) | {split} | {mean:.3g} | {times(mean / s['test_mse'])} | "
                          + " | ".join(_driven([r.rollout for r in mine], w) for w in WINDOWS) + f" | {_size(mine)} |")
     return "\n".join(lines)
 
@@ -209,7 +198,7 @@ def loops(root: Path) -> str:
     """The residual loop from each fit on each split: test MSE before and after, the
     ratio to the standard model, the held-out error and what it holds out, the
     rounds kept, and the driven rollouts before and after."""
-    standard = {split: _standard(_records(root, folder)) for split, (folder, _) in zip(SPLIT_NAMES, MATRICES)}
+    standard = {split: standard_model(indirect_records(root, folder)) for split, (folder, _) in zip(SPLIT_NAMES, MATRICES)}
     lines = ["| loop from | split | test MSE before → after | after / standard | held out before → after "
              "(what it holds out) | rounds kept | " + " | ".join(f"driven {w} s before → after" for w in WINDOWS) + " |",
              "|---|---|---|---:|---|---:|" + "---|" * len(WINDOWS)]
@@ -219,10 +208,10 @@ def loops(root: Path) -> str:
             if r is None:
                 continue
             s = standard[split]
-            ratio = _ratio(r['mse_after']['test'] / s['test_mse']) if s else "—"
+            ratio = times(r['mse_after']['test'] / s['test_mse']) if s else "—"
             kept = sum(1 for x in r["rounds"] if x["round"] > 0 and x.get("accepted") and not x.get("stop"))
             lines.append(f"| {label} | {split} | {r['mse_before']['test']:.4g} → {r['mse_after']['test']:.4g} | {ratio} "
-                         f"| {_fmt(r['rounds'][0]['heldout_mse'])} → {_fmt(r['rounds'][-1]['heldout_mse'])} "
+                         f"| {figure(r['rounds'][0]['heldout_mse'])} → {figure(r['rounds'][-1]['heldout_mse'])} "
                          f"({holds_out(r)}) | {kept} | " + " | ".join(_driven_pair(r, w) for w in WINDOWS) + " |")
     return "\n".join(lines)
 

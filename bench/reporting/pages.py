@@ -23,11 +23,25 @@ from pathlib import Path
 from typing import Callable
 
 from bench.core.errors import UserError
+from bench.core.experiment import INDIRECT
+from bench.runner.records import Record, read_records
 
 BLOCK = re.compile(r"(?P<open><!-- generated (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(?P<close><!-- /generated -->)", re.S)
 
 #: the generators: ``name -> f(results root) -> markdown``
 GENERATORS: dict[str, Callable[[Path], str]] = {}
+
+
+def figure(x: float) -> str:
+    """A figure in a generated block: three significant digits."""
+    return f"{x:.3g}"
+
+
+def indirect_records(root: Path, folder: str, tuned: bool | None = False) -> list[Record]:
+    """The indirect records of ``root/folder``: those with each method's own
+    hyperparameters by default, the tuned ones with ``tuned=True``, all with ``None``."""
+    return [r for r in read_records(Path(root) / folder) if r.experiment == INDIRECT
+            and (tuned is None or r.tuned == tuned)]
 
 
 def block(name: str):

@@ -9,8 +9,8 @@ import json
 from collections import Counter, defaultdict
 from pathlib import Path
 
-from bench.reporting.measured import HYBRIDS, LEARNERS, MATRICES, SPLIT_NAMES, _ratio, _records, _standard
-from bench.reporting.pages import block
+from bench.reporting.measured import HYBRIDS, LEARNERS, MATRICES, SPLIT_NAMES, standard_model, times
+from bench.reporting.pages import block, indirect_records
 from bench.runner.records import Record
 
 #: the learners tuned beside their defaults, in the page's order, with their names there
@@ -37,8 +37,8 @@ def tuned_beside_default(root: Path) -> str:
     lines = ["| learner | split | defaults: All n / standard | rank | tuned: All n / standard | rank | "
              "chosen most often (seeds) |", "|---|---|---:|---:|---:|---:|---|"]
     for (folder, _), split in zip(MATRICES, SPLIT_NAMES):
-        records = _records(root, folder, tuned=None)
-        s = _standard(records)
+        records = indirect_records(root, folder, tuned=None)
+        s = standard_model(records)
         if not s:
             continue
         default = {m: _all_n([r for r in records if r.method == m and not r.tuned]) for m, _ in TUNED}
@@ -52,9 +52,9 @@ def tuned_beside_default(root: Path) -> str:
                              for r in records if r.method == method and r.tuned and r.status == "ok")
             top, count = chosen.most_common(1)[0] if chosen else ("{}", 0)
             words = ", ".join(f"{k}={v}" for k, v in sorted(json.loads(top).items())) or "nothing to search"
-            d = "—" if default[method] is None else _ratio(default[method] / s["test_mse"])
+            d = "—" if default[method] is None else times(default[method] / s["test_mse"])
             lines.append(f"| {label} | {split} | {d} | {rank_d.get(method, '—')} | "
-                         f"{_ratio(tuned[method] / s['test_mse'])} | {rank_t.get(method, '—')} | {words} ({count}) |")
+                         f"{times(tuned[method] / s['test_mse'])} | {rank_t.get(method, '—')} | {words} ({count}) |")
     return "\n".join(lines)
 
 
@@ -64,7 +64,7 @@ def validation_cases(root: Path) -> list[dict]:
     cases = []
     for (folder, _), split in zip(MATRICES, SPLIT_NAMES):
         by_seed = defaultdict(dict)
-        for r in _records(root, folder, tuned=True):
+        for r in indirect_records(root, folder, tuned=True):
             validation = (r.details.get("tuning") or {}).get("validation_mse")
             if r.tuned and r.status == "ok" and validation is not None and r.test_mse is not None:
                 by_seed[r.seed][r.method] = (validation, r.test_mse)
@@ -107,7 +107,7 @@ def selected(root: Path) -> str:
             if c["validation_mse"] is None or c["test_mse"] is None:
                 lines.append(f"| {split} | {c['name']} | {c['status']} | | | |")
                 continue
-            ratio = "—" if c.get("test_over_standard") is None else _ratio(c["test_over_standard"])
+            ratio = "—" if c.get("test_over_standard") is None else times(c["test_over_standard"])
             lines.append(f"| {split} | {c['name']} | {c['validation_mse']:.3g} | {c['test_mse']:.3g} | {ratio} | "
                          f"{'**chosen**' if c['name'] == chosen else ''} |")
     return "\n".join(lines)
