@@ -116,10 +116,11 @@ def hybrids(root: Path) -> str:
     lines = ["| hybrid | split | All n / standard | worst seed / standard | All n / its prior | seeds worse than "
              "their prior | test samples worse than the prior (median over seeds) | driven 0.25 s windows finite |",
              "|---|---|---:|---:|---:|---:|---:|---:|"]
+    matrices = [indirect_records(root, folder) for folder, _ in MATRICES]
+    standard = [standard_model(records) for records in matrices]
     for method, label in HYBRIDS:
-        for (folder, _), split in zip(MATRICES, SPLIT_NAMES):
-            records = [r for r in indirect_records(root, folder) if r.method == method and r.status == "ok"]
-            s = standard_model(indirect_records(root, folder))
+        for every, s, split in zip(matrices, standard, SPLIT_NAMES):
+            records = [r for r in every if r.method == method and r.status == "ok"]
             if not records or not s:
                 continue
             tests = [r.test_mse for r in records]

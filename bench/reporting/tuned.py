@@ -66,7 +66,7 @@ def validation_cases(root: Path) -> list[dict]:
         by_seed = defaultdict(dict)
         for r in indirect_records(root, folder, tuned=True):
             validation = (r.details.get("tuning") or {}).get("validation_mse")
-            if r.tuned and r.status == "ok" and validation is not None and r.test_mse is not None:
+            if r.status == "ok" and validation is not None and r.test_mse is not None:
                 by_seed[r.seed][r.method] = (validation, r.test_mse)
         for seed, learners in sorted(by_seed.items()):
             if len(learners) < 2:
