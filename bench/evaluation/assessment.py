@@ -36,11 +36,13 @@ ROLLOUT_LIMIT_S = 120.0
 
 
 def assess(method, experiment: str, system: System, train: Dataset, test: Dataset | None, test_prediction,
-           stages: Stages, *, rollout: bool, timed: bool, timing: dict) -> tuple[dict | None, dict]:
+           stages: Stages, *, rollout: bool, timed: bool, timing: dict, own_data: bool) -> tuple[dict | None, dict]:
     """The run's rollout entry (``None`` where none applies or ``rollout`` is off) and
     the entries the scores that apply add to its record's details. Each is a stage
     of ``stages``: one that fails is named there, and the others still run. ``timed``:
-    the run has a time budget; the seconds of each part go into ``timing``."""
+    the run has a time budget; the seconds of each part go into ``timing``. ``own_data``:
+    the data are the system's own split, not files given for it, so that its logged
+    torque is the test samples'."""
     details, entry = {}, None
     indirect = Experiment.of(experiment).learns_torque
     if test is not None and rollout and (system.simulated or (test.time is not None and indirect)):
@@ -52,7 +54,7 @@ def assess(method, experiment: str, system: System, train: Dataset, test: Datase
         timing["rollout_s"] = time.perf_counter() - clock
     if not system.simulated and indirect:
         details["constant_model"] = constant_reference(train, test)
-        by_joint = stages.run("per joint", per_joint_entry, test_prediction, system, test)
+        by_joint = stages.run("per joint", per_joint_entry, test_prediction, system if own_data else None, test)
         if by_joint is not None:
             details["per_joint"] = by_joint
     references = {name: stages.run(f"reference {name}", against, method, ref, train, test)

@@ -213,7 +213,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             **exact,
         }
         fields["rollout"], assessed = assess(method, spec.experiment, system, train, test, test_prediction, stages,
-                                             rollout=spec.rollout, timed=budget.kind != STEPS, timing=timing)
+                                             rollout=spec.rollout, timed=budget.kind != STEPS, timing=timing,
+                                             own_data=not spec.train_path)
         fields["details"].update(assessed)
         if spec.save:
             fields["details"]["saved"] = stages.run("save", save_fitted, method, spec, train, system)

@@ -4,6 +4,7 @@ and the page ``bench table --per-joint`` writes from a run on a measured system.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -69,3 +70,22 @@ def test_a_run_on_a_measured_arm_records_its_error_per_joint_and_the_page_gives_
     assert f"| the filter's noise floor | — | {floor} |" in page
     assert f"| sysid | 1 | {entry['03']['mse'][0]:.4g} | {entry['03']['mse'][1]:.4g} |" in page
     assert "Per joint and per test trajectory" in (out / "tables.md").read_text()  # the headline table points to it
+
+
+def test_a_run_on_files_given_for_a_measured_system_scores_per_joint_against_the_files_alone(tmp_path):
+    """The system's logged torque is its own test trajectories'; files given for it have other samples."""
+    frame = __import__("pandas").read_csv(Path(__file__).parents[2] / "systems/data/delan_characters.csv.gz")
+    frame = frame.rename(columns={"character": "trajectory", "t": "time"})
+    held = frame["trajectory"].isin(["g", "r"])
+    train, test = tmp_path / "train.csv", tmp_path / "test.csv"
+    frame[~held & ~frame["trajectory"].isin(["e", "q", "v"])].to_csv(train, index=False)
+    frame[held].to_csv(test, index=False)
+    out = tmp_path / "run.json"
+    r = cli("fit", "--system", "delan_characters", "--method", "sysid", "--experiment", "indirect",
+            "--train", train, "--test", test, "--steps", "1", "--json", out)
+    assert r.returncode == 0, r.stderr
+    record = json.loads(out.read_text())
+    assert record["failed_stages"] == {}
+    entry = record["details"]["per_joint"]["trajectories"]
+    assert sorted(entry) == ["g", "r"] and sum(e["n"] for e in entry.values()) == int(held.sum())
+    assert all("mse_logged" not in e for e in entry.values())
