@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from sklearn.metrics import mean_squared_error, r2_score
 
+from bench.cli import main
 from bench.core.data import Dataset
 from bench.evaluation.per_joint import per_joint
 from tests.commandline import cli
@@ -81,9 +82,8 @@ def test_a_run_on_files_given_for_a_measured_system_scores_per_joint_against_the
     frame[~held & ~frame["trajectory"].isin(["e", "q", "v"])].to_csv(train, index=False)
     frame[held].to_csv(test, index=False)
     out = tmp_path / "run.json"
-    r = cli("fit", "--system", "delan_characters", "--method", "sysid", "--experiment", "indirect",
-            "--train", train, "--test", test, "--steps", "1", "--json", out)
-    assert r.returncode == 0, r.stderr
+    assert main(["fit", "--system", "delan_characters", "--method", "sysid", "--experiment", "indirect",
+                 "--train", str(train), "--test", str(test), "--steps", "1", "--json", str(out)]) == 0
     record = json.loads(out.read_text())
     assert record["failed_stages"] == {}
     entry = record["details"]["per_joint"]["trajectories"]
