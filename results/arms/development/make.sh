@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# DeLaN's development measurements on results/arms/README.md, made by steps at one commit: the optimiser's
-# grid, the warm-up and V's network (shared with Λ or its own). Every fit is scored on data that no
+# DeLaN's development measurements on results/arms/README.md, made by steps: the optimiser's grid, the
+# network's size, the warm-up and V's network (shared with Λ or its own). Every fit is scored on data that no
 # published run trains or tests on: generated samples of seed 2000 for the Panda and the UR5 (the runs'
 # test samples come from seeds 1000 to 1009), and for the characters three of the 17 training characters
 # (g, r and w: those that follow the test characters e, q and v), trained on the other 14.
@@ -59,6 +59,13 @@ for lr in 1e-2 2e-2; do
     fit "optimiser_12000_b256_lr$lr" panda panda 12000 0 --set lr=$lr
 done
 fit optimiser_20000_b128_lr1e-2 panda panda 20000 0 --set batch_size=128
+
+# the network's size on the Panda, 2,000 steps (the authors': 2 layers of 64 units)
+fit size_64x2_2000 panda panda 2000 0
+for hidden in 128 256; do
+    fit "size_${hidden}x2_2000" panda panda 2000 0 --set hidden=$hidden
+done
+fit size_64x3_2000 panda panda 2000 0 --set layers=3
 
 # the warm-up on the characters, every seed
 for seed in 0 1 2 3 4 5 6 7 8 9; do
