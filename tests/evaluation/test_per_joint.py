@@ -4,15 +4,16 @@ and the page ``bench table --per-joint`` writes from a run on a measured system.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from sklearn.metrics import mean_squared_error, r2_score
 
 from bench.cli import main
 from bench.core.data import Dataset
 from bench.evaluation.per_joint import per_joint
+from systems.delan_characters import DATA as CHARACTERS
 from tests.commandline import cli
 
 
@@ -75,7 +76,7 @@ def test_a_run_on_a_measured_arm_records_its_error_per_joint_and_the_page_gives_
 
 def test_a_run_on_files_given_for_a_measured_system_scores_per_joint_against_the_files_alone(tmp_path):
     """The system's logged torque is its own test trajectories'; files given for it have other samples."""
-    frame = __import__("pandas").read_csv(Path(__file__).parents[2] / "systems/data/delan_characters.csv.gz")
+    frame = pd.read_csv(CHARACTERS)
     frame = frame.rename(columns={"character": "trajectory", "t": "time"})
     held = frame["trajectory"].isin(["g", "r"])
     train, test = tmp_path / "train.csv", tmp_path / "test.csv"
