@@ -16,6 +16,9 @@ beside it. Both models are term libraries (:class:`~bench.physics.terms.TermLibr
 Usage::
 
     python -m bench study dfki-filter [--out results/measured/dfki_filter.md]
+
+Beside the page it writes its numbers, by cut-off, with the command and
+provenance (``dfki_filter.json``), so that a page may name one of them.
 """
 
 from __future__ import annotations
@@ -28,10 +31,11 @@ import sympy
 
 from bench.physics import regression
 from bench.core.data import Dataset
-from bench.core.fileio import atomic_write, check_output
+from bench.core.fileio import atomic_write, check_output, write_json
 from bench.core.recordings import FilterSpec
 from bench.core.symbolic import coordinate_symbols
 from bench.physics.terms import Term, TermLibrary
+from bench.runner.provenance import provenance
 from systems.dfki_double_pendulum import LAB_FRICTION, DfkiDoublePendulum, lab_parameters
 
 #: the filter the DFKI's file declares, whose cut-off the study varies
@@ -133,11 +137,13 @@ HELP = "measure how the DFKI filter's cut-off changes the identified model (resu
 
 def add_arguments(parser) -> None:
     parser.add_argument("--out", type=Path, default=Path("results/measured/dfki_filter.md"),
-                        help="the table to write (default results/measured/dfki_filter.md)")
+                        help="the table to write (default results/measured/dfki_filter.md); its numbers go beside it, "
+                             "in a .json of the same name")
 
 
 def main(args) -> int:
     check_output(args.out)
+    check_output(args.out.with_suffix(".json"))
     rows = []
     for i, cutoff in enumerate(CUTOFFS_HZ, 1):
         rows.append(evaluate(dataclasses.replace(DFKI_FILTER, cutoff_hz=cutoff)))
@@ -145,6 +151,9 @@ def main(args) -> int:
         print(f"[{i}/{len(CUTOFFS_HZ)}] {cutoff:g} Hz: rigid {r['rigid_raw']:.4g}, lab {r['lab_raw']:.4g} (test MSE vs raw torque)", flush=True)
     text = report(rows, DFKI_FILTER)
     atomic_write(args.out, lambda f: f.write(text))
+    write_json(args.out.with_suffix(".json"), {
+        "command": args.invocation, "provenance": provenance(), "default_cutoff_hz": DFKI_FILTER.cutoff_hz,
+        "cutoffs": {f"{r['cutoff_hz']:g}": r for r in rows}})
     print(text)
     best = min(rows, key=lambda r: r["lab_raw"])
     print(f"rigid-body base coefficients at {best['cutoff_hz']:g} Hz: {np.round(best['rigid_coef'], 5).tolist()}")
