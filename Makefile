@@ -26,9 +26,10 @@ $(STAMP): pyproject.toml Makefile
 bench: $(STAMP)
 	$(BIN)/python -m bench run --systems double_pendulum --n-seeds 3 --budget 10 --out results/quick
 
-# the default tests on every core (pytest-xdist); each test process pins one BLAS and torch thread
+# the default tests on every core (pytest-xdist); each test process pins one BLAS and torch thread, and
+# the tests that compile with torch.compile share one process (their xdist_group), so the compiler starts once
 test: $(STAMP)
-	$(BIN)/python -m pytest -n auto
+	$(BIN)/python -m pytest -n auto --dist loadgroup
 
 benchmark: $(STAMP)
 	$(BIN)/python -m pytest tests/benchmarks -m benchmark --benchmark-only --benchmark-columns=min,mean,median,rounds

@@ -37,7 +37,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from sklearn.model_selection import GroupKFold, KFold
 
 from bench.core.autocorrelation import integrated_time
 from bench.core.data import Dataset
@@ -128,6 +127,8 @@ def folds(data: Dataset, max_folds: int | None = None, values: np.ndarray | None
     """The validation folds of ``data`` (see the module docstring). ``max_folds``
     caps the folds of whole trajectories (all of them by default); ``values``
     (``(n, k)``, default the torque) is what the gap's autocorrelation is measured on."""
+    from sklearn.model_selection import GroupKFold, KFold  # here: scikit-learn takes a second to import
+
     names = data.trajectories()
     n = len(data)
     if len(names) >= 2:
@@ -152,6 +153,8 @@ def _mask(n: int, index: np.ndarray) -> np.ndarray:
 
 def _spans(data: Dataset, values: np.ndarray) -> Folds:
     """Spans in time of one trajectory's recordings, with their gaps (see the module docstring)."""
+    from sklearn.model_selection import GroupKFold, KFold
+
     n = len(data)
     order = data.in_time_order()
     values = np.asarray(values, dtype=np.float64).reshape(n, -1)

@@ -54,7 +54,7 @@ def assess(method, experiment: str, system: System, train: Dataset, test: Datase
         timing["rollout_s"] = time.perf_counter() - clock
     if not system.simulated and indirect:
         details["constant_model"] = constant_reference(train, test)
-        by_joint = stages.run("per joint", per_joint_entry, test_prediction, system if own_data else None, test)
+        by_joint = stages.run("per joint", per_joint_entry, test_prediction, system, test, own_data)
         if by_joint is not None:
             details["per_joint"] = by_joint
     references = {name: stages.run(f"reference {name}", against, method, ref, train, test)

@@ -52,13 +52,21 @@ def per_joint(predicted: np.ndarray, data: Dataset, logged: np.ndarray | None = 
     return {"trajectories": out}
 
 
-def per_joint_entry(predicted: np.ndarray | None, system, test: Dataset | None) -> dict | None:
+def logged_test_torque(system, own_data: bool) -> np.ndarray | None:
+    """``system``'s logged torque of its test samples, where the data scored are its own
+    split (``own_data``) and it logs one; ``None`` for files given for the system, which its
+    log does not describe."""
+    return system.logged_torque("test") if own_data else None
+
+
+def per_joint_entry(predicted: np.ndarray | None, system, test: Dataset | None, own_data: bool) -> dict | None:
     """:func:`per_joint` of a model's torque ``predicted`` on ``test``, against
-    the logged torque too where ``system`` gives it (the record's
-    ``details.per_joint``); ``None`` where ``test`` holds no torque."""
+    the logged torque too where ``system`` gives it for these data
+    (:func:`logged_test_torque`; the record's ``details.per_joint``); ``None``
+    where ``test`` holds no torque."""
     if test is None or test.tau is None or predicted is None:
         return None
-    return per_joint(predicted, test, None if system is None else system.logged_torque("test"))
+    return per_joint(predicted, test, logged_test_torque(system, own_data))
 
 
 def percent(value: float) -> str:

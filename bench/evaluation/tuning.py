@@ -29,6 +29,7 @@ fold, and the folds are the record's ``details.tuning``.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
@@ -36,8 +37,6 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from sklearn.base import BaseEstimator
-from sklearn.model_selection import GridSearchCV, ParameterGrid
 
 from bench.core.budget import SECONDS, Budget
 from bench.core.data import Dataset, mse
@@ -65,6 +64,8 @@ def combinations(method_cls) -> list[dict]:
     space = getattr(method_cls, "search_space", {}) or {}
     if not space:
         return []
+    from sklearn.model_selection import ParameterGrid  # scikit-learn is imported where a search needs it
+
     return [dict(c) for c in ParameterGrid({k: list(v) for k, v in space.items()})]
 
 
@@ -81,6 +82,8 @@ def prepare(method_cls, settings: dict, train: Dataset, experiment: str, device:
 def _grid(method_cls, settings: dict) -> tuple[list[str], list[dict]]:
     """The hyperparameters searched (those of the space that ``settings`` does not set)
     and their combinations; ``[{}]`` where nothing is searched."""
+    from sklearn.model_selection import ParameterGrid
+
     space = {k: v for k, v in _space(method_cls).items() if k not in settings}
     return sorted(space), ([dict(c) for c in ParameterGrid(space)] if space else [{}])
 
@@ -110,33 +113,41 @@ class _Shared:
         return self
 
 
-class _Candidate(BaseEstimator):
-    """One combination as a scikit-learn estimator: ``X`` holds sample indices."""
+@functools.cache
+def _candidate_type() -> type:
+    """:class:`_Candidate`'s type, made on first use: it is a scikit-learn estimator, and
+    scikit-learn takes about a second to import, which a run that does not tune never needs."""
+    from sklearn.base import BaseEstimator
 
-    def __init__(self, shared: _Shared | None = None, choice: dict | None = None):
-        self.shared = shared
-        self.choice = choice
+    class _Candidate(BaseEstimator):
+        """One combination as a scikit-learn estimator: ``X`` holds sample indices."""
 
-    def fit(self, X, y=None):
-        s = self.shared
-        self.method_ = None
-        if time.perf_counter() > s.deadline:
-            s.failures[_key(self.choice)] = OUT_OF_TIME
+        def __init__(self, shared: _Shared | None = None, choice: dict | None = None):
+            self.shared = shared
+            self.choice = choice
+
+        def fit(self, X, y=None):
+            s = self.shared
+            self.method_ = None
+            if time.perf_counter() > s.deadline:
+                s.failures[_key(self.choice)] = OUT_OF_TIME
+                return self
+            try:
+                method = s.make(self.choice)
+                method.fit(s.train.subset(np.asarray(X)[:, 0]), s.experiment, s.seed, s.budget, system=s.system)
+                self.method_ = method
+            except Exception as exc:  # a combination that fails is not chosen; the record says why
+                s.failures[_key(self.choice)] = f"{type(exc).__name__}: {exc}"[:300]
             return self
-        try:
-            method = s.make(self.choice)
-            method.fit(s.train.subset(np.asarray(X)[:, 0]), s.experiment, s.seed, s.budget, system=s.system)
-            self.method_ = method
-        except Exception as exc:  # a combination that fails is not chosen; the record says why
-            s.failures[_key(self.choice)] = f"{type(exc).__name__}: {exc}"[:300]
-        return self
+
+    return _Candidate
 
 
 def _key(choice: dict) -> tuple:
     return tuple(sorted((k, repr(v)) for k, v in choice.items()))
 
 
-def _score(candidate: _Candidate, X, y=None) -> float:
+def _score(candidate, X, y=None) -> float:
     """Minus the candidate's MSE on the samples ``X``; ``nan`` where it failed or predicts non-finite values."""
     if candidate.method_ is None:
         return math.nan
@@ -168,6 +179,8 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
     def make(choice: dict):
         return method_cls(**{**fixed, **choice}).use_device(device)
 
+    from sklearn.model_selection import GridSearchCV
+
     t0 = time.perf_counter()
     fold_set = folds(train, max_folds=MAX_FOLDS)
     fits = len(grid) * len(fold_set)
@@ -178,8 +191,8 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
     # say, may take longer than its part of it)
     deadline = t0 + (1.0 - FINAL_SHARE) * budget.seconds if budget.kind == SECONDS else math.inf
     shared = _Shared(make, train, experiment, seed, each, system, deadline)
-    search = GridSearchCV(_Candidate(shared), {"choice": grid}, scoring=_score, cv=fold_set.indices(), refit=False,
-                          error_score=math.nan)
+    search = GridSearchCV(_candidate_type()(shared), {"choice": grid}, scoring=_score, cv=fold_set.indices(),
+                          refit=False, error_score=math.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a failed or non-finite combination is recorded, not warned about
         search.fit(np.arange(len(train))[:, None])

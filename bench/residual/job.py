@@ -16,7 +16,7 @@ from bench.core.data import Dataset
 from bench.physics.system import System
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest, read_settings, write_json
-from bench.evaluation.per_joint import per_joint, per_joint_lines
+from bench.evaluation.per_joint import logged_test_torque, per_joint, per_joint_lines
 from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
@@ -118,7 +118,7 @@ class ResidualJob(Job):
                                checkpoint=checkpoint, on_phase=on_phase)
         per_joint_errors = None
         if test is not None and result.models is not None:
-            logged = None if self.train_path else system.logged_torque("test")
+            logged = logged_test_torque(system, own_data=not self.train_path)
             per_joint_errors = {name: per_joint(model.predict_torque(test), test, logged)
                                 for name, model in zip(("before", "after"), result.models)}
             for line in per_joint_lines(per_joint_errors["before"], per_joint_errors["after"]):

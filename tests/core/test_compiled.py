@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
 from bench.core.compiled import compiled_once
+
+# with the suite's other compiling tests, in one test process (see tests/methods/test_delan.py)
+pytestmark = pytest.mark.xdist_group("torch.compile")
 
 
 def _square_sum(x):

@@ -12,6 +12,10 @@ from bench.evaluation.forces import decomposition
 from methods import METHODS
 from methods.delan import DeepLagrangian, DeLaNConfig
 
+# The tests that compile share one test process (``make test`` runs pytest with --dist loadgroup): torch's
+# compiler starts once there, and a graph compiled for a shape is compiled once for all of them
+pytestmark = pytest.mark.xdist_group("torch.compile")
+
 
 @pytest.mark.parametrize("activation", ["softplus", "tanh", "relu"])
 @pytest.mark.parametrize("diagonal", ["softplus", "relu"])
