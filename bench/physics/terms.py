@@ -129,7 +129,7 @@ class Term:
         (zero for a term of ``D`` or a generalized force)."""
         if not self.in_lagrangian:
             return np.zeros(len(data))
-        return np.broadcast_to(symbolic.to_numpy(self.expr, data.dof)(data.q, data.qd), (len(data),)).astype(np.float64)
+        return np.broadcast_to(_value_function(self.expr, data.dof)(data.q, data.qd), (len(data),)).astype(np.float64)
 
     def torque(self, data: Dataset) -> np.ndarray:
         """The term's torque per unit coefficient, shape ``(n, dof)``."""
@@ -226,6 +226,12 @@ def _dissipative_forces(expr: sympy.Expr, dof: int) -> tuple[tuple[int, sympy.Ex
 def _lagrangian_function(expr: sympy.Expr, dof: int):
     """A Lagrangian term compiled to torch once per expression (see :func:`_dissipative_forces`)."""
     return symbolic.to_torch(expr, dof)
+
+
+@functools.lru_cache(maxsize=4096)
+def _value_function(expr: sympy.Expr, dof: int):
+    """A Lagrangian term's value compiled to numpy once per expression (see :func:`_dissipative_forces`)."""
+    return symbolic.to_numpy(expr, dof)
 
 
 @functools.lru_cache(maxsize=4096)
