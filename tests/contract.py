@@ -118,7 +118,24 @@ def check_generated_data(system) -> None:
         assert a.L.shape == (200,) and np.isfinite(a.L).all()
 
 
-def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
+def one_system_per_kind(names: list[str]) -> list[str]:
+    """The first of ``names`` of each kind of data a system gives: a closed-form
+    simulation, an engine's simulation (no symbolic L), a measurement. What a
+    method does on its device depends on its code and on that kind (the data's
+    shapes, times, trajectories), not on which system of a kind gave them, so
+    the device check (:func:`check_device`, a whole fit with every op checked,
+    about fifteen times a plain fit's time) runs on these."""
+    kinds = {}
+    for name in names:
+        cls = SYSTEMS[name]
+        kinds.setdefault((cls.simulated, cls.simulated and cls.symbolic), name)
+    return list(kinds.values())
+
+
+def check_method(cls, train: Dataset, test: Dataset, experiment: str, device: bool = True) -> None:
+    """``cls`` on ``train`` and ``test``: it fits within its smoke configuration's
+    steps, replays, predicts finite values and, where symbolic, writes out its
+    model; with ``device``, its fit keeps to its device (:func:`check_device`)."""
     smoke = cls.smoke_config()
     assert smoke, f"{cls.name} declares no smoke configuration"
     assert smoke.get("max_steps"), "a smoke configuration must bound its steps, so that a seed is reproducible"
@@ -136,7 +153,7 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str) -> None:
         again = cls(**smoke).fit(train, experiment, seed=0, budget_s=Budget.replaying(Schedule.from_json(replay)))
         np.testing.assert_array_equal(again.predict(test), m.predict(test))
         assert again.fit_info["steps"] == info["steps"]
-    if cls.uses_device and experiment == "indirect":  # the torque loss is the one with every part of a step
+    if device and cls.uses_device and experiment == "indirect":  # the torque loss has every part of a step
         check_device(cls, train, experiment)
     if cls(**smoke).stacking_unavailable_reason() is None:
         check_stacked(cls, smoke, train, test, experiment)

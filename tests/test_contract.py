@@ -8,10 +8,16 @@ import pytest
 from bench.core.data import generate
 from methods import METHODS
 from systems import SYSTEMS
-from tests.contract import check_method, check_system, suite_entries
+from tests.contract import check_method, check_system, one_system_per_kind, suite_entries
 
 SUITE_METHODS = [n for n in suite_entries(METHODS, "methods") if METHODS.entry(n).available]
 SUITE_SYSTEMS = suite_entries(SYSTEMS, "systems")
+#: the systems a method's fit is checked on its device on (see one_system_per_kind)
+DEVICE_SYSTEMS = one_system_per_kind(SUITE_SYSTEMS)
+
+
+def test_the_device_check_covers_each_kind_of_data():
+    assert len(DEVICE_SYSTEMS) == 3 and {SYSTEMS[n].simulated for n in DEVICE_SYSTEMS} == {True, False}
 
 
 @pytest.mark.parametrize("name", SUITE_SYSTEMS)
@@ -41,5 +47,5 @@ def test_method_contract(method_name, experiment, system_name, datasets):
         SYSTEMS[system_name].not_applicable if experiment not in SYSTEMS[system_name].experiments else None)
     if reason:
         pytest.skip(reason)
-    check_method(cls, *datasets[system_name], experiment)
+    check_method(cls, *datasets[system_name], experiment, device=system_name in DEVICE_SYSTEMS)
 
