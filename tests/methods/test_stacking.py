@@ -80,7 +80,8 @@ def test_a_compiled_stacked_step_is_compiled_before_the_budget_and_gives_the_fit
     compiling it here too would double the test's compilation."""
     train, test = data
     config = {**METHODS["delan"].smoke_config(), "max_steps": 8}
-    alone = [METHODS["delan"](**config | {"compile": False}).fit(d, "indirect", k, steps=8) for d, k in zip(train, SEEDS)]
+    alone = [METHODS["delan"](**config | {"compile": False}).fit(d, "indirect", k, steps=8)
+             for d, k in zip(train, SEEDS)]
     stacked = fit_stacked([METHODS["delan"](**config | {"compile": True}) for _ in SEEDS], train, "indirect", SEEDS,
                           steps=8)
     for a, b in zip(alone, stacked):
