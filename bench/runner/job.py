@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import json
 import math
 import tempfile
 import time
@@ -35,6 +36,7 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from bench.core.budget import SECONDS, Budget
+from bench.runner.ledger import Ledger
 from bench.runner.isolation import Call, CallFailed, Outcome, map_interruptibly, run_call
 from bench.runner.progress import print_now
 
@@ -167,18 +169,32 @@ def run_isolated(job: Job, work: str | Path | None = None, name: str = "job", *,
     return job.finish(outcome, echo or print_now)
 
 
+def job_fields(job: Job) -> dict:
+    """What a job is, as its ledger compares it: its class and its fields, as JSON reads them back."""
+    return json.loads(json.dumps({"job": f"{type(job).__module__}:{type(job).__qualname__}",
+                                  "fields": job.payload()}))
+
+
 def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], str],
-             report: Callable[[str], None]) -> dict[str, Any]:
+             report: Callable[[str], None], ledger: Ledger | None = None) -> dict[str, Any]:
     """Run each named job with :func:`run_isolated`, ``workers`` at a time;
     returns the results by name, in the order given.
 
     Every job is checked before any starts. Each finished job is reported in
     one line, ``[k/n, t s] name: describe(result)``; jobs that did not finish
     raise :class:`~bench.runner.isolation.CallFailed`, named, once all have ended.
+    With a ``ledger``, each job that finishes is kept in it as it finishes, and
+    a job it already holds from the same code is not run again
+    (:mod:`bench.runner.ledger`).
     """
     early = {name: job.check() for name, job in jobs.items()}
+    fields = {name: job_fields(job) for name, job in jobs.items()} if ledger else {}
+    kept = ledger.finished(fields) if ledger else {}
+    if kept:
+        report(f"{len(kept)} of {len(jobs)} job(s) finished before, by this code: taken from {ledger.path}")
     start = time.monotonic()
     finished: list[str] = []
+    todo = [name for name in jobs if name not in kept]
 
     def one(item: tuple[str, Path]) -> tuple[bool, Any]:
         name, work = item
@@ -187,14 +203,18 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
                           else run_isolated(jobs[name], work, name, checked=True)), True
         except CallFailed as exc:
             result, ok = str(exc), False
+        if ok and ledger:
+            ledger.add(name, fields[name], result)
         finished.append(name)
         what = describe(result) if ok else f"did not finish ({result})"
-        report(f"[{len(finished)}/{len(jobs)}, {time.monotonic() - start:.0f} s] {name}: {what}")
+        report(f"[{len(finished)}/{len(todo)}, {time.monotonic() - start:.0f} s] {name}: {what}")
         return ok, result
 
     with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work:
-        items = [(name, Path(work) / str(i)) for i, name in enumerate(jobs)]
-        outcomes = dict(zip(jobs, map_interruptibly(one, items, workers)))
+        items = [(name, Path(work) / str(i)) for i, name in enumerate(todo)]
+        outcomes = {name: (True, result) for name, result in kept.items()}
+        outcomes.update(zip(todo, map_interruptibly(one, items, workers)))
+        outcomes = {name: outcomes[name] for name in jobs}
     failed = [name for name, (ok, _) in outcomes.items() if not ok]
     if failed:
         raise CallFailed(f"{len(failed)} of {len(jobs)} job(s) did not finish: {', '.join(failed)}")

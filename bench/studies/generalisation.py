@@ -33,6 +33,7 @@ from bench.core.fileio import atomic_write, check_output, write_json
 from bench.evaluation.reference import CONFIGURATION, METHOD as STANDARD_METHOD
 from bench.reporting.plots import line_plot
 from bench.runner.job import KILL_FACTOR, CaseJob, run_jobs
+from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now
 from bench.runner.provenance import made_at, provenance
 from methods import METHODS
@@ -140,7 +141,8 @@ def main(args) -> int:
     names = [STANDARD, CONSTANT] + list(args.methods)
     jobs = {f"{split} {m}": Case(args.system, split, m, args.seed, args.budget, args.steps)
             for split in args.splits for m in names}
-    rows = list(run_jobs(jobs, args.workers, lambda r: f"test MSE {r['test_mse']:.3g}", print_now).values())
+    ledger = Ledger(args.out)
+    rows = list(run_jobs(jobs, args.workers, lambda r: f"test MSE {r['test_mse']:.3g}", print_now, ledger).values())
     prov = provenance()
     work = f"{args.steps} steps of its work" if args.steps is not None else f"{args.budget:g} s"
     lines = ["# Where each learner stops generalising", "",
@@ -164,5 +166,6 @@ def main(args) -> int:
                   ""]
     write_json(args.out.with_suffix(".json"), rows)
     atomic_write(args.out, lambda f: f.write("\n".join(lines)))
+    ledger.close()
     print("\n".join(lines))
     return 0

@@ -8,8 +8,9 @@ noise level, each data seed and each method, the double pendulum's torques
 get the effects (:func:`bench.physics.undeclared.add_effects`) and Gaussian
 noise on train and test torques (a fraction of each joint's torque standard
 deviation); the loop (:func:`bench.residual.residual_loop`) runs, each case in
-its own process through the runner, under a work budget, and its report is
-scored (:mod:`bench.studies.acceptance_scoring`):
+its own process through the runner, under a work budget (the runs finished
+are kept as they finish, and the same command resumes from them:
+:mod:`bench.runner.ledger`), and its report is scored (:mod:`bench.studies.acceptance_scoring`):
 
 * **recall**: of the laws put in, the share found as the right law on the
   right joints with every parameter within 10 %;
@@ -51,6 +52,7 @@ from bench.residual.selection import AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MI
 from bench.residual.loop import residual_loop
 from bench.residual.sensors import Sensor
 from bench.runner.job import CaseJob, fit_limit, run_jobs
+from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance
 from systems import SYSTEMS
@@ -272,7 +274,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--workers", type=positive_int, default=2, help="runs at a time, one process each (default 2)")
     parser.add_argument("--out", type=Path, default=Path("results/residual/acceptance.md"),
                         help="the page to write (default results/residual/acceptance.md); every run goes to the "
-                             "same name with .json")
+                             "same name with .json; until the page is written, finished runs are kept in "
+                             ".partial.jsonl, and the same command run again resumes from them")
 
 
 def cases_table(rows: list[dict], cases: list[str], sets: list[str]) -> str:
@@ -302,7 +305,8 @@ def main(args) -> int:
         return (f"{r['right']}/{r['put_in']} right, {r['reported']} reported "
                 f"({', '.join(r['found']) or 'nothing'}); test MSE {r['before']:.3g} -> {r['after']:.3g}")
 
-    rows = list(run_jobs(jobs, args.workers, describe, print_now).values())
+    ledger = Ledger(args.out)
+    rows = list(run_jobs(jobs, args.workers, describe, print_now, ledger).values())
     order = {c: i for i, c in enumerate(args.cases)}
     rows.sort(key=lambda r: (args.sets.index(r["set"]), order[r["case"]], r["noise"], r["seed"],
                              args.methods.index(r["method"])))
@@ -375,5 +379,6 @@ def main(args) -> int:
     ])
     write_json(runs, rows)
     atomic_write(args.out, lambda f: f.write(text))
+    ledger.close()
     print(text)
     return 0

@@ -31,6 +31,7 @@ from bench.core.fileio import atomic_write, check_output, link
 from bench.residual import validation
 from bench.residual.loop import residual_loop
 from bench.runner.job import CaseJob, fit_limit, run_jobs
+from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance
 from systems import SYSTEMS
@@ -146,10 +147,11 @@ def main(args) -> int:
     def describe(r: dict) -> str:
         return f"test MSE {r['before']:.4g} -> {r['after']:.4g} ({r['after'] / r['before']:.3f}x) in {r['seconds']:.1f} s"
 
+    ledger = Ledger(args.out)
     suite = run_jobs({f"suite split {m}": Loop(m, None, args.budget, args.steps) for m in args.methods},
-                     1, describe, print_now)
+                     1, describe, print_now, ledger)
     loro = run_jobs({f"held out {k} {m}": Loop(m, k, args.loro_budget, args.steps)
-                     for k in recordings for m in args.methods}, args.workers, describe, print_now)
+                     for k in recordings for m in args.methods}, args.workers, describe, print_now, ledger)
     suite_rows, loro_rows = list(suite.values()), list(loro.values())
     prov = provenance()
     sysid = next((r for r in suite_rows if r["method"] == "sysid"), None)
@@ -177,5 +179,6 @@ def main(args) -> int:
         "",
     ])
     atomic_write(args.out, lambda f: f.write(text))
+    ledger.close()
     print(text)
     return 0

@@ -45,3 +45,20 @@ class Sleep(Job):
 
     def run(self, on_phase):
         return sleep({"seconds": self.seconds}, on_phase)
+
+
+@dataclass(frozen=True)
+class Tally(Job):
+    """Adds a line to the file ``tally`` each time it runs, and returns ``x``."""
+
+    tally: str
+    x: int
+
+    def limits(self):
+        return {"run": 60.0}
+
+    def run(self, on_phase):
+        on_phase("run")
+        with open(self.tally, "a") as f:
+            f.write(f"{self.x}\n")
+        return {"x": self.x}

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from bench.physics.undeclared import parse_effects
 from bench.studies.acceptance_scoring import expected, score
 from bench.studies.acceptance_cases import DEVELOPMENT, DEVELOPMENT_CASES, EVALUATION, effects
-from bench.studies.residual_acceptance import run_case, worth
+from bench.runner.job import job_fields
+from bench.runner.ledger import Ledger
+from bench.studies.residual_acceptance import Case, run_case, worth
+from tests.commandline import cli
 
 
 def test_each_case_expects_its_effects_under_the_names_and_joints_the_loop_reports():
@@ -94,3 +99,21 @@ def test_every_method_is_judged_on_the_same_cases():
                                             ("sysid", 0.1, 3.0, 1.0), ("sparse", 0.1, 3.0, 1.0))]
     worth(rows)
     assert [r["worth"] for r in rows if r["noise"]] == [50.0, 50.0]  # the least of the methods' clean residuals
+
+
+def test_the_study_resumes_from_the_runs_it_kept_and_drops_them_once_its_page_is_written(tmp_path):
+    out = tmp_path / "acceptance.md"
+    kept = Case(DEVELOPMENT, "spring", 0.0, "sysid", 300, 150, None, 10, 0)
+    ledger = Ledger(out)
+    # a run finished before the study stopped; its seconds mark it as the one kept
+    finished = {**run_case(**kept.payload()), "seconds": 12345.0}
+    ledger.add("development spring noise=0 seed=0 sysid", job_fields(kept), finished)
+    r = cli("study", "residual-acceptance", "--cases", "spring", "--methods", "sysid", "--noise", "0", "0.01",
+            "--sets", DEVELOPMENT, "--seeds", "0", "--n-train", 300, "--n-test", 150, "--steps", 10,
+            "--workers", 1, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert f"1 of 2 job(s) finished before, by this code: taken from {ledger.path}" in r.stdout
+    rows = json.loads(out.with_suffix(".json").read_text())
+    assert [(row["noise"], row["seconds"] == 12345.0) for row in rows] == [(0.0, True), (0.01, False)]
+    assert rows[1]["right"] == 2  # the run it did make names both springs
+    assert not ledger.path.exists() and out.is_file()

@@ -1,0 +1,53 @@
+"""A study's ledger: the jobs that finished are kept as they finish, and the
+same jobs run again by the same code are taken from it instead of run again."""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.runner.isolation import CallFailed
+from bench.runner.job import run_jobs
+from bench.runner.ledger import Ledger
+from tests.runner.jobs import Sleep, Tally
+
+
+def test_a_study_stopped_part_way_resumes_with_the_jobs_that_did_not_finish(tmp_path):
+    tally, lines = tmp_path / "tally", []
+    ledger = Ledger(tmp_path / "page.md")
+    assert ledger.path == tmp_path / "page.partial.jsonl" and ledger.code is not None
+    with pytest.raises(CallFailed, match="1 of 2 job.s. did not finish: slow"):
+        run_jobs({"quick": Tally(str(tally), 1), "slow": Sleep(60, 1.0)}, 2, str, lines.append, ledger)
+    assert tally.read_text() == "1\n"
+
+    lines.clear()
+    results = run_jobs({"quick": Tally(str(tally), 1), "slow": Sleep(0, 60.0)}, 2, str, lines.append, ledger)
+    assert results == {"quick": {"x": 1}, "slow": {"slept": 0}} and list(results) == ["quick", "slow"]
+    assert tally.read_text() == "1\n"  # quick was not run again
+    assert lines[0] == f"1 of 2 job(s) finished before, by this code: taken from {ledger.path}"
+    assert [line.split("] ")[1] for line in lines[1:]] == ["slow: {'slept': 0}"] and lines[1].startswith("[1/1, ")
+
+    # a job whose fields changed is run again, under the same name
+    assert run_jobs({"quick": Tally(str(tally), 2)}, 1, str, lines.append, ledger) == {"quick": {"x": 2}}
+    assert tally.read_text() == "1\n2\n"
+
+    ledger.close()
+    assert not ledger.path.exists()
+
+
+def test_a_ledger_keeps_nothing_from_other_code_or_a_torn_line(tmp_path):
+    tally = tmp_path / "tally"
+    ledger = Ledger(tmp_path / "page.md")
+    run_jobs({"a": Tally(str(tally), 1)}, 1, str, lambda line: None, ledger)
+    with open(ledger.path, "a") as f:
+        f.write('{"name": "b", "fields": ')  # the process killed while writing its line
+    assert list(ledger.finished({"a": _fields(tally, 1), "b": _fields(tally, 2)})) == ["a"]
+
+    other = Ledger(tmp_path / "page.md")
+    other.code = "a digest of other code"
+    assert other.finished({"a": _fields(tally, 1)}) == {}
+    run_jobs({"a": Tally(str(tally), 1)}, 1, str, lambda line: None, other)
+    assert tally.read_text() == "1\n1\n"
+
+
+def _fields(tally, x):
+    return {"job": "tests.runner.jobs:Tally", "fields": {"tally": str(tally), "x": x}}
