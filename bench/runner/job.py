@@ -189,9 +189,11 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
     """
     early = {name: job.check() for name, job in jobs.items()}
     fields = {name: job_fields(job) for name, job in jobs.items()} if ledger else {}
-    kept = ledger.finished(fields) if ledger else {}
+    kept, other = ledger.finished(fields) if ledger else ({}, 0)
     if kept:
         report(f"{len(kept)} of {len(jobs)} job(s) finished before, by this code: taken from {ledger.path}")
+    if other:
+        report(f"{other} job(s) in {ledger.path} were made by other code or with other fields: they run again")
     start = time.monotonic()
     finished: list[str] = []
     todo = [name for name in jobs if name not in kept]

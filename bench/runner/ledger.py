@@ -39,20 +39,25 @@ class Ledger:
         self.code = code_digest()
         self._lock = threading.Lock()
 
-    def finished(self, jobs: dict[str, dict]) -> dict[str, Any]:
-        """The results kept for ``jobs`` (``{name: the job's fields}``) that this code made with the same fields."""
-        if self.code is None or not self.path.exists():
-            return {}
-        kept = {}
+    def finished(self, jobs: dict[str, dict]) -> tuple[dict[str, Any], int]:
+        """The results kept for ``jobs`` (``{name: the job's fields}``) that this code made with the same
+        fields, and how many of ``jobs`` the ledger holds only from other code or other fields."""
+        if not self.path.exists():
+            return {}, 0
+        kept, other = {}, set()
         for line in self.path.read_text(encoding="utf-8").splitlines():
             try:
                 entry = json.loads(line)
             except json.JSONDecodeError:
                 continue
             name = entry.get("name")
-            if name in jobs and entry.get("code") == self.code and entry.get("fields") == jobs[name]:
+            if name not in jobs:
+                continue
+            if self.code is not None and entry.get("code") == self.code and entry.get("fields") == jobs[name]:
                 kept[name] = entry["result"]
-        return kept
+            else:
+                other.add(name)
+        return kept, len(other - set(kept))
 
     def add(self, name: str, fields: dict, result: Any) -> None:
         """Keep a finished job's result, on disk before this returns."""

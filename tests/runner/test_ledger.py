@@ -40,13 +40,15 @@ def test_a_ledger_keeps_nothing_from_other_code_or_a_torn_line(tmp_path):
     run_jobs({"a": Tally(str(tally), 1)}, 1, str, lambda line: None, ledger)
     with open(ledger.path, "a") as f:
         f.write('{"name": "b", "fields": ')  # the process killed while writing its line
-    assert list(ledger.finished({"a": _fields(tally, 1), "b": _fields(tally, 2)})) == ["a"]
+    assert ledger.finished({"a": _fields(tally, 1), "b": _fields(tally, 2)}) == ({"a": {"x": 1}}, 0)
 
     other = Ledger(tmp_path / "page.md")
     other.code = "a digest of other code"
-    assert other.finished({"a": _fields(tally, 1)}) == {}
-    run_jobs({"a": Tally(str(tally), 1)}, 1, str, lambda line: None, other)
+    assert other.finished({"a": _fields(tally, 1)}) == ({}, 1)
+    lines = []
+    run_jobs({"a": Tally(str(tally), 1)}, 1, str, lines.append, other)
     assert tally.read_text() == "1\n1\n"
+    assert lines[0] == f"1 job(s) in {other.path} were made by other code or with other fields: they run again"
 
 
 def _fields(tally, x):
