@@ -36,8 +36,8 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from bench.core.budget import SECONDS, Budget
-from bench.runner.ledger import Ledger
 from bench.runner.isolation import Call, CallFailed, Outcome, map_interruptibly, run_call
+from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now
 
 #: A fit is killed at this multiple of its time budget.
