@@ -25,6 +25,7 @@ the records it comes from, without a manifest entry:
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import tomllib
@@ -86,6 +87,7 @@ class Entry:
     command: str
     also: tuple[str, ...] = ()
     superseded_by: str | None = None
+    #: the commit its page states (:func:`stated_commit`), else the manifest's
     commit: str | None = None
     figures: tuple[Figure, ...] = field(default_factory=tuple)
 
@@ -121,13 +123,13 @@ def read_manifest(root: Path) -> list[Entry]:
                 raise UserError(f"{where}: figure {f['name']} takes its value from 'records' or from 'json'")
             figures.append(Figure(f["name"], f["label"], f.get("format", ".2g"), f.get("records"), f.get("json"),
                                   f.get("over")))
-        entry = Entry(item["path"], item["group"], item["title"], item["status"], item["command"],
-                      tuple(item.get("also", ())), item.get("superseded_by"), item.get("commit"), tuple(figures))
-        stated = stated_commit(root, entry)
-        if stated and entry.commit:
+        stated = stated_commit(root, item["path"])
+        if stated and item.get("commit"):
             raise UserError(f"{where}: the page states the commit it was made at ({stated}); remove 'commit' "
-                            f"({entry.commit}) from its entry")
-        entries.append(entry)
+                            f"({item['commit']}) from its entry")
+        entries.append(Entry(item["path"], item["group"], item["title"], item["status"], item["command"],
+                             tuple(item.get("also", ())), item.get("superseded_by"), stated or item.get("commit"),
+                             tuple(figures)))
     names = Counter(f.name for e in entries for f in e.figures)
     twice = sorted(n for n, k in names.items() if k > 1)
     if twice:
@@ -212,24 +214,25 @@ def figure_value(root: Path, entry: Entry, figure: Figure, records: _Records | N
 STATED_COMMIT = re.compile(r"\(commit (?P<commit>[0-9a-f]{7,40})")
 
 
-def stated_commit(root: Path, entry: Entry) -> str | None:
+def stated_commit(root: Path, path: str) -> str | None:
     """The commit a result's page (a folder's README.md) states in its first five lines, if it states one."""
-    page = Path(root) / entry.path
+    page = Path(root) / path
     page = page / "README.md" if page.is_dir() else page
     if page.suffix != ".md" or not page.is_file():
         return None
-    found = STATED_COMMIT.search("\n".join(page.read_text().splitlines()[:5]))
+    with open(page, encoding="utf-8") as f:
+        found = STATED_COMMIT.search("".join(itertools.islice(f, 5)))
     return found["commit"] if found else None
 
 
 def commit_of(root: Path, entry: Entry, records: _Records | None = None) -> str:
-    """The commit of a result's records (the most common; how many there are), else the one its page
-    states (:func:`stated_commit`), else the manifest's."""
+    """The commit of a result's records (the most common; how many there are), else its entry's: the one
+    its page states (:func:`stated_commit`), else the manifest's."""
     if (Path(root) / entry.path / "records").is_dir():
         commits = Counter(r.provenance.get("commit", "")[:10] for r in (records or _Records(root))(entry.path))
         top, _ = commits.most_common(1)[0]
         return top if len(commits) == 1 else f"{top} and {len(commits) - 1} more"
-    return stated_commit(root, entry) or entry.commit or "—"
+    return entry.commit or "—"
 
 
 def figures(root: Path, entries: list[Entry] | None = None, records: _Records | None = None) -> dict[str, str]:
