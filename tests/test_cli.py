@@ -15,6 +15,7 @@ import pytest
 
 from bench.cli import build_parser, main
 from bench.core.fileio import write_json
+from bench.runner import job
 from bench.runner.records import Record
 from bench.runner.spec import RunSpec
 from tests.commandline import cli
@@ -109,7 +110,11 @@ def test_fit_without_test_data_reports_none(tmp_path, capsys):
     assert "test MSE n/a (no test data)" in capsys.readouterr().out
 
 
-def test_rerun_replays_every_record_of_a_time_budgeted_matrix(tmp_path, capsys):
+def test_rerun_replays_every_record_of_a_time_budgeted_matrix(tmp_path, capsys, monkeypatch):
+    # each fit stops itself at its 1 s budget; the kill at KILL_FACTOR x it is the runner's backstop (a call
+    # killed at its phase's limit: tests/runner/test_isolation.py), here out of reach, so that a busy machine,
+    # where a fit stops late, cannot turn a run into a timeout
+    monkeypatch.setattr(job, "KILL_FACTOR", 1000.0)
     out = tmp_path / "m"
     assert main(["run", "--methods", "mlp,mggp,sysid", "--experiments", "indirect", "--seeds", "0", "--budget", "1",
                  "--n-train", "256", "--n-test", "64", "--no-rollout", "--out", str(out)]) == 0
