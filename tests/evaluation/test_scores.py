@@ -34,7 +34,7 @@ def test_a_run_whose_judgement_is_stopped_keeps_its_record(monkeypatch):
     """Sparse regression recovers the single pendulum exactly; with the symbolic
     check made to hang, the run still ends ok with its scores, ``exact`` unset
     and the limit in its details."""
-    spec = build_specs(["single_pendulum"], ["sparse"], ["indirect"], [0], 5.0, n_train=256, n_test=64)[0]
+    spec = build_specs(["single_pendulum"], ["sparse"], ["indirect"], [0], None, steps=1, n_train=256, n_test=64)[0]  # one solve
     assert execute.execute(spec).exact is True
     monkeypatch.setattr(scores_module, "JUDGE_LIMIT_S", 0.5)
     monkeypatch.setattr(recovery, "_vanishes", lambda *a, **k: time.sleep(30))
