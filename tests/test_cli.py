@@ -238,6 +238,9 @@ def test_noise_levels_are_a_dimension_of_the_matrix(tmp_path):
         (["run", "--methods", "mlp", "--seeds", "3-1", "--out", "x"], "the seed range 3-1 is empty"),
         (["run", "--methods", "mlp", "--seeds", "1,1", "--out", "x"], "a seed is given twice"),
         (["run", "--methods", "mlp", "--set", "batch_size=0", "--out", "x"], "batch_size must be at least 1, got 0"),
+        (["run", "--methods", "loop,mlp", "--out", "x"],  # named, and applies to no system given: refused
+         "loop: the prior loop is SysId identified on an arm's linear form (from its URDF), and double_pendulum has none"),
+        (["run", "--methods", "standard+gp", "--out", "x"], "standard+gp: the prior standard is SysId identified"),
         (["run", "--methods", "mlp", "--set", "max_steps=-5", "--out", "x"], "max_steps must be at least 1, got -5"),
         (["fit", "--system", "double_pendulum", "--method", "mlp", "--experiment", "direct", "--set", "eval_samples=0"],
          "eval_samples must be at least 1, got 0"),

@@ -191,9 +191,15 @@ def plugin_paths(plugins: list[str]) -> tuple[str, ...]:
     return tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)
 
 
-def check_names(args, systems=(), methods=(), experiments=()) -> None:
+def check_names(args, systems=(), methods=(), experiments=(), named: bool = True) -> dict[tuple[str, str], str]:
     """Every name known; an unknown one that a ``.py`` file in the working
-    folder registers, while no ``--plugin`` gave it, says so."""
+    folder registers, while no ``--plugin`` gave it, says so.
+
+    A method the user ``named`` that applies to none of ``systems``
+    (:meth:`~methods.base.Method.refused_on`) is refused in one line. One they
+    did not name (every registered method, the default of ``run``) is not: the
+    matrix records its runs as not applicable. Returns why each such
+    ``(method, system)`` pair does not apply."""
     for registry, names in ((SYSTEMS, systems), (METHODS, methods)):
         for name in names:
             try:
@@ -203,11 +209,14 @@ def check_names(args, systems=(), methods=(), experiments=()) -> None:
                 raise UsageError(f"{exc}{_plugin_hint(name, args.plugin) if unknown else ''}") from None
     for name in experiments:
         Experiment.of(name)
+    skipped = {}
     for method in methods:
-        refused = [METHODS[method].refused_on(SYSTEMS[s]()) for s in systems]
-        reason = next((r for r in refused if r), None)
-        if reason and all(refused):  # on none of the systems given
+        refused = {s: METHODS[method].refused_on(SYSTEMS[s]()) for s in systems}
+        reason = next((r for r in refused.values() if r), None)
+        if named and reason and all(refused.values()):  # on none of the systems given
             raise UsageError(reason)
+        skipped.update({(method, s): r for s, r in refused.items() if r})
+    return skipped
 
 
 def _plugin_hint(name: str, plugins: list[str]) -> str:

@@ -25,7 +25,9 @@ def add_arguments(r) -> None:
     r.add_argument("--systems", type=csv_list, default=["double_pendulum"],
                    help="comma-separated, or 'all'; urdf:PATH for any arm's URDF, measured:PATH for a measured arm's "
                         "file (default: double_pendulum)")
-    r.add_argument("--methods", type=csv_list, default=None, help="comma-separated (default: all registered)")
+    r.add_argument("--methods", type=csv_list, default=None, help="comma-separated (default: every registered method; one that applies to none of "
+                        "the systems is recorded as not applicable, with one line saying why, where one named here "
+                        "is refused)")
     r.add_argument("--experiments", type=csv_list, default=["direct", "indirect"], help="direct,indirect (default: both)")
     seeds = r.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=seed_list, default=None, help="explicit seeds, e.g. 0,1,2 or 0-9")
@@ -70,7 +72,9 @@ def main(args) -> int:
     systems, plugins = load_plugins(args, SYSTEMS.names() if args.systems == ["all"] else args.systems,
                                     args.methods or [])
     methods = args.methods or METHODS.names()
-    check_names(args, systems, methods, args.experiments)
+    skipped = check_names(args, systems, methods, args.experiments, named=args.methods is not None)
+    for reason in dict.fromkeys(skipped.values()):  # every registered method: one line each that cannot apply
+        print(f"not applicable, recorded as such: {reason}")
     check_split(args.split, systems)
     seeds = args.seeds if args.seeds is not None else list(SEEDS[: args.n_seeds])
     budget_s, steps = budget(args)
