@@ -11,6 +11,7 @@ from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
 from bench.residual.job import ResidualJob, run_residual
 from bench.residual.loop import FIT_SHARE, MAX_ROUNDS
+from bench.residual.report import summary_lines
 from bench.runner.job import KILL_FACTOR
 from methods import METHODS
 
@@ -73,8 +74,8 @@ def main(args) -> int:
     print(f"torque MSE before: train {b['train']:.4g}, test {number(b['test'])}; after: train {a['train']:.4g}, test {number(a['test'])}")
     for e in result.effects:
         print("  " + effect_line(e))
-    if not result.effects:
-        print("  no effect added: nothing significant in the residual")
+    for line in summary_lines(result):
+        print("  " + line)
     return 0
 
 

@@ -185,6 +185,11 @@ class _Loop(Tidying):
         self.horizon = budget.fit_seconds  # the loop's time (unlimited under a work budget)
         self.checkpoint, self.on_phase = (lambda result: None), (lambda phase: None)
         self.stopped: str | None = None  # where the budget ended the loop early
+        self.ending: dict = {}  # why the rounds ended (ResidualResult.ending)
+        self.pending: dict = {}  # what the running round has found so far: its laws, then its held-out error
+        self.round_began = 0.0  # when the running round began (bench.core.budget.now)
+        self.equivalent: list[dict] = []  # the kept rounds' laws that the data could not tell from others
+        self.fit_seconds, self.fit_scales = 0.0, False  # the method's fit, and whether a longer budget lengthens it
         self.fitter = Fitter(method, seed, budget.scaled(FIT_SHARE), hyperparameters, device)
         self.start = now()
         self.beyond: dict[str, tuple] = {}  # effects dropped for claiming beyond the data: label -> (term, entry)
@@ -244,6 +249,9 @@ class _Loop(Tidying):
             report(f"round 0: fitting {self.method} on {len(train)} samples with the declared model only "
                    f"({self.fitter.budget.describe()}{share})")
             fitted = self.fitter.fit(train)
+            info = getattr(fitted, "fit_info", {}) or {}
+            self.fit_seconds = float(info.get("fit_seconds") or 0.0)
+            self.fit_scales = budget.kind == "seconds" and info.get("stop_reason") == "budget"
         else:
             report(f"round 0: starting from the given {self.method} fit")
         strategy = self.strategy = strategy_for(fitted)
@@ -297,7 +305,8 @@ class _Loop(Tidying):
             budget=budget.to_json(), seed=self.seed, train_source=train.source,
             test_source=None if self.test is None else self.test.source, provenance=provenance(),
             feasibility=None if self.feasible_before is None else {"before": self.feasible_before, "after": feasible_after},
-            stopped=self.stopped, heldout_holds_out=strategy.holds_out(),
+            stopped=self.stopped, heldout_holds_out=strategy.holds_out(), ending=self.ending or None,
+            equivalent_laws=self.equivalent or None,
             sensor_laws_offered=list(dict.fromkeys(t.name for t in Sensor.exact(self.measured).candidates(self.measured))),
         )
 
@@ -362,6 +371,10 @@ class _Loop(Tidying):
                 report(f"  {' + '.join(map(label, runner))} instead of {' + '.join(map(label, chosen))}: "
                        f"a lower BIC once refitted with the model")
                 built, effects = other, other[0].effects
+                for kept, _, entry in selection.equivalents:  # the refit, not the rule, chose among them
+                    if kept is chosen:
+                        entry.update(kept=" + ".join(map(label, runner)), chosen_by="a lower BIC once refitted with "
+                                     "the model, which the linearised comparison of the trace may rank wrongly")
                 on_sensor = [t for t in on_sensor if t not in chosen] + [t for t in runner if t in laws]
         for named, rival, *seen in selection.mismatched:
             other = self.compare(model, effects, on_sensor, named, [rival], built, MIN_BIC_DROP)
@@ -390,8 +403,12 @@ class _Loop(Tidying):
                 self.stopped = (f"round {k} not started: the budget of {self.budget.seconds:g} s would be spent "
                                 f"before it ended")
                 report(f"round {k}: not started, the budget of {self.budget.seconds:g} s would be spent before it ended")
+                self.ending = {"reason": "budget", "round": k, "detail": self.stopped, "found": [],
+                               "budget_needed_s": {"at_least": round(began - self.start + longest, 1),
+                                                   "estimate": "the time spent so far and the longest round's"}}
                 break
             before_round = (self.train, self.sensor, dict(self.beyond), dict(self.unnamed))
+            self.pending, self.round_began = {}, began
             try:
                 model, held, mass, findings, done = self.round(k, model, held, mass, pool, rounds)
             except Exception as exc:  # the budget ran out, or the round failed: the rounds before it stand
@@ -399,9 +416,12 @@ class _Loop(Tidying):
                 self.beyond, self.unnamed = before_round[2], before_round[3]
                 if isinstance(exc, _BudgetSpent):
                     why = f"the budget of {self.budget.describe()} ran out in round {k}, while {exc}"
+                    self.ending = {"reason": "budget", "round": k, "detail": why, **self.pending,
+                                   "budget_needed_s": self.needed(began)}
                 else:
                     traceback.print_exc()  # to the loop's log
                     why = f"round {k} failed ({type(exc).__name__}: {first_line(exc)})"
+                    self.ending = {"reason": "failed", "round": k, "detail": why, **self.pending}
                 self.stopped = f"{why}: the round is undone, and the rounds before it are kept"
                 rounds.append(Round(k, self.scores(model), held, stop=f"stopped: {self.stopped}", seconds=self.elapsed()))
                 report(f"round {k}: stopped, {self.stopped}")
@@ -410,7 +430,20 @@ class _Loop(Tidying):
             if done:
                 break
             self.save(model, held, mass, rounds, findings)
+        else:
+            self.ending = {"reason": "max_rounds", "detail": f"the loop ran its {MAX_ROUNDS} rounds"}
         return model, held, mass, findings
+
+    def needed(self, began: float) -> dict:
+        """A lower bound on the time budget that would have let the round that began at
+        ``began`` finish: the loop had run this long when the budget ended inside it, and
+        where the method's fit stopped on its share of the budget, a larger budget
+        lengthens the fit too (:data:`FIT_SHARE`)."""
+        spent = now() - self.start
+        bound = max(spent, (spent - self.fit_seconds) / (1 - FIT_SHARE)) if self.fit_scales else spent
+        return {"more_than": round(bound, 1), "round_seconds_so_far": round(now() - began, 1),
+                "estimate": "a lower bound: the round had not finished"
+                            + (f", and the method's fit takes {FIT_SHARE:.0%} of any time budget" if self.fit_scales else "")}
 
     def round(self, k: int, model: LoopModel, held: float, mass: float, pool: TermLibrary, rounds: list[Round]):
         """Round ``k`` from ``model``; appends its :class:`Round` to ``rounds`` and
@@ -438,9 +471,17 @@ class _Loop(Tidying):
                                 f"a larger budget may find more")
                 report(f"round {k}: the loop's budget ran out before the trace found anything significant; "
                        f"a larger budget may find more")
+                self.ending = {"reason": "budget", "round": k, "detail": self.stopped, "found": [],
+                               "budget_needed_s": self.needed(self.round_began)}
             else:
                 report(f"round {k}: nothing significant left")
+                self.ending = {"reason": "nothing_significant", "round": k,
+                               "detail": f"round {k}'s trace found no candidate that passes every test"}
             return model, held, mass, findings, True
+        self.pending = {"found": [{"law": step["candidate"], **{key: step.get(key) for key in
+                                                               ("coefficient", "bic_drop", "heldout_gain")}}
+                                  for step in selection.steps if step.get("accepted")],
+                        "equivalent": [entry for _, _, entry in selection.equivalents]}
         self.in_budget("tracing")
         accepted = [label(c) for c in selection.accepted]
         report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
@@ -450,6 +491,7 @@ class _Loop(Tidying):
         candidate, removed, simplified = self.tidy(candidate, findings)
         train = self.train
         candidate_held = self.timed(self.heldout, candidate)
+        self.pending["heldout_mse"] = {"before": held, "with_them": candidate_held}
         candidate_mass = self.timed(smallest_mass_eigenvalue, candidate, train)
         self.in_budget("scoring the refitted model on held-out data")
         undo = None  # why the round is undone: the JSON's words, then the progress line's
@@ -463,17 +505,26 @@ class _Loop(Tidying):
                     f"held-out MSE {candidate_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")
         else:
             undo = self.timed(strategy.check, candidate, model, train)
+        equivalent = [entry for _, _, entry in selection.equivalents] or None
         if undo is not None:
             self.use(*before_round)
             rounds.append(Round(k, self.scores(model), held, accepted, selection.steps, removed, f"undone: {undo[0]}",
-                                candidate_held, simplified=simplified or None, seconds=self.elapsed()))
+                                candidate_held, simplified=simplified or None, seconds=self.elapsed(),
+                                equivalent=equivalent))
             report(f"round {k}: undone, {undo[1]}")
+            self.ending = {"reason": "undone", "round": k, "detail": f"round {k} was undone: {undo[0]}", **self.pending}
             return model, held, mass, findings, True
         s = self.scores(candidate)
         rounds.append(Round(k, s, candidate_held, accepted, selection.steps, removed, simplified=simplified or None,
-                            seconds=self.elapsed()))
+                            seconds=self.elapsed(), equivalent=equivalent))
+        for entry in equivalent or ():
+            self.equivalent.append({"round": k, **entry})
+            report(f"round {k}: equivalent on these data: {' ≡ '.join([entry['kept'], *entry['equivalent']])}; "
+                   f"kept {entry['kept']} by {entry.get('chosen_by', entry['rule'])}")
         if not set(accepted) - set(removed):
             report(f"round {k}: every effect it added became redundant; stopping")
+            self.ending = {"reason": "redundant", "round": k,
+                           "detail": f"every effect round {k} added became redundant in the joint refit"}
             return candidate, candidate_held, candidate_mass, findings, True
         report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {candidate_held:.4g}")
         return candidate, candidate_held, candidate_mass, findings, False

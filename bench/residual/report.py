@@ -110,8 +110,7 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
                                                                  for k, p in e["per_recording"].items())
             joints = ", ".join(map(str, e["joints"]))
             lines.append(f"| {name} | {e['kind']} | `{e['law']}` | {joints} | {params} |")
-    else:
-        lines.append("No effect added: nothing significant in the residual.")
+    lines += [""] + summary_lines(result)
     lines += ["", "Rounds:", ""]
     for r in result.rounds:
         added = ", ".join(r["accepted"]) or "nothing"
@@ -125,13 +124,59 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
                    + ("" if "t" not in last else f", |t| {'∞' if t is None else format(t, '.3g')}")
                    + ("" if gain is None else f", held-out gain {gain:.2%}") + ")")
         held = f", held out {cell(r['heldout_mse'])}" if r.get("heldout_mse") is not None else ""
-        lines.append(f"- round {r['round']}: test MSE {cell(r['mse']['test'])}{held}; added {added}{removed}{stop}{why}")
+        same = "".join(f"; equivalent on these data: {' ≡ '.join([e['kept'], *e['equivalent']])}"
+                       for e in r.get("equivalent") or ())
+        lines.append(f"- round {r['round']}: test MSE {cell(r['mse']['test'])}{held}; added {added}{removed}{stop}{why}"
+                     f"{same}")
     if plot_name:
         lines += ["", f"![residuals before and after]({plot_name})"]
     if result.lagrangian:
         lines += ["", "Final Lagrangian:", "", f"    {result.lagrangian}"]
     lines += _inputs(result.inputs, result.provenance)
     return "\n".join(lines) + "\n"
+
+
+def summary_lines(result: ResidualResult) -> list[str]:
+    """Why the loop ended and what that means for the laws it reports, in sentences
+    (the report's and the console's): where nothing was added, whether the residual held
+    nothing significant or the budget, an undone round or a failure ended the loop, with
+    the laws the last round had found and the budget it would have needed; then every
+    law that the data could not tell from others, with the rule that kept it."""
+    ending = result.ending or {}
+    reason, lines = ending.get("reason"), []
+    added = [e for e in result.effects if "finding" not in e]
+    found = ending.get("found") or []
+    laws = ", ".join(f"{f['law']}" + ("" if f.get("heldout_gain") is None else
+                                      f" (held-out gain {f['heldout_gain']:.1%} in the trace)") for f in found)
+    held = ending.get("heldout_mse")
+    with_them = "" if not held else (f"; with them refitted, the held-out MSE went from {held['before']:.4g} to "
+                                     f"{held['with_them']:.4g}")
+    if reason == "budget":
+        head = "No effect added: the budget ended the loop, not the residual" if not added else \
+            "The budget ended the loop before the residual did"
+        lines.append(f"{head}: {ending['detail']}.")
+        if found:
+            lines.append(f"Round {ending['round']} had found {len(found)} law(s) before it was undone: {laws}{with_them}.")
+        needed = ending.get("budget_needed_s") or {}
+        if "more_than" in needed:
+            lines.append(f"A time budget of more than {needed['more_than']:g} s would let the round finish "
+                         f"({needed['estimate']}); --steps N bounds the loop by work instead, and every round finishes.")
+        elif "at_least" in needed:
+            lines.append(f"A time budget of at least {needed['at_least']:g} s would let the round run "
+                         f"({needed['estimate']}); --steps N bounds the loop by work instead.")
+    elif reason == "undone" and not added:
+        lines.append(f"No effect added: round {ending['round']} found {laws or 'laws'}{with_them}, but "
+                     f"{ending['detail'].split(': ', 1)[-1]}, so it was undone.")
+    elif reason == "failed":
+        lines.append(f"{'No effect added: ' if not added else ''}{ending['detail']}; the rounds before it are kept.")
+    elif not added:
+        lines.append("No effect added: nothing significant in the residual.")
+    for entry in result.equivalent_laws or ():
+        figures = ", ".join(f"{law} {mse:.3g}" for law, mse in entry["heldout_mse"].items())
+        lines.append(f"Equivalent on these data (round {entry['round']}): {' ≡ '.join([entry['kept'], *entry['equivalent']])}: "
+                     f"held-out MSE {figures}, each within the standard error of its difference from the first's, "
+                     f"or at round-off; kept {entry['kept']} by {entry.get('chosen_by', entry['rule'])}.")
+    return lines
 
 
 def _inputs(inputs: dict | None, provenance: dict) -> list[str]:

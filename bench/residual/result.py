@@ -88,6 +88,14 @@ class ResidualResult(Provenanced):
     #: the loop worked on every ``thinned``-th sample of each training recording (:data:`bench.residual.loop.MAX_SAMPLES`)
     thinned: int = 1
     per_joint: dict | None = None
+    #: why the rounds ended (:meth:`bench.residual.loop._Loop.rounds`): ``reason`` (``nothing_significant``,
+    #: ``budget``, ``undone``, ``redundant``, ``failed`` or ``max_rounds``), the ``round`` and a ``detail``;
+    #: where the last round was undone or stopped, the laws it had ``found`` (each with its trace's held-out
+    #: gain), its ``heldout_mse`` where it got that far, and under a time budget ``budget_needed_s``
+    ending: dict | None = None
+    #: the kept rounds' laws that the data could not tell from others: per round, the law ``kept``, the
+    #: ``equivalent`` ones, each one's held-out error with the kept one's standard error, and the rule that chose
+    equivalent_laws: list | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
     def to_json(self) -> dict:
@@ -126,6 +134,8 @@ class Round:
     cross_fit: dict | None = None
     simplified: list[str] | None = None
     seconds: float = 0.0
+    #: laws of this round that the held-out error could not tell apart (:attr:`~bench.residual.selection.Selection.equivalents`)
+    equivalent: list[dict] | None = None
 
     def to_json(self) -> dict:
         return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}

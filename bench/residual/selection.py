@@ -32,6 +32,16 @@ A candidate is accepted only if all hold:
   finding's column stays in the later steps' fits (and in no model), so no
   admissible term is accepted for mimicking it, while other effects still can be.
 
+Where other candidates that pass every test explain the same part of the
+residual as the one chosen (as much of it, and nothing significant beside it)
+and give the same held-out error, within the standard error of the difference (paired over the
+scored samples, counted as the independent samples they hold; or both at
+round-off), the data cannot tell them apart: the step records them as
+*equivalent on these data* (:attr:`Selection.equivalents`), and the one kept
+is chosen by :data:`EQUIVALENCE_RULE`: the fewest parameters, then the law
+declared first (:func:`declared`), not by a difference in fit the data do not
+support.
+
 Noise alone fails the first two tests: with Gaussian residuals, a useless
 column lowers ``n log RSS`` by a chi-squared(1) amount, and ``log n`` plus the
 drop of 10 asks for a chi-squared value above 20 (p < 1e-5 per candidate).
@@ -56,7 +66,7 @@ from bench.core.budget import now
 from bench.residual.basis import extend_basis, orthonormal_basis, project_off
 from bench.residual.candidates import admissible, is_named, label
 from bench.residual.shapes import SHAPE_LIMITS, at_limit, refinable, refined_shape
-from bench.residual.validation import FoldFits, row_folds
+from bench.residual.validation import FoldFits, paired_difference, row_folds
 
 MIN_BIC_DROP = 10.0
 MIN_T = 5.0
@@ -74,6 +84,10 @@ AS_WELL = 0.9
 
 #: a trace's last step where the loop's time ran out before it ended
 BUDGET_STOP = "the loop's budget: no further step started"
+#: how the trace chooses among candidates equivalent on the data (see the module docstring)
+EQUIVALENCE_RULE = ("the fewest parameters, then the law declared first (the arm's laws in the order "
+                    "bench/physics/effects.py declares them, each from joint 1 on, then the whole system's, the laws "
+                    "of the sensor and the drive, and the open-ended terms last)")
 
 
 def bic(rss: float, n: int, k: int) -> float:
@@ -92,6 +106,9 @@ class Selection:
     mismatched: list[tuple] = field(default_factory=list)
     #: ``(accepted group, runner-up group)``: the next best named candidate that passed every test
     runners_up: list[tuple] = field(default_factory=list)
+    #: ``(kept group, [equivalent groups], entry)``: candidates of one step that the held-out error cannot
+    #: tell apart, the one kept by :data:`EQUIVALENCE_RULE`; ``entry`` is what the loop's JSON gives of them
+    equivalents: list[tuple] = field(default_factory=list)
 
 
 def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
@@ -165,6 +182,72 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         rows[list(best["candidate"].joints)] = True
         mine = column.reshape(-1, data.dof)[:, rows]
         return float(np.sqrt(np.mean(mine**2)))
+
+    def held_residuals(group: list[Term]) -> np.ndarray:
+        """The held-out residual on each scored row with ``group``'s columns beside this step's design."""
+        return held_fits.residuals(np.column_stack([F_all[t] for t in group]))
+
+    def params(best: dict) -> int:
+        """A candidate's parameters: its group's coefficients, and its shape."""
+        return len(best["group"]) + (best["candidate"].shape is not None)
+
+    def redundant(chosen: dict, other: dict, k_now: int) -> bool:
+        """Whether each of the two candidates adds nothing significant beside the other (a BIC
+        drop of at most :data:`MIN_BIC_DROP`, residuals floored at round-off): they explain the
+        same part of the residual, rather than two parts that a later step would take both of."""
+        both = chosen["group"] + [t for t in other["group"] if t not in chosen["group"]]
+        rss_both = max(beside(both, k_now)[2], floor * n_rows)
+        k_both = k_now + params(chosen) + params(other)
+        return all(bic(max(one["rss"], floor * n_rows), n_rows, k_now + params(one)) - bic(rss_both, n_rows, k_both)
+                   <= MIN_BIC_DROP for one in (chosen, other))
+
+    def _equivalents(chosen: dict, info: dict, k_now: int, rss_now: float):
+        """The candidates (of either tier) that pass every test, are physical, explain the same part
+        of the residual as ``chosen`` (as much of it, and nothing beside it: :func:`redundant`) and
+        whose held-out error differs from ``chosen``'s by no more than the standard error of the difference
+        (:func:`~bench.residual.validation.paired_difference`), or both at round-off; the kept
+        one by :data:`EQUIVALENCE_RULE`, its step's statistics, the others, and the JSON's entry
+        (``None`` where there is none)."""
+        mine = {slot(t) for t in chosen["group"]}
+        others = [c for tier in tiers for c in tier if slot(c) not in taken and slot(c) not in mine]
+        if not others:
+            return chosen, info, [], None
+        r_c = held_residuals(chosen["group"])
+        cv_c = float(np.nanmean(r_c**2))
+        project(t for c in others for t in group(c))
+        found, seen = [], set()
+        for best in sorted((stats(c, k_now, rss_now) for c in others), key=lambda b: -b["bic_drop"]):
+            if slot(best["candidate"]) in seen or not best["bic_drop"] > MIN_BIC_DROP:
+                continue
+            seen.add(slot(best["candidate"]))
+            if {slot(t) for t in best["group"]} & mine or physical(best) is not None:
+                continue
+            if rss_now - best["rss"] < AS_WELL * (rss_now - chosen["rss"]):  # it explains less of the residual
+                continue
+            if not redundant(chosen, best, k_now):  # it explains something else too: another cause, not a rival
+                continue
+            ok, other_info = _passes(best, before, held_cv, min_gain)
+            if not ok:
+                continue
+            r_b = held_residuals(best["group"])
+            cv_b = float(np.nanmean(r_b**2))
+            difference, stderr = paired_difference(data, r_c, r_b)
+            if abs(difference) <= stderr or max(cv_b, cv_c) <= floor:
+                found.append((best, other_info, cv_b, stderr))
+        if not found:
+            return chosen, info, [], None
+        every = sorted([(chosen, info, cv_c, None)] + found, key=lambda e: (params(e[0]), declared(e[0]["candidate"])))
+        kept = every[0][0]
+        name = {id(b): " + ".join(label(t) for t in b["group"]) for b, *_ in every}
+        entry = {"kept": name[id(kept)], "equivalent": [name[id(b)] for b, *_ in every if b is not kept],
+                 "heldout_mse": {name[id(b)]: cv for b, _, cv, _ in every},
+                 "difference_stderr": {name[id(b)]: se for b, _, _, se in found},
+                 "parameters": {name[id(b)]: params(b) for b, *_ in every}, "rule": EQUIVALENCE_RULE}
+        return kept, every[0][1], [b for b, *_ in every if b is not kept], entry
+
+    def declared(term: Term) -> tuple:
+        """Where ``term`` stands in the order the candidates are declared in (see :data:`EQUIVALENCE_RULE`)."""
+        return declared_order.get(slot(term), (len(declared_order),))
 
     def design(cands):
         cands = nuisance + list(cands)
@@ -266,6 +349,10 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     # the named effects first; the open-ended terms only where no named effect passes
     named = list(given or ()) + [c for c in pool if is_named(c)]
     tiers = [[c for c in named if c in F_all], [c for c in pool if not is_named(c) and c in F_all]]
+    declared_order: dict = {}
+    for c in [c for c in pool if is_named(c)] + list(given or ()) + [c for c in pool if not is_named(c)]:
+        declared_order.setdefault(slot(c), (len(declared_order),))
+    equivalents: list[tuple] = []
     while max_steps is None or len(steps_taken) < max_steps:
         k_now = fixed.shape[1] + len(nuisance) + len(accepted)
         new = [t for t in nuisance + accepted if t not in in_basis]
@@ -321,7 +408,8 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                         runners_up.append((chosen["group"], best["group"]))
                         steps.append({**info, "runner_up_of": " + ".join(label(t) for t in chosen["group"])})
                         break
-                    steps.append({**info, "accepted": True})
+                    chosen_info = {**info, "accepted": True}
+                    steps.append(chosen_info)
                     chosen = best
                     if not runner_up or not is_named(best["candidate"]):
                         break
@@ -338,6 +426,17 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                     break  # weaker candidates explain less still
             if chosen is not None or inadmissible is not None:
                 break  # an impossible coefficient is not handed to the open-ended terms to mimic
+        if chosen is not None and now() <= deadline:
+            kept, kept_info, others, entry = _equivalents(chosen, chosen_info, k_now, rss_now)
+            if entry is not None:
+                if kept is not chosen:  # the rule keeps another: this step's choice and runner-up follow it
+                    chosen_info.update(accepted=False, equivalent_of=entry["kept"])
+                    steps.append({**kept_info, "accepted": True, "chosen_by": EQUIVALENCE_RULE})
+                    if runners_up and runners_up[-1][0] is chosen["group"]:
+                        runner = runners_up[-1][1]
+                        runners_up[-1] = (kept["group"], chosen["group"] if runner == kept["group"] else runner)
+                    chosen = kept
+                equivalents.append((kept["group"], [b["group"] for b in others], entry))
         if chosen is not None and is_named(chosen["candidate"]):
             rival = _rival(chosen)
             if rival is not None:
@@ -357,7 +456,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         steps_taken.append(chosen)
         taken.update(slot(t) for t in chosen["group"])
         rss_now = chosen["rss"]
-    return Selection(accepted, steps, structural, mismatched, runners_up)
+    return Selection(accepted, steps, structural, mismatched, runners_up, equivalents)
 
 
 def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:

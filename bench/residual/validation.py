@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bench.core.autocorrelation import integrated_time
 from bench.core.data import Dataset
 from bench.core.folds import Fold, Folds, folds
 from bench.physics.regression import Compressed, least_squares
@@ -134,3 +135,48 @@ class FoldFits:
         scored = [fit if score is None else score.compressed(G) for fit, (_, score) in zip(fits, self.parts)]
         rows = sum(int(f.score.sum()) for f in self.held)
         return float(_held_out_rss(fits, scored).sum() / max(rows, 1))
+
+    def residuals(self, G: np.ndarray | None = None) -> np.ndarray:
+        """The held-out residual of ``y ~ [D | G]`` on each row a fold scores
+        (by the fit without that fold), ``nan`` on the rows no fold scores; the
+        mean of its squares is :meth:`cv`."""
+        F = self.D if G is None else np.hstack([self.D, G])
+        out = np.full(len(self.y), np.nan)
+        if F.shape[1] == 0:
+            for f in self.held:
+                out[f.score] = self.y[f.score]
+            return out
+        fits = [fit.compressed(G) for fit, _ in self.parts] if self.split else None
+        for i, f in enumerate(self.held):
+            coef = Compressed.stacked(fits[:i] + fits[i + 1:]).coef() if self.split else least_squares(F[f.fit], self.y[f.fit])
+            out[f.score] = self.y[f.score] - F[f.score] @ coef
+        return out
+
+
+
+def paired_difference(data: Dataset, a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """The difference of two held-out mean squared errors, ``mean(a**2) - mean(b**2)``
+    over the rows both score (:meth:`FoldFits.residuals` of two designs on the same
+    folds), and its standard error: the spread of the per-sample differences (each
+    sample's rows summed) over the square root of the independent samples they hold
+    (:func:`~bench.core.autocorrelation.effective_samples` within each recording:
+    neighbouring samples of a trajectory are near copies). Paired, it sees a difference
+    far smaller than either error's own spread."""
+    per_sample = (a**2 - b**2).reshape(len(data), -1)
+    scored = ~np.isnan(per_sample).any(axis=1)
+    if not scored.any():
+        return 0.0, float("inf")
+    d = per_sample.sum(axis=1)
+    dof = per_sample.shape[1]
+    mean = float(d[scored].mean()) / dof
+    if scored.sum() < 2:
+        return mean, float("inf")
+    if data.recording is None:
+        independent = float(scored.sum())
+    else:
+        independent = 0.0
+        for index in data.in_time_order():
+            kept = index[scored[index]]
+            if len(kept):
+                independent += len(kept) / integrated_time(d[kept])
+    return mean, float(np.std(d[scored], ddof=1) / np.sqrt(max(independent, 1.0))) / dof

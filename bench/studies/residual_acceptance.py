@@ -83,6 +83,7 @@ def run_case(case: str, noise: float, method: str, n_train: int, n_test: int, bu
         "found": sorted(f"{n} j{'-'.join(map(str, j))}" for n, j in found),
         "findings": sorted(f"{e['kind']}: {e['name']} j{'-'.join(map(str, e['joints']))}" for e in out.effects
                            if (e["name"], tuple(e["joints"])) not in found),
+        "equivalent": [" ≡ ".join([e["kept"], *e["equivalent"]]) for e in out.equivalent_laws or ()],
         "before": out.mse_before["test"], "after": out.mse_after["test"], "floor": floor, "rows": train.tau.size,
         "seconds": time.perf_counter() - start, "statistics_seconds": out.statistics_seconds,
     }
