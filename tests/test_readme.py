@@ -108,14 +108,18 @@ def test_the_quick_starts_commands_run_every_method_that_applies(tmp_path):
         _check_matrix(out, named, done.stdout)
 
 
+def _registered_methods() -> list[str]:
+    """The methods a fresh command line registers (this test process may hold other tests' plugins)."""
+    names = subprocess.run([sys.executable, "-c", "from bench.cli import main; from methods import METHODS; "
+                            "print(*METHODS.names())"], cwd=ROOT, capture_output=True, text=True, check=True)
+    return names.stdout.split()
+
+
 def _check_matrix(out: Path, named: list[str] | None, stdout: str) -> None:
     """Every method (those named, else every registered one) has a record for each experiment; each runs where
     it applies, and each that does not is named with its reason once on stdout and in the tables."""
-    import bench.cli.options  # noqa: F401  (the command line's registrations: the loop method)
-    from methods import METHODS
-
     records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
-    methods = named or METHODS.names()
+    methods = named or _registered_methods()
     by_method = {m: [r for r in records if r["method"] == m] for m in methods}
     tables = (out / "tables.md").read_text()
     for method, runs in by_method.items():

@@ -36,7 +36,9 @@ Where other candidates that pass every test explain the same part of the
 residual as the one chosen (as much of it, and nothing significant beside it)
 and give the same held-out error, within the standard error of the difference (paired over the
 scored samples, counted as the independent samples they hold; or both at
-round-off), the data cannot tell them apart: the step records them as
+round-off), the data cannot tell them apart (a law of the whole system, a
+payload or a tilt, whose torque is a sum of terms, is also compared with the
+best pair of other candidates): the step records them as
 *equivalent on these data* (:attr:`Selection.equivalents`), and the one kept
 is chosen by :data:`EQUIVALENCE_RULE`: the fewest parameters, then the law
 declared first (:func:`declared`), not by a difference in fit the data do not
@@ -84,6 +86,10 @@ AS_WELL = 0.9
 
 #: a trace's last step where the loop's time ran out before it ended
 BUDGET_STOP = "the loop's budget: no further step started"
+#: two held-out errors this close, relatively, are the same fit to round-off (two columns the same beside the design)
+SAME = 1e-6
+#: a law of the whole system is compared with pairs of the best candidate and one of this many next best
+PAIRED = 20
 #: how the trace chooses among candidates equivalent on the data (see the module docstring)
 EQUIVALENCE_RULE = ("the fewest parameters, then the law declared first (the arm's laws in the order "
                     "bench/physics/effects.py declares them, each from joint 1 on, then the whole system's, the laws "
@@ -214,26 +220,43 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
             return chosen, info, [], None
         r_c = held_residuals(chosen["group"])
         cv_c = float(np.nanmean(r_c**2))
+
+        def rival(best: dict):
+            """``(best, its step's statistics, held-out error, standard error of the difference)``
+            where ``best`` is ``chosen``'s equal on these data, else ``None``."""
+            if {slot(t) for t in best["group"]} & mine or physical(best) is not None:
+                return None
+            if rss_now - best["rss"] < AS_WELL * (rss_now - chosen["rss"]):  # it explains less of the residual
+                return None
+            if not redundant(chosen, best, k_now):  # it explains something else too: another cause, not a rival
+                return None
+            ok, other_info = _passes(best, before, held_cv, min_gain)
+            if not ok:
+                return None
+            r_b = held_residuals(best["group"])
+            cv_b = float(np.nanmean(r_b**2))
+            difference, stderr = paired_difference(data, r_c, r_b)
+            if abs(difference) <= max(stderr, SAME * max(cv_b, cv_c)) or max(cv_b, cv_c) <= floor:
+                return best, other_info, cv_b, stderr
+            return None
+
         project(t for c in others for t in group(c))
-        found, seen = [], set()
+        singles, seen = [], set()
         for best in sorted((stats(c, k_now, rss_now) for c in others), key=lambda b: -b["bic_drop"]):
             if slot(best["candidate"]) in seen or not best["bic_drop"] > MIN_BIC_DROP:
                 continue
             seen.add(slot(best["candidate"]))
-            if {slot(t) for t in best["group"]} & mine or physical(best) is not None:
-                continue
-            if rss_now - best["rss"] < AS_WELL * (rss_now - chosen["rss"]):  # it explains less of the residual
-                continue
-            if not redundant(chosen, best, k_now):  # it explains something else too: another cause, not a rival
-                continue
-            ok, other_info = _passes(best, before, held_cv, min_gain)
-            if not ok:
-                continue
-            r_b = held_residuals(best["group"])
-            cv_b = float(np.nanmean(r_b**2))
-            difference, stderr = paired_difference(data, r_c, r_b)
-            if abs(difference) <= stderr or max(cv_b, cv_c) <= floor:
-                found.append((best, other_info, cv_b, stderr))
+            if not {slot(t) for t in best["group"]} & mine and physical(best) is None:
+                singles.append(best)
+        found = [r for r in map(rival, singles) if r is not None]
+        if not found and whole(chosen["candidate"]) and len(singles) >= 2:
+            # a law of the whole system is a sum of terms each of which others may give: the best pair stands too
+            first = singles[0]
+            pairs = [stats(b["candidate"], k_now, rss_now, first["group"] + b["group"]) for b in singles[1:PAIRED + 1]
+                     if not {slot(t) for t in b["group"]} & {slot(t) for t in first["group"]}]
+            pairs = [p for p in pairs if len(p["group"]) == len(first["group"]) + 1 and p["bic_drop"] > MIN_BIC_DROP]
+            if pairs:
+                found = [r for r in [rival(min(pairs, key=lambda p: p["rss"]))] if r is not None]
         if not found:
             return chosen, info, [], None
         every = sorted([(chosen, info, cv_c, None)] + found, key=lambda e: (params(e[0]), declared(e[0]["candidate"])))
@@ -244,6 +267,10 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
                  "difference_stderr": {name[id(b)]: se for b, _, _, se in found},
                  "parameters": {name[id(b)]: params(b) for b, *_ in every}, "rule": EQUIVALENCE_RULE}
         return kept, every[0][1], [b for b, *_ in every if b is not kept], entry
+
+    def whole(term: Term) -> bool:
+        """Whether ``term`` is a law of the whole system (a payload, a gravity tilt), not of one joint or pair."""
+        return is_named(term) and term.place != "sensor" and EFFECTS[term.name].arity == 0
 
     def declared(term: Term) -> tuple:
         """Where ``term`` stands in the order the candidates are declared in (see :data:`EQUIVALENCE_RULE`)."""

@@ -144,6 +144,8 @@ FIGURES = (
     ("precision", _precision),
     ("precision with parameters right", lambda rows: _precision(rows, "right")),
     ("runs with a spurious law", lambda rows: f"{sum(bool(r['spurious']) for r in rows)} of {len(rows)}"),
+    ("runs naming laws equivalent on their data", lambda rows: f"{sum(bool(r.get('equivalent')) for r in rows)} of "
+                                                               f"{len(rows)}"),
 )
 
 
@@ -351,7 +353,11 @@ def main(args) -> int:
         "Where the data do not pin a parameter to 10 %, no method can be right by that rule: the column \"within "
         f"{CONSISTENT:g} standard errors\" also counts a law found on its joints whose parameters are each within 10 % "
         f"or within {CONSISTENT:g} of the standard errors the loop reports for them (N still exact). How each is "
-        "scored: [bench/studies/acceptance_scoring.py](" + link(Path(__file__).with_name("acceptance_scoring.py"), args.out) + ").",
+        "scored: [bench/studies/acceptance_scoring.py](" + link(Path(__file__).with_name("acceptance_scoring.py"), args.out) + "). "
+        "Where the loop could not tell laws apart on a run's data it names them as equivalent and keeps one by its rule "
+        "(the fewest parameters, then the law declared first: [docs/residual_loop.md]("
+        + link(Path(__file__).parents[2] / "docs" / "residual_loop.md", args.out) + "#laws-the-data-cannot-tell-apart)); "
+        "the scores count the law it kept, and the last column counts the runs that named equivalents.",
         "",
         "## Over every case",
         "",
