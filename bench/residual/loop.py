@@ -373,8 +373,11 @@ class _Loop(Tidying):
                 built, effects = other, other[0].effects
                 for kept, _, entry in selection.equivalents:  # the refit, not the rule, chose among them
                     if kept is chosen:
-                        entry.update(kept=" + ".join(map(label, runner)), chosen_by="a lower BIC once refitted with "
-                                     "the model, which the linearised comparison of the trace may rank wrongly")
+                        now_kept = " + ".join(map(label, runner))
+                        entry.update(kept=now_kept, equivalent=[entry["kept"]] + [e for e in entry["equivalent"]
+                                                                                  if e != now_kept],
+                                     chosen_by="a lower BIC once refitted with the model, which the linearised "
+                                               "comparison of the trace may rank wrongly")
                 on_sensor = [t for t in on_sensor if t not in chosen] + [t for t in runner if t in laws]
         for named, rival, *seen in selection.mismatched:
             other = self.compare(model, effects, on_sensor, named, [rival], built, MIN_BIC_DROP)
