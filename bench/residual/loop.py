@@ -442,10 +442,10 @@ class _Loop(Tidying):
         ``began`` finish: the loop had run this long when the budget ended inside it, and
         where the method's fit stopped on its share of the budget, a larger budget
         lengthens the fit too (:data:`FIT_SHARE`)."""
-        spent = now() - self.start
+        spent, so_far = now() - self.start, now() - began
         bound = max(spent, (spent - self.fit_seconds) / (1 - FIT_SHARE)) if self.fit_scales else spent
-        return {"more_than": round(bound, 1), "round_seconds_so_far": round(now() - began, 1),
-                "estimate": "a lower bound: the round had not finished"
+        return {"more_than": round(bound, 1), "round_seconds_so_far": round(so_far, 1),
+                "estimate": f"a lower bound: the round had run {so_far:.1f} s and not finished"
                             + (f", and the method's fit takes {FIT_SHARE:.0%} of any time budget" if self.fit_scales else "")}
 
     def round(self, k: int, model: LoopModel, held: float, mass: float, pool: TermLibrary, rounds: list[Round]):
