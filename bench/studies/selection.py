@@ -104,7 +104,8 @@ def entry(candidate: Candidate, record: Record, out: Path) -> dict:
             record.test_mse / standard, "hyperparameters": tuning.get("chosen", {}),
             "model": None if saved is None else os.path.relpath(saved, Path(out).resolve()),
             "error": record.error_line or
-            (record.failed_stages.get("save") if record.failed_stages else None), "run_id": record.run_id}
+            (record.failed_stages.get("save") if record.failed_stages else None), "run_id": record.run_id,
+            "work": tuning.get("work")}
 
 
 def choose(entries: list[dict]) -> dict | None:
@@ -127,17 +128,18 @@ def page(result: dict) -> str:
              f"Each candidate is {PROTOCOL} (validation folds: {result['folds'] or 'none'}), then fitted on all the "
              f"training data; the one with the lowest validation MSE is chosen, and the test data are read only to "
              f"score. The test columns are there to show whether validation chose well.", "",
-             "| candidate | hyperparameters chosen | validation MSE | test MSE | test / standard model | rank by "
-             "validation | rank by test |", "|---|---|---|---|---|---|---|"]
+             "| candidate | hyperparameters chosen | work: each fold fit → the final fit | validation MSE | test MSE | "
+             "test / standard model | rank by validation | rank by test |", "|---|---|---|---|---|---|---|---|"]
     for e in entries:
         mark = " **(chosen)**" if chosen and e["name"] == chosen["name"] else ""
         hp = ", ".join(f"{k}={v}" for k, v in sorted(e["hyperparameters"].items())) or "—"
         if e["status"] != "ok" or e["validation_mse"] is None:
-            lines.append(f"| {e['name']}{mark} | {hp} | {e['status']}: {e['error'] or 'no validation'} | | | | |")
+            lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['status']}: "
+                         f"{e['error'] or 'no validation'} | | | | |")
             continue
         ratio = "—" if e["test_over_standard"] is None else f"{e['test_over_standard']:.3f}x"
-        lines.append(f"| {e['name']}{mark} | {hp} | {e['validation_mse']:.4g} | {e['test_mse']:.4g} | {ratio} | "
-                     f"{by_validation.get(e['name'], '—')} | {by_test.get(e['name'], '—')} |")
+        lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['validation_mse']:.4g} | "
+                     f"{e['test_mse']:.4g} | {ratio} | {by_validation.get(e['name'], '—')} | {by_test.get(e['name'], '—')} |")
     lines.append("")
     if chosen:
         best = min(ok, key=lambda e: e["test_mse"]) if ok else None
@@ -150,6 +152,22 @@ def page(result: dict) -> str:
     else:
         lines.append("No candidate ran and validated: nothing chosen.")
     return "\n".join(lines) + "\n"
+
+
+def work_cell(work: dict | None) -> str:
+    """The work of a candidate's fold fits beside its final fit's: median steps and seconds of the
+    folds → the final fit's (``—`` for a record made before tuning recorded it)."""
+    if not work:
+        return "—"
+    folds = [s for s in work.get("fold_steps") or [] if s is not None]
+    seconds = work.get("fold_fit_seconds") or []
+
+    def median(xs):
+        xs = sorted(xs)
+        return xs[len(xs) // 2] if xs else None
+
+    fold = (f"{median(folds):g} steps, {median(seconds):.3g} s" if folds and seconds else "not fitted")
+    return f"{fold} → {work.get('final_steps')} steps, {work.get('final_fit_seconds', 0):.3g} s"
 
 
 def select(system: str, out: Path, *, split: str | None, budget_s: float | None, steps: int | None, seed: int,

@@ -98,6 +98,19 @@ def test_the_best_validated_combination_is_chosen_and_fitted_on_all_the_training
     assert tuned.method.hyperparameters()["degree"] == 3
 
 
+def test_the_record_gives_the_work_of_the_fold_fits_beside_the_final_fits():
+    # under a work budget every fit does the budget's steps; under a time budget each fold fit has a slice of the
+    # search's seconds and the final fit the rest, and the record shows how much less the validated fits did
+    train = _trajectories()
+    by_work = tune(METHODS["mlp"], {"hidden": 8, "layers": 1, "eval_samples": 64}, train,
+                   "indirect", 0, Budget(steps=7)).details["work"]
+    assert by_work["fold_steps"] == [7] * 3 and by_work["final_steps"] == 7
+    assert len(by_work["fold_fit_seconds"]) == 3 and by_work["final_fit_seconds"] > 0
+    poly = tune(Poly, {}, train, "indirect", 0, Budget(steps=1)).details
+    chosen = next(r for r in poly["combinations"] if r["hyperparameters"] == poly["chosen"])
+    assert poly["work"]["fold_steps"] == chosen["fold_steps"] == [1, 1, 1] and poly["work"]["final_steps"] == 1
+
+
 def test_a_hyperparameter_the_user_set_is_not_searched():
     tuned = tune(Poly, {"degree": 1}, _trajectories(), "indirect", 0, Budget(steps=1))
     assert tuned.details["searched"] == ["ridge"] and len(tuned.details["combinations"]) == 2

@@ -29,6 +29,9 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     assert result["chosen"]["name"] == best["name"] and set(result["chosen"]) >= {"name", "validation_mse", "test_mse"}
     text = (out / "select.md").read_text()
     assert f"| {best['name']} **(chosen)** |" in text and "rank by validation" in text
+    for c in result["candidates"]:  # under --steps each fold fit does the final fit's work, and the page says so
+        assert set(c["work"]["fold_steps"]) == {c["work"]["final_steps"]}
+    assert "work: each fold fit → the final fit" in text and " steps, " in text
     write_csv(SYSTEMS["kuka_lwr4"]().load("test"), tmp_path / "test.csv")
     p = cli("predict", "--model", out / "model.npz", "--log", tmp_path / "test.csv", "--out", tmp_path / "p.csv")
     assert p.returncode == 0
