@@ -1,9 +1,15 @@
 """``bench select``: candidates tuned on the training data, one chosen by
-validation alone, its page, its JSON and its model file; a second call resumes."""
+validation alone, its page, its JSON and its model file; a second call resumes;
+and the test trajectory's torques, read only to score, change no choice."""
 
 from __future__ import annotations
 
+import csv
+import gzip
+import io
 import json
+import shutil
+from pathlib import Path
 
 import pytest
 
@@ -60,3 +66,41 @@ def test_a_candidate_that_failed_or_saved_nothing_is_not_chosen():
     text = page({"system": "arm", "command": "cmd", "split": None, "budget": "1 steps", "seed": 0, "folds": "f",
                  "chosen": entries[2], "candidates": entries})
     assert "| c **(chosen)** | x=1 |" in text and "timeout: killed" in text
+
+
+def _arm(folder: Path, test_torque_factor: float) -> Path:
+    """The shipped KUKA declared as a measured arm of one's own, its test trajectory's (run 3's) torques
+    multiplied by ``test_torque_factor``."""
+    data = Path(__file__).resolve().parents[2] / "systems" / "data"
+    folder.mkdir()
+    for name in ("kuka_lwr4.urdf.gz", "kuka_lwr4_run1.csv.gz", "kuka_lwr4_run2.csv.gz"):
+        shutil.copy(data / name, folder / name)
+    declared = folder / f"arm_{folder.name}.toml"  # a name of its own: a system is registered by its file's name
+    shutil.copy(data / "kuka_lwr4.toml", declared)
+    with gzip.open(data / "kuka_lwr4_run3.csv.gz", "rt") as f:
+        rows = list(csv.reader(f))
+    taus = [i for i, name in enumerate(rows[0]) if name.startswith("tau")]
+    for row in rows[1:]:
+        for i in taus:
+            row[i] = repr(float(row[i]) * test_torque_factor)
+    text = io.StringIO()
+    csv.writer(text, lineterminator="\n").writerows(rows)
+    with gzip.open(folder / "kuka_lwr4_run3.csv.gz", "wt") as f:
+        f.write(text.getvalue())
+    return declared
+
+
+def test_the_test_trajectorys_torques_change_no_choice(tmp_path):
+    results = []
+    for factor in (1.0, 3.0):
+        arm = _arm(tmp_path / f"times{factor:g}", factor)
+        out = tmp_path / f"sel{factor:g}"
+        r = cli("select", "--system", f"measured:{arm}", "--candidates", "standard,standard+gp", "--steps", "2",
+                "--no-rollout", "--out", out)
+        assert r.returncode == 0, r.stderr
+        results.append(json.loads((out / "select.json").read_text()))
+    same, scaled = results
+    assert same["chosen"]["name"] == scaled["chosen"]["name"]
+    for a, b in zip(same["candidates"], scaled["candidates"]):
+        assert a["validation_mse"] == b["validation_mse"] and a["hyperparameters"] == b["hyperparameters"]
+        assert b["test_mse"] > 2 * a["test_mse"]  # the test data were read, to score
