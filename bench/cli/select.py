@@ -7,7 +7,10 @@ from pathlib import Path
 
 from bench.cli.options import UsageError, add_budget, add_plugin, add_split, budget, check_names, check_split, load_plugins
 from bench.core.arguments import csv_list, positive_int, seed
+from bench.core.csv_format import read_csv
 from bench.core.fileio import check_output
+from bench.evaluation.domain import sentences
+from bench.runner.execute import given_data
 from bench.studies.selection import CANDIDATES, select
 from systems import SYSTEMS
 
@@ -25,6 +28,11 @@ def add_arguments(p) -> None:
     p.add_argument("--candidates", type=csv_list, default=None,
                    help=f"only these candidates (default: all of {', '.join(c.name for c in CANDIDATES)})")
     p.add_argument("--no-rollout", action="store_true", help="skip the candidates' driven rollouts of the test recordings")
+    p.add_argument("--target-states", type=Path, default=None, metavar="LOG",
+                   help="a CSV in the suite's format of the states the model will be asked (q, qd and qdd; its "
+                        "torque columns, if any, are not read): the page says whether validation reached as far "
+                        "from the training states as they lie (default: the spread between the training "
+                        "trajectories, where there are several)")
     add_plugin(p)
 
 
@@ -45,13 +53,18 @@ def main(args) -> int:
     check_names(args, [name], names)
     check_split(args.split, [name])
     budget_s, steps = budget(args)
+    arm = SYSTEMS[name](split=args.split)
+    data = given_data(arm, None, None)
+    target = None if args.target_states is None else read_csv(args.target_states, dof=arm.dof, system=name,
+                                                               states_only=True)
     result = select(name, args.out, split=args.split, budget_s=budget_s, steps=steps, seed=args.seed,
                     workers=args.workers, plugins=plugins, command=args.invocation, candidates=candidates,
-                    rollout=not args.no_rollout)
+                    rollout=not args.no_rollout, data=data, target=target)
     chosen = result["chosen"]
     if chosen is None:
         print(f"nothing chosen: no candidate ran and validated (see {args.out / 'select.md'})")
         return 1
     print(f"chosen: {chosen['name']} (validation MSE {chosen['validation_mse']:.4g}, test MSE {chosen['test_mse']:.4g}); "
           f"model in {args.out / 'model.npz'}, page in {args.out / 'select.md'}")
+    print(sentences(result["domain"]).replace("**", ""))
     return 0

@@ -172,10 +172,12 @@ def numeric_column(frame, col: str, path: Path) -> np.ndarray:
 
 
 def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | None = None,
-             torque_optional: bool = False) -> Dataset:
+             torque_optional: bool = False, states_only: bool = False) -> Dataset:
     """Load a CSV in the suite's format, checking it thoroughly. With
     ``torque_optional``, a file without ``tau_i`` columns is read with zero
-    torques and ``meta["no_torque"]`` set (states to predict the torques of).
+    torques and ``meta["no_torque"]`` set (states to predict the torques of);
+    with ``states_only``, any ``tau_i`` columns are not read at all (states a
+    choice may look at, where their torques must not inform it).
 
     Raises :class:`DataError` with a one-line message naming the file and the
     problem for: an unreadable or empty file, missing columns, a number of
@@ -196,7 +198,7 @@ def read_csv(path: str | os.PathLike, *, dof: int | None = None, system: str | N
         who = f"system {system!r}" if system else "the model"
         raise DataError(f"{path}: the file has {file_dof} degrees of freedom (q_1..q_{file_dof}) but {who} has {dof}")
     need = columns(file_dof, False)
-    no_torque = torque_optional and not found["tau"]
+    no_torque = states_only or (torque_optional and not found["tau"])
     missing = [c for c in need if c not in frame.columns and not (no_torque and c.startswith("tau_"))]
     if missing:
         raise DataError(f"{path}: missing column(s) {', '.join(missing)}")

@@ -24,10 +24,16 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+
+import numpy as np
 from pathlib import Path
 
+from bench.core.data import Dataset
+from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, write_json
-from bench.evaluation.tuning import PROTOCOL
+from bench.core.folds import folds as fold_data
+from bench.evaluation.domain import domain, sentences
+from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL
 from bench.runner import matrix
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
@@ -151,6 +157,14 @@ def page(result: dict) -> str:
                   f"Its model: `model.npz` (`python -m bench predict --model model.npz --log LOG.csv --out PRED.csv`)."]
     else:
         lines.append("No candidate ran and validated: nothing chosen.")
+    report = result.get("domain")
+    if report:
+        lines += ["", "## What validation could see", "", sentences(report)]
+        if report.get("test_median_distance") is not None:
+            beyond = report["test_median_distance"] > report["reach"]["median"]
+            lines += ["", f"For comparison, read from the test trajectory's states after the choice (never to make "
+                          f"it): it lies a median {report['test_median_distance']:.3g} from the training states, "
+                          + ("beyond" if beyond else "within") + " what validation reached."]
     return "\n".join(lines) + "\n"
 
 
@@ -170,10 +184,22 @@ def work_cell(work: dict | None) -> str:
     return f"{fold} → {work.get('final_steps')} steps, {work.get('final_fit_seconds', 0):.3g} s"
 
 
+def applicability(train: Dataset, test: Dataset | None, target: Dataset | None) -> dict:
+    """:func:`bench.evaluation.domain.domain` on the training data, folded as tuning folds them, with
+    ``test_median_distance``: the test states' distance, for the page's comparison after the choice."""
+    report = domain(train, fold_data(train, max_folds=MAX_FOLDS), target)
+    report["test_median_distance"] = None if test is None else \
+        float(np.median(TrainingStates(train).distance(test)))
+    report["test_beyond_reach"] = None if test is None else report["test_median_distance"] > report["reach"]["median"]
+    return report
+
+
 def select(system: str, out: Path, *, split: str | None, budget_s: float | None, steps: int | None, seed: int,
            workers: int | None, plugins: tuple[str, ...], command: str, candidates=CANDIDATES, rollout: bool = True,
-           report=print) -> dict:
-    """Run the candidates, choose one, write ``select.json``, ``select.md`` and ``model.npz`` into ``out``."""
+           report=print, data: tuple[Dataset, Dataset | None] | None = None, target: Dataset | None = None) -> dict:
+    """Run the candidates, choose one, write ``select.json``, ``select.md`` and ``model.npz`` into ``out``.
+    ``data`` is the system's training and test data, for the page's report of what validation could see
+    (with ``target``, the states the user says the model will be asked: :mod:`bench.evaluation.domain`)."""
     out = Path(out)
     rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout)
     done = run(rows, workers, report)
@@ -183,7 +209,8 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
                   if (r.details or {}).get("tuning", {}).get("folds")), None)
     budget = rows[0][1].budget.describe()
     result = {"system": system, "split": split, "seed": seed, "budget": budget, "command": command,
-              "protocol": PROTOCOL, "folds": folds, "chosen": chosen, "candidates": entries}
+              "protocol": PROTOCOL, "folds": folds, "chosen": chosen, "candidates": entries,
+              "domain": None if data is None else applicability(data[0], data[1], target)}
     if chosen:
         content = (out / chosen["model"]).read_bytes()
         atomic_write(out / "model.npz", lambda f: f.write(content), binary=True)
