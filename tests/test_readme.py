@@ -68,7 +68,8 @@ def _make_recipe(target: str) -> list[list[str]]:
 
 
 def _at_smoke_budget(words: list[str]) -> list[str]:
-    """A bench command bounded by one step of work and one seed instead of its seconds, steps and seeds."""
+    """A bench command bounded by one step of work and one seed instead of its seconds, steps and seeds, and
+    without the simulated rollouts after each fit (what is run is the command's matrix, not its scores)."""
     out, words = [], list(words)
     while words:
         word = words.pop(0)
@@ -76,7 +77,7 @@ def _at_smoke_budget(words: list[str]) -> list[str]:
             words.pop(0)
             continue
         out.append(word)
-    return out + ["--steps", "1", "--n-seeds", "1"] if "run" in out else out
+    return out + ["--steps", "1", "--n-seeds", "1", "--no-rollout"] if "run" in out else out
 
 
 def _quick_start() -> list[list[str]]:
