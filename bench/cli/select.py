@@ -8,6 +8,7 @@ from pathlib import Path
 from bench.cli.options import UsageError, add_budget, add_plugin, add_split, budget, check_names, check_split, load_plugins
 from bench.core.arguments import csv_list, positive_int, seed
 from bench.core.csv_format import read_csv
+from bench.core.protocols import NAMES
 from bench.core.fileio import check_output
 from bench.evaluation.domain import sentences
 from bench.runner.execute import given_data
@@ -33,6 +34,11 @@ def add_arguments(p) -> None:
                         "torque columns, if any, are not read): the page says whether validation reached as far "
                         "from the training states as they lie (default: the spread between the training "
                         "trajectories, where there are several)")
+    p.add_argument("--folds", choices=NAMES, default="time",
+                   help="the validation folds: time (whole trajectories, or spans in time of one), regions "
+                        "(leave-region-out: k-means regions of the states), or knndm (the folds of time or of "
+                        "regions whose held-out distances match the target's: --target-states, else the spread "
+                        "between the training trajectories); default time")
     add_plugin(p)
 
 
@@ -57,9 +63,15 @@ def main(args) -> int:
     data = given_data(arm, None, None)
     target = None if args.target_states is None else read_csv(args.target_states, dof=arm.dof, system=name,
                                                                states_only=True)
+    protocol = args.folds
+    if protocol == "knndm" and args.target_states is not None:
+        protocol = f"knndm:{args.target_states.resolve()}"
+    elif protocol == "knndm" and len(data[0].trajectories()) < 2:
+        raise UsageError("--folds knndm: the training data hold one trajectory; name the states the model will be "
+                         "asked with --target-states LOG")
     result = select(name, args.out, split=args.split, budget_s=budget_s, steps=steps, seed=args.seed,
                     workers=args.workers, plugins=plugins, command=args.invocation, candidates=candidates,
-                    rollout=not args.no_rollout, data=data, target=target)
+                    rollout=not args.no_rollout, data=data, target=target, protocol=protocol)
     chosen = result["chosen"]
     if chosen is None:
         print(f"nothing chosen: no candidate ran and validated (see {args.out / 'select.md'})")

@@ -76,6 +76,10 @@ class Folds:
     autocorrelation: float | None = None
     recordings: int = 0
     trajectories: int = 0
+    #: how a protocol of :mod:`bench.core.protocols` made the folds, in words (``None``: the kinds above)
+    detail: str | None = None
+    #: what a protocol that chooses among fold sets tried (kNNDM's candidates and their match)
+    choices: list | None = None
 
     def __len__(self) -> int:
         return len(self.folds)
@@ -99,10 +103,12 @@ class Folds:
     def rows(self, dof: int) -> "Folds":
         """The same folds over the rows of a torque fit (``tau.ravel()``: ``dof`` rows a sample)."""
         return Folds(tuple(Fold(np.repeat(f.held, dof), np.repeat(f.score, dof)) for f in self.folds), self.kind,
-                     self.gap, self.autocorrelation, self.recordings, self.trajectories)
+                     self.gap, self.autocorrelation, self.recordings, self.trajectories, self.detail, self.choices)
 
     def describe(self) -> str:
         """How the data were folded, in words."""
+        if self.detail:
+            return self.detail
         n = len(self.folds)
         if self.kind == "trajectories":
             extra = f" ({self.recordings} recordings)" if self.recordings != self.trajectories else ""
@@ -120,7 +126,8 @@ class Folds:
         """What a record says of the folds."""
         return {"kind": self.kind, "folds": len(self.folds), "gap_samples": self.gap,
                 "autocorrelation_samples": None if self.autocorrelation is None else round(self.autocorrelation, 1),
-                "scored": [int(f.score.sum()) for f in self.folds], "description": self.describe()}
+                "scored": [int(f.score.sum()) for f in self.folds], "description": self.describe(),
+                **({"choices": self.choices} if self.choices else {})}
 
 
 def folds(data: Dataset, max_folds: int | None = None, values: np.ndarray | None = None) -> Folds:

@@ -1,41 +1,52 @@
 """A method's hyperparameters chosen on the training data alone, by the
-suite's one validation protocol (:mod:`bench.core.folds`).
+suite's one validation protocol (:mod:`bench.core.folds`), each combination
+validated at the work its final fit gets.
 
 Each method declares a small search space (:attr:`methods.base.Method.search_space`:
 values per hyperparameter, at most :data:`MAX_COMBINATIONS` combinations in
 all, as SRBench allows: La Cava et al., 2021). A tuned fit
 
-1. folds the training data (:func:`bench.core.folds.folds`, at most
-   :data:`MAX_FOLDS` folds of whole trajectories, or spans in time of one
-   trajectory with the torque's autocorrelation time between what a fold
-   fits and what it scores);
-2. fits every combination on every fold and scores it on the fold's scored
-   samples: scikit-learn's ``GridSearchCV``, with the folds as its ``cv``;
-3. chooses the combination with the lowest validation MSE (the mean over the
-   folds; a combination that fails or predicts non-finite torques on any fold
-   is not chosen), and fits it on all the training data. A method with
-   nothing to search has its one configuration validated the same way, so
-   that every tuned run says what validation made of it.
+1. folds the training data (:func:`bench.core.folds.folds`, or a protocol in
+   state space of :mod:`bench.core.protocols`; at most :data:`MAX_FOLDS` folds);
+2. searches by **successive halving over work** (Jamieson & Talwalkar, 2016;
+   Li et al., 2018): every combination is fitted on every fold with a third
+   of a third … of the final fit's steps, the best third (by the mean
+   validation MSE over the folds) go on with three times the steps, and so
+   on until **one** is left, fitted on every fold with exactly the steps its
+   final fit will do. A method with nothing to search has that one rung only;
+3. scores the method by that survivor's mean validation MSE at the final
+   fit's work (:data:`SCORE_RULE`): not the least score over the search, and
+   not the score of a fit less trained than the model kept. The lower rungs
+   that kept the survivor scored the same folds, so a little of the search's
+   optimism remains; ``bench study selection`` measures it against the test;
+4. fits the survivor on all the training data with the same steps.
 
-The fit's budget covers all of it. Under a time budget each fit of the search
-has an equal part of ``1 - FINAL_SHARE`` of the seconds, no fit starts once
-that share has passed (a combination left unfitted is recorded so and not
-chosen), and the final fit has what is left, at least :data:`MIN_FINAL_SHARE`
-of the budget; under a work budget every fit, in the search and the final
-one, does the budget's steps (the work a method is compared by), so that a
-tuned run is as replayable as any. What it chose, every combination's validation MSE per
-fold, and the folds are the record's ``details.tuning``; its ``work`` gives the steps and
-seconds of the chosen combination's fold fits beside those of the final fit, so that a
-reader sees how much less trained the validated fits were than the model kept.
+The final fit's steps are the work budget's, under ``--steps``. Under a time
+budget they are measured: a probe fits the first combination on the first
+fold for :data:`PROBE_SHARE` of the seconds, a straight line (seconds against
+steps × the share of the samples fitted) is drawn through the probe and every
+fit since, and before each rung the steps are planned so that what is left of
+the search and the final fit end within :data:`PLANNED_SHARE` of the budget.
+No fit of the search starts once ``1 - MIN_FINAL_SHARE`` of it has passed (a
+combination left unfitted is recorded so and not chosen).
+
+scikit-learn's ``HalvingGridSearchCV`` ends with ``factor`` combinations at a
+rung of ``min_resources × factor^k`` and cannot re-plan the steps from the
+fits it measured, so the rungs are counted here; each rung's fits are plain
+fits of the method on the folds' samples. A fit of one combination, fold and
+step count is done once and reused where two rungs ask for the same steps.
+
+What it chose, every combination's validation MSE per fold at the highest rung
+it reached, the rungs and the folds are the record's ``details.tuning``; its
+``work`` gives the steps and seconds of the chosen combination's fold fits
+beside those of the final fit.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 import time
-import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -43,21 +54,30 @@ import numpy as np
 from bench.core.budget import SECONDS, Budget
 from bench.core.data import Dataset, mse
 from bench.core.errors import ConfigError
-from bench.core.folds import folds
+from bench.core.folds import Folds
+from bench.core.protocols import folds
 from bench.physics.system import System
 
 #: at most this many combinations a method's search space may hold
 MAX_COMBINATIONS = 10
-#: folds of whole trajectories the search uses at most
+#: folds the search uses at most
 MAX_FOLDS = 4
-#: the share of a time budget the final fit has; the search has the rest
-FINAL_SHARE = 0.5
-#: the least share of a time budget the final fit has where the search took more than its own
+#: successive halving's factor: a rung keeps the best third of its combinations, with three times the steps
+ETA = 3
+#: the share of a time budget the probe that measures a fit's pace has
+PROBE_SHARE = 0.05
+#: the share of a time budget the search and the final fit are planned to end within
+PLANNED_SHARE = 0.8
+#: the least share of a time budget left to the final fit: no fit of the search starts past the rest
 MIN_FINAL_SHARE = 0.25
 #: why a combination was not fitted where the search's share of a time budget ended first
 OUT_OF_TIME = "not fitted: the search's share of the budget ended before it"
 #: what the record and the tables call a tuned run
 PROTOCOL = "tuned on the training trajectories"
+#: how a tuned method is scored
+SCORE_RULE = ("the mean validation MSE over the folds of the one combination successive halving kept, each fold fit "
+              "doing the final fit's steps (not the least score over the search; the rungs that kept it scored the "
+              "same folds)")
 
 
 def combinations(method_cls) -> list[dict]:
@@ -105,66 +125,100 @@ def check_space(method_cls) -> None:
         method_cls(**choice)
 
 
-class _Shared:
-    """What every candidate of one search shares (the data, the budget): one
-    object, not copied when scikit-learn clones a candidate."""
-
-    def __init__(self, make: Callable[[dict], object], train: Dataset, experiment: str, seed: int, budget: Budget,
-                 system: System | None, deadline: float = math.inf):
-        self.make, self.train, self.experiment, self.seed = make, train, experiment, seed
-        self.budget, self.system, self.deadline = budget, system, deadline
-        self.failures: dict[tuple, str] = {}
-        #: the work each combination's fold fits did (steps, in the folds' order), and their seconds
-        self.steps: dict[tuple, list] = {}
-        self.seconds: dict[tuple, list] = {}
-
-    def __deepcopy__(self, memo):
-        return self
+def rungs(combinations: int) -> list[tuple[int, float]]:
+    """Successive halving's rungs for ``combinations``: ``(combinations fitted, share of the final fit's steps)``,
+    the last rung one combination at the whole steps (``[(8, 1/9), (3, 1/3), (1, 1)]`` for 8)."""
+    counts = [combinations]
+    while counts[-1] > 1:
+        counts.append(math.ceil(counts[-1] / ETA))
+    top = len(counts) - 1
+    return [(n, 1.0 / ETA ** (top - k)) for k, n in enumerate(counts)]
 
 
-@functools.cache
-def _candidate_type() -> type:
-    """:class:`_Candidate`'s type, made on first use: it is a scikit-learn estimator, and
-    scikit-learn takes about a second to import, which a run that does not tune never needs."""
-    from sklearn.base import BaseEstimator
+@dataclass
+class _Fit:
+    """A combination's fits on every fold at one step count."""
 
-    class _Candidate(BaseEstimator):
-        """One combination as a scikit-learn estimator: ``X`` holds sample indices."""
+    mse: list = field(default_factory=list)
+    steps: list = field(default_factory=list)
+    seconds: list = field(default_factory=list)
+    failed: str | None = None
 
-        def __init__(self, shared: _Shared | None = None, choice: dict | None = None):
-            self.shared = shared
-            self.choice = choice
+    @property
+    def score(self) -> float | None:
+        """The mean validation MSE over the folds; ``None`` where a fold failed or was not finite."""
+        if self.failed or not self.mse or not all(math.isfinite(v) for v in self.mse):
+            return None
+        return float(np.mean(self.mse))
 
-        def fit(self, X, y=None):
-            s = self.shared
-            self.method_ = None
-            if time.perf_counter() > s.deadline:
-                s.failures[_key(self.choice)] = OUT_OF_TIME
-                return self
+
+class _Search:
+    """The fits of one search: each combination fitted and scored on each fold at a step count, once, and the
+    seconds they took, from which the steps a time budget allows are planned."""
+
+    def __init__(self, make: Callable[[dict], object], train: Dataset, experiment: str, seed: int,
+                 system: System | None, fold_set: Folds):
+        self.make, self.train, self.experiment, self.seed, self.system = make, train, experiment, seed, system
+        self.folds = fold_set
+        self.fits: dict[tuple, _Fit] = {}
+        #: (steps x share of the samples fitted, seconds) of every fit so far
+        self.observed: list[tuple[float, float]] = []
+        self.shares = [float(np.mean(f.fit)) for f in fold_set]
+
+    def _one(self, choice: dict, fold: int, budget: Budget):
+        t0 = time.perf_counter()
+        method = self.make(choice)
+        fold_ = self.folds[fold]
+        method.fit(self.train.subset(fold_.fit), self.experiment, self.seed, budget, system=self.system)
+        seconds = time.perf_counter() - t0
+        steps = method.fit_info.get("steps")
+        self.observed.append(((steps or 0) * self.shares[fold], seconds))
+        return method, steps, seconds
+
+    def probe(self, choice: dict, seconds: float) -> dict:
+        """One fit of ``choice`` on the first fold for ``seconds``: what it did, for the plan."""
+        try:
+            _, steps, took = self._one(choice, 0, Budget(seconds=seconds))
+        except Exception as exc:  # the search records the combination's failure when it fits it
+            return {"seconds": round(seconds, 3), "failed": f"{type(exc).__name__}: {exc}"[:300]}
+        return {"seconds": round(took, 3), "steps": steps}
+
+    def score(self, choice: dict, steps: int, deadline: float) -> _Fit:
+        key = (_key(choice), steps)
+        if key in self.fits:
+            return self.fits[key]
+        out = self.fits[key] = _Fit()
+        for k, fold in enumerate(self.folds):
+            if time.perf_counter() > deadline:
+                out.failed = OUT_OF_TIME
+                break
             try:
-                method = s.make(self.choice)
-                method.fit(s.train.subset(np.asarray(X)[:, 0]), s.experiment, s.seed, s.budget, system=s.system)
-                self.method_ = method
-                s.steps.setdefault(_key(self.choice), []).append(method.fit_info.get("steps"))
-                s.seconds.setdefault(_key(self.choice), []).append(round(method.fit_info.get("fit_seconds") or 0.0, 3))
+                method, done, seconds = self._one(choice, k, Budget(steps=steps))
+                part = self.train.subset(fold.score)
+                out.mse.append(float(mse(method.predict(part, self.experiment), part.target(self.experiment))))
+                out.steps.append(done)
+                out.seconds.append(round(seconds, 3))
             except Exception as exc:  # a combination that fails is not chosen; the record says why
-                s.failures[_key(self.choice)] = f"{type(exc).__name__}: {exc}"[:300]
-            return self
+                out.failed = f"{type(exc).__name__}: {exc}"[:300]
+                break
+        return out
 
-    return _Candidate
-
-
-def _key(choice: dict) -> tuple:
-    return tuple(sorted((k, repr(v)) for k, v in choice.items()))
-
-
-def _score(candidate, X, y=None) -> float:
-    """Minus the candidate's MSE on the samples ``X``; ``nan`` where it failed or predicts non-finite values."""
-    if candidate.method_ is None:
-        return math.nan
-    s = candidate.shared
-    part = s.train.subset(np.asarray(X)[:, 0])
-    return -mse(candidate.method_.predict(part, s.experiment), part.target(s.experiment))
+    def plan(self, schedule: list[tuple[int, float]], seconds: float) -> int:
+        """The final fit's steps that let ``schedule``'s rungs (on every fold) and the final fit (on all the
+        samples) end within ``seconds``, by the line through the fits observed so far (at least one step)."""
+        units = np.array([u for u, _ in self.observed])
+        took = np.array([s for _, s in self.observed])
+        if not len(units) or not (units > 0).any():
+            return 1
+        if len(set(units.tolist())) >= 2:
+            slope, overhead = np.polyfit(units, took, 1)
+        else:
+            slope, overhead = 0.0, 0.0
+        if not (slope > 0) or overhead < 0:  # a line that does not describe the fits: seconds per unit, no overhead
+            slope, overhead = float(took.sum() / units.sum()), 0.0
+        fits = sum(n for n, _ in schedule) * len(self.folds) + 1
+        work = sum(n * share for n, share in schedule) * sum(self.shares) + 1.0
+        return max(1, int((seconds - fits * overhead) / (slope * work)))
 
 
 @dataclass
@@ -177,12 +231,14 @@ class Tuned:
 
 
 def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int, budget: Budget,
-         system: System | None = None, device: str = "cpu", report: Callable[[str], None] | None = None) -> Tuned:
+         system: System | None = None, device: str = "cpu", report: Callable[[str], None] | None = None,
+         protocol: str | None = None) -> Tuned:
     """Choose ``method_cls``'s hyperparameters from its search space on ``train``
     (see the module docstring), on top of ``settings`` (its configuration and
     the user's ``--set``; a searched hyperparameter the user set stays as set and
-    is not searched), and fit the choice on all of ``train``. ``report`` is
-    given a line as the search goes."""
+    is not searched), and fit the choice on all of ``train`` at the steps it was
+    validated at. ``protocol`` names the folds (:func:`bench.core.protocols.folds`; default those of
+    time). ``report`` is given a line as the search goes."""
     say = report or (lambda line: None)
     fixed = dict(settings)
     searched, grid = _grid(method_cls, fixed)  # nothing to search: the one configuration is still validated
@@ -190,68 +246,85 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
     def make(choice: dict):
         return method_cls(**{**fixed, **choice}).use_device(device)
 
-    from sklearn.model_selection import GridSearchCV
-
     t0 = time.perf_counter()
-    fold_set = folds(train, max_folds=MAX_FOLDS)
-    fits = len(grid) * len(fold_set)
-    each = budget.scaled((1.0 - FINAL_SHARE) / fits)
+    timed = budget.kind == SECONDS
+    fold_set = folds(train, protocol, MAX_FOLDS)
+    search = _Search(make, train, experiment, seed, system, fold_set)
+    schedule = rungs(len(grid))
+    deadline = t0 + (1.0 - MIN_FINAL_SHARE) * budget.seconds if timed else math.inf
+    end = t0 + PLANNED_SHARE * budget.seconds if timed else math.inf
+    probe = search.probe(grid[0], PROBE_SHARE * budget.seconds) if timed else None
     say(f"tuning {method_cls.name}: {len(grid)} combinations x {len(fold_set)} folds ({fold_set.describe()}), "
-        f"{each.describe()} a fit")
-    # under a time budget no fit of the search starts past its share (each fit's own work, a hybrid's prior
-    # say, may take longer than its part of it)
-    deadline = t0 + (1.0 - FINAL_SHARE) * budget.seconds if budget.kind == SECONDS else math.inf
-    shared = _Shared(make, train, experiment, seed, each, system, deadline)
-    search = GridSearchCV(_candidate_type()(shared), {"choice": grid}, scoring=_score, cv=fold_set.indices(),
-                          refit=False, error_score=math.nan)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # a failed or non-finite combination is recorded, not warned about
-        search.fit(np.arange(len(train))[:, None])
-    results = search.cv_results_
-    rows = []
-    for i, choice in enumerate(results["param_choice"]):
-        per_fold = [-float(results[f"split{k}_test_score"][i]) for k in range(len(fold_set))]
-        finite = all(math.isfinite(v) for v in per_fold)
-        row = {"hyperparameters": dict(choice), "validation_mse": float(np.mean(per_fold)) if finite else None,
-               "fold_mse": [v if math.isfinite(v) else None for v in per_fold],
-               "fit_seconds": round(float(results["mean_fit_time"][i]) * len(fold_set), 3),
-               "fold_steps": shared.steps.get(_key(choice), []), "fold_fit_seconds": shared.seconds.get(_key(choice), [])}
-        failure = shared.failures.get(_key(choice))
-        if failure or not finite:
-            row["failed"] = failure or "non-finite validation MSE"
-        rows.append(row)
-        say(f"  {_words(choice)}: validation MSE "
-            + (f"failed ({row['failed']})" if row["validation_mse"] is None else format(row["validation_mse"], ".4g")))
-    usable = [r for r in rows if r["validation_mse"] is not None]
+        f"by successive halving over {len(schedule)} rung(s) of work"
+        + (f"; a probe did {probe.get('steps')} steps in {probe['seconds']:g} s" if probe else ""))
+    survivors, reached, table = list(grid), {}, []
+    final_steps = budget.steps
+    for k, (count, share) in enumerate(schedule):
+        if timed:  # re-planned from every fit so far, so that the last rung and the final fit end in time
+            final_steps = search.plan(schedule[k:], end - time.perf_counter())
+        steps = max(1, round(final_steps * share))
+        fits = {_key(c): search.score(c, steps, deadline) for c in survivors}
+        for c in survivors:
+            reached[_key(c)] = (k, steps, c)
+        ranked = sorted((c for c in survivors if fits[_key(c)].score is not None),
+                        key=lambda c: fits[_key(c)].score)
+        table.append({"steps": steps, "combinations": len(survivors), "scored": len(ranked)})
+        say(f"  rung {k + 1} of {len(schedule)}, {steps} steps a fold fit: "
+            + "; ".join(f"{_words(c) or 'its configuration'} "
+                        + (format(fits[_key(c)].score, '.4g') if fits[_key(c)].score is not None
+                           else f"failed ({fits[_key(c)].failed or 'non-finite validation MSE'})") for c in survivors))
+        if not ranked:
+            break
+        survivors = ranked[:schedule[k + 1][0]] if k + 1 < len(schedule) else ranked[:1]
+    rows = [_row(c, k, steps, search.fits[(_key(c), steps)]) for c in grid for k, steps, _ in [reached[_key(c)]]]
+    top = len(schedule) - 1
+    whole = [r for r in rows if r["rung"] == top and r["validation_mse"] is not None]
     search_seconds = time.perf_counter() - t0
-    if not usable:
-        chosen, note = {}, "every combination failed in the search: the method's own defaults are fitted"
+    note = None
+    if whole:
+        chosen_row = whole[0]
     else:
-        chosen, note = min(usable, key=lambda r: r["validation_mse"])["hyperparameters"], None
-    if budget.kind == SECONDS:  # the final fit has what is left of the budget, and at least MIN_FINAL_SHARE of it
-        left = budget.seconds - (time.perf_counter() - t0)
-        final = Budget(seconds=max(left, MIN_FINAL_SHARE * budget.seconds))
-    else:
-        final = budget.scaled(FINAL_SHARE)
+        usable = [r for r in rows if r["validation_mse"] is not None]
+        chosen_row = max(usable, key=lambda r: (r["rung"], -r["validation_mse"])) if usable else None
+        note = ("every combination failed in the search: the method's own defaults are fitted" if chosen_row is None
+                else f"no combination was validated at the final fit's steps (the search's share of the budget "
+                     f"ended): the best at {chosen_row['steps']} steps is chosen, its score from fits with fewer steps")
+    chosen = chosen_row["hyperparameters"] if chosen_row else {}
+    final = Budget(seconds=budget.seconds, steps=budget.steps) if not timed else Budget(steps=final_steps)
     say(f"tuning {method_cls.name}: chose {_words(chosen) or 'its defaults'}; fitting it on all the training data "
         f"({final.describe()})")
     method = make(chosen)
     method.fit(train, experiment, seed, final, system=system)
-    validation = next((r["validation_mse"] for r in rows if r["hyperparameters"] == chosen), None)
-    chosen_row = next((r for r in rows if r["hyperparameters"] == chosen), {})
     details = {"protocol": PROTOCOL, "space": _space(method_cls), "searched": searched, "chosen": chosen,
-               "validation_mse": validation, "folds": fold_set.to_json(), "fit_budget": each.to_json(),
-               "final_budget": final.to_json(), "combinations": rows, "search_seconds": round(search_seconds, 3),
-               "work": {"fold_steps": chosen_row.get("fold_steps", []),
-                        "fold_fit_seconds": chosen_row.get("fold_fit_seconds", []),
+               "validation_mse": chosen_row["validation_mse"] if chosen_row else None, "score": SCORE_RULE,
+               "folds": fold_set.to_json(), "rungs": table, "final_budget": final.to_json(), "combinations": rows,
+               "search_seconds": round(search_seconds, 3),
+               "work": {"fold_steps": chosen_row["fold_steps"] if chosen_row else [],
+                        "fold_fit_seconds": chosen_row["fold_fit_seconds"] if chosen_row else [],
                         "final_steps": method.fit_info.get("steps"),
                         "final_fit_seconds": round(method.fit_info.get("fit_seconds") or 0.0, 3)}}
+    if probe:
+        details["probe"] = probe
     if len(rows) == 1 and not note:
         note = ("nothing to tune: the method declares no search space" if not _space(method_cls) else
                 "nothing to tune: the hyperparameters of its search space are set") + "; its configuration is validated"
     if note:
         details["note"] = note
     return Tuned(method, details)
+
+
+def _row(choice: dict, rung: int, steps: int, fit: _Fit) -> dict:
+    """A combination's line of the record: its figures at the highest rung it reached."""
+    row = {"hyperparameters": dict(choice), "validation_mse": fit.score, "fold_mse": [
+        v if math.isfinite(v) else None for v in fit.mse], "rung": rung, "steps": steps,
+        "fold_steps": fit.steps, "fold_fit_seconds": fit.seconds}
+    if fit.score is None:
+        row["failed"] = fit.failed or "non-finite validation MSE"
+    return row
+
+
+def _key(choice: dict) -> tuple:
+    return tuple(sorted((k, repr(v)) for k, v in choice.items()))
 
 
 def _space(method_cls) -> dict:

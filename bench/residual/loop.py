@@ -128,7 +128,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
                   steps: int | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
                   fitted: FittedModel | None = None, open_ended: bool | None = None,
                   device: str = "cpu", checkpoint: Callable[[ResidualResult], None] | None = None,
-                  on_phase: Callable[[str], None] | None = None) -> ResidualResult:
+                  on_phase: Callable[[str], None] | None = None, max_rounds: int = MAX_ROUNDS) -> ResidualResult:
     """Run the loop in this process; see the module docstring.
 
     ``budget_s`` bounds the whole loop (its method's fit has
@@ -137,8 +137,8 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     only recorded, as the ceiling its caller kills it at: the fit
     and each cross-fit do ``steps`` steps of the method's work, the polish
     all its starts, the trace until nothing is significant, and at most
-    :data:`MAX_ROUNDS` rounds run, so that the result does not depend on
-    the machine's speed. ``fitted`` is an already fitted instance of
+    ``max_rounds`` (default :data:`MAX_ROUNDS`) rounds run, so that the result
+    does not depend on the machine's speed. ``fitted`` is an already fitted instance of
     ``method`` to start from instead of round 0's fit (for instance a model
     fitted before the system changed). Each round records ``seconds``, the
     time since the loop began. ``device`` is where a torch method's fits
@@ -162,7 +162,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     with remembered_columns(train, test):  # each candidate's and effect's columns once, for every round
         loop = _Loop(method, train, test, Budget(seconds=budget_s, steps=steps), seed, dict(hyperparameters or {}),
                      report, open_ended, device)
-        loop.thinned = thinned
+        loop.thinned, loop.max_rounds = thinned, min(int(max_rounds), MAX_ROUNDS)
         loop.checkpoint, loop.on_phase = checkpoint or (lambda result: None), on_phase or (lambda phase: None)
         return loop.run(fitted)
 
@@ -195,6 +195,7 @@ class _Loop(Tidying):
         self.beyond: dict[str, tuple] = {}  # effects dropped for claiming beyond the data: label -> (term, entry)
         self.unnamed: dict[str, dict] = {}  # open-ended terms taken where a named law was only the nearest: label -> entry
         self.thinned = 1  # the loop works on one training sample in this many (residual_loop)
+        self.max_rounds = MAX_ROUNDS  # the most rounds it runs (residual_loop)
         self.statistics = 0.0  # seconds in selection, pruning and the held-out and mass-matrix checks
         # the share of the held-out error a round must save: on trajectories, whose held-out spans are not
         # independent of the rest, what each candidate must (a smaller gain is a fit to the one motion)
@@ -394,11 +395,11 @@ class _Loop(Tidying):
         return candidate
 
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
-        """Rounds 1 to :data:`MAX_ROUNDS`; returns the final model, its held-out
+        """Rounds 1 to :attr:`max_rounds`; returns the final model, its held-out
         error and mass-matrix eigenvalue, and the structural findings."""
         report = self.report
         pool, findings, longest = self.candidates(), {}, 0.0
-        for k in range(1, MAX_ROUNDS + 1):
+        for k in range(1, self.max_rounds + 1):
             began = now()
             if began - self.start + longest >= self.horizon:
                 rounds.append(Round(k, self.scores(model), held, stop=f"the budget of {self.budget.seconds:g} s would "
@@ -434,7 +435,7 @@ class _Loop(Tidying):
                 break
             self.save(model, held, mass, rounds, findings)
         else:
-            self.ending = {"reason": "max_rounds", "detail": f"the loop ran its {MAX_ROUNDS} rounds"}
+            self.ending = {"reason": "max_rounds", "detail": f"the loop ran its {self.max_rounds} rounds"}
         return model, held, mass, findings
 
     def needed(self, began: float) -> dict:

@@ -7,8 +7,15 @@ the drive that the data identify; its final model (the rigid body, its named
 laws, read through the sensor's laws) is the prior, and the residual learner
 of :mod:`methods.hybrid` is fitted to what it leaves. Both are fitted within
 the hybrid's one budget: under a time budget the loop has :data:`LOOP_SHARE`
-of it and the residual the rest; under a work budget the loop's fit and
-rounds are bounded by the steps as ``bench residual --steps`` bounds them.
+of it and the residual the rest; under a work budget the loop's fit is
+bounded by the steps as ``bench residual --steps`` bounds it, and it runs
+its rounds until nothing is significant (at most
+:data:`~bench.residual.loop.MAX_ROUNDS`).
+
+The method ``loop`` counts a round as its step: under ``--steps N`` it runs at
+most ``N`` rounds after its fit, and its record's steps are the rounds it ran,
+so that a tuned or selected ``loop`` is validated at the rounds its final fit
+runs (:mod:`bench.evaluation.tuning`).
 
 Registering the method and the prior is importing this module: a run's own
 process imports it before it resolves the name (:func:`methods.hybrid.modules_for`).
@@ -24,7 +31,8 @@ from bench.core.experiment import INDIRECT
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.physics.models import FittedModel
-from bench.residual.loop import residual_loop
+from bench.residual.loop import MAX_ROUNDS, residual_loop
+from bench.residual.result import ResidualResult
 from methods.base import METHODS, Method
 from methods.hybrid import Prior, prior_unavailable, register_prior
 from methods.progress import Progress
@@ -37,9 +45,19 @@ METHOD = "sysid"
 
 def identify(train: Dataset, system, seed: int, budget: Budget) -> FittedModel:
     """The loop's final model on ``train`` within ``budget``, its progress printed line by line."""
-    result = residual_loop(METHOD, train, None, budget_s=None if budget.steps is not None else budget.seconds,
-                           steps=budget.steps, seed=seed, report=lambda line: print(f"prior: {line}", flush=True))
-    return result.models[1]
+    return run(train, seed, budget).models[1]
+
+
+def run(train: Dataset, seed: int, budget: Budget, max_rounds: int = MAX_ROUNDS) -> ResidualResult:
+    """The loop on ``train`` within ``budget`` and at most ``max_rounds`` rounds, its progress printed line by line."""
+    return residual_loop(METHOD, train, None, budget_s=None if budget.steps is not None else budget.seconds,
+                         steps=budget.steps, seed=seed, max_rounds=max_rounds,
+                         report=lambda line: print(f"prior: {line}", flush=True))
+
+
+def rounds_run(result: ResidualResult) -> int:
+    """The rounds after round 0 that the loop ran, finished or undone (one not started is not counted)."""
+    return sum(1 for r in result.rounds if r["round"] > 0 and not (r.get("stop") or "").startswith("the budget of"))
 
 
 PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the feasible rigid body and its named laws)",
@@ -50,7 +68,8 @@ PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the 
 class Loop(Method):
     """The residual loop's final model from SysId as a method of its own
     (``bench run --methods loop``, a candidate of ``bench select``): fitted by
-    :func:`identify` within the run's whole budget."""
+    :func:`run` within the run's whole budget, a round its step (under a work
+    budget of ``N`` steps, at most ``N`` rounds)."""
 
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "the residual loop traces torques: the direct experiment has none"
@@ -70,9 +89,14 @@ class Loop(Method):
         return None if system.linear_form() is not None else f"loop: {prior_unavailable('loop', system)}"
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        self.model = identify(train, self.system, self.seed, self.budget)
-        while progress.step():
-            progress.stop("solved")
+        budget = self.budget
+        rounds = MAX_ROUNDS if budget.steps is None else min(budget.steps, MAX_ROUNDS)
+        result = run(train, self.seed, budget, rounds)
+        self.model, self._rounds = result.models[1], rounds_run(result)
+        progress.stop("solved")
+
+    def _work_done(self, progress: Progress) -> int:
+        return getattr(self, "_rounds", 0)
 
     def _get_state(self):
         return self.model

@@ -169,7 +169,8 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             phase("fit")
             if spec.tune:
                 tuned = tune(METHODS[spec.method], method_config(spec), train, spec.experiment, spec.seed, budget,
-                             system=system, device=spec.device, report=lambda line: print(line, flush=True))
+                             system=system, device=spec.device, report=lambda line: print(line, flush=True),
+                             protocol=spec.folds)
                 method, tuning = tuned.method, tuned.details
             else:
                 method.fit(train, spec.experiment, spec.seed, budget, system=system)

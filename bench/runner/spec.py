@@ -89,6 +89,9 @@ class RunSpec:
     tune
         Choose the method's hyperparameters from its search space on the
         training data, within the run's budget (:mod:`bench.evaluation.tuning`).
+    folds
+        The validation protocol of a tuned run (:func:`bench.core.protocols.folds`:
+        ``time``, ``regions``, ``knndm`` or ``knndm:LOG``); ``None``: ``time``.
     save
         Write the fitted model to this model file (:mod:`methods.saving`);
         ``None``: do not.
@@ -122,6 +125,7 @@ class RunSpec:
     device: str = "cpu"
     tune: bool = False
     save: str | None = None
+    folds: str | None = None
 
     def __post_init__(self):
         _ = self.budget  # a spec without a valid budget is refused where it is made (ConfigError)
@@ -147,6 +151,7 @@ class RunSpec:
         d["plugins"] = tuple(d.get("plugins", ()))
         d.setdefault("tune", False)
         d.setdefault("save", None)
+        d.setdefault("folds", None)
         return cls(**d)
 
 

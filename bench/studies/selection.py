@@ -31,9 +31,9 @@ from pathlib import Path
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, write_json
-from bench.core.folds import folds as fold_data
+from bench.core.protocols import folds as fold_data
 from bench.evaluation.domain import domain, sentences
-from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL
+from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL, SCORE_RULE
 from bench.runner import matrix
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
@@ -64,8 +64,10 @@ CANDIDATES = (
 
 
 def specs(system: str, split: str | None, budget_s: float | None, steps: int | None, seed: int, out: Path,
-          plugins: tuple[str, ...], candidates=CANDIDATES, rollout: bool = True) -> list[tuple[Candidate, RunSpec, Path]]:
-    """Each candidate's tuned run, the folder its record goes to, and its model file under ``out/models``."""
+          plugins: tuple[str, ...], candidates=CANDIDATES, rollout: bool = True,
+          protocol: str | None = None) -> list[tuple[Candidate, RunSpec, Path]]:
+    """Each candidate's tuned run (validated by ``protocol``'s folds, :mod:`bench.core.protocols`), the folder
+    its record goes to, and its model file under ``out/models``."""
     out = Path(out).resolve()
     folders = {}
     rows = []
@@ -75,7 +77,8 @@ def specs(system: str, split: str | None, budget_s: float | None, steps: int | N
         folders.setdefault(c.method, folder)
         spec = RunSpec(system=system, method=c.method, experiment="indirect", seed=seed, budget_s=budget_s,
                        steps=steps, profile=c.profile, hyperparameters=dict(c.fixed), split=split, plugins=plugins,
-                       tune=True, rollout=rollout, save=str(out / "models" / f"{c.name.replace('+', '_')}.npz"))
+                       tune=True, rollout=rollout, save=str(out / "models" / f"{c.name.replace('+', '_')}.npz"),
+                       folds=protocol)
         rows.append((c, spec, folder))
     return rows
 
@@ -131,9 +134,11 @@ def page(result: dict) -> str:
     lines = [f"# A model of {result['system']}, chosen by validation", "",
              f"Command: `{result['command']}`", "",
              f"Split: {result['split'] or 'default'}; budget per candidate: {result['budget']}; seed {result['seed']}. "
-             f"Each candidate is {PROTOCOL} (validation folds: {result['folds'] or 'none'}), then fitted on all the "
-             f"training data; the one with the lowest validation MSE is chosen, and the test data are read only to "
-             f"score. The test columns are there to show whether validation chose well.", "",
+             f"Each candidate is {PROTOCOL} (validation folds: {result['folds'] or 'none'}) by successive halving over "
+             f"work, each fold fit of the combination it keeps doing the steps of the final fit on all the training "
+             f"data; its validation MSE is {SCORE_RULE}. The one with the lowest validation MSE is chosen, and the "
+             f"test data are read only to score. The test columns are there to show whether validation chose well.",
+             "",
              "| candidate | hyperparameters chosen | work: each fold fit → the final fit | validation MSE | test MSE | "
              "test / standard model | rank by validation | rank by test |", "|---|---|---|---|---|---|---|---|"]
     for e in entries:
@@ -184,10 +189,10 @@ def work_cell(work: dict | None) -> str:
     return f"{fold} → {work.get('final_steps')} steps, {work.get('final_fit_seconds', 0):.3g} s"
 
 
-def applicability(train: Dataset, test: Dataset | None, target: Dataset | None) -> dict:
+def applicability(train: Dataset, test: Dataset | None, target: Dataset | None, protocol: str | None = None) -> dict:
     """:func:`bench.evaluation.domain.domain` on the training data, folded as tuning folds them, with
     ``test_median_distance``: the test states' distance, for the page's comparison after the choice."""
-    report = domain(train, fold_data(train, max_folds=MAX_FOLDS), target)
+    report = domain(train, fold_data(train, protocol, MAX_FOLDS, target), target)
     report["test_median_distance"] = None if test is None else \
         float(np.median(TrainingStates(train).distance(test)))
     report["test_beyond_reach"] = None if test is None else report["test_median_distance"] > report["reach"]["median"]
@@ -196,12 +201,14 @@ def applicability(train: Dataset, test: Dataset | None, target: Dataset | None) 
 
 def select(system: str, out: Path, *, split: str | None, budget_s: float | None, steps: int | None, seed: int,
            workers: int | None, plugins: tuple[str, ...], command: str, candidates=CANDIDATES, rollout: bool = True,
-           report=print, data: tuple[Dataset, Dataset | None] | None = None, target: Dataset | None = None) -> dict:
+           report=print, data: tuple[Dataset, Dataset | None] | None = None, target: Dataset | None = None,
+           protocol: str | None = None) -> dict:
     """Run the candidates, choose one, write ``select.json``, ``select.md`` and ``model.npz`` into ``out``.
     ``data`` is the system's training and test data, for the page's report of what validation could see
-    (with ``target``, the states the user says the model will be asked: :mod:`bench.evaluation.domain`)."""
+    (with ``target``, the states the user says the model will be asked: :mod:`bench.evaluation.domain`).
+    ``protocol`` names the validation folds (:mod:`bench.core.protocols`)."""
     out = Path(out)
-    rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout)
+    rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout, protocol)
     done = run(rows, workers, report)
     entries = [entry(c, r, out) for c, r in done]
     chosen = choose(entries)
@@ -209,8 +216,8 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
                   if (r.details or {}).get("tuning", {}).get("folds")), None)
     budget = rows[0][1].budget.describe()
     result = {"system": system, "split": split, "seed": seed, "budget": budget, "command": command,
-              "protocol": PROTOCOL, "folds": folds, "chosen": chosen, "candidates": entries,
-              "domain": None if data is None else applicability(data[0], data[1], target)}
+              "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds, "chosen": chosen, "candidates": entries,
+              "domain": None if data is None else applicability(data[0], data[1], target, protocol)}
     if chosen:
         content = (out / chosen["model"]).read_bytes()
         atomic_write(out / "model.npz", lambda f: f.write(content), binary=True)

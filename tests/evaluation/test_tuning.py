@@ -17,6 +17,7 @@ from bench.core.data import Dataset, mse
 from bench.core.errors import ConfigError
 from bench.core.folds import folds
 from bench.evaluation.tuning import MAX_COMBINATIONS, MAX_FOLDS, PROTOCOL, check_space, combinations, tune
+from bench.evaluation.tuning import rungs as tuning_rungs
 from bench.runner.records import Record
 from bench.runner.spec import RunSpec, parse_run_id, run_id
 from methods import METHODS
@@ -99,8 +100,7 @@ def test_the_best_validated_combination_is_chosen_and_fitted_on_all_the_training
 
 
 def test_the_record_gives_the_work_of_the_fold_fits_beside_the_final_fits():
-    # under a work budget every fit does the budget's steps; under a time budget each fold fit has a slice of the
-    # search's seconds and the final fit the rest, and the record shows how much less the validated fits did
+    # the survivor's fold fits and the final fit do the same steps, and the record says so beside their seconds
     train = _trajectories()
     by_work = tune(METHODS["mlp"], {"hidden": 8, "layers": 1, "eval_samples": 64}, train,
                    "indirect", 0, Budget(steps=7)).details["work"]
@@ -198,9 +198,32 @@ def test_no_fit_starts_past_the_searchs_share_of_a_time_budget(monkeypatch):
             return self.now
 
     monkeypatch.setattr(tuning, "time", Clock())
-    d = tune(Poly, {}, _trajectories(), "indirect", 0, Budget(seconds=20.0)).details
+    d = tune(Poly, {}, _trajectories(), "indirect", 0, Budget(seconds=40.0)).details
     skipped = [r for r in d["combinations"] if r.get("failed") == tuning.OUT_OF_TIME]
     fitted = [r for r in d["combinations"] if r["validation_mse"] is not None]
     assert skipped and fitted and len(skipped) + len(fitted) == 8
-    assert d["chosen"] == min(fitted, key=lambda r: r["validation_mse"])["hyperparameters"]
-    assert d["final_budget"]["seconds"] >= tuning.MIN_FINAL_SHARE * 20.0
+    assert d["chosen"] in [r["hyperparameters"] for r in fitted] and d["final_budget"]["kind"] == "steps"
+
+
+def test_successive_halving_scores_the_survivor_at_the_final_fits_steps():
+    # a rung keeps the best third with three times the steps; the last holds one combination fitted on every fold
+    # with exactly the steps of the final fit, and that is the method's score, not the least over the search
+    assert tuning_rungs(8) == [(8, 1 / 9), (3, 1 / 3), (1, 1.0)] and tuning_rungs(1) == [(1, 1.0)]
+    train = _trajectories()
+    d = tune(METHODS["mlp"], {"hidden": 8, "layers": 1, "eval_samples": 64}, train, "indirect", 0,
+             Budget(steps=9)).details
+    assert [r["steps"] for r in d["rungs"]] == [3, 9] and [r["combinations"] for r in d["rungs"]] == [2, 1]
+    top = [r for r in d["combinations"] if r["rung"] == 1]
+    assert len(top) == 1 and top[0]["hyperparameters"] == d["chosen"] and d["validation_mse"] == top[0]["validation_mse"]
+    assert d["work"]["fold_steps"] == [9, 9, 9] and d["work"]["final_steps"] == 9
+    dropped = next(r for r in d["combinations"] if r["rung"] == 0)
+    assert dropped["steps"] == 3 and len(dropped["fold_steps"]) == 3
+
+
+def test_under_a_time_budget_the_fold_fits_do_the_steps_the_final_fit_does():
+    train = _trajectories()
+    d = tune(METHODS["mlp"], {"hidden": 8, "layers": 1, "eval_samples": 64, "lr": 1e-3}, train, "indirect", 0,
+             Budget(seconds=6.0)).details
+    assert d["probe"]["steps"] > 0 and d["final_budget"]["kind"] == "steps"
+    steps = d["final_budget"]["steps"]
+    assert d["work"]["fold_steps"] == [steps] * 3 and d["work"]["final_steps"] == steps > 1

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import bench.residual.prior  # noqa: F401  (registers the loop)
-from bench.residual.loop import residual_loop
+from bench.residual.loop import MAX_ROUNDS, residual_loop
 from methods import METHODS
 from methods.hybrid import PRIORS, modules_for
 from methods.saving import TOLERANCE, load_model, save_model
@@ -22,18 +22,21 @@ def arm():
     return system, part, system.load("test").subset(slice(0, 400))
 
 
-def test_the_loop_method_is_the_loops_final_model(arm, capsys):
+def test_the_loop_method_is_the_loops_final_model_a_round_its_step(arm, capsys):
     system, train, test = arm
-    fitted = METHODS["loop"]().fit(train, "indirect", 0, steps=1, system=system)
-    result = residual_loop("sysid", train, None, steps=1, seed=0, report=lambda line: None)
-    np.testing.assert_array_equal(fitted.predict_torque(test), result.models[1].predict_torque(test))
+    for steps in (1, MAX_ROUNDS):
+        fitted = METHODS["loop"]().fit(train, "indirect", 0, steps=steps, system=system)
+        result = residual_loop("sysid", train, None, steps=steps, seed=0, max_rounds=steps, report=lambda line: None)
+        np.testing.assert_array_equal(fitted.predict_torque(test), result.models[1].predict_torque(test))
+        ran = [r for r in result.rounds if r["round"] > 0]
+        assert fitted.fit_info["steps"] == len(ran) <= steps
     assert "prior: round 0" in capsys.readouterr().out  # the loop's progress, line by line
 
 
 def test_a_loop_hybrid_fits_its_residual_to_what_the_loop_leaves_and_saves(arm, tmp_path):
     system, train, test = arm
     hybrid = METHODS["loop+sparse_torque"]().fit(train, "indirect", 0, steps=1, system=system)
-    loop = METHODS["loop"]().fit(train, "indirect", 0, steps=1, system=system)
+    loop = METHODS["loop"]().fit(train, "indirect", 0, steps=MAX_ROUNDS, system=system)
     np.testing.assert_allclose(hybrid.prior.predict_torque(test), loop.predict_torque(test), rtol=1e-12, atol=1e-12)
     assert np.mean((hybrid.predict_torque(train) - train.tau) ** 2) < np.mean((loop.predict_torque(train) - train.tau) ** 2)
     assert hybrid.record_details()["prior"].startswith("the residual loop's model")
