@@ -247,6 +247,8 @@ def test_noise_levels_are_a_dimension_of_the_matrix(tmp_path):
         (["fit", "--system", "double_pendulum", "--method", "mlp", "--experiment", "direct", "--train", "."],
          "is a folder, not a file"),
         (["convert", "--columns", "time=t,q_1=p", "raw.csv", "--out", "o.csv"], "missing qd_1, tau_1"),
+        (["select", "--system", "kuka_lwr4", "--folds", "knndm", "--out", "sel"],
+         "the training data hold one trajectory; name the states the model will be asked with --target-states"),
     ],
 )
 def test_what_users_type_wrong_is_refused_in_one_line(tmp_path, monkeypatch, capsys, args, message):
