@@ -138,19 +138,22 @@ def device(name: str, methods: list[str]) -> str:
     return resolved
 
 
-def add_budget(parser, what: str) -> None:
-    """``--budget SECONDS`` and ``--steps N``, for ``what`` ("per run", "for the fit")."""
+def add_budget(parser, what: str, default: float = DEFAULT_BUDGET_S) -> None:
+    """``--budget SECONDS`` and ``--steps N``, for ``what`` ("per run", "for the fit"); ``default`` seconds
+    where neither is given."""
+    parser.set_defaults(default_budget_s=default)
     parser.add_argument("--budget", type=positive, default=None,
-                        help=f"wall-clock seconds {what} (default {DEFAULT_BUDGET_S:g}); with --steps, a ceiling past "
+                        help=f"wall-clock seconds {what} (default {default:g}); with --steps, a ceiling past "
                              "which a run is killed and recorded as timeout (default: none)")
     parser.add_argument("--steps", type=positive_int, default=None, help=STEPS_HELP)
 
 
 def budget(args) -> tuple[float | None, int | None]:
     """``(budget_s, steps)`` from ``--budget`` and ``--steps``: seconds
-    (default :data:`DEFAULT_BUDGET_S`), or steps with an optional ceiling."""
+    (default: :func:`add_budget`'s, :data:`DEFAULT_BUDGET_S` unless the command
+    says otherwise), or steps with an optional ceiling."""
     if args.steps is None:
-        return (args.budget if args.budget is not None else DEFAULT_BUDGET_S), None
+        return (args.budget if args.budget is not None else getattr(args, "default_budget_s", DEFAULT_BUDGET_S)), None
     return args.budget, args.steps
 
 

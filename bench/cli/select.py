@@ -15,6 +15,10 @@ from bench.runner.execute import given_data
 from bench.studies.selection import CANDIDATES, select
 from systems import SYSTEMS
 
+#: select's seconds per candidate where neither --budget nor --steps is given: its search fits every
+#: combination on every fold, the last rung at the final fit's steps (bench.evaluation.tuning)
+SELECT_BUDGET_S = 180.0
+
 HELP = "choose a model of a measured arm by validation on its training data; write it, and a page of every candidate"
 
 
@@ -22,7 +26,7 @@ def add_arguments(p) -> None:
     p.add_argument("--system", required=True, help="a measured arm (kuka_lwr4, measured:PATH)")
     p.add_argument("--out", type=Path, required=True,
                    help="output folder: select.md, select.json, model.npz, and the candidates' runs (a rerun resumes)")
-    add_budget(p, "per candidate")
+    add_budget(p, "per candidate", SELECT_BUDGET_S)
     add_split(p)
     p.add_argument("--seed", type=seed, default=0, help="the candidates' seed (default 0)")
     p.add_argument("--workers", type=positive_int, default=None, help="candidates at a time (default: one per core)")

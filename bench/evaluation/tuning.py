@@ -176,12 +176,14 @@ class _Search:
         return method, steps, seconds
 
     def probe(self, choice: dict, seconds: float) -> dict:
-        """One fit of ``choice`` on the first fold for ``seconds``: what it did, for the plan."""
+        """Two fits of ``choice`` on the first fold, for the plan's line: one step (what a fit costs however
+        short), then as many steps as ``seconds`` allow."""
         try:
+            _, _, once = self._one(choice, 0, Budget(steps=1))
             _, steps, took = self._one(choice, 0, Budget(seconds=seconds))
         except Exception as exc:  # the search records the combination's failure when it fits it
             return {"seconds": round(seconds, 3), "failed": f"{type(exc).__name__}: {exc}"[:300]}
-        return {"seconds": round(took, 3), "steps": steps}
+        return {"one_step_seconds": round(once, 3), "seconds": round(took, 3), "steps": steps}
 
     def score(self, choice: dict, steps: int, deadline: float) -> _Fit:
         key = (_key(choice), steps)
@@ -258,11 +260,18 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
         f"by successive halving over {len(schedule)} rung(s) of work"
         + (f"; a probe did {probe.get('steps')} steps in {probe['seconds']:g} s" if probe else ""))
     survivors, reached, table = list(grid), {}, []
-    final_steps = budget.steps
+    final_steps, top, done = budget.steps, len(schedule) - 1, 0
     for k, (count, share) in enumerate(schedule):
         if timed:  # re-planned from every fit so far, so that the last rung and the final fit end in time
             final_steps = search.plan(schedule[k:], end - time.perf_counter())
+            if k and round(final_steps * share) <= done:
+                # the time left affords no rung with more steps than the last: the search ends there, and the
+                # final fit does that rung's steps
+                final_steps, top = done, k - 1
+                say(f"  the time left affords no rung of more than {done} steps: the search ends at rung {k}")
+                break
         steps = max(1, round(final_steps * share))
+        done = steps
         fits = {_key(c): search.score(c, steps, deadline) for c in survivors}
         for c in survivors:
             reached[_key(c)] = (k, steps, c)
@@ -277,20 +286,24 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
             break
         survivors = ranked[:schedule[k + 1][0]] if k + 1 < len(schedule) else ranked[:1]
     rows = [_row(c, k, steps, search.fits[(_key(c), steps)]) for c in grid for k, steps, _ in [reached[_key(c)]]]
-    top = len(schedule) - 1
-    whole = [r for r in rows if r["rung"] == top and r["validation_mse"] is not None]
+    whole = sorted((r for r in rows if r["rung"] == top and r["validation_mse"] is not None),
+                   key=lambda r: r["validation_mse"])
     search_seconds = time.perf_counter() - t0
     note = None
     if whole:
         chosen_row = whole[0]
+        if len(whole) > 1:
+            note = (f"the time budget ended the search at rung {top + 1} of {len(schedule)}: the best of its "
+                    f"{len(whole)} combinations is chosen, its score the least of theirs, at the final fit's steps")
     else:
         usable = [r for r in rows if r["validation_mse"] is not None]
         chosen_row = max(usable, key=lambda r: (r["rung"], -r["validation_mse"])) if usable else None
         note = ("every combination failed in the search: the method's own defaults are fitted" if chosen_row is None
-                else f"no combination was validated at the final fit's steps (the search's share of the budget "
-                     f"ended): the best at {chosen_row['steps']} steps is chosen, its score from fits with fewer steps")
+                else f"no combination was scored at the last rung reached (the search's share of the budget "
+                     f"ended): the best at {chosen_row['steps']} steps is chosen, and the final fit does those steps")
     chosen = chosen_row["hyperparameters"] if chosen_row else {}
-    final = Budget(seconds=budget.seconds, steps=budget.steps) if not timed else Budget(steps=final_steps)
+    final = Budget(seconds=budget.seconds, steps=budget.steps) if not timed else \
+        Budget(steps=chosen_row["steps"] if chosen_row else final_steps)
     say(f"tuning {method_cls.name}: chose {_words(chosen) or 'its defaults'}; fitting it on all the training data "
         f"({final.describe()})")
     method = make(chosen)

@@ -227,3 +227,18 @@ def test_under_a_time_budget_the_fold_fits_do_the_steps_the_final_fit_does():
     assert d["probe"]["steps"] > 0 and d["final_budget"]["kind"] == "steps"
     steps = d["final_budget"]["steps"]
     assert d["work"]["fold_steps"] == [steps] * 3 and d["work"]["final_steps"] == steps > 1
+
+
+def test_a_time_budget_that_affords_no_more_steps_ends_the_search_at_equal_work(monkeypatch):
+    # the plan before the second rung finds the time left too short for more steps than the first rung's: the
+    # search ends there, and the final fit does the steps the chosen combination's fold fits did
+    from bench.evaluation import tuning
+
+    plans = iter([27, 2])
+    monkeypatch.setattr(tuning._Search, "plan", lambda self, schedule, seconds: next(plans))
+    d = tune(METHODS["mlp"], {"hidden": 8, "layers": 1, "eval_samples": 64}, _trajectories(), "indirect", 0,
+             Budget(seconds=30.0)).details
+    assert [r["steps"] for r in d["rungs"]] == [9] and d["final_budget"] == {"kind": "steps", "steps": 9,
+                                                                             "ceiling_s": None}
+    assert d["work"]["fold_steps"] == [9, 9, 9] and d["work"]["final_steps"] == 9
+    assert "ended the search at rung 1 of 2" in d["note"]
