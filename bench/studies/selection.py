@@ -107,8 +107,12 @@ def entry(candidate: Candidate, record: Record, out: Path) -> dict:
     saved = (details.get("saved") or {}).get("path")
     tuning = details.get("tuning") or {}
     standard = (details.get("standard_model") or {}).get("test_mse")
+    chosen = next((c for c in tuning.get("combinations") or [] if c.get("hyperparameters") == tuning.get("chosen")
+                   and c.get("validation_mse") is not None), None)
+    folds = [v for v in (chosen or {}).get("fold_mse") or [] if v is not None]
     return {"name": candidate.name, "method": record.method, "status": record.status,
             "validation_mse": tuning.get("validation_mse"), "test_mse": record.test_mse,
+            "validation_stderr": float(np.std(folds, ddof=1) / np.sqrt(len(folds))) if len(folds) > 1 else None,
             "train_mse": record.train_mse, "test_over_standard": None if not (standard and record.test_mse) else
             record.test_mse / standard, "hyperparameters": tuning.get("chosen", {}),
             "model": None if saved is None else os.path.relpath(saved, Path(out).resolve()),

@@ -1,0 +1,306 @@
+"""``python -m bench study selection``: how well each way of choosing a model
+chooses, on arms whose truth is known.
+
+Each case is a simulated arm (the Panda, the UR5, the KUKA's URDF) whose
+torque holds laws the rigid body lacks (:data:`EFFECT_SETS`), logged as a robot
+logs it (:func:`bench.studies.robot_log.fourier_trajectory`: excitation
+trajectories of finite Fourier series) and declared as a measured arm of
+one's own (a TOML file beside its logs). Two layouts:
+
+* ``one``: one training trajectory recorded twice, tested on another
+  trajectory :data:`FASTER` times as fast, as the shipped KUKA's;
+* ``several``: :data:`SEVERAL` training trajectories, tested on another.
+
+On each case ``bench select`` runs once per validation protocol
+(:mod:`bench.core.protocols`: ``time``, ``regions``, and ``knndm`` where the
+training data hold several trajectories), under a work budget (``--steps``),
+so that the study gives the same numbers on any machine. Each run's
+candidates are then chosen by each rule (:data:`RULES`):
+
+* ``lowest``: the lowest validation MSE (``bench select``'s);
+* ``one_se``: the first candidate in :data:`SIMPLICITY` (from the rigid body
+  to the flexible residuals) whose validation MSE is within one standard
+  error (over the folds) of the lowest.
+
+A case's **regret** under a protocol and a rule is the chosen candidate's test
+MSE over the best candidate's; the page gives it per case with the rank
+correlation (Spearman) between validation and test, and per protocol and rule
+the median and worst regret and how often the best was chosen.
+
+The **development** set (seeds :data:`DEVELOPMENT_SEEDS`) is for trying rules;
+the **evaluation** set (seeds :data:`EVALUATION_SEEDS`, effect values drawn
+per seed) is run once a rule is fixed, and no test reads it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from bench.core.arguments import positive_int
+from bench.core.csv_format import write_csv
+from bench.core.data import Dataset, add_noise
+from bench.core.fileio import atomic_write, write_json
+
+DEVELOPMENT, EVALUATION = "development", "evaluation"
+#: each set's data seeds
+DEVELOPMENT_SEEDS = (0,)
+EVALUATION_SEEDS = (5113, 6271)
+#: the arms, by the name ``robot-log`` simulates (the KUKA by its shipped URDF)
+ARMS = ("panda", "ur5", "kuka")
+#: how fast the one-trajectory layout's test trajectory is against its training one
+FASTER = 1.5
+#: training trajectories of the ``several`` layout
+SEVERAL = 4
+LAYOUTS = ("one", "several")
+#: seconds of each recording, and its rate
+SECONDS, RATE_HZ, BASE_HZ = 20.0, 100.0, 0.1
+#: the torque noise, a fraction of each joint's torque standard deviation
+NOISE = 0.02
+#: the protocols compared
+PROTOCOLS = ("time", "regions", "knndm")
+#: the candidates from the rigid body to the flexible residuals: the ``one_se`` rule's order
+SIMPLICITY = ("standard", "feasible", "loop", "feasible+sparse_torque", "standard+gp", "feasible+gp", "loop+gp",
+              "standard+mlp", "feasible+delan")
+#: the candidates the study runs (select's own less the slowest learners)
+CANDIDATES = ("standard", "feasible", "loop", "standard+gp", "feasible+gp", "standard+mlp")
+RULES = ("lowest", "one_se")
+#: steps of each candidate's fits (a round of the loop's, a gradient step of the learners')
+STEPS = 60
+
+
+def _values(rng: np.random.Generator, dof: int, lo: float, hi: float) -> str:
+    return ",".join(f"{v:.3g}" for v in rng.uniform(lo, hi, dof))
+
+
+#: laws the rigid body lacks, each a function of the arm's joints and a generator of the values
+EFFECT_SETS = {
+    # friction the standard model holds, and a drive's cogging and a Stribeck dip it does not
+    "drive": lambda dof, rng: [f"viscous_friction={_values(rng, dof, 0.2, 1.0)}",
+                               f"coulomb_friction={_values(rng, dof, 0.3, 1.5)}",
+                               f"periodic_torque=1:{rng.uniform(0.5, 1.5):.3g},6,{rng.uniform(0, 3):.3g}",
+                               f"stribeck_friction=2:{rng.uniform(0.5, 1.0):.3g},{rng.uniform(1.5, 2.5):.3g},0.3,0.2"],
+    # what a drive and a sensor add: motor inertia, a sensor's offsets and gains, a gear whose Coulomb level
+    # grows with its load
+    "sensor": lambda dof, rng: [f"viscous_friction={_values(rng, dof, 0.2, 1.0)}",
+                                f"armature={_values(rng, dof, 0.05, 0.3)}", f"offset={_values(rng, dof, -0.5, 0.5)}",
+                                f"torque_gain={_values(rng, dof, 0.93, 1.07)}",
+                                f"load_friction={_values(rng, dof, 0.02, 0.1)}"],
+}
+
+
+@dataclass(frozen=True)
+class Case:
+    arm: str
+    layout: str
+    effects: str
+    seed: int
+
+    @property
+    def name(self) -> str:
+        return f"{self.arm}_{self.layout}_{self.effects}_{self.seed}"
+
+
+def cases(which: str) -> list[Case]:
+    seeds = DEVELOPMENT_SEEDS if which == DEVELOPMENT else EVALUATION_SEEDS
+    return [Case(a, lay, e, s) for s in seeds for a in ARMS for lay in LAYOUTS for e in EFFECT_SETS]
+
+
+def _system(arm: str):
+    from systems import get_system
+
+    if arm == "kuka":
+        from systems.urdf_arm import register_urdf
+
+        return get_system(register_urdf(f"urdf:{_data() / 'kuka_lwr4.urdf.gz'}"))
+    return get_system(arm)
+
+
+def _data() -> Path:
+    return Path(__file__).resolve().parents[2] / "systems" / "data"
+
+
+def _urdf(arm: str) -> Path:
+    return _data() / {"panda": "panda.urdf.gz", "ur5": "ur5_robot.urdf.gz", "kuka": "kuka_lwr4.urdf.gz"}[arm]
+
+
+def recording(system, effects: list[str], trajectory_seed: int, noise_seed: int, base_hz: float) -> Dataset:
+    """One recording of the Fourier trajectory of ``trajectory_seed``, its torque the arm's with ``effects``
+    and noise drawn with ``noise_seed``."""
+    import torch
+
+    from bench.physics.undeclared import add_effects, parse_effects
+    from bench.studies.robot_log import REACH, fourier_trajectory
+
+    time = np.arange(int(round(SECONDS * RATE_HZ))) / RATE_HZ
+    q, qd, qdd = fourier_trajectory(system.dof, time, base_hz, np.random.default_rng(trajectory_seed))
+    (q_lo, q_hi), (v_lo, v_hi) = (system.domain.bounds(k, system.dof) for k in ("q", "qd"))
+    amplitude = REACH * np.minimum((q_hi - q_lo) / 2, (v_hi - v_lo) / 2 / np.abs(qd).max(axis=0))
+    q, qd, qdd = (q_lo + q_hi) / 2 + amplitude * q, amplitude * qd, amplitude * qdd
+    tau, _ = system.torque(*(torch.from_numpy(np.ascontiguousarray(x)) for x in (q, qd, qdd)))
+    data = Dataset(q, qd, qdd, tau.numpy(), None, system.name, "simulated", time=time)
+    data = add_effects(data, parse_effects(effects, system.dof), system)
+    return add_noise(data, "indirect", NOISE, noise_seed)
+
+
+def make(case: Case, folder: Path) -> Path:
+    """Write ``case``'s recordings and its measured-arm file into ``folder``; returns the file."""
+    declared = folder / f"arm_{case.name}.toml"
+    if declared.exists():
+        return declared
+    folder.mkdir(parents=True, exist_ok=True)
+    system = _system(case.arm)
+    rng = np.random.default_rng(zlib.crc32(case.name.encode()))
+    effects = EFFECT_SETS[case.effects](system.dof, rng)
+    base = 1000 * case.seed
+    if case.layout == "one":
+        plan = [("A", base + 1, base + 11, BASE_HZ), ("A", base + 1, base + 12, BASE_HZ),
+                ("T", base + 2, base + 13, FASTER * BASE_HZ)]
+    else:
+        plan = [(f"A{k}", base + 1 + k, base + 11 + k, BASE_HZ) for k in range(SEVERAL)] + \
+               [("T", base + 1 + SEVERAL, base + 11 + SEVERAL, BASE_HZ)]
+    rows = []
+    for k, (trajectory, t_seed, n_seed, hz) in enumerate(plan):
+        name = f"rec{k}.csv"
+        write_csv(recording(system, effects, t_seed, n_seed, hz), folder / name)
+        rows.append(f'rec{k} = {{ file = "{name}", trajectory = "{trajectory}" }}')
+    dof = system.dof
+    columns = ",".join(["time=time"] + [f"{k}_{j}={k}_{j}" for j in range(1, dof + 1) for k in ("q", "qd", "qdd", "tau")])
+    text = (f"# {case.name}: simulated {case.arm}, effects {' '.join(effects)}, noise {NOISE:g}\n"
+            f'urdf = "{_urdf(case.arm)}"\n' + ('joints = [' + ", ".join(f'"panda_joint{j}"' for j in range(1, 8))
+                                                + ']\n' if case.arm == "panda" else "")
+            + f'columns = "{columns}"\ntest = ["T"]\nas_recorded = true\n\n'
+            f"[recordings]\n" + "\n".join(rows) + "\n")
+    atomic_write(declared, lambda f: f.write(text))
+    write_json(folder / "case.json", {"case": case.__dict__, "effects": effects})
+    return declared
+
+
+def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tuple[str, ...], workers: int) -> dict:
+    """``bench select`` on ``case`` under ``protocol``; its ``select.json``."""
+    declared = make(case, folder)
+    out = folder / protocol
+    command = [sys.executable, "-m", "bench", "select", "--system", f"measured:{declared}", "--steps", str(steps),
+               "--candidates", ",".join(candidates), "--folds", protocol, "--no-rollout", "--workers", str(workers),
+               "--out", str(out)]
+    done = subprocess.run(command, capture_output=True, text=True)
+    result = out / "select.json"
+    if not result.exists():
+        return {"error": (done.stderr.strip().splitlines() or ["no select.json"])[-1]}
+    return json.loads(result.read_text())
+
+
+def choose(entries: list[dict], rule: str) -> dict | None:
+    """The candidate ``rule`` chooses among those that validated."""
+    ok = [e for e in entries if e.get("validation_mse") is not None and e.get("test_mse") is not None
+          and math.isfinite(e["validation_mse"])]
+    if not ok:
+        return None
+    best = min(ok, key=lambda e: e["validation_mse"])
+    if rule == "lowest":
+        return best
+    bound = best["validation_mse"] + (best.get("validation_stderr") or 0.0)
+    within = [e for e in ok if e["validation_mse"] <= bound]
+    return min(within, key=lambda e: SIMPLICITY.index(e["name"]) if e["name"] in SIMPLICITY else len(SIMPLICITY))
+
+
+def scores(result: dict) -> dict:
+    """Per rule: the chosen candidate and its regret; and the rank correlation of validation and test."""
+    from scipy.stats import spearmanr
+
+    entries = result.get("candidates") or []
+    ok = [e for e in entries if e.get("validation_mse") is not None and e.get("test_mse") is not None]
+    if not ok:
+        return {"error": result.get("error", "no candidate validated")}
+    best = min(ok, key=lambda e: e["test_mse"])
+    rho = float(spearmanr([e["validation_mse"] for e in ok], [e["test_mse"] for e in ok])[0]) if len(ok) > 2 else None
+    out = {"best": best["name"], "best_test_mse": best["test_mse"], "spearman": rho, "rules": {}}
+    for rule in RULES:
+        c = choose(entries, rule)
+        out["rules"][rule] = {"chosen": c["name"], "regret": c["test_mse"] / best["test_mse"]}
+    return out
+
+
+def summary(table: list[dict]) -> list[dict]:
+    """Per protocol and rule: the median and worst regret, and how often the best was chosen."""
+    rows = []
+    for protocol in PROTOCOLS:
+        for rule in RULES:
+            regrets = [t["scores"]["rules"][rule]["regret"] for t in table
+                       if t["protocol"] == protocol and "rules" in t["scores"]]
+            if not regrets:
+                continue
+            rows.append({"protocol": protocol, "rule": rule, "cases": len(regrets),
+                         "median_regret": float(np.median(regrets)), "worst_regret": float(np.max(regrets)),
+                         "best_chosen": int(sum(r <= 1.0 + 1e-12 for r in regrets))})
+    return rows
+
+
+def page(result: dict) -> str:
+    lines = ["# How well each way of choosing a model chooses", "",
+             f"Command: `{result['command']}`", "",
+             f"Set: {result['set']}; {len(result['cases'])} cases; candidates {', '.join(result['candidates'])}; "
+             f"{result['steps']} steps a fit. Regret: the chosen candidate's test MSE over the best candidate's. "
+             "The test trajectory is read only to score.", "",
+             "| protocol | rule | cases | median regret | worst regret | chose the best |", "|---|---|---:|---:|---:|---:|"]
+    for r in result["summary"]:
+        lines.append(f"| {r['protocol']} | {r['rule']} | {r['cases']} | {r['median_regret']:.3g} | "
+                     f"{r['worst_regret']:.3g} | {r['best_chosen']} of {r['cases']} |")
+    lines += ["", "| case | protocol | best on the test | lowest | one_se | Spearman (validation, test) |",
+              "|---|---|---|---|---|---:|"]
+    for t in result["table"]:
+        s = t["scores"]
+        if "rules" not in s:
+            lines.append(f"| {t['case']} | {t['protocol']} | failed: {s['error']} | | | |")
+            continue
+        cells = [f"{s['rules'][r]['chosen']} ({s['rules'][r]['regret']:.3g})" for r in RULES]
+        rho = "—" if s["spearman"] is None else f"{s['spearman']:.2f}"
+        lines.append(f"| {t['case']} | {t['protocol']} | {s['best']} | {cells[0]} | {cells[1]} | {rho} |")
+    return "\n".join(lines) + "\n"
+
+
+HELP = "how well each validation protocol and rule chooses a model, on simulated arms whose truth is known"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--set", choices=(DEVELOPMENT, EVALUATION), default=DEVELOPMENT,
+                        help="the development cases (for trying rules) or the evaluation ones (default development)")
+    parser.add_argument("--cases", nargs="+", default=None, help="only the cases whose names start with these")
+    parser.add_argument("--protocols", nargs="+", choices=PROTOCOLS, default=list(PROTOCOLS),
+                        help="the validation protocols to compare (default all; knndm only where there are several "
+                             "training trajectories)")
+    parser.add_argument("--steps", type=positive_int, default=STEPS, help=f"steps a fit (default {STEPS})")
+    parser.add_argument("--workers", type=positive_int, default=2, help="candidates at a time (default 2)")
+    parser.add_argument("--out", type=Path, default=Path("results/selection/benchmark.md"),
+                        help="the page (default results/selection/benchmark.md); the cases' runs go beside it")
+
+
+def main(args) -> int:
+    chosen = [c for c in cases(args.set) if not args.cases or c.name.startswith(tuple(args.cases))]
+    root = args.out.parent / f"cases_{args.set}"
+    table = []
+    for i, case in enumerate(chosen):
+        for protocol in args.protocols:
+            if protocol == "knndm" and case.layout == "one":
+                continue  # one trajectory and no target: kNNDM has nothing to match
+            result = run_case(case, root / case.name, protocol, args.steps, CANDIDATES, args.workers)
+            s = scores(result)
+            table.append({"case": case.name, "protocol": protocol, "scores": s})
+            print(f"[{i + 1}/{len(chosen)}] {case.name} {protocol}: " +
+                  (s.get("error") or ", ".join(f"{r} chose {v['chosen']} (regret {v['regret']:.3g})"
+                                               for r, v in s["rules"].items())), flush=True)
+    result = {"command": "python -m bench study selection " + " ".join(sys.argv[3:]), "set": args.set,
+              "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
+              "table": table, "summary": summary(table)}
+    write_json(args.out.with_suffix(".json"), result)
+    text = page(result)
+    atomic_write(args.out, lambda f: f.write(text))
+    print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,54 @@
+"""The selection benchmark: its cases load as measured arms of one's own with
+the layout they declare, its rules choose as stated, and regret and the
+summary are computed from the candidates' figures."""
+
+from __future__ import annotations
+
+import pytest
+
+from bench.studies import selection_benchmark as sb
+
+
+def _entry(name, validation, test, stderr=None):
+    return {"name": name, "validation_mse": validation, "test_mse": test, "validation_stderr": stderr}
+
+
+def test_a_case_is_a_measured_arm_with_the_layout_it_declares(tmp_path):
+    from systems import get_system
+    from systems.measured_arm import register_measured
+
+    for case in (sb.Case("ur5", "one", "drive", 0), sb.Case("ur5", "several", "sensor", 0)):
+        declared = sb.make(case, tmp_path / case.name)
+        system = get_system(register_measured(f"measured:{declared}"))
+        train, test = system.load("train"), system.load("test")
+        per = int(sb.SECONDS * sb.RATE_HZ)
+        if case.layout == "one":
+            assert train.trajectories() == ["A"] and len(train) == 2 * per
+        else:
+            assert len(train.trajectories()) == sb.SEVERAL and len(train) == sb.SEVERAL * per
+        assert test.trajectories() == ["T"] and len(test) == per and train.dof == 6
+        assert sb.make(case, tmp_path / case.name) == declared  # made once
+
+
+def test_the_rules_choose_as_stated_and_regret_is_against_the_best_on_the_test():
+    entries = [_entry("standard+gp", 0.50, 0.9, 0.05), _entry("standard", 0.53, 0.6, 0.02),
+               _entry("standard+mlp", 0.70, 0.3, 0.1), {"name": "loop", "validation_mse": None, "test_mse": None}]
+    assert sb.choose(entries, "lowest")["name"] == "standard+gp"
+    assert sb.choose(entries, "one_se")["name"] == "standard"  # within 0.05 of the lowest, and simpler
+    s = sb.scores({"candidates": entries})
+    assert s["best"] == "standard+mlp"
+    assert s["rules"]["lowest"]["regret"] == pytest.approx(3.0) and s["rules"]["one_se"]["regret"] == pytest.approx(2.0)
+    assert s["spearman"] == pytest.approx(-1.0)  # validation ranks them exactly against the test
+    table = [{"case": "a", "protocol": "time", "scores": s},
+             {"case": "b", "protocol": "time", "scores": sb.scores({"candidates": entries[:2]})}]
+    lowest = next(r for r in sb.summary(table) if r["rule"] == "lowest")
+    assert lowest["cases"] == 2 and lowest["worst_regret"] == pytest.approx(3.0) and lowest["best_chosen"] == 0
+    assert "failed" in sb.page({"command": "c", "set": "development", "cases": ["a"], "candidates": ["x"], "steps": 1,
+                                "summary": [], "table": [{"case": "a", "protocol": "time",
+                                                          "scores": sb.scores({"candidates": []})}]})
+
+
+def test_the_evaluation_set_is_apart_from_the_development_set():
+    development, evaluation = sb.cases(sb.DEVELOPMENT), sb.cases(sb.EVALUATION)
+    assert len(evaluation) >= 24 and not set(sb.DEVELOPMENT_SEEDS) & set(sb.EVALUATION_SEEDS)
+    assert {c.layout for c in evaluation} == set(sb.LAYOUTS) and {c.arm for c in evaluation} == set(sb.ARMS)
