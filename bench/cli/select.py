@@ -38,11 +38,12 @@ def add_arguments(p) -> None:
                         "torque columns, if any, are not read): the page says whether validation reached as far "
                         "from the training states as they lie (default: the spread between the training "
                         "trajectories, where there are several)")
-    p.add_argument("--folds", choices=NAMES, default="time",
+    p.add_argument("--folds", choices=NAMES, default="auto",
                    help="the validation folds: time (whole trajectories, or spans in time of one), regions "
-                        "(leave-region-out: k-means regions of the states), or knndm (the folds of time or of "
+                        "(leave-region-out: k-means regions of the states), knndm (the folds of time or of "
                         "regions whose held-out distances match the target's: --target-states, else the spread "
-                        "between the training trajectories); default time")
+                        "between the training trajectories), or auto: whole trajectories where there are several, "
+                        "regions where there is one (default auto)")
     add_plugin(p)
 
 

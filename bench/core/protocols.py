@@ -24,10 +24,13 @@ it serves as any ``cv`` argument, and :func:`folds` makes the suite's
   Few regions hold out far states, many near ones, the folds of time the
   nearest; the target decides.
 
-:func:`protocol` makes one from its name as ``--folds`` gives it: ``time``,
-``regions`` or ``knndm`` (its target the spread between the training
-trajectories, :func:`bench.evaluation.domain.spread`'s distances) or
-``knndm:LOG`` (the states of a log, its torques not read).
+:func:`folds` makes the folds of a protocol named as ``--folds`` names it:
+``time``, ``regions`` or ``knndm`` (its target the spread between the
+training trajectories, :func:`bench.evaluation.domain.spread`'s distances) or
+``knndm:LOG`` (the states of a log, its torques not read); ``auto`` is the
+folds of time where the data hold several trajectories (each held out whole
+reaches as far as the trajectories lie apart) or none (independent samples),
+and regions where they hold one, whose spans in time only interpolate.
 """
 
 from __future__ import annotations
@@ -39,10 +42,10 @@ from scipy.spatial import cKDTree
 
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
-from bench.core.folds import Fold, Folds, folds as time_folds
+from bench.core.folds import MAX_SPANS, Fold, Folds, folds as time_folds
 
 #: the protocols ``--folds`` names
-NAMES = ("time", "regions", "knndm")
+NAMES = ("time", "regions", "knndm", "auto")
 #: at most this many scored samples a fold's distances are measured on, drawn with a fixed seed
 DISTANCE_SAMPLES = 2000
 #: kNNDM's candidate region counts: the folds' count times these
@@ -175,7 +178,7 @@ def parse(name: str | None) -> tuple[str, str | None]:
     return kind, path or None
 
 
-def folds(data: Dataset, name: str | None, max_folds: int, target: Dataset | None = None) -> Folds:
+def folds(data: Dataset, name: str | None, max_folds: int | None, target: Dataset | None = None) -> Folds:
     """The folds of ``data`` by the protocol ``name`` (:data:`NAMES`, or ``knndm:LOG``; ``None``: ``time``), at
     most ``max_folds`` of them; ``target`` is kNNDM's states (default: ``LOG``'s positions and velocities, else
     the spread between the training trajectories)."""
@@ -185,10 +188,12 @@ def folds(data: Dataset, name: str | None, max_folds: int, target: Dataset | Non
 
         target = read_csv(path, dof=data.dof, states_only=True)
     by_time = time_folds(data, max_folds=max_folds)
+    if kind == "auto":
+        kind = "regions" if len(data.trajectories()) == 1 else "time"
     if kind == "time":
         return by_time
     x = states(data)
-    n_splits = min(max_folds, len(data))
+    n_splits = min(max_folds or MAX_SPANS, len(data))
     if kind == "regions":
         splitter = Regions(n_splits)
         held = [_mask(len(data), test) for _, test in splitter.split(x)]

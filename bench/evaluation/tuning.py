@@ -23,7 +23,8 @@ all, as SRBench allows: La Cava et al., 2021). A tuned fit
 
 The final fit's steps are the work budget's, under ``--steps``. Under a time
 budget they are measured: a probe fits the first combination on the first
-fold for :data:`PROBE_SHARE` of the seconds, a straight line (seconds against
+fold for one step (kept as that fold's fit where a rung asks for one step)
+and, where that was quicker, for :data:`PROBE_SHARE` of the seconds; a straight line (seconds against
 steps × the share of the samples fitted) is drawn through the probe and every
 fit since, and before each rung the steps are planned so that what is left of
 the search and the final fit end within :data:`PLANNED_SHARE` of the budget.
@@ -164,6 +165,8 @@ class _Search:
         #: (steps x share of the samples fitted, seconds) of every fit so far
         self.observed: list[tuple[float, float]] = []
         self.shares = [float(np.mean(f.fit)) for f in fold_set]
+        #: fits done before the rungs (the probe's), by (combination, steps, fold), for the rung that asks for them
+        self.kept: dict[tuple, tuple] = {}
 
     def _one(self, choice: dict, fold: int, budget: Budget):
         t0 = time.perf_counter()
@@ -176,10 +179,14 @@ class _Search:
         return method, steps, seconds
 
     def probe(self, choice: dict, seconds: float) -> dict:
-        """Two fits of ``choice`` on the first fold, for the plan's line: one step (what a fit costs however
-        short), then as many steps as ``seconds`` allow."""
+        """Fits of ``choice`` on the first fold for the plan's line: one step (what a fit costs however short,
+        kept as that fold's fit where a rung asks for one step), then, where that took less than ``seconds``, as
+        many steps as ``seconds`` allow."""
         try:
-            _, _, once = self._one(choice, 0, Budget(steps=1))
+            method, done, once = self._one(choice, 0, Budget(steps=1))
+            self.kept[(_key(choice), 1, 0)] = (method, done, once)
+            if once >= seconds:  # a step costs the probe's time already (a round of the loop): one point it is
+                return {"one_step_seconds": round(once, 3), "seconds": round(once, 3), "steps": done}
             _, steps, took = self._one(choice, 0, Budget(seconds=seconds))
         except Exception as exc:  # the search records the combination's failure when it fits it
             return {"seconds": round(seconds, 3), "failed": f"{type(exc).__name__}: {exc}"[:300]}
@@ -195,7 +202,8 @@ class _Search:
                 out.failed = OUT_OF_TIME
                 break
             try:
-                method, done, seconds = self._one(choice, k, Budget(steps=steps))
+                kept = self.kept.pop((_key(choice), steps, k), None)
+                method, done, seconds = kept or self._one(choice, k, Budget(steps=steps))
                 part = self.train.subset(fold.score)
                 out.mse.append(float(mse(method.predict(part, self.experiment), part.target(self.experiment))))
                 out.steps.append(done)

@@ -1,7 +1,8 @@
-"""Held-out validation for the residual loop, by the suite's one protocol
-(:mod:`bench.core.folds`): whole trajectories where the data name several,
-spans in time of one trajectory with a gap of the torque's autocorrelation
-time, or blocks of independent samples.
+"""Held-out validation for the residual loop, by the protocol :data:`PROTOCOL`
+(:mod:`bench.core.protocols`): whole trajectories where the data name several,
+regions of the state space where they name one (spans in time of one
+trajectory score states next to those fitted, so that a law that only
+interpolates better would pass), or blocks of independent samples.
 
 :func:`cv_mse` refits a linear problem without each fold and scores it on the
 fold's scored samples; the mean over all scored rows is the figure the loop
@@ -14,12 +15,21 @@ import numpy as np
 
 from bench.core.autocorrelation import integrated_time
 from bench.core.data import Dataset
-from bench.core.folds import Fold, Folds, folds
+from bench.core.folds import Fold, Folds
+from bench.core.protocols import folds as protocol_folds
+
+#: the loop's validation protocol (:func:`bench.core.protocols.folds`)
+PROTOCOL = "auto"
+
+
+def folds(data: Dataset) -> Folds:
+    """The loop's folds of ``data``, by :data:`PROTOCOL`."""
+    return protocol_folds(data, PROTOCOL, None)
 from bench.physics.regression import Compressed, least_squares
 
 
 def describe(data: Dataset) -> str:
-    """How :func:`~bench.core.folds.folds` folds ``data``, in words."""
+    """How :func:`folds` folds ``data``, in words."""
     return folds(data).describe()
 
 

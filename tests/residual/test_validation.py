@@ -53,7 +53,9 @@ def test_recordings_of_one_trajectory_are_held_out_together():
             times = one.time[f & (one.recording == name)]
             assert np.ptp(times) == pytest.approx(0.99, abs=1e-9)
         assert set(np.round(one.time[f & (one.recording == "run1")], 6)) == set(np.round(one.time[f & (one.recording == "run2")], 6))
-    assert describe(one).startswith(f"{BLOCKS} contiguous spans in time of one trajectory")
+    assert folds(one).describe().startswith(f"{BLOCKS} contiguous spans in time of one trajectory")
+    # the loop holds out regions of the state space of one trajectory instead: spans only interpolate
+    assert "regions of the states" in describe(one)
 
 
 def test_cv_mse_scores_each_fold_by_a_fit_on_the_others():
