@@ -7,15 +7,13 @@ the drive that the data identify; its final model (the rigid body, its named
 laws, read through the sensor's laws) is the prior, and the residual learner
 of :mod:`methods.hybrid` is fitted to what it leaves. Both are fitted within
 the hybrid's one budget: under a time budget the loop has :data:`LOOP_SHARE`
-of it and the residual the rest; under a work budget the loop's fit is
-bounded by the steps as ``bench residual --steps`` bounds it, and it runs
-its rounds until nothing is significant (at most
-:data:`~bench.residual.loop.MAX_ROUNDS`).
+of it and the residual the rest; under a work budget of ``N`` steps the
+loop's fit is bounded by them as ``bench residual --steps`` bounds it, and it
+runs at most ``N`` rounds (and at most :data:`~bench.residual.loop.MAX_ROUNDS`).
 
-The method ``loop`` counts a round as its step: under ``--steps N`` it runs at
-most ``N`` rounds after its fit, and its record's steps are the rounds it ran,
-so that a tuned or selected ``loop`` is validated at the rounds its final fit
-runs (:mod:`bench.evaluation.tuning`).
+A round is the loop's step: the method ``loop`` records the rounds it ran as
+its steps, so that a tuned or selected ``loop`` or ``loop+RESIDUAL`` is
+validated at the rounds its final fit runs (:mod:`bench.evaluation.tuning`).
 
 Registering the method and the prior is importing this module: a run's own
 process imports it before it resolves the name (:func:`methods.hybrid.modules_for`).
@@ -44,8 +42,14 @@ METHOD = "sysid"
 
 
 def identify(train: Dataset, system, seed: int, budget: Budget) -> FittedModel:
-    """The loop's final model on ``train`` within ``budget``, its progress printed line by line."""
-    return run(train, seed, budget).models[1]
+    """The loop's final model on ``train`` within ``budget`` (under a work budget of ``N`` steps, at most ``N``
+    rounds), its progress printed line by line."""
+    return run(train, seed, budget, rounds(budget)).models[1]
+
+
+def rounds(budget: Budget) -> int:
+    """The most rounds the loop runs within ``budget``: a round is a step of its work."""
+    return MAX_ROUNDS if budget.steps is None else min(budget.steps, MAX_ROUNDS)
 
 
 def run(train: Dataset, seed: int, budget: Budget, max_rounds: int = MAX_ROUNDS) -> ResidualResult:
@@ -89,9 +93,7 @@ class Loop(Method):
         return None if system.linear_form() is not None else f"loop: {prior_unavailable('loop', system)}"
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        budget = self.budget
-        rounds = MAX_ROUNDS if budget.steps is None else min(budget.steps, MAX_ROUNDS)
-        result = run(train, self.seed, budget, rounds)
+        result = run(train, self.seed, self.budget, rounds(self.budget))
         self.model, self._rounds = result.models[1], rounds_run(result)
         progress.stop("solved")
 
