@@ -86,7 +86,7 @@ class Unpacker:
 #: the sympy functions an expression in a model file may hold, by name
 FUNCTIONS = {f.__name__: f for f in (sympy.sin, sympy.cos, sympy.tan, sympy.exp, sympy.log, sympy.sign, sympy.Abs,
                                      sympy.tanh, sympy.sinh, sympy.cosh, sympy.atan, sympy.asin, sympy.acos,
-                                     sympy.Heaviside)}
+                                     sympy.Heaviside, sympy.erf)}
 #: the operations, by name
 OPERATIONS = {"Add": sympy.Add, "Mul": sympy.Mul, "Pow": sympy.Pow}
 #: the assumptions a symbol keeps (the suite's coordinates are real)

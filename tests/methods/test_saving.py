@@ -166,3 +166,18 @@ def test_an_expression_node_outside_the_fixed_list_is_refused():
                  {"symbol": "q_1", "assumptions": {"commutative": "yes"}}):
         with pytest.raises(ModelFileError):
             expression_from_json(tree)
+
+
+def test_every_named_law_of_the_arm_saves_and_reads_back():
+    # the residual loop's model file holds each law's expression: a law the vocabulary lacks (the Stribeck
+    # hump's erf) would fail the loop's save after its fit
+    from bench.physics.effects import EFFECTS
+    from bench.physics.models import term_from_json, term_to_json
+
+    for name, effect in EFFECTS.items():
+        if effect.arity == 0 or effect.sensor:  # a law of the whole system, or of the sensor: no term of a joint
+            continue
+        shape = None if not effect.shaped else 3.0 if effect.shaped == "N" else 0.1  # a period count is whole
+        term = effect.term(*range(effect.arity), shape=shape)
+        back = term_from_json(json.loads(json.dumps(term_to_json(term))), "test")
+        assert back.expr == term.expr, name
