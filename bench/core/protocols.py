@@ -40,6 +40,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from bench.core.csv_format import read_csv
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
 from bench.core.folds import MAX_SPANS, Fold, Folds, folds as time_folds
@@ -184,8 +185,6 @@ def folds(data: Dataset, name: str | None, max_folds: int | None, target: Datase
     the spread between the training trajectories)."""
     kind, path = parse(name)
     if path is not None and target is None:
-        from bench.core.csv_format import read_csv
-
         target = read_csv(path, dof=data.dof, states_only=True)
     by_time = time_folds(data, max_folds=max_folds)
     if kind == "auto":

@@ -48,6 +48,10 @@ from bench.core.arguments import positive_int
 from bench.core.csv_format import write_csv
 from bench.core.data import Dataset, add_noise
 from bench.core.fileio import atomic_write, write_json
+from bench.physics.undeclared import add_effects, parse_effects
+from bench.studies.robot_log import REACH, fourier_trajectory
+from systems import get_system
+from systems.urdf_arm import register_urdf
 
 DEVELOPMENT, EVALUATION = "development", "evaluation"
 #: each set's data seeds
@@ -115,11 +119,7 @@ def cases(which: str) -> list[Case]:
 
 
 def _system(arm: str):
-    from systems import get_system
-
     if arm == "kuka":
-        from systems.urdf_arm import register_urdf
-
         return get_system(register_urdf(f"urdf:{_data() / 'kuka_lwr4.urdf.gz'}"))
     return get_system(arm)
 
@@ -136,9 +136,6 @@ def recording(system, effects: list[str], trajectory_seed: int, noise_seed: int,
     """One recording of the Fourier trajectory of ``trajectory_seed``, its torque the arm's with ``effects``
     and noise drawn with ``noise_seed``."""
     import torch
-
-    from bench.physics.undeclared import add_effects, parse_effects
-    from bench.studies.robot_log import REACH, fourier_trajectory
 
     time = np.arange(int(round(SECONDS * RATE_HZ))) / RATE_HZ
     q, qd, qdd = fourier_trajectory(system.dof, time, base_hz, np.random.default_rng(trajectory_seed))
