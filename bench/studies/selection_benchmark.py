@@ -50,8 +50,8 @@ from bench.core.data import Dataset, add_noise
 from bench.core.fileio import atomic_write, write_json
 from bench.physics.undeclared import add_effects, parse_effects
 from bench.studies.robot_log import REACH, fourier_trajectory
+from bench.runner.plugins import register_by_file
 from systems import get_system
-from systems.urdf_arm import register_urdf
 
 DEVELOPMENT, EVALUATION = "development", "evaluation"
 #: each set's data seeds
@@ -120,7 +120,7 @@ def cases(which: str) -> list[Case]:
 
 def _system(arm: str):
     if arm == "kuka":
-        return get_system(register_urdf(f"urdf:{_data() / 'kuka_lwr4.urdf.gz'}"))
+        return get_system(register_by_file(f"urdf:{_data() / 'kuka_lwr4.urdf.gz'}"))
     return get_system(arm)
 
 
