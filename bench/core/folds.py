@@ -141,18 +141,19 @@ def folds(data: Dataset, max_folds: int | None = None, values: np.ndarray | None
     if len(names) >= 2:
         labels = data.trajectory_labels()
         splits = min(len(names), max_folds or len(names))
-        held = [_mask(n, test) for _, test in GroupKFold(n_splits=splits).split(np.zeros(n), groups=labels)]
+        held = [mask(n, test) for _, test in GroupKFold(n_splits=splits).split(np.zeros(n), groups=labels)]
         held.sort(key=lambda m: int(np.argmax(m)))  # in order of first appearance
         return Folds(tuple(Fold(m, m) for m in held), "trajectories", recordings=len(data.recordings()),
                      trajectories=len(names))
     if names:
         return _spans(data, data.tau if values is None else values)
     k = min(MAX_SPANS, n)
-    held = [_mask(n, test) for _, test in KFold(n_splits=k).split(np.zeros(n))] if k >= 2 else [np.ones(n, bool)]
+    held = [mask(n, test) for _, test in KFold(n_splits=k).split(np.zeros(n))] if k >= 2 else [np.ones(n, bool)]
     return Folds(tuple(Fold(m, m) for m in held), "blocks")
 
 
-def _mask(n: int, index: np.ndarray) -> np.ndarray:
+def mask(n: int, index: np.ndarray) -> np.ndarray:
+    """A boolean mask of ``n`` samples, true at ``index``."""
     mask = np.zeros(n, dtype=bool)
     mask[index] = True
     return mask
@@ -168,7 +169,7 @@ def _spans(data: Dataset, values: np.ndarray) -> Folds:
     tau = max((integrated_time(values[index, c]) for index in order for c in range(values.shape[1])), default=1.0)
     shortest = min(len(index) for index in order)
     if shortest < 2:
-        held = [_mask(n, test) for _, test in KFold(n_splits=2).split(np.zeros(n))] if n >= 2 else [np.ones(n, bool)]
+        held = [mask(n, test) for _, test in KFold(n_splits=2).split(np.zeros(n))] if n >= 2 else [np.ones(n, bool)]
         return Folds(tuple(Fold(m, m) for m in held), "blocks")
     count = next((k for k in range(MAX_SPANS, 1, -1) if _gap_fits(math.ceil(tau), shortest, k)), 2)
     gap = math.ceil(tau)
@@ -184,7 +185,7 @@ def _spans(data: Dataset, values: np.ndarray) -> Folds:
         end = np.searchsorted(which, which, side="right")
         inside = ((which == 0) | (position - start >= gap)) & ((which == count - 1) | (end - 1 - position >= gap))
         span[index], scored[index] = which, inside
-    held = [_mask(n, test) for _, test in GroupKFold(n_splits=count).split(np.zeros(n), groups=span)]
+    held = [mask(n, test) for _, test in GroupKFold(n_splits=count).split(np.zeros(n), groups=span)]
     held.sort(key=lambda m: int(span[np.argmax(m)]))
     return Folds(tuple(Fold(m, m & scored) for m in held), "spans", gap, tau, recordings=len(order), trajectories=1)
 

@@ -42,8 +42,9 @@ from scipy.spatial import cKDTree
 
 from bench.core.csv_format import read_csv
 from bench.core.data import Dataset
+from bench.core.distance import TrainingStates
 from bench.core.errors import ConfigError
-from bench.core.folds import MAX_SPANS, Fold, Folds, folds as time_folds
+from bench.core.folds import MAX_SPANS, Fold, Folds, folds as time_folds, mask
 
 #: the protocols ``--folds`` names
 NAMES = ("time", "regions", "knndm", "auto")
@@ -136,7 +137,7 @@ class KNNDM:
             if k > len(x) // 10 and factor > 1:
                 break
             labels = regions(x, k, self.seed)
-            yield f"{k} regions", [_mask(len(x), test) for _, test in _grouped(labels, self.n_splits)]
+            yield f"{k} regions", [mask(len(x), test) for _, test in _grouped(labels, self.n_splits)]
 
     def held(self, X) -> list[np.ndarray]:
         """The chosen candidate's held-out masks (and :attr:`tried`, :attr:`chosen`)."""
@@ -165,12 +166,6 @@ class KNNDM:
                 f"{float(np.median(self.target)):.3g})")
 
 
-def _mask(n: int, index: np.ndarray) -> np.ndarray:
-    mask = np.zeros(n, dtype=bool)
-    mask[index] = True
-    return mask
-
-
 def parse(name: str | None) -> tuple[str, str | None]:
     """``(protocol, target log)`` of a ``--folds`` value (``knndm:LOG`` names its target's log)."""
     kind, _, path = (name or "time").partition(":")
@@ -186,22 +181,22 @@ def folds(data: Dataset, name: str | None, max_folds: int | None, target: Datase
     kind, path = parse(name)
     if path is not None and target is None:
         target = read_csv(path, dof=data.dof, states_only=True)
-    by_time = time_folds(data, max_folds=max_folds)
     if kind == "auto":
         kind = "regions" if len(data.trajectories()) == 1 else "time"
     if kind == "time":
-        return by_time
+        return time_folds(data, max_folds=max_folds)
     x = states(data)
     n_splits = min(max_folds or MAX_SPANS, len(data))
+    counts = {"recordings": len(data.recordings()), "trajectories": len(data.trajectories())}
     if kind == "regions":
         splitter = Regions(n_splits)
-        held = [_mask(len(data), test) for _, test in splitter.split(x)]
-        return Folds(tuple(Fold(m, m) for m in _ordered(held)), "regions", detail=splitter.describe(),
-                     recordings=by_time.recordings, trajectories=by_time.trajectories)
+        held = [mask(len(data), test) for _, test in splitter.split(x)]
+        return Folds(tuple(Fold(m, m) for m in _ordered(held)), "regions", detail=splitter.describe(), **counts)
     distances = target_distances(data, target)
     if distances is None:
         raise ConfigError("--folds knndm: the training data hold one trajectory and no target was named "
                           "(--target-states LOG): nothing to match the folds' distances to")
+    by_time = time_folds(data, max_folds=max_folds)
     splitter = KNNDM(distances, n_splits, time=[f.held for f in by_time])
     held = splitter.held(x)
     if splitter.chosen["folds"] == "time":
@@ -209,25 +204,19 @@ def folds(data: Dataset, name: str | None, max_folds: int | None, target: Datase
                      by_time.trajectories, detail=splitter.describe() + f": {by_time.describe()}",
                      choices=splitter.tried)
     return Folds(tuple(Fold(m, m) for m in _ordered(held)), "knndm", detail=splitter.describe(),
-                 recordings=by_time.recordings, trajectories=by_time.trajectories, choices=splitter.tried)
+                 choices=splitter.tried, **counts)
 
 
 def target_distances(data: Dataset, target: Dataset | None) -> np.ndarray | None:
     """The target's distances to the nearest training state, in the training states' standard deviations:
     ``target``'s states, else each training trajectory's from the others' (``None`` for one trajectory)."""
-    x = np.hstack([data.q, data.qd]).astype(np.float64)
-    scale = np.maximum(x.std(axis=0), 1e-12)
     if target is not None:
-        return cKDTree(x / scale).query(states(target, scale))[0]
+        return TrainingStates(data).distance(target)
     names = data.trajectories()
     if not names or len(names) < 2:
         return None
-    labels = data.trajectory_labels()
-    out = []
-    for name in names:
-        inside = labels == name
-        out.append(cKDTree(x[~inside] / scale).query(x[inside] / scale)[0])
-    return np.concatenate(out)
+    x, labels = states(data), data.trajectory_labels()
+    return np.concatenate([cKDTree(x[labels != name]).query(x[labels == name])[0] for name in names])
 
 
 def _ordered(held: list[np.ndarray]) -> list[np.ndarray]:

@@ -282,7 +282,7 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
         done = steps
         fits = {_key(c): search.score(c, steps, deadline) for c in survivors}
         for c in survivors:
-            reached[_key(c)] = (k, steps, c)
+            reached[_key(c)] = (k, steps)
         ranked = sorted((c for c in survivors if fits[_key(c)].score is not None),
                         key=lambda c: fits[_key(c)].score)
         table.append({"steps": steps, "combinations": len(survivors), "scored": len(ranked)})
@@ -293,7 +293,7 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
         if not ranked:
             break
         survivors = ranked[:schedule[k + 1][0]] if k + 1 < len(schedule) else ranked[:1]
-    rows = [_row(c, k, steps, search.fits[(_key(c), steps)]) for c in grid for k, steps, _ in [reached[_key(c)]]]
+    rows = [_row(c, *reached[_key(c)], search.fits[(_key(c), reached[_key(c)][1])]) for c in grid]
     whole = sorted((r for r in rows if r["rung"] == top and r["validation_mse"] is not None),
                    key=lambda r: r["validation_mse"])
     search_seconds = time.perf_counter() - t0

@@ -44,18 +44,15 @@ METHOD = "sysid"
 def identify(train: Dataset, system, seed: int, budget: Budget) -> FittedModel:
     """The loop's final model on ``train`` within ``budget`` (under a work budget of ``N`` steps, at most ``N``
     rounds), its progress printed line by line."""
-    return run(train, seed, budget, rounds(budget)).models[1]
+    return run(train, seed, budget).models[1]
 
 
-def rounds(budget: Budget) -> int:
-    """The most rounds the loop runs within ``budget``: a round is a step of its work."""
-    return MAX_ROUNDS if budget.steps is None else min(budget.steps, MAX_ROUNDS)
-
-
-def run(train: Dataset, seed: int, budget: Budget, max_rounds: int = MAX_ROUNDS) -> ResidualResult:
-    """The loop on ``train`` within ``budget`` and at most ``max_rounds`` rounds, its progress printed line by line."""
+def run(train: Dataset, seed: int, budget: Budget) -> ResidualResult:
+    """The loop on ``train`` within ``budget``, a round a step of its work (under a work budget of ``N`` steps, at
+    most ``N`` rounds), its progress printed line by line."""
     return residual_loop(METHOD, train, None, budget_s=None if budget.steps is not None else budget.seconds,
-                         steps=budget.steps, seed=seed, max_rounds=max_rounds,
+                         steps=budget.steps, seed=seed,
+                         max_rounds=MAX_ROUNDS if budget.steps is None else min(budget.steps, MAX_ROUNDS),
                          report=lambda line: print(f"prior: {line}", flush=True))
 
 
@@ -93,7 +90,7 @@ class Loop(Method):
         return None if system.linear_form() is not None else f"loop: {prior_unavailable('loop', system)}"
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        result = run(train, self.seed, self.budget, rounds(self.budget))
+        result = run(train, self.seed, self.budget)
         self.model, self._rounds = result.models[1], rounds_run(result)
         progress.stop("solved")
 

@@ -17,6 +17,7 @@ from bench.core.autocorrelation import integrated_time
 from bench.core.data import Dataset
 from bench.core.folds import Fold, Folds
 from bench.core.protocols import folds as protocol_folds
+from bench.physics.regression import Compressed, least_squares
 
 #: the loop's validation protocol (:func:`bench.core.protocols.folds`)
 PROTOCOL = "auto"
@@ -25,7 +26,6 @@ PROTOCOL = "auto"
 def folds(data: Dataset) -> Folds:
     """The loop's folds of ``data``, by :data:`PROTOCOL`."""
     return protocol_folds(data, PROTOCOL, None)
-from bench.physics.regression import Compressed, least_squares
 
 
 def describe(data: Dataset) -> str:

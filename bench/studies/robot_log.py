@@ -61,9 +61,11 @@ def fourier_trajectory(dof: int, time: np.ndarray, base_hz: float, rng: np.rando
 
 
 def simulate(system_name: str, seconds: float, rate_hz: float, base_hz: float, effects: list[str], noise: float,
-             seed: int, torque_delay: float = 0.0) -> tuple[np.ndarray, Dataset]:
+             seed: int, torque_delay: float = 0.0, noise_seed: int | None = None) -> tuple[np.ndarray, Dataset]:
     """One recording: its time stamps and its samples (``q, qd, qdd`` exact,
-    the torque with the effects and the noise). With ``torque_delay`` the
+    the torque with the effects and the noise). ``seed`` draws the trajectory
+    and, unless ``noise_seed`` is given (a repeat of one trajectory with noise
+    of its own), the noise. With ``torque_delay`` the
     torque logged at ``t`` is the one at ``t - torque_delay`` (its effects
     and noise included): a sensor's or a filter's delay, exact because the
     trajectory is a Fourier series."""
@@ -84,7 +86,7 @@ def simulate(system_name: str, seconds: float, rate_hz: float, base_hz: float, e
     tau, L = system.torque(*(torch.from_numpy(x) for x in seen))
     data = Dataset(*seen, tau.numpy(), L.numpy(), system.name, f"simulated log of {system.name}")
     data = add_effects(data, fx, system)
-    data = add_noise(data, "indirect", noise, seed) if noise else data
+    data = add_noise(data, "indirect", noise, seed if noise_seed is None else noise_seed) if noise else data
     if torque_delay:
         data = data.replace(q=q[:n], qd=qd[:n], qdd=qdd[:n], L=None,
                             source=f"{data.source}, its torque {torque_delay:g} s behind its state")

@@ -24,9 +24,9 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-from pathlib import Path
 
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
@@ -121,11 +121,16 @@ def entry(candidate: Candidate, record: Record, out: Path) -> dict:
             "work": tuning.get("work")}
 
 
+def usable(entries: list[dict]) -> list[dict]:
+    """The candidates that ran, validated and saved their model: those a choice may fall on."""
+    return [e for e in entries if e["status"] == "ok" and e["validation_mse"] is not None
+            and math.isfinite(e["validation_mse"]) and e["model"]]
+
+
 def choose(entries: list[dict]) -> dict | None:
-    """The candidate with the lowest validation MSE among those that ran and saved their model."""
-    usable = [e for e in entries if e["status"] == "ok" and e["validation_mse"] is not None
-              and math.isfinite(e["validation_mse"]) and e["model"]]
-    return min(usable, key=lambda e: e["validation_mse"]) if usable else None
+    """The candidate with the lowest validation MSE among :func:`usable`'s."""
+    candidates = usable(entries)
+    return min(candidates, key=lambda e: e["validation_mse"]) if candidates else None
 
 
 def page(result: dict) -> str:

@@ -35,7 +35,6 @@ per seed) is run once a rule is fixed, and no test reads it.
 from __future__ import annotations
 
 import json
-import math
 import subprocess
 import sys
 import zlib
@@ -46,11 +45,11 @@ import numpy as np
 
 from bench.core.arguments import positive_int
 from bench.core.csv_format import write_csv
-from bench.core.data import Dataset, add_noise
+from bench.core.data import Dataset
 from bench.core.fileio import atomic_write, write_json
-from bench.physics.undeclared import add_effects, parse_effects
-from bench.studies.robot_log import REACH, fourier_trajectory
 from bench.runner.plugins import register_by_file
+from bench.studies import selection
+from bench.studies.robot_log import simulate
 from systems import get_system
 
 DEVELOPMENT, EVALUATION = "development", "evaluation"
@@ -133,19 +132,11 @@ def _urdf(arm: str) -> Path:
 
 
 def recording(system, effects: list[str], trajectory_seed: int, noise_seed: int, base_hz: float) -> Dataset:
-    """One recording of the Fourier trajectory of ``trajectory_seed``, its torque the arm's with ``effects``
-    and noise drawn with ``noise_seed``."""
-    import torch
-
-    time = np.arange(int(round(SECONDS * RATE_HZ))) / RATE_HZ
-    q, qd, qdd = fourier_trajectory(system.dof, time, base_hz, np.random.default_rng(trajectory_seed))
-    (q_lo, q_hi), (v_lo, v_hi) = (system.domain.bounds(k, system.dof) for k in ("q", "qd"))
-    amplitude = REACH * np.minimum((q_hi - q_lo) / 2, (v_hi - v_lo) / 2 / np.abs(qd).max(axis=0))
-    q, qd, qdd = (q_lo + q_hi) / 2 + amplitude * q, amplitude * qd, amplitude * qdd
-    tau, _ = system.torque(*(torch.from_numpy(np.ascontiguousarray(x)) for x in (q, qd, qdd)))
-    data = Dataset(q, qd, qdd, tau.numpy(), None, system.name, "simulated", time=time)
-    data = add_effects(data, parse_effects(effects, system.dof), system)
-    return add_noise(data, "indirect", NOISE, noise_seed)
+    """One recording of the Fourier trajectory of ``trajectory_seed`` (:func:`bench.studies.robot_log.simulate`),
+    its torque the arm's with ``effects`` and noise drawn with ``noise_seed``, with its time stamps."""
+    time, data = simulate(system.name, SECONDS, RATE_HZ, base_hz, effects, NOISE, trajectory_seed,
+                          noise_seed=noise_seed)
+    return data.replace(L=None, time=time)
 
 
 def make(case: Case, folder: Path) -> Path:
@@ -196,16 +187,13 @@ def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tu
 
 
 def choose(entries: list[dict], rule: str) -> dict | None:
-    """The candidate ``rule`` chooses among those that validated."""
-    ok = [e for e in entries if e.get("validation_mse") is not None and e.get("test_mse") is not None
-          and math.isfinite(e["validation_mse"])]
-    if not ok:
-        return None
-    best = min(ok, key=lambda e: e["validation_mse"])
-    if rule == "lowest":
+    """The candidate ``rule`` chooses among those ``bench select`` may choose (:func:`bench.studies.selection.usable`);
+    ``lowest`` is ``bench select``'s own choice."""
+    best = selection.choose(entries)
+    if best is None or rule == "lowest":
         return best
     bound = best["validation_mse"] + (best.get("validation_stderr") or 0.0)
-    within = [e for e in ok if e["validation_mse"] <= bound]
+    within = [e for e in selection.usable(entries) if e["validation_mse"] <= bound]
     return min(within, key=lambda e: SIMPLICITY.index(e["name"]) if e["name"] in SIMPLICITY else len(SIMPLICITY))
 
 

@@ -11,7 +11,8 @@ from bench.studies import selection_benchmark as sb
 
 
 def _entry(name, validation, test, stderr=None):
-    return {"name": name, "validation_mse": validation, "test_mse": test, "validation_stderr": stderr}
+    return {"name": name, "status": "ok", "model": f"{name}.npz", "validation_mse": validation, "test_mse": test,
+            "validation_stderr": stderr}
 
 
 def test_a_case_is_a_measured_arm_with_the_layout_it_declares(tmp_path):
@@ -33,7 +34,7 @@ def test_a_case_is_a_measured_arm_with_the_layout_it_declares(tmp_path):
 
 def test_the_rules_choose_as_stated_and_regret_is_against_the_best_on_the_test():
     entries = [_entry("standard+gp", 0.50, 0.9, 0.05), _entry("standard", 0.53, 0.6, 0.02),
-               _entry("standard+mlp", 0.70, 0.3, 0.1), {"name": "loop", "validation_mse": None, "test_mse": None}]
+               _entry("standard+mlp", 0.70, 0.3, 0.1), {"name": "loop", "status": "timeout", "model": None, "validation_mse": None, "test_mse": None}]
     assert sb.choose(entries, "lowest")["name"] == "standard+gp"
     assert sb.choose(entries, "one_se")["name"] == "standard"  # within 0.05 of the lowest, and simpler
     s = sb.scores({"candidates": entries})
