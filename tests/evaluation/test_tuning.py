@@ -220,6 +220,21 @@ def test_successive_halving_scores_the_survivor_at_the_final_fits_steps():
     assert dropped["steps"] == 3 and len(dropped["fold_steps"]) == 3
 
 
+def test_the_plan_gives_the_steps_that_fit_the_time_left_by_the_line_through_the_fits():
+    from bench.evaluation import tuning
+
+    train = _trajectories()
+    search = tuning._Search(lambda choice: Poly(), train, "indirect", 0, None, folds(train, max_folds=MAX_FOLDS))
+    assert search.plan([(1, 1.0)], 20.0) == 1  # nothing measured yet: one step
+    search.observed = [(1.0, 1.1), (11.0, 2.1)]  # a second of overhead a fit, a tenth of a second a unit of work
+    # the last rung on 3 folds fitted on 2/3 of the samples each, and the final fit on all: 4 fits, 3 units a step
+    assert search.plan([(1, 1.0)], 20.0) == int((20.0 - 4 * 1.0) / (0.1 * 3.0))
+    search.observed = [(1.0, 2.0), (11.0, 1.0)]  # a line that falls: seconds per unit over all the fits, no overhead
+    assert search.plan([(1, 1.0)], 20.0) == int(20.0 / (3.0 / 12.0 * 3.0))
+
+
+@pytest.mark.slow  # the steps planned depend on the machine's speed: on a loaded machine the one-step probe takes its
+# whole share of 6 s, and the plan, one point to go by, counts all of it as work (one step)
 def test_under_a_time_budget_the_fold_fits_do_the_steps_the_final_fit_does():
     train = _trajectories()
     d = tune(METHODS["mlp"], {"hidden": 8, "layers": 1, "eval_samples": 64, "lr": 1e-3}, train, "indirect", 0,
