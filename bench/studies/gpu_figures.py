@@ -8,7 +8,10 @@ one run on one machine, each beside what it is compared with:
    seeds stacked on the device, beside one CPU core of the same machine
    training seeds one by one (its rate per seed does not depend on how many
    it trains, so it trains :attr:`Sizes.cpu_seeds` of them);
-3. the paper's 10-seed indirect table in the closest stackable
+3. where the stacked SyReNets step's time goes on the device: torch's
+   profiler over :attr:`Sizes.profile_steps` steps of the table's 10 seeds
+   stacked (:mod:`bench.studies.device_profile`);
+4. the paper's 10-seed indirect table in the closest stackable
    configuration to ``best-300s`` (``best-300s`` compiles one network's pass,
    so it trains alone: the same settings, not compiled), for the steps that
    300 s gave each seed of the published ``best-300s`` table on one core
@@ -31,7 +34,9 @@ at toy sizes (the tests run it on the CPU).
 Each fit's time is its loop's, ``loop_seconds`` (after its one-time
 compiling, to its loop's end, evaluations on its schedule included);
 SyReNets runs without its refinement after training (``refine=False``),
-which a step count does not bound.
+which a step count does not bound. The parts run in the order ``--parts``
+names them, and the page and JSON are written again after each, so that a
+run stopped by its machine's limit keeps the parts it finished.
 """
 
 from __future__ import annotations
@@ -55,6 +60,7 @@ from bench.core.fileio import atomic_write
 from bench.runner.progress import print_now
 from bench.runner.provenance import cpu_model
 from bench.runner.spec import TEST_SEED_OFFSET
+from bench.studies import device_profile
 import systems
 from methods import METHODS
 from methods.stacking import fit_stacked
@@ -74,6 +80,8 @@ TABLE_CONFIG = {**METHODS["syrenets"].configurations["best-300s"].values, "compi
 #: what a bare machine lacks that the suite imports, as pip pins, with what they need that the machine's image
 #: lacks (deap imports moocore, which needs cffi, pycparser and platformdirs); fetched here into ``.whl``
 WHEELS = ("deap==1.4.4", "moocore==0.3.2", "cffi==2.1.1", "pycparser==3.12", "platformdirs==4.14.8")
+#: the parts, in their default order
+PARTS = ("syrenets", "panda", "profile", "table")
 #: the prepared Panda samples, in ``--data``
 PANDA_FILE = "panda.npz"
 #: what may travel to a device machine, MiB
@@ -100,6 +108,8 @@ class Sizes:
     table_allowance_s: float = 200.0
     table_n_train: int = 32000
     table_n_test: int = 10000
+    #: the profiled steps of the table's seeds stacked
+    profile_steps: int = 40
     #: each method's configuration starts from its smoke configuration (toy networks, nothing compiled)
     smoke: bool = False
 
@@ -110,7 +120,7 @@ class Sizes:
 
 FULL = Sizes()
 TINY = Sizes(syrenets_steps=3, syrenets_seeds=(1, 2), panda_steps=3, panda_seeds=(1, 2), cpu_seeds=1, cpu_steps=2,
-             n_train=64, table_seeds=2, table_steps=4, table_probe_steps=2, table_allowance_s=120.0, table_n_train=96, table_n_test=48, smoke=True)
+             n_train=64, table_seeds=2, table_steps=4, profile_steps=2, table_probe_steps=2, table_allowance_s=120.0, table_n_train=96, table_n_test=48, smoke=True)
 
 
 def published_table() -> dict:
@@ -215,6 +225,27 @@ def panda_part(method: str, sizes: Sizes, device: str, data: Dataset, report) ->
     return {"cpu_core": cpu, "stacked": rows}
 
 
+def profile_part(sizes: Sizes, device: str, report) -> dict:
+    """Torch's profiler over :attr:`Sizes.profile_steps` steps of the table's seeds stacked, after two
+    unprofiled steps that do the one-time work."""
+    system = systems.get_system("double_pendulum")
+    seeds = list(range(sizes.table_seeds))
+    train = [generate(system, sizes.n_train, k) for k in seeds]
+    config = sizes.config("syrenets", **TABLE_CONFIG)
+
+    def stack(steps: int):
+        return fit_stacked([_fresh("syrenets", config, device) for _ in seeds], train, "indirect", seeds,
+                           steps=steps, system=system)
+
+    stack(2)
+    out = {"seeds": len(seeds), "config": config, **device_profile.profile_call(lambda: stack(sizes.profile_steps),
+                                                                                device, sizes.profile_steps)}
+    report(f"profile: {len(seeds)} stacked syrenets seeds, {out['ms_per_step']:.3g} ms a step profiled; device busy "
+           f"{100 * out['device_busy']:.3g} %, {out['kernels_per_step']:.4g} kernels a step, operators "
+           f"{100 * out['operators_cpu_share']:.3g} % of the wall on the CPU")
+    return out
+
+
 def table_part(sizes: Sizes, device: str, report) -> dict:
     """The 10-seed table stacked: a probe of :attr:`Sizes.table_probe_steps` times the pace, then the
     published steps where that pace does them within :attr:`Sizes.table_allowance_s`, else the steps it
@@ -312,8 +343,8 @@ def add_arguments(parser) -> None:
                         help=f"write the Panda's samples to DIR/{PANDA_FILE} (needs Pinocchio) and stop")
     parser.add_argument("--dry-run", action="store_true", help="list what would travel to a bare machine, with sizes")
     parser.add_argument("--wheels", type=Path, default=ROOT / ".whl", help="the folder of wheels that travel (default .whl)")
-    parser.add_argument("--parts", nargs="+", choices=("syrenets", "panda", "table"), default=["syrenets", "panda", "table"],
-                        help="which parts to run (default all)")
+    parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS),
+                        help="which parts to run, in this order (default all)")
 
 
 def main(args) -> int:
@@ -331,17 +362,18 @@ def main(args) -> int:
     print_now(f"on {info['device']} (torch {info['torch']}, CUDA {info['cuda']}); CPU {info['cpu']}, one thread")
     out = {"versions": info, "sizes": dataclasses.asdict(sizes), "command": args.invocation}
     panda = panda_samples(args.data, sizes.n_train) if "panda" in args.parts else None  # before any long work
-    if "syrenets" in args.parts:
-        out["syrenets"] = attempt("syrenets", lambda: syrenets_part(sizes, device, print_now))
-    if "panda" in args.parts:
-        out["panda"] = {m: attempt(m, lambda m=m: panda_part(m, sizes, device, panda, print_now)) for m in ("mlp", "delan")}
-    if "table" in args.parts:
-        out["table"] = attempt("the table", lambda: table_part(sizes, device, print_now))
-    out["seconds"] = time.perf_counter() - began
+    runs = {"syrenets": lambda: attempt("syrenets", lambda: syrenets_part(sizes, device, print_now)),
+            "panda": lambda: {m: attempt(m, lambda m=m: panda_part(m, sizes, device, panda, print_now))
+                              for m in ("mlp", "delan")},
+            "profile": lambda: attempt("the profile", lambda: profile_part(sizes, device, print_now)),
+            "table": lambda: attempt("the table", lambda: table_part(sizes, device, print_now))}
     args.out.mkdir(parents=True, exist_ok=True)
-    atomic_write(args.out / "gpu_figures.json", lambda f: f.write(json.dumps(out, indent=1)))
-    text = page(out)
-    atomic_write(args.out / "gpu_figures.md", lambda f: f.write(text))
+    for part in dict.fromkeys(args.parts):
+        out[part] = runs[part]()
+        out["seconds"] = time.perf_counter() - began
+        text = page(out)
+        atomic_write(args.out / "gpu_figures.json", lambda f: f.write(json.dumps(out, indent=1)))
+        atomic_write(args.out / "gpu_figures.md", lambda f: f.write(text))
     print(text)
     return 1 if "Failed here:" in text else 0
 
@@ -364,7 +396,7 @@ def page(out: dict) -> str:
              f"Measured by `{out['command']}` on {v['device']} ({v['device_type']}; torch {v['torch']}, CUDA {v['cuda']}), "
              f"beside one core of its CPU ({v['cpu']}), one thread; {out['seconds']:.0f} s in all.", ""]
     failed = [f"{name}: {part['error']}" for name, part in
-              [("syrenets", out.get("syrenets", {})), ("table", out.get("table", {})),
+              [("syrenets", out.get("syrenets", {})), ("profile", out.get("profile", {})), ("table", out.get("table", {})),
                *((m, p) for m, p in out.get("panda", {}).items())] if "error" in part]
     if failed:
         lines += ["Failed here: " + "; ".join(failed) + ".", ""]
@@ -385,6 +417,11 @@ def page(out: dict) -> str:
             lines += [f"| {m} | {r['seeds']} | {r['seed_steps_per_s']:.4g} | {p['cpu_core']['seed_steps_per_s']:.4g} "
                       f"| {r['x_cpu_core']:.3g} |" for r in p["stacked"]]
         lines.append("")
+    if "profile" in out and "error" not in out["profile"]:
+        p = out["profile"]
+        lines += ["## Where the stacked SyReNets step's time goes", "",
+                  f"Torch's profiler over the table's configuration, {p['seeds']} seeds stacked on {p['device']}.", "",
+                  *device_profile.page_lines(p)]
     if "table" in out and "error" not in out["table"]:
         t = out["table"]
         pub = t["published"]

@@ -34,8 +34,12 @@ def test_the_gpu_figures_run_on_the_cpu_from_prepared_samples_and_write_their_pa
     table = result["table"]
     assert table["steps"] == table["steps_wanted"] == gpu_figures.TINY.table_steps and table["probe_steps_per_s"] > 0
     assert all(np.isfinite(table["test_mse"])) and table["published"]["steps"] > 10000
+    profiled = result["profile"]
+    assert profiled["steps"] == gpu_figures.TINY.profile_steps and profiled["kernels_per_step"] == 0  # no device here
+    assert 0 < profiled["operators_cpu_share"] <= 1 and profiled["operators"][0]["calls_per_step"] > 0
     text = (out / "gpu_figures.md").read_text()
     assert "× public code" in text and "× one core" in text and "published, one core each" in text
+    assert "| operators, by CPU self time |" in text
 
 
 def test_without_prepared_samples_or_pinocchio_the_command_says_so_in_one_line(tmp_path, monkeypatch):
@@ -60,7 +64,7 @@ def test_a_part_that_fails_is_named_on_the_page_and_the_others_still_run(tmp_pat
         raise RuntimeError("no C++ compiler here\nsecond line")
 
     monkeypatch.setattr(gpu_figures, "table_part", broken)
-    r = cli("study", "gpu", "--device", "cpu", "--tiny", "--parts", "syrenets", "table", "--out", tmp_path)
+    r = cli("study", "gpu", "--device", "cpu", "--tiny", "--parts", "table", "syrenets", "--out", tmp_path)
     assert r.returncode == 1
     text = (tmp_path / "gpu_figures.md").read_text()
     assert "Failed here: table: RuntimeError: no C++ compiler here." in text and "× public code" in text
