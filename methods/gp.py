@@ -243,6 +243,9 @@ class GaussianProcess(Method):
         """A GP of the torque has no Lagrangian: ``nan``."""
         return np.full(len(data), math.nan)
 
+    def takes_accelerations(self) -> bool:
+        return "qdd" in self.config.inputs
+
     def not_a_lagrangian(self) -> str | None:
         if "qdd" in self.config.inputs:
             return "the GP's torque takes qdd as an input: it is not affine in the accelerations"

@@ -210,6 +210,20 @@ class Hybrid(Method):
     def predict_torque(self, data: Dataset) -> np.ndarray:
         return self.prior.predict_torque(data) + self.residual_torque(data)
 
+    def takes_accelerations(self) -> bool:
+        return self.prior.takes_accelerations() or self.residual.takes_accelerations()
+
+    def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The prior's ``M`` and ``c`` plus the residual's, weighted: the gate's
+        weight depends on the state alone, so each of the two is asked once a
+        state for its own (a residual of the state alone gives its torque at
+        each state once, and the gate is looked up once a state)."""
+        M, c = self.prior.mass_and_bias(q, qd)
+        M_r, c_r = self.residual.mass_and_bias(q, qd)
+        zeros = np.zeros_like(q)
+        w = self.weight(Dataset(q, qd, zeros, zeros))
+        return M + w[:, None, None] * M_r, c + w[:, None] * c_r
+
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         """The prior's L plus the weighted residual's (for a residual that has one)."""
         return self.prior.predict_lagrangian(data) + self.weight(data) * self.residual.predict_lagrangian(data)

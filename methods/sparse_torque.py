@@ -86,6 +86,9 @@ class SparseTorque(Method):
             out[:, j] = terms(data, j)[1] @ c
         return out
 
+    def takes_accelerations(self) -> bool:
+        return False
+
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         """A regression of the torque has no Lagrangian: ``nan``."""
         return np.full(len(data), math.nan)

@@ -16,7 +16,11 @@ the rest of the suite uses nothing else of them:
   linear in its parameters, an expression, or opaque), for code that treats
   kinds differently;
 * :meth:`~FittedModel.not_a_lagrangian`: why the model is not a Lagrangian
-  of ``(q, qd)`` alone, or ``None``.
+  of ``(q, qd)`` alone, or ``None``;
+* :meth:`~FittedModel.mass_and_bias`: ``M`` and ``c`` of ``tau = M qdd + c``
+  (the forward dynamics' and the checks' one source), and
+  :meth:`~FittedModel.takes_accelerations`, which lets a torque of the state
+  alone give them from one torque a state.
 
 Models given by a batched torch function ``L(q, qd)`` subclass
 :class:`LagrangianFunction`, which owns their predictions (torques through
@@ -118,6 +122,35 @@ class FittedModel(abc.ABC):
         not affine in ``qdd``: it has no forward dynamics to roll out, and
         its expression cannot be judged against a Lagrangian."""
         return None
+
+    def takes_accelerations(self) -> bool:
+        """Whether the torque depends on ``qdd``. ``False`` for a torque of
+        the state alone (a friction law, a GP of ``(q, qd)``): its mass matrix
+        is zero, and :meth:`mass_and_bias` asks one torque a state. By default
+        ``True``."""
+        return True
+
+    def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``M`` of shape ``(n, dof, dof)`` and ``c`` of shape ``(n, dof)`` with
+        ``tau = M qdd + c``. By default from one :meth:`predict_torque` call at
+        ``dof + 1`` accelerations a state (every Lagrangian's torque is affine
+        in ``qdd``), or at ``qdd = 0`` alone where the torque
+        :meth:`takes_accelerations` not; a model made of others combines
+        theirs (:class:`methods.hybrid.Hybrid`)."""
+        n, dof = q.shape
+        if not self.takes_accelerations():
+            zeros = np.zeros((n, dof))
+            c = np.asarray(self.predict_torque(Dataset(q, qd, zeros, zeros)), dtype=np.float64)
+            return np.zeros((n, dof, dof)), c
+        qdd = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
+        batch = Dataset(
+            np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0),
+            np.tile(qdd, (n, 1)), np.zeros((n * (dof + 1), dof)),
+        )
+        tau = np.asarray(self.predict_torque(batch), dtype=np.float64).reshape(n, dof + 1, dof)
+        c = tau[:, 0]
+        M = np.transpose(tau[:, 1:] - c[:, None, :], (0, 2, 1))  # column j is tau(e_j) - c
+        return M, c
 
     def saved(self, packer: Packer) -> dict:
         """The model as a model file holds it (:mod:`bench.core.modelfile`): a
@@ -438,16 +471,5 @@ class FeasibleSet:
 
 
 def mass_and_bias(model: FittedModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``M`` of shape ``(n, dof, dof)`` and ``c`` of shape ``(n, dof)`` with
-    ``tau = M qdd + c``, from one :meth:`~FittedModel.predict_torque` call
-    (every Lagrangian's torque is affine in ``qdd``)."""
-    n, dof = q.shape
-    qdd = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
-    batch = Dataset(
-        np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0),
-        np.tile(qdd, (n, 1)), np.zeros((n * (dof + 1), dof)),
-    )
-    tau = np.asarray(model.predict_torque(batch), dtype=np.float64).reshape(n, dof + 1, dof)
-    c = tau[:, 0]
-    M = np.transpose(tau[:, 1:] - c[:, None, :], (0, 2, 1))  # column j is tau(e_j) - c
-    return M, c
+    """``model``'s :meth:`~FittedModel.mass_and_bias` at the states ``(q, qd)``."""
+    return model.mass_and_bias(q, qd)

@@ -8,7 +8,7 @@ import sympy
 from scipy.integrate import solve_ivp
 
 from bench.core.data import Dataset
-from bench.physics.models import ExpressionModel, mass_and_bias
+from bench.physics.models import ExpressionModel, FittedModel, mass_and_bias
 from bench.evaluation.driven import driven_entry, driven_rollout, summary, windows
 from bench.evaluation.rollout import TrueModel, forward_dynamics
 from systems import get_system
@@ -101,9 +101,9 @@ def test_a_long_test_log_is_rolled_out_over_evenly_spread_windows(monkeypatch):
     q = np.zeros((n, 1))
     data = Dataset(q, q, q, q, recording=np.array(["r"] * n), time=t)
 
-    class Still:  # a unit mass at rest under no torque: it stays where it is
-        def not_a_lagrangian(self):
-            return None
+    class Still(FittedModel):  # a unit mass at rest under no torque: it stays where it is
+        def predict_lagrangian(self, d):
+            return 0.5 * d.qd[:, 0] ** 2
 
         def predict_torque(self, d):
             return d.qdd.copy()

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from bench.core.data import generate, mse
+from bench.physics.models import FittedModel
 from bench.physics.undeclared import add_effects
 from methods import METHODS
 from systems import get_system
@@ -106,3 +107,22 @@ def test_the_gps_elbo_counts_the_independent_samples_of_a_recording(panda):
     every = METHODS["gp"](**SMALL_GP, samples="all").fit(recorded.replace(tau=smooth), "indirect", seed=0, steps=2,
                                                           system=system)
     assert every.record_details()["effective_samples"] == [float(len(train))] * train.dof
+
+
+@pytest.mark.parametrize("name, hyperparameters", [("standard+gp", SMALL_GP), ("standard+mlp", SMALL_MLP),
+                                                   ("standard+sparse_torque", {})])
+def test_a_hybrids_mass_matrix_and_bias_are_its_torques_and_a_residual_of_the_state_is_asked_once_a_state(
+        name, hyperparameters, panda, monkeypatch):
+    system, train, test = panda
+    hybrid = METHODS[name](**hyperparameters).fit(train, "indirect", seed=0, steps=5, system=system)
+    q, qd = test.q[:40], test.qd[:40]
+    asked = []
+    own = type(hybrid.residual).predict_torque
+    monkeypatch.setattr(type(hybrid.residual), "predict_torque", lambda self, d: asked.append(len(d)) or own(self, d))
+    M, c = hybrid.mass_and_bias(q, qd)
+    # what the torques at dof + 1 accelerations a state give (the default of every model)
+    M_torques, c_torques = FittedModel.mass_and_bias(hybrid, q, qd)
+    np.testing.assert_allclose(M, M_torques, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(c, c_torques, rtol=1e-9, atol=1e-9)
+    per_state = 1 if name != "standard+mlp" else system.dof + 1  # the MLP's torque takes accelerations
+    assert asked[0] == per_state * len(q)
