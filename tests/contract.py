@@ -17,7 +17,7 @@ from torch.utils._pytree import tree_leaves
 from bench.core import symbolic
 from bench.core.budget import Budget, Schedule
 from bench.core.data import Dataset, generate
-from bench.physics.models import mass_and_bias
+from bench.physics.models import FittedModel, mass_and_bias
 from methods.stacking import fit_stacked
 from systems import SYSTEMS, Domain
 
@@ -86,11 +86,15 @@ def check_engine_system(system) -> None:
     np.testing.assert_allclose(np.einsum("nij,nj->ni", M, accelerations), -_bias(system, data), rtol=1e-8, atol=1e-8)
 
 
-class TorquesOf:
+class TorquesOf(FittedModel):
     """A system's own torques as a model (for :func:`mass_and_bias`)."""
 
     def __init__(self, system):
         self.system = system
+
+    def predict_lagrangian(self, data):
+        t = data.tensors()
+        return self.system.lagrangian(t["q"], t["qd"]).numpy()
 
     def predict_torque(self, data):
         t = data.tensors()

@@ -9,7 +9,7 @@ from hypothesis import given, strategies as st
 
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
-from bench.physics.models import mass_and_bias
+from bench.physics.models import FittedModel, mass_and_bias
 
 
 def _data(states: np.ndarray, dof: int) -> Dataset:
@@ -49,7 +49,10 @@ def test_the_forward_dynamics_batch_of_a_gated_model_looks_each_state_up_once():
     gate = TrainingStates(_data(rng.normal(size=(500, 2 * dof)), dof))
     gate.tree = _Counting(gate.tree)
 
-    class Gated:  # a model whose torque is the gate's distance on each joint, as a gated residual's weight is
+    class Gated(FittedModel):  # a model whose torque is the gate's distance on each joint, as a gated residual's weight is
+        def predict_lagrangian(self, data):
+            return np.zeros(len(data))
+
         def predict_torque(self, data):
             return np.repeat(gate.distance(data)[:, None], dof, axis=1)
 
