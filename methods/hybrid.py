@@ -210,9 +210,6 @@ class Hybrid(Method):
     def predict_torque(self, data: Dataset) -> np.ndarray:
         return self.prior.predict_torque(data) + self.residual_torque(data)
 
-    def takes_accelerations(self) -> bool:
-        return self.prior.takes_accelerations() or self.residual.takes_accelerations()
-
     def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The prior's ``M`` and ``c`` plus the residual's, weighted: the gate's
         weight depends on the state alone, so each of the two is asked once a

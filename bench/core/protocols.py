@@ -35,6 +35,7 @@ and regions where they hold one, whose spans in time only interpolate.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -200,9 +201,8 @@ def folds(data: Dataset, name: str | None, max_folds: int | None, target: Datase
     splitter = KNNDM(distances, n_splits, time=[f.held for f in by_time])
     held = splitter.held(x)
     if splitter.chosen["folds"] == "time":
-        return Folds(by_time.folds, by_time.kind, by_time.gap, by_time.autocorrelation, by_time.recordings,
-                     by_time.trajectories, detail=splitter.describe() + f": {by_time.describe()}",
-                     choices=splitter.tried)
+        return dataclasses.replace(by_time, detail=splitter.describe() + f": {by_time.describe()}",
+                                   choices=splitter.tried)
     return Folds(tuple(Fold(m, m) for m in _ordered(held)), "knndm", detail=splitter.describe(),
                  choices=splitter.tried, **counts)
 
