@@ -124,6 +124,11 @@ CROSS_FIT_SHARE = 0.15
 MAX_SAMPLES = 16384
 
 
+def not_started(budget_s: float) -> str:
+    """The ``stop`` of a round the loop did not start because the time budget ``budget_s`` would end first."""
+    return f"the budget of {budget_s:g} s would be spent before a round ended"
+
+
 def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float | None = None,
                   steps: int | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
                   fitted: FittedModel | None = None, open_ended: bool | None = None,
@@ -402,8 +407,8 @@ class _Loop(Tidying):
         for k in range(1, self.max_rounds + 1):
             began = now()
             if began - self.start + longest >= self.horizon:
-                rounds.append(Round(k, self.scores(model), held, stop=f"the budget of {self.budget.seconds:g} s would "
-                                    f"be spent before a round ended", seconds=self.elapsed()))
+                rounds.append(Round(k, self.scores(model), held, stop=not_started(self.budget.seconds),
+                                    seconds=self.elapsed()))
                 self.stopped = (f"round {k} not started: the budget of {self.budget.seconds:g} s would be spent "
                                 f"before it ended")
                 report(f"round {k}: not started, the budget of {self.budget.seconds:g} s would be spent before it ended")

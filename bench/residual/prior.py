@@ -29,7 +29,7 @@ from bench.core.experiment import INDIRECT
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.physics.models import FittedModel
-from bench.residual.loop import MAX_ROUNDS, residual_loop
+from bench.residual.loop import MAX_ROUNDS, not_started, residual_loop
 from bench.residual.result import ResidualResult
 from methods.base import METHODS, Method
 from methods.hybrid import Prior, prior_unavailable, register_prior
@@ -58,7 +58,8 @@ def run(train: Dataset, seed: int, budget: Budget) -> ResidualResult:
 
 def rounds_run(result: ResidualResult) -> int:
     """The rounds after round 0 that the loop ran, finished or undone (one not started is not counted)."""
-    return sum(1 for r in result.rounds if r["round"] > 0 and not (r.get("stop") or "").startswith("the budget of"))
+    skipped = None if result.budget_s is None else not_started(result.budget_s)
+    return sum(1 for r in result.rounds if r["round"] > 0 and (skipped is None or r.get("stop") != skipped))
 
 
 PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the feasible rigid body and its named laws)",

@@ -3,11 +3,13 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
-import bench.residual.prior  # noqa: F401  (registers the loop)
-from bench.residual.loop import residual_loop
+from bench.residual.loop import not_started, residual_loop
+from bench.residual.prior import rounds_run  # importing it registers the loop
 from methods import METHODS
 from methods.hybrid import PRIORS, modules_for
 from methods.saving import TOLERANCE, load_model, save_model
@@ -51,3 +53,10 @@ def test_a_runs_process_is_told_to_import_the_loop():
     assert PRIORS["loop"].module == "bench.residual.prior"
     assert modules_for(["loop+gp", "loop", "feasible+gp", "mlp"]) == ("bench.residual.prior",)
     assert "loop" in METHODS["loop"].not_applicable_reason("indirect", SYSTEMS["double_pendulum"]())
+
+
+def test_the_loops_steps_count_the_rounds_it_ran_and_not_one_it_did_not_start():
+    rounds = [{"round": 0}, {"round": 1}, {"round": 2, "stop": "stopped: the budget of 60 s ran out in round 2"},
+              {"round": 3, "stop": not_started(60.0)}]
+    assert rounds_run(SimpleNamespace(budget_s=60.0, rounds=rounds)) == 2  # the undone round 2 ran
+    assert rounds_run(SimpleNamespace(budget_s=None, rounds=rounds[:3])) == 2  # a work budget starts every round
