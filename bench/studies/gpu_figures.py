@@ -167,10 +167,15 @@ def _fresh(method: str, config: dict, device: str):
     return METHODS[method](**config).use_device(device)
 
 
+def _fit_stack(method: str, config: dict, datasets: list[Dataset], steps: int, device: str, system=None) -> list:
+    """``method`` fitted on each of ``datasets`` (seeds 0, 1, …) stacked on ``device``, ``steps`` each."""
+    return fit_stacked([_fresh(method, config, device) for _ in datasets], datasets, "indirect",
+                       list(range(len(datasets))), steps=steps, system=system)
+
+
 def stacked(method: str, config: dict, datasets: list[Dataset], steps: int, device: str, system=None) -> dict:
     """The seeds of ``datasets`` trained stacked on ``device`` for ``steps`` each."""
-    fitted = fit_stacked([_fresh(method, config, device) for _ in datasets], datasets, "indirect",
-                         list(range(len(datasets))), steps=steps, system=system)
+    fitted = _fit_stack(method, config, datasets, steps, device, system)
     loop = fitted[0].fit_info["loop_seconds"]  # the first seed's clock starts first and its loop ends with all
     return {"seeds": len(datasets), "steps": steps, "loop_s": loop, "steps_per_s": steps / loop,
             "seed_steps_per_s": len(datasets) * steps / loop}
@@ -233,13 +238,10 @@ def profile_part(sizes: Sizes, device: str, report) -> dict:
     train = [generate(system, sizes.n_train, k) for k in seeds]
     config = sizes.config("syrenets", **TABLE_CONFIG)
 
-    def stack(steps: int):
-        return fit_stacked([_fresh("syrenets", config, device) for _ in seeds], train, "indirect", seeds,
-                           steps=steps, system=system)
-
-    stack(2)
-    out = {"seeds": len(seeds), "config": config, **device_profile.profile_call(lambda: stack(sizes.profile_steps),
-                                                                                device, sizes.profile_steps)}
+    _fit_stack("syrenets", config, train, 2, device, system)
+    out = {"seeds": len(seeds), "config": config,
+           **device_profile.profile_call(lambda: _fit_stack("syrenets", config, train, sizes.profile_steps, device, system),
+                                         device, sizes.profile_steps)}
     report(f"profile: {len(seeds)} stacked syrenets seeds, {out['ms_per_step']:.3g} ms a step profiled; device busy "
            f"{100 * out['device_busy']:.3g} %, {out['kernels_per_step']:.4g} kernels a step, operators "
            f"{100 * out['operators_cpu_share']:.3g} % of the wall on the CPU")
@@ -260,8 +262,7 @@ def table_part(sizes: Sizes, device: str, report) -> dict:
 
     def stack(steps: int):
         start = time.perf_counter()
-        fitted = fit_stacked([_fresh("syrenets", config, device) for _ in seeds], train, "indirect", seeds,
-                             steps=steps, system=system)
+        fitted = _fit_stack("syrenets", config, train, steps, device, system)
         return fitted, time.perf_counter() - start
 
     probe, _ = stack(sizes.table_probe_steps)
