@@ -119,7 +119,7 @@ def cases(which: str) -> list[Case]:
 
 def _system(arm: str):
     if arm == "kuka":
-        return get_system(register_by_file(f"urdf:{_data() / 'kuka_lwr4.urdf.gz'}"))
+        return get_system(register_by_file(f"urdf:{_urdf(arm)}"))
     return get_system(arm)
 
 
@@ -282,7 +282,7 @@ def main(args) -> int:
             print(f"[{i + 1}/{len(chosen)}] {case.name} {protocol}: " +
                   (s.get("error") or ", ".join(f"{r} chose {v['chosen']} (regret {v['regret']:.3g})"
                                                for r, v in s["rules"].items())), flush=True)
-    result = {"command": "python -m bench study selection " + " ".join(sys.argv[3:]), "set": args.set,
+    result = {"command": args.invocation, "set": args.set,
               "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
               "table": table, "summary": summary(table)}
     write_json(args.out.with_suffix(".json"), result)
