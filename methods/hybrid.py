@@ -8,8 +8,9 @@ How the field learns a real arm (Nguyen-Tuong & Peters, ICRA 2010; Reuss et al.
 * **The prior** is SysId identified on the training data in one of its
   configurations (:data:`PRIORS`): ``standard`` (rigid-body base parameters
   plus Coulomb and viscous friction per joint, by least squares) or
-  ``feasible`` (the physically feasible rigid body). It needs an arm's linear
-  form (a URDF).
+  ``feasible`` (SysId's ``feasible`` configuration: the physically feasible
+  rigid body with nonnegative Coulomb and viscous friction per joint). It
+  needs an arm's linear form (a URDF).
 * **The residual** is any registered method that fits torques (the indirect
   experiment), a user's plugin included, fitted to ``tau - tau_prior`` on the
   same training data within the same budget: one composition for every pair
@@ -92,7 +93,8 @@ def sysid_prior(configuration: str):
 
 
 register_prior(Prior("standard", "SysId's standard configuration", sysid_prior("standard")))
-register_prior(Prior("feasible", "SysId's feasible rigid body", sysid_prior("default")))
+register_prior(Prior("feasible", "SysId's feasible configuration (the feasible rigid bodies and nonnegative "
+                                 "joint friction)", sysid_prior("feasible")))
 
 #: the gate lengths a tuned hybrid tries, where its residual is gated (:mod:`bench.evaluation.tuning`)
 GATE_LENGTHS = (1.0, 3.0)

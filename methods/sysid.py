@@ -111,7 +111,10 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
 
     With ``feasible`` (a form of rigid bodies with a prior), every
     parameter instead, each body's pseudo-inertia held positive
-    semidefinite (:func:`bench.physics.feasible.feasible_fit`). Either way the
+    semidefinite (:func:`bench.physics.feasible.feasible_fit`), and the
+    coefficient of each further term whose effect is nonnegative (a joint's
+    friction, :attr:`~bench.physics.effects.Effect.nonnegative`) at 0 or
+    above. Either way the
     facts say whether the identified set is a rigid body's (``feasibility``):
     the least-squares base parameters are judged by the full set nearest
     the prior with their torques (:func:`~bench.physics.feasible.nearest_completion`)."""
@@ -143,10 +146,13 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
         ls_full = nearest_completion(problem.R[:, : problem.columns], independent, coef, prior)
         report = {"least_squares": {**Feasibility.of(ls_full, form.bodies).as_dict(), "seconds": round(ls_seconds, 3)}}
         if feasible:
-            full, solve = feasible_fit(problem, form.bodies, np.asarray(form.prior), regularisation)
+            first = len(form.names) - len(form.terms)  # the further terms' first column
+            nonnegative = tuple(first + i for i, t in enumerate(form.terms)
+                                if t.name in EFFECTS and EFFECTS[t.name].nonnegative)
+            full, solve = feasible_fit(problem, form.bodies, np.asarray(form.prior), regularisation, nonnegative)
             base = full[independent] + beta @ full[dependent]
             model = LinearParametricModel(form, np.arange(len(form.names)), full, form.names,
-                                          feasible=FeasibleSet(form.bodies, form.prior, regularisation))
+                                          feasible=FeasibleSet(form.bodies, form.prior, regularisation, nonnegative))
             report["feasible"] = {
                 **Feasibility.of(full, form.bodies).as_dict(), **solve,
                 "seconds": round(time.perf_counter() - start, 3),
@@ -198,6 +204,9 @@ class SysId(TorchLagrangianMethod):
     configurations = {
         "standard": Named("the field's standard identified model of an arm: rigid-body base parameters plus Coulomb "
                           "and viscous friction on each joint, by least squares", {"feasible": False, "friction": True}),
+        "feasible": Named("a physically feasible model of an arm: rigid bodies whose pseudo-inertias are positive "
+                          "semidefinite, and Coulomb and viscous friction on each joint held at 0 or above",
+                          {"feasible": True, "friction": True}),
     }
     linear: LinearParametricModel | None = None
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,11 +83,13 @@ class Feasibility:
         return {"feasible": self.feasible, "masses": self.masses, "smallest_eigenvalues": self.smallest_eigenvalues}
 
 
-def feasible_fit(problem: Compressed, bodies: int, prior: np.ndarray, regularisation: float) -> tuple[np.ndarray, dict]:
+def feasible_fit(problem: Compressed, bodies: int, prior: np.ndarray, regularisation: float,
+                 nonnegative: Sequence[int] = ()) -> tuple[np.ndarray, dict]:
     """The coefficients of ``problem`` (its first ``BODY * bodies`` columns a
-    rigid body's parameters, any further columns free) with the least
-    squared error such that every pseudo-inertia is at least :data:`MARGIN`;
-    and facts of the solve.
+    rigid body's parameters, any further columns free but those named in
+    ``nonnegative``, such as a joint's friction, which are held at 0 or
+    above) with the least squared error such that every pseudo-inertia is at
+    least :data:`MARGIN`; and facts of the solve.
 
     The program is written as a step ``d`` from the least-squares solution
     ``c0`` nearest ``prior`` (the residual of ``c0`` is orthogonal to every
@@ -97,8 +100,9 @@ def feasible_fit(problem: Compressed, bodies: int, prior: np.ndarray, regularisa
     the mean squared singular value times its squared length, so they stay
     at the prior unless feasibility needs them; identified directions are
     not pulled. Variables are scaled to unit columns. What the solver
-    returns within its tolerance of the cone is projected onto it
-    (:func:`project`; the facts give the largest change)."""
+    returns within its tolerance of the cone, or of 0 for a column held
+    nonnegative, is projected onto it (:func:`project`; the facts give the
+    largest change)."""
     import cvxpy as cp
 
     n_body = BODY * bodies
@@ -121,6 +125,11 @@ def feasible_fit(problem: Compressed, bodies: int, prior: np.ndarray, regularisa
         objective = objective + regularisation * float(np.mean(sv[:rank] ** 2)) * cp.sum_squares(pulled.T @ step[:n_body])
     coef = cp.multiply(x0 + step, 1.0 / scale)
     constraints = [_pseudo_inertia(coef[BODY * b:BODY * (b + 1)]) >> MARGIN * np.eye(4) for b in range(bodies)]
+    if len(nonnegative):
+        if min(nonnegative) < n_body or max(nonnegative) >= len(x0):
+            raise ValueError(f"the columns held nonnegative, {list(nonnegative)}, are not among the further columns "
+                             f"{n_body}..{len(x0) - 1}")
+        constraints.append(coef[list(nonnegative)] >= 0)
     start = time.perf_counter()
     program = cp.Problem(cp.Minimize(objective), constraints)
     try:
@@ -132,7 +141,9 @@ def feasible_fit(problem: Compressed, bodies: int, prior: np.ndarray, regularisa
     if program.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or step.value is None:
         raise DataError(f"the feasible fit's solver ended {program.status}")
     result = (x0 + np.asarray(step.value)) / scale
-    projected = project(result, bodies)  # within the solver's tolerance of the cone: onto it
+    held = result.copy()
+    held[list(nonnegative)] = np.maximum(held[list(nonnegative)], 0.0)  # within the solver's tolerance of 0: onto it
+    projected = project(held, bodies)  # within the solver's tolerance of the cone: onto it
     return projected, {
         "solver": "CLARABEL", "status": program.status, "solve_seconds": round(time.perf_counter() - start, 3),
         "unidentified_directions": int(null.shape[1]),

@@ -411,7 +411,8 @@ class LinearParametricModel(FittedModel):
                 "term_names": list(self.form.names[len(self.form.names) - extra:]),
                 "feasible": None if self.feasible is None else {
                     "bodies": self.feasible.bodies, "prior": packer.array(self.feasible.prior),
-                    "regularisation": self.feasible.regularisation},
+                    "regularisation": self.feasible.regularisation,
+                    "nonnegative": [int(i) for i in self.feasible.nonnegative]},
                 "probe": packer.array(_probe(self.form))}
 
 
@@ -456,18 +457,21 @@ def _load_linear(tree: dict, unpacker: Unpacker, context: dict) -> "LinearParame
     return LinearParametricModel(
         form, unpacker.array(tree["columns"]), unpacker.array(tree["coef"]), tree["names"], float(tree["offset"]),
         None if feasible is None else FeasibleSet(int(feasible["bodies"]), tuple(unpacker.array(feasible["prior"])),
-                                                  float(feasible["regularisation"])))
+                                                  float(feasible["regularisation"]),
+                                                  tuple(int(i) for i in feasible.get("nonnegative", ()))))
 
 
 @dataclass(frozen=True)
 class FeasibleSet:
     """How a linear model's parameters are held feasible (:func:`bench.physics.feasible.feasible_fit`):
     its first ``bodies`` blocks of 10 columns are rigid bodies', pulled toward
-    ``prior`` with weight ``regularisation``."""
+    ``prior`` with weight ``regularisation``, and the columns ``nonnegative``
+    (a joint's friction) are held at 0 or above."""
 
     bodies: int
     prior: tuple[float, ...]
     regularisation: float
+    nonnegative: tuple[int, ...] = ()
 
 
 def mass_and_bias(model: FittedModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

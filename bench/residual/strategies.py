@@ -237,7 +237,7 @@ class Feasible(Linear):
         A, y = np.hstack([F_L, Phi]), train.tau.ravel()
         held = model.rigid.feasible
         problem = Compressed(A, y)
-        coef, _ = feasible_fit(problem, held.bodies, np.asarray(held.prior), held.regularisation)
+        coef, _ = feasible_fit(problem, held.bodies, np.asarray(held.prior), held.regularisation, held.nonnegative)
         _, stderr, _ = fit_statistics(A, y, problem)
         k = F_L.shape[1]
         return LoopModel(model.rigid.with_coefficients(coef[:k]), effects, coef[k:], stderr[k:])

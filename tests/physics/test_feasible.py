@@ -95,6 +95,40 @@ def test_free_columns_beside_the_bodies_are_fitted_without_constraint(panda):
     assert min(smallest_eigenvalues(coef[:70], 7)) >= 0.0 and facts["status"].startswith("optimal")
 
 
+def test_columns_held_nonnegative_stay_at_zero_or_above_and_the_rest_are_free(panda):
+    form = panda.linear_form()
+    data = generate(panda, 256, 0)
+    W = form.torque_regressor(data.q, data.qd, data.qdd).reshape(-1, len(form.names))
+    offset = np.tile(np.eye(7), (len(data), 1))
+    truth = np.array([1.0, -2.0, 3.0, -4.0, 5.0, -6.0, 7.0])
+    y = data.tau.ravel() + offset @ truth
+    held = [70 + j for j in range(7) if truth[j] < 0]
+    coef, facts = feasible_fit(Compressed(np.hstack([W, offset]), y), 7, np.asarray(form.prior), 1e-6, held)
+    free = [j for j in range(7) if truth[j] > 0]
+    assert np.all(coef[held] >= 0.0) and np.all(coef[held] <= 1e-6)  # held at the bound they cross
+    assert np.all(np.abs(coef[70:][free] - truth[free]) < 0.5)  # the free ones fitted, not pinned
+    with pytest.raises(ValueError, match="nonnegative"):
+        feasible_fit(Compressed(np.hstack([W, offset]), y), 7, np.asarray(form.prior), 1e-6, [3])
+
+
+def test_the_feasible_configuration_holds_friction_nonnegative_and_a_body_feasible(panda):
+    from bench.physics.effects import EFFECTS
+
+    data = generate(panda, 512, 0)
+    b, fc = np.linspace(0.2, 0.8, 7), np.linspace(0.3, 1.2, 7)
+    friction = b * data.qd + fc * np.sign(data.qd)
+    train = data.replace(tau=data.tau + friction)
+    model = METHODS["sysid"](**METHODS["sysid"].configuration("feasible")).fit(train, "indirect", 0, steps=1)
+    values = model.identified_parameters()
+    fitted_b = np.array([values[f"b_{j}"] for j in range(1, 8)])
+    fitted_fc = np.array([values[f"F_c_{j}"] for j in range(1, 8)])
+    np.testing.assert_allclose(fitted_b, b, atol=0.05)
+    np.testing.assert_allclose(fitted_fc, fc, atol=0.05)
+    assert model.linear.feasible.nonnegative == tuple(range(70, 84))
+    assert min(smallest_eigenvalues(model.linear.coef[:70], 7)) >= 0.0
+    assert EFFECTS["viscous_friction"].nonnegative and EFFECTS["coulomb_friction"].nonnegative
+
+
 def test_the_residual_loop_refits_a_feasible_fit_under_its_constraints(panda):
     from bench.residual.candidates import candidates
     from bench.residual.model import LoopModel
