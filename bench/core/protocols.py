@@ -175,6 +175,14 @@ def parse(name: str | None) -> tuple[str, str | None]:
     return kind, path or None
 
 
+def resolve(kind: str, trajectories: int) -> str:
+    """The folds ``auto`` stands for on training data of ``trajectories`` trajectories: whole trajectories
+    (``time``) where there are several, ``regions`` where there is one; any other kind is itself."""
+    if kind != "auto":
+        return kind
+    return "regions" if trajectories == 1 else "time"
+
+
 def folds(data: Dataset, name: str | None, max_folds: int | None, target: Dataset | None = None) -> Folds:
     """The folds of ``data`` by the protocol ``name`` (:data:`NAMES`, or ``knndm:LOG``; ``None``: ``time``), at
     most ``max_folds`` of them; ``target`` is kNNDM's states (default: ``LOG``'s positions and velocities, else
@@ -182,8 +190,7 @@ def folds(data: Dataset, name: str | None, max_folds: int | None, target: Datase
     kind, path = parse(name)
     if path is not None and target is None:
         target = read_csv(path, dof=data.dof, states_only=True)
-    if kind == "auto":
-        kind = "regions" if len(data.trajectories()) == 1 else "time"
+    kind = resolve(kind, len(data.trajectories()))
     if kind == "time":
         return time_folds(data, max_folds=max_folds)
     x = states(data)

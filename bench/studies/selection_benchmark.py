@@ -12,9 +12,11 @@ one's own (a TOML file beside its logs). Two layouts:
 * ``several``: :data:`SEVERAL` training trajectories, tested on another.
 
 On each case ``bench select`` runs once per validation protocol
-(:mod:`bench.core.protocols`: ``time``, ``regions``, and ``knndm`` where the
+(:mod:`bench.core.protocols`: ``time``, select's folds before it had others;
+``auto``, its default, :func:`resolve`; ``regions``; and ``knndm`` where the
 training data hold several trajectories), under a work budget (``--steps``),
-so that the study gives the same numbers on any machine. Each run's
+so that the study gives the same numbers on any machine; a protocol that
+gives a case the folds of another shares its run. Each run's
 candidates are then chosen by each rule (:data:`RULES`):
 
 * ``lowest``: the lowest validation MSE (``bench select``'s);
@@ -43,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.core import protocols
 from bench.core.arguments import positive_int
 from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
@@ -64,11 +67,15 @@ FASTER = 1.5
 SEVERAL = 4
 LAYOUTS = ("one", "several")
 #: seconds of each recording, and its rate
-SECONDS, RATE_HZ, BASE_HZ = 20.0, 100.0, 0.1
+SECONDS, RATE_HZ, BASE_HZ = 10.0, 100.0, 0.1
 #: the torque noise, a fraction of each joint's torque standard deviation
 NOISE = 0.02
-#: the protocols compared
-PROTOCOLS = ("time", "regions", "knndm")
+#: the protocols compared: ``time`` is what select did before it had others, ``auto`` its default now
+#: (:func:`resolve`)
+PROTOCOLS = ("time", "auto", "regions", "knndm")
+#: the shipped real cases: ``bench select`` at its default on each split of the KUKA, their pages' JSON
+REAL = {"kuka_lwr4 (default split)": "results/measured/select_default/select.json",
+        "kuka_lwr4 (swapped split)": "results/measured/select_swapped/select.json"}
 #: the candidates from the rigid body to the flexible residuals: the ``one_se`` rule's order
 SIMPLICITY = ("standard", "feasible", "loop", "feasible+sparse_torque", "standard+gp", "feasible+gp", "loop+gp",
               "standard+mlp", "feasible+delan")
@@ -77,7 +84,7 @@ SIMPLICITY = ("standard", "feasible", "loop", "feasible+sparse_torque", "standar
 CANDIDATES = ("standard", "feasible", "standard+gp", "feasible+gp", "standard+mlp", "feasible+sparse_torque")
 RULES = ("lowest", "one_se")
 #: steps of each candidate's fits (a round of the loop's, a gradient step of the learners')
-STEPS = 60
+STEPS = 20
 
 
 def _values(rng: np.random.Generator, dof: int, lo: float, hi: float) -> str:
@@ -172,6 +179,15 @@ def make(case: Case, folder: Path) -> Path:
     return declared
 
 
+def resolve(protocol: str, layout: str) -> str | None:
+    """The folds ``protocol`` gives on a case of ``layout`` (``bench select``'s ``auto``: whole trajectories
+    where there are several, regions where there is one), or ``None`` where it gives none (kNNDM on one
+    trajectory, with no target named)."""
+    if protocol == "knndm" and layout == "one":
+        return None
+    return protocols.resolve(protocol, 1 if layout == "one" else SEVERAL)
+
+
 def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tuple[str, ...], workers: int) -> dict:
     """``bench select`` on ``case`` under ``protocol``; its ``select.json``."""
     declared = make(case, folder)
@@ -239,17 +255,28 @@ def page(result: dict) -> str:
     for r in result["summary"]:
         lines.append(f"| {r['protocol']} | {r['rule']} | {r['cases']} | {r['median_regret']:.3f} | "
                      f"{r['worst_regret']:.3f} | {r['best_chosen']} of {r['cases']} |")
-    lines += ["", "| case | protocol | best on the test | lowest | one_se | Spearman (validation, test) |",
-              "|---|---|---|---|---|---:|"]
-    for t in result["table"]:
-        s = t["scores"]
+    lines += ["", "Each case under each protocol: the candidate each rule chose (its regret). `auto` is select's "
+              "default, which is `regions` on one trajectory and `time` (whole trajectories) on several: the same run.",
+              ""] + _rows(result["table"])
+    if result.get("real"):
+        lines += ["", "## The shipped real arm", "",
+                  "`bench select` at its default (180 s a candidate, `--folds auto`) on each split of the KUKA, "
+                  "read from the pages it wrote (`source`); they are not rerun here.", ""] + _rows(result["real"])
+    return "\n".join(lines) + "\n"
+
+
+def _rows(table: list[dict]) -> list[str]:
+    lines = ["| case | protocol (folds) | best on the test | lowest | one_se | Spearman (validation, test) |",
+             "|---|---|---|---|---|---:|"]
+    for t in table:
+        s, protocol = t["scores"], f"{t['protocol']} ({t.get('folds') or t['protocol']})"
         if "rules" not in s:
-            lines.append(f"| {t['case']} | {t['protocol']} | failed: {s['error']} | | | |")
+            lines.append(f"| {t['case']} | {protocol} | failed: {s['error']} | | | |")
             continue
         cells = [f"{s['rules'][r]['chosen']} ({s['rules'][r]['regret']:.3f})" for r in RULES]
         rho = "—" if s["spearman"] is None else f"{s['spearman']:.2f}"
-        lines.append(f"| {t['case']} | {t['protocol']} | {s['best']} | {cells[0]} | {cells[1]} | {rho} |")
-    return "\n".join(lines) + "\n"
+        lines.append(f"| {t['case']} | {protocol} | {s['best']} | {cells[0]} | {cells[1]} | {rho} |")
+    return lines
 
 
 HELP = "how well each validation protocol and rule chooses a model, on simulated arms whose truth is known"
@@ -259,9 +286,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--set", choices=(DEVELOPMENT, EVALUATION), default=DEVELOPMENT,
                         help="the development cases (for trying rules) or the evaluation ones (default development)")
     parser.add_argument("--cases", nargs="+", default=None, help="only the cases whose names start with these")
-    parser.add_argument("--protocols", nargs="+", choices=PROTOCOLS, default=list(PROTOCOLS),
-                        help="the validation protocols to compare (default all; knndm only where there are several "
-                             "training trajectories)")
+    parser.add_argument("--protocols", nargs="+", choices=PROTOCOLS, default=["time", "auto"],
+                        help="the validation protocols to compare: time (spans in time of one trajectory, whole "
+                             "trajectories of several), auto (select's default: regions of one trajectory, whole "
+                             "trajectories of several), regions, knndm (only where there are several training "
+                             "trajectories) (default time auto)")
     parser.add_argument("--steps", type=positive_int, default=STEPS, help=f"steps a fit (default {STEPS})")
     parser.add_argument("--workers", type=positive_int, default=2, help="candidates at a time (default 2)")
     parser.add_argument("--out", type=Path, default=Path("results/selection/benchmark.md"),
@@ -273,18 +302,24 @@ def main(args) -> int:
     root = args.out.parent / f"cases_{args.set}"
     table = []
     for i, case in enumerate(chosen):
+        done = {}  # each folds' run once a case: auto is one of the others
         for protocol in args.protocols:
-            if protocol == "knndm" and case.layout == "one":
-                continue  # one trajectory and no target: kNNDM has nothing to match
-            result = run_case(case, root / case.name, protocol, args.steps, CANDIDATES, args.workers)
-            s = scores(result)
-            table.append({"case": case.name, "protocol": protocol, "scores": s})
-            print(f"[{i + 1}/{len(chosen)}] {case.name} {protocol}: " +
+            folds = resolve(protocol, case.layout)
+            if folds is None:
+                continue
+            if folds not in done:
+                done[folds] = scores(run_case(case, root / case.name, folds, args.steps, CANDIDATES, args.workers))
+            s = done[folds]
+            table.append({"case": case.name, "protocol": protocol, "folds": folds, "scores": s})
+            print(f"[{i + 1}/{len(chosen)}] {case.name} {protocol} ({folds}): " +
                   (s.get("error") or ", ".join(f"{r} chose {v['chosen']} (regret {v['regret']:.3g})"
                                                for r, v in s["rules"].items())), flush=True)
+    real = [{"case": name, "protocol": "auto", "folds": json.loads(Path(path).read_text()).get("folds_protocol"),
+             "source": path, "scores": scores(json.loads(Path(path).read_text()))}
+            for name, path in REAL.items() if Path(path).exists()]
     result = {"command": args.invocation, "set": args.set,
               "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
-              "table": table, "summary": summary(table)}
+              "table": table, "summary": summary(table), "real": real}
     write_json(args.out.with_suffix(".json"), result)
     text = page(result)
     atomic_write(args.out, lambda f: f.write(text))

@@ -48,3 +48,9 @@ def test_the_rules_choose_as_stated_and_regret_is_against_the_best_on_the_test()
     assert "failed" in sb.page({"command": "c", "set": "development", "cases": ["a"], "candidates": ["x"], "steps": 1,
                                 "summary": [], "table": [{"case": "a", "protocol": "time",
                                                           "scores": sb.scores({"candidates": []})}]})
+
+
+def test_select_default_folds_are_regions_of_one_trajectory_and_whole_trajectories_of_several():
+    assert sb.resolve("auto", "one") == "regions" and sb.resolve("auto", "several") == "time"
+    assert sb.resolve("knndm", "one") is None and sb.resolve("knndm", "several") == "knndm"
+    assert sb.resolve("time", "one") == "time"
