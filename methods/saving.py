@@ -67,9 +67,8 @@ def load_model(path: str | Path, system: System | None = None):
             raise ModelFileError(f"{path}: its system {name!r} is not registered here (a measured arm's or a URDF's "
                                  f"file is given to the command that reads the model)")
         system = None if name is None else SYSTEMS[name]()
-    try:
-        dof = int(header["dof"])
-    except (KeyError, TypeError, ValueError):
-        raise ModelFileError(f"{path}: not a model file of this suite (no joints in it)") from None
+    dof = int(header["dof"])  # an integer from 1 up: the header is checked (bench.core.modelfile.HEADER_SCHEMA)
+    if system is not None and system.dof != dof:
+        raise ModelFileError(f"{path}: a model of {dof} joint(s), but its system {system.name} has {system.dof}")
     model = modelfile.build(header["model"], unpacker, {"system": system, "dof": dof})
     return model, header

@@ -47,6 +47,12 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def one_line(message: str) -> str:
+    """``message`` with every character that is not printable (a line end, a control character that a file
+    put in it) written as its escape, so that an error is one line whatever the file held."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in message)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
@@ -54,10 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return COMMANDS[args.command].main(args)
     except (UserError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_USAGE
     except CallFailed as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("interrupted; finished runs keep their records, rerun the same command to resume", file=sys.stderr)

@@ -25,23 +25,35 @@ def add_arguments(p) -> None:
                         "convert makes one from a robot's log)")
     p.add_argument("--out", type=Path, required=True,
                    help="write the predicted torques here: a CSV of tau_hat_1..tau_hat_n, one row per sample of the log")
+    p.add_argument("--system", default=None,
+                   help="the arm the model was fitted on, where it is not built in: urdf:PATH or measured:PATH (a "
+                        "model file names no file that predict opens)")
     add_plugin(p)
 
 
 def main(args) -> int:
     check_output(args.out)
     header, _ = read(args.model)  # a file that is no model: one line, before anything else is read
-    # the arm's URDF or declaration the model was fitted on (data, read as such); a method's plugin (code) only
-    # where the command line gives it
-    arms = [p for p in header.get("plugins", []) if isinstance(p, str) and p.startswith(("urdf:", "measured:"))]
-    load_plugins(args, arms)
+    # the arm's URDF or declaration is the user's to name; a method's plugin (code) only where the command line
+    # gives it
+    (given,), _ = load_plugins(args, [args.system]) if args.system else ((None,), ())
     name = header.get("system")
+    if given is not None and name != given:
+        raise UsageError(f"{args.model}: the model was fitted on {name!r}, not on --system's {given!r}")
     if name is not None and name not in SYSTEMS:
-        raise UsageError(f"{args.model}: its system {name!r} is not registered here; give the file that declares it "
-                         f"with --plugin")
+        files = [p.split(":", 1)[0] for p in header.get("plugins", []) if p.startswith(("urdf:", "measured:"))]
+        raise UsageError(f"{args.model}: its system {name!r} is not registered here; name the file that declares it "
+                         f"with --system {(files or ['urdf'])[0]}:PATH")
     model, header = load_model(args.model)
     log = read_csv(args.log, dof=int(header["dof"]), system=name, torque_optional=True)
-    tau = np.asarray(model.predict_torque(log), dtype=np.float64)
+    try:  # the model is the file's: whatever stops it from predicting is the file's fault, said in one line
+        tau = np.asarray(model.predict_torque(log), dtype=np.float64)
+    except (ArithmeticError, RuntimeError, ValueError, TypeError, IndexError, KeyError, AttributeError) as exc:
+        raise ModelFileError(f"{args.model}: its model does not predict on {args.log} "
+                             f"({type(exc).__name__}: {exc})"[:300]) from None
+    if tau.shape != (len(log), log.dof):
+        raise ModelFileError(f"{args.model}: predicts torques of shape {tau.shape} on {len(log)} samples of "
+                             f"{log.dof} joints")
     if not np.isfinite(tau).all():
         raise ModelFileError(f"{args.model}: predicts non-finite torques on {args.log}")
     frame = pd.DataFrame(tau, columns=[f"tau_hat_{j + 1}" for j in range(tau.shape[1])])

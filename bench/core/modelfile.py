@@ -13,7 +13,23 @@ fitted one did to round-off.
 A model says how it is saved (:meth:`~bench.physics.models.FittedModel.saved`:
 a kind and a JSON tree holding :class:`Packer` references to arrays), and
 each kind has a loader (:data:`LOADERS`, :func:`loader`), registered beside
-the model it loads. A file that is not such a model, is truncated or does not
+the model it loads.
+
+A model file may come from anyone, so it is data, checked before it is used:
+
+* the archive's size, each entry's size unpacked, and the entries' names are
+  checked before anything is unpacked (:data:`MAX_HEADER_BYTES`,
+  :data:`MAX_ARRAY_BYTES`);
+* the header is checked against :data:`HEADER_SCHEMA` (JSON Schema, by
+  ``jsonschema``), every field's type and range stated;
+* an expression is checked as it is read, before sympy evaluates anything:
+  its depth, its nodes, the digits of its numbers, and the size of any power
+  of numbers sympy would compute (:data:`EXPRESSION_LIMITS`);
+* the file names no path that is opened: a URDF's or a measured arm's file is
+  named by the user (``--plugin``), and a linear model's regressor is compared
+  with the one it was fitted on at probe states.
+
+A file that is not such a model, is truncated, corrupt, too large or does not
 parse is refused in one line naming it (:class:`ModelFileError`).
 """
 
@@ -23,6 +39,7 @@ import io
 import json
 import math
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Callable
 
@@ -42,6 +59,52 @@ HEADER = "model.json"
 
 class ModelFileError(UserError):
     """A file that is not a model this suite saved, or cannot be read as one; the message names the file."""
+
+
+#: the most bytes a model file's header and all its arrays may take unpacked, and a file on disk
+MAX_HEADER_BYTES, MAX_ARRAY_BYTES, MAX_FILE_BYTES = 64 << 20, 4 << 30, 4 << 30
+#: a name a system or a method may have in a header
+_NAME = {"type": "string", "minLength": 1, "maxLength": 200}
+#: what a model file's header holds, each field's type and range (JSON Schema); the model's own tree is its
+#: kind's loader's to check
+HEADER_SCHEMA = {
+    "type": "object",
+    "required": ["format", "dof", "kind", "model"],
+    "properties": {
+        "format": {"const": FORMAT},
+        "dof": {"type": "integer", "minimum": 1, "maximum": 64},
+        "kind": {"type": "string", "minLength": 1, "maxLength": 64},
+        "model": {"type": "object", "required": ["kind"], "properties": {"kind": {"type": "string", "maxLength": 64}}},
+        "method": _NAME,
+        "system": {"anyOf": [_NAME, {"type": "null"}]},
+        "plugins": {"type": "array", "maxItems": 64, "items": {"type": "string", "maxLength": 1000}},
+        "split": {"anyOf": [{"type": "string", "maxLength": 200}, {"type": "null"}]},
+        "experiment": {"type": "string", "maxLength": 64},
+        "seed": {"type": "integer", "minimum": 0},
+        "hyperparameters": {"type": "object"},
+        "budget": {"type": "object"},
+        "train_source": {"type": "string"},
+        "n_train": {"type": "integer", "minimum": 0},
+        "tuned": {"type": "boolean"},
+        "provenance": {"type": "object"},
+    },
+}
+
+
+def check_header(header, source: str) -> dict:
+    """``header`` where it is what :data:`HEADER_SCHEMA` says; :class:`ModelFileError` naming the first field that
+    is not, otherwise."""
+    import jsonschema
+
+    validator = jsonschema.Draft202012Validator(HEADER_SCHEMA)
+    error = jsonschema.exceptions.best_match(validator.iter_errors(header))
+    if error is None:
+        return header
+    where = "/".join(str(p) for p in error.absolute_path) or "the header"
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        got = header.get("format") if isinstance(header, dict) else None
+        raise ModelFileError(f"{source}: not a model file of this suite (format {got!r:.60}, not {FORMAT!r})")
+    raise ModelFileError(f"{source}: not a model file of this suite ({HEADER}: {where}: {error.message})"[:300])
 
 
 # -- arrays ----------------------------------------------------------------------------------
@@ -129,16 +192,55 @@ def expression_to_json(expr) -> object:
     raise ValueError(f"the expression holds {name} ({str(expr)[:60]}), which a model file cannot hold")
 
 
+#: what an expression in a model file may hold: its depth, its nodes, the digits of one number written in it,
+#: and the digits of all the numbers it holds or that sympy would compute from them (a power of two numbers is
+#: computed when it is built; its digits are counted, and refused, before it is)
+EXPRESSION_LIMITS = {"depth": 200, "nodes": 100_000, "digits": 40, "total_digits": 20_000}
+
+
+def _digits(value) -> float:
+    """Decimal digits of a sympy number's numerator and denominator (a float: its exponent's)."""
+    if isinstance(value, sympy.Rational):
+        return max(abs(int(value.p)), abs(int(value.q)), 1).bit_length() * math.log10(2) + 1
+    if isinstance(value, sympy.Float):
+        return abs(float(value._mpf_[2]) + float(value._mpf_[3])) * math.log10(2) + 1 if value._mpf_[1] else 1
+    return 1.0
+
+
 def expression_from_json(tree, source: str = "model") -> sympy.Expr:
     """The sympy expression of a tree from :func:`expression_to_json`, built
     node by node from :data:`OPERATIONS`, :data:`FUNCTIONS` and
-    :data:`CONSTANTS`; anything else is refused (:class:`ModelFileError`)."""
+    :data:`CONSTANTS` within :data:`EXPRESSION_LIMITS`; anything else is
+    refused (:class:`ModelFileError`)."""
+    limits = EXPRESSION_LIMITS
+    count = {"nodes": 0, "digits": 0.0}
+
     def bad(why: str):
         return ModelFileError(f"{source}: not a model file (an expression {why})")
 
+    def literal(text) -> str:
+        text = str(text)
+        if len(text) > limits["digits"] + 8:
+            raise bad(f"writes a number of {len(text)} characters (at most {limits['digits']} digits)")
+        spend(len(text))
+        return text
+
+    def spend(digits: float) -> None:
+        count["digits"] += digits
+        if count["digits"] > limits["total_digits"]:
+            raise bad(f"holds numbers of more than {limits['total_digits']} digits in all")
+
+    def power(base, exponent):
+        if isinstance(base, sympy.Number) and isinstance(exponent, sympy.Rational) and not base.is_zero:
+            spend(abs(float(exponent)) * _digits(base))  # what sympy computes, counted before it does
+        return sympy.Pow(base, exponent)
+
     def build(node, depth: int):
-        if depth > 200:
+        if depth > limits["depth"]:
             raise bad("is nested too deeply")
+        count["nodes"] += 1
+        if count["nodes"] > limits["nodes"]:
+            raise bad(f"has more than {limits['nodes']} nodes")
         if not isinstance(node, dict) or not 1 <= len(node) <= 2:
             raise bad(f"node is {node!r:.80}")
         try:
@@ -151,25 +253,35 @@ def expression_from_json(tree, source: str = "model") -> sympy.Expr:
                     raise bad(f"gives the symbol {name} the assumptions {given!r:.60}")
                 return sympy.Symbol(name, **given)
             if "int" in node:
-                return sympy.Integer(int(str(node["int"])))
+                return sympy.Integer(int(literal(node["int"])))
             if "rational" in node:
                 p, q = node["rational"]
-                return sympy.Rational(int(str(p)), int(str(q)))
+                p, q = int(literal(p)), int(literal(q))
+                if q == 0:
+                    raise bad("divides by zero")
+                return sympy.Rational(p, q)
             if "float" in node:
-                return sympy.Float(float(str(node["float"])))
+                value = float(literal(node["float"]))
+                if not math.isfinite(value):
+                    raise bad(f"holds the float {value}, which is no number")
+                return sympy.Float(value)
             if "constant" in node:
                 return CONSTANTS[node["constant"]]
             op = node.get("op")
+            if not isinstance(op, str) or not isinstance(node.get("args", []), list):
+                raise bad(f"node is {node!r:.80}")
+            if op not in OPERATIONS and op not in FUNCTIONS:
+                raise bad(f"holds {op!r:.40}, which is no operation a model file may hold")
             args = [build(a, depth + 1) for a in node.get("args", [])]
+            if op == "Pow":
+                if len(args) != 2:
+                    raise bad(f"raises to a power with {len(args)} arguments")
+                return power(*args)
+            return OPERATIONS[op](*args) if op in OPERATIONS else FUNCTIONS[op](*args)
         except ModelFileError:
             raise
-        except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        except (KeyError, TypeError, ValueError, ZeroDivisionError, AttributeError):
             raise bad(f"node is {node!r:.80}") from None
-        if op in OPERATIONS:
-            return OPERATIONS[op](*args)
-        if op in FUNCTIONS:
-            return FUNCTIONS[op](*args)
-        raise bad(f"holds {op!r:.40}, which is no operation a model file may hold")
 
     return build(tree, 0)
 
@@ -202,36 +314,44 @@ def save(path: str | Path, header: dict, model_tree: dict, packer: Packer) -> No
 
 
 def read(path: str | Path) -> tuple[dict, Unpacker]:
-    """A model file's description and its arrays; :class:`ModelFileError` in one line otherwise."""
+    """A model file's description (checked against :data:`HEADER_SCHEMA`) and its arrays;
+    :class:`ModelFileError` in one line otherwise."""
     source = str(path)
     try:
+        if Path(path).is_file() and Path(path).stat().st_size > MAX_FILE_BYTES:
+            raise ModelFileError(f"{source}: a file of {Path(path).stat().st_size} bytes, more than a model file may "
+                                 f"take ({MAX_FILE_BYTES})")
         with zipfile.ZipFile(path) as z:
-            names = set(z.namelist())
-            if HEADER not in names:
+            entries = {i.filename: i for i in z.infolist()}
+            if HEADER not in entries:
                 raise ModelFileError(f"{source}: not a model file of this suite (no {HEADER} in it)")
+            others = [n for n in entries if n != HEADER]
+            strange = [n for n in others if not (n.endswith(".npy") and n[:-4].isidentifier())]
+            if strange or len(entries) != len(z.infolist()):
+                raise ModelFileError(f"{source}: not a model file of this suite (it holds {(strange or ['a name twice'])[0]!r:.60})")
+            if entries[HEADER].file_size > MAX_HEADER_BYTES or \
+                    sum(entries[n].file_size for n in others) > MAX_ARRAY_BYTES:
+                raise ModelFileError(f"{source}: its entries unpack to more than a model file may hold "
+                                     f"({MAX_HEADER_BYTES} bytes of header, {MAX_ARRAY_BYTES} of arrays)")
             try:
                 header = json.loads(z.read(HEADER).decode("utf-8"))
-            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-                raise ModelFileError(f"{source}: its {HEADER} does not parse ({exc})") from None
-            if not isinstance(header, dict) or header.get("format") != FORMAT:
-                raise ModelFileError(f"{source}: not a model file of this suite (format "
-                                     f"{header.get('format') if isinstance(header, dict) else None!r}, not {FORMAT!r})")
+            except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+                why = "it is nested too deeply" if isinstance(exc, RecursionError) else exc
+                raise ModelFileError(f"{source}: its {HEADER} does not parse ({why})"[:300]) from None
+            check_header(header, source)
             arrays = {}
-            for name in names - {HEADER}:
-                if not name.endswith(".npy"):
-                    raise ModelFileError(f"{source}: not a model file of this suite (it holds {name!r:.60})")
+            for name in others:
                 arrays[name[:-4]] = np.load(io.BytesIO(z.read(name)), allow_pickle=False)
     except ModelFileError:
         raise
     except FileNotFoundError:
         raise ModelFileError(f"{source}: no such file") from None
-    except zipfile.BadZipFile:
-        raise ModelFileError(f"{source}: not a model file of this suite (not a complete archive: truncated or "
-                             f"another kind of file)") from None
-    except (ValueError, EOFError, OSError, zipfile.LargeZipFile, NotImplementedError) as exc:
+    except (zipfile.BadZipFile, zlib.error):
+        raise ModelFileError(f"{source}: not a model file of this suite (not a complete archive: truncated, "
+                             f"corrupt or another kind of file)") from None
+    except (ValueError, EOFError, OSError, zipfile.LargeZipFile, NotImplementedError, RecursionError,
+            MemoryError) as exc:
         raise ModelFileError(f"{source}: a model file that cannot be read ({type(exc).__name__}: {exc})"[:300]) from None
-    if not isinstance(header.get("model"), dict):
-        raise ModelFileError(f"{source}: not a model file of this suite (no model in it)")
     return header, Unpacker(arrays, source)
 
 
@@ -245,6 +365,6 @@ def build(tree: dict, unpacker: Unpacker, context: dict):
         return LOADERS[kind](tree, unpacker, context)
     except ModelFileError:
         raise
-    except (KeyError, TypeError, ValueError, IndexError, RuntimeError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, RuntimeError, AttributeError, ArithmeticError) as exc:
         raise ModelFileError(f"{unpacker.source}: its {kind} model does not load ({type(exc).__name__}: {exc})"[:300]) \
             from None
