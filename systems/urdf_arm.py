@@ -78,11 +78,61 @@ def _pinocchio():
     return pinocchio
 
 
+#: what a joint that shares its name with a link is called inside the engine
+JOINT_SUFFIX = "__joint"
+
+
+@functools.lru_cache(maxsize=16)
+def _distinct(text: str) -> tuple[str, tuple[tuple[str, str], ...]]:
+    """The URDF ``text`` with every joint that shares its name with a link renamed ``NAME__joint`` (and the
+    mimic tags that name it), and the renames, original first; ``text`` itself where no name is shared.
+
+    Makers' URDFs often name a fixed joint like the link it holds (``left_hand``). Pinocchio gives each a
+    frame of that name, and its ``buildReducedModel`` then stops at a name that matches two frames; the
+    engine sees distinct names, and the suite's joints keep the URDF's names (:func:`_engine_name`,
+    :func:`_urdf_name`)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise DataError(f"not a URDF (its XML does not parse: {exc})") from None
+    links = {link.get("name") for link in root.findall("link")}
+    taken = links | {joint.get("name") for joint in root.findall("joint")}
+    renames = {}
+    for joint in root.findall("joint"):
+        name = joint.get("name")
+        if name in links:
+            new = name + JOINT_SUFFIX
+            while new in taken:
+                new += "_"
+            taken.add(new)
+            renames[name] = new
+            joint.set("name", new)
+    if not renames:
+        return text, ()
+    for mimic in root.iter("mimic"):
+        if mimic.get("joint") in renames:
+            mimic.set("joint", renames[mimic.get("joint")])
+    return ET.tostring(root, encoding="unicode"), tuple(renames.items())
+
+
+def _engine_name(text: str, joint: str) -> str:
+    """The engine's name of the URDF's joint ``joint`` (:func:`_distinct`)."""
+    return dict(_distinct(text)[1]).get(joint, joint)
+
+
+def _urdf_name(text: str, joint: str) -> str:
+    """The URDF's name of the engine's joint ``joint`` (:func:`_distinct`)."""
+    return {new: old for old, new in _distinct(text)[1]}.get(joint, joint)
+
+
 def _full_model(text: str):
-    """The Pinocchio model of a URDF text, every joint in it; a :class:`DataError` where Pinocchio cannot read it."""
+    """The Pinocchio model of a URDF text, every joint in it, its joints named as :func:`_distinct` names them;
+    a :class:`DataError` where Pinocchio cannot read it."""
     pin = _pinocchio()
     try:
-        return pin.buildModelFromXML(text)
+        return pin.buildModelFromXML(_distinct(text)[0])
     except (RuntimeError, ValueError) as exc:
         raise DataError(f"not a URDF Pinocchio can read: {str(exc).strip().splitlines()[0]}") from None
 
@@ -95,15 +145,16 @@ def _model(text: str, locked: tuple[str, ...], g: float, locked_at: tuple[tuple[
     pin = _pinocchio()
     model = _full_model(text)
     if locked:
-        unknown = [j for j in locked if not model.existJointName(j)]
+        named = {_urdf_name(text, n) for n in model.names}
+        unknown = [j for j in locked if j not in named]
         if unknown:
             raise DataError(f"no joint(s) {', '.join(unknown)} in the URDF")
         reference = pin.neutral(model)
         for joint, value in locked_at:
-            if not model.existJointName(joint) or joint not in locked:
+            if joint not in locked:
                 raise DataError(f"locked_at names {joint!r}, which is no locked joint of the URDF")
-            reference[model.joints[model.getJointId(joint)].idx_q] = value
-        model = pin.buildReducedModel(model, [model.getJointId(j) for j in locked], reference)
+            reference[model.joints[model.getJointId(_engine_name(text, joint))].idx_q] = value
+        model = pin.buildReducedModel(model, [model.getJointId(_engine_name(text, j)) for j in locked], reference)
     if model.nq != model.nv:
         raise DataError("the URDF has joints with more than one coordinate (continuous or floating); "
                         "only revolute and prismatic joints are supported")
@@ -276,7 +327,7 @@ def urdf_arm(urdf: str | Path, *, locked: Sequence[str] = (), name: str | None =
         qdd=(-QDD_HALF_WIDTH, QDD_HALF_WIDTH),
     )
     cls = type(f"Urdf_{re.sub(r'[^0-9a-zA-Z]', '_', name or path.stem)}", (UrdfArm,), {
-        "coordinates": tuple(model.names[i] for i in range(1, model.njoints)),
+        "coordinates": tuple(_urdf_name(text, model.names[i]) for i in range(1, model.njoints)),
         "coordinate_kinds": kinds,
         "default_domain": domain,
         "position_limits": tuple((float(a), float(b)) for a, b in zip(lo, hi)),
@@ -297,30 +348,33 @@ def chain(urdf: str | Path, root: str | None = None, tip: str | None = None,
     joint, to lock. A :class:`DataError` naming the file and the link or joint
     where a link or joint is unknown, or the joints do not form a chain."""
     path = Path(urdf)
-    model = _full_model(_read(path))
-    movable = [model.names[i] for i in range(1, model.njoints)]
+    text = _read(path)
+    model = _full_model(text)
+    name = [_urdf_name(text, n) for n in model.names]  # each joint's URDF name, by the engine's index
+    movable = name[1:]
+    body = _pinocchio().FrameType.BODY
     if joints is not None:
-        unknown = [j for j in joints if not model.existJointName(j)]
+        unknown = [j for j in joints if j not in movable]
         if unknown:
             raise DataError(f"{path}: no joint(s) {', '.join(unknown)} (its joints: {', '.join(movable)})")
-        ids = [model.getJointId(j) for j in joints]
+        ids = [model.getJointId(_engine_name(text, j)) for j in joints]
         for parent, child in zip(ids, ids[1:]):
             if model.parents[child] != parent:
-                raise DataError(f"{path}: the joints do not form a chain: {model.names[child]} does not follow "
-                                f"{model.names[parent]} (its parent joint is {model.names[model.parents[child]]})")
+                raise DataError(f"{path}: the joints do not form a chain: {name[child]} does not follow "
+                                f"{name[parent]} (its parent joint is {name[model.parents[child]]})")
         picked = list(joints)
     else:
-        def joint_of(link: str, key: str) -> int:
-            if not model.existFrame(link) or model.frames[model.getFrameId(link)].type != _pinocchio().FrameType.BODY:
+        def frame_of(link: str, key: str) -> int:
+            if not model.existFrame(link, body):
                 raise DataError(f"{path}: no link {link!r} ({key})")
-            return int(model.frames[model.getFrameId(link)].parentJoint)
+            return int(model.getFrameId(link, body))
 
-        top = joint_of(root, "root") if root is not None else 0
-        bottom = joint_of(tip, "tip") if tip is not None else None
+        top = int(model.frames[frame_of(root, "root")].parentJoint) if root is not None else 0
+        bottom = int(model.frames[frame_of(tip, "tip")].parentJoint) if tip is not None else None
         if bottom is None:
             raise DataError(f"{path}: name the arm's tip link (tip) beside its root, or its joints")
         if root is not None:  # the root link on the links' path from the tip to the base
-            frame, target = model.getFrameId(tip), model.getFrameId(root)
+            frame, target = frame_of(tip, "tip"), frame_of(root, "root")
             while frame != target:
                 if frame == 0:
                     raise DataError(f"{path}: the links {root!r} (root) and {tip!r} (tip) do not form a chain: "
@@ -328,7 +382,7 @@ def chain(urdf: str | Path, root: str | None = None, tip: str | None = None,
                 frame = int(model.frames[frame].parentFrame)
         picked, at = [], bottom
         while at != top:
-            picked.append(model.names[at])
+            picked.append(name[at])
             at = model.parents[at]
         picked.reverse()
     return picked, [j for j in movable if j not in picked]

@@ -56,19 +56,24 @@ def build_per_joint(records: list[Record], page: str | Path = "per_joint.md") ->
             dof = len(first["mse"])
             parts += [f"## {system}, split {split}: test trajectory {name} ({first['n']} samples)", ""]
             for title, key, floor_key, in_percent in TABLES:
-                if key not in first:
+                having = [r for rs in runs.values() for r in rs if key in r]
+                if not having:
                     continue
                 show = percent if in_percent else (lambda x: f"{x:.4g}")
                 parts += [f"{title}:", "",
                           "| learner | runs | " + " | ".join(f"joint {j + 1}" for j in range(dof)) + " | mean |",
                           "|---|---:|" + "---:|" * (dof + 1)]
-                if floor_key:
-                    floor = np.asarray(first[floor_key])
+                floor = next((np.asarray(r[floor_key]) for r in having if floor_key and floor_key in r), None)
+                if floor is not None:
                     parts.append("| the filter's noise floor | — | " + " | ".join(show(x) for x in floor)
                                  + f" | {show(floor.mean())} |")
                 for method in sorted(runs):
-                    cells = np.median(np.array([r[key] for r in runs[method]], dtype=float), axis=0)
-                    parts.append(f"| {method} | {len(runs[method])} | " + " | ".join(show(x) for x in cells)
+                    values = [r[key] for r in runs[method] if key in r]
+                    if not values:  # a learner whose records were written without this figure
+                        parts.append(f"| {method} | 0 | " + " | ".join("—" for _ in range(dof)) + " | — |")
+                        continue
+                    cells = np.median(np.array(values, dtype=float), axis=0)
+                    parts.append(f"| {method} | {len(values)} | " + " | ".join(show(x) for x in cells)
                                  + f" | {show(cells.mean())} |")
                 parts.append("")
     return "\n".join(parts).rstrip() + "\n"

@@ -90,3 +90,21 @@ def test_a_run_on_files_given_for_a_measured_system_scores_per_joint_against_the
     entry = record["details"]["per_joint"]["trajectories"]
     assert sorted(entry) == ["g", "r"] and sum(e["n"] for e in entry.values()) == int(held.sum())
     assert all("mse_logged" not in e for e in entry.values())
+
+
+def test_the_page_takes_learners_whose_records_lack_the_logged_figures():
+    from bench.reporting.per_joint import build_per_joint
+    from bench.runner.records import Record
+
+    def record(method: str, logged: bool) -> Record:
+        entry = {"n": 10, "mse": [1.0, 2.0], "nmse": [0.1, 0.2]}
+        if logged:
+            entry.update(mse_logged=[1.5, 2.5], nmse_logged=[0.15, 0.25], noise_floor=[0.2, 0.3],
+                         noise_floor_nmse=[0.02, 0.03])
+        spec = {"system": "dfki_double_pendulum", "method": method, "experiment": "indirect", "seed": 0,
+                "budget_s": None, "steps": 1}
+        return Record.new(spec, "ok", details={"per_joint": {"trajectories": {"03": entry}}})
+
+    page = build_per_joint([record("sysid", True), record("mlp", False)])
+    assert "| mlp | 0 | — | — | — |" in page  # in the logged tables: it has no such figure
+    assert "| mlp | 1 | 1 | 2 | 1.5 |" in page  # in the filtered ones: it has
