@@ -128,13 +128,26 @@ class ResidualJob(Job):
         return result
 
     def finish(self, outcome: Outcome, report: Report) -> ResidualResult:
-        """The loop's result; where its process was killed, its last checkpoint,
-        the rounds that finished, with ``stopped`` saying where (written here,
-        the report without plots); only a loop killed before its first round
-        ended raises :class:`CallFailed`."""
+        """The loop's result; where its process was killed, or failed after a
+        round had ended (an error in the outputs after the rounds, say), its
+        last checkpoint, the rounds that finished, with ``stopped`` saying
+        where (written here, the report without plots); a loop killed before
+        its first round ended raises :class:`CallFailed`, as does a process
+        that failed without a checkpoint."""
+        path = Path(self.checkpoint_path) if self.checkpoint_path else None
+        saved = path is not None and path.is_file()
+        if outcome.result is None and not outcome.killed and saved:
+            result = ResidualResult.from_json(json.loads(path.read_text()))
+            last = result.rounds[-1]["round"] if result.rounds else 0
+            why = (outcome.log_tail or "").strip().splitlines()[-1:] or [f"exit code {outcome.exit_code}"]
+            stopped = (f"the loop's process failed after round {last} ({why[0][:200]}): the rounds up to round "
+                       f"{last} are kept")
+            result = dataclasses.replace(result, stopped=stopped)
+            report(f"stopped: {stopped}")
+            write_outputs(result, None, None, self.json_path, self.report_path)
+            return result
         if outcome.killed:
-            path = Path(self.checkpoint_path) if self.checkpoint_path else None
-            if path is None or not path.is_file():
+            if not saved:
                 raise CallFailed(f"the residual loop was still running at {fit_limit_words(self.budget)}, "
                                  f"in round 0; killed")
             result = ResidualResult.from_json(json.loads(path.read_text()))

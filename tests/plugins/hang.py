@@ -1,7 +1,8 @@
 """Makes the residual loop's own process hang, and leave a mark beside its
 training file when it does, at the place the training file's folder is named
 for: ``round0`` (round 0's fit), ``round2`` (round 2) or ``rollouts`` (the driven
-rollouts after the rounds). Imported as a plugin by the budget tests, in the
+rollouts after the rounds); or fail, at ``outputs`` (writing the outputs
+after the rounds, with an error that is not the user's). Imported as a plugin by the budget tests, in the
 loop's process (``ResidualJob.plugins``); the tests' clock reads the mark."""
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from bench.residual.model import Fitter
 MARK = "hanging"
 
 _given_data, _round, _fit, _driven = job.given_data, loop._Loop.round, Fitter.fit, rollouts.driven_entry
+_write_outputs = job.write_outputs
 _where: dict[str, Path] = {}
 
 
@@ -48,4 +50,11 @@ def driven_entry(*args, **kwargs):
     return _driven(*args, **kwargs)
 
 
+def write_outputs(*args, **kwargs):
+    if _where.get("folder") is not None and _where["folder"].name == "outputs":
+        raise RuntimeError("the outputs could not be written")
+    return _write_outputs(*args, **kwargs)
+
+
 job.given_data, loop._Loop.round, Fitter.fit, rollouts.driven_entry = given_data, round_, fit, driven_entry
+job.write_outputs = write_outputs

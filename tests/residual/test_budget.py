@@ -174,3 +174,13 @@ def test_an_error_in_a_later_round_or_the_rollouts_keeps_the_rounds_that_finishe
     out = residual_loop("sysid", train, timed, steps=SYSID, report=quiet)
     assert out.effects and out.rollout is None and out.mse_after["test"] < out.mse_before["test"]
     assert out.stopped == "the driven rollouts after the rounds failed (ValueError: no windows): the rounds are kept"
+
+
+def test_a_loop_whose_process_fails_after_its_rounds_keeps_the_rounds_it_saved(monkeypatch, tmp_path):
+    lines = []
+    out = run_residual(_hanging_job(tmp_path, "outputs", monkeypatch), lines.append)
+    assert len(out.rounds) >= 2 and out.effects
+    assert out.stopped.startswith(f"the loop's process failed after round {out.rounds[-1]['round']} (")
+    assert "the outputs could not be written" in out.stopped and lines[-1] == f"stopped: {out.stopped}"
+    written = json.loads((tmp_path / "outputs" / "out.json").read_text())
+    assert written["stopped"] == out.stopped and len(written["rounds"]) == len(out.rounds)
