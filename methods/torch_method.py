@@ -19,7 +19,7 @@ import torch
 from bench.core.experiment import Experiment
 from bench.core.data import Dataset
 from bench.physics.dynamics import euler_lagrange
-from bench.core.modelfile import Packer, Unpacker, loader
+from bench.core.modelfile import ModelFileError, Packer, Unpacker, loader
 from bench.physics.models import LagrangianFunction
 from methods.base import Method, restored, saved_hyperparameters
 from methods.config import POSITIVE, MethodConfig, Range
@@ -266,9 +266,17 @@ def _load_network(tree: dict, unpacker: Unpacker, context: dict):
     method = restored(tree, context)
     dof = method.dof
     zeros = np.zeros((1, dof))
-    method.model = method.build_model(Dataset(zeros, zeros, zeros, zeros, system=getattr(method.system, "name", None)))
+    shape = Dataset(zeros, zeros, zeros, zeros, system=getattr(method.system, "name", None))
+    state = unpacker.tensors(tree["state"])
+    with torch.device("meta"):  # the network the file's hyperparameters describe, without memory: its shapes
+        probe = method.build_model(shape)
+    wanted = {k: tuple(v.shape) for k, v in probe.state_dict().items()}
+    if wanted != {k: tuple(v.shape) for k, v in state.items()}:
+        raise ModelFileError(f"{unpacker.source}: its {method.name} network's hyperparameters describe weights "
+                             f"other than the {len(state)} arrays the file holds")
+    method.model = method.build_model(shape)
     method.model.to("cpu", torch.float64)
-    method.model.load_state_dict(unpacker.tensors(tree["state"]))
+    method.model.load_state_dict(state)
     method._trained = True
     return method
 

@@ -72,9 +72,11 @@ def main(args) -> int:
     runs = preflight(spec) is None  # else its record says why not (the run's job writes it)
     given = given_data(make_system(spec), spec.train_path, spec.test_path, check_limits=not args.ignore_limits) \
         if runs else None
-    for part in given or ():
+    for name, part in zip(("train", "test"), given or ()):
         if part is not None:
             part.target(args.experiment)  # bad files: exit 2 now, before the run's process starts
+            for recording, words in (part.meta or {}).get("resampled", {}).items():
+                print(f"{name}: recording {recording}: {words}")
     record, log = run_one(spec, checked=runs, data=given)
     if args.json:
         write_json(args.json, record.to_json())

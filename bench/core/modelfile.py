@@ -272,6 +272,8 @@ def expression_from_json(tree, source: str = "model") -> sympy.Expr:
                 raise bad(f"node is {node!r:.80}")
             if op not in OPERATIONS and op not in FUNCTIONS:
                 raise bad(f"holds {op!r:.40}, which is no operation a model file may hold")
+            if count["nodes"] + len(node.get("args", [])) > limits["nodes"]:  # before any of them is built
+                raise bad(f"has more than {limits['nodes']} nodes")
             args = [build(a, depth + 1) for a in node.get("args", [])]
             if op == "Pow":
                 if len(args) != 2:

@@ -30,8 +30,9 @@ the low-pass passes as they are.
 The defaults (:data:`DEFAULT_FILTER`) keep the log's own step and every
 sample, with the cut-off measured for the DFKI double pendulum (``python -m
 bench study dfki-filter``); a robot of its own wants its own cut-off, chosen
-the same way. Resampling happens only where ``dt`` asks for it, and
-:func:`resampling` says so.
+the same way. Resampling happens where ``dt`` asks for it or where the rows'
+steps vary (item 1), and :func:`resampling` says so in words, which a
+dataset's source and ``meta["resampled"]`` carry and ``fit`` prints.
 """
 
 from __future__ import annotations

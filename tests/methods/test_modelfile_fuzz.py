@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from hypothesis.errors import InvalidArgument
 
 from bench.cli import main as cli_main
 from bench.core import modelfile
@@ -69,12 +70,20 @@ def _predict(path: Path, log: Path, out: Path) -> None:
         code = cli_main(["predict", "--model", str(path), "--log", str(log), "--out", str(out)])
     if code == 0:
         assert out.exists()
-        event("predicted")
+        _count("predicted")
         return
-    event("refused")
+    _count("refused")
     lines = err.getvalue().strip().splitlines()
     assert code == 2 and len(lines) == 1 and str(path) in lines[0], (code, err.getvalue()[-500:])
     assert not out.exists()
+
+
+def _count(outcome: str) -> None:
+    """Count ``outcome`` in hypothesis' statistics, inside a hypothesis test."""
+    try:
+        event(outcome)
+    except InvalidArgument:  # a crafted file, outside hypothesis
+        pass
 
 
 def _fuzz(**kwargs):
@@ -204,6 +213,17 @@ def test_the_crafted_files_that_hung_or_crashed_predict_are_refused_in_one_line(
             code = cli_main(["predict", "--model", str(written(header, name)), "--log", str(saved / "test.csv"),
                              "--out", str(out)])
         assert code == 2 and len(err.getvalue().strip().splitlines()) == 1 and not out.exists(), (name, err.getvalue())
+    wide = saved / "mlp.npz"  # a network whose hyperparameters ask for 7 GB of weights the file does not hold
+    with zipfile.ZipFile(wide) as z:
+        entries = {n: z.read(n) for n in z.namelist()}
+    header = json.loads(entries[modelfile.HEADER])
+    assert "hidden" in header["model"]["hyperparameters"]
+    header["model"]["hyperparameters"]["hidden"] = 30_000
+    err = io.StringIO()
+    with _guard(), contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = cli_main(["predict", "--model", str(written(header, "wide.npz")), "--log", str(saved / "test.csv"),
+                         "--out", str(tmp_path / "p.csv")])
+    assert code == 2 and "describe weights other than" in err.getvalue() and not (tmp_path / "p.csv").exists()
     corrupt = bytearray(source.read_bytes())  # a deflated entry whose bytes no longer inflate: zlib's error
     with zipfile.ZipFile(source) as z:
         info = z.getinfo(modelfile.HEADER)

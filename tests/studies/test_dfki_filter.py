@@ -29,3 +29,18 @@ def test_a_page_that_cannot_be_written_is_refused_before_any_fit(tmp_path):
     r = cli("study", "dfki-filter", "--out", tmp_path / "taken.md")
     assert r.returncode != 0 and len(r.stderr.strip().splitlines()) == 1 and "taken.json" in r.stderr
     assert not (tmp_path / "taken.md").exists()
+
+
+def test_the_cut_off_chosen_on_training_trajectories_reads_no_test_data(monkeypatch):
+    from systems.dfki_double_pendulum import DfkiDoublePendulum
+
+    read = []
+    load = DfkiDoublePendulum.load
+
+    def watched(self, part, *args, **kwargs):
+        read.append(part)
+        return load(self, part, *args, **kwargs)
+
+    monkeypatch.setattr(DfkiDoublePendulum, "load", watched)
+    folds = dfki_filter.held_out(DfkiDoublePendulum(), dfki_filter.DFKI_FILTER)
+    assert set(read) == {"train"} and len(folds) == 4 and all(v > 0 for v in folds)

@@ -35,6 +35,14 @@ def test_the_default_split_holds_out_a_whole_trajectory_and_swapped_exchanges_th
     np.testing.assert_allclose(step, 0.01, atol=1e-9)
 
 
+def test_fit_says_which_recordings_it_put_on_a_uniform_grid():
+    result = cli("fit", "--system", "kuka_lwr4", "--method", "sysid", "--experiment", "indirect", "--steps", "1")
+    assert result.returncode == 0, result.stderr
+    said = [line for line in result.stdout.splitlines() if "interpolated onto a uniform" in line]
+    assert {line.split(":")[0] for line in said} == {"train", "test"}  # the KUKA's rows lie 3 to 7 ms apart
+    assert any(line.startswith("train: recording run1: rows ") for line in said)
+
+
 def test_an_unknown_split_is_refused_in_one_line():
     result = cli("fit", "--system", "kuka_lwr4", "--method", "sysid", "--experiment", "indirect", "--steps", "1",
                  "--split", "sideways")
