@@ -157,8 +157,8 @@ def report(rows: list[dict], spec: FilterSpec) -> str:
     lines += ["", f"Chosen on the training trajectories alone (the lowest *held-out training trajectory* MSE: each of "
               f"00, 01, 02 and 04 held out in turn, the lab's structure fitted on the other three, scored against "
               f"its torque without the low-pass): **{by_training:g} Hz**. Chosen on the test trajectories (the "
-              f"lowest *lab, raw*): {by_test:g} Hz; the file's default, {DFKI_FILTER.cutoff_hz:g} Hz, was chosen "
-              f"so, and is marked test-informed in docs/choices.md."]
+              f"lowest *lab, raw*): {by_test:g} Hz. The file's default, {DFKI_FILTER.cutoff_hz:g} Hz, was first chosen "
+              f"on the test (docs/choices.md)."]
     return "\n".join(lines) + "\n"
 
 
