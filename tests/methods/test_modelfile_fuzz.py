@@ -16,6 +16,7 @@ import io
 import json
 import os
 import signal
+import time
 import zipfile
 from pathlib import Path
 
@@ -61,13 +62,26 @@ def _guard():
         signal.signal(signal.SIGALRM, previous)
 
 
+#: each file's seconds in predict, for the closing figure (``-s`` prints the slowest; nothing asserts on it)
+SECONDS: list[float] = []
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _slowest():
+    yield
+    if SECONDS:
+        print(f"\n{len(SECONDS)} files through predict; the slowest took {max(SECONDS):.3f} s")
+
+
 def _predict(path: Path, log: Path, out: Path) -> None:
     """``bench predict`` on ``path``: it predicts, or says why not in one line with exit 2 and writes nothing."""
     if out.exists():
         out.unlink()
     err = io.StringIO()
+    start = time.perf_counter()
     with _guard(), contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
         code = cli_main(["predict", "--model", str(path), "--log", str(log), "--out", str(out)])
+    SECONDS.append(time.perf_counter() - start)
     if code == 0:
         assert out.exists()
         _count("predicted")
