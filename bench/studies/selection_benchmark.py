@@ -51,6 +51,7 @@ from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
 from bench.core.fileio import atomic_write, write_json
 from bench.runner.plugins import register_by_file
+from bench.runner.provenance import provenance
 from bench.studies import selection
 from bench.studies.robot_log import simulate
 from systems import get_system
@@ -247,10 +248,19 @@ def summary(table: list[dict]) -> list[dict]:
 
 def page(result: dict) -> str:
     lines = ["# How well each way of choosing a model chooses", "",
-             f"Command: `{result['command']}`", "",
+             f"Command: `{result['command']}`" + (f", at commit {result['commit']}" if result.get("commit") else ""), "",
              f"Set: {result['set']}; {len(result['cases'])} cases; candidates {', '.join(result['candidates'])}; "
              f"{result['steps']} steps a fit. Regret: the chosen candidate's test MSE over the best candidate's. "
              "The test trajectory is read only to score.", "",
+             "Cases: the Panda, the UR5 and the KUKA's URDF, each with the laws of a drive (viscous and Coulomb "
+             "friction, a cogging torque, a Stribeck dip) or of a drive and its sensor (armature, offsets, gains, "
+             "load-dependent friction), drawn per seed; `one`: one training trajectory recorded twice, tested on "
+             f"another {FASTER:g} times as fast; `several`: {SEVERAL} training trajectories, tested on another. "
+             f"Protocols: `time` spans in time of one trajectory, whole trajectories of several (select's folds "
+             "before it had others); `auto` select's default (regions of the states on one trajectory, whole "
+             "trajectories on several). Rules: `lowest` the lowest validation MSE (select's); `one_se` the "
+             "first candidate, in the order " + " → ".join(SIMPLICITY) + ", whose validation MSE is within one "
+             "standard error (over the folds) of the lowest.", "",
              "| protocol | rule | cases | median regret | worst regret | chose the best |", "|---|---|---:|---:|---:|---:|"]
     for r in result["summary"]:
         lines.append(f"| {r['protocol']} | {r['rule']} | {r['cases']} | {r['median_regret']:.3f} | "
@@ -317,7 +327,7 @@ def main(args) -> int:
     real = [{"case": name, "protocol": "auto", "folds": json.loads(Path(path).read_text()).get("folds_protocol"),
              "source": path, "scores": scores(json.loads(Path(path).read_text()))}
             for name, path in REAL.items() if Path(path).exists()]
-    result = {"command": args.invocation, "set": args.set,
+    result = {"command": args.invocation, "commit": provenance().get("commit"), "set": args.set,
               "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
               "table": table, "summary": summary(table), "real": real}
     write_json(args.out.with_suffix(".json"), result)
