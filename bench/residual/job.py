@@ -136,23 +136,18 @@ class ResidualJob(Job):
         that failed without a checkpoint."""
         path = Path(self.checkpoint_path) if self.checkpoint_path else None
         saved = path is not None and path.is_file()
-        if outcome.result is None and not outcome.killed and saved:
+        failed = outcome.result is None and not outcome.killed and saved
+        if outcome.killed and not saved:
+            raise CallFailed(f"the residual loop was still running at {fit_limit_words(self.budget)}, "
+                             f"in round 0; killed")
+        if outcome.killed or failed:
             result = ResidualResult.from_json(json.loads(path.read_text()))
             last = result.rounds[-1]["round"] if result.rounds else 0
-            why = (outcome.log_tail or "").strip().splitlines()[-1:] or [f"exit code {outcome.exit_code}"]
-            stopped = (f"the loop's process failed after round {last} ({why[0][:200]}): the rounds up to round "
-                       f"{last} are kept")
-            result = dataclasses.replace(result, stopped=stopped)
-            report(f"stopped: {stopped}")
-            write_outputs(result, None, None, self.json_path, self.report_path)
-            return result
-        if outcome.killed:
-            if not saved:
-                raise CallFailed(f"the residual loop was still running at {fit_limit_words(self.budget)}, "
-                                 f"in round 0; killed")
-            result = ResidualResult.from_json(json.loads(path.read_text()))
-            last = result.rounds[-1]["round"] if result.rounds else 0
-            if outcome.phase == "evaluate":
+            if failed:
+                why = (outcome.log_tail or "").strip().splitlines()[-1:] or [f"exit code {outcome.exit_code}"]
+                stopped = (f"the loop's process failed after round {last} ({why[0][:200]}): the rounds up to "
+                           f"round {last} are kept")
+            elif outcome.phase == "evaluate":
                 stopped = (f"the driven rollouts after the rounds were still running after "
                            f"{self.limits()['evaluate']:g} s; killed: the result has every round and no rollouts")
             else:
