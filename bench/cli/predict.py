@@ -36,8 +36,8 @@ def main(args) -> int:
     header, _ = read(args.model)  # a file that is no model: one line, before anything else is read
     # the arm's URDF or declaration is the user's to name; a method's plugin (code) only where the command line
     # gives it
-    (given,), _ = load_plugins(args, [args.system]) if args.system else ((None,), ())
-    name = header.get("system")
+    names, _ = load_plugins(args, [args.system] if args.system else [])
+    given, name = (names or [None])[0], header.get("system")
     if given is not None and name != given:
         raise UsageError(f"{args.model}: the model was fitted on {name!r}, not on --system's {given!r}")
     if name is not None and name not in SYSTEMS:

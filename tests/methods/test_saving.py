@@ -5,7 +5,10 @@ expressions in a file are read without eval."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +23,8 @@ from methods import METHODS
 from methods.saving import TOLERANCE, load_model, save_model
 from systems import SYSTEMS
 from tests.commandline import cli
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -88,6 +93,20 @@ def test_predict_gives_the_runs_test_mse_and_writes_the_torques(saved, tmp_path)
     assert record["details"]["saved"]["largest_relative_difference"] <= TOLERANCE
     header = (tmp_path / "p.csv").read_text().splitlines()[0]
     assert header == "tau_hat_1,tau_hat_2" and len((tmp_path / "p.csv").read_text().splitlines()) == 301
+
+
+def test_predict_imports_the_plugin_that_registers_the_models_method(saved, tmp_path):
+    plugin = ROOT / "tests" / "plugins" / "penalised.py"
+    model = tmp_path / "penalised.npz"
+    r = cli("fit", "--system", "double_pendulum", "--method", "penalised_mlp", "--experiment", "indirect", "--train",
+            saved / "train.csv", "--steps", 2, "--plugin", plugin, "--save", model)
+    assert r.returncode == 0, r.stderr
+    # in a fresh interpreter: this one has imported the plugin for the fit
+    p = subprocess.run([sys.executable, "-m", "bench", "predict", "--model", str(model), "--log",
+                        str(saved / "test.csv"), "--out", str(tmp_path / "p.csv"), "--plugin", str(plugin)],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    assert len((tmp_path / "p.csv").read_text().splitlines()) == 301
 
 
 def _refused(path, log, tmp_path):
