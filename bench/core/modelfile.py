@@ -320,9 +320,9 @@ def read(path: str | Path) -> tuple[dict, Unpacker]:
     :class:`ModelFileError` in one line otherwise."""
     source = str(path)
     try:
-        if Path(path).is_file() and Path(path).stat().st_size > MAX_FILE_BYTES:
-            raise ModelFileError(f"{source}: a file of {Path(path).stat().st_size} bytes, more than a model file may "
-                                 f"take ({MAX_FILE_BYTES})")
+        size = Path(path).stat().st_size if Path(path).is_file() else 0
+        if size > MAX_FILE_BYTES:
+            raise ModelFileError(f"{source}: a file of {size} bytes, more than a model file may take ({MAX_FILE_BYTES})")
         with zipfile.ZipFile(path) as z:
             entries = {i.filename: i for i in z.infolist()}
             if HEADER not in entries:

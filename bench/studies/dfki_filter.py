@@ -18,7 +18,9 @@ The cut-off is also chosen on the training trajectories alone: each of the
 four is held out in turn, the lab's structure fitted on the other three and
 scored on it against its torque without the low-pass (``lab_validation``,
 the mean over the four). The page gives that choice beside the cut-off with
-the lowest test MSE, which was the file's default: a choice made on the test. Both models are term libraries (:class:`~bench.physics.terms.TermLibrary`).
+the lowest test MSE, which was the file's default: a choice made on the test
+(:func:`chosen`). Both models are term libraries
+(:class:`~bench.physics.terms.TermLibrary`).
 Usage::
 
     python -m bench study dfki-filter [--out results/measured/dfki_filter.md]
@@ -125,6 +127,12 @@ def evaluate(spec: FilterSpec) -> dict:
     return row
 
 
+def chosen(rows: list[dict]) -> tuple[float, float]:
+    """The cut-off with the lowest held-out training MSE, and the one with the lowest test MSE (lab, raw)."""
+    return (min(rows, key=lambda r: r["lab_validation"])["cutoff_hz"],
+            min(rows, key=lambda r: r["lab_raw"])["cutoff_hz"])
+
+
 def report(rows: list[dict], spec: FilterSpec) -> str:
     lines = [
         "# DFKI double pendulum: effect of the low-pass cut-off",
@@ -145,8 +153,7 @@ def report(rows: list[dict], spec: FilterSpec) -> str:
         "| cut-off (Hz) | lab, held-out training trajectory, raw | rigid, raw | rigid, filtered | lab, raw | lab, filtered | lab's values, raw | lab's values, filtered | b1 | b2 | cf1 | cf2 |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    by_training = min(rows, key=lambda r: r["lab_validation"])["cutoff_hz"]
-    by_test = min(rows, key=lambda r: r["lab_raw"])["cutoff_hz"]
+    by_training, by_test = chosen(rows)
     for r in rows:
         mark = " (default)" if r["cutoff_hz"] == DFKI_FILTER.cutoff_hz else ""
         b1, b2, c1, c2 = r["friction"]
@@ -182,13 +189,13 @@ def main(args) -> int:
         print(f"[{i}/{len(CUTOFFS_HZ)}] {cutoff:g} Hz: rigid {r['rigid_raw']:.4g}, lab {r['lab_raw']:.4g} (test MSE vs raw torque)", flush=True)
     text = report(rows, DFKI_FILTER)
     atomic_write(args.out, lambda f: f.write(text))
+    by_training, by_test = chosen(rows)
     write_json(args.out.with_suffix(".json"), {
         "command": args.invocation, "provenance": provenance(), "default_cutoff_hz": DFKI_FILTER.cutoff_hz,
-        "chosen_on_training_hz": min(rows, key=lambda r: r["lab_validation"])["cutoff_hz"],
-        "chosen_on_test_hz": min(rows, key=lambda r: r["lab_raw"])["cutoff_hz"],
+        "chosen_on_training_hz": by_training, "chosen_on_test_hz": by_test,
         "cutoffs": {f"{r['cutoff_hz']:g}": r for r in rows}})
     print(text)
-    best = min(rows, key=lambda r: r["lab_raw"])
+    best = next(r for r in rows if r["cutoff_hz"] == by_test)
     print(f"rigid-body base coefficients at {best['cutoff_hz']:g} Hz: {np.round(best['rigid_coef'], 5).tolist()}")
     print(f"wrote {args.out}")
     return 0

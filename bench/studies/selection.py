@@ -3,9 +3,10 @@ on its training data alone, fitted on all of it and scored on the test data once
 
 The candidates (:data:`CANDIDATES`) are the field's models of a real arm: the
 standard model, the feasible rigid body with nonnegative joint friction,
-hybrids of either with a learned residual, the residual loop's model from SysId, and the loop's model with a
-Gaussian process of what it leaves. Each is one run of the matrix with
-``--tune`` (:mod:`bench.evaluation.tuning`): its hyperparameters chosen by the
+hybrids of either with a learned residual, the residual loop's model from
+SysId, and the loop's model with a Gaussian process of what it leaves. Each
+is one run of the matrix with ``--tune`` (:mod:`bench.evaluation.tuning`):
+its hyperparameters chosen by the
 suite's validation protocol (:mod:`bench.core.folds`) on the training
 trajectories, within the run's budget, then fitted on all the training data
 and saved (:mod:`methods.saving`). The candidate chosen is the one with the

@@ -324,9 +324,9 @@ def main(args) -> int:
             print(f"[{i + 1}/{len(chosen)}] {case.name} {protocol} ({folds}): " +
                   (s.get("error") or ", ".join(f"{r} chose {v['chosen']} (regret {v['regret']:.3g})"
                                                for r, v in s["rules"].items())), flush=True)
-    real = [{"case": name, "protocol": "auto", "folds": json.loads(Path(path).read_text()).get("folds_protocol"),
-             "source": path, "scores": scores(json.loads(Path(path).read_text()))}
-            for name, path in REAL.items() if Path(path).exists()]
+    pages = {name: (path, json.loads(Path(path).read_text())) for name, path in REAL.items() if Path(path).exists()}
+    real = [{"case": name, "protocol": "auto", "folds": page.get("folds_protocol"), "source": path,
+             "scores": scores(page)} for name, (path, page) in pages.items()]
     result = {"command": args.invocation, "commit": provenance().get("commit"), "set": args.set,
               "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
               "table": table, "summary": summary(table), "real": real}
