@@ -109,6 +109,15 @@ def test_predict_imports_the_plugin_that_registers_the_models_method(saved, tmp_
     assert len((tmp_path / "p.csv").read_text().splitlines()) == 301
 
 
+def test_predict_refuses_a_system_the_model_was_not_fitted_on_in_one_line(saved, tmp_path):
+    urdf = ROOT / "systems" / "data" / "ur5_robot.urdf.gz"
+    r = cli("predict", "--model", saved / "model.npz", "--log", saved / "test.csv", "--out", tmp_path / "p.csv",
+            "--system", f"urdf:{urdf}")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "the model was fitted on 'double_pendulum', not on --system's 'urdf_ur5_robot" in r.stderr
+    assert not (tmp_path / "p.csv").exists()
+
+
 def _refused(path, log, tmp_path):
     out = tmp_path / "p.csv"
     r = cli("predict", "--model", path, "--log", log, "--out", out)
