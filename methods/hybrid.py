@@ -235,7 +235,7 @@ class Hybrid(Method):
 
     def saved(self, packer) -> dict:
         """Its prior, its residual and its gate (the training states, scaled), each as saved."""
-        gate = None if self.gate is None else {"states": packer.array(self.gate.tree.data),
+        gate = None if self.gate is None else {"states": packer.array(self.gate.states),
                                                "scale": packer.array(self.gate.scale)}
         return {"kind": "hybrid", "method": self.name, "hyperparameters": saved_hyperparameters(self),
                 "prior": self.prior.saved(packer), "residual": self.residual.saved(packer), "gate": gate}

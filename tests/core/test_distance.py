@@ -1,14 +1,17 @@
 """The distance to the nearest training state: the same distances whether a state
 comes once or repeated in consecutive rows, and each distinct state looked up once
-(a rollout asks for each state's torque at dof + 1 accelerations in a row)."""
+(a rollout asks for each state's torque at dof + 1 accelerations in a row); a long
+log's two-stage search gives scipy's k-d tree's distances."""
 
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
+from scipy.spatial import cKDTree
 
 from bench.core.data import Dataset
-from bench.core.distance import TrainingStates
+from bench.core import distance
+from bench.core.distance import NearestStates, TrainingStates
 from bench.physics.models import FittedModel, mass_and_bias
 
 
@@ -18,14 +21,14 @@ def _data(states: np.ndarray, dof: int) -> Dataset:
 
 
 class _Counting:
-    """A k-d tree that counts the points it is asked for."""
+    """A nearest-state index that counts the points it is asked for."""
 
-    def __init__(self, tree):
-        self.tree, self.asked = tree, 0
+    def __init__(self, index):
+        self.index, self.asked = index, 0
 
-    def query(self, x, *args, **kwargs):
+    def query(self, x):
         self.asked += len(x)
-        return self.tree.query(x, *args, **kwargs)
+        return self.index.query(x)
 
 
 @given(st.lists(st.integers(1, 4), min_size=1, max_size=12), st.integers(0, 2**16))
@@ -35,19 +38,19 @@ def test_repeated_states_give_each_rows_distance_and_are_looked_up_once(runs, se
     gate = TrainingStates(_data(rng.normal(size=(200, 2 * dof)), dof))
     distinct = rng.normal(size=(len(runs), 2 * dof)) * 2
     rows = np.repeat(distinct, runs, axis=0)
-    plain, _ = gate.tree.query(rows / gate.scale)
-    gate.tree = _Counting(gate.tree)
+    plain, _ = cKDTree(gate.states).query(rows / gate.scale)
+    gate.index = _Counting(gate.index)
     got = gate.distance(_data(rows, dof))
     np.testing.assert_array_equal(got, plain)
     distinct_runs = 1 + int(np.sum(np.any(distinct[1:] != distinct[:-1], axis=1)))
-    assert gate.tree.asked == distinct_runs
+    assert gate.index.asked == distinct_runs
 
 
 def test_the_forward_dynamics_batch_of_a_gated_model_looks_each_state_up_once():
     rng = np.random.default_rng(0)
     dof, n = 7, 5
     gate = TrainingStates(_data(rng.normal(size=(500, 2 * dof)), dof))
-    gate.tree = _Counting(gate.tree)
+    gate.index = _Counting(gate.index)
 
     class Gated(FittedModel):  # a model whose torque is the gate's distance on each joint, as a gated residual's weight is
         def predict_lagrangian(self, data):
@@ -58,5 +61,43 @@ def test_the_forward_dynamics_batch_of_a_gated_model_looks_each_state_up_once():
 
     states = rng.normal(size=(n, 2 * dof))
     M, c = mass_and_bias(Gated(), states[:, :dof], states[:, dof:])
-    assert gate.tree.asked == n  # not n * (dof + 1)
+    assert gate.index.asked == n  # not n * (dof + 1)
     assert M.shape == (n, dof, dof) and np.allclose(M, 0.0)  # the distance does not depend on the acceleration
+
+
+def _motion(rng: np.random.Generator, n: int, dof: int, recordings: int) -> np.ndarray:
+    """States along ``recordings`` smooth curves (sums of sines), as logs of an arm's motion hold them."""
+    out = []
+    for _ in range(recordings):
+        t = np.linspace(0, rng.uniform(2, 8), n // recordings)[:, None]
+        out.append(np.hstack([np.sin(t * rng.uniform(0.2, 2.0, dof) + rng.uniform(0, 6, dof)) for _ in range(2)]))
+    return np.vstack(out)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**16), st.integers(1, 4), st.floats(0.0, 3.0), st.integers(20, 600))
+def test_the_two_stage_search_gives_the_k_d_trees_distances(seed, recordings, spread, kept):
+    rng = np.random.default_rng(seed)
+    states = _motion(rng, 3000, 3, recordings)
+    states[rng.integers(0, len(states), 50)] = states[rng.integers(0, len(states), 50)]  # repeated states
+    old = distance.THINNED_ABOVE, distance.KEPT, distance.REACH_MAX
+    distance.THINNED_ABOVE, distance.KEPT, distance.REACH_MAX = 1000, kept, np.inf  # exact at any reach
+    try:
+        index = NearestStates(states)
+    finally:
+        distance.THINNED_ABOVE, distance.KEPT, distance.REACH_MAX = old
+    assert index.coarse is not None and index.coarse.n < len(states)
+    asked = np.vstack([states[rng.integers(0, len(states), 100)] + rng.normal(size=(100, 6)) * spread,
+                       states[:5]])  # some on the training states themselves
+    np.testing.assert_allclose(index.query(asked), cKDTree(states).query(asked)[0], rtol=1e-12, atol=1e-12)
+
+
+def test_states_that_are_not_smooth_motion_use_the_plain_tree(monkeypatch):
+    monkeypatch.setattr(distance, "THINNED_ABOVE", 1000)
+    monkeypatch.setattr(distance, "KEPT", 300)
+    rng = np.random.default_rng(1)
+    scattered = NearestStates(rng.normal(size=(3000, 6)))
+    assert scattered.coarse is None
+    asked = rng.normal(size=(50, 6))
+    np.testing.assert_array_equal(scattered.query(asked), cKDTree(scattered.states).query(asked)[0])
+    assert NearestStates(_motion(rng, 3000, 3, 2)).coarse is not None
