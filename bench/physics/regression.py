@@ -150,14 +150,40 @@ def fit_basis(basis: Sequence[sympy.Expr], data: Dataset, experiment: str, thres
     and the largest one whose held-out MSE is within 10 % of the best is
     refitted on all samples (the sparsest model that predicts as well).
     """
+    library, F = design(basis, data, experiment, deadline)
+    held = folds(data).indices() if data.trajectories() else None
+    coef = fit_columns(F, data.target(experiment).ravel(), len(data), threshold, deadline, held)
+    return library.lagrangian(coef), coef
+
+
+def design(basis: Sequence[sympy.Expr], data: Dataset, experiment: str,
+           deadline: float | None = None) -> tuple[TermLibrary, np.ndarray]:
+    """The term library of the Lagrangian terms ``basis`` (with a constant where a direct target may carry an
+    offset) and its design matrix on ``data`` (:func:`fit_basis`)."""
     basis = list(basis)
     if not Experiment.of(experiment).learns_torque and not any(f.is_number for f in basis):
         basis.append(sympy.Integer(1))  # the direct target may carry a constant offset
     library = TermLibrary.of_lagrangian(basis)
-    F = library.design(data, experiment, deadline)
-    held = folds(data).indices() if data.trajectories() else None
-    coef = fit_columns(F, data.target(experiment).ravel(), len(data), threshold, deadline, held)
-    return library.lagrangian(coef), coef
+    return library, library.design(data, experiment, deadline)
+
+
+def held_out_mse(F: np.ndarray, y: np.ndarray, n_samples: int, held: list[tuple[np.ndarray, np.ndarray]],
+                 deadline: float | None = None) -> float:
+    """The MSE over ``held``'s scored samples of :func:`fit_columns` fitted on each fold's fitted samples
+    (``(fitted, scored)`` sample indices; the threshold chosen within the fitted ones), pooled."""
+    rows_per_sample = len(y) // max(n_samples, 1)
+
+    def rows(index):
+        return (np.asarray(index)[:, None] * rows_per_sample + np.arange(rows_per_sample)).ravel()
+
+    total, count = 0.0, 0
+    for fitted, scored in held:
+        if not len(fitted) or not len(scored):
+            continue
+        coef = fit_columns(F[rows(fitted)], y[rows(fitted)], len(fitted), deadline=deadline)
+        residual = F[rows(scored)] @ coef - y[rows(scored)]
+        total, count = total + float(residual @ residual), count + len(residual)
+    return total / count if count else float("inf")
 
 
 def fit_columns(F: np.ndarray, y: np.ndarray, n_samples: int, threshold: float | None = None,

@@ -12,7 +12,7 @@ import numpy as np
 import sympy
 import torch
 
-from bench.core import symbolic
+from bench.core import protocols, symbolic
 from bench.physics import regression
 from bench.core.data import mse
 from bench.physics.models import ExpressionModel, FittedModel, NoVariant
@@ -20,6 +20,10 @@ from bench.core.timeouts import Timeout, call_with_timeout
 
 #: the refinement gives up on pruned equations that expand into more terms
 MAX_REFIT_TERMS = 2000
+#: the refinement's samples: at most this many of the training data, evenly spaced
+REFINE_SAMPLES = 4096
+#: ... and its folds (the validation protocol's, ``auto``)
+REFINE_FOLDS = 4
 #: a pruned equation keeping more weights than this is not written out: its
 #: text would exceed the record's 20 000 characters, and pushing it through
 #: sympy grows faster than linearly (results/syrenets/design.md)
@@ -106,18 +110,24 @@ class Equations:
            below 1e-2;
         3. refit the ``c_i`` by sequentially thresholded least squares, on ``L``
            (direct) or on ``g(f_i)`` against ``tau`` (indirect; g is linear in
-           L), the threshold chosen on held-out samples.
+           L), the threshold chosen within each fold's fitted samples.
 
-        The refit with the lowest MSE on further held-out training samples is
-        kept. The symbolic steps run under a hard time limit (they cannot be
-        interrupted otherwise), so the refinement never overruns the budget.
+        The size whose refits predict the held-out samples of the validation
+        protocol's folds best (:func:`bench.core.protocols.folds`, ``auto``:
+        whole trajectories, regions of one trajectory's states, or blocks of
+        independent samples) is refitted on all of them and kept. The samples
+        are at most :data:`REFINE_SAMPLES` of the training data, evenly spaced
+        in its order. The symbolic steps run under a hard time limit (they
+        cannot be interrupted otherwise), so the refinement never overruns the
+        budget.
         """
         pruned_k = self._notes["pruned_terms"]
         sizes = sorted({min(k, pruned_k) for k in self.REFINE_SIZES})
-        rng = np.random.default_rng(self.seed + 1)
-        pick = rng.permutation(len(train))
-        fit_set = train.subset(np.sort(pick[:4096]))
-        check_set = train.subset(np.sort(pick[4096:6144])) if len(train) > 4096 else fit_set
+        sample = train.subset(np.unique(np.linspace(0, len(train) - 1, min(len(train), REFINE_SAMPLES)).round()
+                                        .astype(int)))
+        folding = protocols.folds(sample, "auto", max_folds=REFINE_FOLDS)
+        held, y = folding.indices(), sample.target(experiment).ravel()
+        self._notes["refine_folds"] = folding.describe()
         best, best_err, reasons = None, np.inf, []
         for k in sizes:
             variant = self._top_terms(k)
@@ -137,16 +147,25 @@ class Equations:
                 if len(basis) > MAX_REFIT_TERMS:
                     reasons.append(f"{k} terms: {len(basis)} after expansion")
                     continue
-                refit, coef = regression.fit_basis(basis, fit_set, experiment, deadline=deadline)
+                library, F = regression.design(basis, sample, experiment, deadline)
+                err = regression.held_out_mse(F, y, len(sample), held, deadline)
             except Timeout:
                 reasons.append(f"{k} terms: out of budget")
                 break
-            model = ExpressionModel(refit, self.dof)
-            err = mse(model.predict(check_set, experiment), check_set.target(experiment))
             if err < best_err:
-                best, best_err = model, err
+                best, best_err = (k, library, F), err
+        if best is not None:
+            k, library, F = best
+            try:
+                coef = regression.fit_columns(F, y, len(sample), deadline=deadline, folds=held)
+            except Timeout:
+                reasons.append(f"{k} terms: out of budget")
+                best = None
+            else:
+                best = ExpressionModel(library.lagrangian(coef), self.dof)
                 self._notes["refined_from_terms"] = k
                 self._notes["refined_terms"] = int(np.count_nonzero(coef))
+                self._notes["refined_heldout_mse"] = best_err
         if best is None:
             out_of_budget = bool(reasons) and reasons[-1].endswith("out of budget")
             return NoVariant("no refit finished: " + "; ".join(reasons), "timeout" if out_of_budget else "failed")
