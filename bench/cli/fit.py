@@ -9,7 +9,7 @@ import tempfile
 from pathlib import Path
 
 from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget, check_names,
-                               check_split, configurations, device, hyperparameters, load_plugins)
+                               check_split, configurations, device, hyperparameters, load_plugins, resampled)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output, write_json
 from bench.evaluation.per_joint import per_joint_lines
@@ -72,11 +72,11 @@ def main(args) -> int:
     runs = preflight(spec) is None  # else its record says why not (the run's job writes it)
     given = given_data(make_system(spec), spec.train_path, spec.test_path, check_limits=not args.ignore_limits) \
         if runs else None
-    for name, part in zip(("train", "test"), given or ()):
+    for part in given or ():
         if part is not None:
-            part.target(args.experiment)  # bad files: exit 2 now, before the run's process starts
-            for recording, words in (part.meta or {}).get("resampled", {}).items():
-                print(f"{name}: recording {recording}: {words}")
+            part.check_target(args.experiment)  # bad files: exit 2 now, before the run's process starts
+    for line in resampled(given):
+        print(line)
     record, log = run_one(spec, checked=runs, data=given)
     if args.json:
         write_json(args.json, record.to_json())

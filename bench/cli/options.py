@@ -157,6 +157,13 @@ def budget(args) -> tuple[float | None, int | None]:
     return args.budget, args.steps
 
 
+def resampled(given) -> list[str]:
+    """A line for each recording of ``given`` (``(train, test)`` or ``None``) put on a uniform grid, as
+    :func:`bench.core.recordings.resampling` words it: ``train: recording NAME: resampled from ...``."""
+    return [f"{name}: recording {recording}: {words}" for name, part in zip(("train", "test"), given or ())
+            if part is not None for recording, words in (part.meta or {}).get("resampled", {}).items()]
+
+
 def number(x: float | None, spec: str = ".4g") -> str:
     """A figure as a command prints it; ``n/a`` where there is none (no test data)."""
     return "n/a" if x is None else format(x, spec)

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from bench.cli.options import (UsageError, add_budget, add_ignore_limits, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget, check_names,
-                               check_split, configurations, device, hyperparameters, load_plugins)
+                               check_split, configurations, device, hyperparameters, load_plugins, resampled)
 from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
@@ -96,9 +96,10 @@ def main(args) -> int:
     for spec in specs:  # fail fast on a bad override, before any process starts
         if spec.method in METHODS and METHODS.entry(spec.method).available:
             METHODS[spec.method](**method_config(spec))
-    if not args.ignore_limits:  # a measured arm's log in degrees, say: one line, before any run starts
-        for spec in {(s.system, s.split): s for s in specs}.values():
-            given_data(make_system(spec), None, None, check_limits=True)
+    for spec in {(s.system, s.split): s for s in specs}.values():  # a measured arm's log in degrees, say: one
+        given = given_data(make_system(spec), None, None, check_limits=not args.ignore_limits)  # line, before any run
+        for line in resampled(given):
+            print(f"{spec.system}: {line}")
     if args.stack_seeds and args.tune:
         raise UsageError("--stack-seeds trains the seeds as one model; --tune searches each seed's hyperparameters "
                          "on its own: give one of them")
