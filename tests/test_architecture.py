@@ -1,5 +1,6 @@
 """The layers hold: import-linter's contracts in pyproject.toml (imports point
-down the layers, no cycles between sibling modules), and what they do not
+down the layers, no cycles between sibling modules, only the scorers open the test
+split), and what they do not
 cover, measured from the source by :mod:`tests.architecture`."""
 
 from __future__ import annotations
@@ -35,19 +36,24 @@ def measured():
 def test_the_import_contracts_are_kept():
     r = lint(ROOT)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "Contracts: 2 kept, 0 broken." in r.stdout
+    assert "Contracts: 3 kept, 0 broken." in r.stdout
 
 
 @pytest.mark.skipif(LINT is None, reason="import-linter is not installed (pip install -e '.[test]')")
-def test_an_upward_import_breaks_the_layers_contract(tmp_path):
+@pytest.mark.parametrize("module, imported, contract", [
+    ("bench/core/data.py", "bench.runner.records", "Imports point down the layers"),
+    ("bench/evaluation/tuning.py", "bench.core.sealed", "Only the scorers open the test split"),  # a choice
+], ids=["upward", "a-chooser-opens-the-test-split"])
+def test_an_import_against_a_contract_breaks_it(tmp_path, module, imported, contract):
     for package in architecture.PACKAGES:
         shutil.copytree(ROOT / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__", "data"))
-    data = tmp_path / "bench" / "core" / "data.py"
-    data.write_text(data.read_text() + "\nfrom bench.runner import records  # noqa: E402,F401  (upward, on purpose)\n")
+    path = tmp_path / module
+    package, _, name = imported.rpartition(".")
+    path.write_text(path.read_text() + f"\nfrom {package} import {name}  # noqa: E402,F401  (on purpose)\n")
     r = lint(tmp_path, pythonpath=tmp_path)
     assert r.returncode == 1, r.stdout + r.stderr
-    assert "Imports point down the layers BROKEN" in r.stdout
-    assert "bench.core.data -> bench.runner.records" in r.stdout
+    assert f"{contract} BROKEN" in r.stdout
+    assert f"{module[:-3].replace('/', '.')} -> {imported}" in r.stdout
 
 
 def test_bench_holds_only_its_entry_points_and_the_layers():

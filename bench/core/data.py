@@ -111,12 +111,16 @@ class Dataset:
 
     def target(self, experiment: "str | Experiment") -> np.ndarray:
         """The experiment's target (:attr:`Experiment.target`): ``L`` (direct, shape (n,)) or ``tau`` (indirect)."""
+        self.check_target(experiment)
+        return getattr(self, Experiment.of(experiment).target)
+
+    def check_target(self, experiment: "str | Experiment") -> None:
+        """Raise :class:`DataError` where the data lack the experiment's target, reading none of its values
+        (so a sealed test split, :mod:`bench.core.sealed`, can be checked too)."""
         experiment = Experiment.of(experiment)
-        targets = getattr(self, experiment.target)
-        if targets is None:
+        if object.__getattribute__(self, experiment.target) is None:
             raise DataError(f"{self.source}: the {experiment} experiment needs column '{experiment.target}', "
                             f"which this data lacks")
-        return targets
 
     def subset(self, index) -> "Dataset":
         return Dataset(

@@ -16,6 +16,7 @@ from bench.core.data import Dataset
 from bench.physics.system import System
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest, read_settings, write_json
+from bench.core.sealed import scoring
 from bench.evaluation.per_joint import logged_test_torque, per_joint, per_joint_lines
 from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
@@ -117,14 +118,15 @@ class ResidualJob(Job):
                                hyperparameters=self.hyperparameters, report=report, device=self.device,
                                checkpoint=checkpoint, on_phase=on_phase)
         per_joint_errors = None
-        if test is not None and result.models is not None:
-            logged = logged_test_torque(system, own_data=not self.train_path)
-            per_joint_errors = {name: per_joint(model.predict_torque(test), test, logged)
-                                for name, model in zip(("before", "after"), result.models)}
-            for line in per_joint_lines(per_joint_errors["before"], per_joint_errors["after"]):
-                report(line)
-        result = dataclasses.replace(result, inputs=inputs, per_joint=per_joint_errors)
-        write_outputs(result, train, test, self.json_path, self.report_path)
+        with scoring():  # the loop's figures on the test split, to report
+            if test is not None and result.models is not None:
+                logged = logged_test_torque(system, own_data=not self.train_path)
+                per_joint_errors = {name: per_joint(model.predict_torque(test), test, logged)
+                                    for name, model in zip(("before", "after"), result.models)}
+                for line in per_joint_lines(per_joint_errors["before"], per_joint_errors["after"]):
+                    report(line)
+            result = dataclasses.replace(result, inputs=inputs, per_joint=per_joint_errors)
+            write_outputs(result, train, test, self.json_path, self.report_path)
         return result
 
     def finish(self, outcome: Outcome, report: Report) -> ResidualResult:

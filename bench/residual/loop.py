@@ -92,7 +92,7 @@ from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
-from bench.residual.rollouts import driven_rollouts
+from bench.residual.rollouts import driven_rollouts, test_mse
 from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, bic, trace
 from bench.residual.sensors import Sensed, Sensor, column as sensor_column, measured_rss, settle
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
@@ -217,7 +217,7 @@ class _Loop(Tidying):
         """Torque MSEs in the measured torque's units: the model read through the sensor."""
         model = Sensed(model, self.sensor)
         return {"train": mse(model.predict_torque(self.measured), self.measured.tau),
-                "test": None if self.test is None else mse(model.predict_torque(self.test), self.test.tau)}
+                "test": None if self.test is None else test_mse(model, self.test)}
 
     def heldout(self, model: LoopModel, train: Dataset | None = None, sensor: Sensor | None = None) -> float:
         """:func:`~bench.residual.checks.heldout` in the measured torque's units."""

@@ -21,6 +21,7 @@ import torch
 from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate
 from bench.core.csv_format import read_csv
+from bench.core.sealed import scoring, seal
 from bench.physics.models import NoVariant
 from bench.core.timeouts import Timeout
 from bench.physics.system import System
@@ -81,8 +82,9 @@ def _clean_data(spec: RunSpec, system: System):
 def given_data(system: System, train_path: str | None, test_path: str | None, *,
                check_limits: bool = False) -> tuple[Dataset, Dataset | None] | None:
     """Train and test data that need no generating: CSV files in the suite's
-    format (checked against the system), else a measured system's own splits;
-    ``None`` for a simulated system without files. With ``check_limits``, their
+    format (checked against the system), else a measured system's own splits,
+    the test split sealed (:mod:`bench.core.sealed`); ``None`` for a simulated
+    system without files. With ``check_limits``, their
     positions are checked against the system's position limits
     (:meth:`~bench.physics.system.System.check_positions`)."""
     if train_path:
@@ -95,7 +97,7 @@ def given_data(system: System, train_path: str | None, test_path: str | None, *,
     if check_limits:
         for part in (train, test):
             system.check_positions(part)
-    return train, test
+    return train, seal(test)
 
 
 def preflight(spec: RunSpec) -> Record | None:
@@ -151,6 +153,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         clock = time.perf_counter()
         system = make_system(spec)
         train, test = data if data is not None else load_data(spec, system)
+        test = seal(test)  # its targets are read only to score, in the evaluate phase below
         budget = spec.budget
         if fitted is None:
             method = make_method(spec)
@@ -181,42 +184,43 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             curve=_thin(info.get("curve", [])), hyperparameters=method.hyperparameters(), replay=info.get("schedule"),
         )
         clock = time.perf_counter()
-        test_prediction = None if test is None else method.predict(test, spec.experiment)
-        fields.update(errors(method, spec.experiment, train, test, test_prediction))
-        stages = Stages()
-        fields["expression"] = stages.run("expression", expression_entry, method)
-        exact = stages.run("exact", exact_entry, method, spec.experiment, system, default={"exact": None})
-        fields["exact"] = exact.pop("exact")
-        variants = {}
-        for name, model in stages.run("variants", method.variants, default={}).items():
-            if isinstance(model, NoVariant):  # why there is none, and its outcome
-                variants[name] = {"status": model.status, "error": model.reason}
-                continue
-            variant = Stages(prefix=f"variant {name}: ")
-            scored = variant.run("scores", scores, model, spec.experiment, train, test, system, variant)
-            variants[name] = {"status": "failed", "error": variant.failed[variant.prefix + "scores"]} if scored is None \
-                else {"status": "ok", **scored}
-            stages.failed.update(variant.failed)
-        timing["evaluate_s"] = time.perf_counter() - clock
-        fields["details"] = {
-            "train_source": train.source,
-            "test_source": None if test is None else test.source,
-            "n_train": len(train),
-            "n_test": None if test is None else len(test),
-            "domain": dataclasses.asdict(system.domain),
-            "device": device_entry(method.trained_on()),
-            **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason", "schedule")},
-            "prepare_seconds": prepared or info.get("prepare_seconds", 0.0),
-            **stages.run("details", method.record_details, default={}),
-            "variants": variants,
-            **({"exact_not_judged": not_judged(system)} if not_judged(system) else {}),
-            **({"tuning": tuning} if tuning is not None else {}),
-            **exact,
-        }
-        fields["rollout"], assessed = assess(method, spec.experiment, system, train, test, test_prediction, stages,
-                                             rollout=spec.rollout, timed=budget.kind != STEPS, timing=timing,
-                                             own_data=not spec.train_path)
-        fields["details"].update(assessed)
+        with scoring():  # the test split is read here, once, to score
+            test_prediction = None if test is None else method.predict(test, spec.experiment)
+            fields.update(errors(method, spec.experiment, train, test, test_prediction))
+            stages = Stages()
+            fields["expression"] = stages.run("expression", expression_entry, method)
+            exact = stages.run("exact", exact_entry, method, spec.experiment, system, default={"exact": None})
+            fields["exact"] = exact.pop("exact")
+            variants = {}
+            for name, model in stages.run("variants", method.variants, default={}).items():
+                if isinstance(model, NoVariant):  # why there is none, and its outcome
+                    variants[name] = {"status": model.status, "error": model.reason}
+                    continue
+                variant = Stages(prefix=f"variant {name}: ")
+                scored = variant.run("scores", scores, model, spec.experiment, train, test, system, variant)
+                variants[name] = {"status": "failed", "error": variant.failed[variant.prefix + "scores"]} if scored is None \
+                    else {"status": "ok", **scored}
+                stages.failed.update(variant.failed)
+            timing["evaluate_s"] = time.perf_counter() - clock
+            fields["details"] = {
+                "train_source": train.source,
+                "test_source": None if test is None else test.source,
+                "n_train": len(train),
+                "n_test": None if test is None else len(test),
+                "domain": dataclasses.asdict(system.domain),
+                "device": device_entry(method.trained_on()),
+                **{k: v for k, v in info.items() if k not in ("curve", "steps", "fit_seconds", "stop_reason", "schedule")},
+                "prepare_seconds": prepared or info.get("prepare_seconds", 0.0),
+                **stages.run("details", method.record_details, default={}),
+                "variants": variants,
+                **({"exact_not_judged": not_judged(system)} if not_judged(system) else {}),
+                **({"tuning": tuning} if tuning is not None else {}),
+                **exact,
+            }
+            fields["rollout"], assessed = assess(method, spec.experiment, system, train, test, test_prediction, stages,
+                                                 rollout=spec.rollout, timed=budget.kind != STEPS, timing=timing,
+                                                 own_data=not spec.train_path)
+            fields["details"].update(assessed)
         if spec.save:
             fields["details"]["saved"] = stages.run("save", save_fitted, method, spec, train, system)
         fields["details"]["timing"] = {k: round(v, 3) for k, v in timing.items()}
