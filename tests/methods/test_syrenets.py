@@ -134,6 +134,7 @@ def test_refinement_recovers_the_exact_lagrangian_from_a_near_miss(data, double_
     m._top_terms = lambda k: Fake()
     refined = m._refine(data[0], experiment, deadline=float("inf"))
     assert mse(refined.predict(data[1], experiment), data[1].target(experiment)) < 1e-20
+    assert "blocks" in m._notes["refine_folds"]  # the protocol's folds of independent samples, not a random split
     terms = sympy.Add.make_args(sympy.expand(refined.expression()))
     assert len([t for t in terms if t.free_symbols]) == 5
 

@@ -43,6 +43,15 @@ def test_fit_says_which_recordings_it_put_on_a_uniform_grid():
     assert any(line.startswith("train: recording run1: rows ") for line in said)
 
 
+def test_run_says_which_recordings_it_put_on_a_uniform_grid(tmp_path):
+    result = cli("run", "--systems", "kuka_lwr4", "--methods", "sysid", "--experiments", "indirect", "--seeds", "0",
+                 "--steps", "1", "--no-rollout", "--workers", "1", "--out", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    said = [line for line in result.stdout.splitlines() if line.startswith("kuka_lwr4: ") and "interpolated" in line]
+    assert {line.split(":")[1].strip() for line in said} == {"train", "test"}
+    assert any(line.startswith("kuka_lwr4: train: recording run1: rows ") for line in said)
+
+
 def test_an_unknown_split_is_refused_in_one_line():
     result = cli("fit", "--system", "kuka_lwr4", "--method", "sysid", "--experiment", "indirect", "--steps", "1",
                  "--split", "sideways")
