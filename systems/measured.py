@@ -57,6 +57,7 @@ from bench.core.experiment import INDIRECT
 from bench.core.data import Dataset, DataError
 from bench.core.csv_format import read_frame
 from bench.core.errors import ConfigError
+from bench.core.sealed import seal
 from bench.core.recordings import TIME_UNITS, ColumnMap, FilterSpec, joined, preprocess, read_log, resampling
 
 #: the splits of every measured system: its declared one, and train and test exchanged
@@ -299,7 +300,8 @@ class Measured:
     def load(self, part: str, filter: FilterSpec | None = None, *, filter_torque: bool = True) -> Dataset:
         """The ``train`` or ``test`` part of the instance's split (:attr:`split`), or ``all``
         of it: whole trajectories, each sample with its recording, trajectory
-        and time. ``filter`` replaces the file's (a study of cut-offs);
+        and time; the test part sealed (:mod:`bench.core.sealed`: its torques
+        are read only to score). ``filter`` replaces the file's (a study of cut-offs);
         ``filter_torque=False`` leaves the torque unfiltered."""
         parts = self.measured.parts(self.split)
         if part not in parts:
@@ -314,9 +316,10 @@ class Measured:
             "filter": dataclasses.asdict(filter), "split": self.split, **({"resampled": moved} if moved else {}),
             **({} if filter_torque else {"torque_filtered": False})}
         sign = s.get("sign_qd")
-        return Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,
+        data = Dataset(s["q"].copy(), s["qd"].copy(), s["qdd"].copy(), s["tau"].copy(), None, self.name, source, meta,
                        recording=s["recording"].copy(), sign_qd=None if sign is None else sign.copy(),
                        trajectory=s["trajectory"].copy(), time=s["time"].copy())
+        return seal(data) if part == "test" else data
 
     def logged_torque(self, part: str) -> np.ndarray:
         """The torque of ``part`` as logged, at the samples :meth:`load` gives (the filter's q and qd, its grid and

@@ -20,6 +20,8 @@ from bench.core.data import Dataset, generate
 from bench.physics.models import FittedModel, mass_and_bias
 from methods.stacking import fit_stacked
 from systems import SYSTEMS, Domain
+from bench.core.scoring import opened
+from bench.core.sealed import SealedSplit
 
 
 def suite_entries(registry, package: str) -> list[str]:
@@ -192,6 +194,8 @@ def check_measured_system(system) -> None:
     its test trajectories out of training; its form for SysId claims no true values."""
     for split in system.splits:
         train, test = (type(system)(split=split).load(part) for part in ("train", "test"))
+        assert isinstance(test, SealedSplit) and not isinstance(train, SealedSplit)  # read only to score
+        test = opened(test)
         for data in (train, test):
             assert len(data) > 0 and data.dof == system.dof and data.system == system.name
             for k in ("q", "qd", "qdd", "tau"):

@@ -42,7 +42,7 @@ def test_the_import_contracts_are_kept():
 @pytest.mark.skipif(LINT is None, reason="import-linter is not installed (pip install -e '.[test]')")
 @pytest.mark.parametrize("module, imported, contract", [
     ("bench/core/data.py", "bench.runner.records", "Imports point down the layers"),
-    ("bench/evaluation/tuning.py", "bench.core.sealed", "Only the scorers open the test split"),  # a choice
+    ("bench/evaluation/tuning.py", "bench.core.scoring", "Only the scorers open the test split"),  # a choice
 ], ids=["upward", "a-chooser-opens-the-test-split"])
 def test_an_import_against_a_contract_breaks_it(tmp_path, module, imported, contract):
     for package in architecture.PACKAGES:
@@ -82,3 +82,10 @@ def test_the_repository_root_holds_only_the_layouts_files():
     top = {line.split("/", 1)[0] for line in tracked.splitlines() if line}
     assert top <= {".ci", ".gitignore", "LICENSE", "Makefile", "README.md", "pyproject.toml",
                    "bench", "docs", "methods", "results", "systems", "tests"}, sorted(top)
+
+
+def test_only_the_scoring_module_opens_the_sealed_gate():
+    # the import contract guards who may import bench.core.scoring; this guards the gate it opens
+    touching = sorted(str(p.relative_to(ROOT)) for package in architecture.PACKAGES
+                      for p in (ROOT / package).rglob("*.py") if "_GATE" in p.read_text())
+    assert touching == ["bench/core/scoring.py", "bench/core/sealed.py"]

@@ -8,6 +8,7 @@ import pytest
 from bench.core.data import generate
 from methods import METHODS
 from systems import SYSTEMS
+from bench.core.scoring import opened
 from tests.contract import check_method, check_system, one_system_per_kind, suite_entries
 
 SUITE_METHODS = [n for n in suite_entries(METHODS, "methods") if METHODS.entry(n).available]
@@ -33,7 +34,7 @@ def datasets():
         if system.simulated:
             out[name] = (generate(system, 256, 0), generate(system, 128, 1000))
         else:
-            train, test = system.load("train"), system.load("test")
+            train, test = system.load("train"), opened(system.load("test"))
             out[name] = (train.subset(slice(0, 256)), test.subset(slice(0, 128)))
     return out
 

@@ -178,11 +178,13 @@ class Dataset:
         return _in_order(self.trajectory_labels())
 
     def tensors(self, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
-        """``q, qd, qdd, tau`` (and ``L``) as tensors of ``dtype`` on ``device`` (the CPU by default)."""
-        out = {k: torch.tensor(getattr(self, k), dtype=dtype, device=device) for k in ("q", "qd", "qdd", "tau")}
-        if self.L is not None:
-            out["L"] = torch.tensor(self.L, dtype=dtype, device=device)
-        return out
+        """``q, qd, qdd, tau`` (and ``L``) as tensors of ``dtype`` on ``device`` (the CPU by default): those of
+        :meth:`readable` (a sealed test split's states only, outside scoring)."""
+        return {k: torch.tensor(getattr(self, k), dtype=dtype, device=device) for k in self.readable()}
+
+    def readable(self) -> tuple[str, ...]:
+        """The arrays :meth:`tensors` gives: ``q, qd, qdd, tau`` and ``L`` where known."""
+        return ("q", "qd", "qdd", "tau") + (() if self.L is None else ("L",))
 
 
 def _in_order(labels: np.ndarray | None) -> list[str]:

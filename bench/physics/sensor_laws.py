@@ -190,7 +190,7 @@ class JointTorqueLaw(SensorLaw):
         raise NotImplementedError
 
     def factor(self, data):
-        out = np.ones_like(data.tau)
+        out = np.ones_like(data.q)
         out[:, self.joint] = self.joint_factor(data)
         return out
 

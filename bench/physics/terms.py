@@ -134,12 +134,12 @@ class Term:
     def torque(self, data: Dataset) -> np.ndarray:
         """The term's torque per unit coefficient, shape ``(n, dof)``."""
         if self.place == "D":
-            out = np.zeros_like(data.tau)
+            out = np.zeros_like(data.q)
             for j, dD in _dissipative_forces(self.expr, data.dof):
                 out[:, j] = _force_function(dD)(data)
             return out
         if self.place == "force":
-            out = np.zeros_like(data.tau)
+            out = np.zeros_like(data.q)
             out[:, self.joint] = _force_function(self.expr)(data)
             return out
         if self.place == "sensor":

@@ -16,7 +16,7 @@ from bench.core.data import Dataset
 from bench.physics.system import System
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest, read_settings, write_json
-from bench.core.sealed import scoring
+from bench.core.scoring import scoring
 from bench.evaluation.per_joint import logged_test_torque, per_joint, per_joint_lines
 from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs

@@ -13,7 +13,7 @@ import traceback
 
 from bench.core.budget import now
 from bench.core.data import Dataset, mse
-from bench.core.sealed import scoring
+from bench.core.scoring import scoring
 from bench.core.errors import first_line
 from bench.physics.models import FittedModel
 from bench.evaluation.driven import driven_entry

@@ -21,7 +21,8 @@ import torch
 from bench.core.budget import STEPS
 from bench.core.data import Dataset, add_noise, generate
 from bench.core.csv_format import read_csv
-from bench.core.sealed import scoring, seal
+from bench.core.scoring import scoring
+from bench.core.sealed import seal
 from bench.physics.models import NoVariant
 from bench.core.timeouts import Timeout
 from bench.physics.system import System

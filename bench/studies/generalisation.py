@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.core.scoring import scoring
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.budget import Budget
 from bench.core.distance import TrainingStates
@@ -65,13 +66,14 @@ def run_case(system: str, split: str, method: str, seed: int, budget: float | No
     s, train, test = split_data(system, split)
     start = time.perf_counter()
     if method == CONSTANT:
-        tau, done = np.broadcast_to(train.tau.mean(axis=0), test.tau.shape), None
+        tau, done = np.broadcast_to(train.tau.mean(axis=0), (len(test), test.dof)), None
     else:
         name, config = (STANDARD_METHOD, CONFIGURATION) if method == STANDARD else (method, "default")
         work = Budget(steps=1) if method == STANDARD else Budget(seconds=budget, steps=steps)
         model = METHODS[name](**METHODS[name].configuration(config)).fit(train, "indirect", seed, work, system=s)
         tau, done = model.predict_torque(test), model.fit_info.get("steps")
-    error = np.mean((tau - test.tau) ** 2, axis=1)
+    with scoring():  # the test split, read to score
+        error = np.mean((tau - test.tau) ** 2, axis=1)
     distance = TrainingStates(train).distance(test)
     cut = np.asarray(edges(system, split))
     which = np.clip(np.searchsorted(cut, distance, side="right") - 1, 0, BINS - 1)

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.core.sealed import seal
 from bench.core.budget import Budget
 from bench.core.arguments import positive, positive_int
 from bench.core.fileio import atomic_write, check_output, link
@@ -49,7 +50,7 @@ def split(held_out: str | None):
         return system.load("train"), system.load("test")
     every = system.load("all")
     out = every.recording == held_out
-    return every.subset(np.flatnonzero(~out)), every.subset(np.flatnonzero(out))
+    return every.subset(np.flatnonzero(~out)), seal(every.subset(np.flatnonzero(out)))
 
 
 def run_case(method: str, held_out: str | None, budget: float | None, seed: int = 0, steps: int | None = None) -> dict:

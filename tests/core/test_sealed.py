@@ -10,7 +10,8 @@ import pytest
 
 from bench.core.budget import Budget
 from bench.core.data import Dataset
-from bench.core.sealed import SealedSplit, SealedRead, scoring, seal
+from bench.core.scoring import scoring
+from bench.core.sealed import SealedRead, SealedSplit, seal
 from bench.evaluation.tuning import tune
 from bench.runner.execute import given_data
 from methods import METHODS

@@ -15,6 +15,7 @@ from bench.core.folds import folds
 from bench.evaluation.domain import domain, sentences
 from bench.studies.selection import applicability
 from systems import SYSTEMS
+from bench.core.scoring import opened
 from tests.commandline import cli
 
 
@@ -65,7 +66,7 @@ def test_several_trajectories_are_their_own_target():
 
 
 def test_select_reads_the_target_logs_states_and_never_its_torques(tmp_path):
-    test = SYSTEMS["kuka_lwr4"]().load("test")
+    test = opened(SYSTEMS["kuka_lwr4"]().load("test"))
     write_csv(test, tmp_path / "target.csv")
     lines = (tmp_path / "target.csv").read_text().splitlines()
     header = lines[0].split(",")

@@ -11,6 +11,7 @@ from bench.core.data import generate
 from bench.evaluation.forces import decomposition, forces_entry
 from bench.evaluation.rollout import TrueModel
 from systems import get_system
+from bench.core.scoring import opened
 
 
 def test_an_arms_parts_are_pinocchios_own():
@@ -41,7 +42,7 @@ def test_the_true_model_scores_zero_and_a_wrong_one_does_not(double_pendulum):
 
 def test_delans_characters_ship_parts_that_add_up_to_their_torque():
     chars = get_system("delan_characters")
-    test = chars.load("test")
+    test = opened(chars.load("test"))
     parts = chars.forces(test)
     np.testing.assert_allclose(sum(parts.values()), test.tau, atol=1e-6)
     assert chars.forces(test.replace(q=test.q + 1.0)) is None  # not rows of the file: not known

@@ -22,6 +22,7 @@ from bench.core.modelfile import ModelFileError, expression_from_json, expressio
 from methods import METHODS
 from methods.saving import TOLERANCE, load_model, save_model
 from systems import SYSTEMS
+from bench.core.scoring import opened
 from tests.commandline import cli
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -30,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="module")
 def kuka():
     system = SYSTEMS["kuka_lwr4"]()
-    return system, system.load("train").subset(slice(0, 600)), system.load("test").subset(slice(0, 300))
+    return system, system.load("train").subset(slice(0, 600)), opened(system.load("test")).subset(slice(0, 300))
 
 
 @pytest.mark.parametrize("name,settings_,steps", [

@@ -14,6 +14,7 @@ from methods import METHODS
 from methods.hybrid import PRIORS, modules_for
 from methods.saving import TOLERANCE, load_model, save_model
 from systems import SYSTEMS
+from bench.core.scoring import opened
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +22,7 @@ def arm():
     system = SYSTEMS["kuka_lwr4"]()
     train = system.load("train")
     part = train.subset(np.sort(np.concatenate([index[:400] for index in train.in_time_order()])))
-    return system, part, system.load("test").subset(slice(0, 400))
+    return system, part, opened(system.load("test")).subset(slice(0, 400))
 
 
 def test_the_loop_method_is_the_loops_final_model_a_round_its_step(arm, capsys):

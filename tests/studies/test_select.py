@@ -16,6 +16,7 @@ import pytest
 from bench.studies.selection import choose, page
 from systems import SYSTEMS
 from bench.core.csv_format import write_csv
+from bench.core.scoring import opened
 from tests.commandline import cli
 
 
@@ -38,7 +39,7 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     for c in result["candidates"]:  # under --steps each fold fit does the final fit's work, and the page says so
         assert set(c["work"]["fold_steps"]) == {c["work"]["final_steps"]}
     assert "work: each fold fit → the final fit" in text and " steps, " in text
-    write_csv(SYSTEMS["kuka_lwr4"]().load("test"), tmp_path / "test.csv")
+    write_csv(opened(SYSTEMS["kuka_lwr4"]().load("test")), tmp_path / "test.csv")
     p = cli("predict", "--model", out / "model.npz", "--log", tmp_path / "test.csv", "--out", tmp_path / "p.csv")
     assert p.returncode == 0
     assert float(p.stdout.split("torque MSE ")[1].split()[0]) == pytest.approx(result["chosen"]["test_mse"], rel=1e-5)

@@ -13,6 +13,7 @@ from bench.studies.dfki_filter import lab_coefficients, lab_design
 from systems import get_system
 from bench.core.recordings import DEFAULT_FILTER, FilterSpec, preprocess
 from systems.dfki_double_pendulum import LAYOUTS, RAW_COLUMNS, read_raw
+from bench.core.scoring import opened
 
 
 def synthetic_recording(rng, seconds=6.0, quantum=0.011):
@@ -71,7 +72,7 @@ def test_bad_raw_files_name_the_file_and_column(tmp_path, edit, message):
 
 def test_packaged_recordings_have_the_raw_columns():
     system = get_system("dfki_double_pendulum")
-    train, test = system.load("train"), system.load("test")
+    train, test = system.load("train"), opened(system.load("test"))
     assert set(RAW_COLUMNS) <= set(pd.read_csv(system_path("00")).columns)
     assert 3500 < len(train) < 4000 and 1700 < len(test) < 2000
     assert train.meta["filter"]["cutoff_hz"] == DEFAULT_FILTER.cutoff_hz
@@ -88,7 +89,7 @@ def system_path(name):
 def test_the_labs_model_explains_the_measured_torque():
     """Relative angles, hanging-down zero and the sign of gravity are right if the
     lab's identified model explains most of the measured torque's variance."""
-    test = get_system("dfki_double_pendulum").load("test")
+    test = opened(get_system("dfki_double_pendulum").load("test"))
     residual = lab_design(test) @ lab_coefficients() - test.tau.ravel()
     explained = 1 - residual.var() / test.tau.ravel().var()
     assert explained > 0.8
@@ -96,7 +97,7 @@ def test_the_labs_model_explains_the_measured_torque():
 
 def test_rigid_body_form_at_the_labs_values_matches_the_lab_model_without_rotor_and_friction():
     system = get_system("dfki_double_pendulum")
-    test = system.load("test").subset(slice(0, 200))
+    test = opened(system.load("test")).subset(slice(0, 200))
     from bench.physics.dynamics import euler_lagrange_chunked
 
     t = test.tensors()

@@ -17,6 +17,7 @@ from bench.core.errors import ConfigError
 from methods import METHODS
 from systems import SYSTEMS
 from systems.measured_arm import DATA_DIR, measured_arm
+from bench.core.scoring import opened
 from tests.commandline import cli
 
 KUKA_COLUMNS = ",".join(f"{k}_{i}={c}{i}" for i in range(1, 8) for k, c in (("q", "q"), ("qd", "dq"), ("tau", "tau")))
@@ -24,7 +25,7 @@ KUKA_COLUMNS = ",".join(f"{k}_{i}={c}{i}" for i in range(1, 8) for k, c in (("q"
 
 def test_the_default_split_holds_out_a_whole_trajectory_and_swapped_exchanges_them():
     default, swapped = SYSTEMS["kuka_lwr4"](), SYSTEMS["kuka_lwr4"](split="swapped")
-    train, test = default.load("train"), default.load("test")
+    train, test = default.load("train"), opened(default.load("test"))
     assert (train.recordings(), train.trajectories()) == (["run1", "run2"], ["A"])
     assert (test.recordings(), test.trajectories()) == (["run3"], ["B"])
     assert not set(train.trajectories()) & set(test.trajectories())
@@ -112,7 +113,7 @@ def test_a_log_missing_a_mapped_column_is_refused_naming_the_log(tmp_path):
 
 
 def _fit_torques(system, config: dict) -> np.ndarray:
-    train, test = system.load("train"), system.load("test")
+    train, test = system.load("train"), opened(system.load("test"))
     method = METHODS["sysid"](**config)
     method.fit(train, "indirect", 0, Budget(steps=1), system=system)
     return method.predict_torque(test)
