@@ -171,17 +171,13 @@ def held_out_mse(F: np.ndarray, y: np.ndarray, n_samples: int, held: list[tuple[
                  deadline: float | None = None) -> float:
     """The MSE over ``held``'s scored samples of :func:`fit_columns` fitted on each fold's fitted samples
     (``(fitted, scored)`` sample indices; the threshold chosen within the fitted ones), pooled."""
-    rows_per_sample = len(y) // max(n_samples, 1)
-
-    def rows(index):
-        return (np.asarray(index)[:, None] * rows_per_sample + np.arange(rows_per_sample)).ravel()
-
+    per = len(y) // max(n_samples, 1)
     total, count = 0.0, 0
     for fitted, scored in held:
         if not len(fitted) or not len(scored):
             continue
-        coef = fit_columns(F[rows(fitted)], y[rows(fitted)], len(fitted), deadline=deadline)
-        residual = F[rows(scored)] @ coef - y[rows(scored)]
+        coef = fit_columns(F[_rows(fitted, per)], y[_rows(fitted, per)], len(fitted), deadline=deadline)
+        residual = F[_rows(scored, per)] @ coef - y[_rows(scored, per)]
         total, count = total + float(residual @ residual), count + len(residual)
     return total / count if count else float("inf")
 
@@ -262,6 +258,11 @@ def independent_columns(F: np.ndarray, tol: float = 1e-8, deadline: float | None
     return np.asarray(kept, dtype=int)
 
 
+def _rows(index, per_sample: int) -> np.ndarray:
+    """The design's rows of the samples ``index``, each sample's ``per_sample`` rows in order."""
+    return (np.asarray(index)[:, None] * per_sample + np.arange(per_sample)).ravel()
+
+
 def _validated_threshold(F: np.ndarray, y: np.ndarray, rows_per_sample: int,
                          folds: list[tuple[np.ndarray, np.ndarray]], deadline: float | None = None) -> float:
     """The largest threshold whose held-out MSE over ``folds`` (sample indices)
@@ -270,10 +271,7 @@ def _validated_threshold(F: np.ndarray, y: np.ndarray, rows_per_sample: int,
     if not folds:
         return THRESHOLDS[0]
 
-    def rows(index):  # a sample's rows, in order
-        return (np.asarray(index)[:, None] * rows_per_sample + np.arange(rows_per_sample)).ravel()
-
-    folds = [(rows(f), rows(s)) for f, s in folds]
+    folds = [(_rows(f, rows_per_sample), _rows(s, rows_per_sample)) for f, s in folds]
     errors = []
     for threshold in THRESHOLDS:
         total, count = 0.0, 0
