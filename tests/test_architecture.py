@@ -6,6 +6,7 @@ cover, measured from the source by :mod:`tests.architecture`."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -89,3 +90,15 @@ def test_only_the_scoring_module_opens_the_sealed_gate():
     touching = sorted(str(p.relative_to(ROOT)) for package in architecture.PACKAGES
                       for p in (ROOT / package).rglob("*.py") if "_GATE" in p.read_text())
     assert touching == ["bench/core/scoring.py", "bench/core/sealed.py"]
+
+
+#: what a run leaves beside its records, which the repository does not keep (.gitignore)
+DEBRIS = re.compile(r"(^results/.*/logs/|(^|/)\.lock$|\.phase$|\.call\.json$)")
+
+
+def test_no_run_debris_is_committed():
+    try:
+        tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("not a git checkout")
+    assert [f for f in tracked.splitlines() if DEBRIS.search(f)] == []
