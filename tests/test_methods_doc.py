@@ -18,8 +18,13 @@ def _rows() -> dict[str, set[str]]:
             for m in re.finditer(r"^\| `([a-z_]+)` \| .* \| ([a-z, -]+) \|$", table, re.M)}
 
 
+def _built_in() -> list[str]:
+    """The methods the suite registers itself (other tests' plugins register toys in the same process)."""
+    return sorted(n for n in METHODS if METHODS.entry(n).obj.__module__.split(".")[0] in ("methods", "bench"))
+
+
 def test_every_registered_method_has_its_row_with_its_tags():
     rows = _rows()
-    assert sorted(rows) == sorted(METHODS)
-    for name in METHODS:
+    assert sorted(rows) == _built_in() and len(rows) >= 11
+    for name in rows:
         assert rows[name] == set(METHODS.entry(name).tags), name
