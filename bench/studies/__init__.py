@@ -1,12 +1,12 @@
 """The studies: measurement scripts, each a subcommand of ``python -m bench study``
-(an *experiment*, by contrast, is what is learned: :mod:`bench.core.experiment`):
+(an *experiment*, by contrast, is what is learned: :mod:`bench.core.experiment`).
+Their index is :data:`bench.cli.study.STUDIES`, from which ``python -m bench
+study --help`` lists each with its ``HELP`` line and the page it writes; this
+package also holds the user commands ``robot-log`` (:mod:`~bench.studies.robot_log`)
+and ``select``'s engine (:mod:`~bench.studies.selection`), and the modules
+some studies share (``acceptance_cases``, ``acceptance_scoring``,
+``scaling_systems``, ``device_profile``).
 
-* :mod:`~bench.studies.adaptation`: adapting to a change in the system;
-* :mod:`~bench.studies.residual_acceptance`: the residual loop on known undeclared effects;
-* :mod:`~bench.studies.overhead`: the harness's own overhead and speed-up;
-* :mod:`~bench.studies.dfki_filter`: the DFKI pre-processing filter's cut-off;
-* :mod:`~bench.studies.selection_benchmark`: how well each validation protocol and rule chooses a model.
-
-Each module gives ``add_arguments(parser)`` and ``main(args)``; what it
+Each study gives ``add_arguments(parser)``, ``main(args)`` and ``HELP``; what it
 measures is also callable from Python.
 """
