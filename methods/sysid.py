@@ -245,7 +245,7 @@ class SysId(TorchLagrangianMethod):
     def _post_fit(self, train, experiment, seconds_left):
         super()._post_fit(train, experiment, seconds_left)  # a network's fit: on the CPU, in float64
         if self.linear is not None:  # the consistency the data can decide: a positive definite mass matrix
-            rows = np.unique(np.linspace(0, len(train) - 1, min(MASS_STATES, len(train))).astype(int))
+            rows = train.evenly(MASS_STATES)
             q, qd = train.q[rows], train.qd[rows]
             smallest = np.concatenate([_smallest_eigenvalues(self.linear, q[k:k + MASS_CHUNK], qd[k:k + MASS_CHUNK])
                                        for k in range(0, len(rows), MASS_CHUNK)])

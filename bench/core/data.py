@@ -37,6 +37,10 @@ from bench.core.fileio import atomic_write
 GENERATOR_VERSION = 1
 
 
+#: the arrays of a sample that are its state: what a model predicts from
+STATES = ("q", "qd", "qdd")
+
+
 @dataclass(frozen=True, eq=False)
 class Dataset:
     """Samples of a Lagrangian system.
@@ -183,8 +187,12 @@ class Dataset:
         return {k: torch.tensor(getattr(self, k), dtype=dtype, device=device) for k in self.readable()}
 
     def readable(self) -> tuple[str, ...]:
-        """The arrays :meth:`tensors` gives: ``q, qd, qdd, tau`` and ``L`` where known."""
-        return ("q", "qd", "qdd", "tau") + (() if self.L is None else ("L",))
+        """The arrays :meth:`tensors` gives: :data:`STATES`, ``tau``, and ``L`` where known."""
+        return STATES + ("tau",) + (() if self.L is None else ("L",))
+
+    def evenly(self, count: int) -> np.ndarray:
+        """The indices of at most ``count`` samples, evenly spread over the data's order."""
+        return np.unique(np.linspace(0, len(self) - 1, min(count, len(self))).astype(int))
 
 
 def _in_order(labels: np.ndarray | None) -> list[str]:

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import contextlib
 
-import dataclasses
-
 from bench.core import sealed
 from bench.core.data import Dataset
 
@@ -30,4 +28,4 @@ def opened(data: Dataset | None) -> Dataset | None:
     if not isinstance(data, sealed.SealedSplit):
         return data
     with scoring():
-        return Dataset(**{f.name: getattr(data, f.name) for f in dataclasses.fields(Dataset)})
+        return Dataset(**sealed.fields(data))

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from bench.core.data import Dataset
+from bench.core.data import STATES, Dataset
 
 #: the fields a test split seals
 SEALED = ("tau", "L")
@@ -57,16 +57,21 @@ class SealedSplit(Dataset):
 
     def readable(self) -> tuple[str, ...]:
         """The states only, outside :func:`bench.core.scoring.scoring` (a model predicts from them)."""
-        return super().readable() if _GATE.depth else ("q", "qd", "qdd")
+        return super().readable() if _GATE.depth else STATES
+
+
+def fields(data: Dataset) -> dict:
+    """``data``'s fields by name, to build a copy of another kind (a sealed one's only while scoring)."""
+    return {f.name: getattr(data, f.name) for f in dataclasses.fields(Dataset)}
 
 
 def seal(data: Dataset | None) -> Dataset | None:
     """``data`` as a :class:`SealedSplit` (``None`` stays ``None``; a test split is returned as it is)."""
     if data is None or isinstance(data, SealedSplit):
         return data
-    fields = {f.name: getattr(data, f.name) for f in dataclasses.fields(Dataset)}
+    values = fields(data)
     _GATE.depth += 1  # its own checks in __post_init__ read the targets
     try:
-        return SealedSplit(**fields)
+        return SealedSplit(**values)
     finally:
         _GATE.depth -= 1

@@ -34,7 +34,6 @@ def heldout(strategy: Strategy, model: LoopModel, train: Dataset, scale: np.ndar
 def smallest_mass_eigenvalue(model: FittedModel, train: Dataset) -> float:
     """The smallest eigenvalue of the model's mass matrix ``d^2 L / dqd^2``
     (with its effects) over up to :data:`MASS_STATES` training states, evenly spread."""
-    rows = np.unique(np.linspace(0, len(train) - 1, min(MASS_STATES, len(train))).astype(int))
-    states = train.subset(rows)
+    states = train.subset(train.evenly(MASS_STATES))
     M, _ = mass_and_bias(model, states.q, states.qd)
     return float(np.linalg.eigvalsh(0.5 * (M + np.transpose(M, (0, 2, 1))))[:, 0].min())

@@ -123,8 +123,7 @@ class Equations:
         """
         pruned_k = self._notes["pruned_terms"]
         sizes = sorted({min(k, pruned_k) for k in self.REFINE_SIZES})
-        sample = train.subset(np.unique(np.linspace(0, len(train) - 1, min(len(train), REFINE_SAMPLES)).round()
-                                        .astype(int)))
+        sample = train.subset(train.evenly(REFINE_SAMPLES))
         folding = protocols.folds(sample, "auto", max_folds=REFINE_FOLDS)
         held, y = folding.indices(), sample.target(experiment).ravel()
         self._notes["refine_folds"] = folding.describe()
