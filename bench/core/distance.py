@@ -49,8 +49,9 @@ class NearestStates:
         if n > THINNED_ABOVE:
             coarse = cKDTree(self.states[:: -(-n // KEPT)])
             near, owner = coarse.query(self.states)
-            if float(near.max()) <= REACH_MAX:
-                self.coarse, self.reach = coarse, float(near.max())
+            reach = float(near.max())
+            if reach <= REACH_MAX:
+                self.coarse, self.reach = coarse, reach
                 self.owned = np.argsort(owner, kind="stable")
                 self.first = np.searchsorted(owner[self.owned], np.arange(coarse.n + 1))
         self.tree = cKDTree(self.states) if self.coarse is None else None
@@ -58,8 +59,10 @@ class NearestStates:
     def query(self, x: np.ndarray) -> np.ndarray:
         """The distances, shape ``(len(x),)``."""
         x = np.asarray(x, dtype=np.float64)
-        if self.coarse is None or not len(x):
-            return np.asarray(self.tree.query(x)[0], dtype=np.float64) if len(x) else np.zeros(0)
+        if not len(x):
+            return np.zeros(0)
+        if self.coarse is None:
+            return np.asarray(self.tree.query(x)[0], dtype=np.float64)
         d, _ = self.coarse.query(x)
         balls = self.coarse.query_ball_point(x, (d + self.reach) * (1 + 1e-9) + 1e-12)
         kept = np.concatenate([np.asarray(b, dtype=np.intp) for b in balls])
@@ -98,7 +101,8 @@ class TrainingStates:
         dynamics ask for each state's torque at ``dof + 1`` accelerations in a
         row (:func:`bench.physics.models.mass_and_bias`), and in 14 dimensions
         a nearest-state query costs about a millisecond on 70,000 training
-        states (a fifth of that through :class:`NearestStates`' two stages), so a 7-joint rollout would otherwise repeat it eight times a step."""
+        states (a sixth of that through :class:`NearestStates`' two stages),
+        so a 7-joint rollout would otherwise repeat it eight times a step."""
         if not len(data):
             return np.zeros(0)
         states = np.hstack([data.q, data.qd]) / self.scale

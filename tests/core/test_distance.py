@@ -5,6 +5,8 @@ log's two-stage search gives scipy's k-d tree's distances."""
 
 from __future__ import annotations
 
+from unittest import mock
+
 import numpy as np
 from hypothesis import given, settings, strategies as st
 from scipy.spatial import cKDTree
@@ -80,12 +82,8 @@ def test_the_two_stage_search_gives_the_k_d_trees_distances(seed, recordings, sp
     rng = np.random.default_rng(seed)
     states = _motion(rng, 3000, 3, recordings)
     states[rng.integers(0, len(states), 50)] = states[rng.integers(0, len(states), 50)]  # repeated states
-    old = distance.THINNED_ABOVE, distance.KEPT, distance.REACH_MAX
-    distance.THINNED_ABOVE, distance.KEPT, distance.REACH_MAX = 1000, kept, np.inf  # exact at any reach
-    try:
+    with mock.patch.multiple(distance, THINNED_ABOVE=1000, KEPT=kept, REACH_MAX=np.inf):  # exact at any reach
         index = NearestStates(states)
-    finally:
-        distance.THINNED_ABOVE, distance.KEPT, distance.REACH_MAX = old
     assert index.coarse is not None and index.coarse.n < len(states)
     asked = np.vstack([states[rng.integers(0, len(states), 100)] + rng.normal(size=(100, 6)) * spread,
                        states[:5]])  # some on the training states themselves
