@@ -13,9 +13,16 @@ How the field learns a real arm (Nguyen-Tuong & Peters, ICRA 2010; Reuss et al.
   needs an arm's linear form (a URDF).
 * **The residual** is any registered method that fits torques (the indirect
   experiment), a user's plugin included, fitted to ``tau - tau_prior`` on the
-  same training data within the same budget: one composition for every pair
-  (:class:`Hybrid`, made for a name by :func:`compose`). The hybrid's
+  same training data within the hybrid's budget: one composition for every
+  pair (:class:`Hybrid`, made for a name by :func:`compose`). The hybrid's
   hyperparameters are the residual's, and its steps are the residual's.
+* **The prior's work does not depend on the budget.** Every prior is
+  identified with fixed work (SysId's one solve; the residual loop's rounds,
+  until one accepts nothing), the same on any machine, so it is the hybrid's
+  one-time work on its samples (:meth:`Hybrid.prepare_samples`), done before
+  the budget starts, and the budget is the residual's. A tuned hybrid's
+  priors, one per fold and one for all the training data, are identified
+  before its search starts (:mod:`bench.evaluation.tuning`).
 * **Never worse than its prior where the data end.** A residual learner
   that falls back to zero far from its training states by itself (a Gaussian
   process with a zero mean, :attr:`~methods.base.Method.falls_back_to_zero`)
@@ -47,7 +54,7 @@ from bench.core.distance import TrainingStates
 from bench.core.modelfile import Unpacker, build, loader
 from bench.physics.models import FittedModel
 from bench.core.names import MethodName, MethodNameError
-from bench.core.registry import RegistryError
+from bench.core.registry import RegistryError, UnknownName
 from bench.physics.system import System
 from methods.base import METHODS, Method, restored, saved_hyperparameters
 from methods.config import POSITIVE
@@ -60,15 +67,15 @@ PRIOR_METHOD = "sysid"
 @dataclass(frozen=True)
 class Prior:
     """A prior a hybrid may name: how it is identified on the training data
-    (``identify(train, system, seed, budget)``, a fitted model; ``budget`` is
-    :attr:`share` of a time budget, or the work budget's steps) and what it
-    is, in words. ``module`` is the module that registers it, which a run's
-    own process imports before it composes the hybrid's name."""
+    (``identify(train, system, seed)``, a fitted model, with work that does
+    not depend on the hybrid's budget: the same for the same samples and
+    seed on any machine) and what it is, in words. ``module`` is the module
+    that registers it, which a run's own process imports before it composes
+    the hybrid's name."""
 
     name: str
     words: str
-    identify: Callable[[Dataset, "System | None", int, Budget], FittedModel]
-    share: float = 0.0
+    identify: Callable[[Dataset, "System | None", int], FittedModel]
     module: str = __name__
 
 
@@ -85,8 +92,8 @@ def register_prior(prior: Prior) -> Prior:
 
 
 def sysid_prior(configuration: str):
-    """The identification of SysId's configuration ``configuration`` (one solve, whatever the budget)."""
-    def identify(train: Dataset, system, seed: int, budget: Budget) -> FittedModel:
+    """The identification of SysId's configuration ``configuration``: one solve."""
+    def identify(train: Dataset, system, seed: int) -> FittedModel:
         method = METHODS[PRIOR_METHOD](**METHODS[PRIOR_METHOD].configuration(configuration))
         return method.fit(train, INDIRECT, seed, Budget(steps=1), system=system)
     return identify
@@ -176,8 +183,12 @@ class Hybrid(Method):
         return f"{self.name} fits its prior, then its residual, one seed at a time"
 
     # -- the fit ---------------------------------------------------------------
+    def _prepare_samples(self, train: Dataset, experiment: str, seed: int, system: System | None) -> None:
+        """The prior on ``train``: fixed work, identified before the budget starts (and kept for the fit)."""
+        identified_prior(self.prior_name, train, system, seed)
+
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        self.prior = identified_prior(self.prior_name, train, self.system, self.seed, self.budget)
+        self.prior = identified_prior(self.prior_name, train, self.system, self.seed)
         self._residual_data = train.replace(tau=train.tau - self.prior.predict_torque(train))
         self.gate = None if self.residual.falls_back_to_zero else TrainingStates(train)
         # the residual starts as a fit of its own would (its seed, its one-time work), on the hybrid's clock
@@ -262,18 +273,17 @@ def _load(tree: dict, unpacker: Unpacker, context: dict) -> Hybrid:
 _priors: "OrderedDict[tuple, Method]" = OrderedDict()
 
 
-def identified_prior(prior: str, train: Dataset, system: System | None, seed: int, budget: Budget) -> FittedModel:
-    """The prior ``prior`` identified on ``train`` with ``seed`` within its
-    share of ``budget`` (:class:`Prior`): the same fit for the same samples,
-    seed and budget, so the last :data:`PRIOR_CACHE` are kept and reused (a
-    tuned hybrid fits every combination on the same folds)."""
+def identified_prior(prior: str, train: Dataset, system: System | None, seed: int) -> FittedModel:
+    """The prior ``prior`` identified on ``train`` with ``seed`` (:class:`Prior`):
+    the same fit for the same samples and seed, so the last :data:`PRIOR_CACHE`
+    are kept and reused (a tuned hybrid fits every combination on the same
+    folds, each fold's prior identified before the search)."""
     entry = PRIORS[prior]
-    share = budget.scaled(entry.share) if entry.share else budget
-    key = (prior, None if system is None else system.name, seed, repr(share.to_json()), fingerprint(train))
+    key = (prior, None if system is None else system.name, seed, fingerprint(train))
     if key in _priors:
         _priors.move_to_end(key)
         return _priors[key]
-    fitted = entry.identify(train, system, seed, share)
+    fitted = entry.identify(train, system, seed)
     _priors[key] = fitted
     while len(_priors) > PRIOR_CACHE:
         _priors.popitem(last=False)
@@ -311,8 +321,8 @@ def compose(name: str) -> type | None:
         raise RegistryError(f"unknown prior {prior!r} in {name!r}: {naming()}")
     try:
         entry = METHODS.entry(residual)
-    except RegistryError as exc:
-        raise RegistryError(f"{name}: unknown residual learner: {exc}") from None
+    except UnknownName as exc:
+        raise UnknownName(f"{name}: unknown residual learner: {exc}", exc.name) from None
     reason = entry.obj.not_applicable_reason(INDIRECT)
     if reason:
         raise RegistryError(f"{name}: {residual} cannot learn a residual torque: {reason}")

@@ -78,5 +78,9 @@ def test_an_unknown_method_that_a_file_here_registers_hints_at_plugin(tmp_path):
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "unknown method 'my_ridge'" in r.stderr
     assert "my_ridge.py names it: add --plugin my_ridge.py" in r.stderr
+    hybrid = cli("fit", "--system", "double_pendulum", "--method", "standard+my_ridge", "--experiment", "indirect",
+                 cwd=tmp_path)  # the residual is the name the file registers
+    assert hybrid.returncode == 2 and hybrid.stderr.count("\n") == 1
+    assert "unknown residual learner" in hybrid.stderr and "add --plugin my_ridge.py" in hybrid.stderr
     elsewhere = cli("fit", "--system", "double_pendulum", "--method", "my_ridge", "--experiment", "indirect", cwd=tmp_path.parent)
     assert "needs --plugin FILE.py" in elsewhere.stderr

@@ -16,7 +16,7 @@ from bench.core.arguments import assignment, positive, positive_int
 from bench.core.experiment import Experiment
 from bench.core.devices import CHOICES, resolve as resolve_device
 from bench.core.errors import UserError
-from bench.core.registry import RegistryError
+from bench.core.registry import RegistryError, UnknownName
 import bench.residual.prior  # noqa: F401  (registers the loop prior: loop+RESIDUAL)
 from bench.runner.plugins import import_plugins, system_plugins
 from methods import METHODS
@@ -214,9 +214,10 @@ def check_names(args, systems=(), methods=(), experiments=(), named: bool = True
         for name in names:
             try:
                 registry.entry(name)
+            except UnknownName as exc:  # a name a plugin might register: say which file in the folder names it
+                raise UsageError(f"{exc}{_plugin_hint(exc.name, args.plugin)}") from None
             except RegistryError as exc:
-                unknown = str(exc).startswith("unknown ") and "unknown prior" not in str(exc) or "unknown residual" in str(exc)
-                raise UsageError(f"{exc}{_plugin_hint(name, args.plugin) if unknown else ''}") from None
+                raise UsageError(str(exc)) from None
     for name in experiments:
         Experiment.of(name)
     skipped = {}

@@ -33,6 +33,15 @@ class RegistryError(UserError, KeyError):
         return str(self.args[0])
 
 
+class UnknownName(RegistryError):
+    """A name that no entry holds: :attr:`name` is the part of it that a plugin could register (a hybrid's
+    residual, for a hybrid whose residual is unknown)."""
+
+    def __init__(self, message: str, name: str):
+        super().__init__(message)
+        self.name = name
+
+
 @dataclass(frozen=True)
 class Entry(Generic[T]):
     name: str
@@ -119,7 +128,7 @@ class Registry(Generic[T]):
             close = difflib.get_close_matches(name, list(self._entries), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""
             known = ", ".join(sorted(self._entries)) or "none"
-            raise RegistryError(f"unknown {self.kind} {name!r}{hint} (known: {known})") from None
+            raise UnknownName(f"unknown {self.kind} {name!r}{hint} (known: {known})", name) from None
 
     def __getitem__(self, name: str) -> T:
         return self.entry(name).obj
