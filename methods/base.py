@@ -275,16 +275,18 @@ class Method(FittedModel):
             raise ConfigError(f"{self.name}: warm_start continues a {self.experiment} fit of {self.dof} DoF; "
                               f"got {experiment} data of {train.dof} DoF")
         self.warm_start = warm_start
-        reason = self.not_applicable_reason(experiment, system if system is not None else self._resolve_system(train))
+        system = system if system is not None else self._resolve_system(train)
+        reason = self.not_applicable_reason(experiment, system)
         if reason:
             raise ConfigError(reason)
         if len(train) == 0:
             raise DataError(f"{train.source}: no samples to fit")
         train.target(experiment)  # raises a DataError naming what is missing
         prepare_seconds = self.prepare(train, experiment) if prepare else 0.0
+        prepare_seconds += self.prepare_samples(train, experiment, seed, system)
         t0 = time.perf_counter()
         self.experiment, self.seed, self.dof = experiment, int(seed), train.dof
-        self.system = system if system is not None else self._resolve_system(train)
+        self.system = system
         self.budget = budget
         seed_everything(self.seed)
 
@@ -342,6 +344,21 @@ class Method(FittedModel):
         self._prepare(train, Experiment.of(experiment))
         self._prepared = key
         return round(time.perf_counter() - t0, 3)
+
+    def prepare_samples(self, train: Dataset, experiment: str, seed: int, system: System | None = None) -> float:
+        """Work on ``train``'s samples that does not depend on the budget (a
+        hybrid's prior, identified with fixed work), done before the budget
+        starts and kept for the fit; returns the seconds it took. :meth:`fit`
+        calls it before its budget starts; the runner and a tuned search call
+        it first, in the phase of the one-time work, so that the fit's time
+        limit does not cover it."""
+        t0 = time.perf_counter()
+        self._prepare_samples(train, Experiment.of(experiment), int(seed),
+                              system if system is not None else self._resolve_system(train))
+        return round(time.perf_counter() - t0, 3)
+
+    def _prepare_samples(self, train: Dataset, experiment: str, seed: int, system: System | None) -> None:
+        """:meth:`prepare_samples`'s work; none by default."""
 
     def _replay_schedule(self, progress: Progress) -> dict:
         """The record's replay entry: the fit's :class:`Schedule`, or why it cannot be replayed."""

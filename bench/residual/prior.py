@@ -5,15 +5,20 @@ The loop (:func:`bench.residual.loop.residual_loop`) fits SysId's feasible
 rigid body on the training data and adds the laws of the arm, the sensor and
 the drive that the data identify; its final model (the rigid body, its named
 laws, read through the sensor's laws) is the prior, and the residual learner
-of :mod:`methods.hybrid` is fitted to what it leaves. Both are fitted within
-the hybrid's one budget: under a time budget the loop has :data:`LOOP_SHARE`
-of it and the residual the rest; under a work budget of ``N`` steps the
-loop's fit is bounded by them as ``bench residual --steps`` bounds it, and it
-runs at most ``N`` rounds (and at most :data:`~bench.residual.loop.MAX_ROUNDS`).
+of :mod:`methods.hybrid` is fitted to what it leaves.
 
-A round is the loop's step: the method ``loop`` records the rounds it ran as
-its steps, so that a tuned or selected ``loop`` or ``loop+RESIDUAL`` is
-validated at the rounds its final fit runs (:mod:`bench.evaluation.tuning`).
+The loop's rounds are bounded by work, never by a share of seconds, so that
+the same samples and seed give the same model on any machine:
+
+* as a hybrid's prior it runs as ``bench residual --steps 1`` runs it
+  (SysId's one solve a fit) until a round accepts nothing, at most
+  :data:`~bench.residual.loop.MAX_ROUNDS` rounds, whatever the hybrid's
+  budget; being fixed work, it is identified before that budget starts
+  (:meth:`methods.hybrid.Hybrid.prepare_samples`);
+* as the method ``loop`` a round is its step: under a work budget of ``N``
+  steps it runs at most ``N`` rounds (and at most ``MAX_ROUNDS``), so that a
+  tuned or selected ``loop`` is validated at the rounds its final fit runs
+  (:mod:`bench.evaluation.tuning`); under a time budget the budget bounds it.
 
 Registering the method and the prior is importing this module: a run's own
 process imports it before it resolves the name (:func:`methods.hybrid.modules_for`).
@@ -35,24 +40,24 @@ from methods.base import METHODS, Method
 from methods.hybrid import Prior, prior_unavailable, register_prior
 from methods.progress import Progress
 
-#: the share of a hybrid's time budget the loop has
-LOOP_SHARE = 0.5
 #: the method whose model the loop extends
 METHOD = "sysid"
 
 
-def identify(train: Dataset, system, seed: int, budget: Budget) -> FittedModel:
-    """The loop's final model on ``train`` within ``budget`` (under a work budget of ``N`` steps, at most ``N``
-    rounds), its progress printed line by line."""
-    return run(train, seed, budget).models[1]
+def identify(train: Dataset, system, seed: int) -> FittedModel:
+    """The loop's final model on ``train``: SysId's one solve a fit, until a round accepts nothing (at most
+    :data:`~bench.residual.loop.MAX_ROUNDS` rounds), its progress printed line by line."""
+    return run(train, seed, Budget(steps=1), MAX_ROUNDS).models[1]
 
 
-def run(train: Dataset, seed: int, budget: Budget) -> ResidualResult:
-    """The loop on ``train`` within ``budget``, a round a step of its work (under a work budget of ``N`` steps, at
-    most ``N`` rounds), its progress printed line by line."""
+def run(train: Dataset, seed: int, budget: Budget, rounds: int | None = None) -> ResidualResult:
+    """The loop on ``train`` within ``budget``, at most ``rounds`` rounds (default: under a work budget of ``N``
+    steps, ``N``; under a time budget, :data:`~bench.residual.loop.MAX_ROUNDS`), its progress printed line by
+    line."""
+    if rounds is None:
+        rounds = MAX_ROUNDS if budget.steps is None else budget.steps
     return residual_loop(METHOD, train, None, budget_s=None if budget.steps is not None else budget.seconds,
-                         steps=budget.steps, seed=seed,
-                         max_rounds=MAX_ROUNDS if budget.steps is None else min(budget.steps, MAX_ROUNDS),
+                         steps=budget.steps, seed=seed, max_rounds=min(rounds, MAX_ROUNDS),
                          report=lambda line: print(f"prior: {line}", flush=True))
 
 
@@ -63,7 +68,7 @@ def rounds_run(result: ResidualResult) -> int:
 
 
 PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the feasible rigid body and its named laws)",
-                             identify, share=LOOP_SHARE, module=__name__))
+                             identify, module=__name__))
 
 
 @METHODS.add("loop", "symbolic", "residual")

@@ -169,7 +169,10 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
             phase("prepare")
             prepared = method.prepare(train, spec.experiment)
             if spec.tune:
-                prepared += prepare_search(METHODS[spec.method], method_config(spec), train, spec.experiment, spec.device)
+                prepared += prepare_search(METHODS[spec.method], method_config(spec), train, spec.experiment,
+                                           spec.device, seed=spec.seed, system=system, protocol=spec.folds)
+            else:
+                prepared += method.prepare_samples(train, spec.experiment, spec.seed, system)
             phase("fit")
             if spec.tune:
                 tuned = tune(METHODS[spec.method], method_config(spec), train, spec.experiment, spec.seed, budget,

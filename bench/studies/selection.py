@@ -9,7 +9,10 @@ is one run of the matrix with ``--tune`` (:mod:`bench.evaluation.tuning`):
 its hyperparameters chosen by the
 suite's validation protocol (:mod:`bench.core.folds`) on the training
 trajectories, within the run's budget, then fitted on all the training data
-and saved (:mod:`methods.saving`). The candidate chosen is the one with the
+and saved (:mod:`methods.saving`). The loop's candidates are bounded by
+work whatever select's budget: ``loop`` runs its rounds until one accepts
+nothing (:attr:`Candidate.work`), and ``loop+gp``'s prior does the same before
+its residual's budget starts (:mod:`bench.residual.prior`). The candidate chosen is the one with the
 lowest validation MSE; the test data are read by each run to score it, and
 nothing is chosen on them. The runs' records are kept, so that the same
 command resumes where it stopped, as a matrix does.
@@ -35,6 +38,7 @@ from bench.core.fileio import atomic_write, write_json
 from bench.core.protocols import folds as fold_data
 from bench.evaluation.domain import domain, sentences
 from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL, SCORE_RULE
+from bench.residual.loop import MAX_ROUNDS
 from bench.runner import matrix
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
@@ -42,12 +46,20 @@ from bench.runner.spec import RunSpec
 
 @dataclass(frozen=True)
 class Candidate:
-    """A candidate: its name on the page, the method, its configuration and the hyperparameters it fixes."""
+    """A candidate: its name on the page, the method, its configuration and the hyperparameters it fixes.
+    ``work``, where given, is the steps the candidate's run does under select's time budget, which is then only
+    their ceiling (x :data:`WORK_CEILING`): the residual loop's rounds, which are bounded by work so that the
+    candidate is the same on any machine (its fold fits run the final fit's rounds)."""
 
     name: str
     method: str
     profile: str = "default"
     fixed: tuple[tuple[str, object], ...] = ()
+    work: int | None = None
+
+
+#: a candidate with :attr:`Candidate.work` is killed past this multiple of select's seconds a candidate
+WORK_CEILING = 5.0
 
 
 #: the candidates, in the page's order
@@ -59,7 +71,7 @@ CANDIDATES = (
     Candidate("standard+mlp", "standard+mlp"),
     Candidate("feasible+delan", "feasible+delan"),
     Candidate("feasible+sparse_torque", "feasible+sparse_torque"),
-    Candidate("loop", "loop"),
+    Candidate("loop", "loop", work=MAX_ROUNDS),
     Candidate("loop+gp", "loop+gp"),
 )
 
@@ -76,8 +88,10 @@ def specs(system: str, split: str | None, budget_s: float | None, steps: int | N
         # two candidates of one method (SysId's standard and feasible bodies) keep their records apart
         folder = out / "runs" if c.method not in folders else out / f"runs_{c.name.replace('+', '_')}"
         folders.setdefault(c.method, folder)
-        spec = RunSpec(system=system, method=c.method, experiment="indirect", seed=seed, budget_s=budget_s,
-                       steps=steps, profile=c.profile, hyperparameters=dict(c.fixed), split=split, plugins=plugins,
+        work = c.work if steps is None and c.work is not None else None
+        spec = RunSpec(system=system, method=c.method, experiment="indirect", seed=seed,
+                       budget_s=budget_s if work is None else WORK_CEILING * budget_s,
+                       steps=steps if work is None else work, profile=c.profile, hyperparameters=dict(c.fixed), split=split, plugins=plugins,
                        tune=True, rollout=rollout, save=str(out / "models" / f"{c.name.replace('+', '_')}.npz"),
                        folds=protocol)
         rows.append((c, spec, folder))
@@ -117,7 +131,7 @@ def entry(candidate: Candidate, record: Record, out: Path) -> dict:
             "train_mse": record.train_mse, "test_over_standard": None if not (standard and record.test_mse) else
             record.test_mse / standard, "hyperparameters": tuning.get("chosen", {}),
             "model": None if saved is None else os.path.relpath(saved, Path(out).resolve()),
-            "error": record.error_line or
+            "budget": record.describe_budget(), "error": record.error_line or
             (record.failed_stages.get("save") if record.failed_stages else None), "run_id": record.run_id,
             "work": tuning.get("work")}
 
@@ -143,7 +157,8 @@ def page(result: dict) -> str:
     chosen = result["chosen"]
     lines = [f"# A model of {result['system']}, chosen by validation", "",
              f"Command: `{result['command']}`", "",
-             f"Split: {result['split'] or 'default'}; budget per candidate: {result['budget']}; seed {result['seed']}. "
+             f"Split: {result['split'] or 'default'}; budget per candidate: {result['budget']}{own_budgets(result)}; "
+             f"seed {result['seed']}. "
              f"Each candidate is {PROTOCOL} (validation folds: {result['folds'] or 'none'}) by successive halving over "
              f"work, each fold fit of the combination it keeps doing the steps of the final fit on all the training "
              f"data; its validation MSE is {SCORE_RULE}. The one with the lowest validation MSE is chosen, and the "
@@ -181,6 +196,12 @@ def page(result: dict) -> str:
                           f"it): it lies a median {report['test_median_distance']:.3g} from the training states, "
                           + ("beyond" if beyond else "within") + " what validation reached."]
     return "\n".join(lines) + "\n"
+
+
+def own_budgets(result: dict) -> str:
+    """The candidates whose budget is their own (the loop's rounds, bounded by work), in words for the page."""
+    own = [f"{e['name']} {e['budget']}" for e in result["candidates"] if e.get("budget") not in (None, result["budget"])]
+    return f" ({'; '.join(own)}: the residual loop's rounds, bounded by work)" if own else ""
 
 
 def work_cell(work: dict | None) -> str:

@@ -257,3 +257,30 @@ def test_a_time_budget_that_affords_no_more_steps_ends_the_search_at_equal_work(
                                                                              "ceiling_s": None}
     assert d["work"]["fold_steps"] == [9, 9, 9] and d["work"]["final_steps"] == 9
     assert "ended the search at rung 1 of 2" in d["note"]
+
+
+def test_work_on_the_samples_that_no_budget_bounds_is_done_for_every_fold_before_the_search():
+    """A method's work on its samples that does not depend on the budget (a hybrid's prior) is done for each
+    fold's fitted samples and for all the training data before the search fits anything, once a set of samples
+    where the method keeps it (as a hybrid keeps its priors)."""
+    events = []
+
+    class Primed(Poly):
+        name = "toy_primed"
+        search_space = {"degree": (0, 1)}
+
+        def _prepare_samples(self, train, experiment, seed, system):
+            events.append(("samples", len(train)))
+
+        def _fit(self, train, experiment, progress):
+            events.append(("fit", len(train)))
+            super()._fit(train, experiment, progress)
+
+    train = _trajectories()
+    fold_set = folds(train, max_folds=MAX_FOLDS)
+    tune(Primed, {}, train, "indirect", 0, Budget(steps=1))
+    first_fit = next(k for k, (kind, _) in enumerate(events) if kind == "fit")
+    before = [n for kind, n in events[:first_fit]]
+    expected = sorted([len(train.subset(f.fit)) for f in fold_set] + [len(train)])
+    # each combination's, then the first fit's own call (the prior kept, it costs a hybrid nothing)
+    assert sorted(before[:2 * len(expected)]) == sorted(expected * 2) and before[2 * len(expected):] == [before[-1]]

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from bench.studies.selection import choose, page
+from bench.core.budget import Budget
+from bench.residual.loop import MAX_ROUNDS
+from bench.studies.selection import CANDIDATES, WORK_CEILING, choose, page, specs
 from systems import SYSTEMS
 from bench.core.csv_format import write_csv
 from bench.core.scoring import opened
@@ -105,3 +107,13 @@ def test_the_test_trajectorys_torques_change_no_choice(tmp_path):
     for a, b in zip(same["candidates"], scaled["candidates"]):
         assert a["validation_mse"] == b["validation_mse"] and a["hyperparameters"] == b["hyperparameters"]
         assert b["test_mse"] > 2 * a["test_mse"]  # the test data were read, to score
+
+
+def test_the_loops_candidate_is_bounded_by_its_rounds_whatever_selects_seconds(tmp_path):
+    """Under select's time budget the loop runs its rounds (work, the same on any machine), the seconds only their
+    ceiling; every other candidate has the seconds. Under --steps every candidate has the steps."""
+    timed = {c.name: spec.budget for c, spec, _ in specs("kuka_lwr4", None, 180.0, None, 0, tmp_path, ())}
+    assert timed["loop"] == Budget(seconds=WORK_CEILING * 180.0, steps=MAX_ROUNDS)
+    assert all(b == Budget(seconds=180.0) for name, b in timed.items() if name != "loop")
+    worked = {c.name: spec.budget for c, spec, _ in specs("kuka_lwr4", None, None, 3, 0, tmp_path, ())}
+    assert set(worked.values()) == {Budget(steps=3)} and len(worked) == len(CANDIDATES)
