@@ -11,11 +11,11 @@ from pathlib import Path
 from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget, check_names,
                                check_split, configurations, device, hyperparameters, load_plugins, resampled)
 from bench.core.arguments import positive, positive_int, seed
-from bench.core.fileio import check_output, write_json
+from bench.core.fileio import atomic_write, check_output
 from bench.evaluation.per_joint import per_joint_lines
 from bench.runner import matrix
 from bench.runner.execute import given_data, make_system, method_config, preflight
-from bench.runner.records import Record
+from bench.runner.records import Record, record_path
 from bench.runner.spec import N_TEST, N_TRAIN, RunSpec
 from methods import METHODS
 
@@ -77,9 +77,7 @@ def main(args) -> int:
             part.check_target(args.experiment)  # bad files: exit 2 now, before the run's process starts
     for line in resampled(given):
         print(line)
-    record, log = run_one(spec, checked=runs, data=given)
-    if args.json:
-        write_json(args.json, record.to_json())
+    record, log = run_one(spec, checked=runs, data=given, copy_to=args.json)
     print(summary_line(record, log))
     for line in per_joint_summary(record):
         print(line)
@@ -91,15 +89,20 @@ def main(args) -> int:
     return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
 
 
-def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None) -> tuple[Record, Path | None]:
+def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None,
+            copy_to: Path | None = None) -> tuple[Record, Path | None]:
     """One run in its own process (threads pinned, killed like any run of a
     matrix), in a scratch folder; returns its record and, where something
     failed, the log that holds the traceback (the folder is then kept).
     ``checked``: the caller made the run job's checks, which are not repeated;
     ``data``: the ``(train, test)`` pair the caller read, handed to the run's
-    process so that it does not read the files again."""
+    process so that it does not read the files again; ``copy_to``: where the
+    record's file, as the run wrote it, is copied (``--json``)."""
     work = Path(tempfile.mkdtemp(prefix="bench-fit-"))
     record = matrix.run_one(spec, work, checked=checked, data=data)
+    if copy_to is not None:
+        content = record_path(work, spec.run_id).read_bytes()
+        atomic_write(copy_to, lambda f: f.write(content), binary=True)
     if record.status in ("failed", "timeout") or record.failed_stages:
         return record, matrix.log_path(work, spec.run_id)
     shutil.rmtree(work, ignore_errors=True)

@@ -96,23 +96,28 @@ class RunJob(Job):
         return phase_limits(self.run_spec)
 
     def run(self, on_phase) -> dict:
+        """The run, in the child: its record, with the code it ran (:func:`~bench.runner.code.code_hash`), is what
+        the child writes, once, to the record's path (:meth:`result_file`)."""
         data = None
         if self.data_file:
             with open(self.data_file, "rb") as f:
                 data = pickle.load(f)
-        return execute(self.run_spec, on_phase, data=data, checked=True).to_json()
+        spec = self.run_spec
+        record = execute(spec, on_phase, data=data, checked=True)
+        return record.replace(code=code_hash(spec.method, spec.system, spec.plugins)).to_json()
 
     def result_file(self, work: Path, name: str) -> Path:
         return record_path(self.out_dir, name)
 
     def finish(self, outcome: Outcome, report) -> Record:
+        """The record the child wrote; where it wrote none (it failed or was killed), the one written here."""
         spec = self.run_spec
         path = record_path(self.out_dir, spec.run_id)
+        if outcome.result is not None:
+            return Record.from_json(outcome.result, str(path))
         limits = self.limits()
         code = code_hash(spec.method, spec.system, spec.plugins)
-        if outcome.result is not None:
-            record = Record.from_json(outcome.result, str(path)).replace(code=code)
-        elif not outcome.killed:
+        if not outcome.killed:
             error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
             record = Record.new(spec, "failed", elsewhere=True, error=error, code=code)
         elif outcome.phase == "fit":

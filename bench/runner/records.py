@@ -97,14 +97,14 @@ class Record(Provenanced):
     failed_stages: dict = field(default_factory=dict)
 
     @classmethod
-    def new(cls, spec: RunSpec | dict, status: str, *, elsewhere: bool = False, **fields) -> "Record":
-        """A complete record of ``spec``, stamped with this process's provenance
+    def new(cls, run: RunSpec, status: str, *, elsewhere: bool = False, **fields) -> "Record":
+        """A complete record of ``run``, stamped with this process's provenance
         or, with ``elsewhere``, with the threads the run has in its own process."""
-        spec = spec.to_dict() if isinstance(spec, RunSpec) else dict(spec)
+        spec = run.to_dict()
         if status not in STATUSES:
             raise ValueError(f"unknown status {status!r}")
         noise = spec.get("noise", 0.0)
-        fields.setdefault("budget", RunSpec.from_dict(spec).budget.to_json())
+        fields.setdefault("budget", run.budget.to_json())
         return cls(
             schema=SCHEMA,
             run_id=run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], noise, spec.get("tune", False)),

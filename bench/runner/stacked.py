@@ -61,11 +61,13 @@ def _unstackable(spec: RunSpec) -> str | None:
 @dataclass(frozen=True)
 class StackedJob(Job):
     """A group of seeds (:meth:`RunSpec.to_dict` each) trained stacked in one process, as a
-    :class:`~bench.runner.job.Job`; its result is one record's JSON a seed, or ``None``
-    where the process failed or was killed (each seed then runs alone)."""
+    :class:`~bench.runner.job.Job`; the process writes each seed's record into ``out_dir``, once, and its
+    result is one record's JSON a seed, or ``None`` where the process failed or was killed (each seed then
+    runs alone)."""
 
     specs: tuple
     phase_limits: dict
+    out_dir: str
 
     @property
     def threads(self) -> int:
@@ -87,8 +89,13 @@ class StackedJob(Job):
         fit_stacked(methods, [train for train, _ in data], first.experiment, [s.seed for s in specs], first.budget,
                     system=system, on_fit=lambda: on_phase("fit"))
         on_phase("evaluate")
-        return {"records": [execute(spec, data=pair, fitted=method, checked=True).to_json()
-                            for spec, pair, method in zip(specs, data, methods)]}
+        code = code_hash(first.method, first.system, first.plugins)
+        records = []
+        for spec, pair, method in zip(specs, data, methods):
+            record = execute(spec, data=pair, fitted=method, checked=True).replace(code=code)
+            write_record(record_path(self.out_dir, spec.run_id), record)
+            records.append(record.to_json())
+        return {"records": records}
 
     def finish(self, outcome: Outcome, report) -> list[dict] | None:
         return None if outcome.result is None else outcome.result["records"]
@@ -103,20 +110,14 @@ def run_stacked(group: list[RunSpec], out_dir: str | Path, run_alone: Callable[[
                 limits: dict[str, float]) -> list[Record]:
     """Run ``group`` stacked in its own process (``limits`` as one run's,
     :func:`~bench.runner.matrix.phase_limits`; the evaluation's times the
-    seeds); write and return its records. A group of one, or a group whose
+    seeds); its process writes their records, returned here. A group of one, or a group whose
     process gave no records, runs each seed with ``run_alone``."""
     if len(group) == 1:
         return [run_alone(group[0])]
     out_dir = Path(out_dir)
     name = stack_name(group)
-    job = StackedJob(tuple(s.to_dict() for s in group), limits)
+    job = StackedJob(tuple(s.to_dict() for s in group), limits, str(out_dir))
     results = run_isolated(job, out_dir / "logs", name, checked=True)
     if results is None:  # the stack failed or was killed: each seed on its own
         return [run_alone(spec) for spec in group]
-    code = code_hash(group[0].method, group[0].system, group[0].plugins)
-    records = []
-    for spec, obj in zip(group, results):
-        record = Record.from_json(obj, f"{name}: {spec.run_id}").replace(code=code)
-        write_record(record_path(out_dir, spec.run_id), record)
-        records.append(record)
-    return records
+    return [Record.from_json(obj, f"{name}: {spec.run_id}") for spec, obj in zip(group, results)]

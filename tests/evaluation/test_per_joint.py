@@ -15,6 +15,7 @@ from bench.core.data import Dataset
 from bench.evaluation.per_joint import per_joint
 from systems.delan_characters import DATA as CHARACTERS
 from tests.commandline import cli
+from bench.runner.spec import RunSpec
 
 
 def _data(rng, n=300, dof=3):
@@ -103,7 +104,7 @@ def test_the_page_takes_learners_whose_records_lack_the_logged_figures():
                          noise_floor_nmse=[0.02, 0.03])
         spec = {"system": "dfki_double_pendulum", "method": method, "experiment": "indirect", "seed": 0,
                 "budget_s": None, "steps": 1}
-        return Record.new(spec, "ok", details={"per_joint": {"trajectories": {"03": entry}}})
+        return Record.new(RunSpec(**spec), "ok", details={"per_joint": {"trajectories": {"03": entry}}})
 
     page = build_per_joint([record("sysid", True), record("mlp", False)])
     assert "| mlp | 0 | — | — | — |" in page  # in the logged tables: it has no such figure

@@ -6,11 +6,12 @@ from pathlib import Path
 
 from bench.reporting.leaderboard import build, read_commentary
 from bench.runner.records import Record, record_path, write_record
+from bench.runner.spec import RunSpec
 
 
 def write(run_dir, system, experiment, method, seed):
     spec = {"system": system, "method": method, "experiment": experiment, "seed": seed, "budget_s": 5.0}
-    r = Record.new(spec, "ok", train_mse=1.0 + seed, test_mse=2.0 + seed, curve=[[0.1, 9.0], [1.0, 1.0 + seed]])
+    r = Record.new(RunSpec(**spec), "ok", train_mse=1.0 + seed, test_mse=2.0 + seed, curve=[[0.1, 9.0], [1.0, 1.0 + seed]])
     write_record(record_path(run_dir, r.run_id), r)
 
 
@@ -37,7 +38,7 @@ def test_the_methods_mean_ranks_across_sections_follow_the_tables(tmp_path):
         for offset, method in enumerate(("sparse", "mlp", "mggp")):  # sparse lowest everywhere, mggp highest
             for seed in range(5):
                 spec = {"system": system, "method": method, "experiment": "indirect", "seed": seed, "budget_s": 5.0}
-                r = Record.new(spec, "ok", train_mse=1.0, test_mse=10.0 ** offset + seed)
+                r = Record.new(RunSpec(**spec), "ok", train_mse=1.0, test_mse=10.0 ** offset + seed)
                 write_record(record_path(run_dir, r.run_id), r)
     notes = tmp_path / "commentary.md"
     notes.write_text("## Introduction\nHi.\n\n## More runs\nBye.\n")

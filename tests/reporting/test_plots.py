@@ -10,6 +10,7 @@ from bench.reporting.plots import best_so_far, convergence_plot, residual_plot
 from bench.runner.records import Record, record_path, write_record
 from bench.reporting.tables import write_tables
 from systems import get_system
+from bench.runner.spec import RunSpec
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -23,7 +24,7 @@ def test_best_so_far_is_a_step_function_of_the_running_minimum():
 def record(method, seed, curve, status="ok"):
     spec = {"system": "double_pendulum", "method": method, "experiment": "direct", "seed": seed, "budget_s": 10.0}
     fields = {"train_mse": curve[-1][1], "test_mse": 1.0, "curve": curve} if status == "ok" else {"error": "x"}
-    return Record.new(spec, status, **fields)
+    return Record.new(RunSpec(**spec), status, **fields)
 
 
 def test_tables_embed_a_convergence_plot_per_section(tmp_path):

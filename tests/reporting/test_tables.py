@@ -9,6 +9,7 @@ from bench.reporting.groups import group_stats
 from bench.reporting.tables import (build_table, build_tables, expand_variants, constant_line, standard_line,
                                      write_tables)
 from bench.runner.records import Record, record_path, write_record
+from bench.runner.spec import RunSpec
 
 
 def rec(method, seed, train, test, status="ok", experiment="direct", system="double_pendulum", error=None):
@@ -16,7 +17,7 @@ def rec(method, seed, train, test, status="ok", experiment="direct", system="dou
     fields = {"error": error}
     if status == "ok":
         fields.update(train_mse=train, test_mse=test)
-    return Record.new(spec, status, **fields)
+    return Record.new(RunSpec(**spec), status, **fields)
 
 
 def test_groups_rank_by_training_mse():

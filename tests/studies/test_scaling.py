@@ -10,6 +10,7 @@ from bench.studies import scaling
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record
 from systems import SYSTEMS
+from bench.runner.spec import RunSpec
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -18,7 +19,7 @@ def record(method, system, seed, status="ok", steps=10, fit=2.0, mse=1.0, memory
     spec = {"system": system, "method": method, "experiment": "indirect", "seed": seed, "budget_s": 5.0}
     fields = {"steps": steps, "fit_seconds": fit, "train_mse": mse, "test_mse": mse,
               "details": {"memory": {"start_mb": memory[0], "peak_mb": memory[1]}}} if status == "ok" else {"error": "too big"}
-    return Record.new(spec, status, **fields)
+    return Record.new(RunSpec(**spec), status, **fields)
 
 
 def test_the_pendulums_are_registered_only_by_the_plugin():
@@ -65,7 +66,7 @@ def test_a_study_of_one_method_keeps_the_others_rows_at_its_budget_and_seeds(tmp
 
     import_plugins([scaling.PLUGIN])
     earlier = [record("mlp", "panda", s) for s in range(3)] + [record("mlp", "double_pendulum", 0)]
-    other_budget = Record.new({"system": "ur5", "method": "mggp", "experiment": "indirect", "seed": 0, "budget_s": 60.0},
+    other_budget = Record.new(RunSpec("ur5", "mggp", "indirect", 0, 60.0),
                               "failed", error="x")
     for r in earlier + [other_budget]:
         write_record(record_path(tmp_path, r.run_id), r)
