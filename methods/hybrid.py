@@ -69,14 +69,13 @@ class Prior:
     """A prior a hybrid may name: how it is identified on the training data
     (``identify(train, system, seed)``, a fitted model, with work that does
     not depend on the hybrid's budget: the same for the same samples and
-    seed on any machine) and what it is, in words. ``module`` is the module
-    that registers it, which a run's own process imports before it composes
-    the hybrid's name."""
+    seed on any machine) and what it is, in words. A prior registered outside
+    this package is registered by a module the method registry imports
+    (:mod:`bench.core.registry`: an entry point, or a ``--plugin`` file)."""
 
     name: str
     words: str
     identify: Callable[[Dataset, "System | None", int], FittedModel]
-    module: str = __name__
 
 
 #: the priors a hybrid may name, by name (:func:`register_prior`)
@@ -109,29 +108,9 @@ GATE_LENGTHS = (1.0, 3.0)
 PRIOR_CACHE = 8
 
 
-def modules_for(names) -> tuple[str, ...]:
-    """The modules a run's own process imports before it resolves ``names``:
-    those of the suite outside ``methods`` that register a hybrid's prior, or
-    a method, among them (the residual loop's)."""
-    out = []
-    for name in names:
-        try:
-            parsed = MethodName.parse(name)
-        except MethodNameError:
-            continue
-        if parsed.hybrid and parsed.prior in PRIORS:
-            module = PRIORS[parsed.prior].module
-        elif not parsed.hybrid and name in METHODS.names():
-            module = METHODS[name].__module__
-        else:
-            continue
-        if module.startswith("bench.") and module not in out:
-            out.append(module)
-    return tuple(out)
-
-
 def naming() -> str:
     """How a hybrid is named, for ``bench list`` and errors."""
+    METHODS.load_declared()  # the priors that modules declared to the registry register
     priors = "; ".join(f"{name}: {prior.words}" for name, prior in PRIORS.items())
     return (f"a hybrid is named PRIOR+RESIDUAL: PRIOR one of {', '.join(PRIORS)} ({priors}), RESIDUAL any method that "
             f"fits torques, e.g. standard+gp, feasible+delan")

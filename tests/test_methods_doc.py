@@ -6,7 +6,6 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import bench.residual.prior  # noqa: F401  (registers the loop)
 from methods import METHODS
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "methods_and_systems.md"

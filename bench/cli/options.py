@@ -17,10 +17,8 @@ from bench.core.experiment import Experiment
 from bench.core.devices import CHOICES, resolve as resolve_device
 from bench.core.errors import UserError
 from bench.core.registry import RegistryError, UnknownName
-import bench.residual.prior  # noqa: F401  (registers the loop prior: loop+RESIDUAL)
 from bench.runner.plugins import import_plugins, system_plugins
 from methods import METHODS
-from methods.hybrid import modules_for
 from systems import SYSTEMS
 
 #: seconds per run where neither --budget nor --steps is given
@@ -189,11 +187,10 @@ def hyperparameters(overrides: list[tuple[str, object]], method: str, methods: l
 
 def load_plugins(args, systems: list[str] = (), methods: list[str] = ()) -> tuple[list[str], tuple[str, ...]]:
     """Import ``--plugin`` files and register any ``urdf:PATH`` system; returns
-    the systems' names and the plugins a run's own process needs (with the
-    modules that register the priors of the hybrids among ``methods``)."""
+    the systems' names and the plugins a run's own process needs."""
     import_plugins(args.plugin)
     names, arms = system_plugins(systems)
-    return names, plugin_paths(args.plugin) + arms + modules_for(methods)
+    return names, plugin_paths(args.plugin) + arms
 
 
 def plugin_paths(plugins: list[str]) -> tuple[str, ...]:

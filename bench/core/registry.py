@@ -9,6 +9,13 @@ Entries are added with a decorator, never discovered by globbing files::
     class MLP(Method):
         ...
 
+Modules outside the registry's own package that register entries (the
+suite's residual loop, another installed package's methods) are declared as
+entry points of the registry's group in their package's metadata
+(``[project.entry-points."syrenets_bench.methods"]`` in ``pyproject.toml``),
+never registered by a side effect of some other import: the registry imports
+them, once, the first time it is asked for a name or a listing.
+
 An entry may declare itself unavailable (a missing optional dependency, a
 runtime that cannot start) through a class method ``unavailable_reason()``
 that returns ``None`` when it can run and a human-readable reason otherwise.
@@ -18,6 +25,7 @@ Unavailable entries stay listed, with their reason; they are never dropped.
 from __future__ import annotations
 
 import difflib
+from importlib.metadata import entry_points
 from dataclasses import dataclass, field
 from typing import Any, Callable, Generic, Iterator, TypeVar
 
@@ -76,11 +84,27 @@ class Registry(Generic[T]):
     it is made of, so that removing one removes it.
     """
 
-    def __init__(self, kind: str):
+    def __init__(self, kind: str, group: str | None = None):
         self.kind = kind
         self._entries: dict[str, Entry[T]] = {}
         self.composer: Callable[[str], T | None] | None = None
         self._composed: dict[str, Entry[T]] = {}  # not listed by names(): made on demand
+        #: the entry-point group whose modules register entries (see the module docstring)
+        self.group = group
+        self._declared_loaded = group is None
+
+    def load_declared(self) -> None:
+        """Import, once, the modules that installed packages declare in :attr:`group`; one that fails to import
+        is a :class:`RegistryError` naming it."""
+        if self._declared_loaded:
+            return
+        self._declared_loaded = True
+        for point in entry_points(group=self.group):
+            try:
+                point.load()
+            except Exception as exc:
+                raise RegistryError(f"the {self.kind} module {point.value!r} that entry point {point.name!r} "
+                                    f"declares ({self.group}) failed to import: {type(exc).__name__}: {exc}") from None
 
     def add(self, name: str, *tags: str) -> Callable[[T], T]:
         """Register the decorated object under ``name`` with ``tags``.
@@ -113,6 +137,7 @@ class Registry(Generic[T]):
         self._composed = {k: v for k, v in self._composed.items() if k != name and name not in v.made_of}
 
     def entry(self, name: str) -> Entry[T]:
+        self.load_declared()
         try:
             return self._entries.get(name) or self._composed[name]
         except KeyError:
@@ -134,6 +159,7 @@ class Registry(Generic[T]):
         return self.entry(name).obj
 
     def __contains__(self, name: object) -> bool:
+        self.load_declared()
         if name in self._entries or name in self._composed:
             return True
         if not isinstance(name, str) or self.composer is None:
@@ -145,13 +171,16 @@ class Registry(Generic[T]):
         return True
 
     def __iter__(self) -> Iterator[str]:
+        self.load_declared()
         return iter(sorted(self._entries))
 
     def __len__(self) -> int:
+        self.load_declared()
         return len(self._entries)
 
     def names(self, *tags: str) -> list[str]:
         """Sorted names carrying every one of ``tags`` (all names if none)."""
+        self.load_declared()
         want = set(tags)
         return sorted(n for n, e in self._entries.items() if want <= e.tags)
 

@@ -20,8 +20,9 @@ the same samples and seed give the same model on any machine:
   tuned or selected ``loop`` is validated at the rounds its final fit runs
   (:mod:`bench.evaluation.tuning`); under a time budget the budget bounds it.
 
-Registering the method and the prior is importing this module: a run's own
-process imports it before it resolves the name (:func:`methods.hybrid.modules_for`).
+The method registry imports this module, which registers the method and the
+prior, the first time it is asked for a method: ``pyproject.toml`` declares it
+as an entry point of the registry's group (:mod:`bench.core.registry`).
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ def rounds_run(result: ResidualResult) -> int:
 
 
 PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the feasible rigid body and its named laws)",
-                             identify, module=__name__))
+                             identify))
 
 
 @METHODS.add("loop", "symbolic", "residual")

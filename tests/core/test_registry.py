@@ -68,3 +68,39 @@ def test_suite_registries_hold_the_foundation_entries():
     assert {"mlp", "sysid"} <= set(METHODS)
     assert "double_pendulum" in SYSTEMS
     assert all(METHODS.entry(n).available for n in ("mlp", "sysid"))
+
+
+class _Point:
+    """An entry point as importlib.metadata gives it: a name, a module, and what importing it does."""
+
+    def __init__(self, name, value, load):
+        self.name, self.value, self.load = name, value, load
+
+
+def test_modules_declared_in_the_registrys_group_are_imported_once_on_the_first_question(monkeypatch):
+    reg = Registry("thing", group="example.things")
+    loads = []
+
+    def load():
+        loads.append(1)
+        reg.add("declared", "tag")(type("Declared", (), {}))
+
+    asked = []
+    monkeypatch.setattr("bench.core.registry.entry_points",
+                        lambda group: asked.append(group) or [_Point("declared", "pkg.things", load)])
+    reg.add("own")(type("Own", (), {}))
+    assert loads == []  # nothing imported before a question
+    assert reg.names() == ["declared", "own"] and "declared" in reg and reg["declared"].__name__ == "Declared"
+    assert loads == [1] and asked == ["example.things"]
+
+
+def test_a_declared_module_that_fails_to_import_is_one_line_naming_it(monkeypatch):
+    reg = Registry("thing", group="example.things")
+
+    def load():
+        raise ImportError("No module named 'pkg'")
+
+    monkeypatch.setattr("bench.core.registry.entry_points", lambda group: [_Point("broken", "pkg.things", load)])
+    with pytest.raises(RegistryError, match=r"'pkg\.things' that entry point 'broken' declares \(example\.things\) "
+                                            r"failed to import: ImportError"):
+        reg.names()
