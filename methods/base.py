@@ -80,20 +80,11 @@ def seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def as_budget(budget_s: "float | Budget | None", steps: int | None = None) -> Budget:
-    """A fit's budget from :meth:`Method.fit`'s arguments: seconds, a
-    :class:`~bench.core.budget.Budget`, or ``steps`` of work."""
-    if isinstance(budget_s, Budget):
-        if steps is not None:
-            raise ConfigError("give a Budget or steps, not both")
-        return budget_s
-    if steps is not None:
-        if budget_s is not None:
-            raise ConfigError("give budget_s (seconds) or steps (work), not both")
-        return Budget(steps=steps)
-    if budget_s is None or not (budget_s > 0):
-        raise ConfigError(f"budget_s must be positive, got {budget_s}")
-    return Budget(seconds=float(budget_s))
+def as_budget(budget: Budget) -> Budget:
+    """:meth:`Method.fit`'s budget, checked: a :class:`~bench.core.budget.Budget` and nothing else."""
+    if not isinstance(budget, Budget):
+        raise ConfigError(f"a fit's budget is a Budget (Budget(seconds=S) or Budget(steps=N)), got {budget!r}")
+    return budget
 
 
 class Method(FittedModel):
@@ -225,15 +216,13 @@ class Method(FittedModel):
         return dataclasses.asdict(self.config)
 
     # -- the protocol ----------------------------------------------------------
-    def fit(self, train: Dataset, experiment: str, seed: int, budget_s: "float | Budget | None" = None, *,
-            steps: int | None = None, warm_start: bool = False, system: System | None = None) -> "Method":
-        """Learn from ``train`` within ``budget_s`` seconds of wall-clock
-        time, or within ``steps`` steps of the method's work (gradient steps,
-        generations; see :mod:`bench.core.budget`).
-
-        ``budget_s`` may also be a :class:`~bench.core.budget.Budget`: a
-        work budget, or a time-budgeted fit's schedule to replay. Under a
-        work budget the fit has no wall-clock deadline.
+    def fit(self, train: Dataset, experiment: str, seed: int, budget: Budget, *, warm_start: bool = False,
+            system: System | None = None) -> "Method":
+        """Learn from ``train`` within ``budget`` (:mod:`bench.core.budget`):
+        ``Budget(seconds=S)`` of wall-clock time, ``Budget(steps=N)`` steps of
+        the method's work (gradient steps, generations), or a time-budgeted
+        fit's schedule to replay. Under a work budget the fit has no
+        wall-clock deadline.
 
         Keeps and restores the state with the lowest training MSE seen.
         Fills :attr:`fit_info` with the steps done, the best-so-far curve of
@@ -251,21 +240,20 @@ class Method(FittedModel):
         ``system`` is the system the data belong to, for methods that read its
         declared form; by default the registered system named by ``train.system``.
         """
-        started = self.begin_fit(train, experiment, seed, budget_s, steps=steps, warm_start=warm_start, system=system)
+        started = self.begin_fit(train, experiment, seed, budget, warm_start=warm_start, system=system)
         with gc_frozen():
             self._fit(train, self.experiment, started.progress)
         return self.end_fit(started, train)
 
-    def begin_fit(self, train: Dataset, experiment: str, seed: int, budget_s: "float | Budget | None" = None, *,
-                  steps: int | None = None, warm_start: bool = False, system: System | None = None,
-                  prepare: bool = True) -> "FitStart":
+    def begin_fit(self, train: Dataset, experiment: str, seed: int, budget: Budget, *, warm_start: bool = False,
+                  system: System | None = None, prepare: bool = True) -> "FitStart":
         """What :meth:`fit` does before the method's loop: check the data, do
         the one-time work (:meth:`prepare`; ``prepare=False`` where the loop that
         runs elsewhere does not use it), seed the generators, draw the evaluation
         subset and start the budget's :class:`Progress`. With :meth:`end_fit`
         after the loop, a fit whose loop runs elsewhere (several seeds' networks
         trained as one, :mod:`methods.stacking`) is the same as :meth:`fit`."""
-        budget = as_budget(budget_s, steps)
+        budget = as_budget(budget)
         experiment = Experiment.of(experiment)
         if warm_start and not self.supports_warm_start:
             raise ConfigError(f"{self.name} cannot continue a fit (warm_start)")
@@ -448,7 +436,8 @@ class FitStart:
     n_eval: int
 
 
-METHODS: Registry[type[Method]] = Registry("method")
+#: the methods, by name; methods registered outside this package are declared in the group's entry points
+METHODS: Registry[type[Method]] = Registry("method", group="syrenets_bench.methods")
 
 
 def saved_hyperparameters(method) -> dict:

@@ -54,6 +54,7 @@ import numpy as np
 import torch
 from torch.func import functional_call, stack_module_state, vmap
 
+from bench.core.budget import Budget
 from bench.core.experiment import Experiment
 from bench.core.compiled import compiled_once
 from bench.core.data import Dataset
@@ -282,8 +283,8 @@ def train_lagrangians(methods: list, starts: list, datasets: list[Dataset], expe
 SHARED_BUDGET = "another seed of the stack used up the shared budget"
 
 
-def fit_stacked(methods: list, datasets: list[Dataset], experiment: str, seeds: list[int], budget_s=None, *,
-                steps: int | None = None, system=None, on_fit=None) -> list:
+def fit_stacked(methods: list, datasets: list[Dataset], experiment: str, seeds: list[int], budget: Budget, *,
+                system=None, on_fit=None) -> list:
     """Fit ``methods`` (instances of one stackable torch method, one configuration)
     on ``datasets`` with ``seeds``, one each, as one stacked model (see the module
     docstring); returns them fitted, each as :meth:`~methods.base.Method.fit`
@@ -310,7 +311,7 @@ def fit_stacked(methods: list, datasets: list[Dataset], experiment: str, seeds: 
     starts = []
     for method, data, seed, slot in zip(methods, datasets, seeds, slots):
         with slot:  # no one-time work of its own: what a method prepares for its own step is not the stack's
-            start = method.begin_fit(data, experiment, seed, budget_s, steps=steps, system=system, prepare=False)
+            start = method.begin_fit(data, experiment, seed, budget, system=system, prepare=False)
             starts.append(dataclasses.replace(start, prepare_seconds=prepared))
     with gc_frozen():
         kind.train_stacked(methods, starts, datasets, experiment, slots)

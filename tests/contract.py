@@ -146,7 +146,7 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str, device: bo
     assert smoke, f"{cls.name} declares no smoke configuration"
     assert smoke.get("max_steps"), "a smoke configuration must bound its steps, so that a seed is reproducible"
 
-    m = cls(**smoke).fit(train, experiment, seed=0, steps=smoke["max_steps"])  # a work budget: no deadline
+    m = cls(**smoke).fit(train, experiment, seed=0, budget=Budget(steps=smoke["max_steps"]))  # a work budget: no deadline
     L, tau = m.predict_lagrangian(test), m.predict_torque(test)
     assert L.shape == (len(test),) and tau.shape == (len(test), train.dof)
     assert np.isfinite(tau).all() and (np.isfinite(L).all() if cls.has_lagrangian else np.isnan(L).all())
@@ -156,7 +156,7 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str, device: bo
     # the same seed and the work the fit recorded give the same result (what python -m bench rerun does)
     replay = info["schedule"]
     if "unavailable" not in replay:
-        again = cls(**smoke).fit(train, experiment, seed=0, budget_s=Budget.replaying(Schedule.from_json(replay)))
+        again = cls(**smoke).fit(train, experiment, seed=0, budget=Budget.replaying(Schedule.from_json(replay)))
         np.testing.assert_array_equal(again.predict(test), m.predict(test))
         assert again.fit_info["steps"] == info["steps"]
     if device and cls.uses_device and experiment == "indirect":  # the torque loss has every part of a step
@@ -178,8 +178,8 @@ def check_stacked(cls, smoke: dict, train: Dataset, test: Dataset, experiment: s
     makes alone: to the last bits in float64, to float32's rounding otherwise
     (the stack's batched products sum in another order)."""
     seeds = [0, 1]
-    alone = [cls(**smoke).fit(train, experiment, seed=k, steps=smoke["max_steps"]) for k in seeds]
-    stacked = fit_stacked([cls(**smoke) for _ in seeds], [train, train], experiment, seeds, steps=smoke["max_steps"])
+    alone = [cls(**smoke).fit(train, experiment, seed=k, budget=Budget(steps=smoke["max_steps"])) for k in seeds]
+    stacked = fit_stacked([cls(**smoke) for _ in seeds], [train, train], experiment, seeds, budget=Budget(steps=smoke["max_steps"]))
     tolerance = 1e-12 if getattr(alone[0].config, "dtype", "float64") == "float64" else 1e-5
     for a, b in zip(alone, stacked):
         want, got = a.predict(test), b.predict(test)
@@ -255,7 +255,7 @@ def check_device(cls, train: Dataset, experiment: str) -> None:
     method = cls(**smoke).use_device("meta")
     mode = OnMeta()
     with mode:
-        method.fit(train, experiment, seed=0, steps=smoke["max_steps"])
+        method.fit(train, experiment, seed=0, budget=Budget(steps=smoke["max_steps"]))
     assert not mode.mixed, f"{cls.name} mixed devices in {sorted(mode.mixed)}"
     if method.trained_on() == "meta":  # else it had nothing to train there (SysId solving an arm's linear form)
         assert mode.on_meta > 10 * smoke["max_steps"], f"{cls.name} did not train on its device"

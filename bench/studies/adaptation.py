@@ -47,6 +47,7 @@ import statistics
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from bench.core.budget import Budget
 from bench.core.arguments import positive, positive_int
 from bench.core.data import generate, mse
 from bench.physics.undeclared import add_effects, parse_effects
@@ -114,7 +115,7 @@ def run_learner(learner: str, setup: Setup, seed: int) -> dict:
     train_a, test_a, train_b, test_b = streams(setup, seed)
     base, loop = LEARNERS[learner]
     method = METHODS[base](**HYPERPARAMETERS.get(base, {}))
-    method.fit(train_a, "indirect", seed, None if setup.steps else setup.before_s, steps=setup.steps)
+    method.fit(train_a, "indirect", seed, Budget(steps=setup.steps) if setup.steps else Budget(seconds=setup.before_s))
 
     def error(data):
         return mse(method.predict_torque(data), data.tau)
@@ -130,7 +131,7 @@ def run_learner(learner: str, setup: Setup, seed: int) -> dict:
     else:
         spent = 0.0
         for t in setup.checkpoints[1:]:
-            method.fit(train_b, "indirect", seed, max(t - spent, 1e-3), warm_start=True)
+            method.fit(train_b, "indirect", seed, Budget(seconds=max(t - spent, 1e-3)), warm_start=True)
             spent += method.fit_info["fit_seconds"]
             curve.append([spent, error(test_b)])
     out["curve"] = curve

@@ -64,6 +64,7 @@ from bench.studies import device_profile
 import systems
 from methods import METHODS
 from methods.stacking import fit_stacked
+from bench.core.budget import Budget
 
 HELP = "the GPU figures of stacked seeds, with ratios, in one run (runs on a bare GPU machine; --dry-run, --prepare)"
 
@@ -170,7 +171,7 @@ def _fresh(method: str, config: dict, device: str):
 def _fit_stack(method: str, config: dict, datasets: list[Dataset], steps: int, device: str, system=None) -> list:
     """``method`` fitted on each of ``datasets`` (seeds 0, 1, …) stacked on ``device``, ``steps`` each."""
     return fit_stacked([_fresh(method, config, device) for _ in datasets], datasets, "indirect",
-                       list(range(len(datasets))), steps=steps, system=system)
+                       list(range(len(datasets))), budget=Budget(steps=steps), system=system)
 
 
 def stacked(method: str, config: dict, datasets: list[Dataset], steps: int, device: str, system=None) -> dict:
@@ -183,7 +184,8 @@ def stacked(method: str, config: dict, datasets: list[Dataset], steps: int, devi
 
 def alone(method: str, config: dict, datasets: list[Dataset], steps: int, device: str, system=None) -> dict:
     """The seeds of ``datasets`` trained one by one on ``device`` for ``steps`` each."""
-    loop = sum(_fresh(method, config, device).fit(d, "indirect", k, steps=steps, system=system).fit_info["loop_seconds"]
+    loop = sum(_fresh(method, config, device).fit(d, "indirect", k, Budget(steps=steps), system=system)
+               .fit_info["loop_seconds"]
                for k, d in enumerate(datasets))
     return {"seeds": len(datasets), "steps": steps, "loop_s": loop, "steps_per_s": len(datasets) * steps / loop,
             "seed_steps_per_s": len(datasets) * steps / loop}
@@ -191,8 +193,9 @@ def alone(method: str, config: dict, datasets: list[Dataset], steps: int, device
 
 def warm(method: str, config: dict, data: Dataset, device: str, system=None) -> None:
     """The process's one-time work for ``method`` on ``device`` (imports, kernels, compiling), alone and stacked."""
-    _fresh(method, config, device).fit(data, "indirect", 0, steps=1, system=system)
-    fit_stacked([_fresh(method, config, device) for _ in range(2)], [data, data], "indirect", [0, 1], steps=1, system=system)
+    _fresh(method, config, device).fit(data, "indirect", 0, budget=Budget(steps=1), system=system)
+    fit_stacked([_fresh(method, config, device) for _ in range(2)], [data, data], "indirect", [0, 1], Budget(steps=1),
+                system=system)
 
 
 def syrenets_part(sizes: Sizes, device: str, report) -> dict:

@@ -33,6 +33,7 @@ from bench.runner.provenance import cpu_model
 from methods import METHODS
 from methods.stacking import fit_stacked
 from systems import get_system
+from bench.core.budget import Budget
 
 #: what is measured by default: SyReNets on the double pendulum (1 and 10 seeds), the MLP and DeLaN on the Panda
 DEFAULT_CASES = ("syrenets:double_pendulum:1,10", "mlp:panda", "delan:panda")
@@ -49,11 +50,12 @@ def measure(method: str, system_name: str, seeds: int, steps: int, n_train: int,
     def fresh():
         return cls(**MEASURED_CONFIG.get(method, {})).use_device(device)
 
-    fresh().fit(data[0], "indirect", 0, steps=1, system=system)  # the process's one-time work (imports, compiling)
-    alone = [fresh().fit(d, "indirect", k, steps=steps, system=system) for k, d in enumerate(data)]
+    fresh().fit(data[0], "indirect", 0, Budget(steps=1), system=system)  # the process's one-time work (imports, compiling)
+    alone = [fresh().fit(d, "indirect", k, budget=Budget(steps=steps), system=system) for k, d in enumerate(data)]
     alone_s = sum(m.fit_info["loop_seconds"] for m in alone)
     start = time.perf_counter()
-    stacked = fit_stacked([fresh() for _ in data], data, "indirect", list(range(seeds)), steps=steps, system=system)
+    stacked = fit_stacked([fresh() for _ in data], data, "indirect", list(range(seeds)), Budget(steps=steps),
+                          system=system)
     wall = time.perf_counter() - start
     stacked_s = stacked[0].fit_info["loop_seconds"]  # the first seed's clock starts first and its loop ends with all
     return {"method": method, "system": system_name, "seeds": seeds, "steps": steps,

@@ -77,7 +77,7 @@ def _trajectories(seed: int = 0) -> Dataset:
 def _by_hand(train: Dataset, choice: dict) -> float:
     out = []
     for fold in folds(train, max_folds=MAX_FOLDS):
-        m = Poly(**choice).fit(train.subset(fold.fit), "indirect", 0, steps=1)
+        m = Poly(**choice).fit(train.subset(fold.fit), "indirect", 0, budget=Budget(steps=1))
         part = train.subset(fold.score)
         out.append(mse(m.predict_torque(part), part.tau))
     return float(np.mean(out))
@@ -94,7 +94,7 @@ def test_the_best_validated_combination_is_chosen_and_fitted_on_all_the_training
         assert len(row["fold_mse"]) == 3
     best = min(d["combinations"], key=lambda r: r["validation_mse"])
     assert d["chosen"] == best["hyperparameters"] == {"degree": 3, "ridge": 0.0}
-    again = Poly(**d["chosen"]).fit(train, "indirect", 0, steps=1)
+    again = Poly(**d["chosen"]).fit(train, "indirect", 0, budget=Budget(steps=1))
     np.testing.assert_array_equal(tuned.method.predict_torque(train), again.predict_torque(train))
     assert tuned.method.hyperparameters()["degree"] == 3
 

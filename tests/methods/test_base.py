@@ -57,7 +57,7 @@ class _Scripted(Method):
 def test_best_state_is_kept_and_restored(small_data):
     train, _ = small_data
     # steps of 20 ms: early on, every step is evaluated (the gap is 10 % of the elapsed time)
-    m = _Scripted([9.0, 4.0, 1.0, 25.0, 36.0], sleep=0.02, max_steps=4).fit(train, "direct", 0, 10.0)
+    m = _Scripted([9.0, 4.0, 1.0, 25.0, 36.0], sleep=0.02, max_steps=4).fit(train, "direct", 0, Budget(seconds=10.0))
     assert m.value == 1.0
     assert m.fit_info["best_step"] == 2
     assert m.fit_info["curve"][-1][1] == pytest.approx(1.0)
@@ -65,7 +65,7 @@ def test_best_state_is_kept_and_restored(small_data):
 
 def test_deadline_is_honoured(small_data):
     train, _ = small_data
-    m = _Scripted([1.0], sleep=0.01).fit(train, "indirect", 0, 0.5)
+    m = _Scripted([1.0], sleep=0.01).fit(train, "indirect", 0, Budget(seconds=0.5))
     assert m.fit_info["stop_reason"] == "budget"  # the loop has no other end
 
 
@@ -73,13 +73,13 @@ def test_deadline_is_honoured(small_data):
 def test_the_deadline_ends_the_fit_within_a_step_of_its_budget(small_data):
     train, _ = small_data
     t0 = time.perf_counter()
-    _Scripted([1.0], sleep=0.01).fit(train, "indirect", 0, 0.5)
+    _Scripted([1.0], sleep=0.01).fit(train, "indirect", 0, Budget(seconds=0.5))
     assert time.perf_counter() - t0 < 1.0
 
 
 def test_non_finite_loss_stops_and_keeps_the_last_good_state(small_data):
     train, _ = small_data
-    m = _Scripted([4.0, 2.0, float("nan")], sleep=0.02, max_steps=50).fit(train, "direct", 0, 10.0)
+    m = _Scripted([4.0, 2.0, float("nan")], sleep=0.02, max_steps=50).fit(train, "direct", 0, Budget(seconds=10.0))
     assert m.value == 2.0 and m.fit_info["stop_reason"] == "non-finite training loss"
 
 
@@ -175,7 +175,7 @@ def test_a_time_budgeted_syrenets_fit_with_a_cosine_schedule_and_four_starts_rep
     train, test = small_data
     hp = {"layers": 2, "heads": 3, "latent": 4, "ae_hidden": 8, "head_hidden": 8, "eval_samples": 64, "refine": False,
           "lr_schedule": "cosine", "starts": 4}
-    live = METHODS["syrenets"](**hp).fit(train, "indirect", 0, 2.0)
+    live = METHODS["syrenets"](**hp).fit(train, "indirect", 0, Budget(seconds=2.0))
     assert live.fit_info["stop_reason"] == "budget" and live.record_details()["starts"]["networks"] == 4
     replayed = METHODS["syrenets"](**hp).fit(train, "indirect", 0, Budget.replaying(Schedule.from_json(live.fit_info["schedule"])))
     np.testing.assert_array_equal(replayed.predict(test), live.predict(test))
@@ -193,20 +193,20 @@ def test_a_fit_whose_time_ran_out_before_its_first_step_replays(small_data):
 
 def test_a_work_budget_has_no_deadline_and_is_counted_in_steps(small_data):
     train, _ = small_data
-    m = _Scripted([4.0, 2.0, 1.0]).fit(train, "direct", 0, steps=7)
+    m = _Scripted([4.0, 2.0, 1.0]).fit(train, "direct", 0, budget=Budget(steps=7))
     assert m.fit_info["steps"] == 7 and m.fit_info["stop_reason"] == "max_steps"
     assert m.budget == Budget(steps=7) and m.fit_info["schedule"]["steps"] == 7
-    with pytest.raises(ConfigError, match="not both"):
-        m.fit(train, "direct", 0, 5.0, steps=7)
+    with pytest.raises(ConfigError, match="a fit's budget is a Budget"):
+        m.fit(train, "direct", 0, 5.0)
 
 
 def test_fit_rejects_bad_calls(small_data):
     train, _ = small_data
     m = METHODS["mlp"](**METHODS["mlp"].smoke_config())
     with pytest.raises(ConfigError, match="unknown experiment"):
-        m.fit(train, "sideways", 0, 1.0)
-    with pytest.raises(ConfigError, match="budget_s must be positive"):
-        m.fit(train, "direct", 0, 0.0)
+        m.fit(train, "sideways", 0, Budget(seconds=1.0))
+    with pytest.raises(ConfigError, match="seconds must be positive"):
+        m.fit(train, "direct", 0, Budget(seconds=0.0))
 
 
 def test_sysid_needs_a_system(small_data):
@@ -216,7 +216,7 @@ def test_sysid_needs_a_system(small_data):
     train, _ = small_data
     anonymous = Dataset(train.q, train.qd, train.qdd, train.tau, train.L, system=None, source="anon.csv")
     with pytest.raises(DataError, match="anon.csv: sysid needs to know the data's system"):
-        METHODS["sysid"](max_steps=2).fit(anonymous, "indirect", 0, 5.0)
+        METHODS["sysid"](max_steps=2).fit(anonymous, "indirect", 0, Budget(seconds=5.0))
 
 
 @pytest.mark.parametrize("typed, value", [("false", False), ("FALSE", False), ("No", False), ("0", False), (0, False),
@@ -268,6 +268,6 @@ def test_the_garbage_collector_skips_older_objects_only_during_the_loop(small_da
             self.frozen_inside = gc.get_freeze_count()
             super()._fit(train, experiment, progress)
 
-    m = _Watching([1.0], max_steps=2).fit(small_data[0], "direct", 0, 10.0)
+    m = _Watching([1.0], max_steps=2).fit(small_data[0], "direct", 0, Budget(seconds=10.0))
     assert m.frozen_inside > 1000  # the objects that existed on entry
     assert gc.get_freeze_count() == 0

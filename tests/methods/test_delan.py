@@ -11,6 +11,7 @@ from bench.physics.dynamics import euler_lagrange
 from bench.evaluation.forces import decomposition
 from methods import METHODS
 from methods.delan import DeepLagrangian, DeLaNConfig
+from bench.core.budget import Budget
 
 # The tests that compile share one test process (``make test`` runs pytest with --dist loadgroup): torch's
 # compiler starts once there, and a graph compiled for a shape is compiled once for all of them
@@ -44,7 +45,7 @@ def test_the_mass_matrix_is_positive_definite_by_construction():
 
 def test_delan_learns_the_double_pendulum_from_torques(double_pendulum):
     train, test = generate(double_pendulum, 2048, 0), generate(double_pendulum, 512, 1000)
-    m = METHODS["delan"](eval_samples=512).fit(train, "indirect", 0, steps=1500)
+    m = METHODS["delan"](eval_samples=512).fit(train, "indirect", 0, budget=Budget(steps=1500))
     assert mse(m.predict(test), test.tau) / np.var(test.tau) < 0.01
     # its learned parts add up to its torque, and its mass matrix is the model's H
     parts = decomposition(m, test)
@@ -56,7 +57,7 @@ def test_delan_learns_the_double_pendulum_from_torques(double_pendulum):
 def test_delan_learns_the_double_pendulums_lagrangian_directly(double_pendulum):
     train, test = generate(double_pendulum, 2048, 0), generate(double_pendulum, 512, 1000)
     assert abs(train.L.mean()) > 10  # far from V's initial constant: what the start at the data's level is for
-    m = METHODS["delan"](eval_samples=512).fit(train, "direct", 0, steps=1500)
+    m = METHODS["delan"](eval_samples=512).fit(train, "direct", 0, budget=Budget(steps=1500))
     assert mse(m.predict(test), test.L) / np.var(test.L) < 0.01
 
 
@@ -80,10 +81,10 @@ def test_the_public_configuration_is_the_authors_optimiser():
 
 def test_a_fitted_network_is_evaluated_in_float64_and_a_warm_start_trains_in_float32(double_pendulum):
     train = generate(double_pendulum, 256, 0)
-    m = METHODS["delan"](**METHODS["delan"].smoke_config()).fit(train, "indirect", 0, steps=5)
+    m = METHODS["delan"](**METHODS["delan"].smoke_config()).fit(train, "indirect", 0, budget=Budget(steps=5))
     assert m.dtype == torch.float64 and all(p.dtype == torch.float64 for p in m.model.parameters())
     before = m.predict(train)
-    m.fit(train, "indirect", 0, steps=5, warm_start=True)  # Adam's float32 state would refuse float64 weights
+    m.fit(train, "indirect", 0, budget=Budget(steps=5), warm_start=True)  # Adam's float32 state would refuse float64 weights
     assert all(p.dtype == torch.float64 for p in m.model.parameters())
     assert not np.allclose(m.predict(train), before)  # it trained on
 

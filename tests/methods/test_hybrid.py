@@ -16,6 +16,7 @@ from methods import METHODS
 from systems import get_system
 from tests.commandline import cli
 from tests.contract import check_method
+from bench.core.budget import Budget
 
 #: what the standard model of the Panda lacks: an offset and a spring on each joint
 EFFECTS = {"offset": (0.5, -0.3, 0.4, -0.2, 0.3, -0.4, 0.2), "spring": (2.0, 1.0, 2.0, 1.0, 2.0, 1.0, 1.0)}
@@ -37,7 +38,7 @@ def test_a_hybrid_keeps_the_method_contract(name, panda):
 
 def test_a_gp_on_the_standard_model_learns_what_the_rigid_body_lacks_and_is_scored_against_its_prior(panda):
     system, train, test = panda
-    hybrid = METHODS["standard+gp"](**SMALL_GP).fit(train, "indirect", seed=0, steps=150, system=system)
+    hybrid = METHODS["standard+gp"](**SMALL_GP).fit(train, "indirect", seed=0, budget=Budget(steps=150), system=system)
     prior = mse(hybrid.prior.predict_torque(test), test.tau)
     assert mse(hybrid.predict_torque(test), test.tau) < 0.5 * prior
     assert hybrid.references() == {"prior": hybrid.prior} and hybrid.record_details()["gated"] is False
@@ -46,7 +47,7 @@ def test_a_gp_on_the_standard_model_learns_what_the_rigid_body_lacks_and_is_scor
 @pytest.mark.parametrize("name, hyperparameters", [("standard+gp", SMALL_GP), ("standard+mlp", SMALL_MLP)])
 def test_far_from_every_training_state_a_hybrid_predicts_its_prior(name, hyperparameters, panda):
     system, train, test = panda
-    hybrid = METHODS[name](**hyperparameters).fit(train, "indirect", seed=0, steps=50, system=system)
+    hybrid = METHODS[name](**hyperparameters).fit(train, "indirect", seed=0, budget=Budget(steps=50), system=system)
     far = test.replace(q=test.q + 8 * train.q.std(axis=0), qd=test.qd + 8 * train.qd.std(axis=0))
     near = test
     assert np.abs(hybrid.residual_torque(near)).max() > 1e-2  # it learned something where the data are
@@ -89,7 +90,7 @@ def test_a_matrix_runs_a_hybrid_by_its_name_and_records_its_prior(tmp_path):
 
 def test_the_fitted_gps_mean_is_gpytorchs(panda):
     system, train, test = panda
-    gp = METHODS["gp"](**SMALL_GP).fit(train, "indirect", seed=0, steps=20, system=system)
+    gp = METHODS["gp"](**SMALL_GP).fit(train, "indirect", seed=0, budget=Budget(steps=20), system=system)
     fast = gp.predict_torque(test)
     weights, gp._weights = gp._weights, None  # through GPyTorch's variational strategy instead
     np.testing.assert_allclose(fast, gp.predict_torque(test), rtol=1e-9, atol=1e-9 * np.abs(fast).max())
@@ -98,13 +99,13 @@ def test_the_fitted_gps_mean_is_gpytorchs(panda):
 
 def test_the_gps_elbo_counts_the_independent_samples_of_a_recording(panda):
     system, train, _ = panda
-    gp = METHODS["gp"](**SMALL_GP).fit(train, "indirect", seed=0, steps=2, system=system)
+    gp = METHODS["gp"](**SMALL_GP).fit(train, "indirect", seed=0, budget=Budget(steps=2), system=system)
     assert gp.record_details()["effective_samples"] == [float(len(train))] * train.dof  # generated: independent
     recorded = train.replace(recording=np.array(["a"] * len(train)), time=np.arange(len(train)) * 0.01)
     smooth = np.sin(np.linspace(0, 4 * np.pi, len(train)))[:, None] * np.ones(train.dof)
-    gp = METHODS["gp"](**SMALL_GP).fit(recorded.replace(tau=smooth), "indirect", seed=0, steps=2, system=system)
+    gp = METHODS["gp"](**SMALL_GP).fit(recorded.replace(tau=smooth), "indirect", seed=0, budget=Budget(steps=2), system=system)
     assert max(gp.record_details()["effective_samples"]) < 0.1 * len(train)
-    every = METHODS["gp"](**SMALL_GP, samples="all").fit(recorded.replace(tau=smooth), "indirect", seed=0, steps=2,
+    every = METHODS["gp"](**SMALL_GP, samples="all").fit(recorded.replace(tau=smooth), "indirect", seed=0, budget=Budget(steps=2),
                                                           system=system)
     assert every.record_details()["effective_samples"] == [float(len(train))] * train.dof
 
@@ -114,7 +115,7 @@ def test_the_gps_elbo_counts_the_independent_samples_of_a_recording(panda):
 def test_a_hybrids_mass_matrix_and_bias_are_its_torques_and_a_residual_of_the_state_is_asked_once_a_state(
         name, hyperparameters, panda, monkeypatch):
     system, train, test = panda
-    hybrid = METHODS[name](**hyperparameters).fit(train, "indirect", seed=0, steps=5, system=system)
+    hybrid = METHODS[name](**hyperparameters).fit(train, "indirect", seed=0, budget=Budget(steps=5), system=system)
     q, qd = test.q[:40], test.qd[:40]
     asked = []
     own = type(hybrid.residual).predict_torque

@@ -15,6 +15,7 @@ from methods import METHODS
 from methods.jets import JetAlgebra
 from methods.mggp import Individual
 from systems import System
+from bench.core.budget import Budget
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ def _smallish(**kw):
 @pytest.mark.parametrize("experiment", ["direct", "indirect"])
 def test_finds_a_planted_pendulum(pendulum_data, experiment):
     system, train, test = pendulum_data
-    m = _smallish(max_steps=40).fit(train, experiment, seed=1, budget_s=120)
+    m = _smallish(max_steps=40).fit(train, experiment, seed=1, budget=Budget(seconds=120))
     assert mse(m.predict(test), test.target(experiment)) < 1e-12
     assert judge(m.expression(), system.lagrangian_sympy, 1, experiment).exact
 
@@ -72,7 +73,7 @@ def test_indirect_weights_are_the_least_squares_solution(pendulum_data):
 def test_same_seed_same_result_and_no_creator_types(pendulum_data):
     _, train, test = pendulum_data
     before = set(vars(creator))
-    a = _smallish(max_steps=3).fit(train, "indirect", seed=5, budget_s=60)
-    b = _smallish(max_steps=3).fit(train, "indirect", seed=5, budget_s=60)
+    a = _smallish(max_steps=3).fit(train, "indirect", seed=5, budget=Budget(seconds=60))
+    b = _smallish(max_steps=3).fit(train, "indirect", seed=5, budget=Budget(seconds=60))
     assert str(a.expression()) == str(b.expression())
     assert set(vars(creator)) == before  # no types created in DEAP's global creator

@@ -14,6 +14,7 @@ from bench.physics.dynamics import euler_lagrange
 from methods import METHODS
 from methods import pysr_adapter
 from methods.pysr_adapter import _parse, lagrangian_template
+from bench.core.budget import Budget
 
 
 class _Function:
@@ -104,5 +105,5 @@ def test_real_pysr_run_finds_a_planted_lagrangian(double_pendulum):
         pytest.skip(reason)
     train, test = generate(double_pendulum, 1000, 0), generate(double_pendulum, 200, 1)
     for experiment in ("direct", "indirect"):
-        m = METHODS["pysr"](populations=8).fit(train, experiment, seed=0, budget_s=300)
+        m = METHODS["pysr"](populations=8).fit(train, experiment, seed=0, budget=Budget(seconds=300))
         assert mse(m.predict(test), test.target(experiment)) < 1e-3 * np.var(test.target(experiment))

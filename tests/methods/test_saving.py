@@ -24,6 +24,7 @@ from methods.saving import TOLERANCE, load_model, save_model
 from systems import SYSTEMS
 from bench.core.scoring import opened
 from tests.commandline import cli
+from bench.core.budget import Budget
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -40,7 +41,7 @@ def kuka():
     ("standard+sparse_torque", {}, 1)])
 def test_a_saved_arm_model_predicts_the_fitted_torques(tmp_path, kuka, name, settings_, steps):
     system, train, test = kuka
-    fitted = METHODS[name](**settings_).fit(train, "indirect", 0, steps=steps, system=system)
+    fitted = METHODS[name](**settings_).fit(train, "indirect", 0, budget=Budget(steps=steps), system=system)
     check = save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": name}, train, system)
     assert check["largest_relative_difference"] <= TOLERANCE
     loaded, header = load_model(tmp_path / "m.npz")
@@ -54,7 +55,7 @@ def test_a_saved_lagrangian_predicts_the_fitted_torques(tmp_path, name):
     system = SYSTEMS["double_pendulum"]()
     train, test = generate(system, 200, 0), generate(system, 100, 1)
     smoke = {**METHODS[name].smoke_config(), **({"samples": 64} if name == "sparse" else {})}
-    fitted = METHODS[name](**smoke).fit(train, "indirect", 0, steps=smoke["max_steps"])
+    fitted = METHODS[name](**smoke).fit(train, "indirect", 0, budget=Budget(steps=smoke["max_steps"]))
     save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": name}, train, system)
     loaded, _ = load_model(tmp_path / "m.npz")
     expected = fitted.predict_torque(test)
@@ -65,7 +66,7 @@ def test_a_model_that_cannot_be_saved_writes_nothing(tmp_path):
     system = SYSTEMS["double_pendulum"]()
     train = generate(system, 64, 0)
     smoke = METHODS["syrenets"].smoke_config()
-    fitted = METHODS["syrenets"](**smoke).fit(train, "indirect", 0, steps=2)
+    fitted = METHODS["syrenets"](**smoke).fit(train, "indirect", 0, budget=Budget(steps=2))
     with pytest.raises(ValueError, match="cannot be saved"):
         save_model(fitted, tmp_path / "m.npz", {"system": system.name}, train, system)
     assert list(tmp_path.iterdir()) == []

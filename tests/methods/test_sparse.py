@@ -11,6 +11,7 @@ from bench.core.data import generate, mse
 from bench.evaluation.recovery import judge
 from methods import METHODS
 from bench.physics.terms import lagrangian_library as library
+from bench.core.budget import Budget
 
 
 def test_library_is_built_from_the_coordinates():
@@ -26,7 +27,7 @@ def test_library_is_built_from_the_coordinates():
 @pytest.mark.parametrize("experiment", ["direct", "indirect"])
 def test_recovers_the_double_pendulum_exactly(double_pendulum, experiment):
     train, test = generate(double_pendulum, 32000, 0), generate(double_pendulum, 2000, 1000)
-    m = METHODS["sparse"]().fit(train, experiment, seed=0, steps=1)  # solved in one step
+    m = METHODS["sparse"]().fit(train, experiment, seed=0, budget=Budget(steps=1))  # solved in one step
     assert mse(m.predict(test), test.target(experiment)) < 1e-18
     assert judge(m.expression(), double_pendulum.lagrangian_sympy, 2, experiment).exact
     terms = [t for t in sympy.Add.make_args(m.expression()) if t.free_symbols]

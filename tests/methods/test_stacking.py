@@ -18,6 +18,7 @@ from methods import METHODS
 from methods.stacking import fit_stacked
 from systems import get_system
 from tests.contract import OnMeta
+from bench.core.budget import Budget
 
 STACKABLE = [n for n in METHODS.names() if METHODS.entry(n).available and METHODS[n].stackable]
 SEEDS = [0, 1, 2]
@@ -38,8 +39,8 @@ def test_the_suites_plain_torch_methods_stack():
 def test_each_stacked_seed_is_the_fit_it_makes_alone(name, experiment, data):
     train, test = data
     cls, smoke = METHODS[name], METHODS[name].smoke_config()
-    alone = [cls(**smoke).fit(d, experiment, k, steps=smoke["max_steps"]) for d, k in zip(train, SEEDS)]
-    stacked = fit_stacked([cls(**smoke) for _ in SEEDS], train, experiment, SEEDS, steps=smoke["max_steps"])
+    alone = [cls(**smoke).fit(d, experiment, k, budget=Budget(steps=smoke["max_steps"])) for d, k in zip(train, SEEDS)]
+    stacked = fit_stacked([cls(**smoke) for _ in SEEDS], train, experiment, SEEDS, budget=Budget(steps=smoke["max_steps"]))
     tolerance = 1e-12 if alone[0].config.dtype == "float64" else 1e-5
     for a, b in zip(alone, stacked):
         want, got = a.predict(test), b.predict(test)
@@ -60,8 +61,8 @@ def test_stacked_syrenets_seeds_keep_their_own_selection_replay_probes_and_multi
     train, test = data
     config = {**METHODS["syrenets"].smoke_config(), "starts": 2, "replay": 4, "max_steps": 24, "eval_samples": 64,
               "lr_schedule": "cosine"}
-    alone = [METHODS["syrenets"](**config).fit(d, experiment, k, steps=24) for d, k in zip(train, SEEDS)]
-    stacked = fit_stacked([METHODS["syrenets"](**config) for _ in SEEDS], train, experiment, SEEDS, steps=24)
+    alone = [METHODS["syrenets"](**config).fit(d, experiment, k, budget=Budget(steps=24)) for d, k in zip(train, SEEDS)]
+    stacked = fit_stacked([METHODS["syrenets"](**config) for _ in SEEDS], train, experiment, SEEDS, budget=Budget(steps=24))
     for a, b in zip(alone, stacked):
         want, got = a.predict(test), b.predict(test)
         assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want))
@@ -80,10 +81,10 @@ def test_a_compiled_stacked_step_is_compiled_before_the_budget_and_gives_the_fit
     compiling it here too would double the test's compilation."""
     train, test = data
     config = {**METHODS["delan"].smoke_config(), "max_steps": 8}
-    alone = [METHODS["delan"](**config | {"compile": False}).fit(d, "indirect", k, steps=8)
+    alone = [METHODS["delan"](**config | {"compile": False}).fit(d, "indirect", k, budget=Budget(steps=8))
              for d, k in zip(train, SEEDS)]
     stacked = fit_stacked([METHODS["delan"](**config | {"compile": True}) for _ in SEEDS], train, "indirect", SEEDS,
-                          steps=8)
+                          budget=Budget(steps=8))
     for a, b in zip(alone, stacked):
         want, got = a.predict(test), b.predict(test)
         assert np.max(np.abs(got - want)) <= 1e-5 * np.max(np.abs(want))
@@ -96,7 +97,7 @@ def test_a_stack_keeps_every_tensor_on_its_device(data):
     methods = [METHODS["mlp"](**smoke).use_device("meta") for _ in SEEDS]
     mode = OnMeta()
     with mode:
-        fit_stacked(methods, train, "indirect", SEEDS, steps=smoke["max_steps"])
+        fit_stacked(methods, train, "indirect", SEEDS, budget=Budget(steps=smoke["max_steps"]))
     assert not mode.mixed and mode.on_meta > 0
 
 
@@ -114,7 +115,7 @@ def test_when_one_seeds_budget_ends_the_stack_stops_together_and_says_it_shared_
         return started
 
     methods[0].begin_fit = cut
-    fits = fit_stacked(methods, train, "indirect", SEEDS, steps=20)
+    fits = fit_stacked(methods, train, "indirect", SEEDS, budget=Budget(steps=20))
     assert [f.fit_info["steps"] for f in fits] == [6, 6, 6] and all(f.fit_info["stacked"] == 3 for f in fits)
     assert [f.fit_info["stop_reason"] for f in fits] == ["max_steps"] + ["another seed of the stack used up the "
                                                                          "shared budget"] * 2
@@ -123,13 +124,13 @@ def test_when_one_seeds_budget_ends_the_stack_stops_together_and_says_it_shared_
 def test_what_cannot_stack_is_refused(data):
     train, _ = data
     with pytest.raises(ConfigError, match="stackable"):
-        fit_stacked([METHODS["sysid"]() for _ in SEEDS], train, "indirect", SEEDS, steps=1)
+        fit_stacked([METHODS["sysid"]() for _ in SEEDS], train, "indirect", SEEDS, budget=Budget(steps=1))
     with pytest.raises(ConfigError, match="compiled pass"):
-        fit_stacked([METHODS["syrenets"](compile=True) for _ in SEEDS], train, "indirect", SEEDS, steps=1)
+        fit_stacked([METHODS["syrenets"](compile=True) for _ in SEEDS], train, "indirect", SEEDS, budget=Budget(steps=1))
     with pytest.raises(ConfigError, match="one configuration"):
-        fit_stacked([METHODS["mlp"](hidden=8), METHODS["mlp"](hidden=16)], train[:2], "indirect", SEEDS[:2], steps=1)
+        fit_stacked([METHODS["mlp"](hidden=8), METHODS["mlp"](hidden=16)], train[:2], "indirect", SEEDS[:2], budget=Budget(steps=1))
     with pytest.raises(ConfigError, match="one dataset and one seed"):
-        fit_stacked([METHODS["mlp"]()], train, "indirect", SEEDS, steps=1)
+        fit_stacked([METHODS["mlp"]()], train, "indirect", SEEDS, budget=Budget(steps=1))
     assert torch.get_default_dtype() == torch.float32  # nothing above changed torch's defaults
 
 

@@ -18,6 +18,7 @@ from methods.syrenets.equations import round_inner_constants
 from methods.syrenets.multistart import halve
 from methods.syrenets.network import Gram, HeadsOutput, SyReNet
 from methods.syrenets.training import Fixed, Network, training_pass
+from bench.core.budget import Budget
 
 SMALL = dict(layers=2, heads=3, latent=4, ae_hidden=8, head_hidden=8)
 
@@ -91,7 +92,7 @@ def data(double_pendulum):
 
 @pytest.mark.parametrize("experiment", ["direct", "indirect"])
 def test_expression_evaluates_to_the_frozen_model(data, experiment):
-    m = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], experiment, 0, 60)
+    m = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], experiment, 0, Budget(seconds=60))
     f = symbolic.to_numpy(m.expression(), 2)
     np.testing.assert_allclose(f(data[1].q, data[1].qd), m.predict_lagrangian(data[1]), rtol=1e-10, atol=1e-10)
     # the indirect training loss uses exactly the torques of the frozen function
@@ -101,7 +102,7 @@ def test_expression_evaluates_to_the_frozen_model(data, experiment):
 
 
 def test_pruned_variant_keeps_few_terms_within_tolerance(data):
-    m = METHODS["syrenets"](**SMALL, max_steps=30, eval_samples=64, refine=False).fit(data[0], "direct", 0, 60)
+    m = METHODS["syrenets"](**SMALL, max_steps=30, eval_samples=64, refine=False).fit(data[0], "direct", 0, Budget(seconds=60))
     pruned = m.variants()["pruned"]
     details = m.record_details()
     assert 0 < details["pruned_terms"] < details["total_terms"]
@@ -124,7 +125,7 @@ def test_refinement_recovers_the_exact_lagrangian_from_a_near_miss(data, double_
     (q1, q2), (qd1, qd2) = symbolic.coordinate_symbols(2)
     near = (7.13 * qd1**2 + 0.4651 * qd2**2 + 2.2301 * qd1 * qd2 * sympy.cos(1.0003 * q1 - 0.9996 * q2)
             + 65.47 * sympy.cos(0.9998 * q1) + 8.19 * sympy.cos(q2) + 0.002 * q1 * qd2)
-    m = METHODS["syrenets"](**SMALL, max_steps=1, eval_samples=64).fit(data[0], experiment, 0, 60)
+    m = METHODS["syrenets"](**SMALL, max_steps=1, eval_samples=64).fit(data[0], experiment, 0, Budget(seconds=60))
 
     class Fake:  # stands for the dominant terms of a trained model
         def expression(self):
@@ -140,7 +141,7 @@ def test_refinement_recovers_the_exact_lagrangian_from_a_near_miss(data, double_
 
 
 def test_six_input_variant_runs_and_is_flagged(data):
-    m = METHODS["syrenets"](**SMALL, inputs="q_qd_qdd", max_steps=3, eval_samples=64).fit(data[0], "indirect", 0, 60)
+    m = METHODS["syrenets"](**SMALL, inputs="q_qd_qdd", max_steps=3, eval_samples=64).fit(data[0], "indirect", 0, Budget(seconds=60))
     assert np.isfinite(m.predict_torque(data[1])).all()
     assert "refinement needs inputs='q_qd'" in m.record_details()["refined"]
 
@@ -257,7 +258,7 @@ def test_cosine_schedule_anneals_from_lr_to_lr_min_over_the_steps(data):
         return step(batch, experiment)
 
     m.train_step = recording
-    m.fit(data[0], "direct", 0, 60)
+    m.fit(data[0], "direct", 0, Budget(seconds=60))
     C = m.model.C
     expected = [1e-4 + (1e-2 - 1e-4) * 0.5 * (1 + np.cos(np.pi * k / 19)) for k in range(20)]
     np.testing.assert_allclose(seen, expected, rtol=1e-12)  # first step 1e-2, last 1e-4
@@ -279,7 +280,7 @@ def test_the_plateau_schedule_watches_a_moving_average_of_the_batch_loss(data):
             return err
 
         m.train_step = recording
-        m.fit(data[0], "direct", 0, 60)
+        m.fit(data[0], "direct", 0, Budget(seconds=60))
         expected = [batch_losses[0]]
         for loss in batch_losses[1:]:
             expected.append(a * expected[-1] + (1 - a) * loss)
@@ -299,7 +300,7 @@ def test_a_multi_start_fit_keeps_the_network_with_the_lowest_training_mse(data):
         return net
 
     m._network = recording
-    m.fit(data[0], "direct", 0, 60)
+    m.fit(data[0], "direct", 0, Budget(seconds=60))
     starts = m.record_details()["starts"]
     assert starts["networks"] == 4 and len(inits) == 4
     assert all(not torch.equal(inits[0], other) for other in inits[1:])  # each network its own initialisation
@@ -309,7 +310,7 @@ def test_a_multi_start_fit_keeps_the_network_with_the_lowest_training_mse(data):
     assert sorted(k for k, _ in second) == sorted(k for k, _ in better)
     assert starts["kept"] == min(second, key=lambda pair: pair[1])[0]
     assert m.fit_info["steps"] == 40  # the rounds share the run's steps, they do not add to them
-    single = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], "direct", 0, 60)
+    single = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], "direct", 0, Budget(seconds=60))
     assert "starts" not in single.record_details()
 
 
@@ -319,7 +320,7 @@ def test_float32_training_is_evaluated_in_float64_and_can_continue(data):
     seen = []
     step = m.train_step
     m.train_step = lambda batch, experiment: (seen.append(batch["q"].dtype), step(batch, experiment))[1]
-    m.fit(train, "indirect", 0, 60)
+    m.fit(train, "indirect", 0, Budget(seconds=60))
     assert set(seen) == {torch.float32}
     assert all(p.dtype == torch.float64 for p in m.model.parameters())
     assert all(w.dtype == torch.float64 for w in m.frozen)
@@ -327,14 +328,14 @@ def test_float32_training_is_evaluated_in_float64_and_can_continue(data):
     t = test.tensors(torch.float64)
     expected = euler_lagrange(m.lagrangian, t["q"], t["qd"], t["qdd"]).numpy()
     np.testing.assert_array_equal(m.predict_torque(test), expected)
-    m.fit(train, "indirect", 0, 60, warm_start=True)  # continues in float32, with the optimiser's float32 state
+    m.fit(train, "indirect", 0, Budget(seconds=60), warm_start=True)  # continues in float32, with the optimiser's float32 state
     assert seen[-1] == torch.float32 and len(seen) == 10
     assert all(p.dtype == torch.float64 for p in m.model.parameters())
 
 
 def test_the_record_lists_when_the_plateau_schedule_cut_the_learning_rate(data):
     m = METHODS["syrenets"](**SMALL, lr_patience=0, max_steps=30, eval_samples=64, refine=False)
-    m.fit(data[0], "direct", 0, 60)
+    m.fit(data[0], "direct", 0, Budget(seconds=60))
     drops = m.record_details()["lr_drops"]
     assert drops, "with no patience the rate is cut at the first step without a new best"
     steps, seconds, lrs = zip(*drops)
@@ -344,7 +345,7 @@ def test_the_record_lists_when_the_plateau_schedule_cut_the_learning_rate(data):
     np.testing.assert_allclose(lrs, [max(e, 1e-5) for e in expected][: len(lrs)])
     assert lrs[-1] == m.optimizer.param_groups[0]["lr"]
     cosine = METHODS["syrenets"](**SMALL, lr_schedule="cosine", max_steps=3, eval_samples=64, refine=False)
-    assert "lr_drops" not in cosine.fit(data[0], "direct", 0, 60).record_details()
+    assert "lr_drops" not in cosine.fit(data[0], "direct", 0, Budget(seconds=60)).record_details()
 
 
 ALL_OPERATORS = ("sum", "prod", "diff", "sin", "cos", "exp")
@@ -407,12 +408,12 @@ def test_the_compiled_training_pass_equals_the_eager_one(data, experiment):
 @pytest.mark.slow
 def test_a_compiled_fit_compiles_before_its_budget_and_says_how_long_it_took(data):
     m = METHODS["syrenets"](**SMALL, compile=True, starts=2, replay=4, eval_samples=64, refine=False)
-    m.fit(data[0], "indirect", 0, steps=20)
+    m.fit(data[0], "indirect", 0, budget=Budget(steps=20))
     details = m.record_details()
     assert 0 < details["compile_seconds"] <= m.fit_info["prepare_seconds"]  # before the budget's clock started
     assert m.fit_info["steps"] == 20
     assert np.isfinite(m.fit_info["curve"][-1][1])
-    plain = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], "indirect", 0, 60)
+    plain = METHODS["syrenets"](**SMALL, max_steps=5, eval_samples=64, refine=False).fit(data[0], "indirect", 0, Budget(seconds=60))
     assert "compile_seconds" not in plain.record_details()
 
 

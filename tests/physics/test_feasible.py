@@ -14,6 +14,7 @@ from bench.physics.regression import Compressed, base_columns, least_squares
 from methods import METHODS
 from systems import get_system
 from systems.urdf_arm import physically_consistent
+from bench.core.budget import Budget
 
 finite = st.floats(-10, 10, allow_nan=False)
 
@@ -47,8 +48,8 @@ def panda():
 
 def test_on_noise_free_data_the_feasible_fit_is_least_squares(panda):
     train, test = generate(panda, 768, 0), generate(panda, 256, 1000)
-    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, steps=1)
-    feasible = METHODS["sysid"]().fit(train, "indirect", 0, steps=1)  # the default on an arm
+    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, budget=Budget(steps=1))
+    feasible = METHODS["sysid"]().fit(train, "indirect", 0, budget=Budget(steps=1))  # the default on an arm
     facts = feasible.record_details()["feasibility"]
     assert "feasible" not in ls.record_details()["feasibility"]
     assert facts["least_squares"]["feasible"] and facts["feasible"]["feasible"]
@@ -59,8 +60,8 @@ def test_on_noise_free_data_the_feasible_fit_is_least_squares(panda):
 def test_on_noisy_data_least_squares_is_infeasible_and_the_feasible_fit_is_not(panda):
     train = add_noise(generate(panda, 768, 0), "indirect", 0.05, 0)
     test = generate(panda, 512, 1000)
-    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, steps=1)
-    feasible = METHODS["sysid"](feasible=True).fit(train, "indirect", 0, steps=1)
+    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, budget=Budget(steps=1))
+    feasible = METHODS["sysid"](feasible=True).fit(train, "indirect", 0, budget=Budget(steps=1))
     facts = feasible.record_details()["feasibility"]
     assert not facts["least_squares"]["feasible"]  # some body's pseudo-inertia has a negative eigenvalue
     assert facts["feasible"]["feasible"] and min(facts["feasible"]["smallest_eigenvalues"]) >= 0.0
@@ -118,7 +119,7 @@ def test_the_feasible_configuration_holds_friction_nonnegative_and_a_body_feasib
     b, fc = np.linspace(0.2, 0.8, 7), np.linspace(0.3, 1.2, 7)
     friction = b * data.qd + fc * np.sign(data.qd)
     train = data.replace(tau=data.tau + friction)
-    model = METHODS["sysid"](**METHODS["sysid"].configuration("feasible")).fit(train, "indirect", 0, steps=1)
+    model = METHODS["sysid"](**METHODS["sysid"].configuration("feasible")).fit(train, "indirect", 0, budget=Budget(steps=1))
     values = model.identified_parameters()
     fitted_b = np.array([values[f"b_{j}"] for j in range(1, 8)])
     fitted_fc = np.array([values[f"F_c_{j}"] for j in range(1, 8)])
@@ -135,8 +136,8 @@ def test_the_residual_loop_refits_a_feasible_fit_under_its_constraints(panda):
     from bench.residual.strategies import Feasible, Linear, strategy_for
 
     train = add_noise(generate(panda, 512, 0), "indirect", 0.05, 0)
-    feasible = METHODS["sysid"]().fit(train, "indirect", 0, steps=1)
-    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, steps=1)
+    feasible = METHODS["sysid"]().fit(train, "indirect", 0, budget=Budget(steps=1))
+    ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, budget=Budget(steps=1))
     assert type(strategy_for(ls)) is Linear and type(strategy_for(feasible)) is Feasible
     strategy = strategy_for(feasible)
     offsets = [t for t in candidates(train.dof) if t.name == "offset"]

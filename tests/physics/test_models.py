@@ -13,6 +13,7 @@ from bench.physics.models import ExpressionModel, FittedModel, ParametricModel
 from bench.physics.system import ParametricForm
 from methods import METHODS, Method
 from systems import get_system
+from bench.core.budget import Budget
 
 
 def test_the_interface_and_the_method_hooks_are_abstract():
@@ -72,11 +73,11 @@ def test_the_parameter_jacobian_of_a_form_linear_in_its_parameters():
 def test_sysid_gives_its_fit_as_a_parametric_model():
     system = get_system("double_pendulum")
     data = generate(system, 256, 6)
-    sysid = METHODS["sysid"](max_steps=5).fit(data, "indirect", 0, 10.0)
+    sysid = METHODS["sysid"](max_steps=5).fit(data, "indirect", 0, Budget(seconds=10.0))
     model = sysid.parametric()
     assert isinstance(model, ParametricModel) and model.parameters() == sysid.identified_parameters()
     np.testing.assert_allclose(model.predict_torque(data), sysid.predict_torque(data), rtol=1e-10, atol=1e-10)
-    assert METHODS["mlp"](max_steps=1, hidden=4, layers=1).fit(data, "indirect", 0, 5.0).parametric() is None
+    assert METHODS["mlp"](max_steps=1, hidden=4, layers=1).fit(data, "indirect", 0, Budget(seconds=5.0)).parametric() is None
 
 
 @pytest.mark.parametrize("name", ["double_pendulum", "dfki_double_pendulum", "cart_pole", "spring_pendulum", "delan_characters"])

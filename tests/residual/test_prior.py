@@ -3,18 +3,21 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from bench.residual.loop import not_started, residual_loop
-from bench.residual.prior import rounds_run  # importing it registers the loop
+from bench.residual.prior import rounds_run
 from methods import METHODS
-from methods.hybrid import PRIORS, modules_for
+from methods.hybrid import PRIORS
 from methods.saving import TOLERANCE, load_model, save_model
 from systems import SYSTEMS
 from bench.core.scoring import opened
+from bench.core.budget import Budget
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +31,7 @@ def arm():
 def test_the_loop_method_is_the_loops_final_model_a_round_its_step(arm, capsys):
     system, train, test = arm
     for steps in (1, 2):
-        fitted = METHODS["loop"]().fit(train, "indirect", 0, steps=steps, system=system)
+        fitted = METHODS["loop"]().fit(train, "indirect", 0, budget=Budget(steps=steps), system=system)
         result = residual_loop("sysid", train, None, steps=steps, seed=0, max_rounds=steps, report=lambda line: None)
         np.testing.assert_array_equal(fitted.predict_torque(test), result.models[1].predict_torque(test))
         ran = [r for r in result.rounds if r["round"] > 0]
@@ -38,7 +41,7 @@ def test_the_loop_method_is_the_loops_final_model_a_round_its_step(arm, capsys):
 
 def test_a_loop_hybrid_fits_its_residual_to_what_the_loop_leaves_and_saves(arm, tmp_path):
     system, train, test = arm
-    hybrid = METHODS["loop+sparse_torque"]().fit(train, "indirect", 0, steps=1, system=system)
+    hybrid = METHODS["loop+sparse_torque"]().fit(train, "indirect", 0, budget=Budget(steps=1), system=system)
     # the prior is the loop run to its end by work (a round that accepts nothing, or MAX_ROUNDS), whatever the
     # hybrid's budget: two rounds or more, where the residual's budget is one step
     loop = residual_loop("sysid", train, None, steps=1, seed=0, report=lambda line: None)
@@ -54,9 +57,14 @@ def test_a_loop_hybrid_fits_its_residual_to_what_the_loop_leaves_and_saves(arm, 
     assert header["kind"] == "hybrid"
 
 
-def test_a_runs_process_is_told_to_import_the_loop():
-    assert PRIORS["loop"].module == "bench.residual.prior"
-    assert modules_for(["loop+gp", "loop", "feasible+gp", "mlp"]) == ("bench.residual.prior",)
+def test_the_registry_finds_the_loop_without_being_told_to_import_it():
+    """A fresh process that imports only the method registry lists the loop and composes its hybrids: the module
+    that registers them is declared as an entry point, not imported as a side effect of the command line."""
+    code = ("import sys; from methods import METHODS; assert 'bench.residual.prior' not in sys.modules; "
+            "print('loop' in METHODS.names(), METHODS['loop+gp'].prior_name)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["True", "loop"]
+    assert PRIORS["loop"].name == "loop"
     assert "loop" in METHODS["loop"].not_applicable_reason("indirect", SYSTEMS["double_pendulum"]())
 
 
@@ -71,8 +79,8 @@ def test_a_loop_hybrids_prior_is_fixed_work_identified_before_its_budget_starts(
     """The prior does not depend on the hybrid's budget: a time budget far too short for one round of the loop
     still gets the loop's whole model, identified before the budget starts (as a run's prepare phase does)."""
     system, train, test = arm
-    worked = METHODS["loop+sparse_torque"]().fit(train, "indirect", 1, steps=2, system=system)
+    worked = METHODS["loop+sparse_torque"]().fit(train, "indirect", 1, budget=Budget(steps=2), system=system)
     timed = METHODS["loop+sparse_torque"]()
     timed.prepare_samples(train, "indirect", 1, system)
-    timed.fit(train, "indirect", 1, 0.05, system=system)
+    timed.fit(train, "indirect", 1, Budget(seconds=0.05), system=system)
     np.testing.assert_array_equal(timed.prior.predict_torque(test), worked.prior.predict_torque(test))

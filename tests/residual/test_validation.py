@@ -231,7 +231,7 @@ def test_an_effect_only_in_a_kept_fits_own_training_residual_is_undone_by_its_cr
     assert out.rounds[1]["accepted"] == ["offset on joint 1"] and "for each half" in out.rounds[1]["stop"]
     assert out.effects == [] and out.mse_after == out.mse_before
     # given a fit made on other data, what it leaves here is out of sample: the loop neither cross-fits nor refuses
-    given = _Biased().fit(train, "indirect", 0, 1.0)
+    given = _Biased().fit(train, "indirect", 0, Budget(seconds=1.0))
     out = residual_loop("biased", train, test, steps=SOLVED, report=quiet, fitted=given, open_ended=False)
     assert "cross_fit" not in out.rounds[0] and [e["name"] for e in out.effects] == ["offset"]
 
@@ -246,9 +246,9 @@ def test_the_cross_fit_deals_the_recordings_into_two_halves_each_predicted_by_th
 
         def fit(self, data):
             seen.append("".join(data.recordings()))
-            return _Biased().fit(data, "indirect", 0, 1.0)
+            return _Biased().fit(data, "indirect", 0, Budget(seconds=1.0))
 
-    full = _Biased().fit(train, "indirect", 0, 1.0)
+    full = _Biased().fit(train, "indirect", 0, Budget(seconds=1.0))
     cross, info = strategies.cross_fit(Fitter(), full, train, quiet)
     assert seen == ["bd", "ac"] and info["in_sample_mse"] == pytest.approx(0.125)
     assert [np.flatnonzero(h)[[0, -1]].tolist() for h in cross.halves] == [[0, 599], [200, 799]]

@@ -14,32 +14,33 @@ from bench.core.errors import ConfigError
 from bench.studies import adaptation
 from methods import METHODS
 from systems import SYSTEMS
+from bench.core.budget import Budget
 
 
 def test_warm_start_continues_parameters_and_optimiser_state():
     system = SYSTEMS["double_pendulum"]()
     a, b = generate(system, 256, seed=0), add_effects(generate(system, 256, seed=1), {"spring": (5.0, 0.0)})
     m = METHODS["mlp"](max_steps=30, hidden=16, layers=2, lr=3e-2)
-    m.fit(a, "indirect", 0, 10.0)
+    m.fit(a, "indirect", 0, Budget(seconds=10.0))
     steps = m._optimizer.state_dict()["state"][0]["step"].item()
     error_at_switch = mse(m.predict_torque(b), b.tau)
-    m.fit(b, "indirect", 0, 10.0, warm_start=True)
+    m.fit(b, "indirect", 0, Budget(seconds=10.0), warm_start=True)
     assert m._optimizer.state_dict()["state"][0]["step"].item() == steps + 30  # the same Adam, further on
     # the continued fit's first evaluation (on all of b) is the pre-switch model's error
     assert m.fit_info["curve"][0][1] == pytest.approx(error_at_switch, rel=1e-9)
-    cold = METHODS["mlp"](max_steps=30, hidden=16, layers=2, lr=3e-2).fit(b, "indirect", 0, 10.0)
+    cold = METHODS["mlp"](max_steps=30, hidden=16, layers=2, lr=3e-2).fit(b, "indirect", 0, Budget(seconds=10.0))
     assert cold.fit_info["curve"][0][1] != pytest.approx(error_at_switch, rel=1e-3)
 
 
 def test_warm_start_is_refused_where_it_cannot_continue():
     data = generate(SYSTEMS["double_pendulum"](), 128, seed=0)
     with pytest.raises(ConfigError, match="cannot continue"):
-        METHODS["sparse"]().fit(data, "indirect", 0, 5.0, warm_start=True)
+        METHODS["sparse"]().fit(data, "indirect", 0, Budget(seconds=5.0), warm_start=True)
     with pytest.raises(ConfigError, match="needs an earlier fit"):
-        METHODS["mlp"](max_steps=1).fit(data, "indirect", 0, 5.0, warm_start=True)
-    m = METHODS["mlp"](max_steps=1).fit(data, "indirect", 0, 5.0)
+        METHODS["mlp"](max_steps=1).fit(data, "indirect", 0, Budget(seconds=5.0), warm_start=True)
+    m = METHODS["mlp"](max_steps=1).fit(data, "indirect", 0, Budget(seconds=5.0))
     with pytest.raises(ConfigError, match="continues a indirect fit"):
-        m.fit(data, "direct", 0, 5.0, warm_start=True)
+        m.fit(data, "direct", 0, Budget(seconds=5.0), warm_start=True)
 
 
 def test_step_function_of_a_curve():

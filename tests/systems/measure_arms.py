@@ -13,6 +13,7 @@ from bench.residual import residual_loop
 from methods import METHODS
 from systems import get_system
 from systems.n_link_pendulum import n_link_pendulum
+from bench.core.budget import Budget
 # bench data vs RNEA on the Panda
 panda = get_system("panda"); data = generate(panda, 300, 3, cache=False)
 model = pinocchio_panda(); d = model.createData()
@@ -31,7 +32,7 @@ for n in range(1, 8):
     worst = max(worst, np.abs(ours - theirs).max()); top = max(top, np.abs(theirs).max())
 print("EL vs RNEA n=1..7 max diff", worst, "max |tau|", top)
 train, test = generate(panda, 4000, 0), generate(panda, 1000, 1000)
-s = METHODS["sysid"]().fit(train, "indirect", 0, 60.0); f = s.record_details()
+s = METHODS["sysid"]().fit(train, "indirect", 0, Budget(seconds=60.0)); f = s.record_details()
 print("panda sysid", f["base_parameters"], "param error", f["parameter_error"], "test mse", mse(s.predict_torque(test), test.tau))
 fx = {"viscous_friction": tuple(0.1 + 0.05 * j for j in range(7)), "coulomb_friction": tuple(0.3 + 0.1 * j for j in range(7))}
 tr, te = add_effects(generate(panda, 1000, 0), fx), add_effects(generate(panda, 500, 1000), fx)

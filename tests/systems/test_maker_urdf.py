@@ -11,6 +11,7 @@ import pytest
 from bench.core.data import DataError, generate, mse
 from methods import METHODS
 from systems.urdf_arm import chain, urdf_arm
+from bench.core.budget import Budget
 
 
 def _link(name: str, mass: float, mesh: bool) -> str:
@@ -81,7 +82,7 @@ def test_its_torques_are_the_hand_cleaned_copys(arms):
 def test_a_makers_arm_is_fitted(arms):
     arm = arms[True][2]
     train, test = generate(arm, 400, 0), generate(arm, 200, 1)
-    model = METHODS["sysid"](**METHODS["sysid"].configuration("standard")).fit(train, "indirect", 0, steps=1,
+    model = METHODS["sysid"](**METHODS["sysid"].configuration("standard")).fit(train, "indirect", 0, budget=Budget(steps=1),
                                                                               system=arm)
     assert mse(model.predict_torque(test), test.tau) < 1e-8 * float(np.mean(test.tau ** 2))
 

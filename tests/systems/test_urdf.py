@@ -21,6 +21,7 @@ from methods import METHODS  # noqa: E402
 from systems import SYSTEMS, get_system  # noqa: E402
 from systems.n_link_pendulum import n_link_pendulum  # noqa: E402
 from systems.urdf_arm import DATA_DIR, physically_consistent, register_urdf  # noqa: E402
+from bench.core.budget import Budget
 
 
 def pinocchio_panda():
@@ -82,7 +83,7 @@ def test_the_suites_euler_lagrange_transform_agrees_with_pinocchios_rnea(n):
 def test_sysid_identifies_the_pandas_base_parameters():
     panda = get_system("panda")
     train, test = generate(panda, 4000, 0), generate(panda, 1000, 1000)
-    m = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, steps=1)  # a linear form is solved in one step
+    m = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, budget=Budget(steps=1))  # a linear form is solved in one step
     facts = m.record_details()
     assert facts["base_parameters"] == 43  # as Gaz et al. (2019) found for the Panda
     assert facts["parameter_error"] < 1e-9 and facts["mass_matrix_positive_definite"]
