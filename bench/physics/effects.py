@@ -307,6 +307,17 @@ EFFECTS: dict[str, Effect] = {
     )
 }
 
+def register_effect(effect: Effect) -> Effect:
+    """Add ``effect`` to :data:`EFFECTS`, where the data generator and the residual loop's candidates find it; a
+    name another effect has taken is refused (the same effect again is kept). A law of the joint is declared
+    through :meth:`bench.physics.laws.Laws.declare`, which registers its effect here."""
+    known = EFFECTS.get(effect.name)
+    if not effect.name or not effect.name.replace("_", "").isalnum() or (known is not None and known != effect):
+        raise ValueError(f"an effect needs a name of its own (letters, digits, _), got {effect.name!r}")
+    EFFECTS[effect.name] = effect
+    return effect
+
+
 #: the gains a torque sensor's calibration error may have, ``(low, high)``: its coefficient's bounds as ``g = 1 + c``
 GAIN_RANGE = tuple(1.0 + b for b in EFFECTS["torque_gain"].bounds)
 

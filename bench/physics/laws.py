@@ -58,7 +58,11 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Callable, Mapping
 
-from bench.physics.effects import EFFECTS
+from bench.physics.effects import EFFECTS, Effect, register_effect
+
+#: which parts belong to which physical family: a joint carries at most one law of each (filled as laws register:
+#: a part's family is that of the first law it is a member of)
+FAMILIES: dict[str, str] = {}
 
 
 @dataclass(frozen=True)
@@ -160,7 +164,7 @@ def _periodic(parts: dict) -> dict:
 def _single(name: str, family: str) -> Law:
     effect = EFFECTS[name]
     return Law(name, family, (effect.parameter,), "", effect.kind, (name,),
-               admissible=lambda c: effect.admissible(c), condition=f"{effect.parameter} >= 0" if effect.nonnegative else "",
+               admissible=lambda c: effect.admissible(c), condition=effect.condition,
                parts=lambda c: [Part(name, c)],
                parameters_of=lambda parts: {effect.parameter: _value(parts[name])})
 
@@ -189,12 +193,39 @@ class Laws:
         if not law.name or (known is not None and not again):
             raise ValueError(f"a law needs a name of its own, got {law.name!r}")
         place[law.name] = law
+        if isinstance(law, Law):
+            for part in law.members:
+                FAMILIES.setdefault(part, law.family)
         return law
 
+    def declare(self, effect: Effect, family: str) -> Law:
+        """A law of the joint made of one effect, declared at once: ``effect`` (a term per unit coefficient on
+        one joint, :class:`~bench.physics.effects.Effect`) goes into :data:`~bench.physics.effects.EFFECTS`,
+        where the data generator (``bench data --effects``) and the residual loop's candidates find it, and
+        its law into :attr:`arm` under ``family`` (a joint carries at most one law of each family). The
+        built-in one-effect laws are declared so, and a plugin's law of the joint the same way
+        (docs/extending.md); a declared name is refused again unless it is the same effect."""
+        if effect.arity != 1 or effect.sensor or effect.on_system is not None:
+            raise ValueError(f"{effect.name}: a law of the joint is one effect on one joint of the arm")
+        if not family or not family.replace("_", "").isalnum():
+            raise ValueError(f"{effect.name}: a law's family is a name (letters, digits, _), got {family!r}")
+        known = self._arm.get(effect.name)
+        if known is not None and EFFECTS.get(effect.name) is effect and known.family == family:
+            return known
+        if effect.name in self._arm or effect.name in self._sensor:
+            raise ValueError(f"a law needs a name of its own, got {effect.name!r}")
+        register_effect(effect)
+        return self.register(_single(effect.name, family))
+
     def remove(self, name: str) -> None:
-        """Take the law ``name`` out (a test's plugin, once the test is done)."""
-        self._arm.pop(name, None)
+        """Take the law ``name`` out, with the effect and the family a declared law brought (a test's plugin,
+        once the test is done)."""
+        law = self._arm.pop(name, None)
         self._sensor.pop(name, None)
+        if law is not None and law.members == (name,) and not any(name in other.members for other in self._arm.values()):
+            FAMILIES.pop(name, None)
+            if name in EFFECTS and not EFFECTS[name].sensor:
+                EFFECTS.pop(name)
 
     @property
     def arm(self) -> Mapping[str, Law]:
@@ -209,9 +240,11 @@ class Laws:
 
 #: every law of the suite, by name (see :class:`Laws`)
 LAWS = Laws()
+FAMILIES["offset"] = "offset"  # a torque offset is a family of its own, also where it is part of a spring's law
+# in the order the loop offers them: friction, then inertia, springs and offsets, then periodic torques
+for _name, _family in (("viscous_friction", "friction"), ("coulomb_friction", "friction")):
+    LAWS.declare(EFFECTS[_name], _family)
 for _law in (
-        _single("viscous_friction", "friction"),
-        _single("coulomb_friction", "friction"),
         Law("coulomb_viscous_friction", "friction", ("F_c", "b"), "D = F_c*Abs(qd_{n}) + b*qd_{n}**2/2", "dissipative",
             ("coulomb_friction", "viscous_friction"), admissible=lambda F_c, b: F_c >= 0 and b >= 0, condition="F_c >= 0, b >= 0",
             parts=lambda F_c, b: [Part("coulomb_friction", F_c), Part("viscous_friction", b)],
@@ -232,9 +265,11 @@ for _law in (
             parts=lambda F_c, v_s, b: [Part("smooth_coulomb", F_c, v_s), Part("viscous_friction", b)],
             parameters_of=_smooth, limits={"smooth_coulomb": (("coulomb_friction",), ("viscous_friction",))},
             simpler=("coulomb_viscous_friction", "viscous_friction")),
-        _single("armature", "inertia"),
-        _single("spring", "spring"),
-        _single("offset", "offset"),
+):
+    LAWS.register(_law)
+for _name, _family in (("armature", "inertia"), ("spring", "spring"), ("offset", "offset")):
+    LAWS.declare(EFFECTS[_name], _family)
+for _law in (
         Law("offset_spring", "spring", ("k", "q0"), "L += -k*(q_{n} - q0)**2/2", "conservative", ("spring", "offset"),
             admissible=lambda k, q0: k >= 0, condition="k >= 0", parts=lambda k, q0: [Part("spring", k), Part("offset", -k * q0)],
             parameters_of=_offset_spring, simpler=("spring",)),
@@ -245,10 +280,6 @@ for _law in (
             parameters_of=_periodic),
 ):
     LAWS.register(_law)
-
-#: which parts belong to which physical family: a joint carries at most one law of each
-FAMILIES: dict[str, str] = {part: law.family for law in LAWS.arm.values() for part in law.members if part != "offset"}
-FAMILIES["offset"] = "offset"
 
 
 def led_by(part: str) -> Law | None:
