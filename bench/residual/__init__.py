@@ -3,7 +3,7 @@ add them, refit, and report the error before and after.
 
 * :mod:`~bench.residual.candidates`: the named effects and the open-ended
   library, as terms;
-* :mod:`~bench.residual.selection`: stepwise selection with its statistics,
+* :mod:`~bench.residual.tracing`: stepwise selection with its statistics,
   on :mod:`~bench.residual.basis` (projections off the design) and
   :mod:`~bench.residual.shapes` (a shaped effect's nonlinear parameter);
 * :mod:`~bench.physics.sensor_laws`, :mod:`~bench.residual.sensors`: the
@@ -26,6 +26,6 @@ from bench.residual.job import ResidualJob, run_residual
 from bench.residual.loop import residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
-from bench.residual.selection import trace
+from bench.residual.tracing import trace
 
 __all__ = ["ResidualJob", "ResidualResult", "candidates", "residual_loop", "run_residual", "trace", "write_outputs"]

@@ -14,7 +14,7 @@ can undo a round) is the model's refit strategy, chosen once from the model
    (``mse_before`` is the polished model's, and round 0 records the
    method's own as ``method_mse``); a kept fit is cross-fitted.
 2. **Residual.** ``r = tau - g(L_hat) - Phi c`` on the training and test sets.
-3. **Trace.** Forward stepwise selection (:mod:`bench.residual.selection`)
+3. **Trace.** Forward stepwise selection (:mod:`bench.residual.tracing`)
    over the candidates of :mod:`bench.residual.candidates`: the named
    effects on every joint, those of the whole system (a payload, a gravity
    tilt), the laws of the torque sensor (a gain, a time shift:
@@ -93,7 +93,7 @@ from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
 from bench.residual.rollouts import driven_rollouts, test_mse
-from bench.residual.selection import BUDGET_STOP, MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, bic, trace
+from bench.residual.tracing import BUDGET_STOP, MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, Trace, bic, trace
 from bench.residual.sensors import Sensed, Sensor, column as sensor_column, measured_rss, settle
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.tidying import Tidying
@@ -335,10 +335,10 @@ class _Loop(Tidying):
         """The build (:meth:`build`) with the group ``other`` in place of the accepted
         ``chosen``, where its BIC on the measured torques, both refitted with the model,
         is lower by more than ``margin``; else ``None``. For an open-ended term far
-        better than the named law accepted (:attr:`~bench.residual.selection.Selection.mismatched`,
-        margin :data:`~bench.residual.selection.MIN_BIC_DROP`), and for the runner-up
+        better than the named law accepted (:attr:`~bench.residual.tracing.Trace.mismatched`,
+        margin :data:`~bench.residual.tracing.MIN_BIC_DROP`), and for the runner-up
         of a step whose model's linearisation may rank the two wrongly
-        (:attr:`~bench.residual.selection.Selection.runners_up`, margin 0)."""
+        (:attr:`~bench.residual.tracing.Trace.runners_up`, margin 0)."""
         alternative = self.build(model, [t for t in effects if t not in chosen] + [t for t in other if t.place != "sensor"],
                                  [t for t in on_sensor if t not in chosen] + [t for t in other if t.place == "sensor"])
         n = self.measured.tau.size
@@ -361,23 +361,23 @@ class _Loop(Tidying):
                 if resolved_periods(t, train)]
         return TermLibrary([t for t in pool if is_named(t) or self.open_ended is not False])
 
-    def choose(self, model: LoopModel, selection, laws: dict, k: int) -> LoopModel:
+    def choose(self, model: LoopModel, traced: Trace, laws: dict, k: int) -> LoopModel:
         """The round's model: ``model`` refitted with what the trace accepted
         (:meth:`build`), where refitting shows it better, with a runner-up in place
         of the accepted candidate, and with an open-ended term in place of a named
         law it explains far better (a structural finding, :attr:`unnamed`); the
         sensor's new laws applied."""
         sensor, train, report = self.sensor, self.train, self.report
-        on_sensor = [t for t in selection.accepted if t in laws]
-        effects = model.effects + [t for t in selection.accepted if t not in laws]
+        on_sensor = [t for t in traced.accepted if t in laws]
+        effects = model.effects + [t for t in traced.accepted if t not in laws]
         built = self.build(model, effects, on_sensor)
-        for chosen, runner in selection.runners_up:
+        for chosen, runner in traced.runners_up:
             other = self.compare(model, effects, on_sensor, chosen, runner, built, 0.0)
             if other is not None:
                 report(f"  {' + '.join(map(label, runner))} instead of {' + '.join(map(label, chosen))}: "
                        f"a lower BIC once refitted with the model")
                 built, effects = other, other[0].effects
-                for kept, _, entry in selection.equivalents:  # the refit, not the rule, chose among them
+                for kept, _, entry in traced.equivalents:  # the refit, not the rule, chose among them
                     if kept is chosen:
                         now_kept = " + ".join(map(label, runner))
                         entry.update(kept=now_kept, equivalent=[entry["kept"]] + [e for e in entry["equivalent"]
@@ -385,7 +385,7 @@ class _Loop(Tidying):
                                      chosen_by="a lower BIC once refitted with the model, which the linearised "
                                                "comparison of the trace may rank wrongly")
                 on_sensor = [t for t in on_sensor if t not in chosen] + [t for t in runner if t in laws]
-        for named, rival, *seen in selection.mismatched:
+        for named, rival, *seen in traced.mismatched:
             other = self.compare(model, effects, on_sensor, named, [rival], built, MIN_BIC_DROP)
             if other is not None:
                 built, effects = other, other[0].effects
@@ -465,16 +465,16 @@ class _Loop(Tidying):
         target, fixed = strategy.problem(model, train)
         excluded = model.effects + [term for term, _ in self.beyond.values()]
         laws = {t: sensor_column(t, model, train, sensor) for t in sensor.candidates(train) if t not in excluded}
-        selection = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
+        traced = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
                                deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
                                runner_up=not strategy.fixed_freedom)
         findings = {}  # what is left unexplained where the loop ends
-        for term, c, se in selection.structural:
+        for term, c, se in traced.structural:
             findings[label(term)] = structural(term, c, se)
             report(f"round {k}: structural finding: {findings[label(term)]['finding']}")
-        if not selection.accepted:
-            rounds.append(Round(k, self.scores(model), held, trace=selection.steps, seconds=self.elapsed()))
-            if any(step.get("stop") == BUDGET_STOP for step in selection.steps):
+        if not traced.accepted:
+            rounds.append(Round(k, self.scores(model), held, trace=traced.steps, seconds=self.elapsed()))
+            if any(step.get("stop") == BUDGET_STOP for step in traced.steps):
                 self.stopped = (f"the budget of {self.budget.describe()} ran out in round {k}'s trace before it found "
                                 f"anything significant (no step of it starts after {TRACE_SHARE:.0%} of the budget); "
                                 f"a larger budget may find more")
@@ -489,13 +489,13 @@ class _Loop(Tidying):
             return model, held, mass, findings, True
         self.pending = {"found": [{"law": step["candidate"], **{key: step.get(key) for key in
                                                                ("coefficient", "bic_drop", "heldout_gain")}}
-                                  for step in selection.steps if step.get("accepted")],
-                        "equivalent": [entry for _, _, entry in selection.equivalents]}
+                                  for step in traced.steps if step.get("accepted")],
+                        "equivalent": [entry for _, _, entry in traced.equivalents]}
         self.in_budget("tracing")
-        accepted = [label(c) for c in selection.accepted]
+        accepted = [label(c) for c in traced.accepted]
         report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
         before_round = (train, sensor)
-        candidate = self.choose(model, selection, laws, k)
+        candidate = self.choose(model, traced, laws, k)
         self.in_budget("refitting jointly")
         candidate, removed, simplified = self.tidy(candidate, findings)
         train = self.train
@@ -514,17 +514,17 @@ class _Loop(Tidying):
                     f"held-out MSE {candidate_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")
         else:
             undo = self.timed(strategy.check, candidate, model, train)
-        equivalent = [entry for _, _, entry in selection.equivalents] or None
+        equivalent = [entry for _, _, entry in traced.equivalents] or None
         if undo is not None:
             self.use(*before_round)
-            rounds.append(Round(k, self.scores(model), held, accepted, selection.steps, removed, f"undone: {undo[0]}",
+            rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed, f"undone: {undo[0]}",
                                 candidate_held, simplified=simplified or None, seconds=self.elapsed(),
                                 equivalent=equivalent))
             report(f"round {k}: undone, {undo[1]}")
             self.ending = {"reason": "undone", "round": k, "detail": f"round {k} was undone: {undo[0]}", **self.pending}
             return model, held, mass, findings, True
         s = self.scores(candidate)
-        rounds.append(Round(k, s, candidate_held, accepted, selection.steps, removed, simplified=simplified or None,
+        rounds.append(Round(k, s, candidate_held, accepted, traced.steps, removed, simplified=simplified or None,
                             seconds=self.elapsed(), equivalent=equivalent))
         for entry in equivalent or ():
             self.equivalent.append({"round": k, **entry})

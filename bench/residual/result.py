@@ -134,7 +134,7 @@ class Round:
     cross_fit: dict | None = None
     simplified: list[str] | None = None
     seconds: float = 0.0
-    #: laws of this round that the held-out error could not tell apart (:attr:`~bench.residual.selection.Selection.equivalents`)
+    #: laws of this round that the held-out error could not tell apart (:attr:`~bench.residual.tracing.Trace.equivalents`)
     equivalent: list[dict] | None = None
 
     def to_json(self) -> dict:

@@ -15,7 +15,7 @@ the others as ratios to it.
 
 Each law is bilinear in the model and the law (``g_j`` times the model's
 torque), so each is judged like any candidate
-(:func:`bench.residual.selection.trace`) by its column linearised at the
+(:func:`bench.residual.tracing.trace`) by its column linearised at the
 model where it stands (:func:`column`). An accepted law is then applied
 exactly (:func:`settle`): the model is refitted on the corrected training
 data (:meth:`Sensor.correct`: each recording's states taken where the state
@@ -44,7 +44,7 @@ from bench.physics.regression import fit_statistics
 from bench.physics.terms import Term
 from bench.residual.beyond_data import held_out_verdict
 from bench.residual.candidates import law_text, structural
-from bench.residual.selection import bic
+from bench.residual.tracing import bic
 from bench.physics.laws import LAWS
 from bench.physics.sensor_laws import SensorLaw, has_time, law_of
 

@@ -39,7 +39,7 @@ scored samples, counted as the independent samples they hold; or both at
 round-off), the data cannot tell them apart (a law of the whole system, a
 payload or a tilt, whose torque is a sum of terms, is also compared with the
 best pair of other candidates): the step records them as
-*equivalent on these data* (:attr:`Selection.equivalents`), and the one kept
+*equivalent on these data* (:attr:`Trace.equivalents`), and the one kept
 is chosen by :data:`EQUIVALENCE_RULE`: the fewest parameters, then the law
 declared first (:func:`declared`), not by a difference in fit the data do not
 support.
@@ -102,7 +102,7 @@ def bic(rss: float, n: int, k: int) -> float:
 
 
 @dataclass
-class Selection:
+class Trace:
     accepted: list[Term]
     steps: list[dict] = field(default_factory=list)
     #: ``(term, coefficient, stderr)`` of a residual only an inadmissible coefficient explains
@@ -119,7 +119,7 @@ class Selection:
 
 def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
           exclude: list[Term] = (), max_steps: int | None = None, deadline: float = math.inf,
-          given: dict[Term, np.ndarray] | None = None, runner_up: bool = False) -> Selection:
+          given: dict[Term, np.ndarray] | None = None, runner_up: bool = False) -> Trace:
     """Forward stepwise selection of candidates explaining ``target`` (``(n, dof)``).
 
     Each step tries the named effects first and the open-ended (symbolic)
@@ -128,7 +128,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     gravity absorbs ``sin q`` leaves ``c (q - sin q)``, which ``q^3`` also fits).
     Where an open-ended term explains it better than the best named law by
     more than :data:`MIN_BIC_DROP`, that law may be only the nearest one the
-    vocabulary has: the step is recorded in :attr:`Selection.mismatched`, and
+    vocabulary has: the step is recorded in :attr:`Trace.mismatched`, and
     the loop settles it by refitting both (:meth:`bench.residual.loop._Loop.compare`;
     a parametric model's linearisation can favour either).
     ``fixed`` columns (the model's own terms and effects already accepted)
@@ -139,7 +139,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     sensor's laws, linearised at the model: :mod:`bench.residual.sensors`),
     with those columns; they are named candidates like the effects.
     With ``runner_up``, each step also records the next best named candidate
-    of another slot that passes every test (:attr:`Selection.runners_up`),
+    of another slot that passes every test (:attr:`Trace.runners_up`),
     for a model whose linearisation may rank the two wrongly (a parametric
     form: :meth:`bench.residual.loop._Loop.compare` refits both).
     Returns the newly accepted candidates, per step the statistics of the
@@ -483,7 +483,7 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         steps_taken.append(chosen)
         taken.update(slot(t) for t in chosen["group"])
         rss_now = chosen["rss"]
-    return Selection(accepted, steps, structural, mismatched, runners_up, equivalents)
+    return Trace(accepted, steps, structural, mismatched, runners_up, equivalents)
 
 
 def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:

@@ -21,7 +21,7 @@ from bench.core.symbolic import coordinate_symbols
 from bench.physics.models import ExpressionModel
 from bench.residual import residual_loop
 from bench.residual.report import summary_lines
-from bench.residual.selection import EQUIVALENCE_RULE
+from bench.residual.tracing import EQUIVALENCE_RULE
 from tests.commandline import cli
 from tests.residual.test_budget import FRICTION, _budget_ends_at
 from tests.residual.test_loop import SOLVED, SYSID, data_with, quiet
