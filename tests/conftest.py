@@ -48,3 +48,25 @@ def small_data(double_pendulum):
     from bench.core.data import generate
 
     return generate(double_pendulum, 512, 0), generate(double_pendulum, 256, 1000)
+
+
+# Where the suite's workers wait: with BENCH_TIMELINE=FILE each test process appends a line a test to FILE.jsonl
+# (its worker, the test, when it started and ended, and the CPU seconds it and the processes it waited for used),
+# which tests/timeline.py sums into each worker's busy, waiting and idle time.
+if os.environ.get("BENCH_TIMELINE"):
+    import json
+    import resource
+    import time
+
+    def _cpu() -> float:
+        own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+        return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(item, nextitem):
+        start, cpu = time.time(), _cpu()
+        yield
+        line = {"worker": os.environ.get("PYTEST_XDIST_WORKER", "main"), "test": item.nodeid, "start": start,
+                "end": time.time(), "cpu": _cpu() - cpu}
+        with open(os.environ["BENCH_TIMELINE"] + ".jsonl", "a") as f:
+            f.write(json.dumps(line) + "\n")
