@@ -46,8 +46,9 @@ KILL_FACTOR = 1.5
 #: recovery, rollouts) may take its budget, and at least this many seconds.
 EVALUATION_MIN_S = 120.0
 #: The method's one-time work before its budget starts (compiling for the
-#: data's shapes, :meth:`methods.base.Method.prepare`) may take its budget,
-#: and at least this many seconds.
+#: data's shapes, :meth:`methods.base.Method.prepare`; a hybrid's prior on
+#: each set of samples it fits, :meth:`methods.base.Method.prepare_samples`)
+#: may take its budget, and at least this many seconds.
 PREPARE_MIN_S = 900.0
 
 

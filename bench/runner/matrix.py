@@ -124,7 +124,8 @@ class RunJob(Job):
             record = Record.new(spec, "timeout", elsewhere=True, code=code,
                                 error=f"fit still running at {fit_limit_words(spec.budget)}; killed")
         elif outcome.phase in ("evaluate", "prepare"):
-            what = "evaluation after the fit" if outcome.phase == "evaluate" else "preparation before the fit (compiling)"
+            what = "evaluation after the fit" if outcome.phase == "evaluate" else \
+                "one-time work before the fit (compiling; a hybrid's prior)"
             record = Record.new(spec, "timeout", elsewhere=True,
                                 error=f"{what} still running after {limits[outcome.phase]:g} s; killed", code=code)
         else:
