@@ -60,7 +60,7 @@ def test_an_import_against_a_contract_breaks_it(tmp_path, module, imported, cont
 def test_bench_holds_only_its_entry_points_and_the_layers():
     assert sorted(p.name for p in (ROOT / "bench").glob("*.py")) == ["__init__.py", "__main__.py"]
     layers = sorted(p.name for p in (ROOT / "bench").iterdir() if (p / "__init__.py").is_file())
-    assert layers == ["cli", "core", "evaluation", "physics", "reporting", "residual", "runner", "studies"]
+    assert layers == ["cli", "core", "evaluation", "physics", "reporting", "residual", "runner", "studies", "tools"]
 
 
 def test_no_module_cycles_and_no_imports_hidden_in_functions(measured):

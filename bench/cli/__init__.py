@@ -23,7 +23,7 @@ import sys
 from bench.cli import convert, data, fit, index, leaderboard, listing, predict, rerun, residual, run, select, study, table
 from bench.cli.options import Parser
 from bench.core.errors import UserError
-from bench.studies import robot_log
+from bench.tools import robot_log
 from bench.runner.isolation import CallFailed
 
 EXIT_USAGE = 2

@@ -1,5 +1,5 @@
 """``python -m bench select``: one model of a measured arm, chosen by validation
-on the training data alone (:mod:`bench.studies.selection`)."""
+on the training data alone (:mod:`bench.tools.select`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from bench.core.protocols import NAMES
 from bench.core.fileio import check_output
 from bench.evaluation.domain import sentences
 from bench.runner.execute import given_data
-from bench.studies.selection import CANDIDATES, select
+from bench.tools.select import CANDIDATES, select
 from systems import SYSTEMS
 
 #: select's seconds per candidate where neither --budget nor --steps is given: its search fits every

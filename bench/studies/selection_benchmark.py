@@ -3,7 +3,7 @@ chooses, on arms whose truth is known.
 
 Each case is a simulated arm (the Panda, the UR5, the KUKA's URDF) whose
 torque holds laws the rigid body lacks (:data:`EFFECT_SETS`), logged as a robot
-logs it (:func:`bench.studies.robot_log.fourier_trajectory`: excitation
+logs it (:func:`bench.tools.robot_log.fourier_trajectory`: excitation
 trajectories of finite Fourier series) and declared as a measured arm of
 one's own (a TOML file beside its logs). Two layouts:
 
@@ -52,8 +52,8 @@ from bench.core.data import Dataset
 from bench.core.fileio import atomic_write, write_json
 from bench.runner.plugins import register_by_file
 from bench.runner.provenance import provenance
-from bench.studies import selection
-from bench.studies.robot_log import simulate
+from bench.tools import select as selection
+from bench.tools.robot_log import simulate
 from systems import get_system
 
 DEVELOPMENT, EVALUATION = "development", "evaluation"
@@ -140,7 +140,7 @@ def _urdf(arm: str) -> Path:
 
 
 def recording(system, effects: list[str], trajectory_seed: int, noise_seed: int, base_hz: float) -> Dataset:
-    """One recording of the Fourier trajectory of ``trajectory_seed`` (:func:`bench.studies.robot_log.simulate`),
+    """One recording of the Fourier trajectory of ``trajectory_seed`` (:func:`bench.tools.robot_log.simulate`),
     its torque the arm's with ``effects`` and noise drawn with ``noise_seed``, with its time stamps."""
     time, data = simulate(system.name, SECONDS, RATE_HZ, base_hz, effects, NOISE, trajectory_seed,
                           noise_seed=noise_seed)
@@ -204,7 +204,7 @@ def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tu
 
 
 def choose(entries: list[dict], rule: str) -> dict | None:
-    """The candidate ``rule`` chooses among those ``bench select`` may choose (:func:`bench.studies.selection.usable`);
+    """The candidate ``rule`` chooses among those ``bench select`` may choose (:func:`bench.tools.select.usable`);
     ``lowest`` is ``bench select``'s own choice."""
     best = selection.choose(entries)
     if best is None or rule == "lowest":

@@ -13,7 +13,7 @@ from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
 from bench.core.folds import folds
 from bench.evaluation.domain import domain, sentences
-from bench.studies.selection import applicability
+from bench.tools.select import applicability
 from systems import SYSTEMS
 from bench.core.scoring import opened
 from tests.commandline import cli

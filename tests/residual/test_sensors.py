@@ -11,7 +11,7 @@ import pytest
 from bench.core.data import Dataset, add_noise, generate
 from bench.physics.undeclared import add_effects, parse_effects
 from bench.core.errors import ConfigError
-from bench.studies.robot_log import simulate
+from bench.tools.robot_log import simulate
 from bench.residual import residual_loop
 from bench.physics.sensor_laws import shifted
 from bench.residual.sensors import Sensed, Sensor

@@ -288,7 +288,7 @@ def test_an_extended_basis_spans_what_a_fresh_one_spans():
 def test_on_trajectories_a_round_must_save_one_percent_of_the_held_out_error(trajectories, monkeypatch):
     # a round whose held-out error falls by 0.5 %: kept on independent samples, undone on trajectories,
     # whose held-out spans are not independent of the rest of their motion
-    from bench.studies.robot_log import simulate
+    from bench.tools.robot_log import simulate
     from bench.residual import loop as loop_module
 
     parts = []

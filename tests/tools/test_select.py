@@ -15,7 +15,7 @@ import pytest
 
 from bench.core.budget import Budget
 from bench.residual.loop import MAX_ROUNDS
-from bench.studies.selection import CANDIDATES, WORK_CEILING, choose, page, specs
+from bench.tools.select import CANDIDATES, WORK_CEILING, choose, page, specs
 from systems import SYSTEMS
 from bench.core.csv_format import write_csv
 from bench.core.scoring import opened

@@ -7,7 +7,7 @@ import pytest
 
 from bench.core.csv_format import read_csv
 from bench.core.errors import ConfigError
-from bench.studies.robot_log import columns, simulate
+from bench.tools.robot_log import columns, simulate
 from systems import get_system
 from tests.commandline import cli
 
