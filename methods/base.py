@@ -95,6 +95,8 @@ class Method(FittedModel):
     """
 
     name: ClassVar[str] = "unnamed"
+    #: the method's name on the pages and in tables' prose (:meth:`display_name`); ``""``: its registered name
+    title: ClassVar[str] = ""
     tags: ClassVar[frozenset[str]] = frozenset()
     Config: ClassVar[type] = MethodConfig
     #: overrides of ``Config`` for a tiny CI run; each method declares its own
@@ -171,6 +173,11 @@ class Method(FittedModel):
         return self.train_device
 
     # -- class-level facts ---------------------------------------------------
+    @classmethod
+    def display_name(cls) -> str:
+        """The method's name on the pages: its :attr:`title`, else its registered name."""
+        return cls.title or cls.name
+
     @classmethod
     def unavailable_reason(cls) -> str | None:
         """``None`` when the method can run here; otherwise why it cannot."""

@@ -260,6 +260,7 @@ def _init(layer: torch.nn.Linear, gain: float, bias: float) -> None:
 
 @METHODS.add("delan", "neural", "structured", "baseline")
 class DeLaN(TorchLagrangianMethod):
+    title = "DeLaN"
     Config = DeLaNConfig
     search_space = {"hidden": (64, 128), "lr": (1e-2, 1e-3)}
     smoke = {"hidden": 16, "max_steps": 20, "batch_size": 64, "eval_samples": 256, "compile": False}

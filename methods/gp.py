@@ -128,6 +128,8 @@ def _model(inducing: torch.Tensor):
 class GaussianProcess(Method):
     """A sparse GP per joint of the torque (see the module docstring)."""
 
+    title = "GP"
+
     Config = GPConfig
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "a GP of the torque learns torques: the direct experiment has no torques, and the GP no L"

@@ -76,6 +76,8 @@ class Prior:
     name: str
     words: str
     identify: Callable[[Dataset, "System | None", int], FittedModel]
+    #: its name on the pages, before its residual's (``standard model + GP``)
+    title: str = ""
 
 
 #: the priors a hybrid may name, by name (:func:`register_prior`)
@@ -98,9 +100,9 @@ def sysid_prior(configuration: str):
     return identify
 
 
-register_prior(Prior("standard", "SysId's standard configuration", sysid_prior("standard")))
+register_prior(Prior("standard", "SysId's standard configuration", sysid_prior("standard"), "standard model"))
 register_prior(Prior("feasible", "SysId's feasible configuration (the feasible rigid bodies and nonnegative "
-                                 "joint friction)", sysid_prior("feasible")))
+                                 "joint friction)", sysid_prior("feasible"), "feasible rigid body"))
 
 #: the gate lengths a tuned hybrid tries, where its residual is gated (:mod:`bench.evaluation.tuning`)
 GATE_LENGTHS = (1.0, 3.0)
@@ -137,6 +139,12 @@ class Hybrid(Method):
     @classmethod
     def unavailable_reason(cls) -> str | None:
         return METHODS.entry(PRIOR_METHOD).unavailable_reason() or METHODS.entry(cls.residual_name).unavailable_reason()
+
+    @classmethod
+    def display_name(cls) -> str:
+        """``PRIOR + RESIDUAL`` in the pages' words: ``standard model + GP``."""
+        prior = PRIORS[cls.prior_name]
+        return f"{prior.title or prior.name} + {METHODS[cls.residual_name].display_name()}"
 
     @classmethod
     def not_applicable_reason(cls, experiment: str, system: System | None = None) -> str | None:

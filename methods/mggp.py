@@ -178,6 +178,7 @@ def _placeholder(name: str, arity: int):
 
 @METHODS.add("mggp", "symbolic", "genetic", "paper")
 class MGGP(ExpressionMethod):
+    title = "MGGP"
     Config = MGGPConfig
     search_space = {"max_genes": (4, 8), "max_depth": (3, 4)}
     smoke = {"population": 40, "generations": 3, "tournament": 3, "fitness_samples": 128, "max_steps": 3,

@@ -57,6 +57,7 @@ class LagrangianMLP(torch.nn.Module):
 
 @METHODS.add("mlp", "neural", "baseline", "paper")
 class MLP(TorchLagrangianMethod):
+    title = "MLP"
     Config = MLPConfig
     search_space = {"hidden": (64, 300), "lr": (1e-3, 3e-4)}
     smoke = {"hidden": 16, "layers": 2, "max_steps": 20, "eval_samples": 256}

@@ -57,6 +57,7 @@ class OperonConfig(MethodConfig):
 
 @METHODS.add("operon", "symbolic", "genetic")
 class Operon(ExpressionMethod):
+    title = "Operon"
     Config = OperonConfig
     experiments = (DIRECT,)
     not_applicable = NOT_APPLICABLE

@@ -99,6 +99,7 @@ def _probe() -> str | None:
 
 @METHODS.add("pysr", "symbolic", "genetic", "needs-julia")
 class PySR(ExpressionMethod):
+    title = "PySR"
     Config = PySRConfig
     search_space = {"maxsize": (20, 40)}
     smoke = {"populations": 2, "population_size": 20, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}

@@ -66,6 +66,7 @@ class SparseConfig(MethodConfig):
 
 @METHODS.add("sparse", "symbolic", "library")
 class SparseLagrangian(ExpressionMethod):
+    title = "sparse regression"
     Config = SparseConfig
     smoke = {"samples": 64, "max_steps": 1, "eval_samples": 128}
 

@@ -58,6 +58,8 @@ def terms(data: Dataset, j: int) -> tuple[list[str], np.ndarray]:
 class SparseTorque(Method):
     """Sparse regression of each joint's torque (see the module docstring)."""
 
+    title = "sparse torque terms"
+
     Config = SparseTorqueConfig
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "a sparse regression of the torque learns torques: the direct experiment has none"

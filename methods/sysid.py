@@ -197,6 +197,7 @@ def _smallest_eigenvalues(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
 
 @METHODS.add("sysid", "symbolic", "parametric", "baseline", "paper")
 class SysId(TorchLagrangianMethod):
+    title = "SysId"
     Config = SysIdConfig
     search_space = {"feasible": (True, False), "friction": (False, True)}
     smoke = {"max_steps": 20, "eval_samples": 256}

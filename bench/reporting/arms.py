@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.reporting.groups import group_stats, seed_statistic
-from bench.reporting.pages import block, figure, indirect_records
+from bench.reporting.pages import block, figure, indirect_records, learners as page_learners
 from bench.runner.records import Record
 
 #: the learners in the table's order, and their names there
@@ -44,7 +44,7 @@ def table(root: Path, folder: str, system: str) -> str:
     """DeLaN, the MLP and SyReNets on ``system`` (those the folder has): one column each, from its records."""
     records = [r for r in indirect_records(root, folder) if r.system == system]
     present = {r.method for r in records}
-    learners = [(m, name) for m, name in LEARNERS if m in present]
+    learners = page_learners(present, LEARNERS)
     by = {m: [r for r in records if r.method == m and r.status == "ok"] for m, _ in learners}
     rows = [("test MSE, All n (the mean over the seeds)", lambda rs: figure(group_stats(rs)["all"]["test"][0])),
             ("test MSE, Best (lowest training MSE)", lambda rs: figure(group_stats(rs)["best"]["test"][0])),

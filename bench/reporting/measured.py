@@ -11,7 +11,7 @@ from pathlib import Path
 
 from bench.evaluation.driven import describe as describe_driven, pooled
 from bench.reporting.groups import group_stats
-from bench.reporting.pages import block, figure, indirect_records
+from bench.reporting.pages import block, figure, indirect_records, learners as page_learners
 from bench.runner.records import Record
 
 #: the two splits' matrices, and how the page heads them
@@ -95,9 +95,7 @@ def learners(root: Path) -> str:
             row += (" — | |" if not c else f" {figure(c['test_mse'])} | "
                     + (times(c['test_mse'] / s['test_mse']) if s else "—") + " |") + " |" * len(WINDOWS)
         lines.append(row)
-    for method, label in LEARNERS + HYBRIDS:
-        if not any(r.method == method for records in matrices for r in records):
-            continue
+    for method, label in page_learners({r.method for records in matrices for r in records}, LEARNERS + HYBRIDS):
         cells = []
         for records, s, c in zip(matrices, standard, constant):
             cells += _learner_cells([r for r in records if r.method == method], s, c)

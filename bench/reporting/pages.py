@@ -25,6 +25,7 @@ from typing import Callable
 from bench.core.errors import UserError
 from bench.core.experiment import INDIRECT
 from bench.runner.records import Record, read_records
+from methods import METHODS
 
 BLOCK = re.compile(r"(?P<open><!-- generated (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(?P<close><!-- /generated -->)", re.S)
 
@@ -35,6 +36,19 @@ GENERATORS: dict[str, Callable[[Path], str]] = {}
 def figure(x: float) -> str:
     """A figure in a generated block: three significant digits."""
     return f"{x:.3g}"
+
+
+def learners(present, labels=()) -> list[tuple[str, str]]:
+    """The learners a page lists: every method of ``present`` (those its records hold), each once, those of
+    ``labels`` (``(method, label)`` pairs: the page's order and its own words, such as the configuration it
+    ran) first, in that order, then the others in name order under their registered names on the pages
+    (:meth:`methods.base.Method.display_name`; a hybrid's from its prior's and its residual's), so that a new
+    learner's records put it on the page without the page naming it."""
+    present = set(present)
+    named = [(m, label) for m, label in labels if m in present]
+    known = {m for m, _ in named}
+    others = sorted(present - known)
+    return named + [(m, METHODS[m].display_name() if m in METHODS else m) for m in others]
 
 
 def indirect_records(root: Path, folder: str, tuned: bool | None = False) -> list[Record]:

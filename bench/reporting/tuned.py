@@ -10,7 +10,7 @@ from collections import Counter, defaultdict
 from pathlib import Path
 
 from bench.reporting.measured import HYBRIDS, LEARNERS, MATRICES, SPLIT_NAMES, standard_model, times
-from bench.reporting.pages import block, indirect_records
+from bench.reporting.pages import block, indirect_records, learners as page_learners
 from bench.runner.records import Record
 
 #: the learners tuned beside their defaults, in the page's order, with their names there
@@ -41,11 +41,12 @@ def tuned_beside_default(root: Path) -> str:
         s = standard_model(records)
         if not s:
             continue
-        default = {m: _all_n([r for r in records if r.method == m and not r.tuned]) for m, _ in TUNED}
-        tuned = {m: _all_n([r for r in records if r.method == m and r.tuned]) for m, _ in TUNED}
-        both = [m for m, _ in TUNED if default[m] is not None and tuned[m] is not None]
+        rows = page_learners({r.method for r in records}, TUNED)
+        default = {m: _all_n([r for r in records if r.method == m and not r.tuned]) for m, _ in rows}
+        tuned = {m: _all_n([r for r in records if r.method == m and r.tuned]) for m, _ in rows}
+        both = [m for m, _ in rows if default[m] is not None and tuned[m] is not None]
         rank_d, rank_t = _ranks({m: default[m] for m in both}), _ranks({m: tuned[m] for m in both})
-        for method, label in TUNED:
+        for method, label in rows:
             if tuned[method] is None:
                 continue
             chosen = Counter(json.dumps((r.details.get("tuning") or {}).get("chosen", {}), sort_keys=True)

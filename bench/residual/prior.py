@@ -69,7 +69,7 @@ def rounds_run(result: ResidualResult) -> int:
 
 
 PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the feasible rigid body and its named laws)",
-                             identify))
+                             identify, "the loop's model"))
 
 
 @METHODS.add("loop", "symbolic", "residual")
@@ -78,6 +78,8 @@ class Loop(Method):
     (``bench run --methods loop``, a candidate of ``bench select``): fitted by
     :func:`run` within the run's whole budget, a round its step (under a work
     budget of ``N`` steps, at most ``N`` rounds)."""
+
+    title = "the residual loop's model from SysId"
 
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "the residual loop traces torques: the direct experiment has none"

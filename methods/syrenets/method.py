@@ -34,6 +34,8 @@ class SyReNets(Equations, TorchLagrangianMethod):
     ``frozen``, ``optimizer`` and ``scheduler`` read it.
     """
 
+    title = "SyReNets"
+
     stackable = True  # its own stacked loop: methods.syrenets.stacked
     Config = SyReNetsConfig
     search_space = {"layers": (2, 3), "heads": (6, 12)}
