@@ -145,69 +145,98 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     Returns the newly accepted candidates, per step the statistics of the
     best candidate, accepted or not, and any structural finding.
     """
-    y = target.ravel()
-    n_rows = len(y)
-    held = row_folds(data)
-    # the held-out gain a candidate must reach (see the module docstring)
-    min_gain = MIN_HELDOUT_GAIN if data.trajectories() else min(MIN_HELDOUT_GAIN, MIN_HELDOUT_CHI2 / n_rows)
-    floor = ROUNDOFF * float(np.mean(data.tau**2))
-    fixed = np.zeros((n_rows, 0)) if fixed is None else fixed
-    F_all = {c: c.column(data, "indirect") for c in pool if c not in exclude}
-    F_all.update({c: np.asarray(f, dtype=np.float64) for c, f in (given or {}).items()})
-    F_all = {c: f for c, f in F_all.items() if np.isfinite(f).all()}  # a term not finite on the data is no candidate
-    accepted, steps, structural = [], [], []
-    taken = {slot(t) for t in exclude}
-    steps_taken: list[dict] = []
+    return Tracer(target, data, pool, fixed, exclude, max_steps, deadline, given, runner_up).run()
 
-    nuisance: list[Term] = []  # what structural findings explain: in every later fit, in no model
-    mismatched: list[tuple] = []  # named laws an open-ended term explained far better: (group, term, margin, size, rms)
-    runners_up: list[tuple] = []  # (accepted group, the next best group that passed every test)
 
-    def _rival(chosen: dict) -> dict | None:
+class Tracer:
+    """One trace (:func:`trace`): its data, the candidates' columns, what the steps have accepted so far, the
+    design's basis and residual, and each step's held-out fits. :meth:`run` takes the steps and returns the
+    :class:`Trace`; the other methods are what a step asks of a candidate (its statistics beside the design,
+    its group and refined shape, its physical sense, its equivalents and rivals)."""
+
+    def __init__(self, target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
+                 exclude: list[Term] = (), max_steps: int | None = None, deadline: float = math.inf,
+                 given: dict[Term, np.ndarray] | None = None, runner_up: bool = False):
+        self.data, self.pool, self.fixed, self.exclude = data, pool, fixed, exclude
+        self.max_steps, self.deadline, self.given, self.runner_up = max_steps, deadline, given, runner_up
+        #: the step's residual off the design, its sum of squares, and its held-out fits and error
+        self.r, self.rss_now, self.held_fits, self.before = None, None, None, None
+        self.y = target.ravel()
+        self.n_rows = len(self.y)
+        self.held = row_folds(self.data)
+        self.min_gain = MIN_HELDOUT_GAIN if self.data.trajectories() else \
+            min(MIN_HELDOUT_GAIN, MIN_HELDOUT_CHI2 / self.n_rows)
+        self.floor = ROUNDOFF * float(np.mean(self.data.tau**2))
+        self.fixed = np.zeros((self.n_rows, 0)) if self.fixed is None else self.fixed
+        self.F_all = {c: c.column(self.data, "indirect") for c in self.pool if c not in self.exclude}
+        self.F_all.update({c: np.asarray(f, dtype=np.float64) for c, f in (self.given or {}).items()})
+        # a term not finite on the data is no candidate
+        self.F_all = {c: f for c, f in self.F_all.items() if np.isfinite(f).all()}
+        self.accepted, self.steps, self.structural = [], [], []
+        self.taken = {slot(t) for t in self.exclude}
+        self.steps_taken: list[dict] = []
+        self.nuisance: list[Term] = []  # what structural findings explain: in every later fit, in no model
+        # named laws an open-ended term explained far better: (group, term, margin, size, rms)
+        self.mismatched: list[tuple] = []
+        self.runners_up: list[tuple] = []  # (accepted group, the next best group that passed every test)
+        self.off: dict[Term, np.ndarray] = {}  # this step's candidate columns projected off the design
+        self.spanned: set[Term] = set()  # candidates the design already expresses (the model's own friction columns)
+        self.Q, self.in_basis = orthonormal_basis(self.fixed), set()
+        self.named = list(self.given or ()) + [c for c in self.pool if is_named(c)]
+        self.tiers = [[c for c in self.named if c in self.F_all],
+                      [c for c in self.pool if not is_named(c) and c in self.F_all]]
+        self.declared_order: dict = {}
+        for c in ([c for c in self.pool if is_named(c)] + list(self.given or ())
+                  + [c for c in self.pool if not is_named(c)]):
+            self.declared_order.setdefault(slot(c), (len(self.declared_order),))
+        self.equivalents: list[tuple] = []
+
+    def _rival(self, chosen: dict) -> dict | None:
         """The open-ended term that explains the residual better than the named law
         ``chosen`` by more than :data:`MIN_BIC_DROP` and passes every test, or ``None``:
         then the named law would be the nearest one the vocabulary has, not the right one."""
-        others = [c for c in tiers[1] if slot(c) not in taken]
+        others = [c for c in self.tiers[1] if slot(c) not in self.taken]
         if not others:
             return None
-        project(others)
-        k_now = fixed.shape[1] + len(nuisance) + len(accepted)
-        best = max((stats(c, k_now, rss_now) for c in others), key=lambda b: b["bic_drop"])
-        if not best["bic_drop"] > chosen["bic_drop"] + MIN_BIC_DROP or physical(best) is not None:
+        self.project(others)
+        k_now = self.fixed.shape[1] + len(self.nuisance) + len(self.accepted)
+        best = max((self.stats(c, k_now, self.rss_now) for c in others), key=lambda b: b["bic_drop"])
+        if not best["bic_drop"] > chosen["bic_drop"] + MIN_BIC_DROP or self.physical(best) is not None:
             return None
-        ok, info = _passes(best, before, held_cv, min_gain)
+        ok, info = _passes(best, self.before, self.held_cv, self.min_gain)
         if not ok:
             return None
-        steps.append({**info, "rival_of": " + ".join(label(t) for t in chosen["group"])})
+        self.steps.append({**info, "rival_of": " + ".join(label(t) for t in chosen["group"])})
         return best
 
-    def _size(best: dict) -> float:
+    def _size(self, best: dict) -> float:
         """The root mean square of the torque ``best``'s term fits, over its joints' rows."""
-        column = best["coefs"][-1] * F_all[best["candidate"]]
-        rows = np.zeros(data.dof, dtype=bool)
+        column = best["coefs"][-1] * self.F_all[best["candidate"]]
+        rows = np.zeros(self.data.dof, dtype=bool)
         rows[list(best["candidate"].joints)] = True
-        mine = column.reshape(-1, data.dof)[:, rows]
+        mine = column.reshape(-1, self.data.dof)[:, rows]
         return float(np.sqrt(np.mean(mine**2)))
 
-    def held_residuals(group: list[Term]) -> np.ndarray:
+    def held_residuals(self, group: list[Term]) -> np.ndarray:
         """The held-out residual on each scored row with ``group``'s columns beside this step's design."""
-        return held_fits.residuals(np.column_stack([F_all[t] for t in group]))
+        return self.held_fits.residuals(np.column_stack([self.F_all[t] for t in group]))
 
-    def params(best: dict) -> int:
+    def params(self, best: dict) -> int:
         """A candidate's parameters: its group's coefficients, and its shape."""
         return len(best["group"]) + (best["candidate"].shape is not None)
 
-    def redundant(chosen: dict, other: dict, k_now: int) -> bool:
+    def redundant(self, chosen: dict, other: dict, k_now: int) -> bool:
         """Whether each of the two candidates adds nothing significant beside the other (a BIC
         drop of at most :data:`MIN_BIC_DROP`, residuals floored at round-off): they explain the
         same part of the residual, rather than two parts that a later step would take both of."""
         both = chosen["group"] + [t for t in other["group"] if t not in chosen["group"]]
-        rss_both = max(beside(both, k_now)[2], floor * n_rows)
-        k_both = k_now + params(chosen) + params(other)
-        return all(bic(max(one["rss"], floor * n_rows), n_rows, k_now + params(one)) - bic(rss_both, n_rows, k_both)
+        rss_both = max(self.beside(both, k_now)[2], self.floor * self.n_rows)
+        k_both = k_now + self.params(chosen) + self.params(other)
+        return all(bic(max(one["rss"], self.floor * self.n_rows), self.n_rows, k_now + self.params(one))
+                   - bic(rss_both, self.n_rows, k_both)
                    <= MIN_BIC_DROP for one in (chosen, other))
 
-    def _equivalents(chosen: dict, info: dict, k_now: int, rss_now: float):
+    def _equivalents(self, chosen: dict, info: dict, k_now: int, rss_now: float):
         """The candidates (of either tier) that pass every test, are physical, explain the same part
         of the residual as ``chosen`` (as much of it, and nothing beside it: :func:`redundant`) and
         whose held-out error differs from ``chosen``'s by no more than the standard error of the difference
@@ -215,76 +244,78 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         one by :data:`EQUIVALENCE_RULE`, its step's statistics, the others, and the JSON's entry
         (``None`` where there is none)."""
         mine = {slot(t) for t in chosen["group"]}
-        others = [c for tier in tiers for c in tier if slot(c) not in taken and slot(c) not in mine]
+        others = [c for tier in self.tiers for c in tier if slot(c) not in self.taken and slot(c) not in mine]
         if not others:
             return chosen, info, [], None
-        r_c = held_residuals(chosen["group"])
+        r_c = self.held_residuals(chosen["group"])
         cv_c = float(np.nanmean(r_c**2))
 
         def rival(best: dict):
             """``(best, its step's statistics, held-out error, standard error of the difference)``
             where ``best`` is ``chosen``'s equal on these data, else ``None``."""
-            if {slot(t) for t in best["group"]} & mine or physical(best) is not None:
+            if {slot(t) for t in best["group"]} & mine or self.physical(best) is not None:
                 return None
             if rss_now - best["rss"] < AS_WELL * (rss_now - chosen["rss"]):  # it explains less of the residual
                 return None
-            if not redundant(chosen, best, k_now):  # it explains something else too: another cause, not a rival
+            if not self.redundant(chosen, best, k_now):  # it explains something else too: another cause, not a rival
                 return None
-            ok, other_info = _passes(best, before, held_cv, min_gain)
+            ok, other_info = _passes(best, self.before, self.held_cv, self.min_gain)
             if not ok:
                 return None
-            r_b = held_residuals(best["group"])
+            r_b = self.held_residuals(best["group"])
             cv_b = float(np.nanmean(r_b**2))
-            difference, stderr = paired_difference(data, r_c, r_b)
-            if abs(difference) <= max(stderr, SAME * max(cv_b, cv_c)) or max(cv_b, cv_c) <= floor:
+            difference, stderr = paired_difference(self.data, r_c, r_b)
+            if abs(difference) <= max(stderr, SAME * max(cv_b, cv_c)) or max(cv_b, cv_c) <= self.floor:
                 return best, other_info, cv_b, stderr
             return None
 
-        project(t for c in others for t in group(c))
+        self.project(t for c in others for t in self.group(c))
         singles, seen = [], set()
-        for best in sorted((stats(c, k_now, rss_now) for c in others), key=lambda b: -b["bic_drop"]):
+        for best in sorted((self.stats(c, k_now, rss_now) for c in others), key=lambda b: -b["bic_drop"]):
             if slot(best["candidate"]) in seen or not best["bic_drop"] > MIN_BIC_DROP:
                 continue
             seen.add(slot(best["candidate"]))
-            if not {slot(t) for t in best["group"]} & mine and physical(best) is None:
+            if not {slot(t) for t in best["group"]} & mine and self.physical(best) is None:
                 singles.append(best)
-        found = [r for r in map(rival, singles) if r is not None]
-        if not found and whole(chosen["candidate"]) and len(singles) >= 2:
+        found = [x for x in map(rival, singles) if x is not None]
+        if not found and self.whole(chosen["candidate"]) and len(singles) >= 2:
             # a law of the whole system is a sum of terms each of which others may give: the best pair stands too
             first = singles[0]
-            pairs = [stats(b["candidate"], k_now, rss_now, first["group"] + b["group"]) for b in singles[1:PAIRED + 1]
+            pairs = [self.stats(b["candidate"], k_now, rss_now, first["group"] + b["group"])
+                     for b in singles[1:PAIRED + 1]
                      if not {slot(t) for t in b["group"]} & {slot(t) for t in first["group"]}]
             pairs = [p for p in pairs if len(p["group"]) == len(first["group"]) + 1 and p["bic_drop"] > MIN_BIC_DROP]
             if pairs:
-                found = [r for r in [rival(min(pairs, key=lambda p: p["rss"]))] if r is not None]
+                found = [x for x in [rival(min(pairs, key=lambda p: p["rss"]))] if x is not None]
         if not found:
             return chosen, info, [], None
-        every = sorted([(chosen, info, cv_c, None)] + found, key=lambda e: (params(e[0]), declared(e[0]["candidate"])))
+        every = sorted([(chosen, info, cv_c, None)] + found,
+                       key=lambda e: (self.params(e[0]), self.declared(e[0]["candidate"])))
         kept = every[0][0]
         name = {id(b): " + ".join(label(t) for t in b["group"]) for b, *_ in every}
         entry = {"kept": name[id(kept)], "equivalent": [name[id(b)] for b, *_ in every if b is not kept],
                  "heldout_mse": {name[id(b)]: cv for b, _, cv, _ in every},
                  "difference_stderr": {name[id(b)]: se for b, _, _, se in found},
-                 "parameters": {name[id(b)]: params(b) for b, *_ in every}, "rule": EQUIVALENCE_RULE}
+                 "parameters": {name[id(b)]: self.params(b) for b, *_ in every}, "rule": EQUIVALENCE_RULE}
         return kept, every[0][1], [b for b, *_ in every if b is not kept], entry
 
-    def whole(term: Term) -> bool:
+    def whole(self, term: Term) -> bool:
         """Whether ``term`` is a law of the whole system (a payload, a gravity tilt), not of one joint or pair."""
         return is_named(term) and term.place != "sensor" and EFFECTS[term.name].arity == 0
 
-    def declared(term: Term) -> tuple:
+    def declared(self, term: Term) -> tuple:
         """Where ``term`` stands in the order the candidates are declared in (see :data:`EQUIVALENCE_RULE`)."""
-        return declared_order.get(slot(term), (len(declared_order),))
+        return self.declared_order.get(slot(term), (len(self.declared_order),))
 
-    def design(cands):
-        cands = nuisance + list(cands)
-        return np.column_stack([fixed] + [F_all[c][:, None] for c in cands]) if cands else fixed
+    def design(self, cands):
+        cands = self.nuisance + list(cands)
+        return np.column_stack([self.fixed] + [self.F_all[c][:, None] for c in cands]) if cands else self.fixed
 
-    def held_cv(group: list[Term]) -> float:
+    def held_cv(self, group: list[Term]) -> float:
         """The held-out error with ``group``'s columns beside this step's design (``held_fits``)."""
-        return held_fits.cv(np.column_stack([F_all[t] for t in group]))
+        return self.held_fits.cv(np.column_stack([self.F_all[t] for t in group]))
 
-    def group(c: Term) -> list[Term]:
+    def group(self, c: Term) -> list[Term]:
         """A shaped candidate with the other parts of the law it leads
         (:func:`bench.physics.laws.led_by`; a Stribeck hump comes with Coulomb
         and viscous friction on its joint), where those are not in the model yet."""
@@ -292,198 +323,193 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
         if law is None or not law.optional:
             return [c]
         mates = [EFFECTS[n].term(c.joint, shape=c.shape if EFFECTS[n].shaped else None) for n in law.optional]
-        mates = [t for t in mates if slot(t) not in taken]
+        mates = [t for t in mates if slot(t) not in self.taken]
         for t in mates:
-            if t not in F_all:
-                F_all[t] = t.column(data, "indirect")
+            if t not in self.F_all:
+                self.F_all[t] = t.column(self.data, "indirect")
         return mates + [c]
 
-    def refine(c: Term) -> Term:
+    def refine(self, c: Term) -> Term:
         """``c`` with its shape at the least residual beside the accepted columns and its companions."""
         effect = EFFECTS[c.name]
-        mates = group(c)[:-1]
-        Qm = Q if not mates else np.hstack([Q, orthonormal_basis(project_off(Q, np.column_stack([F_all[t] for t in mates])))])
-        refined = effect.term(c.joint, shape=refined_shape(Qm, y - Qm @ (Qm.T @ y), c, data))
-        column = refined.column(data, "indirect")
+        mates = self.group(c)[:-1]
+        Qm = self.Q if not mates else np.hstack(
+            [self.Q, orthonormal_basis(project_off(self.Q, np.column_stack([self.F_all[t] for t in mates])))])
+        refined = effect.term(c.joint, shape=refined_shape(Qm, self.y - Qm @ (Qm.T @ self.y), c, self.data))
+        column = refined.column(self.data, "indirect")
         if not np.isfinite(column).all():
             return c
-        F_all[refined] = column
+        self.F_all[refined] = column
         return refined
 
-    off: dict[Term, np.ndarray] = {}  # this step's candidate columns projected off the design
-    spanned: set[Term] = set()  # candidates the design already expresses (the model's own friction columns)
-
-    def project(terms) -> None:
+    def project(self, terms) -> None:
         """Project the columns of ``terms`` not yet projected this step, in one product;
         a column the design already spans (its part off it at round-off) is noted in ``spanned``."""
-        new = [t for t in dict.fromkeys(terms) if t not in off]
+        new = [t for t in dict.fromkeys(terms) if t not in self.off]
         if new:
-            F = np.column_stack([F_all[t] for t in new])
-            P = project_off(Q, F)
-            off.update({t: P[:, i] for i, t in enumerate(new)})
+            F = np.column_stack([self.F_all[t] for t in new])
+            P = project_off(self.Q, F)
+            self.off.update({t: P[:, i] for i, t in enumerate(new)})
             left = np.linalg.norm(P, axis=0) <= SPANNED * np.linalg.norm(F, axis=0)
-            spanned.update(t for t, inside in zip(new, left) if inside)
+            self.spanned.update(t for t, inside in zip(new, left) if inside)
 
-    def beside(terms: list[Term], k: int):
-        project(terms)
-        return _fit_beside(r, np.column_stack([off[t] for t in terms]), k)
+    def beside(self, terms: list[Term], k: int):
+        self.project(terms)
+        return _fit_beside(self.r, np.column_stack([self.off[t] for t in terms]), k)
 
-    def stats(c: Term, k_now: int, rss_now: float, g: list[Term] | None = None) -> dict:
+    def stats(self, c: Term, k_now: int, rss_now: float, g: list[Term] | None = None) -> dict:
         # Frisch-Waugh-Lovell: the group's coefficients, errors and residual are those of its
         # columns' part orthogonal to the design, fitted to the design's residual
-        g = group(c) if g is None else g
-        coef, stderr, rss = beside(g, k_now)
-        if spanned & set(g):  # nothing the model could already express is a candidate, nor a finding
+        g = self.group(c) if g is None else g
+        coef, stderr, rss = self.beside(g, k_now)
+        if self.spanned & set(g):  # nothing the model could already express is a candidate, nor a finding
             return {"candidate": c, "group": g, "bic_drop": -math.inf, "coef": 0.0, "stderr": math.inf,
                     "coefs": [0.0] * len(g), "stderrs": [math.inf] * len(g), "rss": rss_now}
         if len(g) > 1:  # companions the data do not support leave the law (a Stribeck law without viscous friction)
             weak = [t for t, a, e in zip(g[:-1], coef, stderr) if not abs(a) >= MIN_T * e]
             if weak:
                 g = [t for t in g if t not in weak]
-                coef, stderr, rss = beside(g, k_now)
+                coef, stderr, rss = self.beside(g, k_now)
         k_new = k_now + len(g) + (c.shape is not None)  # a shape is a parameter too
-        drop = bic(rss_now, n_rows, k_now) - bic(rss, n_rows, k_new)
+        drop = bic(rss_now, self.n_rows, k_now) - bic(rss, self.n_rows, k_new)
         if len(g) > 1:
             # a law is judged by what it adds to its companions: they compete on their own as well
-            rss_mates = beside(g[:-1], k_now)[2]
-            extra = bic(rss_mates, n_rows, k_new - 2) - bic(rss, n_rows, k_new)
+            rss_mates = self.beside(g[:-1], k_now)[2]
+            extra = bic(rss_mates, self.n_rows, k_new - 2) - bic(rss, self.n_rows, k_new)
             drop = drop if extra > MIN_BIC_DROP else -math.inf
         return {"candidate": c, "group": g, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]),
                 "coefs": [float(v) for v in coef[-len(g):]], "stderrs": [float(v) for v in stderr[-len(g):]], "rss": rss}
 
-    def limit(c: Term, k_now: int, rss_now: float) -> dict | None:
+    def limit(self, c: Term, k_now: int, rss_now: float) -> dict | None:
         """The statistics of the limit law a shaped candidate at an end of its
         range stands for (:attr:`bench.physics.laws.Law.limits`: the first at the
         low end, the second at the high end) with the companions of the law it
         leads; ``None`` where that limit adds nothing new."""
         law = led_by(c.name)
         parts = law.limits[c.name][0 if c.shape < math.sqrt(SHAPE_LIMITS[0] * SHAPE_LIMITS[1]) else 1]
-        new = [t for t in (EFFECTS[p].term(c.joint) for p in parts) if slot(t) not in taken and t in F_all]
+        new = [t for t in (EFFECTS[p].term(c.joint) for p in parts) if slot(t) not in self.taken and t in self.F_all]
         if not new:
             return None
-        mates = [t for t in group(c)[:-1] if t not in new]
-        return stats(new[-1], k_now, rss_now, mates + new)
+        mates = [t for t in self.group(c)[:-1] if t not in new]
+        return self.stats(new[-1], k_now, rss_now, mates + new)
 
-    def physical(best: dict) -> tuple[Term, float, float] | None:
+    def physical(self, best: dict) -> tuple[Term, float, float] | None:
         """The first member of the candidate's group with an impossible coefficient, or ``None``."""
         for t, a, e in zip(best["group"], best["coefs"], best["stderrs"]):
             if not admissible(t, a):
                 return t, a, e
         return None
 
-    # the design's orthonormal basis, extended by each step's new columns
-    Q, in_basis = orthonormal_basis(fixed), set()
-    # the named effects first; the open-ended terms only where no named effect passes
-    named = list(given or ()) + [c for c in pool if is_named(c)]
-    tiers = [[c for c in named if c in F_all], [c for c in pool if not is_named(c) and c in F_all]]
-    declared_order: dict = {}
-    for c in [c for c in pool if is_named(c)] + list(given or ()) + [c for c in pool if not is_named(c)]:
-        declared_order.setdefault(slot(c), (len(declared_order),))
-    equivalents: list[tuple] = []
-    while max_steps is None or len(steps_taken) < max_steps:
-        k_now = fixed.shape[1] + len(nuisance) + len(accepted)
-        new = [t for t in nuisance + accepted if t not in in_basis]
-        Q = extend_basis(Q, np.column_stack([F_all[t] for t in new])) if new else Q
-        in_basis.update(new)
-        r = y - Q @ (Q.T @ y)
-        rss_now = float(r @ r)
-        off.clear()
-        if rss_now / n_rows <= floor:
-            steps.append({"stop": "the residual is at round-off level", "residual_mse": rss_now / n_rows})
-            break
-        if now() > deadline:
-            steps.append({"stop": BUDGET_STOP})
-            break
-        chosen = inadmissible = before = None
-        for tier in tiers:
-            # a shaped candidate (a Stribeck velocity from a grid) stands for its best shape: the
-            # best of its slot (a physical one first) is refined, the others of that slot dropped
-            project(t for c in tier if slot(c) not in taken for t in group(c))  # all at once: one matrix product
-            ranked = sorted((stats(c, k_now, rss_now) for c in tier if slot(c) not in taken),
-                            key=lambda b: (physical(b) is not None, -b["bic_drop"]))
-            seen, unique = set(), []
-            for best in ranked:
-                if slot(best["candidate"]) in seen:
-                    continue
-                seen.add(slot(best["candidate"]))
-                if refinable(best["candidate"]) and best["bic_drop"] > MIN_BIC_DROP:
-                    refined = refine(best["candidate"])
-                    if at_limit(refined.shape):  # there it is the simpler law it contains: that law stands instead
-                        best = limit(refined, k_now, rss_now)
-                        if best is None:
-                            continue
-                    else:
-                        best = stats(refined, k_now, rss_now)
-                unique.append(best)
-            ranked = sorted(unique, key=lambda b: -b["bic_drop"])
-            tried = 0
-            for best in ranked:  # the best first; past an impossible coefficient, the next best that fits as well
-                if inadmissible is not None and rss_now - best["rss"] < AS_WELL * (rss_now - inadmissible["rss"]):
-                    break
-                if before is None:
-                    held_fits = FoldFits(design(accepted), y, held)
-                    before = held_fits.cv()
-                ok, info = _passes(best, before, held_cv, min_gain)
-                impossible = physical(best)
-                if chosen is not None and not (ok and impossible is None):  # no runner-up
+    def run(self) -> Trace:
+        """The steps, until one accepts nothing (or ``max_steps`` were taken, or the deadline passed)."""
+        while self.max_steps is None or len(self.steps_taken) < self.max_steps:
+            k_now = self.fixed.shape[1] + len(self.nuisance) + len(self.accepted)
+            new = [t for t in self.nuisance + self.accepted if t not in self.in_basis]
+            self.Q = extend_basis(self.Q, np.column_stack([self.F_all[t] for t in new])) if new else self.Q
+            self.in_basis.update(new)
+            self.r = self.y - self.Q @ (self.Q.T @ self.y)
+            self.rss_now = float(self.r @ self.r)
+            self.off.clear()
+            if self.rss_now / self.n_rows <= self.floor:
+                self.steps.append({"stop": "the residual is at round-off level",
+                                   "residual_mse": self.rss_now / self.n_rows})
+                break
+            if now() > self.deadline:
+                self.steps.append({"stop": BUDGET_STOP})
+                break
+            chosen = inadmissible = self.before = None
+            for tier in self.tiers:
+                # a shaped candidate (a Stribeck velocity from a grid) stands for its best shape: the
+                # best of its slot (a physical one first) is refined, the others of that slot dropped
+                # all at once: one matrix product
+                self.project(t for c in tier if slot(c) not in self.taken for t in self.group(c))
+                ranked = sorted((self.stats(c, k_now, self.rss_now) for c in tier if slot(c) not in self.taken),
+                                key=lambda b: (self.physical(b) is not None, -b["bic_drop"]))
+                seen, unique = set(), []
+                for best in ranked:
+                    if slot(best["candidate"]) in seen:
+                        continue
+                    seen.add(slot(best["candidate"]))
+                    if refinable(best["candidate"]) and best["bic_drop"] > MIN_BIC_DROP:
+                        refined = self.refine(best["candidate"])
+                        if at_limit(refined.shape):  # there it is the simpler law it contains: that law stands instead
+                            best = self.limit(refined, k_now, self.rss_now)
+                            if best is None:
+                                continue
+                        else:
+                            best = self.stats(refined, k_now, self.rss_now)
+                    unique.append(best)
+                ranked = sorted(unique, key=lambda b: -b["bic_drop"])
+                tried = 0
+                for best in ranked:  # the best first; past an impossible coefficient, the next best that fits as well
+                    if inadmissible is not None and \
+                            self.rss_now - best["rss"] < AS_WELL * (self.rss_now - inadmissible["rss"]):
+                        break
+                    if self.before is None:
+                        self.held_fits = FoldFits(self.design(self.accepted), self.y, self.held)
+                        self.before = self.held_fits.cv()
+                    ok, info = _passes(best, self.before, self.held_cv, self.min_gain)
+                    impossible = self.physical(best)
+                    if chosen is not None and not (ok and impossible is None):  # no runner-up
+                        tried += 1
+                        if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
+                            break
+                        continue
+                    if ok and impossible is None:
+                        if chosen is not None:  # the runner-up: the step's choice is made
+                            self.runners_up.append((chosen["group"], best["group"]))
+                            self.steps.append({**info, "runner_up_of": " + ".join(label(t) for t in chosen["group"])})
+                            break
+                        chosen_info = {**info, "accepted": True}
+                        self.steps.append(chosen_info)
+                        chosen = best
+                        if not self.runner_up or not is_named(best["candidate"]):
+                            break
+                        continue
+                    if ok:
+                        if inadmissible is None:
+                            self.steps.append({**info, "accepted": False, "inadmissible": label(impossible[0])})
+                            inadmissible = {**best, "impossible": impossible}
+                        continue
+                    if inadmissible is None and not tried:
+                        self.steps.append(info)  # the best candidate, rejected
                     tried += 1
                     if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
-                        break
-                    continue
-                if ok and impossible is None:
-                    if chosen is not None:  # the runner-up: the step's choice is made
-                        runners_up.append((chosen["group"], best["group"]))
-                        steps.append({**info, "runner_up_of": " + ".join(label(t) for t in chosen["group"])})
-                        break
-                    chosen_info = {**info, "accepted": True}
-                    steps.append(chosen_info)
-                    chosen = best
-                    if not runner_up or not is_named(best["candidate"]):
-                        break
-                    continue
-                if ok:
-                    if inadmissible is None:
-                        steps.append({**info, "accepted": False, "inadmissible": label(impossible[0])})
-                        inadmissible = {**best, "impossible": impossible}
-                    continue
-                if inadmissible is None and not tried:
-                    steps.append(info)  # the best candidate, rejected
-                tried += 1
-                if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
-                    break  # weaker candidates explain less still
-            if chosen is not None or inadmissible is not None:
-                break  # an impossible coefficient is not handed to the open-ended terms to mimic
-        if chosen is not None and now() <= deadline:
-            kept, kept_info, others, entry = _equivalents(chosen, chosen_info, k_now, rss_now)
-            if entry is not None:
-                if kept is not chosen:  # the rule keeps another: this step's choice and runner-up follow it
-                    chosen_info.update(accepted=False, equivalent_of=entry["kept"])
-                    steps.append({**kept_info, "accepted": True, "chosen_by": EQUIVALENCE_RULE})
-                    if runners_up and runners_up[-1][0] is chosen["group"]:
-                        runner = runners_up[-1][1]
-                        runners_up[-1] = (kept["group"], chosen["group"] if runner == kept["group"] else runner)
-                    chosen = kept
-                equivalents.append((kept["group"], [b["group"] for b in others], entry))
-        if chosen is not None and is_named(chosen["candidate"]):
-            rival = _rival(chosen)
-            if rival is not None:
-                mismatched.append((chosen["group"], rival["candidate"], rival["bic_drop"] - chosen["bic_drop"],
-                                   _size(rival), math.sqrt(rss_now / n_rows)))
-        if chosen is None:
-            if inadmissible is None:
-                break
-            # the finding explains its share of the residual, so that no admissible term mimics it;
-            # the selection goes on for what else is there
-            structural.append(inadmissible["impossible"])
-            wrong = inadmissible["impossible"][0]
-            nuisance.append(wrong)  # its companions (a law's Coulomb part, say) stay candidates
-            taken.add(slot(wrong))
-            continue
-        accepted.extend(chosen["group"])
-        steps_taken.append(chosen)
-        taken.update(slot(t) for t in chosen["group"])
-        rss_now = chosen["rss"]
-    return Trace(accepted, steps, structural, mismatched, runners_up, equivalents)
+                        break  # weaker candidates explain less still
+                if chosen is not None or inadmissible is not None:
+                    break  # an impossible coefficient is not handed to the open-ended terms to mimic
+            if chosen is not None and now() <= self.deadline:
+                kept, kept_info, others, entry = self._equivalents(chosen, chosen_info, k_now, self.rss_now)
+                if entry is not None:
+                    if kept is not chosen:  # the rule keeps another: this step's choice and runner-up follow it
+                        chosen_info.update(accepted=False, equivalent_of=entry["kept"])
+                        self.steps.append({**kept_info, "accepted": True, "chosen_by": EQUIVALENCE_RULE})
+                        if self.runners_up and self.runners_up[-1][0] is chosen["group"]:
+                            runner = self.runners_up[-1][1]
+                            self.runners_up[-1] = (kept["group"],
+                                                   chosen["group"] if runner == kept["group"] else runner)
+                        chosen = kept
+                    self.equivalents.append((kept["group"], [b["group"] for b in others], entry))
+            if chosen is not None and is_named(chosen["candidate"]):
+                rival = self._rival(chosen)
+                if rival is not None:
+                    self.mismatched.append((chosen["group"], rival["candidate"], rival["bic_drop"] - chosen["bic_drop"],
+                                       self._size(rival), math.sqrt(self.rss_now / self.n_rows)))
+            if chosen is None:
+                if inadmissible is None:
+                    break
+                # the finding explains its share of the residual, so that no admissible term mimics it;
+                # the selection goes on for what else is there
+                self.structural.append(inadmissible["impossible"])
+                wrong = inadmissible["impossible"][0]
+                self.nuisance.append(wrong)  # its companions (a law's Coulomb part, say) stay candidates
+                self.taken.add(slot(wrong))
+                continue
+            self.accepted.extend(chosen["group"])
+            self.steps_taken.append(chosen)
+            self.taken.update(slot(t) for t in chosen["group"])
+            self.rss_now = chosen["rss"]
+        return Trace(self.accepted, self.steps, self.structural, self.mismatched, self.runners_up, self.equivalents)
 
 
 def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:
