@@ -97,6 +97,9 @@ class Method(FittedModel):
     name: ClassVar[str] = "unnamed"
     #: the method's name on the pages and in tables' prose (:meth:`display_name`); ``""``: its registered name
     title: ClassVar[str] = ""
+    #: what the method is, in a sentence or a few: its row of docs/methods_and_systems.md, which ``python -m
+    #: bench index`` writes from the registry
+    summary: ClassVar[str] = ""
     tags: ClassVar[frozenset[str]] = frozenset()
     Config: ClassVar[type] = MethodConfig
     #: overrides of ``Config`` for a tiny CI run; each method declares its own

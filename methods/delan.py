@@ -261,6 +261,11 @@ def _init(layer: torch.nn.Linear, gain: float, bias: float) -> None:
 @METHODS.add("delan", "neural", "structured", "baseline")
 class DeLaN(TorchLagrangianMethod):
     title = "DeLaN"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("Deep Lagrangian Networks (Lutter, Ritter & Peters, 2019): L = ½ q̇ᵀH(q)q̇ − V(q) with H = ΛΛᵀ + "
+               "εI, Λ lower-triangular with a positive diagonal; a network of q (2 × 64 softplus) with heads for "
+               "Λ's diagonal and its lower part, and one of the same shape for V, so that H is positive definite "
+               "by construction; trained through the one transform with its own forward derivatives")
     Config = DeLaNConfig
     search_space = {"hidden": (64, 128), "lr": (1e-2, 1e-3)}
     smoke = {"hidden": 16, "max_steps": 20, "batch_size": 64, "eval_samples": 256, "compile": False}

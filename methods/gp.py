@@ -129,6 +129,11 @@ class GaussianProcess(Method):
     """A sparse GP per joint of the torque (see the module docstring)."""
 
     title = "GP"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("a sparse Gaussian process of the torque, one per joint (Nguyen-Tuong & Peters, 2010), a scaled "
+               "RBF kernel with one length per input, learned from inducing points (Hensman, Matthews & "
+               "Ghahramani, 2015) on GPyTorch; indirect experiment only, and a residual learner of the hybrids "
+               "(`standard+gp`, `feasible+gp`)")
 
     Config = GPConfig
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)

@@ -179,6 +179,10 @@ def _placeholder(name: str, arity: int):
 @METHODS.add("mggp", "symbolic", "genetic", "paper")
 class MGGP(ExpressionMethod):
     title = "MGGP"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("multigene genetic programming on DEAP (GPTIPS-like): L = a0 + Σ a_k gene_k with least-squares "
+               "weights; indirectly the weights are fitted on the genes' Euler–Lagrange images, computed by "
+               "second-order forward-mode evaluation")
     Config = MGGPConfig
     search_space = {"max_genes": (4, 8), "max_depth": (3, 4)}
     smoke = {"population": 40, "generations": 3, "tournament": 3, "fitness_samples": 128, "max_steps": 3,

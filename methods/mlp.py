@@ -58,6 +58,8 @@ class LagrangianMLP(torch.nn.Module):
 @METHODS.add("mlp", "neural", "baseline", "paper")
 class MLP(TorchLagrangianMethod):
     title = "MLP"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = "MLP Lagrangian: 5 × 300 softplus, Adam 1e-3, plateau schedule (paper §IV)"
     Config = MLPConfig
     search_space = {"hidden": (64, 300), "lr": (1e-3, 3e-4)}
     smoke = {"hidden": 16, "layers": 2, "max_steps": 20, "eval_samples": 256}

@@ -58,6 +58,8 @@ class OperonConfig(MethodConfig):
 @METHODS.add("operon", "symbolic", "genetic")
 class Operon(ExpressionMethod):
     title = "Operon"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = "Operon's C++ symbolic regression (pyoperon), direct experiment only"
     Config = OperonConfig
     experiments = (DIRECT,)
     not_applicable = NOT_APPLICABLE

@@ -100,6 +100,9 @@ def _probe() -> str | None:
 @METHODS.add("pysr", "symbolic", "genetic", "needs-julia")
 class PySR(ExpressionMethod):
     title = "PySR"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("PySR, directly and, indirectly, through a template whose loss is the Euler–Lagrange residual; "
+               "needs a Julia runtime")
     Config = PySRConfig
     search_space = {"maxsize": (20, 40)}
     smoke = {"populations": 2, "population_size": 20, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}

@@ -67,6 +67,11 @@ class SparseConfig(MethodConfig):
 @METHODS.add("sparse", "symbolic", "library")
 class SparseLagrangian(ExpressionMethod):
     title = "sparse regression"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("sparse Lagrangian regression (Lagrangian-SINDy style) over a library built from the coordinates, "
+               "with the gauge removed; the library grows as the fourth power of the coordinates (2052 terms at "
+               "7), so its design matrix is capped at 256 MB (fewer samples, recorded) and a library too large "
+               "for even that is not applicable")
     Config = SparseConfig
     smoke = {"samples": 64, "max_steps": 1, "eval_samples": 128}
 

@@ -59,6 +59,10 @@ class SparseTorque(Method):
     """Sparse regression of each joint's torque (see the module docstring)."""
 
     title = "sparse torque terms"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("a sparse regression of each joint's torque on terms a reader can name (an offset, a Coulomb "
+               "level, viscous friction, quadratic drag, a spring, gravity or cogging terms of that joint); a "
+               "symbolic residual of the hybrids (`feasible+sparse_torque`)")
 
     Config = SparseTorqueConfig
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)

@@ -198,6 +198,14 @@ def _smallest_eigenvalues(model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
 @METHODS.add("sysid", "symbolic", "parametric", "baseline", "paper")
 class SysId(TorchLagrangianMethod):
     title = "SysId"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("the system's symbolic Lagrangian with unknown physical parameters, produced by a small network "
+               "from a constant input (paper §IV); on an arm, the field's standard: the base parameters of the "
+               "regressor linear in each link's 10 inertial parameters, found by QR with column pivoting and "
+               "fitted by least squares, with their error against the URDF's; `feasible=true` identifies every "
+               "inertial parameter with each link's pseudo-inertia held positive semidefinite (Wensing, Kim & "
+               "Slotine 2017), by a semidefinite program in cvxpy, the directions the data do not identify held "
+               "at the URDF's values")
     Config = SysIdConfig
     search_space = {"feasible": (True, False), "friction": (False, True)}
     smoke = {"max_steps": 20, "eval_samples": 256}

@@ -1,5 +1,6 @@
-"""docs/methods_and_systems.md lists every registered method, with the registry's tags: a method registered
-without its row fails here."""
+"""docs/methods_and_systems.md lists every registered method, with the registry's tags and its summary: the
+table is a block ``python -m bench index`` writes from the registry, so a method registered without a summary,
+or a page not written again since, fails here."""
 
 from __future__ import annotations
 
@@ -27,3 +28,7 @@ def test_every_registered_method_has_its_row_with_its_tags():
     assert sorted(rows) == _built_in() and len(rows) >= 11
     for name in rows:
         assert rows[name] == set(METHODS.entry(name).tags), name
+
+
+def test_every_method_of_the_suite_says_what_it_is():
+    assert [n for n in _built_in() if not METHODS[n].summary] == []

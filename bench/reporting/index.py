@@ -36,7 +36,7 @@ from pathlib import Path
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write
 from bench.reporting.groups import GROUPS, HALVES_FROM, SEED_STATISTICS, TESTED_GROUP, group_stats, seed_statistic
-from bench.reporting import arms, measured, panda_log, tuned  # noqa: F401  (the pages' generated blocks)
+from bench.reporting import arms, docs, measured, panda_log, tuned  # noqa: F401  (the pages' generated blocks)
 from bench.reporting.pages import rewrite, stale_blocks
 from bench.reporting.tables import expand_variants
 from bench.runner.records import read_records
@@ -285,7 +285,8 @@ def _scratch(root: Path, path: Path) -> bool:
 def _pages(root: Path) -> list[Path]:
     top = Path(root).resolve().parent / "README.md"
     pages = [p for p in Path(root).rglob("*.md") if "records" not in p.parts and p.name != INDEX and not _scratch(root, p)]
-    return ([top] if top.is_file() else []) + sorted(pages)
+    docs = sorted((Path(root).resolve().parent / "docs").glob("*.md"))
+    return ([top] if top.is_file() else []) + sorted(pages) + docs
 
 
 def format_like(value: float, shown: str) -> str:

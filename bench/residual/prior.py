@@ -80,6 +80,10 @@ class Loop(Method):
     budget of ``N`` steps, at most ``N`` rounds)."""
 
     title = "the residual loop's model from SysId"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("the residual loop's final model as a method: SysId's rigid body and the laws of the arm, the "
+               "sensor and the drive that the data identify (a round a step); also a hybrid's prior, "
+               "`loop+RESIDUAL` (`loop+gp`)")
 
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "the residual loop traces torques: the direct experiment has none"

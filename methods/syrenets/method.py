@@ -35,6 +35,12 @@ class SyReNets(Equations, TorchLagrangianMethod):
     """
 
     title = "SyReNets"
+    #: what the method is, for docs/methods_and_systems.md (generated from the registry)
+    summary = ("SyReNets (paper §III): 3 symbolic layers × 12 selection heads over sums, products, sines and "
+               "cosines, with a shared contractive auto-encoder; reports the paper's model and two variants, "
+               "`syrenets@pruned` (the fewest terms within 10 % of its MSE, as a readable equation) and "
+               "`syrenets@refined` (that equation's structure with rounded inner constants, refitted by least "
+               "squares)")
 
     stackable = True  # its own stacked loop: methods.syrenets.stacked
     Config = SyReNetsConfig
