@@ -105,22 +105,16 @@ def prepare(method_cls, settings: dict, train: Dataset, experiment: str, device:
     (once a process: :meth:`methods.base.Method.prepare`), and the work on each
     fold's fitted samples and on all the training data that does not depend
     on the budget (a hybrid's prior: :meth:`methods.base.Method.prepare_samples`,
-    kept for the search's fits); returns its seconds."""
+    kept for the search's fits); returns its seconds. :func:`tune` does not
+    repeat it: a run's prepare phase calls this first."""
     t0 = time.perf_counter()
-    fold_set = folds(train, protocol, MAX_FOLDS)
+    samples = [train.subset(fold.fit) for fold in folds(train, protocol, MAX_FOLDS)] + [train]
     for choice in _grid(method_cls, settings)[1]:
         method = method_cls(**{**settings, **choice}).use_device(device)
         method.prepare(train, experiment)
-        _prepare_samples(method, train, fold_set, experiment, seed, system)
+        for part in samples:
+            method.prepare_samples(part, experiment, seed, system)
     return round(time.perf_counter() - t0, 3)
-
-
-def _prepare_samples(method, train: Dataset, fold_set: Folds, experiment: str, seed: int,
-                     system: System | None) -> None:
-    """``method``'s work on each fold's fitted samples and on all of ``train`` that does not depend on the budget."""
-    for fold in fold_set:
-        method.prepare_samples(train.subset(fold.fit), experiment, seed, system)
-    method.prepare_samples(train, experiment, seed, system)
 
 
 def _grid(method_cls, settings: dict) -> tuple[list[str], list[dict]]:
@@ -271,11 +265,9 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
     def make(choice: dict):
         return method_cls(**{**fixed, **choice}).use_device(device)
 
-    fold_set = folds(train, protocol, MAX_FOLDS)
-    for choice in grid:  # done already where a run's prepare phase did it
-        _prepare_samples(make(choice), train, fold_set, experiment, seed, system)
     t0 = time.perf_counter()
     timed = budget.kind == SECONDS
+    fold_set = folds(train, protocol, MAX_FOLDS)
     search = _Search(make, train, experiment, seed, system, fold_set)
     schedule = rungs(len(grid))
     deadline = t0 + (1.0 - MIN_FINAL_SHARE) * budget.seconds if timed else math.inf

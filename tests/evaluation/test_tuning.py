@@ -16,7 +16,7 @@ from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
 from bench.core.errors import ConfigError
 from bench.core.folds import folds
-from bench.evaluation.tuning import MAX_COMBINATIONS, MAX_FOLDS, PROTOCOL, check_space, combinations, tune
+from bench.evaluation.tuning import MAX_COMBINATIONS, MAX_FOLDS, PROTOCOL, check_space, combinations, prepare, tune
 from bench.evaluation.tuning import rungs as tuning_rungs
 from bench.runner.records import Record
 from bench.runner.spec import RunSpec, parse_run_id, run_id
@@ -260,9 +260,9 @@ def test_a_time_budget_that_affords_no_more_steps_ends_the_search_at_equal_work(
 
 
 def test_work_on_the_samples_that_no_budget_bounds_is_done_for_every_fold_before_the_search():
-    """A method's work on its samples that does not depend on the budget (a hybrid's prior) is done for each
-    fold's fitted samples and for all the training data before the search fits anything, once a set of samples
-    where the method keeps it (as a hybrid keeps its priors)."""
+    """A method's work on its samples that does not depend on the budget (a hybrid's prior) is done, in a run's
+    prepare phase, for each fold's fitted samples and for all the training data, before the search fits
+    anything; the search does not repeat it (each fit's own call finds it kept, as a hybrid keeps its priors)."""
     events = []
 
     class Primed(Poly):
@@ -278,6 +278,7 @@ def test_work_on_the_samples_that_no_budget_bounds_is_done_for_every_fold_before
 
     train = _trajectories()
     fold_set = folds(train, max_folds=MAX_FOLDS)
+    prepare(Primed, {}, train, "indirect")
     tune(Primed, {}, train, "indirect", 0, Budget(steps=1))
     first_fit = next(k for k, (kind, _) in enumerate(events) if kind == "fit")
     before = [n for kind, n in events[:first_fit]]
