@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from bench.reporting.docs import suite_methods
 from methods import METHODS
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "methods_and_systems.md"
@@ -18,17 +19,12 @@ def _rows() -> dict[str, set[str]]:
             for m in re.finditer(r"^\| `([a-z_]+)` \| .* \| ([a-z, -]+) \|$", table, re.M)}
 
 
-def _built_in() -> list[str]:
-    """The methods the suite registers itself (other tests' plugins register toys in the same process)."""
-    return sorted(n for n in METHODS if METHODS.entry(n).obj.__module__.split(".")[0] in ("methods", "bench"))
-
-
 def test_every_registered_method_has_its_row_with_its_tags():
     rows = _rows()
-    assert sorted(rows) == _built_in() and len(rows) >= 11
+    assert sorted(rows) == suite_methods() and len(rows) >= 11
     for name in rows:
         assert rows[name] == set(METHODS.entry(name).tags), name
 
 
 def test_every_method_of_the_suite_says_what_it_is():
-    assert [n for n in _built_in() if not METHODS[n].summary] == []
+    assert [n for n in suite_methods() if not METHODS[n].summary] == []

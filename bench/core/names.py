@@ -37,8 +37,14 @@ class MethodNameError(UserError, ValueError):
         self.hybrid = hybrid
 
 
+def is_name(text: str) -> bool:
+    """Whether ``text`` is a name of the suite's registries (a method's, a system's, a law's, an effect's, a
+    family's): letters, digits and ``_``, at least one of them."""
+    return bool(text) and text.replace("_", "").isalnum()
+
+
 def _part(text: str, what: str, name: str, hybrid: bool) -> str:
-    if not text or not text.replace("_", "").isalnum():
+    if not is_name(text):
         raise MethodNameError(f"method name {name!r}: its {what} {text!r} is not a name (letters, digits and '_')",
                               hybrid)
     return text

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Generic, Iterator, TypeVar
 
 from bench.core.errors import UserError
+from bench.core.names import is_name
 
 T = TypeVar("T")
 
@@ -112,7 +113,7 @@ class Registry(Generic[T]):
         Refuses a name that is already taken. The object's ``name`` attribute
         is set to the registered name when the object allows it.
         """
-        if not name or not name.replace("_", "").isalnum():
+        if not is_name(name):
             raise ValueError(f"{self.kind} name {name!r} must be a non-empty identifier")
 
         def decorator(obj: T) -> T:

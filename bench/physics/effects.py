@@ -123,6 +123,7 @@ import sympy
 
 from bench.core.data import Dataset
 from bench.core.errors import ConfigError
+from bench.core.names import is_name
 from bench.physics.terms import PLACES, Term
 
 
@@ -312,7 +313,7 @@ def register_effect(effect: Effect) -> Effect:
     name another effect has taken is refused (the same effect again is kept). A law of the joint is declared
     through :meth:`bench.physics.laws.Laws.declare`, which registers its effect here."""
     known = EFFECTS.get(effect.name)
-    if not effect.name or not effect.name.replace("_", "").isalnum() or (known is not None and known != effect):
+    if not is_name(effect.name) or (known is not None and known != effect):
         raise ValueError(f"an effect needs a name of its own (letters, digits, _), got {effect.name!r}")
     EFFECTS[effect.name] = effect
     return effect

@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Callable, Mapping
 
+from bench.core.names import is_name
 from bench.physics.effects import EFFECTS, Effect, register_effect
 
 #: which parts belong to which physical family: a joint carries at most one law of each (filled as laws register:
@@ -207,7 +208,7 @@ class Laws:
         (docs/extending.md); a declared name is refused again unless it is the same effect."""
         if effect.arity != 1 or effect.sensor or effect.on_system is not None:
             raise ValueError(f"{effect.name}: a law of the joint is one effect on one joint of the arm")
-        if not family or not family.replace("_", "").isalnum():
+        if not is_name(family):
             raise ValueError(f"{effect.name}: a law's family is a name (letters, digits, _), got {family!r}")
         known = self._arm.get(effect.name)
         if known is not None and EFFECTS.get(effect.name) is effect and known.family == family:
