@@ -107,7 +107,7 @@ class Record(Provenanced):
         fields.setdefault("budget", run.budget.to_json())
         return cls(
             schema=SCHEMA,
-            run_id=run_id(spec["system"], spec["method"], spec["experiment"], spec["seed"], noise, spec.get("tune", False)),
+            run_id=run.run_id,
             system=spec["system"], method=spec["method"], experiment=spec["experiment"], seed=spec["seed"],
             budget_s=spec["budget_s"], noise=noise, target=Experiment.of(spec["experiment"]).target,
             spec=spec, status=status, provenance=provenance(spec.get("threads", 1) if elsewhere else None), **fields,
@@ -147,9 +147,10 @@ class Record(Provenanced):
         parts = parse_run_id(rid)
         if parts is None:
             return None
-        tuned = parts.pop("tuned")
+        tuned, profile = parts.pop("tuned"), parts.pop("profile")
         return cls(schema=SCHEMA, run_id=rid, target=Experiment.of(parts["experiment"]).target, budget_s=math.nan,
-                   spec={"tune": True} if tuned else {}, status=MISSING, error=why, **parts)
+                   spec={**({"tune": True} if tuned else {}), **({"profile": profile} if profile != "default" else {})},
+                   status=MISSING, error=why, **parts)
 
     def replace(self, **changes) -> "Record":
         return dataclasses.replace(self, **changes)

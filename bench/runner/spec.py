@@ -28,15 +28,22 @@ TEST_SEED_OFFSET = 1000
 N_TRAIN, N_TEST = 32000, 10000
 
 
-def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 0.0, tuned: bool = False) -> str:
-    """``system__method__experiment__seedN``, with ``__noiseX`` when the targets are noisy
-    and ``__tuned`` when the run chose its hyperparameters (:mod:`bench.evaluation.tuning`)."""
+#: the configurations a run id does not name
+UNNAMED = ("default", "smoke")
+
+
+def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 0.0, tuned: bool = False,
+           profile: str = "default") -> str:
+    """``system__method__experiment__seedN``, with ``__noiseX`` when the targets are noisy,
+    ``__profile-NAME`` when the method runs in a named configuration of its own (two of one method are
+    two runs; :data:`UNNAMED`'s are not named: the defaults, and the smoke test's small copy of them) and ``__tuned`` when the run chose its hyperparameters
+    (:mod:`bench.evaluation.tuning`)."""
     return (f"{system}__{method}__{experiment}__seed{seed}" + (f"__noise{noise:g}" if noise else "")
-            + ("__tuned" if tuned else ""))
+            + (f"__profile-{profile}" if profile not in UNNAMED else "") + ("__tuned" if tuned else ""))
 
 
 _RUN_ID = re.compile(r"^(?P<system>\w+?)__(?P<method>[\w+]+?)__(?P<experiment>direct|indirect)__seed(?P<seed>\d+)"
-                     r"(?:__noise(?P<noise>[0-9.e+-]+?))?(?P<tuned>__tuned)?$")
+                     r"(?:__noise(?P<noise>[0-9.e+-]+?))?(?:__profile-(?P<profile>[\w.-]+?))?(?P<tuned>__tuned)?$")
 
 
 def parse_run_id(rid: str) -> dict | None:
@@ -50,7 +57,7 @@ def parse_run_id(rid: str) -> dict | None:
     except ValueError:
         return None
     return {"system": m["system"], "method": m["method"], "experiment": m["experiment"], "seed": int(m["seed"]),
-            "noise": noise, "tuned": m["tuned"] is not None}
+            "noise": noise, "profile": m["profile"] or "default", "tuned": m["tuned"] is not None}
 
 
 @dataclass(frozen=True)
@@ -132,7 +139,7 @@ class RunSpec:
 
     @property
     def run_id(self) -> str:
-        return run_id(self.system, self.method, self.experiment, self.seed, self.noise, self.tune)
+        return run_id(self.system, self.method, self.experiment, self.seed, self.noise, self.tune, self.profile)
 
     @property
     def budget(self) -> Budget:

@@ -74,46 +74,44 @@ CANDIDATES = (
     Candidate("loop", "loop", work=MAX_ROUNDS),
     Candidate("loop+gp", "loop+gp"),
 )
+#: the order the candidates' runs start in: the longest first (the loop's rounds on every fold, then a
+#: flexible residual's search and its driven rollouts; results/measured/select_default's records say how long
+#: each took), so that two workers end close together
+RUN_ORDER = ("loop+gp", "loop", "feasible+delan", "feasible+gp", "standard+mlp", "standard+gp",
+             "feasible+sparse_torque", "feasible", "standard")
 
 
 def specs(system: str, split: str | None, budget_s: float | None, steps: int | None, seed: int, out: Path,
           plugins: tuple[str, ...], candidates=CANDIDATES, rollout: bool = True,
-          protocol: str | None = None) -> list[tuple[Candidate, RunSpec, Path]]:
-    """Each candidate's tuned run (validated by ``protocol``'s folds, :mod:`bench.core.protocols`), the folder
-    its record goes to, and its model file under ``out/models``."""
+          protocol: str | None = None) -> list[tuple[Candidate, RunSpec]]:
+    """Each candidate's tuned run (validated by ``protocol``'s folds, :mod:`bench.core.protocols`), its model
+    file under ``out/models``; their records go to ``out/runs`` (two configurations of one method, SysId's
+    standard and feasible bodies, are two runs: :func:`bench.runner.spec.run_id`)."""
     out = Path(out).resolve()
-    folders = {}
     rows = []
     for c in candidates:
-        # two candidates of one method (SysId's standard and feasible bodies) keep their records apart
-        folder = out / "runs" if c.method not in folders else out / f"runs_{c.name.replace('+', '_')}"
-        folders.setdefault(c.method, folder)
         work = c.work if steps is None and c.work is not None else None
         spec = RunSpec(system=system, method=c.method, experiment="indirect", seed=seed,
                        budget_s=budget_s if work is None else WORK_CEILING * budget_s,
                        steps=steps if work is None else work, profile=c.profile, hyperparameters=dict(c.fixed), split=split, plugins=plugins,
                        tune=True, rollout=rollout, save=str(out / "models" / f"{c.name.replace('+', '_')}.npz"),
                        folds=protocol)
-        rows.append((c, spec, folder))
+        rows.append((c, spec))
     return rows
 
 
-def run(rows, workers: int | None, report=print) -> list[tuple[Candidate, Record]]:
-    """The candidates' runs, one matrix per folder (resumed from their records)."""
-    records = {}
-    by_folder: dict[Path, list] = {}
-    for c, spec, folder in rows:
-        by_folder.setdefault(folder, []).append((c, spec))
-    for folder, items in by_folder.items():
-        for _, spec in items:  # a run whose model file is missing is redone: the file is part of its result
-            path = record_path(folder, spec.run_id)
-            if path.exists() and not Path(spec.save).exists():
-                path.unlink()
-        report(f"select: {len(items)} candidate(s) in {folder}: {', '.join(c.name for c, _ in items)}")
-        done = matrix.run_matrix([s for _, s in items], folder, workers=workers)
-        for (c, _), record in zip(items, done):
-            records[c.name] = record
-    return [(c, records[c.name]) for c, _, _ in rows]
+def run(rows, out: Path, workers: int | None, report=print) -> list[tuple[Candidate, Record]]:
+    """The candidates' runs, as one matrix in ``out/runs`` (resumed from their records), started in
+    :data:`RUN_ORDER`: the longest first, so that the workers end together."""
+    folder = Path(out).resolve() / "runs"
+    for _, spec in rows:  # a run whose model file is missing is redone: the file is part of its result
+        path = record_path(folder, spec.run_id)
+        if path.exists() and not Path(spec.save).exists():
+            path.unlink()
+    ordered = sorted(rows, key=lambda row: RUN_ORDER.index(row[0].name) if row[0].name in RUN_ORDER else len(RUN_ORDER))
+    report(f"select: {len(rows)} candidate(s) in {folder}: {', '.join(c.name for c, _ in ordered)}")
+    done = dict(zip((c.name for c, _ in ordered), matrix.run_matrix([s for _, s in ordered], folder, workers=workers)))
+    return [(c, done[c.name]) for c, _ in rows]
 
 
 def entry(candidate: Candidate, record: Record, out: Path) -> dict:
@@ -240,7 +238,7 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
     ``protocol`` names the validation folds (:mod:`bench.core.protocols`)."""
     out = Path(out)
     rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout, protocol)
-    done = run(rows, workers, report)
+    done = run(rows, out, workers, report)
     entries = [entry(c, r, out) for c, r in done]
     chosen = choose(entries)
     folds = next(((r.details or {}).get("tuning", {}).get("folds", {}).get("description") for _, r in done

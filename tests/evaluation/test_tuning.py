@@ -159,11 +159,16 @@ def test_a_tuned_run_id_round_trips_and_its_missing_record_stays_tuned():
     rid = run_id("kuka_lwr4", "mlp", "indirect", 3, 0.0, tuned=True)
     assert rid.endswith("__tuned") and parse_run_id(rid)["tuned"] and not parse_run_id(rid[: -len("__tuned")])["tuned"]
     assert parse_run_id(run_id("p", "mlp", "indirect", 3, 0.01, tuned=True)) == {
-        "system": "p", "method": "mlp", "experiment": "indirect", "seed": 3, "noise": 0.01, "tuned": True}
+        "system": "p", "method": "mlp", "experiment": "indirect", "seed": 3, "noise": 0.01, "profile": "default", "tuned": True}
     assert Record.missing(rid, "corrupt").tuned
     hybrid = run_id("kuka_lwr4", "feasible+gp", "indirect", 0, 0.0, tuned=True)  # a hybrid's id parses too
     assert parse_run_id(hybrid)["method"] == "feasible+gp" and Record.missing(hybrid, "corrupt").method == "feasible+gp"
     assert RunSpec("kuka_lwr4", "mlp", "indirect", 3, None, steps=5, tune=True).run_id == rid
+    # two configurations of one method are two runs, whose records do not share a name
+    feasible = RunSpec("kuka_lwr4", "sysid", "indirect", 0, None, steps=1, profile="feasible", tune=True).run_id
+    assert feasible == "kuka_lwr4__sysid__indirect__seed0__profile-feasible__tuned"
+    assert parse_run_id(feasible)["profile"] == "feasible" and parse_run_id(feasible)["tuned"]
+    assert Record.missing(feasible, "corrupt").spec["profile"] == "feasible"
 
 
 def test_a_tuned_matrix_sits_beside_the_default_one_and_replays(tmp_path):

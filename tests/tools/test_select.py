@@ -45,6 +45,8 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     p = cli("predict", "--model", out / "model.npz", "--log", tmp_path / "test.csv", "--out", tmp_path / "p.csv")
     assert p.returncode == 0
     assert float(p.stdout.split("torque MSE ")[1].split()[0]) == pytest.approx(result["chosen"]["test_mse"], rel=1e-5)
+    # SysId's two bodies are two runs of one matrix, each with its own record
+    assert len(list((out / "runs" / "records").glob("*.json"))) == 3
     again = cli(*args)  # resumes: every candidate has its record and its model
     assert again.returncode == 0 and "0 run(s) to do" in again.stdout
     assert json.loads((out / "select.json").read_text())["chosen"] == result["chosen"]
@@ -112,8 +114,8 @@ def test_the_test_trajectorys_torques_change_no_choice(tmp_path):
 def test_the_loops_candidate_is_bounded_by_its_rounds_whatever_selects_seconds(tmp_path):
     """Under select's time budget the loop runs its rounds (work, the same on any machine), the seconds only their
     ceiling; every other candidate has the seconds. Under --steps every candidate has the steps."""
-    timed = {c.name: spec.budget for c, spec, _ in specs("kuka_lwr4", None, 180.0, None, 0, tmp_path, ())}
+    timed = {c.name: spec.budget for c, spec in specs("kuka_lwr4", None, 180.0, None, 0, tmp_path, ())}
     assert timed["loop"] == Budget(seconds=WORK_CEILING * 180.0, steps=MAX_ROUNDS)
     assert all(b == Budget(seconds=180.0) for name, b in timed.items() if name != "loop")
-    worked = {c.name: spec.budget for c, spec, _ in specs("kuka_lwr4", None, None, 3, 0, tmp_path, ())}
+    worked = {c.name: spec.budget for c, spec in specs("kuka_lwr4", None, None, 3, 0, tmp_path, ())}
     assert set(worked.values()) == {Budget(steps=3)} and len(worked) == len(CANDIDATES)
