@@ -1,6 +1,6 @@
 """Each worker's time in a suite run made with ``BENCH_TIMELINE=FILE`` (tests/conftest.py): busy (CPU used by its
 tests and the processes they waited for), waiting (in a test, not computing), idle (between tests and after its
-last), and the tests that waited longest.
+last), the slowest tests and those that waited longest.
 
     BENCH_TIMELINE=/tmp/tl python -m pytest -n 2 --dist loadgroup && python tests/timeline.py /tmp/tl.jsonl
 """
@@ -26,6 +26,9 @@ def main(path: str, top: int = 25) -> None:
         print(f"{worker}: {len(tests)} tests; in tests {wall:.0f} s (CPU {cpu:.0f} s, waiting {wall - cpu:.0f} s); "
               f"between tests {last - min(r['start'] for r in tests) - wall:.0f} s; done {end - last:.0f} s "
               f"before the end")
+    print(f"\nthe {top} slowest tests (wall, s):")
+    for r in sorted(rows, key=lambda r: r["start"] - r["end"])[:top]:
+        print(f"  {r['end'] - r['start']:6.1f}  {r['test']}")
     print(f"\nthe {top} tests that waited longest (wall - CPU, s):")
     for r in sorted(rows, key=lambda r: r["cpu"] - (r["end"] - r["start"]))[:top]:
         print(f"  {r['end'] - r['start'] - r['cpu']:6.1f}  wall {r['end'] - r['start']:6.1f}  {r['test']}")

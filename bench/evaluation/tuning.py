@@ -21,6 +21,13 @@ all, as SRBench allows: La Cava et al., 2021). A tuned fit
    optimism remains; ``bench study selection`` measures it against the test;
 4. fits the survivor on all the training data with the same steps.
 
+Beside each fold's validation MSE the search keeps its MSE on the **farther
+half** of the fold's scored samples (:data:`FAR_RULE`): those at least the
+fold's median distance from the states it is fitted on
+(:class:`bench.core.distance.TrainingStates`). It chooses nothing; it shows
+whether a ranking holds as validation moves away from the fit
+(``bench select``'s page).
+
 The final fit's steps are the work budget's, under ``--steps``. Under a time
 budget they are measured: a probe fits the first combination on the first
 fold for one step (kept as that fold's fit where a rung asks for one step)
@@ -54,6 +61,7 @@ import numpy as np
 
 from bench.core.budget import SECONDS, Budget
 from bench.core.data import Dataset, mse
+from bench.core.distance import TrainingStates
 from bench.core.errors import ConfigError
 from bench.core.folds import Folds
 from bench.core.protocols import folds
@@ -73,6 +81,9 @@ PLANNED_SHARE = 0.8
 MIN_FINAL_SHARE = 0.25
 #: why a combination was not fitted where the search's share of a time budget ended first
 OUT_OF_TIME = "not fitted: the search's share of the budget ended before it"
+#: what a fold's second figure scores
+FAR_RULE = ("the mean over the folds of the MSE on the farther half of each fold's scored samples (those at least "
+            "the fold's median distance, in q and q̇, from the states it is fitted on)")
 #: what the record and the tables call a tuned run
 PROTOCOL = "tuned on the training trajectories"
 #: how a tuned method is scored
@@ -150,6 +161,7 @@ class _Fit:
     """A combination's fits on every fold at one step count."""
 
     mse: list = field(default_factory=list)
+    far: list = field(default_factory=list)
     steps: list = field(default_factory=list)
     seconds: list = field(default_factory=list)
     failed: str | None = None
@@ -160,6 +172,20 @@ class _Fit:
         if self.failed or not self.mse or not all(math.isfinite(v) for v in self.mse):
             return None
         return float(np.mean(self.mse))
+
+    @property
+    def far_score(self) -> float | None:
+        """The mean over the folds of the MSE on each fold's farther half (:data:`FAR_RULE`)."""
+        if self.score is None or len(self.far) != len(self.mse) or not all(math.isfinite(v) for v in self.far):
+            return None
+        return float(np.mean(self.far))
+
+
+def farther_half(train: Dataset, fold) -> np.ndarray:
+    """Which of ``fold``'s scored samples lie at least the fold's median distance from the states it is fitted
+    on (a mask over ``train.subset(fold.score)``)."""
+    distance = TrainingStates(train.subset(fold.fit)).distance(train.subset(fold.score))
+    return distance >= np.median(distance) if len(distance) else np.zeros(0, dtype=bool)
 
 
 class _Search:
@@ -176,6 +202,13 @@ class _Search:
         self.shares = [float(np.mean(f.fit)) for f in fold_set]
         #: fits done before the rungs (the probe's), by (combination, steps, fold), for the rung that asks for them
         self.kept: dict[tuple, tuple] = {}
+        self._far: dict[int, np.ndarray] = {}
+
+    def far(self, k: int) -> np.ndarray:
+        """:func:`farther_half` of fold ``k``, measured once."""
+        if k not in self._far:
+            self._far[k] = farther_half(self.train, self.folds[k])
+        return self._far[k]
 
     def _one(self, choice: dict, fold: int, budget: Budget):
         t0 = time.perf_counter()
@@ -214,7 +247,11 @@ class _Search:
                 kept = self.kept.pop((_key(choice), steps, k), None)
                 method, done, seconds = kept or self._one(choice, k, Budget(steps=steps))
                 part = self.train.subset(fold.score)
-                out.mse.append(float(mse(method.predict(part, self.experiment), part.target(self.experiment))))
+                prediction = np.asarray(method.predict(part, self.experiment), dtype=np.float64)
+                target = np.asarray(part.target(self.experiment), dtype=np.float64)
+                out.mse.append(float(mse(prediction, target)))
+                far = self.far(k)
+                out.far.append(float(mse(prediction[far], target[far])) if far.any() else math.nan)
                 out.steps.append(done)
                 out.seconds.append(round(seconds, 3))
             except Exception as exc:  # a combination that fails is not chosen; the record says why
@@ -327,6 +364,7 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
     method.fit(train, experiment, seed, final, system=system)
     details = {"protocol": PROTOCOL, "space": _space(method_cls), "searched": searched, "chosen": chosen,
                "validation_mse": chosen_row["validation_mse"] if chosen_row else None, "score": SCORE_RULE,
+               "validation_far_mse": chosen_row["validation_far_mse"] if chosen_row else None, "far": FAR_RULE,
                "folds": fold_set.to_json(), "rungs": table, "final_budget": final.to_json(), "combinations": rows,
                "search_seconds": round(search_seconds, 3),
                "work": {"fold_steps": chosen_row["fold_steps"] if chosen_row else [],
@@ -346,7 +384,8 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
 def _row(choice: dict, rung: int, steps: int, fit: _Fit) -> dict:
     """A combination's line of the record: its figures at the highest rung it reached."""
     row = {"hyperparameters": dict(choice), "validation_mse": fit.score, "fold_mse": [
-        v if math.isfinite(v) else None for v in fit.mse], "rung": rung, "steps": steps,
+        v if math.isfinite(v) else None for v in fit.mse], "validation_far_mse": fit.far_score,
+           "fold_far_mse": [v if math.isfinite(v) else None for v in fit.far], "rung": rung, "steps": steps,
         "fold_steps": fit.steps, "fold_fit_seconds": fit.seconds}
     if fit.score is None:
         row["failed"] = fit.failed or "non-finite validation MSE"

@@ -37,7 +37,7 @@ from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, write_json
 from bench.core.protocols import folds as fold_data
 from bench.evaluation.domain import domain, sentences
-from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL, SCORE_RULE
+from bench.evaluation.tuning import FAR_RULE, MAX_FOLDS, PROTOCOL, SCORE_RULE
 from bench.residual.loop import MAX_ROUNDS
 from bench.runner import matrix
 from bench.runner.records import Record, record_path
@@ -124,7 +124,8 @@ def entry(candidate: Candidate, record: Record, out: Path) -> dict:
                    and c.get("validation_mse") is not None), None)
     folds = [v for v in (chosen or {}).get("fold_mse") or [] if v is not None]
     return {"name": candidate.name, "method": record.method, "status": record.status,
-            "validation_mse": tuning.get("validation_mse"), "test_mse": record.test_mse,
+            "validation_mse": tuning.get("validation_mse"), "validation_far_mse": tuning.get("validation_far_mse"),
+            "test_mse": record.test_mse,
             "validation_stderr": float(np.std(folds, ddof=1) / np.sqrt(len(folds))) if len(folds) > 1 else None,
             "train_mse": record.train_mse, "test_over_standard": None if not (standard and record.test_mse) else
             record.test_mse / standard, "hyperparameters": tuning.get("chosen", {}),
@@ -162,17 +163,19 @@ def page(result: dict) -> str:
              f"data; its validation MSE is {SCORE_RULE}. The one with the lowest validation MSE is chosen, and the "
              f"test data are read only to score. The test columns are there to show whether validation chose well.",
              "",
-             "| candidate | hyperparameters chosen | work: each fold fit → the final fit | validation MSE | test MSE | "
-             "test / standard model | rank by validation | rank by test |", "|---|---|---|---|---|---|---|---|"]
+             "| candidate | hyperparameters chosen | work: each fold fit → the final fit | validation MSE | "
+             "validation MSE, farther half | test MSE | test / standard model | rank by validation | rank by test |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for e in entries:
         mark = " **(chosen)**" if chosen and e["name"] == chosen["name"] else ""
         hp = ", ".join(f"{k}={v}" for k, v in sorted(e["hyperparameters"].items())) or "—"
         if e["status"] != "ok" or e["validation_mse"] is None:
             lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['status']}: "
-                         f"{e['error'] or 'no validation'} | | | | |")
+                         f"{e['error'] or 'no validation'} | | | | | |")
             continue
         ratio = "—" if e["test_over_standard"] is None else f"{e['test_over_standard']:.3f}x"
-        lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['validation_mse']:.4g} | "
+        far = "—" if e.get("validation_far_mse") is None else f"{e['validation_far_mse']:.4g}"
+        lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['validation_mse']:.4g} | {far} | "
                      f"{e['test_mse']:.4g} | {ratio} | {by_validation.get(e['name'], '—')} | {by_test.get(e['name'], '—')} |")
     lines.append("")
     if chosen:
@@ -187,13 +190,27 @@ def page(result: dict) -> str:
         lines.append("No candidate ran and validated: nothing chosen.")
     report = result.get("domain")
     if report:
-        lines += ["", "## What validation could see", "", sentences(report)]
+        lines += ["", "## What validation could see", "", sentences(report) + farther(entries, chosen)]
         if report.get("test_median_distance") is not None:
             beyond = report["test_median_distance"] > report["reach"]["median"]
             lines += ["", f"For comparison, read from the test trajectory's states after the choice (never to make "
                           f"it): it lies a median {report['test_median_distance']:.3g} from the training states, "
                           + ("beyond" if beyond else "within") + " what validation reached."]
     return "\n".join(lines) + "\n"
+
+
+def farther(entries: list[dict], chosen: dict | None) -> str:
+    """The page's sentence on the farther half of the folds' scored samples (:data:`FAR_RULE`): which candidate
+    validation puts first there, beside the choice."""
+    far = [e for e in usable(entries) if e.get("validation_far_mse") is not None]
+    if not far or chosen is None:
+        return ""
+    ranked = [e["name"] for e in sorted(far, key=lambda e: e["validation_far_mse"])]
+    then = f" (then {', '.join(ranked[1:3])})" if len(ranked) > 1 else ""
+    same = ("the candidate chosen on all of them" if ranked[0] == chosen["name"] else
+            "not the candidate chosen on all of them: the ranking changes as validation moves away from the fit")
+    return (f" Scored on the farther half of each fold's samples only ({FAR_RULE}), validation puts {ranked[0]} "
+            f"first{then}: {same}.")
 
 
 def own_budgets(result: dict) -> str:

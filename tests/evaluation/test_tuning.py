@@ -16,7 +16,7 @@ from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
 from bench.core.errors import ConfigError
 from bench.core.folds import folds
-from bench.evaluation.tuning import MAX_COMBINATIONS, MAX_FOLDS, PROTOCOL, check_space, combinations, prepare, tune
+from bench.evaluation.tuning import FAR_RULE, MAX_COMBINATIONS, MAX_FOLDS, PROTOCOL, check_space, combinations, prepare, tune
 from bench.evaluation.tuning import rungs as tuning_rungs
 from bench.runner.records import Record
 from bench.runner.spec import RunSpec, parse_run_id, run_id
@@ -74,12 +74,20 @@ def _trajectories(seed: int = 0) -> Dataset:
     return Dataset(q, q, q, tau, recording=labels, time=np.tile(np.arange(n) * 0.01, 3))
 
 
-def _by_hand(train: Dataset, choice: dict) -> float:
+def _by_hand(train: Dataset, choice: dict, farther: bool = False) -> float:
+    """The mean validation MSE over the folds; ``farther``: on each fold's scored samples at least its median
+    distance (in q and q̇, scaled by the fitted states' deviations) from the nearest state it is fitted on."""
     out = []
     for fold in folds(train, max_folds=MAX_FOLDS):
-        m = Poly(**choice).fit(train.subset(fold.fit), "indirect", 0, budget=Budget(steps=1))
-        part = train.subset(fold.score)
-        out.append(mse(m.predict_torque(part), part.tau))
+        fitted, part = train.subset(fold.fit), train.subset(fold.score)
+        m = Poly(**choice).fit(fitted, "indirect", 0, budget=Budget(steps=1))
+        keep = np.ones(len(part), dtype=bool)
+        if farther:
+            scale = np.hstack([fitted.q, fitted.qd]).std(axis=0)
+            x, y = np.hstack([part.q, part.qd]) / scale, np.hstack([fitted.q, fitted.qd]) / scale
+            d = np.sqrt(((x[:, None, :] - y[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
+            keep = d >= np.median(d)
+        out.append(mse(m.predict_torque(part)[keep], part.tau[keep]))
     return float(np.mean(out))
 
 
@@ -91,9 +99,12 @@ def test_the_best_validated_combination_is_chosen_and_fitted_on_all_the_training
     assert len(d["combinations"]) == len(combinations(Poly)) == 8
     for row in d["combinations"]:
         assert row["validation_mse"] == pytest.approx(_by_hand(train, row["hyperparameters"]), rel=1e-9)
-        assert len(row["fold_mse"]) == 3
+        assert len(row["fold_mse"]) == len(row["fold_far_mse"]) == 3
+        # beside it, the farther half of each fold's samples, measured by brute force here
+        assert row["validation_far_mse"] == pytest.approx(_by_hand(train, row["hyperparameters"], True), rel=1e-9)
     best = min(d["combinations"], key=lambda r: r["validation_mse"])
     assert d["chosen"] == best["hyperparameters"] == {"degree": 3, "ridge": 0.0}
+    assert d["validation_far_mse"] == best["validation_far_mse"] and d["far"] == FAR_RULE
     again = Poly(**d["chosen"]).fit(train, "indirect", 0, budget=Budget(steps=1))
     np.testing.assert_array_equal(tuned.method.predict_torque(train), again.predict_torque(train))
     assert tuned.method.hyperparameters()["degree"] == 3

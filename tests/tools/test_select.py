@@ -32,12 +32,14 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     names = [c["name"] for c in result["candidates"]]
     assert names == ["standard", "feasible", "feasible+sparse_torque"]
     for c in result["candidates"]:
-        assert c["validation_mse"] > 0 and c["test_mse"] > 0
+        assert c["validation_mse"] > 0 and c["test_mse"] > 0 and c["validation_far_mse"] > 0
     best = min(result["candidates"], key=lambda c: c["validation_mse"])
     assert result["model"] == "model.npz" and (out / result["chosen"]["model"]).exists()  # paths relative to DIR
     assert result["chosen"]["name"] == best["name"] and set(result["chosen"]) >= {"name", "validation_mse", "test_mse"}
     text = (out / "select.md").read_text()
     assert f"| {best['name']} **(chosen)** |" in text and "rank by validation" in text
+    far = min(result["candidates"], key=lambda c: c["validation_far_mse"])["name"]  # and on the farther half
+    assert "validation MSE, farther half" in text and f"validation puts {far} first" in text
     for c in result["candidates"]:  # under --steps each fold fit does the final fit's work, and the page says so
         assert set(c["work"]["fold_steps"]) == {c["work"]["final_steps"]}
     assert "work: each fold fit → the final fit" in text and " steps, " in text
