@@ -67,17 +67,22 @@ def _make_recipe(target: str) -> list[list[str]]:
     return [shlex.split(line.strip().replace("$(BIN)/python", "python")) for line in body.splitlines()]
 
 
+#: the generated samples of each run of a quick start's matrix at the smoke budget
+SMOKE_SAMPLES = ("--n-train", "2000", "--n-test", "500")
+
+
 def _at_smoke_budget(words: list[str]) -> list[str]:
-    """A bench command bounded by one step of work and one seed instead of its seconds, steps and seeds, and
-    without the simulated rollouts after each fit (what is run is the command's matrix, not its scores)."""
+    """A bench command bounded by one step of work and one seed instead of its seconds, steps and seeds, on
+    :data:`SMOKE_SAMPLES` generated samples, and without the simulated rollouts after each fit (what is run is
+    the command's matrix, not its scores)."""
     out, words = [], list(words)
     while words:
         word = words.pop(0)
-        if word in ("--budget", "--steps", "--n-seeds", "--seeds"):
+        if word in ("--budget", "--steps", "--n-seeds", "--seeds", "--n-train", "--n-test"):
             words.pop(0)
             continue
         out.append(word)
-    return out + ["--steps", "1", "--n-seeds", "1", "--no-rollout"] if "run" in out else out
+    return out + ["--steps", "1", "--n-seeds", "1", "--no-rollout", *SMOKE_SAMPLES] if "run" in out else out
 
 
 def _quick_start() -> list[list[str]]:

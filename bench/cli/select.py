@@ -3,6 +3,8 @@ on the training data alone (:mod:`bench.tools.select`)."""
 
 from __future__ import annotations
 
+import argparse
+
 from pathlib import Path
 
 from bench.cli.options import UsageError, add_budget, add_plugin, add_split, budget, check_names, check_split, load_plugins
@@ -32,7 +34,9 @@ def add_arguments(p) -> None:
     p.add_argument("--workers", type=positive_int, default=None, help="candidates at a time (default: one per core)")
     p.add_argument("--candidates", type=csv_list, default=None,
                    help=f"only these candidates (default: all of {', '.join(c.name for c in CANDIDATES)})")
-    p.add_argument("--no-rollout", action="store_true", help="skip the candidates' driven rollouts of the test recordings")
+    p.add_argument("--rollout", action=argparse.BooleanOptionalAction, default=False,
+                   help="also score each candidate by driven rollouts of the test recordings, kept in its record "
+                        "(the page and the choice do not use them; default --no-rollout)")
     p.add_argument("--target-states", type=Path, default=None, metavar="LOG",
                    help="a CSV in the suite's format of the states the model will be asked (q, qd and qdd; its "
                         "torque columns, if any, are not read): the page says whether validation reached as far "
@@ -76,7 +80,7 @@ def main(args) -> int:
                          "asked with --target-states LOG")
     result = select(name, args.out, split=args.split, budget_s=budget_s, steps=steps, seed=args.seed,
                     workers=args.workers, plugins=plugins, command=args.invocation, candidates=candidates,
-                    rollout=not args.no_rollout, data=data, target=target, protocol=protocol)
+                    rollout=args.rollout, data=data, target=target, protocol=protocol)
     chosen = result["chosen"]
     if chosen is None:
         print(f"nothing chosen: no candidate ran and validated (see {args.out / 'select.md'})")

@@ -74,15 +74,15 @@ CANDIDATES = (
     Candidate("loop", "loop", work=MAX_ROUNDS),
     Candidate("loop+gp", "loop+gp"),
 )
-#: the order the candidates' runs start in: the longest first (the loop's rounds on every fold, then a
-#: flexible residual's search and its driven rollouts; results/measured/select_default's records say how long
-#: each took), so that two workers end close together
+#: the order the candidates' runs start in: the longest first (the loop's rounds on every fold, twice for
+#: loop+gp, whose budget starts after them; then the searches of the learned residuals; the records of
+#: results/measured/select_default say how long each took), so that two workers end close together
 RUN_ORDER = ("loop+gp", "loop", "feasible+delan", "feasible+gp", "standard+mlp", "standard+gp",
              "feasible+sparse_torque", "feasible", "standard")
 
 
 def specs(system: str, split: str | None, budget_s: float | None, steps: int | None, seed: int, out: Path,
-          plugins: tuple[str, ...], candidates=CANDIDATES, rollout: bool = True,
+          plugins: tuple[str, ...], candidates=CANDIDATES, rollout: bool = False,
           protocol: str | None = None) -> list[tuple[Candidate, RunSpec]]:
     """Each candidate's tuned run (validated by ``protocol``'s folds, :mod:`bench.core.protocols`), its model
     file under ``out/models``; their records go to ``out/runs`` (two configurations of one method, SysId's
@@ -246,7 +246,7 @@ def applicability(train: Dataset, test: Dataset | None, target: Dataset | None, 
 
 
 def select(system: str, out: Path, *, split: str | None, budget_s: float | None, steps: int | None, seed: int,
-           workers: int | None, plugins: tuple[str, ...], command: str, candidates=CANDIDATES, rollout: bool = True,
+           workers: int | None, plugins: tuple[str, ...], command: str, candidates=CANDIDATES, rollout: bool = False,
            report=print, data: tuple[Dataset, Dataset | None] | None = None, target: Dataset | None = None,
            protocol: str | None = None) -> dict:
     """Run the candidates, choose one, write ``select.json``, ``select.md`` and ``model.npz`` into ``out``.

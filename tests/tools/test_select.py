@@ -121,3 +121,5 @@ def test_the_loops_candidate_is_bounded_by_its_rounds_whatever_selects_seconds(t
     assert all(b == Budget(seconds=180.0) for name, b in timed.items() if name != "loop")
     worked = {c.name: spec.budget for c, spec in specs("kuka_lwr4", None, None, 3, 0, tmp_path, ())}
     assert set(worked.values()) == {Budget(steps=3)} and len(worked) == len(CANDIDATES)
+    # the driven rollouts, which neither the choice nor the page uses, only where asked for
+    assert not any(spec.rollout for _, spec in specs("kuka_lwr4", None, 180.0, None, 0, tmp_path, ()))
