@@ -13,7 +13,7 @@ from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_co
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import atomic_write, check_output
 from bench.evaluation.per_joint import per_joint_lines
-from bench.runner import matrix
+from bench.runner import run
 from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.records import Record, record_path
 from bench.runner.spec import N_TEST, N_TRAIN, RunSpec
@@ -99,12 +99,12 @@ def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None,
     process so that it does not read the files again; ``copy_to``: where the
     record's file, as the run wrote it, is copied (``--json``)."""
     work = Path(tempfile.mkdtemp(prefix="bench-fit-"))
-    record = matrix.run_one(spec, work, checked=checked, data=data)
+    record = run.run_one(spec, work, checked=checked, data=data)
     if copy_to is not None:
         content = record_path(work, spec.run_id).read_bytes()
         atomic_write(copy_to, lambda f: f.write(content), binary=True)
     if record.status in ("failed", "timeout") or record.failed_stages:
-        return record, matrix.log_path(work, spec.run_id)
+        return record, run.log_path(work, spec.run_id)
     shutil.rmtree(work, ignore_errors=True)
     return record, None
 

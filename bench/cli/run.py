@@ -13,6 +13,7 @@ from bench.core.arguments import csv_list, noise_level, positive, positive_int, 
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
 from bench.runner import matrix
+from bench.runner.run import log_path
 from bench.runner.execute import given_data, make_system, method_config, raised
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, build_specs, seed_count
 from methods import METHODS
@@ -113,5 +114,5 @@ def main(args) -> int:
     errors = [r for r in records if raised(r)]
     for r in errors:  # what a script or CI must see: the runs whose code raised, one line each
         print(f"error: {r.system} {r.method} {r.experiment} seed={r.seed}: {r.error_line or 'no message'} "
-              f"(log: {matrix.log_path(args.out, r.run_id)})", file=sys.stderr)
+              f"(log: {log_path(args.out, r.run_id)})", file=sys.stderr)
     return 1 if errors else 0

@@ -3,7 +3,7 @@ within the budget, score, and return the :class:`~bench.runner.records.Record`.
 
 :func:`execute` never raises for a method's faults: a crash or a NaN result
 is a record with status ``failed`` and the reason. A run in its own process
-is a :class:`bench.runner.matrix.RunJob`.
+is a :class:`bench.runner.run.RunJob`.
 """
 
 from __future__ import annotations
@@ -131,7 +131,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     loaded from the spec. ``fitted`` is the spec's method already fitted on
     ``data`` (one seed of a stack, :mod:`bench.runner.stacked`): the run then
     evaluates it. ``checked``: the caller has made :func:`preflight`'s checks
-    (:meth:`bench.runner.matrix.RunJob.check`), which are then not repeated.
+    (:meth:`bench.runner.run.RunJob.check`), which are then not repeated.
 
     Which scores apply beyond the train and test MSE (rollouts, references, the
     force decomposition) is the policy of :func:`bench.evaluation.assessment.assess`.

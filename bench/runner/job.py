@@ -13,10 +13,12 @@ as JSON. Its life has four steps, each a method it may override:
   its process ended (:class:`~bench.runner.isolation.Outcome`), a kill or a
   crash included.
 
-:func:`run_isolated` runs one job this way and :func:`run_jobs` runs many
-side by side: a matrix's runs (:class:`bench.runner.matrix.RunJob`), its
-stacked groups, the residual loop (:class:`bench.residual.job.ResidualJob`)
-and the studies' cases (:class:`CaseJob`). The process itself, its fork server and the
+:func:`run_isolated` runs one job this way and :func:`run_jobs`, the one
+scheduler, runs many side by side: a matrix's runs
+(:class:`bench.runner.run.RunJob`) and its stacked groups
+(:class:`bench.runner.stacked.StackedJob`), the residual loop
+(:class:`bench.residual.job.ResidualJob`) and the studies' cases
+(:class:`CaseJob`). The process itself, its fork server and the
 killing at a phase's limit are :mod:`bench.runner.isolation`'s.
 
 The limits every job shares are here: a fit is killed at
@@ -103,6 +105,11 @@ class Job:
         """Where the child writes what :meth:`run` returns."""
         return work / f"{name}.result.json"
 
+    def folder(self) -> Path | None:
+        """Where :func:`run_jobs` keeps the job's call, phases and output (``None``: a scratch folder, removed
+        once every job has ended)."""
+        return None
+
     def payload(self) -> dict:
         """The job as JSON, from which :meth:`from_payload` makes it again in the child."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
@@ -176,19 +183,23 @@ def job_fields(job: Job) -> dict:
                                   "fields": job.payload()}))
 
 
-def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], str],
-             report: Callable[[str], None], ledger: Ledger | None = None) -> dict[str, Any]:
-    """Run each named job with :func:`run_isolated`, ``workers`` at a time;
-    returns the results by name, in the order given.
+def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], str] | None,
+             report: Callable[[str], None], ledger: Ledger | None = None, *, checked: bool = False,
+             before: Callable[[str], None] | None = None,
+             on_done: Callable[[str, Any], None] | None = None) -> dict[str, Any]:
+    """The one scheduler: run each named job with :func:`run_isolated`, ``workers`` at a time, in the order
+    given; returns the results by name, in that order.
 
-    Every job is checked before any starts. Each finished job is reported in
-    one line, ``[k/n, t s] name: describe(result)``; jobs that did not finish
-    raise :class:`~bench.runner.isolation.CallFailed`, named, once all have ended.
-    With a ``ledger``, each job that finishes is kept in it as it finishes, and
-    a job it already holds from the same code is not run again
-    (:mod:`bench.runner.ledger`).
+    Every job is checked before any starts (unless the caller did: ``checked``). ``before(name)`` is called
+    as each starts (it may raise to stop the rest). Each finished job is reported in one line, ``[k/n, t s]
+    name: describe(result)``, or handed to ``on_done(name, result)`` instead; jobs that did not finish raise
+    :class:`~bench.runner.isolation.CallFailed`, named, once all have ended. A job's call, phases and output
+    go to its :meth:`Job.folder`, else to a scratch folder. With a ``ledger``, each job that finishes is kept
+    in it as it finishes, and a job it already holds from the same code is not run again
+    (:mod:`bench.runner.ledger`): the studies' cases resume so; a matrix resumes from its records
+    (:mod:`bench.runner.matrix`) and gives only the runs left.
     """
-    early = {name: job.check() for name, job in jobs.items()}
+    early = {name: None if checked else job.check() for name, job in jobs.items()}
     fields = {name: job_fields(job) for name, job in jobs.items()} if ledger else {}
     kept, other = ledger.finished(fields) if ledger else ({}, 0)
     if kept:
@@ -201,6 +212,8 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
 
     def one(item: tuple[str, Path]) -> tuple[bool, Any]:
         name, work = item
+        if before is not None:
+            before(name)
         try:
             result, ok = (early[name] if early[name] is not None
                           else run_isolated(jobs[name], work, name, checked=True)), True
@@ -209,12 +222,15 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
         if ok and ledger:
             ledger.add(name, fields[name], result)
         finished.append(name)
-        what = describe(result) if ok else f"did not finish ({result})"
-        report(f"[{len(finished)}/{len(todo)}, {time.monotonic() - start:.0f} s] {name}: {what}")
+        if ok and on_done is not None:
+            on_done(name, result)
+        else:
+            what = (describe(result) if describe else "done") if ok else f"did not finish ({result})"
+            report(f"[{len(finished)}/{len(todo)}, {time.monotonic() - start:.0f} s] {name}: {what}")
         return ok, result
 
     with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work:
-        items = [(name, Path(work) / str(i)) for i, name in enumerate(todo)]
+        items = [(name, jobs[name].folder() or Path(work) / str(i)) for i, name in enumerate(todo)]
         outcomes = {name: (True, result) for name, result in kept.items()}
         outcomes.update(zip(todo, map_interruptibly(one, items, workers)))
         outcomes = {name: outcomes[name] for name in jobs}

@@ -1,15 +1,11 @@
 """The matrix: systems x methods x experiments x seeds under a wall-clock budget.
 
-* :class:`RunJob` is one :class:`~bench.runner.spec.RunSpec` as a job
-  (:mod:`bench.runner.job`), run in its own process with torch and BLAS
-  threads pinned (:func:`run_one`), which writes its record. Its fit is
-  killed at :func:`~bench.runner.job.fit_limit`, and what follows the fit
-  (scores on the full data, variants, the exact-recovery judgement, the
-  rollout) at :func:`~bench.runner.job.evaluation_limit`; either gives
-  status ``timeout``. A crash or a non-finite result gives status
-  ``failed`` with the reason.
-* :func:`run_matrix` runs many specs on a pool of worker processes, or on
-  Dask distributed, writes one record per run atomically, and skips runs that
+* Each run is a :class:`~bench.runner.run.RunJob`, run in its own process,
+  which writes its record (:mod:`bench.runner.run`).
+* :func:`run_matrix` runs many specs through the one scheduler,
+  :func:`~bench.runner.job.run_jobs`, each stacked group of seeds as one
+  :class:`~bench.runner.stacked.StackedJob` (``stack``), or on Dask
+  distributed, writes one record per run atomically, and skips runs that
   already have a valid record, so a killed matrix loses no finished run and
   re-running it resumes. A corrupt record is moved aside
   (:func:`~bench.runner.records.quarantine`) and its run redone. One matrix
@@ -20,141 +16,22 @@ from __future__ import annotations
 
 import fcntl
 import os
-import pickle
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
 from bench.core.errors import UserError
 from bench.core.processes import process_alive
 from bench.runner.code import code_hash
-from bench.runner.execute import execute, preflight
-from bench.runner.isolation import STARTUP_TIMEOUT_S, Outcome, map_interruptibly
-from bench.runner.job import PREPARE_MIN_S, Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
+from bench.runner.job import Job, run_jobs
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now
 from bench.runner.provenance import CODE_FOLDERS, code_state
 from bench.runner.records import Record, RecordError, quarantine, read_record, record_path, write_record
+from bench.runner.run import RunJob, log_path, run_one
 from bench.runner.spec import RunSpec
-from bench.runner.stacked import groups, run_stacked, stack_name
-
-def phase_limits(spec: RunSpec) -> dict[str, float]:
-    """Seconds a run may spend in each phase: preparing, fitting
-    (:func:`~bench.runner.job.fit_limit`) and after the fit
-    (:func:`~bench.runner.job.evaluation_limit`)."""
-    return {"prepare": max(PREPARE_MIN_S, spec.budget_s or 0.0), "fit": fit_limit(spec.budget),
-            "evaluate": evaluation_limit(spec.budget_s)}
-
-
-def log_path(out_dir: str | os.PathLike, rid: str) -> Path:
-    """Where a run's output goes: ``OUT/logs/<run id>.log`` (a failed run's traceback among it)."""
-    return Path(out_dir) / "logs" / f"{rid}.log"
-
-
-@dataclass(frozen=True)
-class RunJob(Job):
-    """One run of the matrix as a :class:`~bench.runner.job.Job`: its spec,
-    and the folder its record goes to (``OUT/records/<run id>.json``, its
-    output to ``OUT/logs/``).
-
-    From the start of its fit the run has :func:`~bench.runner.job.fit_limit`
-    seconds to finish the fit, then :func:`~bench.runner.job.evaluation_limit`
-    seconds for what follows; past either it is killed and recorded as
-    ``timeout``. A child that dies without writing a record is recorded as
-    ``failed`` with the tail of its log. :meth:`finish` writes the record.
-    """
-
-    spec: dict
-    out_dir: str
-    data_file: str | None = None
-
-    @classmethod
-    def of(cls, spec: RunSpec, out_dir: str | os.PathLike, data_file: str | None = None) -> "RunJob":
-        return cls(spec.to_dict(), str(out_dir), data_file)
-
-    @property
-    def run_spec(self) -> RunSpec:
-        return RunSpec.from_dict(self.spec)
-
-    @property
-    def threads(self) -> int:
-        return self.run_spec.threads
-
-    def check(self) -> Record | None:
-        """The record of a run that cannot start (:func:`~bench.runner.execute.preflight`), written; else ``None``."""
-        spec = self.run_spec
-        early = preflight(spec)
-        if early is None:
-            return None
-        early = early.replace(code=code_hash(spec.method, spec.system, spec.plugins))
-        write_record(record_path(self.out_dir, spec.run_id), early)
-        return early
-
-    def limits(self) -> dict[str, float]:
-        return phase_limits(self.run_spec)
-
-    def run(self, on_phase) -> dict:
-        """The run, in the child: its record, with the code it ran (:func:`~bench.runner.code.code_hash`), is what
-        the child writes, once, to the record's path (:meth:`result_file`)."""
-        data = None
-        if self.data_file:
-            with open(self.data_file, "rb") as f:
-                data = pickle.load(f)
-        spec = self.run_spec
-        record = execute(spec, on_phase, data=data, checked=True)
-        return record.replace(code=code_hash(spec.method, spec.system, spec.plugins)).to_json()
-
-    def result_file(self, work: Path, name: str) -> Path:
-        return record_path(self.out_dir, name)
-
-    def finish(self, outcome: Outcome, report) -> Record:
-        """The record the child wrote; where it wrote none (it failed or was killed), the one written here."""
-        spec = self.run_spec
-        path = record_path(self.out_dir, spec.run_id)
-        if outcome.result is not None:
-            return Record.from_json(outcome.result, str(path))
-        limits = self.limits()
-        code = code_hash(spec.method, spec.system, spec.plugins)
-        if not outcome.killed:
-            error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
-            record = Record.new(spec, "failed", elsewhere=True, error=error, code=code)
-        elif outcome.phase == "fit":
-            record = Record.new(spec, "timeout", elsewhere=True, code=code,
-                                error=f"fit still running at {fit_limit_words(spec.budget)}; killed")
-        elif outcome.phase in ("evaluate", "prepare"):
-            what = "evaluation after the fit" if outcome.phase == "evaluate" else \
-                "one-time work before the fit (compiling; a hybrid's prior)"
-            record = Record.new(spec, "timeout", elsewhere=True,
-                                error=f"{what} still running after {limits[outcome.phase]:g} s; killed", code=code)
-        else:
-            record = Record.new(spec, "failed", elsewhere=True, code=code,
-                                error=f"did not start its fit within {STARTUP_TIMEOUT_S:g} s; killed")
-        write_record(path, record)
-        return record
-
-
-def run_one(spec: RunSpec, out_dir: str | os.PathLike, *, checked: bool = False, fresh: bool = False,
-            data: tuple | None = None) -> Record:
-    """``spec`` run as a :class:`RunJob` by :func:`~bench.runner.job.run_isolated`; its record, written.
-
-    ``data``: the spec's ``(train, test)`` pair, already read (and checked) by
-    the caller; the run's process is handed it through a file in
-    ``out_dir``, removed after the run, instead of reading the spec's files again."""
-    data_file = None
-    if data is not None:
-        data_file = Path(out_dir) / f"{spec.run_id}.data.pickle"
-        data_file.parent.mkdir(parents=True, exist_ok=True)
-        with open(data_file, "wb") as f:
-            pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
-    try:
-        return run_isolated(RunJob.of(spec, out_dir, data_file and str(data_file)), Path(out_dir) / "logs",
-                            spec.run_id, checked=checked, fresh=fresh)
-    finally:
-        if data_file is not None:
-            data_file.unlink(missing_ok=True)
-
+from bench.runner.stacked import StackedJob, groups
 
 class FolderLock:
     """One matrix at a time writes into a folder: an exclusive ``flock`` on
@@ -301,18 +178,20 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
     if todo and cluster is not None:
         for record in _run_on_dask(todo, out_dir, cluster, workers):
             results[record.run_id] = done(record)
-    elif todo and stack:
-        def job(group: list[RunSpec]) -> list[Record]:
-            unchanged(group[0])
-            out = run_stacked(group, out_dir, lambda s: run_one(s, out_dir, checked=True), phase_limits(group[0]))
-            return [done(r, log_path(out_dir, stack_name(group) if r.details.get("stacked") else r.run_id)) for r in out]
-
-        for records in map_interruptibly(job, groups(todo, report), workers):
-            results.update((r.run_id, r) for r in records)
     elif todo:
-        for record in map_interruptibly(lambda s: done(run_one(unchanged(s), out_dir, checked=True), log_path(out_dir, s.run_id)),
-                                        todo, workers):
-            results[record.run_id] = record
+        jobs: dict[str, Job] = {}
+        first: dict[str, RunSpec] = {}
+        for group in groups(todo, report) if stack else [[s] for s in todo]:
+            job = RunJob.of(group[0], out_dir) if len(group) == 1 else StackedJob.of(group, out_dir)
+            name = group[0].run_id if len(group) == 1 else job.name
+            jobs[name], first[name] = job, group[0]
+
+        def finished(name: str, result) -> None:
+            for r in result if isinstance(result, list) else [result]:
+                results[r.run_id] = done(r, log_path(out_dir, name if r.details.get("stacked") else r.run_id))
+
+        run_jobs(jobs, workers, None, report, checked=True, before=lambda name: unchanged(first[name]),
+                 on_done=finished)
     tracker.summary()
     return [results[s.run_id] for s in specs]
 

@@ -4,12 +4,14 @@ written as ordinary records.
 
 * :func:`groups`: the runs to do, each seed of a stackable method's run
   grouped with the seeds whose specs equal it in all else;
-* :func:`run_stacked`: one group in its own process (:class:`StackedJob`), killed like any run
+* :class:`StackedJob`: one group in its own process, killed like any run
   (its fit shares one limit, its evaluations have one each); each seed's
   record is then what :func:`~bench.runner.execute.execute` writes for a fit
   made alone, its ``details.stacked`` the number of seeds that trained with it.
   Where the group's process fails or is killed, each of its seeds runs again
-  on its own, so that no seed's record is lost to another's failure.
+  on its own (:func:`~bench.runner.run.run_one`), so that no seed's record is
+  lost to another's failure. The matrix hands the groups to the one
+  scheduler, :func:`~bench.runner.job.run_jobs`.
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ from bench.core.errors import UserError
 from bench.runner.code import code_hash
 from bench.runner.execute import execute, load_data, make_method, make_system, warm_up_torch
 from bench.runner.isolation import Outcome
-from bench.runner.job import Job, run_isolated
+from bench.runner.job import Job
+from bench.runner.run import phase_limits, run_one
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record, record_path, write_record
 from bench.runner.spec import RunSpec
@@ -69,6 +72,19 @@ class StackedJob(Job):
     phase_limits: dict
     out_dir: str
 
+    @classmethod
+    def of(cls, group: list[RunSpec], out_dir: str | Path) -> "StackedJob":
+        """``group``'s job, its limits a run's (:func:`~bench.runner.run.phase_limits`)."""
+        return cls(tuple(s.to_dict() for s in group), phase_limits(group[0]), str(out_dir))
+
+    @property
+    def name(self) -> str:
+        """Its process's name, its log's and call's (:func:`stack_name`)."""
+        return stack_name([RunSpec.from_dict(d) for d in self.specs])
+
+    def folder(self) -> Path:
+        return Path(self.out_dir) / "logs"
+
     @property
     def threads(self) -> int:
         return RunSpec.from_dict(self.specs[0]).threads
@@ -97,27 +113,15 @@ class StackedJob(Job):
             records.append(record.to_json())
         return {"records": records}
 
-    def finish(self, outcome: Outcome, report) -> list[dict] | None:
-        return None if outcome.result is None else outcome.result["records"]
+    def finish(self, outcome: Outcome, report) -> list[Record]:
+        """Each seed's record: the stack's, or, where its process gave none (it failed or was killed), each
+        seed's run on its own."""
+        specs = [RunSpec.from_dict(d) for d in self.specs]
+        if outcome.result is None:
+            return [run_one(spec, self.out_dir, checked=True) for spec in specs]
+        return [Record.from_json(obj, f"{self.name}: {spec.run_id}") for spec, obj in zip(specs, outcome.result["records"])]
 
 
 def stack_name(group: list[RunSpec]) -> str:
     """The name of a group's process, its log's and call's: its first run's id and its size."""
     return f"{group[0].run_id}__stack{len(group)}"
-
-
-def run_stacked(group: list[RunSpec], out_dir: str | Path, run_alone: Callable[[RunSpec], Record],
-                limits: dict[str, float]) -> list[Record]:
-    """Run ``group`` stacked in its own process (``limits`` as one run's,
-    :func:`~bench.runner.matrix.phase_limits`; the evaluation's times the
-    seeds); its process writes their records, returned here. A group of one, or a group whose
-    process gave no records, runs each seed with ``run_alone``."""
-    if len(group) == 1:
-        return [run_alone(group[0])]
-    out_dir = Path(out_dir)
-    name = stack_name(group)
-    job = StackedJob(tuple(s.to_dict() for s in group), limits, str(out_dir))
-    results = run_isolated(job, out_dir / "logs", name, checked=True)
-    if results is None:  # the stack failed or was killed: each seed on its own
-        return [run_alone(spec) for spec in group]
-    return [Record.from_json(obj, f"{name}: {spec.run_id}") for spec, obj in zip(group, results)]

@@ -37,7 +37,7 @@ from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, write_json
 from bench.core.protocols import folds as fold_data
 from bench.evaluation.domain import domain, sentences
-from bench.evaluation.tuning import FAR_RULE, MAX_FOLDS, PROTOCOL, SCORE_RULE
+from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL, SCORE_RULE
 from bench.residual.loop import MAX_ROUNDS
 from bench.runner import matrix
 from bench.runner.records import Record, record_path
@@ -200,7 +200,7 @@ def page(result: dict) -> str:
 
 
 def farther(entries: list[dict], chosen: dict | None) -> str:
-    """The page's sentence on the farther half of the folds' scored samples (:data:`FAR_RULE`): which candidate
+    """The page's sentence on the farther half of the folds' scored samples (:data:`bench.evaluation.tuning.FAR_RULE`): which candidate
     validation puts first there, beside the choice."""
     far = [e for e in usable(entries) if e.get("validation_far_mse") is not None]
     if not far or chosen is None:
@@ -209,8 +209,8 @@ def farther(entries: list[dict], chosen: dict | None) -> str:
     then = f" (then {', '.join(ranked[1:3])})" if len(ranked) > 1 else ""
     same = ("the candidate chosen on all of them" if ranked[0] == chosen["name"] else
             "not the candidate chosen on all of them: the ranking changes as validation moves away from the fit")
-    return (f" Scored on the farther half of each fold's samples only ({FAR_RULE}), validation puts {ranked[0]} "
-            f"first{then}: {same}.")
+    return (f" Scored on the farther half of each fold's samples only (those at least the fold's median distance "
+            f"from the states it is fitted on), validation puts {ranked[0]} first{then}: {same}.")
 
 
 def own_budgets(result: dict) -> str:

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from bench.evaluation.scores import MAX_EXPRESSION_CHARS, clip
-from bench.runner import job, matrix
+from bench.runner import job, matrix, run
 from bench.runner.execute import execute, load_data, make_system, preflight, raised
 from bench.runner.isolation import fork_server
 from bench.runner.progress import print_now, quiet
@@ -165,7 +165,7 @@ def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatc
     assert r.status == "ok", r.error
     assert r.details["train_source"].endswith("train.csv")
     assert fork_server() is not None
-    fresh = matrix.run_one(spec, "fresh", fresh=True)
+    fresh = run.run_one(spec, "fresh", fresh=True)
     assert fresh.status == "ok" and fresh.train_mse == r.train_mse
 
 
@@ -176,11 +176,11 @@ def test_data_the_caller_read_is_handed_to_the_run_which_reads_no_file(tmp_path)
     system = SYSTEMS["double_pendulum"]()
     train, test = generate(system, 48, seed=1), generate(system, 24, seed=2)
     (spec,) = specs(["toy_constant"], train_path=str(tmp_path / "absent.csv"), test_path=str(tmp_path / "absent.csv"))
-    r = matrix.run_one(spec, tmp_path, checked=True, data=(train, test))
+    r = run.run_one(spec, tmp_path, checked=True, data=(train, test))
     assert r.status == "ok", r.error
     assert r.details["n_train"] == 48 and r.details["n_test"] == 24
     assert not list(tmp_path.glob("*.pickle"))  # the hand-off file is gone after the run
-    unread = matrix.run_one(spec, tmp_path / "again", checked=True)  # without it, the run reads the (absent) file
+    unread = run.run_one(spec, tmp_path / "again", checked=True)  # without it, the run reads the (absent) file
     assert unread.status == "failed" and "absent.csv" in unread.error
 
 
@@ -259,7 +259,7 @@ def test_a_stage_after_the_fit_that_fails_keeps_the_fit_and_names_the_stage(tmp_
     assert r.status == "ok" and r.train_mse > 0 and r.test_mse > 0 and r.steps > 0 and r.curve
     assert r.failed_stages == {"expression": "ValueError: no expression today",
                                "exact": "ValueError: no expression today"} and r.expression is None
-    log = matrix.log_path(tmp_path, r.run_id)
+    log = run.log_path(tmp_path, r.run_id)
     assert any("failed after the fit: expression, exact" in line and str(log) in line for line in lines), lines
     assert "Traceback" in log.read_text() and "no expression today" in log.read_text()
     from bench.reporting.tables import build_tables
@@ -310,7 +310,7 @@ def test_a_failed_run_names_its_log_and_is_redone_once_its_plugin_is_fixed(tmp_p
                                n_train=64, n_test=32)
     lines = []
     (r,) = matrix.run_matrix(todo, tmp_path / "out", workers=1, report=lines.append)
-    log = matrix.log_path(tmp_path / "out", r.run_id)
+    log = run.log_path(tmp_path / "out", r.run_id)
     assert r.status == "failed" and "a typo in the plugin" in r.error and r.code["files"][str(plugin)]
     assert any(f"log {log}" in line for line in lines), lines
     assert "Traceback" in log.read_text() and "KeyError: 'a typo in the plugin'" in log.read_text()
