@@ -4,6 +4,7 @@ record says where its fit trained; methods that are not torch methods say so."""
 
 from __future__ import annotations
 
+from bench.core.budget import Budget
 import json
 
 import pytest
@@ -69,7 +70,7 @@ def test_methods_that_are_not_torch_methods_say_once_that_they_run_on_the_cpu(mo
 def test_the_residual_loop_says_where_its_fits_trained():
     s = get_system("double_pendulum")
     train, test = generate(s, 400, 0), generate(s, 100, 1)
-    out = residual_loop("mlp", train, test, steps=5, hyperparameters={"hidden": 8, "layers": 1}, report=lambda _: None,
+    out = residual_loop("mlp", train, test, budget=Budget(steps=5), hyperparameters={"hidden": 8, "layers": 1}, report=lambda _: None,
                         device="cpu")
     assert out.device["type"] == "cpu" and out.device["name"] and out.to_json()["device"] == out.device
 

@@ -13,7 +13,6 @@ from bench.residual.job import ResidualJob, run_residual
 from bench.residual.loop import FIT_SHARE, MAX_ROUNDS
 from bench.residual.report import summary_lines
 from bench.runner.job import KILL_FACTOR
-from methods import METHODS
 
 HELP = "fit, trace the torque residual to missing effects, add them, refit; report the error before and after"
 
@@ -52,17 +51,14 @@ def main(args) -> int:
     (name,), plugins = load_plugins(args, [args.system])
     check_names(args, [name], [args.method])
     check_split(args.split, [name])
-    configuration = configurations(args, [args.method])[args.method]
-    named = METHODS[args.method].configuration(configuration)
-    overrides = hyperparameters(args.overrides, args.method, [args.method])
-    settings = {**named, **overrides}
-    job = ResidualJob(
-        system=name, method=args.method,
+    job = ResidualJob.of(
+        name, args.method, budget_s=budget(args)[0], steps=args.steps, seed=args.seed,
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
-        budget_s=budget(args)[0], steps=args.steps, seed=args.seed, hyperparameters=settings,
+        profile=configurations(args, [args.method])[args.method],
+        hyperparameters=hyperparameters(args.overrides, args.method, [args.method]),
         json_path=None if args.json is None else str(args.json), report_path=None if args.report is None else str(args.report),
         plugins=plugins, split=args.split, device=device(args.device, [args.method]), check_limits=not args.ignore_limits,
-        command=args.invocation, overrides=overrides, configuration=configuration,
+        command=args.invocation,
     )
     job.check()  # the method, its hyperparameters and the data given: one line, before the note below
     if args.json is None and args.report is None:

@@ -291,14 +291,6 @@ EFFECTS: dict[str, Effect] = {
         Effect("periodic_cos", lambda q, qd, N: -sympy.sin(N * q[0]) / N, "L", "b",
                "b·cos(N·q) (L −= b·sin(N·q)/N)", nonnegative=False, shaped="N",
                numeric=lambda q, qd, N, sign: np.cos(N * q), grid=tuple(range(1, 13))),
-        # the coefficient is the gain's change, g <- g (1 + c): a gain between 0.8 and 1.25 is a calibration
-        # error (a torque sensor's is a few percent); a residual that asks for more is something else the
-        # model lacks, and a finding
-        Effect("torque_gain", lambda q, qd: sympy.Symbol("tau" + str(q[0])[1:], real=True), "sensor", "g",
-               "tau_measured = g·tau", nonnegative=False, bounds=(-0.2, 0.25)),
-        Effect("load_friction", lambda q, qd: sympy.Abs(sympy.Symbol("tau" + str(q[0])[1:], real=True))
-               * sympy.sign(qd[0]), "sensor", "mu", "tau_measured = tau + mu·|tau|·sign(qd)", bounds=(0.0, 0.5)),
-        Effect("time_shift", None, "sensor", "delta", "tau_measured(t) = tau(t − delta)", arity=0, nonnegative=False),
         Effect("tip_payload", None, "L", "m", "a point mass m at the tip (L += m·(|v_tip|²/2 − g·y_tip))",
                arity=0, on_system=lambda system, q, qd: _payload(system, q, qd), needs_link_lengths=True),
         Effect("gravity_tilt", None, "L", "alpha",
@@ -317,10 +309,6 @@ def register_effect(effect: Effect) -> Effect:
         raise ValueError(f"an effect needs a name of its own (letters, digits, _), got {effect.name!r}")
     EFFECTS[effect.name] = effect
     return effect
-
-
-#: the gains a torque sensor's calibration error may have, ``(low, high)``: its coefficient's bounds as ``g = 1 + c``
-GAIN_RANGE = tuple(1.0 + b for b in EFFECTS["torque_gain"].bounds)
 
 
 def _payload(system, q, qd) -> sympy.Expr:

@@ -222,7 +222,8 @@ class Laws:
         """Take the law ``name`` out, with the effect and the family a declared law brought (a test's plugin,
         once the test is done)."""
         law = self._arm.pop(name, None)
-        self._sensor.pop(name, None)
+        if self._sensor.pop(name, None) is not None and name in EFFECTS and EFFECTS[name].sensor:
+            EFFECTS.pop(name)  # the effect a sensor law's class brought
         if law is not None and law.members == (name,) and not any(name in other.members for other in self._arm.values()):
             FAMILIES.pop(name, None)
             if name in EFFECTS and not EFFECTS[name].sensor:

@@ -36,7 +36,7 @@ import numpy as np
 import sympy
 
 from bench.core.data import Dataset
-from bench.physics.effects import EFFECTS, GAIN_RANGE
+from bench.physics.effects import EFFECTS, Effect, register_effect
 from bench.physics.laws import LAWS
 from bench.physics.regression import fit_statistics
 from bench.physics.terms import Term
@@ -73,6 +73,10 @@ class SensorLaw:
     bounds: ClassVar[tuple[float, float] | None] = None
     #: one instance per joint, or one for every joint
     per_joint: ClassVar[bool] = True
+    #: the law as an effect (place ``sensor``: its term per unit coefficient), where it has one: :func:`register`
+    #: puts it into :data:`~bench.physics.effects.EFFECTS` beside the arm's, where the candidates' terms and the
+    #: loop's reports look a law up by name; a law is declared once, here
+    effect: ClassVar[Effect | None] = None
 
     @classmethod
     def start(cls, joint: int | None) -> "SensorLaw":
@@ -93,7 +97,10 @@ class SensorLaw:
 
     @classmethod
     def term(cls, joint: int | None, dof: int) -> Term:
-        """The law on ``joint`` as a candidate term (place ``sensor``)."""
+        """The law on ``joint`` as a candidate term (place ``sensor``): its :attr:`effect`'s, else one of
+        :meth:`expression`."""
+        if cls.effect is not None and cls.effect.expr is not None:
+            return cls.effect.term(joint)
         return Term(cls.expression(joint, dof), "sensor", cls.name, joint)
 
     @classmethod
@@ -206,7 +213,13 @@ class TorqueGain(JointTorqueLaw):
     a gain common to every joint is a rescaling of ``L``). Its coefficient is
     the gain's relative change, ``g <- g (1 + c)``."""
 
-    name, kind, parameter, neutral, bounds = "torque_gain", "sensor", "g", 1.0, GAIN_RANGE
+    # the coefficient is the gain's change, g <- g (1 + c): a gain between 0.8 and 1.25 is a calibration error
+    # (a torque sensor's is a few percent); a residual that asks for more is something else the model lacks,
+    # and a finding
+    effect = Effect("torque_gain", lambda q, qd: sympy.Symbol("tau" + str(q[0])[1:], real=True), "sensor", "g",
+                    "tau_measured = g·tau", nonnegative=False, bounds=(-0.2, 0.25))
+    name, kind, parameter, neutral = effect.name, "sensor", effect.parameter, 1.0
+    bounds = tuple(1.0 + b for b in effect.bounds)
 
     @classmethod
     def offered(cls, train, reference):
@@ -220,10 +233,6 @@ class TorqueGain(JointTorqueLaw):
     @classmethod
     def generable_condition(cls):
         return f"{cls.parameter} > 0"
-
-    @classmethod
-    def term(cls, joint, dof):
-        return EFFECTS[cls.name].term(joint)
 
     @classmethod
     def law_text(cls, term, parameter):
@@ -251,11 +260,9 @@ class LoadFriction(JointTorqueLaw):
     the drive moves the load, -1 where the load drives it back), which needs
     only the torque's sign, the same measured or the arm's while ``mu < 1``."""
 
-    name, kind, parameter, neutral, bounds = "load_friction", "drive", "mu", 0.0, EFFECTS["load_friction"].bounds
-
-    @classmethod
-    def term(cls, joint, dof):
-        return EFFECTS[cls.name].term(joint)
+    effect = Effect("load_friction", lambda q, qd: sympy.Abs(sympy.Symbol("tau" + str(q[0])[1:], real=True))
+                    * sympy.sign(qd[0]), "sensor", "mu", "tau_measured = tau + mu·|tau|·sign(qd)", bounds=(0.0, 0.5))
+    name, kind, parameter, neutral, bounds = effect.name, "drive", effect.parameter, 0.0, effect.bounds
 
     @classmethod
     def law_text(cls, term, parameter):
@@ -308,7 +315,9 @@ class TimeShift(SensorLaw):
     #: each training recording's own estimate, ``{recording: (value, stderr)}``
     per_recording: dict | None = field(default=None, compare=False)
 
-    name, kind, parameter, neutral, bounds, per_joint = "time_shift", "sensor", "delta", 0.0, None, False
+    effect = Effect("time_shift", None, "sensor", "delta", "tau_measured(t) = tau(t − delta)", arity=0,
+                    nonnegative=False)
+    name, kind, parameter, neutral, bounds, per_joint = effect.name, "sensor", effect.parameter, 0.0, None, False
 
     @classmethod
     def offered(cls, train, reference):
@@ -347,17 +356,30 @@ class TimeShift(SensorLaw):
 
 def register(law: type[SensorLaw]) -> type[SensorLaw]:
     """Add ``law`` to the one registry of laws, :data:`bench.physics.laws.LAWS`
-    (usable as a class decorator); a name another law or an arm's effect has
-    taken is refused (the same class imported again, as a plugin file may be,
-    takes its place)."""
+    (usable as a class decorator), and its :attr:`~SensorLaw.effect`, where it
+    has one, to :data:`~bench.physics.effects.EFFECTS`: the built-in laws and
+    a plugin's are declared the same way, as one class each. A name another
+    law or an arm's effect has taken is refused (the same class imported
+    again, as a plugin file may be, takes its place)."""
     if not isinstance(law, type) or not issubclass(law, SensorLaw) or \
             law.name in EFFECTS and EFFECTS[law.name].place != "sensor":
         raise ValueError(f"a law of the sensor or the drive needs a name of its own, got {getattr(law, 'name', law)!r}")
-    return LAWS.register(law)
+    effect = law.effect
+    if effect is not None and (effect.name != law.name or effect.place != "sensor"):
+        raise ValueError(f"{law.name}: a sensor law's effect has its name and the place 'sensor', got "
+                         f"{effect.name!r} at {effect.place!r}")
+    registered = LAWS.register(law)
+    if effect is not None:
+        EFFECTS.pop(law.name, None)  # the same class imported again brings an effect of its own
+        register_effect(effect)
+    return registered
 
 
 for _law in (TorqueGain, LoadFriction, TimeShift):  # in the order the loop offers them
     register(_law)
+
+#: the gains a torque sensor's calibration error may have, ``(low, high)``
+GAIN_RANGE = TorqueGain.bounds
 
 
 def law_of(term: Term) -> type[SensorLaw]:

@@ -21,11 +21,12 @@ from bench.evaluation.per_joint import logged_test_torque, per_joint, per_joint_
 from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
-from bench.runner.execute import given_data
+from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.isolation import CallFailed, Outcome
 from bench.runner.job import Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import Report, print_now
+from bench.runner.spec import RunSpec
 from methods import METHODS
 from systems import SYSTEMS
 
@@ -36,62 +37,75 @@ EVALUATION_FACTOR = 5.0
 @dataclass(frozen=True)
 class ResidualJob(Job):
     """One run of the loop, as the command line gives it, as a
-    :class:`~bench.runner.job.Job`.
-
-    ``train_path`` / ``test_path`` are CSV files in the suite's format; a
-    measured system without them uses its own split ``split`` (``None``: its default). ``json_path`` and
-    ``report_path`` are written by the loop's process, atomically.
-    ``check_limits`` stops the loop where the files' positions leave the
-    arm's joint limits (:meth:`~bench.physics.system.System.check_positions`).
+    :class:`~bench.runner.job.Job`: the run's :class:`~bench.runner.spec.RunSpec`
+    (``spec``, as JSON: the system, the method in its named configuration
+    (``profile``) with the user's ``--set`` values (``hyperparameters``), the
+    data (``train_path`` / ``test_path``, CSV files in the suite's format; a
+    measured system without them uses its own ``split``), the budget, the seed,
+    the plugins and the device) and what the loop adds to a run:
+    ``json_path`` and ``report_path``, written by the loop's process,
+    atomically; ``check_limits``, which stops the loop where the files'
+    positions leave the arm's joint limits
+    (:meth:`~bench.physics.system.System.check_positions`); and the command
+    line, for the result's inputs.
     """
 
-    system: str
-    method: str
-    train_path: str | None = None
-    test_path: str | None = None
-    budget_s: float | None = DEFAULT_BUDGET_S
-    steps: int | None = None
-    seed: int = 0
-    hyperparameters: dict = field(default_factory=dict)
+    spec: dict
     json_path: str | None = None
     report_path: str | None = None
-    plugins: tuple[str, ...] = ()
-    split: str | None = None
-    device: str = "cpu"
     check_limits: bool = True
     command: str = ""
-    overrides: dict = field(default_factory=dict)
-    configuration: str = "default"
     #: where the loop's process keeps the result as it stands after each round (set by :func:`run_residual`)
     checkpoint_path: str | None = None
 
+    @classmethod
+    def of(cls, system: str, method: str, *, budget_s: float | None = DEFAULT_BUDGET_S, steps: int | None = None,
+           seed: int = 0, **fields) -> "ResidualJob":
+        """The loop of ``method`` on ``system``: ``fields`` are the job's own and the spec's (``train_path``,
+        ``hyperparameters``, ``profile``, ``split``, ``plugins``, ``device``, ...)."""
+        own = {f.name for f in dataclasses.fields(cls)} - {"spec"}
+        spec = RunSpec(system=system, method=method, experiment="indirect", seed=seed, budget_s=budget_s, steps=steps,
+                       **{k: v for k, v in fields.items() if k not in own})
+        return cls(spec.to_dict(), **{k: v for k, v in fields.items() if k in own})
+
+    @property
+    def run_spec(self) -> RunSpec:
+        return RunSpec.from_dict(self.spec)
+
+    @property
+    def settings(self) -> dict:
+        """The method's hyperparameters: its named configuration, then the ``--set`` values
+        (:func:`~bench.runner.execute.method_config`)."""
+        return method_config(self.run_spec)
+
     def check(self) -> None:
-        """The method can run here and fits torques, its hyperparameters are
-        valid, and a simulated system has data given; else one line."""
-        entry = METHODS.entry(self.method)
-        if not entry.available:
-            raise UserError(f"method {self.method} is unavailable: {entry.unavailable_reason()}")
-        reason = entry.obj.not_applicable_reason("indirect")
-        if reason:
-            raise UserError(f"method {self.method} cannot run the loop, which fits torques: {reason}")
-        METHODS[self.method](**self.hyperparameters)
-        if not self.train_path and SYSTEMS[self.system].simulated:
-            raise UserError(f"{self.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
+        """The method can run here and fits torques (:func:`~bench.runner.execute.preflight`), its
+        hyperparameters are valid, and a simulated system has data given; else one line."""
+        spec = self.run_spec
+        early = preflight(spec)
+        if early is not None:
+            raise UserError(f"method {spec.method} is unavailable: {early.error}" if early.status == "unavailable"
+                            else f"method {spec.method} cannot run the loop, which fits torques: {early.error}")
+        METHODS[spec.method](**self.settings)
+        if not spec.train_path and SYSTEMS[spec.system].simulated:
+            raise UserError(f"{spec.system} is simulated: give --train (and --test) CSV files, e.g. from python -m bench data")
 
     def limits(self) -> dict[str, float]:
         """The loop (its fit and rounds) is killed at :func:`~bench.runner.job.fit_limit`
         of its budget, the driven rollouts after the rounds at
         :func:`~bench.runner.job.evaluation_limit` with :data:`EVALUATION_FACTOR`:
         their work is the data's and the models', not the budget's."""
-        return {"loop": fit_limit(self.budget), "evaluate": evaluation_limit(self.budget_s, EVALUATION_FACTOR)}
+        spec = self.run_spec
+        return {"loop": fit_limit(spec.budget), "evaluate": evaluation_limit(spec.budget_s, EVALUATION_FACTOR)}
 
     @property
     def budget(self) -> Budget:
-        return Budget(seconds=self.budget_s, steps=self.steps)
+        return self.run_spec.budget
 
     def data(self, system: System) -> tuple[Dataset, Dataset | None]:
         """The train and test data: the given CSVs, else ``system``'s own split."""
-        return given_data(system, self.train_path, self.test_path, check_limits=self.check_limits)
+        spec = self.run_spec
+        return given_data(system, spec.train_path, spec.test_path, check_limits=self.check_limits)
 
     def run(self, on_phase: Callable[[str], None], report: Report = print_now) -> dict:
         """The loop in this process, with its outputs written; ``on_phase`` hears
@@ -105,8 +119,9 @@ class ResidualJob(Job):
 
     def fit(self, report: Report = print_now, on_phase: Callable[[str], None] | None = None) -> ResidualResult:
         """The loop in this process, with its outputs written."""
-        import_plugins(self.plugins)
-        system = SYSTEMS[self.system](split=self.split)
+        spec = self.run_spec
+        import_plugins(spec.plugins)
+        system = make_system(spec)
         train, test = self.data(system)
         inputs = self.inputs()
 
@@ -114,13 +129,13 @@ class ResidualJob(Job):
             if self.checkpoint_path is not None:
                 write_json(self.checkpoint_path, dataclasses.replace(result, inputs=inputs).to_json())
 
-        result = residual_loop(self.method, train, test, budget_s=self.budget_s, steps=self.steps, seed=self.seed,
-                               hyperparameters=self.hyperparameters, report=report, device=self.device,
+        result = residual_loop(spec.method, train, test, budget=spec.budget, seed=spec.seed,
+                               hyperparameters=self.settings, report=report, device=spec.device,
                                checkpoint=checkpoint, on_phase=on_phase)
         per_joint_errors = None
         with scoring():  # the loop's figures on the test split, to report
             if test is not None and result.models is not None:
-                logged = logged_test_torque(system, own_data=not self.train_path)
+                logged = logged_test_torque(system, own_data=not spec.train_path)
                 per_joint_errors = {name: per_joint(model.predict_torque(test), test, logged)
                                     for name, model in zip(("before", "after"), result.models)}
                 for line in per_joint_lines(per_joint_errors["before"], per_joint_errors["after"]):
@@ -170,15 +185,16 @@ class ResidualJob(Job):
         values, the named configuration and the method's whole configuration,
         and each data file (the given CSVs, else the measured system's own
         files) with its sha256 and the settings ``convert`` wrote beside it."""
-        paths = [p for p in (self.train_path, self.test_path) if p] or SYSTEMS[self.system].source_files()
+        spec = self.run_spec
+        paths = [p for p in (spec.train_path, spec.test_path) if p] or SYSTEMS[spec.system].source_files()
         files = {}
         for path in paths:
             files[str(path)] = {"sha256": file_digest(path)}
             settings = read_settings(path)
             if settings is not None:
                 files[str(path)]["convert"] = settings
-        method = METHODS[self.method](**self.hyperparameters)
-        return {"command": self.command, "set": dict(self.overrides), "configuration": self.configuration,
+        method = METHODS[spec.method](**self.settings)
+        return {"command": self.command, "set": dict(spec.hyperparameters), "configuration": spec.profile,
                 "hyperparameters": method.hyperparameters(), "files": files}
 
 

@@ -60,8 +60,8 @@ can undo a round) is the model's refit strategy, chosen once from the model
 7. **Repeat** until a round accepts nothing, for at most :data:`MAX_ROUNDS`
    rounds.
 
-``budget_s`` bounds the whole loop (under a work budget, ``steps``, nothing
-below depends on time: see :func:`residual_loop`): the method's fit has
+The budget's seconds bound the whole loop (under a work budget, its steps,
+nothing below depends on time: see :func:`residual_loop`): the method's fit has
 :data:`FIT_SHARE` of it, each cross-fit of a kept fit :data:`CROSS_FIT_SHARE`,
 the polish stops starting new starts at :data:`POLISH_SHARE`, a round starts
 only if the time it is expected to take (the longest round so far) still
@@ -129,18 +129,17 @@ def not_started(budget_s: float) -> str:
     return f"the budget of {budget_s:g} s would be spent before a round ended"
 
 
-def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s: float | None = None,
-                  steps: int | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
+def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget: Budget | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
                   fitted: FittedModel | None = None, open_ended: bool | None = None,
                   device: str = "cpu", checkpoint: Callable[[ResidualResult], None] | None = None,
                   on_phase: Callable[[str], None] | None = None, max_rounds: int = MAX_ROUNDS) -> ResidualResult:
     """Run the loop in this process; see the module docstring.
 
-    ``budget_s`` bounds the whole loop (its method's fit has
-    :data:`FIT_SHARE` of it; default :data:`DEFAULT_BUDGET_S`). With
-    ``steps`` the loop is bounded by work instead, and ``budget_s`` is
+    ``budget``'s seconds bound the whole loop (its method's fit has
+    :data:`FIT_SHARE` of them; default :data:`DEFAULT_BUDGET_S`). With
+    steps the loop is bounded by work instead, and the seconds are
     only recorded, as the ceiling its caller kills it at: the fit
-    and each cross-fit do ``steps`` steps of the method's work, the polish
+    and each cross-fit do that many steps of the method's work, the polish
     all its starts, the trace until nothing is significant, and at most
     ``max_rounds`` (default :data:`MAX_ROUNDS`) rounds run, so that the result
     does not depend on the machine's speed. ``fitted`` is an already fitted instance of
@@ -158,14 +157,13 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget_s
     rounds end and the work after them (the driven rollouts of the test
     recordings) begins: that work is not charged to the budget.
     """
-    if budget_s is None and steps is None:
-        budget_s = DEFAULT_BUDGET_S
+    budget = budget or Budget(seconds=DEFAULT_BUDGET_S)
     train, thinned = train.thinned(MAX_SAMPLES)
     if thinned > 1:
         report(f"the loop works on one sample in {thinned} of each training recording, {len(train)} samples: "
                f"neighbouring samples are near copies, and its statistics grow with the rows (at most {MAX_SAMPLES})")
     with remembered_columns(train, test):  # each candidate's and effect's columns once, for every round
-        loop = _Loop(method, train, test, Budget(seconds=budget_s, steps=steps), seed, dict(hyperparameters or {}),
+        loop = _Loop(method, train, test, budget, seed, dict(hyperparameters or {}),
                      report, open_ended, device)
         loop.thinned, loop.max_rounds = thinned, min(int(max_rounds), MAX_ROUNDS)
         loop.checkpoint, loop.on_phase = checkpoint or (lambda result: None), on_phase or (lambda phase: None)

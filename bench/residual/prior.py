@@ -57,8 +57,8 @@ def run(train: Dataset, seed: int, budget: Budget, rounds: int | None = None) ->
     line."""
     if rounds is None:
         rounds = MAX_ROUNDS if budget.steps is None else budget.steps
-    return residual_loop(METHOD, train, None, budget_s=None if budget.steps is not None else budget.seconds,
-                         steps=budget.steps, seed=seed, max_rounds=min(rounds, MAX_ROUNDS),
+    return residual_loop(METHOD, train, None, budget=Budget(steps=budget.steps) if budget.steps is not None else budget,
+                         seed=seed, max_rounds=min(rounds, MAX_ROUNDS),
                          report=lambda line: print(f"prior: {line}", flush=True))
 
 

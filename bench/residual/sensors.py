@@ -200,7 +200,7 @@ def measured_rss(model: FittedModel, sensor: Sensor, measured: Dataset) -> float
 def inadmissible(strategy, model, measured: Dataset, sensor: Sensor):
     """The laws whose settled parameter left its admissible range
     (:attr:`~bench.physics.sensor_laws.SensorLaw.bounds`: a gain outside
-    :data:`~bench.physics.effects.GAIN_RANGE`, a load-dependent friction outside
+    :data:`~bench.physics.sensor_laws.GAIN_RANGE`, a load-dependent friction outside
     ``0 <= mu <= 0.5``), each dropped with the others settled again: the fixed
     point may take a law there that entered inside it. Returns the model, the
     sensor and, per law dropped, ``(term, structural finding)``."""

@@ -124,7 +124,7 @@ def run_learner(learner: str, setup: Setup, seed: int) -> dict:
     curve = [[0.0, error(test_b)]]
     if loop:
         result = residual_loop(base, train_b, test_b, seed=seed, fitted=method, report=quiet,
-                               budget_s=None if setup.steps else LOOP_BUDGET_S, steps=setup.steps)
+                               budget=Budget(steps=setup.steps) if setup.steps else Budget(seconds=LOOP_BUDGET_S))
         curve += [[r["seconds"], r["mse"]["test"]] for r in result.rounds if "seconds" in r]
         out["effects"] = [{"name": e["name"], "joints": e["joints"], "law": e["law"], "parameters": e["parameters"]}
                           for e in result.effects]

@@ -74,7 +74,7 @@ def run_case(case: str, noise: float, method: str, n_train: int, n_test: int, bu
         train, test = add_noise(train, "indirect", noise, seed), add_noise(clean_test, "indirect", noise, 1000 + seed)
     floor = float(np.mean((test.tau - clean_test.tau) ** 2))
     start = time.perf_counter()
-    out = residual_loop(method, train, test, budget_s=budget, steps=steps, seed=seed, report=quiet)
+    out = residual_loop(method, train, test, budget=Budget(seconds=budget, steps=steps), seed=seed, report=quiet)
     want = expected(put, system.dof, Sensor.exact(train).reference)
     found = reported(out.effects)
     return {

@@ -58,7 +58,7 @@ def run_case(method: str, held_out: str | None, budget: float | None, seed: int 
     within ``budget`` seconds or, with ``steps``, that work budget (:func:`bench.residual.residual_loop`)."""
     train, test = split(held_out)
     start = time.perf_counter()
-    out = residual_loop(method, train, test, budget_s=budget, steps=steps, seed=seed, report=quiet)
+    out = residual_loop(method, train, test, budget=Budget(seconds=budget, steps=steps), seed=seed, report=quiet)
 
     def name(e):
         what = e["expression"] if e["name"] == "symbolic" else e["name"]

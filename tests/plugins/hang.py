@@ -3,7 +3,7 @@ training file when it does, at the place the training file's folder is named
 for: ``round0`` (round 0's fit), ``round2`` (round 2) or ``rollouts`` (the driven
 rollouts after the rounds); or fail, at ``outputs`` (writing the outputs
 after the rounds, with an error that is not the user's). Imported as a plugin by the budget tests, in the
-loop's process (``ResidualJob.plugins``); the tests' clock reads the mark."""
+loop's process (the plugins of the job's ``RunSpec``); the tests' clock reads the mark."""
 
 from __future__ import annotations
 

@@ -6,6 +6,7 @@ control the clocks rather than rely on the machine's speed."""
 
 from __future__ import annotations
 
+from bench.core.budget import Budget
 import json
 import time
 from pathlib import Path
@@ -48,12 +49,12 @@ def _budget_ends_at(monkeypatch, when: str, round_: int):
 
 def test_a_round_the_budget_ends_in_is_undone_and_the_rounds_before_it_are_kept(monkeypatch):
     train, test = data_with(FRICTION, n=1000)
-    whole = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    whole = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     assert whole.stopped is None and whole.effects and len(whole.rounds) >= 2
     assert whole.heldout_holds_out == "the model and its effects"
     _budget_ends_at(monkeypatch, "refitting jointly", 1)
     saved, lines = [], []
-    out = residual_loop("sysid", train, test, steps=SYSID, report=lines.append, checkpoint=saved.append)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=lines.append, checkpoint=saved.append)
     assert [r["round"] for r in out.rounds] == [0, 1]
     assert out.rounds[1]["stop"].startswith("stopped: the budget of") and "while refitting jointly" in out.stopped
     assert "round 1" in out.stopped and "the rounds before it are kept" in out.stopped
@@ -88,7 +89,7 @@ def _hanging_job(tmp_path: Path, place: str, monkeypatch) -> ResidualJob:
     write_csv(test.replace(recording=np.full(n, "r0"), trajectory=np.full(n, "b"), time=np.arange(n) * 0.01),
               folder / "test.csv")
     _jump_when_hanging(monkeypatch, folder)
-    return ResidualJob("double_pendulum", "sysid", train_path=str(folder / "train.csv"),
+    return ResidualJob.of("double_pendulum", "sysid", train_path=str(folder / "train.csv"),
                        test_path=str(folder / "test.csv"), budget_s=600.0, steps=SYSID, plugins=(HANG,),
                        json_path=str(folder / "out.json"), report_path=str(folder / "out.md"))
 
@@ -110,7 +111,7 @@ def test_a_loop_killed_in_its_driven_rollouts_keeps_every_round_under_the_rollou
     out = run_residual(_hanging_job(tmp_path, "rollouts", monkeypatch), quiet)
     assert out.rounds[-1].get("stop") is None and out.effects and out.rollout is None
     assert out.stopped == (f"the driven rollouts after the rounds were still running after "
-                           f"{ResidualJob('double_pendulum', 'sysid', budget_s=600.0).limits()['evaluate']:g} s; killed: the result has every round and no rollouts")
+                           f"{ResidualJob.of('double_pendulum', 'sysid', budget_s=600.0).limits()['evaluate']:g} s; killed: the result has every round and no rollouts")
 
 
 def test_a_loop_killed_before_round_0_ended_has_nothing_to_return(monkeypatch, tmp_path):
@@ -140,7 +141,7 @@ def test_a_fit_slower_than_expected_still_returns_the_rounds_that_finished(monke
 
     monkeypatch.setattr(Fitter, "fit", slow_fit)
     lines = []
-    out = residual_loop("sysid", train, test, budget_s=2.0, report=lines.append)
+    out = residual_loop("sysid", train, test, budget=Budget(seconds=2.0), report=lines.append)
     last = out.rounds[-1]["round"]
     assert [r["round"] for r in out.rounds] == list(range(last + 1)) and last >= 2 and out.effects
     assert out.stopped.startswith(f"the budget of 2 s ran out in round {last}'s trace before it found anything")
@@ -158,7 +159,7 @@ def test_an_error_in_a_later_round_or_the_rollouts_keeps_the_rounds_that_finishe
 
     monkeypatch.setattr(loop_module._Loop, "round", round_)
     lines = []
-    out = residual_loop("sysid", train, test, steps=SYSID, report=lines.append)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=lines.append)
     assert [r["round"] for r in out.rounds] == [0, 1, 2] and out.effects  # round 1's laws stand
     assert out.stopped == ("round 2 failed (RuntimeError: a term's column overflowed): the round is undone, and the "
                            "rounds before it are kept")
@@ -171,7 +172,7 @@ def test_an_error_in_a_later_round_or_the_rollouts_keeps_the_rounds_that_finishe
     monkeypatch.setattr(rollouts_module, "driven_entry", broken)
     n = len(test)  # test data with a recording's times, so that the loop runs its driven rollouts after the rounds
     timed = test.replace(recording=np.full(n, "r0"), trajectory=np.full(n, "b"), time=np.arange(n) * 0.01)
-    out = residual_loop("sysid", train, timed, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, timed, budget=Budget(steps=SYSID), report=quiet)
     assert out.effects and out.rollout is None and out.mse_after["test"] < out.mse_before["test"]
     assert out.stopped == "the driven rollouts after the rounds failed (ValueError: no windows): the rounds are kept"
 

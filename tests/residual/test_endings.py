@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+from bench.core.budget import Budget
 import json
 
 import sympy
@@ -63,7 +64,7 @@ def test_a_payload_that_explains_the_fits_own_missing_term_is_named_with_that_te
     train, test = data_with({}, n=1000)
     (q1, q2), (v1, v2) = coordinate_symbols(2)
     lacking = 6.0 * v1**2 + 0.5 * v2**2 + 50.0 * sympy.cos(q1) + 8.0 * sympy.cos(q2)
-    out = residual_loop("mggp", train, test, steps=SOLVED, fitted=ExpressionModel(lacking, 2), report=quiet)
+    out = residual_loop("mggp", train, test, budget=Budget(steps=SOLVED), fitted=ExpressionModel(lacking, 2), report=quiet)
     kept = _kept(out.effects)
     assert kept == [("tip_payload", [1, 2])]
     (entry,) = out.equivalent_laws
@@ -75,7 +76,7 @@ def test_a_payload_that_explains_the_fits_own_missing_term_is_named_with_that_te
 
 def test_a_loop_that_finds_nothing_says_so():
     train, test = data_with({}, n=1000)
-    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     assert out.ending["reason"] == "nothing_significant" and not out.equivalent_laws
     assert summary_lines(out) == ["No effect added: nothing significant in the residual."]
 
@@ -83,7 +84,7 @@ def test_a_loop_that_finds_nothing_says_so():
 def test_a_loop_its_budget_ends_in_round_1_names_what_the_round_had_found(monkeypatch):
     train, test = data_with(FRICTION, n=1000)
     _budget_ends_at(monkeypatch, "refitting jointly", 1)
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     assert _kept(out.effects) == []
     ending = out.ending
     assert ending["reason"] == "budget" and ending["round"] == 1 and "while refitting jointly" in ending["detail"]

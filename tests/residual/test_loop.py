@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.core.budget import Budget
 from bench.core.data import add_noise, generate
 from bench.physics.undeclared import add_effects
 from bench.physics.models import ExpressionModel
@@ -19,7 +20,7 @@ from tests.commandline import cli
 
 ROOT = Path(__file__).resolve().parents[2]
 
-#: every loop here is bounded by work, not time (``residual_loop(..., steps=N)``): the method's fit
+#: every loop here is bounded by work, not time (``residual_loop(..., budget=Budget(steps=N))``): the method's fit
 #: does N steps, the polish all its starts and the trace until nothing is significant, so what a
 #: test sees does not depend on the machine's speed or load. SysId's parameters are polished by the
 #: loop anyway; 1000 of its steps leave them far from the optimum on purpose now and then.
@@ -63,7 +64,7 @@ def parts(effects: list[dict]) -> list[dict]:
 )
 def test_each_effect_is_named_on_its_joint_with_its_coefficient(effects):
     train, test = data_with(effects)
-    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     want = {(name, j + 1): c for name, coefs in effects.items() for j, c in enumerate(coefs) if c}
     found = {(e["name"], e["joint"]): e["coefficient"] for e in out.effects}
     assert set(found) == set(want)
@@ -80,7 +81,7 @@ def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec
 
     effects = parse_effects([spec], 2)
     train, test = data_with(effects)
-    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
+    out = residual_loop(method, train, test, budget=Budget(steps=SYSID), report=quiet)
     (effect,) = out.effects
     (name, pairs), = effects.items()
     (value,) = pairs.values()
@@ -95,7 +96,7 @@ def test_an_elbow_spring_or_damper_is_one_effect_with_its_parameter(method, spec
 def test_armature_is_found_by_sysid_whose_declared_form_cannot_absorb_it():
     # a generic library would absorb qd_1^2 / 2 into L; the declared form cannot
     train, test = data_with({"armature": (0.3, 0.0)}, n=1500)
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     assert [(e["name"], e["joint"]) for e in out.effects] == [("armature", 1)]
     assert out.effects[0]["coefficient"] == pytest.approx(0.3, rel=0.05)
     assert out.mse_after["test"] <= 1e-3 * out.mse_before["test"]
@@ -103,15 +104,15 @@ def test_armature_is_found_by_sysid_whose_declared_form_cannot_absorb_it():
 
 def test_clean_data_is_left_alone():
     train, test = data_with({})
-    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     assert out.effects == [] and out.mse_after == out.mse_before
 
 
 def test_noise_alone_produces_no_effect_and_noisy_effects_are_still_found():
     train, test = data_with({}, noise=0.05)
-    assert residual_loop("sparse", train, test, steps=SOLVED, report=quiet).effects == []
+    assert residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet).effects == []
     train, test = data_with({"viscous_friction": (0.8, 0.5)}, noise=0.01)
-    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     found = {(e["name"], e["joint"]): e for e in out.effects}
     assert set(found) == {("viscous_friction", 1), ("viscous_friction", 2)}
     for (name, joint), c in {("viscous_friction", 1): 0.8, ("viscous_friction", 2): 0.5}.items():
@@ -196,14 +197,14 @@ def test_cli_converts_a_raw_dfki_recording(tmp_path):
     # the settings it was made with travel beside it, and a residual loop on it records them
     from bench.residual.job import ResidualJob
 
-    inputs = ResidualJob(system="dfki_double_pendulum", method="sysid", train_path=str(tmp_path / "t.csv")).inputs()
+    inputs = ResidualJob.of("dfki_double_pendulum", "sysid", train_path=str(tmp_path / "t.csv")).inputs()
     convert = inputs["files"][str(tmp_path / "t.csv")]["convert"]
     assert convert["format"] == "dfki" and convert["filter"]["cutoff_hz"] == 6.0 and convert["time_unit"] == "s"
     assert list(convert["resampled"]) == ["dfki_trajectory_03"]
     assert convert["command"].startswith("python -m bench convert --format dfki")
     assert list(convert["logs"]) == [str(trajectory_path("03"))] and len(convert["logs"][str(trajectory_path("03"))]) == 64
     # a measured system's own split: its recordings are the files
-    own = ResidualJob(system="dfki_double_pendulum", method="sysid").inputs()["files"]
+    own = ResidualJob.of("dfki_double_pendulum", "sysid").inputs()["files"]
     assert str(trajectory_path("03")) in own and len(own) == 7  # the declaration file and its six recordings
     assert any(path.endswith("dfki_double_pendulum.toml") for path in own) and all(len(f["sha256"]) == 64 for f in own.values())
 
@@ -244,7 +245,7 @@ def test_open_ended_search_names_a_dissipation_outside_the_named_list():
     train, test = generate(s, 3000, 0), generate(s, 1500, 1000)
     for d in (train, test):
         d.tau[:, 1] += 0.4 * d.qd[:, 1] * np.abs(d.qd[:, 1])
-    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     (e,) = out.effects
     assert e["name"] == "symbolic" and e["kind"] == "dissipative" and e["expression"] == "Abs(qd_2)**3/3"
     assert e["joints"] == [2] and e["coefficient"] == pytest.approx(0.4, rel=0.02)
@@ -262,7 +263,7 @@ def test_open_ended_search_names_a_lagrangian_term_the_declared_form_lacks():
     extra = Term.lagrangian(0.3 * v1**2 * sympy.cos(q2))
     s = get_system("double_pendulum")
     train, test = (d.replace(tau=d.tau + extra.torque(d)) for d in (generate(s, 3000, 0), generate(s, 1500, 1000)))
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     (e,) = [e for e in out.effects if e["kind"] != "structural"]
     assert e["name"] == "symbolic" and e["kind"] == "conservative" and e["expression"] == "qd_1**2*cos(q_2)"
     # a named law that stood in for it (a gain, say) is not reported; what was seen is
@@ -276,13 +277,13 @@ def test_a_named_effect_is_preferred_to_an_open_ended_term_that_mimics_it():
     # SysId's gravity absorbs sin(q_1) of a spring on joint 1, leaving c (q_1 - sin q_1) ~ q_1^3;
     # the spring is tried first and named
     train, test = data_with({"spring": (2.0, 1.0)}, n=2000, noise=0.01)
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     assert sorted((e["name"], e["joint"]) for e in out.effects) == [("spring", 1), ("spring", 2)]
 
 
 def test_no_round_starts_that_would_end_past_the_budget():
     train, test = data_with({"viscous_friction": (0.8, 0.5)}, n=1000)
-    out = residual_loop("sparse", train, test, budget_s=1e-6, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(seconds=1e-6), report=quiet)
     assert [r["round"] for r in out.rounds] == [0, 1] and "budget" in out.rounds[1]["stop"]
     assert out.effects == [] and out.budget_s == 1e-6 and out.fit_budget_s == 0.5e-6
 
@@ -293,7 +294,7 @@ def test_a_trace_cut_short_by_the_budget_says_so_rather_than_that_nothing_is_lef
     monkeypatch.setattr(loop, "TRACE_SHARE", 0.0)  # tracing's time is over as soon as it begins
     train, test = data_with({"viscous_friction": (0.8, 0.5)}, n=1000)
     lines = []
-    out = residual_loop("sparse", train, test, budget_s=20, report=lines.append)  # a time budget, as it is of one
+    out = residual_loop("sparse", train, test, budget=Budget(seconds=20), report=lines.append)  # a time budget, as it is of one
     assert out.effects == [] and out.rounds[1]["trace"][-1]["stop"] == "the loop's budget: no further step started"
     assert any("budget ran out before the trace found anything" in line for line in lines), lines
     assert not any("nothing significant left" in line for line in lines)
@@ -302,7 +303,7 @@ def test_a_trace_cut_short_by_the_budget_says_so_rather_than_that_nothing_is_lef
 def test_a_neural_model_keeps_its_fit_and_only_the_effects_are_fitted():
     # under a work budget the fit and each of the two cross-fits do the same steps
     train, test = data_with({"viscous_friction": (0.8, 0.5), "coulomb_friction": (1.5, 0.7)}, n=2000)
-    out = residual_loop("mlp", train, test, steps=MLP, hyperparameters=SMALL_MLP, report=quiet)
+    out = residual_loop("mlp", train, test, budget=Budget(steps=MLP), hyperparameters=SMALL_MLP, report=quiet)
     assert out.budget == {"kind": "steps", "steps": MLP, "ceiling_s": None} and out.fit_budget_s is None
     assert out.rounds[0]["cross_fit"]["fit_budget"]["steps"] == MLP
     first, last = out.models
@@ -314,7 +315,7 @@ def test_a_neural_model_keeps_its_fit_and_only_the_effects_are_fitted():
 
 def test_the_result_is_typed_and_its_json_is_plain():
     train, test = data_with({"offset": (0.5, 0.0)}, n=1000)
-    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     first, final = out.models
     assert final.predict_torque(test).shape == test.tau.shape and "models" not in out.to_json()
     assert json.loads(json.dumps(out.to_json())) == out.to_json()
@@ -331,9 +332,9 @@ def test_the_loops_job_checks_its_input_once_before_its_process_starts(monkeypat
     from bench.runner import job as runner_job
 
     monkeypatch.setattr(runner_job, "run_call", lambda *a, **k: pytest.fail("a process started before the refusal"))
-    for job, words in ((ResidualJob("double_pendulum", "sysid"), "double_pendulum is simulated: give --train"),
-                       (ResidualJob("double_pendulum", "operon", train_path="t.csv"), "operon cannot run the loop"),
-                       (ResidualJob("double_pendulum", "sysid", train_path="t.csv", hyperparameters={"nope": 1}),
+    for job, words in ((ResidualJob.of("double_pendulum", "sysid"), "double_pendulum is simulated: give --train"),
+                       (ResidualJob.of("double_pendulum", "operon", train_path="t.csv"), "operon cannot run the loop"),
+                       (ResidualJob.of("double_pendulum", "sysid", train_path="t.csv", hyperparameters={"nope": 1}),
                         "nope")):
         with pytest.raises(UserError, match=words):
             run_residual(job, quiet)
@@ -344,7 +345,7 @@ def test_friction_on_every_joint_of_the_panda_is_found_beside_its_base_parameter
     effects = {"viscous_friction": tuple(0.1 + 0.05 * j for j in range(7)),
                "coulomb_friction": tuple(0.3 + 0.1 * j for j in range(7))}
     train, test = add_effects(generate(panda, 1000, 0), effects), add_effects(generate(panda, 500, 1000), effects)
-    out = residual_loop("sysid", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SOLVED), report=quiet)
     assert sorted(e["joint"] for e in out.effects) == list(range(1, 8))  # one friction law a joint
     assert {e["name"] for e in out.effects} == {"coulomb_viscous_friction"}
     found = {(e["name"], e["joint"]): e["coefficient"] for e in parts(out.effects)}
@@ -389,7 +390,7 @@ def test_a_loop_bounded_by_work_gives_the_same_json_apart_from_its_timings():
     s = get_system("double_pendulum")
     fx = parse_effects(["tip_payload=0.5"], 2)
     train, test = add_effects(generate(s, 1000, 0), fx, s), add_effects(generate(s, 500, 1000), fx, s)
-    first, second = (residual_loop("sysid", train, test, steps=200, report=quiet).to_json() for _ in range(2))
+    first, second = (residual_loop("sysid", train, test, budget=Budget(steps=200), report=quiet).to_json() for _ in range(2))
     assert first["budget"] == {"kind": "steps", "steps": 200, "ceiling_s": None}
     assert [e["name"] for e in first["effects"]] == ["tip_payload"]
     assert _without_timings(first) == _without_timings(second)
@@ -400,7 +401,7 @@ def test_noisy_coulomb_and_viscous_friction_is_that_law_never_a_stribeck_hump(me
     # with 5 % noise a hump at a large velocity fits nearly as well as Coulomb friction; the loop
     # reports the simpler law the data identify, one friction law a joint, with its parameters
     train, test = data_with({"viscous_friction": (0.8, 0.5), "coulomb_friction": (1.5, 0.7)}, n=3000, noise=0.05)
-    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
+    out = residual_loop(method, train, test, budget=Budget(steps=SYSID), report=quiet)
     friction = [e for e in out.effects if e["kind"] == "dissipative"]
     assert sorted((e["name"], e["joint"]) for e in friction) == [("coulomb_viscous_friction", 1),
                                                                   ("coulomb_viscous_friction", 2)]
@@ -436,7 +437,7 @@ def test_a_spring_with_a_rest_angle_is_one_law_with_its_stiffness_and_rest_angle
     from bench.physics.undeclared import parse_effects
 
     train, test = data_with(parse_effects(["offset_spring=2:2.0,0.3"], 2))
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     (spring,) = out.effects
     assert spring["name"] == "offset_spring" and spring["joints"] == [2]
     assert {k: p["value"] for k, p in spring["parameters"].items()} == pytest.approx({"k": 2.0, "q0": 0.3}, rel=1e-6)
@@ -447,7 +448,7 @@ def test_a_long_log_is_thinned_and_the_result_says_so(monkeypatch):
     train = generate(get_system("double_pendulum"), 800, 0)
     lines = []
     monkeypatch.setattr(loop_module, "MAX_SAMPLES", 200)
-    out = residual_loop("sparse", train, None, steps=SOLVED, report=lines.append)
+    out = residual_loop("sparse", train, None, budget=Budget(steps=SOLVED), report=lines.append)
     assert out.thinned == 4 and out.to_json()["thinned"] == 4
     assert any("one sample in 4" in line and "200 samples" in line for line in lines)
 

@@ -5,6 +5,7 @@ reported by the loop as the built-in ones are."""
 
 from __future__ import annotations
 
+from bench.core.budget import Budget
 import importlib.util
 import sys
 from pathlib import Path
@@ -48,7 +49,7 @@ def laws(out) -> dict:
 def test_a_registered_law_of_the_drive_is_found_with_its_value_and_read_through(speed_loss):
     s = get_system("double_pendulum")
     train, test = drive(generate(s, 3000, 0), [0.1, 0.0]), drive(generate(s, 1500, 1000), [0.1, 0.0])
-    out = residual_loop("sysid", train, test, steps=SYSID, report=lambda line: None)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=lambda line: None)
     found = laws(out)
     assert list(found) == [("speed_loss", (1,))]
     entry = found[("speed_loss", (1,))]
@@ -62,7 +63,7 @@ def test_a_registered_law_of_the_drive_is_found_with_its_value_and_read_through(
 def test_a_registered_law_outside_its_range_is_a_finding(speed_loss):
     s = get_system("double_pendulum")
     train, test = drive(generate(s, 3000, 0), [-0.1, 0.0]), drive(generate(s, 1500, 1000), [-0.1, 0.0])
-    out = residual_loop("sysid", train, test, steps=SYSID, report=lambda line: None)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=lambda line: None)
     assert ("speed_loss", (1,)) not in laws(out)
     (entry,) = [e for e in out.effects if e["name"] == "speed_loss" and e["joints"] == [1]]
     assert entry["kind"] == "structural" and "0 <= c <= 0.5" in entry["finding"] and "c = -0.1" in entry["finding"]
@@ -74,6 +75,36 @@ def test_a_sensor_offers_each_registered_law_where_it_applies(speed_loss):
     names = [(t.name, t.joint) for t in sensor.candidates(train)]
     assert names == [("torque_gain", 1 - sensor.reference), ("load_friction", 0), ("load_friction", 1),
                      ("speed_loss", 0), ("speed_loss", 1)]  # no time stamps: no time shift
+
+
+def test_a_sensor_law_is_declared_once_on_its_class_and_its_effect_follows_it():
+    """The built-in laws' effects are their classes' (effects.py declares none of the sensor's); a class that
+    carries an effect brings it with its registration and takes it away with its removal."""
+    import sympy
+
+    from bench.physics.effects import EFFECTS, Effect
+    from bench.physics.sensor_laws import GAIN_RANGE, JointTorqueLaw, TorqueGain
+
+    sensor = {name for name, e in EFFECTS.items() if e.sensor}
+    assert sensor == {name for name, law in LAWS.sensor.items() if law.effect is not None} >= {
+        "torque_gain", "load_friction", "time_shift"}
+    assert all(EFFECTS[name] is LAWS.sensor[name].effect for name in sensor)
+    assert GAIN_RANGE == TorqueGain.bounds == (0.8, 1.25) and TorqueGain.term(2, 7) == EFFECTS["torque_gain"].term(2)
+
+    class Creep(JointTorqueLaw):
+        effect = Effect("creep", lambda q, qd: sympy.Symbol("tau" + str(q[0])[1:], real=True), "sensor", "c",
+                        "tau_measured = (1 + c)·tau", bounds=(0.0, 0.1))
+        name, parameter = "creep", "c"
+
+    register(Creep)
+    try:
+        assert EFFECTS["creep"] is Creep.effect and Creep.term(0, 2).name == "creep"
+    finally:
+        LAWS.remove("creep")
+    assert "creep" not in EFFECTS and "creep" not in LAWS.sensor
+    with pytest.raises(ValueError, match="its name and the place"):
+        register(type("Mislabelled", (JointTorqueLaw,), {"name": "mislabelled", "effect": Creep.effect}))
+    assert "mislabelled" not in LAWS.sensor
 
 
 def test_a_law_needs_a_name_of_its_own():

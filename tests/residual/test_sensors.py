@@ -5,6 +5,7 @@ parameters, and none where it was not put in."""
 
 from __future__ import annotations
 
+from bench.core.budget import Budget
 import numpy as np
 import pytest
 
@@ -56,7 +57,7 @@ def test_the_generator_applies_a_gain_to_the_torque_of_the_arm_and_its_other_eff
 @pytest.mark.parametrize("method", ["sysid", "sparse"])
 def test_a_sensor_that_reads_low_is_a_gain_within_one_percent_not_an_armature(method):
     train, test = generated(["torque_gain=1,0.96"], noise=0.01)
-    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
+    out = residual_loop(method, train, test, budget=Budget(steps=SYSID), report=quiet)
     found = laws(out)
     assert list(found) == [("torque_gain", (2,))]
     gain = found[("torque_gain", (2,))]
@@ -67,7 +68,7 @@ def test_a_sensor_that_reads_low_is_a_gain_within_one_percent_not_an_armature(me
 
 def test_a_gain_and_an_offset_on_one_joint_compose():
     train, test = generated(["torque_gain=1,1.05", "offset=0,0.2"], noise=0.01)
-    found = laws(residual_loop("sysid", train, test, steps=SYSID, report=quiet))
+    found = laws(residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet))
     assert set(found) == {("torque_gain", (2,)), ("offset", (2,))}
     assert found[("torque_gain", (2,))]["parameters"]["g"]["value"] == pytest.approx(1.05, rel=0.01)
     assert found[("offset", (2,))]["parameters"]["tau_0"]["value"] == pytest.approx(0.2, rel=0.05)
@@ -76,13 +77,13 @@ def test_a_gain_and_an_offset_on_one_joint_compose():
 def test_the_reference_is_the_joint_with_the_largest_torque_and_gains_are_relative_to_it():
     train, test = generated(["torque_gain=0.9,0.9"])  # a common gain: a rescaling of L, nothing to find
     assert Sensor.exact(train).reference == int(np.argmax(np.sqrt(np.mean(train.tau**2, axis=0))))
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     assert not laws(out) and out.mse_after["test"] < 1e-12
 
 
 def test_a_periodic_torque_is_one_law_with_its_amplitude_periods_and_phase():
     train, test = generated(["periodic_torque=1:0.3,6,0.5"])
-    found = laws(residual_loop("sysid", train, test, steps=SYSID, report=quiet))
+    found = laws(residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet))
     assert list(found) == [("periodic_torque", (1,))]
     p = {k: v["value"] for k, v in found[("periodic_torque", (1,))]["parameters"].items()}
     assert p["N"] == 6 and p["A"] == pytest.approx(0.3, rel=1e-6) and p["phi"] == pytest.approx(0.5, rel=1e-6)
@@ -92,7 +93,7 @@ def test_coulomb_friction_that_entered_alone_takes_its_viscous_part_at_five_perc
     # the viscous part is a small share of a residual that is mostly noise: the held-out gain it
     # brings is a few rows' worth, not 1 % of the residual
     train, test = generated(["viscous_friction=0.8,0.5", "coulomb_friction=1.5,0.7"], n=4000, noise=0.05)
-    found = laws(residual_loop("sysid", train, test, steps=SYSID, report=quiet))
+    found = laws(residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet))
     assert set(found) == {("coulomb_viscous_friction", (1,)), ("coulomb_viscous_friction", (2,))}
     for j, (F_c, b) in ((1, (1.5, 0.8)), (2, (0.7, 0.5))):
         p = found[("coulomb_viscous_friction", (j,))]["parameters"]
@@ -121,7 +122,7 @@ def test_a_five_millisecond_delay_of_a_logged_torque_is_found_within_one_millise
         return _stack(parts)
 
     train = log([0, 1, 2])
-    out = residual_loop("sysid", train, None, steps=SYSID, report=quiet)  # no test: no driven rollouts to wait for
+    out = residual_loop("sysid", train, None, budget=Budget(steps=SYSID), report=quiet)  # no test: no driven rollouts to wait for
     shift = laws(out)[("time_shift", (1, 2))]
     assert shift["parameters"]["delta"]["value"] == pytest.approx(0.005, abs=0.001)
     assert set(shift["per_recording"]) == {"r0", "r1", "r2"}
@@ -140,7 +141,7 @@ def _stack(parts: list[Dataset]) -> Dataset:
 def test_a_gain_the_residual_asks_to_be_far_from_one_is_a_finding_not_a_law():
     # a torque on joint 2 that the model's own torque there does not resemble, five times as large
     train, test = generated(["torque_gain=1,6"])
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     assert ("torque_gain", (2,)) not in laws(out)
 
 
@@ -149,7 +150,7 @@ def test_on_one_measured_trajectory_a_sensor_law_is_a_finding_not_a_law():
     # cannot confirm it, so it is reported and not added
     time, d = simulate("double_pendulum", 8.0, 100.0, 0.2, ["torque_gain=1,0.9"], 0.01, 0)
     one = d.replace(recording=np.asarray(["r0"] * len(d)), trajectory=np.asarray(["A"] * len(d)), time=time)
-    out = residual_loop("sysid", one, None, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", one, None, budget=Budget(steps=SYSID), report=quiet)
     assert ("torque_gain", (2,)) not in laws(out)
     (gain,) = [e for e in out.effects if e["name"] == "torque_gain"]
     assert gain["kind"] == "beyond_data" and "one trajectory" in gain["finding"]
@@ -167,7 +168,7 @@ def test_the_generator_adds_load_dependent_friction_to_the_arm_torque_before_the
 @pytest.mark.parametrize("method", ["sysid", "sparse"])
 def test_a_coulomb_level_that_grows_with_the_load_is_load_dependent_friction(method):
     train, test = generated(["load_friction=0.1,0"], noise=0.01)
-    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
+    out = residual_loop(method, train, test, budget=Budget(steps=SYSID), report=quiet)
     found = laws(out)
     assert list(found) == [("load_friction", (1,))]
     entry = found[("load_friction", (1,))]
@@ -180,7 +181,7 @@ def test_a_coulomb_level_that_grows_with_the_load_is_load_dependent_friction(met
 
 def test_a_coulomb_level_that_does_not_grow_with_the_load_stays_coulomb_friction():
     train, test = generated(["coulomb_friction=1.5,0.7"], noise=0.01)
-    found = laws(residual_loop("sysid", train, test, steps=SYSID, report=quiet))
+    found = laws(residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet))
     assert set(found) == {("coulomb_friction", (1,)), ("coulomb_friction", (2,))}
 
 
@@ -191,7 +192,7 @@ def test_a_friction_that_falls_with_the_load_is_a_finding_not_a_law():
     train, test = generate(s, 3000, 0), generate(s, 1500, 1000)
     train, test = (d.replace(tau=d.tau - 0.15 * np.abs(d.tau) * np.sign(d.qd) * np.asarray([1.0, 0.0]))
                    for d in (train, test))
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     assert ("load_friction", (1,)) not in laws(out)
     (entry,) = [e for e in out.effects if e["name"] == "load_friction"]
     assert entry["kind"] == "structural" and "0 <= mu <= 0.5" in entry["finding"]
@@ -202,7 +203,7 @@ def test_a_drive_law_found_first_is_settled_again_when_a_later_round_adds_fricti
     # when Coulomb friction enters in the next round, mu must be fitted again beside it, or the loop ends
     # with both wrong on noise-free data
     train, test = generated(["load_friction=0.1,0", "coulomb_friction=0.5,0"])
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     found = laws(out)
     assert found[("load_friction", (1,))]["parameters"]["mu"]["value"] == pytest.approx(0.1, rel=1e-6)
     assert found[("coulomb_friction", (1,))]["parameters"]["F_c"]["value"] == pytest.approx(0.5, rel=1e-6)

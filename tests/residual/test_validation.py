@@ -86,7 +86,7 @@ def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
     test = add_effects(generate(s, 1000, 1), {"viscous_friction": (0.8, 0.5)})
     calls = iter([1.0, 2.0])  # round 0, then the refitted round 1: worse
     monkeypatch.setattr(loop, "heldout", lambda strategy, model, data, scale=None: next(calls))
-    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     assert out.effects == [] and out.mse_after == out.mse_before
     last = out.rounds[-1]
     assert last["stop"].startswith("undone") and last["candidate_heldout_mse"] == 2.0 and last["heldout_mse"] == 1.0
@@ -99,7 +99,7 @@ def test_a_round_that_leaves_the_mass_matrix_not_positive_definite_is_undone(mon
     real = loop.smallest_mass_eigenvalue
     # the rod pendulum's own mass matrix is positive definite; pretend the effects spoil it
     monkeypatch.setattr(loop, "smallest_mass_eigenvalue", lambda model, data: real(model, data) - 1e3 * bool(model.effects))
-    out = residual_loop("sparse", train, None, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, None, budget=Budget(steps=SOLVED), report=quiet)
     assert out.effects == [] and out.mass_matrix["positive_definite"]
     assert out.mass_matrix["smallest_eigenvalue_before"] == out.mass_matrix["smallest_eigenvalue_after"] > 0
     assert "mass matrix is not positive definite" in out.rounds[-1]["stop"]
@@ -118,7 +118,7 @@ def test_a_tip_payload_under_the_rod_form_is_found_as_one_payload_with_its_mass(
     s = get_system("double_pendulum")
     fx = parse_effects(["tip_payload=0.5"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx, s), add_effects(generate(s, 1500, 1000), fx, s)
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     (payload,) = out.effects
     assert payload["name"] == "tip_payload" and payload["kind"] == "conservative" and payload["joints"] == [1, 2]
     assert payload["parameters"]["m"]["value"] == pytest.approx(0.5, rel=0.02)
@@ -132,7 +132,7 @@ def test_a_lighter_tip_than_the_rod_form_allows_is_a_structural_finding():
     s = get_system("double_pendulum")
     lighter = EFFECTS["tip_payload"].term(system=s)
     train, test = (d.replace(tau=d.tau - 0.3 * lighter.torque(d)) for d in (generate(s, 3000, 0), generate(s, 1500, 1000)))
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     for e in out.effects:
         if e["kind"] != "structural":
             assert LAWS.arm[e["name"]].check(tuple(v["value"] for v in e["parameters"].values())), e
@@ -149,7 +149,7 @@ def test_a_gravity_tilt_is_found_as_one_tilt_with_its_angle(alpha):
     s = get_system("double_pendulum")
     fx = parse_effects([f"gravity_tilt={alpha}"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx, s), add_effects(generate(s, 1500, 1000), fx, s)
-    out = residual_loop("sysid", train, test, steps=SYSID, report=quiet)
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=quiet)
     (tilt,) = out.effects
     assert tilt["name"] == "gravity_tilt" and tilt["law"].startswith("L += sin(alpha)*")
     assert tilt["parameters"]["alpha"]["value"] == pytest.approx(alpha, rel=0.02)
@@ -163,7 +163,7 @@ def test_stribeck_friction_is_found_as_its_law_with_its_four_parameters(method):
     s = get_system("double_pendulum")
     fx = parse_effects(["stribeck_friction=1:1.0,2.0,0.5,0.3"], 2)
     train, test = add_effects(generate(s, 3000, 0), fx), add_effects(generate(s, 1500, 1000), fx)
-    out = residual_loop(method, train, test, steps=SYSID, report=quiet)
+    out = residual_loop(method, train, test, budget=Budget(steps=SYSID), report=quiet)
     (law,) = out.effects  # one entry, not a viscous term of the wrong sign and polynomials
     assert law["name"] == "stribeck_friction" and law["kind"] == "dissipative" and law["joints"] == [1]
     want = {"F_c": 1.0, "F_s": 2.0, "v_s": 0.5, "b": 0.3}
@@ -181,7 +181,7 @@ def test_friction_outside_the_laws_is_never_reported_with_an_impossible_coeffici
     rising = Term.force((1.5 - sympy.exp(-(qd / 0.5) ** 2)) * sympy.sign(qd) + 0.3 * qd, 0)
     s = get_system("double_pendulum")
     train, test = _with_force(generate(s, 3000, 0), rising), _with_force(generate(s, 1500, 1000), rising)
-    out = residual_loop("sparse", train, test, steps=SOLVED, report=quiet)
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     for e in out.effects:
         if e["kind"] == "structural":
             assert e["parameters"] == {} and "not physical" in e["finding"]
@@ -225,14 +225,14 @@ def test_an_effect_only_in_a_kept_fits_own_training_residual_is_undone_by_its_cr
     s = get_system("double_pendulum")
     train = generate(s, 1200, 0).replace(recording=np.array(list("abcd"))[np.arange(1200) // 300])
     test = generate(s, 600, 5000)
-    out = residual_loop("biased", train, test, steps=SOLVED, report=quiet, open_ended=False)
+    out = residual_loop("biased", train, test, budget=Budget(steps=SOLVED), report=quiet, open_ended=False)
     assert out.rounds[0]["cross_fit"]["in_sample_mse"] == pytest.approx(0.125)  # 0.5**2 on one of two joints
     assert out.rounds[0]["cross_fit"]["out_of_fold_mse"] < 1e-20
     assert out.rounds[1]["accepted"] == ["offset on joint 1"] and "for each half" in out.rounds[1]["stop"]
     assert out.effects == [] and out.mse_after == out.mse_before
     # given a fit made on other data, what it leaves here is out of sample: the loop neither cross-fits nor refuses
     given = _Biased().fit(train, "indirect", 0, Budget(seconds=1.0))
-    out = residual_loop("biased", train, test, steps=SOLVED, report=quiet, fitted=given, open_ended=False)
+    out = residual_loop("biased", train, test, budget=Budget(steps=SOLVED), report=quiet, fitted=given, open_ended=False)
     assert "cross_fit" not in out.rounds[0] and [e["name"] for e in out.effects] == ["offset"]
 
 
@@ -305,7 +305,7 @@ def test_on_trajectories_a_round_must_save_one_percent_of_the_held_out_error(tra
         return 1.0 if len(calls) == 1 else 0.995
 
     monkeypatch.setattr(loop_module._Loop, "heldout", heldout)
-    out = residual_loop("sysid", train, None, steps=SOLVED, report=quiet, open_ended=False)
+    out = residual_loop("sysid", train, None, budget=Budget(steps=SOLVED), report=quiet, open_ended=False)
     first = out.rounds[1]
     if trajectories:
         assert first["stop"].startswith("undone: the refitted model does not lower the held-out error by 1%")

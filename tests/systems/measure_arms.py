@@ -36,5 +36,5 @@ s = METHODS["sysid"]().fit(train, "indirect", 0, Budget(seconds=60.0)); f = s.re
 print("panda sysid", f["base_parameters"], "param error", f["parameter_error"], "test mse", mse(s.predict_torque(test), test.tau))
 fx = {"viscous_friction": tuple(0.1 + 0.05 * j for j in range(7)), "coulomb_friction": tuple(0.3 + 0.1 * j for j in range(7))}
 tr, te = add_effects(generate(panda, 1000, 0), fx), add_effects(generate(panda, 500, 1000), fx)
-out = residual_loop("sysid", tr, te, budget_s=20, report=lambda l: None)
+out = residual_loop("sysid", tr, te, budget=Budget(seconds=20), report=lambda l: None)
 print("panda loop", len(out.effects), out.mse_before["test"], out.mse_after["test"])
