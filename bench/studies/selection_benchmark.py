@@ -22,7 +22,10 @@ candidates are then chosen by each rule (:data:`RULES`):
 * ``lowest``: the lowest validation MSE (``bench select``'s);
 * ``one_se``: the first candidate in :data:`SIMPLICITY` (from the rigid body
   to the flexible residuals) whose validation MSE is within one standard
-  error (over the folds) of the lowest.
+  error (over the folds) of the lowest;
+* ``farther``: the lowest validation MSE on the farther half of each fold's
+  scored samples only (:data:`bench.evaluation.tuning.FAR_RULE`), the half
+  that lies as far from the fit as validation reaches.
 
 A case's **regret** under a protocol and a rule is the chosen candidate's test
 MSE over the best candidate's; the page gives it per case with the rank
@@ -83,7 +86,7 @@ SIMPLICITY = ("standard", "feasible", "loop", "feasible+sparse_torque", "standar
 #: the candidates the study runs: select's own less DeLaN and the loop's two, whose fits take the longest
 #: (the loop's step is a round, so every work budget gives it all its rounds)
 CANDIDATES = ("standard", "feasible", "standard+gp", "feasible+gp", "standard+mlp", "feasible+sparse_torque")
-RULES = ("lowest", "one_se")
+RULES = ("lowest", "one_se", "farther")
 #: steps of each candidate's fits (a round of the loop's, a gradient step of the learners')
 STEPS = 20
 
@@ -205,9 +208,13 @@ def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tu
 
 def choose(entries: list[dict], rule: str) -> dict | None:
     """The candidate ``rule`` chooses among those ``bench select`` may choose (:func:`bench.tools.select.usable`);
-    ``lowest`` is ``bench select``'s own choice."""
+    ``lowest`` is ``bench select``'s own choice; ``farther`` falls back on it where no candidate has a figure on
+    the farther half (a page made before they were kept)."""
     best = selection.choose(entries)
-    if best is None or rule == "lowest":
+    far = [e for e in selection.usable(entries) if e.get("validation_far_mse") is not None]
+    if rule == "farther" and far:
+        return min(far, key=lambda e: e["validation_far_mse"])
+    if best is None or rule in ("lowest", "farther"):
         return best
     bound = best["validation_mse"] + (best.get("validation_stderr") or 0.0)
     within = [e for e in selection.usable(entries) if e["validation_mse"] <= bound]
@@ -258,7 +265,9 @@ def page(result: dict) -> str:
              f"another {FASTER:g} times as fast; `several`: {SEVERAL} training trajectories, tested on another. "
              f"Protocols: `time` spans in time of one trajectory, whole trajectories of several (select's folds "
              "before it had others); `auto` select's default (regions of the states on one trajectory, whole "
-             "trajectories on several). Rules: `lowest` the lowest validation MSE (select's); `one_se` the "
+             "trajectories on several). Rules: `lowest` the lowest validation MSE (select's); `farther` the lowest "
+             "validation MSE on the farther half of each fold's scored samples (those at least the fold's median "
+             "distance from the states it is fitted on); `one_se` the "
              "first candidate, in the order " + " → ".join(SIMPLICITY) + ", whose validation MSE is within one "
              "standard error (over the folds) of the lowest.", "",
              "| protocol | rule | cases | median regret | worst regret | chose the best |", "|---|---|---:|---:|---:|---:|"]
@@ -276,16 +285,16 @@ def page(result: dict) -> str:
 
 
 def _rows(table: list[dict]) -> list[str]:
-    lines = ["| case | protocol (folds) | best on the test | lowest | one_se | Spearman (validation, test) |",
-             "|---|---|---|---|---|---:|"]
+    lines = ["| case | protocol (folds) | best on the test | " + " | ".join(RULES) + " | Spearman (validation, test) |",
+             "|---|---|---|" + "---|" * len(RULES) + "---:|"]
     for t in table:
         s, protocol = t["scores"], f"{t['protocol']} ({t.get('folds') or t['protocol']})"
         if "rules" not in s:
-            lines.append(f"| {t['case']} | {protocol} | failed: {s['error']} | | | |")
+            lines.append(f"| {t['case']} | {protocol} | failed: {s['error']} |" + " |" * (len(RULES) + 1))
             continue
         cells = [f"{s['rules'][r]['chosen']} ({s['rules'][r]['regret']:.3f})" for r in RULES]
         rho = "—" if s["spearman"] is None else f"{s['spearman']:.2f}"
-        lines.append(f"| {t['case']} | {protocol} | {s['best']} | {cells[0]} | {cells[1]} | {rho} |")
+        lines.append(f"| {t['case']} | {protocol} | {s['best']} | " + " | ".join(cells) + f" | {rho} |")
     return lines
 
 

@@ -37,6 +37,9 @@ def test_the_rules_choose_as_stated_and_regret_is_against_the_best_on_the_test()
                _entry("standard+mlp", 0.70, 0.3, 0.1), {"name": "loop", "status": "timeout", "model": None, "validation_mse": None, "test_mse": None}]
     assert sb.choose(entries, "lowest")["name"] == "standard+gp"
     assert sb.choose(entries, "one_se")["name"] == "standard"  # within 0.05 of the lowest, and simpler
+    assert sb.choose(entries, "farther")["name"] == "standard+gp"  # no figure on the farther half: the lowest
+    far = [dict(e, validation_far_mse=f) for e, f in zip(entries[:3], (0.9, 0.8, 0.85))]
+    assert sb.choose(far, "farther")["name"] == "standard"  # the lowest on the farther half
     s = sb.scores({"candidates": entries})
     assert s["best"] == "standard+mlp"
     assert s["rules"]["lowest"]["regret"] == pytest.approx(3.0) and s["rules"]["one_se"]["regret"] == pytest.approx(2.0)
