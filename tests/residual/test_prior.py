@@ -55,11 +55,11 @@ def test_a_loop_hybrid_fits_its_residual_to_what_the_loop_leaves_and_saves(arm, 
     expected = hybrid.predict_torque(test)
     assert np.max(np.abs(loaded.predict_torque(test) - expected)) <= TOLERANCE * np.max(np.abs(expected))
     assert header["kind"] == "hybrid"
-    # a time budget far too short for one round of the loop: the prior is the same whole loop, identified before
-    # the budget starts (as a run's prepare phase does), and the budget is the residual's
+    # under a time budget the prior is the same whole loop, identified before the budget starts (as a run's prepare
+    # phase does), and the budget is the residual's alone (2 s: ample for its one solve on a busy machine)
     timed = METHODS["loop+sparse_torque"]()
     assert timed.prepare_samples(train, "indirect", 0, system) >= 0.0
-    timed.fit(train, "indirect", 0, Budget(seconds=0.05), system=system)
+    timed.fit(train, "indirect", 0, Budget(seconds=2.0), system=system)
     np.testing.assert_array_equal(timed.prior.predict_torque(test), hybrid.prior.predict_torque(test))
 
 
