@@ -69,8 +69,9 @@ def main(args) -> int:
     )
     if METHODS.entry(args.method).available:
         METHODS[args.method](**method_config(spec))  # bad hyperparameters: exit 2 now
-    runs = preflight(spec) is None  # else its record says why not (the run's job writes it)
-    given = given_data(make_system(spec), spec.train_path, spec.test_path, check_limits=not args.ignore_limits) \
+    system = make_system(spec)  # once in this process; the run's own process builds its own
+    runs = preflight(spec, system) is None  # else its record says why not (the run's job writes it)
+    given = given_data(system, spec.train_path, spec.test_path, check_limits=not args.ignore_limits) \
         if runs else None
     for part in given or ():
         if part is not None:

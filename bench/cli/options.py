@@ -218,8 +218,9 @@ def check_names(args, systems=(), methods=(), experiments=(), named: bool = True
     for name in experiments:
         Experiment.of(name)
     skipped = {}
+    built = {s: SYSTEMS[s]() for s in systems} if methods else {}  # each system once, for every method
     for method in methods:
-        refused = {s: METHODS[method].refused_on(SYSTEMS[s]()) for s in systems}
+        refused = {s: METHODS[method].refused_on(built[s]) for s in systems}
         reason = next((r for r in refused.values() if r), None)
         if named and reason and all(refused.values()):  # on none of the systems given
             raise UsageError(reason)

@@ -101,13 +101,14 @@ def given_data(system: System, train_path: str | None, test_path: str | None, *,
     return train, seal(test)
 
 
-def preflight(spec: RunSpec) -> Record | None:
-    """A record for a run that cannot start (unavailable or not applicable), else ``None``."""
+def preflight(spec: RunSpec, system: System | None = None) -> Record | None:
+    """A record for a run that cannot start (unavailable or not applicable), else ``None``; ``system`` is the
+    spec's (:func:`make_system`), where the caller has built it."""
     entry = METHODS.entry(spec.method)
     reason = entry.unavailable_reason()
     if reason:
         return Record.new(spec, "unavailable", elsewhere=True, error=reason)
-    reason = entry.obj.not_applicable_reason(spec.experiment, make_system(spec))
+    reason = entry.obj.not_applicable_reason(spec.experiment, system or make_system(spec))
     if reason:
         return Record.new(spec, "not_applicable", elsewhere=True, error=reason)
     system = SYSTEMS[spec.system]
@@ -148,11 +149,11 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     fields: dict = {}
     try:
         import_plugins(spec.plugins)
-        early = None if checked else preflight(spec)
-        if early:
-            return early
         clock = time.perf_counter()
         system = make_system(spec)
+        early = None if checked else preflight(spec, system)
+        if early:
+            return early
         train, test = data if data is not None else load_data(spec, system)
         test = seal(test)  # its targets are read only to score, in the evaluate phase below
         budget = spec.budget
