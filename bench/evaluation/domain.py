@@ -36,10 +36,14 @@ def _median_distance(fitted: Dataset, asked: Dataset) -> float:
     return float(np.median(TrainingStates(fitted).distance(asked)))
 
 
+def held_out_distances(train: Dataset, fold) -> np.ndarray:
+    """Each of ``fold``'s scored samples' distance from the nearest state the fold is fitted on."""
+    return TrainingStates(train.subset(np.flatnonzero(fold.fit))).distance(train.subset(np.flatnonzero(fold.score)))
+
+
 def reach(train: Dataset, folds: Folds) -> list[float]:
     """Each fold's scored samples' median distance from the states the fold is fitted on."""
-    return [_median_distance(train.subset(np.flatnonzero(f.fit)), train.subset(np.flatnonzero(f.score)))
-            for f in folds]
+    return [float(np.median(held_out_distances(train, f))) for f in folds]
 
 
 def spread(train: Dataset) -> list[float] | None:

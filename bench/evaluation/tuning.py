@@ -24,7 +24,7 @@ all, as SRBench allows: La Cava et al., 2021). A tuned fit
 Beside each fold's validation MSE the search keeps its MSE on the **farther
 half** of the fold's scored samples (:data:`FAR_RULE`): those at least the
 fold's median distance from the states it is fitted on
-(:class:`bench.core.distance.TrainingStates`). It chooses nothing; it shows
+(:func:`bench.evaluation.domain.held_out_distances`, as the domain report measures its reach). It chooses nothing; it shows
 whether a ranking holds as validation moves away from the fit
 (``bench select``'s page).
 
@@ -61,10 +61,10 @@ import numpy as np
 
 from bench.core.budget import SECONDS, Budget
 from bench.core.data import Dataset, mse
-from bench.core.distance import TrainingStates
 from bench.core.errors import ConfigError
 from bench.core.folds import Folds
 from bench.core.protocols import folds
+from bench.evaluation.domain import held_out_distances
 from bench.physics.system import System
 
 #: at most this many combinations a method's search space may hold
@@ -184,7 +184,7 @@ class _Fit:
 def farther_half(train: Dataset, fold) -> np.ndarray:
     """Which of ``fold``'s scored samples lie at least the fold's median distance from the states it is fitted
     on (a mask over ``train.subset(fold.score)``)."""
-    distance = TrainingStates(train.subset(fold.fit)).distance(train.subset(fold.score))
+    distance = held_out_distances(train, fold)
     return distance >= np.median(distance) if len(distance) else np.zeros(0, dtype=bool)
 
 

@@ -111,9 +111,9 @@ def preflight(spec: RunSpec, system: System | None = None) -> Record | None:
     reason = entry.obj.not_applicable_reason(spec.experiment, system or make_system(spec))
     if reason:
         return Record.new(spec, "not_applicable", elsewhere=True, error=reason)
-    system = SYSTEMS[spec.system]
-    if spec.experiment not in system.experiments and not spec.train_path:
-        reason = system.not_applicable or f"{spec.system} has no data for the {spec.experiment} experiment"
+    declared = SYSTEMS[spec.system]
+    if spec.experiment not in declared.experiments and not spec.train_path:
+        reason = declared.not_applicable or f"{spec.system} has no data for the {spec.experiment} experiment"
         return Record.new(spec, "not_applicable", elsewhere=True, error=reason)
     return None
 

@@ -45,7 +45,7 @@ from bench.core.errors import UserError
 from bench.core.fileio import write_json
 from bench.core.names import MethodName, MethodNameError
 from bench.runner.provenance import Provenanced, provenance
-from bench.runner.spec import RunSpec, parse_run_id, run_id
+from bench.runner.spec import RunSpec, parse_run_id
 
 SCHEMA = "syrenets-bench/record/1"
 STATUSES = ("ok", "failed", "timeout", "unavailable", "not_applicable")

@@ -36,8 +36,8 @@ def run_id(system: str, method: str, experiment: str, seed: int, noise: float = 
            profile: str = "default") -> str:
     """``system__method__experiment__seedN``, with ``__noiseX`` when the targets are noisy,
     ``__profile-NAME`` when the method runs in a named configuration of its own (two of one method are
-    two runs; :data:`UNNAMED`'s are not named: the defaults, and the smoke test's small copy of them) and ``__tuned`` when the run chose its hyperparameters
-    (:mod:`bench.evaluation.tuning`)."""
+    two runs; :data:`UNNAMED`'s are not named: the defaults, and the smoke test's small copy of them) and
+    ``__tuned`` when the run chose its hyperparameters (:mod:`bench.evaluation.tuning`)."""
     return (f"{system}__{method}__{experiment}__seed{seed}" + (f"__noise{noise:g}" if noise else "")
             + (f"__profile-{profile}" if profile not in UNNAMED else "") + ("__tuned" if tuned else ""))
 
