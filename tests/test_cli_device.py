@@ -72,5 +72,5 @@ def test_the_residual_loop_says_where_its_fits_trained():
     train, test = generate(s, 400, 0), generate(s, 100, 1)
     out = residual_loop("mlp", train, test, budget=Budget(steps=5), hyperparameters={"hidden": 8, "layers": 1}, report=lambda _: None,
                         device="cpu")
-    assert out.device["type"] == "cpu" and out.device["name"] and out.to_json()["device"] == out.device
+    assert out.device["type"] == "cpu" and out.device["name"] and out.to_json()["details"]["device"] == out.device
 

@@ -18,7 +18,7 @@ lists the marks that disagree with them. A number in prose may also be named by
 the records it comes from, without a manifest entry:
 ``<!-- figure records/leaderboard/cart_pole/direct/delan/all -->2.0e-5<!-- /figure -->``
 (:data:`INLINE`), or by a JSON file under results/ and a dotted key in it:
-``<!-- figure json/measured/kuka_loop/sysid_default.json/mse_after.test -->0.336<!-- /figure -->``
+``<!-- figure json/measured/kuka_loop/sysid_default.json/details.mse_after.test -->0.336<!-- /figure -->``
 (:data:`INLINE_JSON`; a record is such a file too); it is checked and rewritten in the style it is typed in. A page's generated tables and lists
 (:mod:`bench.reporting.pages`) are rewritten and checked the same way.
 """

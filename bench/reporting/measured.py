@@ -5,14 +5,13 @@ made from the matrices' records and the loops' JSON files."""
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
 from bench.evaluation.driven import describe as describe_driven, pooled
 from bench.reporting.groups import group_stats
 from bench.reporting.pages import block, figure, indirect_records, learners as page_learners
-from bench.runner.records import Record
+from bench.runner.records import Record, read_record, residual_fields
 
 #: the two splits' matrices, and how the page heads them
 MATRICES = (("measured/kuka_60s", "train A, test B"), ("measured/kuka_swapped_60s", "train B, test A"))
@@ -172,7 +171,7 @@ def residuals(root: Path) -> str:
 
 def _loop(root: Path, stem: str, split: str) -> dict | None:
     path = Path(root) / LOOPS_DIR / f"{stem}_{split}.json"
-    return json.loads(path.read_text()) if path.is_file() else None
+    return residual_fields(read_record(path)) if path.is_file() else None
 
 
 def holds_out(result: dict) -> str:

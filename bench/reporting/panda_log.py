@@ -5,12 +5,12 @@ the values the logs were made with."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from bench.reporting.pages import block
+from bench.runner.records import read_record, residual_fields
 
 FOLDER = "residual/panda_log"
 #: the values ``robot-log --effects`` put in, per joint (the page's command)
@@ -22,7 +22,7 @@ DRAWS = ((0, "cutoff_60hz.json"), (10, "seed_10_60hz.json"), (20, "seed_20_60hz.
 
 
 def _read(root: Path, name: str) -> dict:
-    return json.loads((Path(root) / FOLDER / name).read_text())
+    return residual_fields(read_record(Path(root) / FOLDER / name))
 
 
 def _laws(result: dict) -> dict[int, dict[str, tuple[str, float, float]]]:

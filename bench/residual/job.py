@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -21,6 +21,7 @@ from bench.evaluation.per_joint import logged_test_torque, per_joint, per_joint_
 from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
+from bench.runner.code import code_hash
 from bench.runner.execute import given_data, make_system, method_config, preflight
 from bench.runner.isolation import CallFailed, Outcome
 from bench.runner.job import Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
@@ -123,11 +124,11 @@ class ResidualJob(Job):
         import_plugins(spec.plugins)
         system = make_system(spec)
         train, test = self.data(system)
-        inputs = self.inputs()
+        own = {"inputs": self.inputs(), "spec": self.spec, "code": code_hash(spec.method, spec.system, spec.plugins)}
 
         def checkpoint(result: ResidualResult) -> None:
             if self.checkpoint_path is not None:
-                write_json(self.checkpoint_path, dataclasses.replace(result, inputs=inputs).to_json())
+                write_json(self.checkpoint_path, dataclasses.replace(result, **own).to_json())
 
         result = residual_loop(spec.method, train, test, budget=spec.budget, seed=spec.seed,
                                hyperparameters=self.settings, report=report, device=spec.device,
@@ -140,7 +141,7 @@ class ResidualJob(Job):
                                     for name, model in zip(("before", "after"), result.models)}
                 for line in per_joint_lines(per_joint_errors["before"], per_joint_errors["after"]):
                     report(line)
-            result = dataclasses.replace(result, inputs=inputs, per_joint=per_joint_errors)
+            result = dataclasses.replace(result, per_joint=per_joint_errors, **own)
             write_outputs(result, train, test, self.json_path, self.report_path)
         return result
 
@@ -158,7 +159,7 @@ class ResidualJob(Job):
             raise CallFailed(f"the residual loop was still running at {fit_limit_words(self.budget)}, "
                              f"in round 0; killed")
         if outcome.killed or failed:
-            result = ResidualResult.from_json(json.loads(path.read_text()))
+            result = ResidualResult.from_json(json.loads(path.read_text()), str(path))
             last = result.rounds[-1]["round"] if result.rounds else 0
             if failed:
                 why = (outcome.log_tail or "").strip().splitlines()[-1:] or [f"exit code {outcome.exit_code}"]

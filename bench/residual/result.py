@@ -7,14 +7,22 @@ from dataclasses import dataclass, field
 
 from bench.physics.models import FittedModel
 from bench.runner.provenance import Provenanced
+from bench.runner.records import Record, residual_fields, residual_record
 
 
 @dataclass(frozen=True)
 class ResidualResult(Provenanced):
-    """What the loop found; :meth:`to_json` is the JSON contract of
-    ``python -m bench residual --json``. Frozen, like a
-    :class:`~bench.runner.records.Record`, with which it shares how its
-    provenance and budget are read (:class:`~bench.runner.provenance.Provenanced`).
+    """What the loop found. On disk it is a :class:`~bench.runner.records.Record`
+    of kind ``residual`` (:meth:`to_json`, :func:`~bench.runner.records.residual_record`):
+    the record's own fields where it has them (the Lagrangian is its
+    ``expression``, ``seconds`` its ``fit_seconds``), the rest in its
+    ``details``; that is the JSON of ``python -m bench residual --json``.
+    :meth:`from_json` reads it, and the loop's JSON as it was written before
+    (every field at the top). ``spec`` is the run's
+    :class:`~bench.runner.spec.RunSpec` as JSON (``None`` for a loop run
+    outside a job: the record makes one from the system, method, seed and
+    budget), ``code`` the hash of the code that ran it
+    (:func:`bench.runner.code.code_hash`).
 
     ``validation`` says how held-out data were formed (:mod:`bench.residual.validation`);
     ``mse_heldout_trajectories`` is the cross-validated torque MSE before and
@@ -96,17 +104,21 @@ class ResidualResult(Provenanced):
     #: the kept rounds' laws that the data could not tell from others: per round, the law ``kept``, the
     #: ``equivalent`` ones, each one's held-out error with the kept one's standard error, and the rule that chose
     equivalent_laws: list | None = None
+    spec: dict | None = None
+    code: dict | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)
 
+    def to_record(self) -> Record:
+        return residual_record({f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "models"})
+
     def to_json(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "models"}
+        return self.to_record().to_json()
 
     @classmethod
-    def from_json(cls, obj: dict) -> "ResidualResult":
-        obj = dict(obj)
-        if "mse_heldout_recordings" in obj:  # the key's name in files published before
-            obj["mse_heldout_trajectories"] = obj.pop("mse_heldout_recordings")
-        return cls(**obj)
+    def from_json(cls, obj: dict, source: str = "the residual loop's result") -> "ResidualResult":
+        """The result in a record's JSON (or in the loop's JSON as it was written before it was a record);
+        :class:`~bench.runner.records.RecordError` naming ``source`` otherwise."""
+        return cls(**residual_fields(Record.from_json(obj, source)))
 
 
 @dataclass

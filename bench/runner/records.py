@@ -1,4 +1,5 @@
-"""The suite's one record type: one immutable JSON file per run.
+"""The suite's one record type: one immutable JSON file per run, of a method
+(kind ``run``) or of the residual loop (kind ``residual``, :func:`residual_record`).
 
 A :class:`Record` holds the run's configuration (system, method, experiment,
 seed, budget, hyperparameters, data), its status (``ok``, ``failed``,
@@ -52,7 +53,14 @@ STATUSES = ("ok", "failed", "timeout", "unavailable", "not_applicable")
 #: fields added to the schema after records were first published, with the
 #: value a record written before them has
 ADDED_LATER = {"exact": None, "noise": 0.0, "rollout": None, "budget": None, "replay": None, "code": None,
-               "failed_stages": {}}
+               "failed_stages": {}, "kind": "run"}
+#: what made a record: a run of a method (``run``: the matrix, ``bench fit``) or the residual loop
+#: (``residual``: ``bench residual``, whose own results are in :attr:`Record.details`, :func:`residual_record`)
+KINDS = ("run", "residual")
+#: the residual loop's results that are the record's own fields, by the loop's name for them
+RESIDUAL_OWN = {"system": "system", "method": "method", "seed": "seed", "budget_s": "budget_s", "budget": "budget",
+                "provenance": "provenance", "lagrangian": "expression", "seconds": "fit_seconds",
+                "rollout": "rollout", "spec": "spec", "code": "code"}
 #: the status of a run whose record file was corrupt (in memory only, never written)
 MISSING = "missing"
 #: where corrupt record files are moved, under ``OUT/records``
@@ -95,6 +103,7 @@ class Record(Provenanced):
     replay: dict | None = None
     code: dict | None = None
     failed_stages: dict = field(default_factory=dict)
+    kind: str = "run"
 
     @classmethod
     def new(cls, run: RunSpec, status: str, *, elsewhere: bool = False, **fields) -> "Record":
@@ -164,6 +173,11 @@ class Record(Provenanced):
         naming ``source`` and the first field that is wrong otherwise."""
         if not isinstance(obj, dict):
             raise RecordError(f"{source}: not a record (a JSON {type(obj).__name__}, not an object)")
+        if "schema" not in obj and {"mse_before", "mse_after", "rounds"} <= set(obj):
+            try:  # the residual loop's JSON, as written before it was a record
+                obj = residual_record(obj).to_json()
+            except (KeyError, TypeError, ValueError, UserError) as exc:
+                raise RecordError(f"{source}: not a record of the residual loop ({type(exc).__name__}: {exc})"[:300]) from None
         names = [f.name for f in dataclasses.fields(cls)]
         obj = {**{k: v for k, v in ADDED_LATER.items() if k not in obj}, **obj}
         missing = [n for n in names if n not in obj]
@@ -187,6 +201,8 @@ class Record(Provenanced):
             raise bad("method", f"is not a method's name ({exc})") from None
         if obj["status"] not in STATUSES:
             raise bad("status", f"must be one of {', '.join(STATUSES)}")
+        if obj["kind"] not in KINDS:
+            raise bad("kind", f"must be one of {', '.join(KINDS)}")
         if obj["experiment"] not in EXPERIMENTS:
             raise bad("experiment", f"must be one of {', '.join(EXPERIMENTS)}")
         if not _is_int(obj["seed"]):
@@ -213,6 +229,39 @@ class Record(Provenanced):
         if obj["status"] == "ok" and not (_is_number(obj["train_mse"]) and math.isfinite(obj["train_mse"])):
             raise bad("train_mse", "of an ok run must be a finite number")
         return cls(**obj)
+
+
+def residual_record(loop: dict) -> Record:
+    """The record of a run of the residual loop, from the loop's results as JSON
+    (:meth:`bench.residual.result.ResidualResult.to_json`'s fields): kind ``residual``; the
+    spec, the system, the method, the seed, the budget, the provenance and the code are the
+    record's own (a result without a spec gets one from its system, method, seed and budget);
+    the Lagrangian is its ``expression``, the loop's seconds its ``fit_seconds``, the torque MSE
+    after the loop its ``train_mse`` and ``test_mse``; the rest is in ``details``, by the loop's
+    names (:func:`residual_fields` reads it back)."""
+    loop = dict(loop)
+    if "mse_heldout_recordings" in loop:  # the key's name in files published before
+        loop["mse_heldout_trajectories"] = loop.pop("mse_heldout_recordings")
+    budget = Budget.from_json(loop["budget"]) if loop.get("budget") else Budget(seconds=loop.get("budget_s"))
+    spec = loop.get("spec") or RunSpec(
+        system=loop.get("system") or "unknown", method=loop["method"], experiment="indirect", seed=loop.get("seed", 0),
+        budget_s=budget.seconds, steps=budget.steps).to_dict()
+    run = RunSpec.from_dict(spec)
+    after = loop.get("mse_after") or {}
+    own = {field: loop.get(name) for name, field in RESIDUAL_OWN.items() if name not in ("spec", "system")}
+    own["provenance"] = own["provenance"] or {}
+    return Record(schema=SCHEMA, run_id=run.run_id, system=loop.get("system") or run.system, experiment="indirect",
+                  noise=run.noise, target="tau", spec=spec, status="ok", train_mse=after.get("train"),
+                  test_mse=after.get("test"), kind="residual",
+                  details={k: v for k, v in loop.items() if k not in RESIDUAL_OWN}, **own)
+
+
+def residual_fields(record: Record) -> dict:
+    """The residual loop's results in ``record`` (kind ``residual``), by the loop's names: the inverse of
+    :func:`residual_record`."""
+    if record.kind != "residual":
+        raise RecordError(f"record {record.run_id}: a record of a {record.kind}, not of the residual loop")
+    return {**record.details, **{name: getattr(record, field) for name, field in RESIDUAL_OWN.items()}}
 
 
 def _is_int(value) -> bool:

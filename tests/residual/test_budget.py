@@ -7,7 +7,6 @@ control the clocks rather than rely on the machine's speed."""
 from __future__ import annotations
 
 from bench.core.budget import Budget
-import json
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -24,6 +23,7 @@ from bench.residual import residual_loop
 from bench.residual.job import ResidualJob, run_residual
 from bench.residual.model import Fitter
 from bench.runner.isolation import CallFailed
+from bench.runner.records import read_record, residual_fields
 from tests.residual.test_loop import SYSID, data_with, quiet
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -101,7 +101,7 @@ def test_a_loop_killed_in_a_round_returns_the_rounds_its_process_saved(monkeypat
     assert out.stopped == ("the loop was still running at its ceiling of 600 s, in round 2, and was killed: the "
                            "rounds up to round 1 are kept")
     assert lines[-1] == f"stopped: {out.stopped}"
-    written = json.loads((tmp_path / "round2" / "out.json").read_text())
+    written = residual_fields(read_record(tmp_path / "round2" / "out.json"))
     assert written["stopped"] == out.stopped and [r["round"] for r in written["rounds"]] == [0, 1]
     report = (tmp_path / "round2" / "out.md").read_text()
     assert "**Stopped early:**" in report and "![residuals" not in report  # no models: no plot
@@ -183,5 +183,5 @@ def test_a_loop_whose_process_fails_after_its_rounds_keeps_the_rounds_it_saved(m
     assert len(out.rounds) >= 2 and out.effects
     assert out.stopped.startswith(f"the loop's process failed after round {out.rounds[-1]['round']} (")
     assert "the outputs could not be written" in out.stopped and lines[-1] == f"stopped: {out.stopped}"
-    written = json.loads((tmp_path / "outputs" / "out.json").read_text())
+    written = residual_fields(read_record(tmp_path / "outputs" / "out.json"))
     assert written["stopped"] == out.stopped and len(written["rounds"]) == len(out.rounds)

@@ -14,7 +14,6 @@
 from __future__ import annotations
 
 from bench.core.budget import Budget
-import json
 
 import sympy
 
@@ -23,6 +22,7 @@ from bench.physics.models import ExpressionModel
 from bench.residual import residual_loop
 from bench.residual.report import summary_lines
 from bench.residual.tracing import EQUIVALENCE_RULE
+from bench.runner.records import read_record, residual_fields
 from tests.commandline import cli
 from tests.residual.test_budget import FRICTION, _budget_ends_at
 from tests.residual.test_loop import SOLVED, SYSID, data_with, quiet
@@ -44,7 +44,7 @@ def test_an_armature_either_joint_or_a_payload_explains_is_kept_by_the_rule_and_
                "--test", tmp_path / "test.csv", "--steps", SYSID, "--json", tmp_path / "out.json",
                "--report", tmp_path / "out.md")
     assert done.returncode == 0, done.stderr
-    out = json.loads((tmp_path / "out.json").read_text())
+    out = residual_fields(read_record(tmp_path / "out.json"))
     # the data are fitted exactly by any one of them with SysId's four parameters: the first declared is kept
     assert _kept(out["effects"]) == [("armature", [1])]
     (entry,) = out["equivalent_laws"]

@@ -5,7 +5,6 @@ through ``bench residual --plugin``, with its value, as a built-in law is."""
 from __future__ import annotations
 
 import importlib.util
-import json
 import sys
 from pathlib import Path
 
@@ -15,6 +14,7 @@ import pytest
 from bench.core.data import generate
 from bench.physics.effects import EFFECTS, Effect
 from bench.physics.laws import FAMILIES, LAWS
+from bench.runner.records import read_record, residual_fields
 from systems import get_system
 from tests.commandline import cli
 
@@ -68,7 +68,7 @@ def test_a_plugins_law_of_the_joint_reaches_generated_data_and_the_loop(drag, tm
     loop = cli("residual", "--system", "double_pendulum", "--method", "sysid", "--train", tmp_path / "train.csv",
                "--test", tmp_path / "test.csv", "--steps", "1000", "--plugin", PLUGIN, "--json", tmp_path / "loop.json")
     assert loop.returncode == 0, loop.stderr
-    result = json.loads((tmp_path / "loop.json").read_text())
+    result = residual_fields(read_record(tmp_path / "loop.json"))
     found = {(e["name"], tuple(e["joints"])): e for e in result["effects"]
              if e["kind"] not in ("structural", "beyond_data", "not_identified")}
     assert list(found) == [("quadratic_drag", (1,))]

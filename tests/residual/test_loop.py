@@ -15,6 +15,7 @@ from bench.core.data import add_noise, generate
 from bench.physics.undeclared import add_effects
 from bench.physics.models import ExpressionModel
 from bench.residual import loop as loop_module, residual_loop, trace, candidates
+from bench.runner.records import read_record, residual_fields
 from systems import get_system
 from tests.commandline import cli
 
@@ -138,7 +139,7 @@ def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
     assert r.returncode == 0, r.stderr
     # the loop runs in its own process; its progress lines reach the terminal as they are printed
     assert "round 0: fitting sparse" in r.stdout and "round 1: adding" in r.stdout
-    out = json.loads((tmp_path / "out.json").read_text())
+    out = residual_fields(read_record(tmp_path / "out.json"))
     assert {"system", "method", "mse_before", "mse_after", "effects", "rounds", "fit_budget_s", "provenance"} <= set(out)
     assert out["provenance"]["threads"]["torch_intra_op"] == 1  # the loop's process pins its threads like any run
     assert set(out["mse_before"]) == {"train", "test"}
@@ -376,7 +377,8 @@ def _without_timings(obj):
     """The loop's JSON without what measures the machine: seconds, timing, provenance."""
     if isinstance(obj, dict):
         return {k: _without_timings(v) for k, v in obj.items()
-                if k not in ("seconds", "statistics_seconds", "loop_seconds", "rollout_seconds", "provenance", "curve")}
+                if k not in ("seconds", "fit_seconds", "statistics_seconds", "loop_seconds", "rollout_seconds", "provenance",
+                             "curve")}
     if isinstance(obj, list):
         return [_without_timings(v) for v in obj]
     return obj
@@ -392,7 +394,7 @@ def test_a_loop_bounded_by_work_gives_the_same_json_apart_from_its_timings():
     train, test = add_effects(generate(s, 1000, 0), fx, s), add_effects(generate(s, 500, 1000), fx, s)
     first, second = (residual_loop("sysid", train, test, budget=Budget(steps=200), report=quiet).to_json() for _ in range(2))
     assert first["budget"] == {"kind": "steps", "steps": 200, "ceiling_s": None}
-    assert [e["name"] for e in first["effects"]] == ["tip_payload"]
+    assert first["kind"] == "residual" and [e["name"] for e in first["details"]["effects"]] == ["tip_payload"]
     assert _without_timings(first) == _without_timings(second)
 
 
@@ -449,7 +451,7 @@ def test_a_long_log_is_thinned_and_the_result_says_so(monkeypatch):
     lines = []
     monkeypatch.setattr(loop_module, "MAX_SAMPLES", 200)
     out = residual_loop("sparse", train, None, budget=Budget(steps=SOLVED), report=lines.append)
-    assert out.thinned == 4 and out.to_json()["thinned"] == 4
+    assert out.thinned == 4 and out.to_json()["details"]["thinned"] == 4
     assert any("one sample in 4" in line and "200 samples" in line for line in lines)
 
 

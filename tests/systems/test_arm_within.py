@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 import numpy as np
 import pytest
+from bench.runner.records import read_record, residual_fields
 
 from systems.urdf_arm import chain
 from tests.commandline import cli
@@ -82,7 +83,7 @@ def test_one_arm_of_a_two_arm_robot_is_fitted_and_traced_from_one_declaration(ar
     r = cli("residual", "--system", f"measured:{declaration}", "--method", "sysid", "--steps", "1",
             "--json", tmp_path / "loop.json")
     assert r.returncode == 0, r.stderr
-    loop = json.loads((tmp_path / "loop.json").read_text())
+    loop = residual_fields(read_record(tmp_path / "loop.json"))
     assert loop["mse_after"]["test"] < loop["mse_before"]["test"]
     # per joint, before and after, against the logged torque beside the filter's noise floor
     before, after = (loop["per_joint"][k]["trajectories"]["c"] for k in ("before", "after"))

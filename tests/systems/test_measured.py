@@ -78,11 +78,13 @@ def test_a_bad_declaration_is_refused_in_one_line_naming_the_file(tmp_path, text
 
 
 def test_a_residual_file_published_under_the_old_key_still_reads():
-    result = ResidualResult(system="s", method="sysid", mse_before={}, mse_after={}, effects=[], rounds=[],
-                            lagrangian=None, seconds=0.0, budget_s=None, fit_budget_s=None, seed=0, train_source="",
-                            test_source=None, mse_heldout_trajectories={"before": 2.0, "after": 1.0})
-    old = {("mse_heldout_recordings" if k == "mse_heldout_trajectories" else k): v for k, v in result.to_json().items()}
-    del old["sensor_laws_offered"]
+    result = ResidualResult(system="s", method="sysid", mse_before={"train": 3.0}, mse_after={"train": 1.5},
+                            effects=[], rounds=[], lagrangian=None, seconds=0.0, budget_s=60.0, fit_budget_s=30.0,
+                            seed=0, train_source="", test_source=None,
+                            mse_heldout_trajectories={"before": 2.0, "after": 1.0})
+    old = {("mse_heldout_recordings" if k == "mse_heldout_trajectories" else k): getattr(result, k)
+           for k in ("system", "method", "mse_before", "mse_after", "effects", "rounds", "lagrangian", "seconds",
+                     "budget_s", "fit_budget_s", "seed", "train_source", "test_source", "mse_heldout_trajectories")}
     assert ResidualResult.from_json(old).mse_heldout_trajectories == {"before": 2.0, "after": 1.0}
 
 
