@@ -70,3 +70,15 @@ if os.environ.get("BENCH_TIMELINE"):
                 "end": time.time(), "cpu": _cpu() - cpu}
         with open(os.environ["BENCH_TIMELINE"] + ".jsonl", "a") as f:
             f.write(json.dumps(line) + "\n")
+
+
+@pytest.fixture(scope="session")
+def dask_client():
+    """A Dask client of a ``LocalCluster`` of two single-threaded worker processes, as ``--cluster local``
+    starts one (:func:`bench.runner.cluster.client_for`), started once for the tests that run jobs on a
+    cluster (each marks itself ``xdist_group("dask")``, so that one worker starts it)."""
+    pytest.importorskip("distributed")
+    from bench.runner.cluster import client_for
+
+    with client_for("local", 2) as client:
+        yield client

@@ -264,10 +264,10 @@ def test_what_users_type_wrong_is_refused_in_one_line(tmp_path, monkeypatch, cap
 
 
 def test_an_output_path_under_a_file_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
-    from bench.runner import matrix
+    from bench.runner import run
 
     (tmp_path / "f").write_text("x")
-    monkeypatch.setattr(matrix, "run_one", lambda *a, **k: pytest.fail("a run started before the refusal"))
+    monkeypatch.setattr(run, "run_isolated", lambda *a, **k: pytest.fail("a run started before the refusal"))
     code = main(["fit", "--system", "double_pendulum", "--method", "sysid", "--experiment", "indirect", "--budget", "60",
                  "--json", str(tmp_path / "f" / "run.json")])
     err = capsys.readouterr().err

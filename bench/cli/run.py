@@ -9,7 +9,7 @@ from pathlib import Path
 
 from bench.cli.options import (UsageError, add_budget, add_ignore_limits, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget, check_names,
                                check_split, configurations, device, hyperparameters, load_plugins, resampled)
-from bench.core.arguments import csv_list, noise_level, positive, positive_int, seed_list
+from bench.core.arguments import add_workers, csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
 from bench.runner import matrix
@@ -36,7 +36,7 @@ def add_arguments(r) -> None:
     add_budget(r, "per run")
     add_split(r)
     r.add_argument("--out", type=Path, required=True, help="output folder: records/, logs/, tables.md")
-    r.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
+    add_workers(r, "runs", None)
     r.add_argument("--threads", type=positive_int, default=1, help="torch/BLAS threads per run (default 1)")
     add_device(r)
     r.add_argument("--stack-seeds", action="store_true",
@@ -55,9 +55,6 @@ def add_arguments(r) -> None:
     r.add_argument("--noise", type=noise_level, nargs="+", default=[0.0], metavar="LEVEL",
                    help="Gaussian noise on the training targets as a fraction of their std; several levels "
                         "add a dimension to the matrix, e.g. --noise 0 0.01 0.1 (default 0)")
-    r.add_argument("--cluster", default=None, metavar="local|ADDRESS",
-                   help="run on Dask distributed: 'local' starts a LocalCluster of --workers processes; "
-                        "tcp://host:8786 uses a running scheduler (needs the 'dask' extra)")
     r.add_argument("--no-rollout", action="store_true",
                    help="skip the rollout error of simulated systems (integrating each model's dynamics for 1 s)")
     add_ignore_limits(r, "run on a measured system whose recordings' positions")

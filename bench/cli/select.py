@@ -8,7 +8,7 @@ import argparse
 from pathlib import Path
 
 from bench.cli.options import UsageError, add_budget, add_plugin, add_split, budget, check_names, check_split, load_plugins
-from bench.core.arguments import csv_list, positive_int, seed
+from bench.core.arguments import add_workers, csv_list, seed
 from bench.core.csv_format import read_csv
 from bench.core.protocols import NAMES
 from bench.core.fileio import check_output
@@ -31,7 +31,7 @@ def add_arguments(p) -> None:
     add_budget(p, "per candidate", SELECT_BUDGET_S)
     add_split(p)
     p.add_argument("--seed", type=seed, default=0, help="the candidates' seed (default 0)")
-    p.add_argument("--workers", type=positive_int, default=None, help="candidates at a time (default: one per core)")
+    add_workers(p, "candidates", None)
     p.add_argument("--candidates", type=csv_list, default=None,
                    help=f"only these candidates (default: all of {', '.join(c.name for c in CANDIDATES)})")
     p.add_argument("--rollout", action=argparse.BooleanOptionalAction, default=False,
@@ -79,7 +79,8 @@ def main(args) -> int:
         raise UsageError("--folds knndm: the training data hold one trajectory; name the states the model will be "
                          "asked with --target-states LOG")
     result = select(name, args.out, split=args.split, budget_s=budget_s, steps=steps, seed=args.seed,
-                    workers=args.workers, plugins=plugins, command=args.invocation, candidates=candidates,
+                    workers=args.workers, cluster=args.cluster, plugins=plugins, command=args.invocation,
+                    candidates=candidates,
                     rollout=args.rollout, data=data, target=target, protocol=protocol)
     chosen = result["chosen"]
     if chosen is None:

@@ -104,3 +104,17 @@ def assignment(text: str) -> tuple[str, object]:
     except (ValueError, SyntaxError):
         value = raw
     return key.strip(), value
+
+
+#: the help of ``--cluster``, wherever jobs are scheduled (:func:`add_workers`)
+CLUSTER_HELP = ("run on Dask distributed: 'local' starts a LocalCluster of --workers processes; tcp://host:8786 "
+                "uses a running scheduler (needs the 'dask' extra)")
+
+
+def add_workers(parser, what: str, default: int | None = 2) -> None:
+    """``--workers N`` (``what`` at a time, one process each) and ``--cluster local|ADDRESS``: where the
+    jobs of a command or a study run (:func:`bench.runner.job.run_jobs`)."""
+    told = "one per core" if default is None else default
+    parser.add_argument("--workers", type=positive_int, default=default,
+                        help=f"{what} at a time, one process each (default {told})")
+    parser.add_argument("--cluster", default=None, metavar="local|ADDRESS", help=CLUSTER_HELP)

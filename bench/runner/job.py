@@ -29,6 +29,7 @@ it has :func:`evaluation_limit`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib
 import json
 import math
@@ -38,8 +39,9 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from bench.core.budget import SECONDS, Budget
+from bench.runner.cluster import run_on_cluster
 from bench.runner.isolation import Call, CallFailed, Outcome, map_interruptibly, run_call
-from bench.runner.ledger import Ledger
+from bench.runner.ledger import Ledger, code_digest
 from bench.runner.progress import print_now
 
 #: A fit is killed at this multiple of its time budget.
@@ -110,6 +112,28 @@ class Job:
         once every job has ended)."""
         return None
 
+    def elsewhere(self, scratch: Path) -> "Job":
+        """The job as it runs on a cluster's worker (:mod:`bench.runner.cluster`), which may not share the
+        caller's files: what it writes goes under ``scratch`` instead. By default the job itself."""
+        return self
+
+    def land(self, result: Any) -> Any:
+        """In the caller, a result that came back from a cluster's worker, with what the job keeps written
+        where it would have written it here (a run's record). By default the result itself."""
+        return result
+
+    def code(self) -> str | None:
+        """The code the job's result depends on, as a digest: a stored result made by other code does not
+        stand for the job (:func:`rerun_reason`). By default the whole suite's, taken once a process
+        (:func:`suite_code`); a run of a method names its method's and its system's files
+        (:meth:`bench.runner.run.RunJob.code`). ``None``: not known (outside a git checkout)."""
+        return suite_code()
+
+    def identity(self) -> dict:
+        """What the job is, as a stored result is compared with it (:func:`rerun_reason`): by default its
+        class and fields (:func:`job_fields`)."""
+        return job_fields(self)
+
     def payload(self) -> dict:
         """The job as JSON, from which :meth:`from_payload` makes it again in the child."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
@@ -177,6 +201,36 @@ def run_isolated(job: Job, work: str | Path | None = None, name: str = "job", *,
     return job.finish(outcome, echo or print_now)
 
 
+def run_remote(job: Job, name: str) -> tuple[bool, Any]:
+    """A cluster's task (:mod:`bench.runner.cluster`): ``job`` in its own process on the worker, in a
+    scratch folder there (:meth:`Job.elsewhere`); ``(True, result)``, or ``(False, why)`` where it did not
+    finish."""
+    with tempfile.TemporaryDirectory(prefix="syrenets-bench-") as scratch:
+        try:
+            return True, run_isolated(job.elsewhere(Path(scratch)), scratch, name, checked=True)
+        except CallFailed as exc:
+            return False, str(exc)
+
+
+@functools.cache
+def suite_code() -> str | None:
+    """:func:`~bench.runner.ledger.code_digest` of the code this process started with."""
+    return code_digest()
+
+
+def rerun_reason(job: Job, code: str | None, identity: dict | None) -> str | None:
+    """The one resume rule, for a matrix's records and a study's ledger alike: why a result stored for
+    ``job``, made by ``code`` for ``identity``, does not stand for it now: ``"made by other code"``
+    (:meth:`Job.code` differs; a result, or a job, whose code is not known is not judged by it), ``"made
+    with another configuration"`` (:meth:`Job.identity` differs); ``None``: it stands."""
+    now = job.code()
+    if code is not None and now is not None and code != now:
+        return "made by other code"
+    if identity is not None and identity != job.identity():
+        return "made with another configuration"
+    return None
+
+
 def job_fields(job: Job) -> dict:
     """What a job is, as its ledger compares it: its class and its fields, as JSON reads them back."""
     return json.loads(json.dumps({"job": f"{type(job).__module__}:{type(job).__qualname__}",
@@ -186,22 +240,23 @@ def job_fields(job: Job) -> dict:
 def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], str] | None,
              report: Callable[[str], None], ledger: Ledger | None = None, *, checked: bool = False,
              before: Callable[[str], None] | None = None,
-             on_done: Callable[[str, Any], None] | None = None) -> dict[str, Any]:
+             on_done: Callable[[str, Any], None] | None = None, cluster=None) -> dict[str, Any]:
     """The one scheduler: run each named job with :func:`run_isolated`, ``workers`` at a time, in the order
-    given; returns the results by name, in that order.
+    given, or each as a task of a Dask ``cluster`` (:mod:`bench.runner.cluster`); returns the results by
+    name, in the order given.
 
     Every job is checked before any starts (unless the caller did: ``checked``). ``before(name)`` is called
-    as each starts (it may raise to stop the rest). Each finished job is reported in one line, ``[k/n, t s]
-    name: describe(result)``, or handed to ``on_done(name, result)`` instead; jobs that did not finish raise
+    as each starts, or is handed to the cluster (it may raise to stop the rest). Each finished job is
+    reported in one line, ``[k/n, t s] name: describe(result)``, or handed to ``on_done(name, result)``
+    instead; jobs that did not finish raise
     :class:`~bench.runner.isolation.CallFailed`, named, once all have ended. A job's call, phases and output
     go to its :meth:`Job.folder`, else to a scratch folder. With a ``ledger``, each job that finishes is kept
-    in it as it finishes, and a job it already holds from the same code is not run again
-    (:mod:`bench.runner.ledger`): the studies' cases resume so; a matrix resumes from its records
-    (:mod:`bench.runner.matrix`) and gives only the runs left.
+    in it as it finishes, and a job it already holds is not run again where its result stands
+    (:func:`rerun_reason`; :mod:`bench.runner.ledger`): the studies' cases resume so; a matrix resumes
+    from its records by the same rule (:mod:`bench.runner.matrix`) and gives only the runs left.
     """
     early = {name: None if checked else job.check() for name, job in jobs.items()}
-    fields = {name: job_fields(job) for name, job in jobs.items()} if ledger else {}
-    kept, other = ledger.finished(fields) if ledger else ({}, 0)
+    kept, other = ledger.finished(jobs, rerun_reason) if ledger else ({}, 0)
     if kept:
         report(f"{len(kept)} of {len(jobs)} job(s) finished before, by this code: taken from {ledger.path}")
     if other:
@@ -209,6 +264,17 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
     start = time.monotonic()
     finished: list[str] = []
     todo = [name for name in jobs if name not in kept]
+
+    def ended(name: str, ok: bool, result: Any) -> tuple[bool, Any]:
+        if ok and ledger:
+            ledger.add(name, jobs[name], result)
+        finished.append(name)
+        if ok and on_done is not None:
+            on_done(name, result)
+        else:
+            what = (describe(result) if describe else "done") if ok else f"did not finish ({result})"
+            report(f"[{len(finished)}/{len(todo)}, {time.monotonic() - start:.0f} s] {name}: {what}")
+        return ok, result
 
     def one(item: tuple[str, Path]) -> tuple[bool, Any]:
         name, work = item
@@ -219,21 +285,25 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
                           else run_isolated(jobs[name], work, name, checked=True)), True
         except CallFailed as exc:
             result, ok = str(exc), False
-        if ok and ledger:
-            ledger.add(name, fields[name], result)
-        finished.append(name)
-        if ok and on_done is not None:
-            on_done(name, result)
-        else:
-            what = (describe(result) if describe else "done") if ok else f"did not finish ({result})"
-            report(f"[{len(finished)}/{len(todo)}, {time.monotonic() - start:.0f} s] {name}: {what}")
-        return ok, result
+        return ended(name, ok, result)
 
-    with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work:
-        items = [(name, jobs[name].folder() or Path(work) / str(i)) for i, name in enumerate(todo)]
-        outcomes = {name: (True, result) for name, result in kept.items()}
-        outcomes.update(zip(todo, map_interruptibly(one, items, workers)))
-        outcomes = {name: outcomes[name] for name in jobs}
+    outcomes = {name: (True, result) for name, result in kept.items()}
+    if cluster is not None:
+        remote = {}
+        for name in todo:
+            if early[name] is not None:
+                outcomes[name] = ended(name, True, early[name])
+                continue
+            if before is not None:
+                before(name)
+            remote[name] = jobs[name]
+        for name, ok, result in run_on_cluster(remote, cluster, workers, run_remote):
+            outcomes[name] = ended(name, ok, result)
+    else:
+        with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work:
+            items = [(name, jobs[name].folder() or Path(work) / str(i)) for i, name in enumerate(todo)]
+            outcomes.update(zip(todo, map_interruptibly(one, items, workers)))
+    outcomes = {name: outcomes[name] for name in jobs}
     failed = [name for name, (ok, _) in outcomes.items() if not ok]
     if failed:
         raise CallFailed(f"{len(failed)} of {len(jobs)} job(s) did not finish: {', '.join(failed)}")

@@ -3,12 +3,15 @@ command, run again, resumes where it stopped.
 
 A :class:`Ledger` is a JSON-lines file beside the study's page
 (``PAGE.partial.jsonl``). :func:`bench.runner.job.run_jobs` appends one line
-per job that finished (its name, its fields, the code that ran it and its
+per job that finished (its name, what it is, the code that ran it and its
 result) and, when started again, takes a job's result from the ledger instead
-of running it where all three match: the same name, the same fields and the
-same code. The code is :func:`~bench.runner.provenance.code_state`'s digest
-(the committed trees of bench/, methods/ and systems/ and their uncommitted
-changes), so a job is never reported from code other than the page's. A
+of running it where it stands for the job by the one resume rule
+(:func:`bench.runner.job.rerun_reason`): the same name, the same job
+(:meth:`~bench.runner.job.Job.identity`) and the same code
+(:meth:`~bench.runner.job.Job.code`: for a study's case, :func:`code_digest`
+of :func:`~bench.runner.provenance.code_state`, the committed trees of bench/,
+methods/ and systems/ and their uncommitted changes), so a job is never
+reported from code other than the page's. A
 torn last line (the process killed while writing it) is skipped. The study
 deletes its ledger once its page is written (:meth:`Ledger.close`).
 """
@@ -20,7 +23,7 @@ import json
 import os
 import threading
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Mapping
 
 from bench.runner.provenance import code_state
 
@@ -36,12 +39,12 @@ class Ledger:
 
     def __init__(self, page: str | os.PathLike):
         self.path = Path(page).with_suffix(".partial.jsonl")
-        self.code = code_digest()
         self._lock = threading.Lock()
 
-    def finished(self, jobs: dict[str, dict]) -> tuple[dict[str, Any], int]:
-        """The results kept for ``jobs`` (``{name: the job's fields}``) that this code made with the same
-        fields, and how many of ``jobs`` the ledger holds only from other code or other fields."""
+    def finished(self, jobs: Mapping[str, Any], rerun_reason: Callable) -> tuple[dict[str, Any], int]:
+        """The results kept for ``jobs`` (``{name: job}``) that stand for them (``rerun_reason(job, code,
+        identity)`` is ``None``: :func:`bench.runner.job.rerun_reason`), and how many of ``jobs`` the ledger
+        holds only from other code or for another configuration."""
         if not self.path.exists():
             return {}, 0
         kept, other = {}, set()
@@ -50,20 +53,22 @@ class Ledger:
                 entry = json.loads(line)
             except json.JSONDecodeError:
                 continue
-            name = entry.get("name")
-            if name not in jobs:
+            if not isinstance(entry, dict) or entry.get("name") not in jobs:
                 continue
-            if self.code is not None and entry.get("code") == self.code and entry.get("fields") == jobs[name]:
+            name = entry["name"]
+            if entry.get("code") is not None and rerun_reason(jobs[name], entry["code"], entry.get("fields")) is None:
                 kept[name] = entry["result"]
             else:
                 other.add(name)
         return kept, len(other - set(kept))
 
-    def add(self, name: str, fields: dict, result: Any) -> None:
-        """Keep a finished job's result, on disk before this returns."""
-        if self.code is None:
+    def add(self, name: str, job, result: Any) -> None:
+        """Keep a finished job's result, with its code and identity, on disk before this returns; nothing
+        where its code is not known (outside a git checkout)."""
+        code = job.code()
+        if code is None:
             return
-        line = json.dumps({"name": name, "fields": fields, "code": self.code, "result": result})
+        line = json.dumps({"name": name, "fields": job.identity(), "code": code, "result": result})
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with self._lock, open(self.path, "a", encoding="utf-8") as f:
             f.write(line + "\n")

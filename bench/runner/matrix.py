@@ -16,20 +16,17 @@ from __future__ import annotations
 
 import fcntl
 import os
-import tempfile
 import time
 from pathlib import Path
-from typing import Iterable
 
 from bench.core.errors import UserError
 from bench.core.processes import process_alive
-from bench.runner.code import code_hash
-from bench.runner.job import Job, run_jobs
+from bench.runner.job import Job, rerun_reason, run_jobs
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now
 from bench.runner.provenance import CODE_FOLDERS, code_state
-from bench.runner.records import Record, RecordError, quarantine, read_record, record_path, write_record
-from bench.runner.run import RunJob, log_path, run_one
+from bench.runner.records import Record, RecordError, quarantine, read_record, record_path
+from bench.runner.run import RunJob, log_path
 from bench.runner.spec import RunSpec
 from bench.runner.stacked import StackedJob, groups
 
@@ -94,13 +91,11 @@ def run_matrix(
     records in the order of ``specs``. Holds :class:`FolderLock` on
     ``out_dir`` throughout; an interrupted matrix kills its running children.
 
-    ``cluster`` hands the runs to Dask distributed instead of the local pool:
-    ``"local"`` starts a ``LocalCluster`` of ``workers`` single-threaded
-    processes; a scheduler address (``"tcp://host:8786"``), a Dask cluster
-    object (``dask_jobqueue.SLURMCluster(...)``) or a ``Client`` uses that.
-    Each Dask task runs :func:`run_one` on its worker, in a scratch
-    directory there, and returns the record, which is written here; workers
-    need the suite installed, not a shared file system.
+    ``cluster`` hands the runs to Dask distributed instead of the local pool
+    (:mod:`bench.runner.cluster`: ``"local"``, a scheduler's address, a Dask
+    cluster object or a ``Client``): each run is a task, run on its worker
+    in a scratch folder there, and its record is written here; workers need
+    the suite installed, not a shared file system.
 
     ``stack`` trains the seeds of a stackable method's runs that differ only
     in their seed as one model, in one process (:mod:`bench.runner.stacked`),
@@ -114,16 +109,14 @@ def run_matrix(
         return _run_matrix(specs, out_dir, workers, resume, report, cluster, retry_failed, stack)
 
 
-def stale(record: Record, spec: RunSpec, retry_failed: bool = False) -> str | None:
-    """Why ``record`` does not stand for ``spec`` as it would run now (``None``: it does)."""
-    now = code_hash(spec.method, spec.system, spec.plugins)
-    if record.code is not None and now is not None and record.code.get("hash") != now["hash"]:
-        return "made by other code"
-    if record.spec and RunSpec.from_dict(record.spec).to_dict() != spec.to_dict():
-        return "made with another configuration"
-    if retry_failed and record.status in ("failed", "timeout"):
+def stale(record: Record, job: RunJob, retry_failed: bool = False) -> str | None:
+    """Why ``record`` does not stand for ``job`` as it would run now (``None``: it does): the one resume
+    rule (:func:`~bench.runner.job.rerun_reason`), and, with ``retry_failed``, a run that failed."""
+    why = rerun_reason(job, (record.code or {}).get("hash"),
+                       RunSpec.from_dict(record.spec).to_dict() if record.spec else None)
+    if why is None and retry_failed and record.status in ("failed", "timeout"):
         return record.status
-    return None
+    return why
 
 
 def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool, report: Report, cluster,
@@ -140,7 +133,7 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
             except RecordError as exc:
                 report(f"warning: {exc}; moved to {quarantine(path)}, and the run is redone")
             else:
-                why = stale(record, spec, retry_failed)
+                why = stale(record, RunJob.of(spec, out_dir), retry_failed)
                 if why is None:
                     results[spec.run_id] = record
                     resumed += 1
@@ -175,10 +168,7 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
         tracker.done(record.status == "ok", _describe(record, log))
         return record
 
-    if todo and cluster is not None:
-        for record in _run_on_dask(todo, out_dir, cluster, workers):
-            results[record.run_id] = done(record)
-    elif todo:
+    if todo:
         jobs: dict[str, Job] = {}
         first: dict[str, RunSpec] = {}
         for group in groups(todo, report) if stack else [[s] for s in todo]:
@@ -188,10 +178,11 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
 
         def finished(name: str, result) -> None:
             for r in result if isinstance(result, list) else [result]:
-                results[r.run_id] = done(r, log_path(out_dir, name if r.details.get("stacked") else r.run_id))
+                log = None if cluster is not None else log_path(out_dir, name if r.details.get("stacked") else r.run_id)
+                results[r.run_id] = done(r, log)
 
         run_jobs(jobs, workers, None, report, checked=True, before=lambda name: unchanged(first[name]),
-                 on_done=finished)
+                 on_done=finished, cluster=cluster)
     tracker.summary()
     return [results[s.run_id] for s in specs]
 
@@ -205,38 +196,3 @@ def _describe(record: Record, log: Path | None = None) -> str:
     else:
         outcome = f"{record.status} ({record.error}{f'; log {log}' if log else ''})"
     return f"{record.system} {record.method} {record.experiment} seed={record.seed}: {outcome}"
-
-
-def run_remote(spec_dict: dict) -> dict:
-    """A Dask task: :func:`run_one` in a scratch directory; returns the record's JSON."""
-    with tempfile.TemporaryDirectory(prefix="syrenets-bench-") as scratch:
-        return run_one(RunSpec.from_dict(spec_dict), scratch, checked=True).to_json()
-
-
-def _run_on_dask(todo: list[RunSpec], out_dir: Path, cluster, workers: int) -> Iterable[Record]:
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError:
-        raise UserError("--cluster needs Dask distributed: pip install 'syrenets-bench[dask]'") from None
-    own = None
-    if cluster == "local":
-        own = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-        client = Client(own)
-    elif isinstance(cluster, Client):
-        client = cluster
-    else:
-        try:
-            client = Client(cluster, timeout="30s")
-        except OSError as exc:
-            raise UserError(f"cannot reach the Dask scheduler {cluster}: {exc}") from None
-    try:
-        futures = [client.submit(run_remote, s.to_dict(), key=f"bench-{s.run_id}-{time.time_ns()}", pure=False) for s in todo]
-        for future in as_completed(futures):
-            record = Record.from_json(future.result(), "a Dask worker's record")
-            write_record(record_path(out_dir, record.run_id), record)
-            yield record
-    finally:
-        if client is not cluster:
-            client.close()
-        if own is not None:
-            own.close()

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 from dataclasses import dataclass
@@ -99,6 +100,25 @@ class RunJob(Job):
     def folder(self) -> Path:
         """``OUT/logs``: the run's call, phases and output (a failed run's traceback among it)."""
         return Path(self.out_dir) / "logs"
+
+    def code(self) -> str | None:
+        """The hash of the files that define the run's method and system (:func:`~bench.runner.code.code_hash`)."""
+        spec = self.run_spec
+        now = code_hash(spec.method, spec.system, spec.plugins)
+        return None if now is None else now["hash"]
+
+    def identity(self) -> dict:
+        """The run's spec, as JSON (wherever its record goes)."""
+        return self.run_spec.to_dict()
+
+    def elsewhere(self, scratch: Path) -> "RunJob":
+        """On a cluster's worker the run writes its record and log under ``scratch``."""
+        return dataclasses.replace(self, out_dir=str(scratch))
+
+    def land(self, record: Record) -> Record:
+        """A record that came back from a cluster's worker, written into this job's folder."""
+        write_record(record_path(self.out_dir, record.run_id), record)
+        return record
 
     def finish(self, outcome: Outcome, report) -> Record:
         """The record the child wrote; where it wrote none (it failed or was killed), the one written here."""

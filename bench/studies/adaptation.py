@@ -48,7 +48,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from bench.core.budget import Budget
-from bench.core.arguments import positive, positive_int
+from bench.core.arguments import positive, positive_int, add_workers
 from bench.core.data import generate, mse
 from bench.physics.undeclared import add_effects, parse_effects
 from bench.core.errors import ConfigError
@@ -168,7 +168,7 @@ class LearnerJob(CaseJob):
         return run_learner(self.learner, self.setup, self.seed)
 
 
-def run(setup: Setup, seeds: list[int], workers: int, report: Report = print) -> list[dict]:
+def run(setup: Setup, seeds: list[int], workers: int, report: Report = print, cluster=None) -> list[dict]:
     """Every learner on every seed, ``workers`` processes at a time, each
     killed at 1.5 x its fitting time plus its loop's budget."""
     jobs = {f"{learner} seed={s}": LearnerJob(learner, setup, s) for s in seeds for learner in LEARNERS}
@@ -176,7 +176,7 @@ def run(setup: Setup, seeds: list[int], workers: int, report: Report = print) ->
     def describe(r: dict) -> str:
         return f"before {r['before']:.3g}, at the switch {r['curve'][0][1]:.3g}, last {r['curve'][-1][1]:.3g}"
 
-    results = run_jobs(jobs, workers, describe, report)
+    results = run_jobs(jobs, workers, describe, report, cluster=cluster)
     return sorted(results.values(), key=lambda r: (list(LEARNERS).index(r["learner"]), r["seed"]))
 
 
@@ -257,7 +257,7 @@ def add_arguments(parser) -> None:
                         help="seconds of fitting after the switch at which the test MSE is measured, from 0")
     parser.add_argument("--n-train", type=positive_int, default=Setup.n_train, help=f"training samples per stream (default {Setup.n_train})")
     parser.add_argument("--n-test", type=positive_int, default=Setup.n_test, help=f"test samples (default {Setup.n_test})")
-    parser.add_argument("--workers", type=positive_int, default=2, help="jobs at a time, one process each (default 2)")
+    add_workers(parser, "jobs")
     parser.add_argument("--out", type=Path, default=Path("results/residual/adaptation"), help="output folder (default results/residual/adaptation)")
 
 
@@ -266,7 +266,7 @@ def main(args) -> int:
     setup = Setup(args.system, tuple(args.effects), args.before, tuple(args.checkpoints), args.n_train, args.n_test)
     setup.check()
     seeds = list(range(args.n_seeds))
-    results = run(setup, seeds, args.workers)
+    results = run(setup, seeds, args.workers, cluster=args.cluster)
     path = write(results, setup, seeds, args.out, args.invocation)
     print(json.dumps({"table": str(path)}))
     print((args.out / "README.md").read_text())

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.core.scoring import scoring
-from bench.core.arguments import positive, positive_int, seed
+from bench.core.arguments import positive, positive_int, seed, add_workers
 from bench.core.budget import Budget
 from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, check_output, write_json
@@ -116,7 +116,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--budget", type=positive, default=None, help="seconds for each fit (default 60)")
     parser.add_argument("--steps", type=positive_int, default=None,
                         help="bound each fit by N steps of its work instead (--budget is then a ceiling)")
-    parser.add_argument("--workers", type=positive_int, default=2, help="fits at a time, one process each (default 2)")
+    add_workers(parser, "fits")
     parser.add_argument("--out", type=Path, default=Path("results/measured/generalisation.md"),
                         help="the page (default results/measured/generalisation.md); the runs go beside it as .json, "
                              "each split's plot as _SPLIT.png")
@@ -144,7 +144,8 @@ def main(args) -> int:
     jobs = {f"{split} {m}": Case(args.system, split, m, args.seed, args.budget, args.steps)
             for split in args.splits for m in names}
     ledger = Ledger(args.out)
-    rows = list(run_jobs(jobs, args.workers, lambda r: f"test MSE {r['test_mse']:.3g}", print_now, ledger).values())
+    rows = list(run_jobs(jobs, args.workers, lambda r: f"test MSE {r['test_mse']:.3g}", print_now, ledger,
+                          cluster=args.cluster).values())
     prov = provenance()
     work = f"{args.steps} steps of its work" if args.steps is not None else f"{args.budget:g} s"
     lines = ["# Where each learner stops generalising", "",

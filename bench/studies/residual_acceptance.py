@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.core.budget import Budget
-from bench.core.arguments import noise_level, positive, positive_int, seed_list
+from bench.core.arguments import noise_level, positive, positive_int, seed_list, add_workers
 from bench.core.data import add_noise, generate
 from bench.physics.undeclared import add_effects, parse_effects
 from bench.core.fileio import atomic_write, check_output, link, write_json
@@ -274,7 +274,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--steps", type=positive_int, default=None,
                         help="bound each loop by N steps of its method's work instead of by time (--budget is then a "
                              "ceiling): the same command gives the same page on any machine")
-    parser.add_argument("--workers", type=positive_int, default=2, help="runs at a time, one process each (default 2)")
+    add_workers(parser, "runs")
     parser.add_argument("--out", type=Path, default=Path("results/residual/acceptance.md"),
                         help="the page to write (default results/residual/acceptance.md); every run goes to the "
                              "same name with .json; until the page is written, finished runs are kept in "
@@ -309,7 +309,7 @@ def main(args) -> int:
                 f"({', '.join(r['found']) or 'nothing'}); test MSE {r['before']:.3g} -> {r['after']:.3g}")
 
     ledger = Ledger(args.out)
-    rows = list(run_jobs(jobs, args.workers, describe, print_now, ledger).values())
+    rows = list(run_jobs(jobs, args.workers, describe, print_now, ledger, cluster=args.cluster).values())
     order = {c: i for i, c in enumerate(args.cases)}
     rows.sort(key=lambda r: (args.sets.index(r["set"]), order[r["case"]], r["noise"], r["seed"],
                              args.methods.index(r["method"])))

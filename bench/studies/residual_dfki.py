@@ -27,7 +27,7 @@ import numpy as np
 
 from bench.core.sealed import seal
 from bench.core.budget import Budget
-from bench.core.arguments import positive, positive_int
+from bench.core.arguments import positive, positive_int, add_workers
 from bench.core.fileio import atomic_write, check_output, link
 from bench.residual import validation
 from bench.residual.loop import residual_loop
@@ -136,7 +136,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--steps", type=positive_int, default=None,
                         help="bound each loop by N steps of its method's work instead of by time (the budgets are "
                              "then ceilings): the same command gives the same effects on any machine")
-    parser.add_argument("--workers", type=positive_int, default=2, help="leave-one-out loops at a time (default 2)")
+    add_workers(parser, "leave-one-out loops")
     parser.add_argument("--out", type=Path, default=Path("results/residual/dfki.md"),
                         help="the tables to write (default results/residual/dfki.md)")
 
@@ -152,7 +152,8 @@ def main(args) -> int:
     suite = run_jobs({f"suite split {m}": Loop(m, None, args.budget, args.steps) for m in args.methods},
                      1, describe, print_now, ledger)
     loro = run_jobs({f"held out {k} {m}": Loop(m, k, args.loro_budget, args.steps)
-                     for k in recordings for m in args.methods}, args.workers, describe, print_now, ledger)
+                     for k in recordings for m in args.methods}, args.workers, describe, print_now, ledger,
+                    cluster=args.cluster)
     suite_rows, loro_rows = list(suite.values()), list(loro.values())
     prov = provenance()
     sysid = next((r for r in suite_rows if r["method"] == "sysid"), None)

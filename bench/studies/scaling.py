@@ -32,7 +32,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from bench.core.experiment import EXPERIMENTS
-from bench.core.arguments import positive, positive_int
+from bench.core.arguments import positive, add_workers
 from bench.core.fileio import atomic_write, check_output, link
 from bench.reporting.plots import line_plot
 from bench.runner.matrix import run_matrix
@@ -173,7 +173,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--budget", type=positive, default=5.0, help="seconds per run (default 5)")
     parser.add_argument("--n-seeds", type=seed_count, default=5, help="the first N of the ten fixed seeds (default 5)")
     parser.add_argument("--methods", nargs="+", default=None, help="methods (default: every available one)")
-    parser.add_argument("--workers", type=positive_int, default=None, help="runs at a time (default: one per core)")
+    add_workers(parser, "runs", None)
     parser.add_argument("--out", type=Path, default=Path("results/scaling"), help="output folder (default results/scaling)")
 
 
@@ -183,7 +183,7 @@ def main(args) -> int:
     methods = args.methods or [m for m in METHODS.names() if METHODS.entry(m).available]
     specs = build_specs(studied_systems(), methods, ["direct", "indirect"], SEEDS[: args.n_seeds], args.budget,
                         plugins=(PLUGIN,), rollout=False)
-    records = with_earlier(run_matrix(specs, args.out, workers=args.workers), args.out, args.budget,
+    records = with_earlier(run_matrix(specs, args.out, workers=args.workers, cluster=args.cluster), args.out, args.budget,
                            tuple(SEEDS[: args.n_seeds]))
     rows = summarize(records)
     images = plots(rows, args.out)

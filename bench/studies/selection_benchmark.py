@@ -49,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.core import protocols
-from bench.core.arguments import positive_int
+from bench.core.arguments import positive_int, add_workers
 from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
 from bench.core.fileio import atomic_write, write_json
@@ -192,13 +192,15 @@ def resolve(protocol: str, layout: str) -> str | None:
     return protocols.resolve(protocol, 1 if layout == "one" else SEVERAL)
 
 
-def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tuple[str, ...], workers: int) -> dict:
-    """``bench select`` on ``case`` under ``protocol``; its ``select.json``."""
+def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tuple[str, ...], workers: int,
+             cluster: str | None = None) -> dict:
+    """``bench select`` on ``case`` under ``protocol`` (its candidates on ``cluster``, where one is named);
+    its ``select.json``."""
     declared = make(case, folder)
     out = folder / protocol
     command = [sys.executable, "-m", "bench", "select", "--system", f"measured:{declared}", "--steps", str(steps),
                "--candidates", ",".join(candidates), "--folds", protocol, "--no-rollout", "--workers", str(workers),
-               "--out", str(out)]
+               "--out", str(out)] + (["--cluster", cluster] if cluster else [])
     done = subprocess.run(command, capture_output=True, text=True)
     result = out / "select.json"
     if not result.exists():
@@ -311,7 +313,7 @@ def add_arguments(parser) -> None:
                              "trajectories of several), regions, knndm (only where there are several training "
                              "trajectories) (default time auto)")
     parser.add_argument("--steps", type=positive_int, default=STEPS, help=f"steps a fit (default {STEPS})")
-    parser.add_argument("--workers", type=positive_int, default=2, help="candidates at a time (default 2)")
+    add_workers(parser, "candidates")
     parser.add_argument("--out", type=Path, default=Path("results/selection/benchmark.md"),
                         help="the page (default results/selection/benchmark.md); the cases' runs go beside it")
 
@@ -327,7 +329,8 @@ def main(args) -> int:
             if folds is None:
                 continue
             if folds not in done:
-                done[folds] = scores(run_case(case, root / case.name, folds, args.steps, CANDIDATES, args.workers))
+                done[folds] = scores(run_case(case, root / case.name, folds, args.steps, CANDIDATES, args.workers,
+                                                 args.cluster))
             s = done[folds]
             table.append({"case": case.name, "protocol": protocol, "folds": folds, "scores": s})
             print(f"[{i + 1}/{len(chosen)}] {case.name} {protocol} ({folds}): " +

@@ -100,9 +100,11 @@ def specs(system: str, split: str | None, budget_s: float | None, steps: int | N
     return rows
 
 
-def run(rows, out: Path, workers: int | None, report=print) -> list[tuple[Candidate, Record]]:
+def run(rows, out: Path, workers: int | None, report=print, cluster=None) -> list[tuple[Candidate, Record]]:
     """The candidates' runs, as one matrix in ``out/runs`` (resumed from their records), started in
-    :data:`RUN_ORDER`: the longest first, so that the workers end together."""
+    :data:`RUN_ORDER`: the longest first, so that the workers end together; on a Dask ``cluster``
+    (:mod:`bench.runner.cluster`) each is a task, and its model file is written at its path by the worker
+    (a cluster without the caller's file system keeps the records, not the model files)."""
     folder = Path(out).resolve() / "runs"
     for _, spec in rows:  # a run whose model file is missing is redone: the file is part of its result
         path = record_path(folder, spec.run_id)
@@ -110,7 +112,8 @@ def run(rows, out: Path, workers: int | None, report=print) -> list[tuple[Candid
             path.unlink()
     ordered = sorted(rows, key=lambda row: RUN_ORDER.index(row[0].name) if row[0].name in RUN_ORDER else len(RUN_ORDER))
     report(f"select: {len(rows)} candidate(s) in {folder}: {', '.join(c.name for c, _ in ordered)}")
-    done = dict(zip((c.name for c, _ in ordered), matrix.run_matrix([s for _, s in ordered], folder, workers=workers)))
+    records = matrix.run_matrix([s for _, s in ordered], folder, workers=workers, cluster=cluster)
+    done = dict(zip((c.name for c, _ in ordered), records))
     return [(c, done[c.name]) for c, _ in rows]
 
 
@@ -248,14 +251,14 @@ def applicability(train: Dataset, test: Dataset | None, target: Dataset | None, 
 def select(system: str, out: Path, *, split: str | None, budget_s: float | None, steps: int | None, seed: int,
            workers: int | None, plugins: tuple[str, ...], command: str, candidates=CANDIDATES, rollout: bool = False,
            report=print, data: tuple[Dataset, Dataset | None] | None = None, target: Dataset | None = None,
-           protocol: str | None = None) -> dict:
+           protocol: str | None = None, cluster=None) -> dict:
     """Run the candidates, choose one, write ``select.json``, ``select.md`` and ``model.npz`` into ``out``.
     ``data`` is the system's training and test data, for the page's report of what validation could see
     (with ``target``, the states the user says the model will be asked: :mod:`bench.evaluation.domain`).
     ``protocol`` names the validation folds (:mod:`bench.core.protocols`)."""
     out = Path(out)
     rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout, protocol)
-    done = run(rows, out, workers, report)
+    done = run(rows, out, workers, report, cluster)
     entries = [entry(c, r, out) for c, r in done]
     chosen = choose(entries)
     folds = next(((r.details or {}).get("tuning", {}).get("folds", {}).get("description") for _, r in done

@@ -3,10 +3,12 @@ same jobs run again by the same code are taken from it instead of run again."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from bench.runner.isolation import CallFailed
-from bench.runner.job import run_jobs
+from bench.runner.job import rerun_reason, run_jobs, suite_code
 from bench.runner.ledger import Ledger
 from tests.runner.jobs import Sleep, Tally
 
@@ -14,7 +16,7 @@ from tests.runner.jobs import Sleep, Tally
 def test_a_study_stopped_part_way_resumes_with_the_jobs_that_did_not_finish(tmp_path):
     tally, lines = tmp_path / "tally", []
     ledger = Ledger(tmp_path / "page.md")
-    assert ledger.path == tmp_path / "page.partial.jsonl" and ledger.code is not None
+    assert ledger.path == tmp_path / "page.partial.jsonl" and suite_code() is not None
     with pytest.raises(CallFailed, match="1 of 2 job.s. did not finish: slow"):
         run_jobs({"quick": Tally(str(tally), 1), "slow": Sleep(60, 1.0)}, 2, str, lines.append, ledger)
     assert tally.read_text() == "1\n"
@@ -40,16 +42,31 @@ def test_a_ledger_keeps_nothing_from_other_code_or_a_torn_line(tmp_path):
     run_jobs({"a": Tally(str(tally), 1)}, 1, str, lambda line: None, ledger)
     with open(ledger.path, "a") as f:
         f.write('{"name": "b", "fields": ')  # the process killed while writing its line
-    assert ledger.finished({"a": _fields(tally, 1), "b": _fields(tally, 2)}) == ({"a": {"x": 1}}, 0)
+    jobs = {"a": Tally(str(tally), 1), "b": Tally(str(tally), 2)}
+    assert ledger.finished(jobs, rerun_reason) == ({"a": {"x": 1}}, 0)
+    (entry,) = [json.loads(line) for line in ledger.path.read_text().splitlines()[:1]]
+    assert entry["code"] == suite_code() and entry["fields"] == {"job": "tests.runner.jobs:Tally",
+                                                                  "fields": {"tally": str(tally), "x": 1}}
 
-    other = Ledger(tmp_path / "page.md")
-    other.code = "a digest of other code"
-    assert other.finished({"a": _fields(tally, 1)}) == ({}, 1)
+    ledger.path.write_text(json.dumps({**entry, "code": "a digest of other code"}) + "\n")
+    assert ledger.finished(jobs, rerun_reason) == ({}, 1)
     lines = []
-    run_jobs({"a": Tally(str(tally), 1)}, 1, str, lines.append, other)
+    run_jobs({"a": Tally(str(tally), 1)}, 1, str, lines.append, ledger)
     assert tally.read_text() == "1\n1\n"
-    assert lines[0] == f"1 job(s) in {other.path} were made by other code or with other fields: they run again"
+    assert lines[0] == f"1 job(s) in {ledger.path} were made by other code or with other fields: they run again"
 
 
-def _fields(tally, x):
-    return {"job": "tests.runner.jobs:Tally", "fields": {"tally": str(tally), "x": x}}
+@pytest.mark.xdist_group("dask")
+def test_a_studys_jobs_run_on_a_dask_cluster_and_resume_from_the_same_ledger(tmp_path, dask_client):
+    """The one scheduler hands a study's jobs to a cluster as it runs them locally: the ledger keeps what
+    finished, a job killed at its limit on its worker is named, and the same jobs run again resume."""
+    tally, lines = tmp_path / "tally", []
+    ledger = Ledger(tmp_path / "page.md")
+    with pytest.raises(CallFailed, match="1 of 2 job.s. did not finish: slow"):
+        run_jobs({"quick": Tally(str(tally), 3), "slow": Sleep(60, 1.0)}, 2, str, lines.append, ledger,
+                 cluster=dask_client)
+    assert tally.read_text() == "3\n" and any(line.endswith("quick: {'x': 3}") for line in lines)
+    assert any("slow: did not finish (killed in its run phase)" in line for line in lines)
+    lines.clear()
+    assert run_jobs({"quick": Tally(str(tally), 3)}, 1, str, lines.append, ledger) == {"quick": {"x": 3}}
+    assert tally.read_text() == "3\n" and lines == [f"1 of 1 job(s) finished before, by this code: taken from {ledger.path}"]

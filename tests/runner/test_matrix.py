@@ -139,16 +139,16 @@ def test_measured_systems_use_their_packaged_splits_and_skip_the_direct_experime
     assert len(train) == 2459 and len(test) == 454 and "trajectories e, q, v" in test.source
 
 
-def test_matrix_on_a_real_dask_local_cluster(tmp_path):
-    pytest.importorskip("distributed")
+@pytest.mark.xdist_group("dask")
+def test_matrix_on_a_real_dask_local_cluster(tmp_path, dask_client):
     todo = specs(["toy_constant", "toy_crasher"], budget=10.0, rollout=False)
     lines = []
-    records = matrix.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
+    records = matrix.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster=dask_client)
     assert [r.run_id for r in records] == [s.run_id for s in todo]
     assert [r.status for r in records] == ["ok", "failed"]
     assert records[1].error == "RuntimeError: the toy fell over"
     assert len(read_records(tmp_path)) == 2 and any("2/2 done, 1 not ok" in line for line in lines)
-    again = matrix.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster="local")
+    again = matrix.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster=dask_client)
     assert [r.provenance for r in again] == [r.provenance for r in records]  # resumed, not run again
 
 

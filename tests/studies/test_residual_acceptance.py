@@ -9,7 +9,6 @@ import pytest
 from bench.physics.undeclared import parse_effects
 from bench.studies.acceptance_scoring import expected, score
 from bench.studies.acceptance_cases import DEVELOPMENT, DEVELOPMENT_CASES, EVALUATION, effects
-from bench.runner.job import job_fields
 from bench.runner.ledger import Ledger
 from bench.studies.residual_acceptance import Case, run_case, worth
 from tests.commandline import cli
@@ -107,7 +106,7 @@ def test_the_study_resumes_from_the_runs_it_kept_and_drops_them_once_its_page_is
     ledger = Ledger(out)
     # a run finished before the study stopped; its seconds mark it as the one kept
     finished = {**run_case(**kept.payload()), "seconds": 12345.0}
-    ledger.add("development spring noise=0 seed=0 sysid", job_fields(kept), finished)
+    ledger.add("development spring noise=0 seed=0 sysid", kept, finished)
     r = cli("study", "residual-acceptance", "--cases", "spring", "--methods", "sysid", "--noise", "0", "0.01",
             "--sets", DEVELOPMENT, "--seeds", "0", "--n-train", 300, "--n-test", 150, "--steps", 10,
             "--workers", 1, "--out", out)
