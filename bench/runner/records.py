@@ -299,8 +299,10 @@ def records_folder(out_dir: str | os.PathLike) -> Path:
     return root / "records" if (root / "records").is_dir() else root
 
 
-def read_records(out_dir: str | os.PathLike, on_bad: Callable[[Path, RecordError], None] | None = None) -> list[Record]:
-    """All records under ``out_dir/records`` (or ``out_dir`` itself), sorted by file name.
+def read_records(out_dir: str | os.PathLike, on_bad: Callable[[Path, RecordError], None] | None = None,
+                 kind: str = "run") -> list[Record]:
+    """The records of ``kind`` under ``out_dir/records`` (or ``out_dir`` itself), sorted by file name (a
+    residual loop's record among a matrix's is not one of its runs).
 
     A file that is not a valid record raises :class:`RecordError`, or, with
     ``on_bad``, is passed to it with the error and left out.
@@ -308,11 +310,14 @@ def read_records(out_dir: str | os.PathLike, on_bad: Callable[[Path, RecordError
     records = []
     for path in sorted(records_folder(out_dir).glob("*.json")):
         try:
-            records.append(read_record(path))
+            record = read_record(path)
         except RecordError as exc:
             if on_bad is None:
                 raise
             on_bad(path, exc)
+        else:
+            if record.kind == kind:
+                records.append(record)
     return records
 
 

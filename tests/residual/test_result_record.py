@@ -7,7 +7,7 @@ import json
 import pytest
 
 from bench.residual.result import ResidualResult
-from bench.runner.records import RecordError, read_record, residual_fields, write_record
+from bench.runner.records import RecordError, read_record, read_records, residual_fields, write_record
 from bench.runner.spec import RunSpec
 
 
@@ -31,6 +31,8 @@ def test_the_loops_result_is_a_record_of_kind_residual_and_reads_back(tmp_path):
     assert record.details["mse_before"] == {"train": 3.0, "test": 4.0} and "mse_after" in record.details
     assert not {"system", "method", "seed", "lagrangian", "seconds", "spec"} & set(record.details)
     assert ResidualResult.from_json(json.loads((tmp_path / "loop.json").read_text())) == out
+    # among a matrix's records it is not one of the runs its tables count
+    assert read_records(tmp_path) == [] and read_records(tmp_path, kind="residual") == [record]
 
 
 def test_a_result_without_a_spec_gets_one_from_its_own_fields():
