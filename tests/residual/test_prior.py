@@ -24,7 +24,7 @@ from bench.core.budget import Budget
 def arm():
     system = SYSTEMS["kuka_lwr4"]()
     train = system.load("train")
-    part = train.subset(np.sort(np.concatenate([index[:400] for index in train.in_time_order()])))
+    part = train.subset(np.sort(np.concatenate([index[:200] for index in train.in_time_order()])))
     return system, part, opened(system.load("test")).subset(slice(0, 400))
 
 
