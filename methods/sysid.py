@@ -253,15 +253,24 @@ class SysId(TorchLagrangianMethod):
 
     def _post_fit(self, train, experiment, seconds_left):
         super()._post_fit(train, experiment, seconds_left)  # a network's fit: on the CPU, in float64
-        if self.linear is not None:  # the consistency the data can decide: a positive definite mass matrix
+        if self.linear is not None:  # the states whose mass matrices the record's facts check (record_details)
             rows = train.evenly(MASS_STATES)
-            q, qd = train.q[rows], train.qd[rows]
-            smallest = np.concatenate([_smallest_eigenvalues(self.linear, q[k:k + MASS_CHUNK], qd[k:k + MASS_CHUNK])
-                                       for k in range(0, len(rows), MASS_CHUNK)])
-            self._facts["mass_matrix_positive_definite"] = bool(np.all(smallest > 0))
-            self._facts["mass_matrix_smallest_eigenvalue"] = float(smallest.min())
-            self._facts["mass_matrix_states"] = len(smallest)  # the training states checked
-            self._facts["mass_matrix_indefinite_states"] = int(np.sum(~(smallest > 0)))
+            self._mass_states = (train.q[rows], train.qd[rows])
+
+    def _mass_matrix_facts(self) -> dict:
+        """The consistency the data can decide: whether the mass matrix is positive definite at the training
+        states kept by the fit. Computed when the record asks for it, once: a fold fit of a tuned run or a
+        hybrid's prior never reports it."""
+        states = getattr(self, "_mass_states", None)
+        if states is None or "mass_matrix_states" in getattr(self, "_facts", {}):
+            return {}
+        q, qd = states
+        smallest = np.concatenate([_smallest_eigenvalues(self.linear, q[k:k + MASS_CHUNK], qd[k:k + MASS_CHUNK])
+                                   for k in range(0, len(q), MASS_CHUNK)])
+        return {"mass_matrix_positive_definite": bool(np.all(smallest > 0)),
+                "mass_matrix_smallest_eigenvalue": float(smallest.min()),
+                "mass_matrix_states": len(smallest),  # the training states checked
+                "mass_matrix_indefinite_states": int(np.sum(~(smallest > 0)))}
 
     def saved(self, packer):
         """The linear model (:meth:`~bench.physics.models.LinearParametricModel.saved`), or the parameter network."""
@@ -274,7 +283,10 @@ class SysId(TorchLagrangianMethod):
         return self.linear.predict_torque(data) if self.linear is not None else super().predict_torque(data)
 
     def record_details(self):
-        return dict(getattr(self, "_facts", {})) if self.linear is not None else {}
+        if self.linear is None:
+            return {}
+        self._facts = {**getattr(self, "_facts", {}), **self._mass_matrix_facts()}
+        return dict(self._facts)
 
     def build_model(self, train):
         if self.system is None:

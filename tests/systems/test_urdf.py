@@ -80,13 +80,21 @@ def test_the_suites_euler_lagrange_transform_agrees_with_pinocchios_rnea(n):
     assert np.abs(ours - theirs).max() <= 1e-10 * max(1.0, np.abs(theirs).max())
 
 
-def test_sysid_identifies_the_pandas_base_parameters():
+def test_sysid_identifies_the_pandas_base_parameters(monkeypatch):
+    import methods.sysid as sysid
+
+    checked = []
+    counted = sysid._smallest_eigenvalues
+    monkeypatch.setattr(sysid, "_smallest_eigenvalues", lambda *a: checked.append(1) or counted(*a))
     panda = get_system("panda")
     train, test = generate(panda, 4000, 0), generate(panda, 1000, 1000)
     m = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, budget=Budget(steps=1))  # a linear form is solved in one step
+    assert checked == []  # the mass matrices are checked when the record asks, not by every fit (a fold's, a prior's)
     facts = m.record_details()
     assert facts["base_parameters"] == 43  # as Gaz et al. (2019) found for the Panda
     assert facts["parameter_error"] < 1e-9 and facts["mass_matrix_positive_definite"]
+    assert facts["mass_matrix_states"] == 4000 and len(checked) == 8  # every training state, 512 at a time
+    assert m.record_details() == facts and len(checked) == 8  # once
     assert mse(m.predict_torque(test), test.tau) < 1e-20
     rollout = rollout_error(m, panda, test)
     assert rollout["status"] == "ok" and rollout["q_rmse"] < 1e-8  # against Pinocchio's own forward dynamics
