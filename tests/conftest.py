@@ -35,6 +35,12 @@ def pytest_configure(config):
     os.environ["SYRENETS_BENCH_CACHE"] = str(cache)
 
 
+def pytest_collection_modifyitems(config, items):
+    """The tests marked ``long`` first, in their order, then the rest: the workers start on the long ones
+    instead of meeting one at the end while the other worker has finished."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)
+
+
 @pytest.fixture(scope="session")
 def double_pendulum():
     from systems import get_system

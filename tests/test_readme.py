@@ -16,6 +16,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
 
@@ -36,6 +38,7 @@ def _bench(*args: str, cwd: Path) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
+@pytest.mark.long
 def test_the_readmes_method_and_system_run_as_plugins_in_a_matrix(tmp_path):
     (tmp_path / "my_method.py").write_text(_python_block("Adding a method"))
     (tmp_path / "my_system.py").write_text(_python_block("Adding a system"))
@@ -100,6 +103,7 @@ def _quick_start() -> list[list[str]]:
     return commands
 
 
+@pytest.mark.long
 def test_the_quick_starts_commands_run_every_method_that_applies(tmp_path):
     commands = _quick_start()
     assert any("run" in c for c in commands) and any("list" in c for c in commands)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
@@ -65,6 +66,7 @@ def test_several_trajectories_are_their_own_target():
     assert report["reach"]["median"] == report["target"]["median_distance"]
 
 
+@pytest.mark.long
 def test_select_reads_the_target_logs_states_and_never_its_torques(tmp_path):
     test = opened(SYSTEMS["kuka_lwr4"]().load("test"))
     write_csv(test, tmp_path / "target.csv")

@@ -43,6 +43,7 @@ def test_the_mass_matrix_is_positive_definite_by_construction():
     assert (eig[:, 0] >= 0.01 - 16 * torch.finfo(torch.float64).eps * eig[:, -1]).all()
 
 
+@pytest.mark.long
 def test_delan_learns_the_double_pendulum_from_torques(double_pendulum):
     train, test = generate(double_pendulum, 2048, 0), generate(double_pendulum, 512, 1000)
     m = METHODS["delan"](eval_samples=512).fit(train, "indirect", 0, budget=Budget(steps=1500))

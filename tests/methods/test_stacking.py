@@ -73,6 +73,7 @@ def test_stacked_syrenets_seeds_keep_their_own_selection_replay_probes_and_multi
         not np.allclose(stacked[0].predict(test), stacked[1].predict(test))
 
 
+@pytest.mark.long
 @pytest.mark.xdist_group("torch.compile")  # with the suite's other compiling tests (tests/methods/test_delan.py)
 def test_a_compiled_stacked_step_is_compiled_before_the_budget_and_gives_the_fits_alone(data):
     """With ``compile=True`` the stack's torques are compiled, before the budgets start, and

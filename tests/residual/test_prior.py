@@ -28,6 +28,7 @@ def arm():
     return system, part, opened(system.load("test")).subset(slice(0, 400))
 
 
+@pytest.mark.long
 def test_the_loop_method_is_the_loops_final_model_a_round_its_step(arm, capsys):
     system, train, test = arm
     for steps in (1, 2):
@@ -39,6 +40,7 @@ def test_the_loop_method_is_the_loops_final_model_a_round_its_step(arm, capsys):
     assert "prior: round 0" in capsys.readouterr().out  # the loop's progress, line by line
 
 
+@pytest.mark.long
 def test_a_loop_hybrid_fits_its_residual_to_what_the_loop_leaves_and_saves(arm, tmp_path):
     system, train, test = arm
     hybrid = METHODS["loop+sparse_torque"]().fit(train, "indirect", 0, budget=Budget(steps=1), system=system)

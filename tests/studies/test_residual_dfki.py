@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from bench.studies.residual_dfki import run_case, split
 
@@ -15,6 +16,7 @@ def test_leaving_a_recording_out_trains_on_the_five_others_and_tests_on_it():
     assert sorted(suite_test.recordings()) == ["03", "05"]
 
 
+@pytest.mark.long
 def test_a_run_reports_before_after_and_its_time():
     row = run_case("sparse", "05", None, steps=1)
     assert row["held_out"] == "05" and row["after"] <= row["before"] and row["cut_short"] == 0

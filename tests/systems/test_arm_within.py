@@ -69,6 +69,7 @@ def arm(tmp_path_factory):
     return folder, declaration, body
 
 
+@pytest.mark.long
 def test_one_arm_of_a_two_arm_robot_is_fitted_and_traced_from_one_declaration(arm, tmp_path):
     folder, declaration, _ = arm
     r = cli("fit", "--system", f"measured:{declaration}", "--method", "sysid", "--experiment", "indirect",

@@ -22,6 +22,7 @@ from bench.core.scoring import opened
 from tests.commandline import cli
 
 
+@pytest.mark.long
 def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     out = tmp_path / "sel"
     args = ("select", "--system", "kuka_lwr4", "--candidates", "standard,feasible,feasible+sparse_torque",
@@ -97,6 +98,7 @@ def _arm(folder: Path, test_torque_factor: float) -> Path:
     return declared
 
 
+@pytest.mark.long
 def test_the_test_trajectorys_torques_change_no_choice(tmp_path):
     results = []
     for factor in (1.0, 3.0):
