@@ -413,3 +413,27 @@ def test_no_effect_line_of_the_residual_command_ends_in_an_empty_description():
     bare = {"name": "spring", "kind": "structural", "joints": [2], "parameters": {}, "law": "L += -k*q_2**2/2"}
     assert effect_line(bare) == "spring (structural) on joint 2: L += -k*q_2**2/2"
     assert not effect_line({**bare, "law": ""}).endswith(": ")
+
+
+def test_every_command_that_runs_jobs_takes_a_cluster_and_select_hands_it_to_its_matrix(tmp_path, monkeypatch):
+    from bench.cli import build_parser
+    from bench.runner import matrix
+
+    parser = build_parser()
+    for argv in (["run", "--systems", "double_pendulum", "--out", "x"], ["select", "--system", "kuka_lwr4", "--out", "x"],
+                 *(["study", name] for name in ("adaptation", "generalisation", "residual-acceptance", "residual-dfki",
+                                                "scaling", "selection"))):
+        args = parser.parse_args([*argv, "--workers", "3", "--cluster", "tcp://scheduler:8786"])
+        assert (args.cluster, args.workers) == ("tcp://scheduler:8786", 3), argv
+
+    class Handed(Exception):
+        pass
+
+    def run_matrix(specs, out, *, workers=None, cluster=None, **kw):
+        raise Handed(cluster, workers, [s.method for s in specs])
+
+    monkeypatch.setattr(matrix, "run_matrix", run_matrix)
+    with pytest.raises(Handed) as handed:
+        main(["select", "--system", "kuka_lwr4", "--candidates", "standard", "--steps", "1", "--out",
+              str(tmp_path / "sel"), "--workers", "3", "--cluster", "tcp://scheduler:8786"])
+    assert handed.value.args == ("tcp://scheduler:8786", 3, ["sysid"])
