@@ -14,6 +14,22 @@ def test_a_periodic_trajectorys_folds_score_states_far_nearer_than_the_test_traj
     assert f["folds"]["kind"] == "spans" and len(f["fold_median_distance"]) == f["folds"]["folds"] >= 2
     assert f["folds"]["gap_samples"] >= 1 and f["train_samples"] + f["test_samples"] > 0
     assert max(f["fold_median_distance"]) < f["test_median_distance"] / 10
+    # select's regions of the states reach far further than spans do; the arm's joint ranges lie further still
+    assert f["regions_median_distance_median"] > 100 * max(f["fold_median_distance"])
+    assert f["joint_ranges_median_distance"] > 2 * f["test_median_distance"]
+
+
+def test_the_joint_ranges_are_states_inside_the_arms_sampling_domain():
+    from bench.studies.trajectories import joint_ranges
+    from systems import SYSTEMS
+
+    arm = SYSTEMS["kuka_lwr4"]()
+    states = joint_ranges(arm, n=500)
+    for name in ("q", "qd"):
+        lo, hi = arm.default_domain.bounds(name, arm.dof)
+        values = getattr(states, name)
+        assert values.shape == (500, arm.dof) and (values >= lo).all() and (values <= hi).all()
+        assert (values.max(axis=0) - values.min(axis=0) > 0.9 * (hi - lo)).all()  # they span the ranges
 
 
 def test_the_study_writes_its_figures_and_names_an_unknown_system_in_one_line(tmp_path):
