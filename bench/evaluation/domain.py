@@ -11,7 +11,8 @@ standard deviations; each figure is a median over the samples.
   user names (``--target-states``: its positions and velocities only), from
   the training states; else, where the training data hold several
   trajectories, the spread between them (each trajectory from the others'
-  states; their median); else nothing, and the report says so;
+  states; their median); else nothing, and the report says so (why not the
+  arm's joint ranges: docs/choices.md, "No default target on one trajectory");
 * **validated at the target's distance** where the folds reached at least
   as far as the target lies.
 
