@@ -129,7 +129,8 @@ def not_started(budget_s: float) -> str:
     return f"the budget of {budget_s:g} s would be spent before a round ended"
 
 
-def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget: Budget | None = None, seed: int = 0, hyperparameters: dict | None = None, report: Report = print,
+def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget: Budget | None = None, seed: int = 0,
+                  hyperparameters: dict | None = None, report: Report = print,
                   fitted: FittedModel | None = None, open_ended: bool | None = None,
                   device: str = "cpu", checkpoint: Callable[[ResidualResult], None] | None = None,
                   on_phase: Callable[[str], None] | None = None, max_rounds: int = MAX_ROUNDS) -> ResidualResult:

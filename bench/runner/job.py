@@ -29,7 +29,6 @@ it has :func:`evaluation_limit`.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import importlib
 import json
 import math
@@ -41,7 +40,7 @@ from typing import Any, Callable, Mapping
 from bench.core.budget import SECONDS, Budget
 from bench.runner.cluster import run_on_cluster
 from bench.runner.isolation import Call, CallFailed, Outcome, map_interruptibly, run_call
-from bench.runner.ledger import Ledger, code_digest
+from bench.runner.ledger import Ledger, suite_code
 from bench.runner.progress import print_now
 
 #: A fit is killed at this multiple of its time budget.
@@ -124,14 +123,15 @@ class Job:
 
     def code(self) -> str | None:
         """The code the job's result depends on, as a digest: a stored result made by other code does not
-        stand for the job (:func:`rerun_reason`). By default the whole suite's, taken once a process
-        (:func:`suite_code`); a run of a method names its method's and its system's files
-        (:meth:`bench.runner.run.RunJob.code`). ``None``: not known (outside a git checkout)."""
+        stand for the job (:func:`~bench.runner.ledger.rerun_reason`). By default the whole suite's, taken
+        once a process (:func:`~bench.runner.ledger.suite_code`); a run of a method names its method's and
+        its system's files (:meth:`bench.runner.run.RunJob.code`). ``None``: not known (outside a git
+        checkout)."""
         return suite_code()
 
     def identity(self) -> dict:
-        """What the job is, as a stored result is compared with it (:func:`rerun_reason`): by default its
-        class and fields (:func:`job_fields`)."""
+        """What the job is, as a stored result is compared with it (:func:`~bench.runner.ledger.rerun_reason`):
+        by default its class and fields (:func:`job_fields`)."""
         return job_fields(self)
 
     def payload(self) -> dict:
@@ -212,25 +212,6 @@ def run_remote(job: Job, name: str) -> tuple[bool, Any]:
             return False, str(exc)
 
 
-@functools.cache
-def suite_code() -> str | None:
-    """:func:`~bench.runner.ledger.code_digest` of the code this process started with."""
-    return code_digest()
-
-
-def rerun_reason(job: Job, code: str | None, identity: dict | None) -> str | None:
-    """The one resume rule, for a matrix's records and a study's ledger alike: why a result stored for
-    ``job``, made by ``code`` for ``identity``, does not stand for it now: ``"made by other code"``
-    (:meth:`Job.code` differs; a result, or a job, whose code is not known is not judged by it), ``"made
-    with another configuration"`` (:meth:`Job.identity` differs); ``None``: it stands."""
-    now = job.code()
-    if code is not None and now is not None and code != now:
-        return "made by other code"
-    if identity is not None and identity != job.identity():
-        return "made with another configuration"
-    return None
-
-
 def job_fields(job: Job) -> dict:
     """What a job is, as its ledger compares it: its class and its fields, as JSON reads them back."""
     return json.loads(json.dumps({"job": f"{type(job).__module__}:{type(job).__qualname__}",
@@ -252,11 +233,11 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
     :class:`~bench.runner.isolation.CallFailed`, named, once all have ended. A job's call, phases and output
     go to its :meth:`Job.folder`, else to a scratch folder. With a ``ledger``, each job that finishes is kept
     in it as it finishes, and a job it already holds is not run again where its result stands
-    (:func:`rerun_reason`; :mod:`bench.runner.ledger`): the studies' cases resume so; a matrix resumes
+    (:func:`~bench.runner.ledger.rerun_reason`): the studies' cases resume so; a matrix resumes
     from its records by the same rule (:mod:`bench.runner.matrix`) and gives only the runs left.
     """
     early = {name: None if checked else job.check() for name, job in jobs.items()}
-    kept, other = ledger.finished(jobs, rerun_reason) if ledger else ({}, 0)
+    kept, other = ledger.finished(jobs) if ledger else ({}, 0)
     if kept:
         report(f"{len(kept)} of {len(jobs)} job(s) finished before, by this code: taken from {ledger.path}")
     if other:

@@ -21,7 +21,8 @@ from pathlib import Path
 
 from bench.core.errors import UserError
 from bench.core.processes import process_alive
-from bench.runner.job import Job, rerun_reason, run_jobs
+from bench.runner.job import Job, run_jobs
+from bench.runner.ledger import rerun_reason
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now
 from bench.runner.provenance import CODE_FOLDERS, code_state
@@ -111,7 +112,7 @@ def run_matrix(
 
 def stale(record: Record, job: RunJob, retry_failed: bool = False) -> str | None:
     """Why ``record`` does not stand for ``job`` as it would run now (``None``: it does): the one resume
-    rule (:func:`~bench.runner.job.rerun_reason`), and, with ``retry_failed``, a run that failed."""
+    rule (:func:`~bench.runner.ledger.rerun_reason`), and, with ``retry_failed``, a run that failed."""
     why = rerun_reason(job, (record.code or {}).get("hash"),
                        RunSpec.from_dict(record.spec).to_dict() if record.spec else None)
     if why is None and retry_failed and record.status in ("failed", "timeout"):

@@ -76,7 +76,7 @@ class RunJob(Job):
         early = preflight(spec)
         if early is None:
             return None
-        early = early.replace(code=code_hash(spec.method, spec.system, spec.plugins))
+        early = early.replace(code=self.code_entry())
         write_record(record_path(self.out_dir, spec.run_id), early)
         return early
 
@@ -92,7 +92,7 @@ class RunJob(Job):
                 data = pickle.load(f)
         spec = self.run_spec
         record = execute(spec, on_phase, data=data, checked=True)
-        return record.replace(code=code_hash(spec.method, spec.system, spec.plugins)).to_json()
+        return record.replace(code=self.code_entry()).to_json()
 
     def result_file(self, work: Path, name: str) -> Path:
         return record_path(self.out_dir, name)
@@ -101,11 +101,15 @@ class RunJob(Job):
         """``OUT/logs``: the run's call, phases and output (a failed run's traceback among it)."""
         return Path(self.out_dir) / "logs"
 
-    def code(self) -> str | None:
-        """The hash of the files that define the run's method and system (:func:`~bench.runner.code.code_hash`)."""
+    def code_entry(self) -> dict | None:
+        """The record's ``code``: the files that define the run's method and system, and their hash
+        (:func:`~bench.runner.code.code_hash`)."""
         spec = self.run_spec
-        now = code_hash(spec.method, spec.system, spec.plugins)
-        return None if now is None else now["hash"]
+        return code_hash(spec.method, spec.system, spec.plugins)
+
+    def code(self) -> str | None:
+        """The hash of :meth:`code_entry`."""
+        return (self.code_entry() or {}).get("hash")
 
     def identity(self) -> dict:
         """The run's spec, as JSON (wherever its record goes)."""
@@ -127,7 +131,7 @@ class RunJob(Job):
         if outcome.result is not None:
             return Record.from_json(outcome.result, str(path))
         limits = self.limits()
-        code = code_hash(spec.method, spec.system, spec.plugins)
+        code = self.code_entry()
         if not outcome.killed:
             error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
             record = Record.new(spec, "failed", elsewhere=True, error=error, code=code)

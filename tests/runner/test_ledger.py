@@ -8,8 +8,8 @@ import json
 import pytest
 
 from bench.runner.isolation import CallFailed
-from bench.runner.job import rerun_reason, run_jobs, suite_code
-from bench.runner.ledger import Ledger
+from bench.runner.job import run_jobs
+from bench.runner.ledger import Ledger, suite_code
 from tests.runner.jobs import Sleep, Tally
 
 
@@ -43,13 +43,13 @@ def test_a_ledger_keeps_nothing_from_other_code_or_a_torn_line(tmp_path):
     with open(ledger.path, "a") as f:
         f.write('{"name": "b", "fields": ')  # the process killed while writing its line
     jobs = {"a": Tally(str(tally), 1), "b": Tally(str(tally), 2)}
-    assert ledger.finished(jobs, rerun_reason) == ({"a": {"x": 1}}, 0)
+    assert ledger.finished(jobs) == ({"a": {"x": 1}}, 0)
     (entry,) = [json.loads(line) for line in ledger.path.read_text().splitlines()[:1]]
     assert entry["code"] == suite_code() and entry["fields"] == {"job": "tests.runner.jobs:Tally",
                                                                   "fields": {"tally": str(tally), "x": 1}}
 
     ledger.path.write_text(json.dumps({**entry, "code": "a digest of other code"}) + "\n")
-    assert ledger.finished(jobs, rerun_reason) == ({}, 1)
+    assert ledger.finished(jobs) == ({}, 1)
     lines = []
     run_jobs({"a": Tally(str(tally), 1)}, 1, str, lines.append, ledger)
     assert tally.read_text() == "1\n1\n"
