@@ -17,7 +17,7 @@ from bench.core.arguments import assignment
 from bench.core.data import DataError
 from bench.core.csv_format import MAX_ABS_VALUE, read_csv
 from bench.core.errors import UserError
-from bench.runner.records import Record, RecordError, read_records, record_path, write_record
+from bench.runner.records import Record, RecordError, read_record, read_records, record_path, write_record
 from bench.runner.spec import RunSpec
 from methods import METHODS
 
@@ -206,3 +206,28 @@ def test_a_log_converts_alike_whatever_common_separator_it_uses_or_names_those_t
     a, b = read_csv(tmp_path / "comma.csv.out.csv", dof=1), read_csv(tmp_path / "log.txt.out.csv", dof=1)
     np.testing.assert_array_equal(a.tau, b.tau)
     np.testing.assert_array_equal(a.qdd, b.qdd)
+
+
+def valid_loop_json() -> dict:
+    """The residual loop's JSON as it was written before it was a record (every field at the top)."""
+    return {"system": "double_pendulum", "method": "sysid", "mse_before": {"train": 2.0, "test": 3.0},
+            "mse_after": {"train": 1.0, "test": 1.5}, "effects": [], "rounds": [{"round": 0}], "lagrangian": None,
+            "seconds": 1.0, "budget_s": 60.0, "fit_budget_s": 30.0, "seed": 0, "train_source": "t.csv",
+            "test_source": None, "budget": {"kind": "seconds", "seconds": 60.0}, "provenance": {}}
+
+
+@SETTINGS
+@given(changes=st.lists(st.tuples(st.sampled_from(sorted(valid_loop_json())), st.one_of(st.just(None), JSON_VALUES)),
+                        max_size=3))
+def test_a_loop_result_written_before_it_was_a_record_reads_whole_or_is_refused_in_one_line(tmp_path, changes):
+    obj = valid_loop_json()
+    for key, value in changes:
+        obj[key] = value
+    path = tmp_path / "loop.json"
+    path.write_text(json.dumps(obj, allow_nan=True))
+    try:
+        record = read_record(path)
+    except RecordError as exc:
+        check_refusal(exc, path)
+        return
+    assert record.kind == "residual" and record.status == "ok" and math.isfinite(record.train_mse)

@@ -176,7 +176,7 @@ class Record(Provenanced):
         if "schema" not in obj and {"mse_before", "mse_after", "rounds"} <= set(obj):
             try:  # the residual loop's JSON, as written before it was a record
                 obj = residual_record(obj).to_json()
-            except (KeyError, TypeError, ValueError, UserError) as exc:
+            except (AttributeError, KeyError, TypeError, ValueError, UserError) as exc:
                 raise RecordError(f"{source}: not a record of the residual loop ({type(exc).__name__}: {exc})"[:300]) from None
         names = [f.name for f in dataclasses.fields(cls)]
         obj = {**{k: v for k, v in ADDED_LATER.items() if k not in obj}, **obj}
