@@ -7,8 +7,8 @@ import argparse
 
 from pathlib import Path
 
-from bench.cli.options import UsageError, add_budget, add_plugin, add_split, budget, check_names, check_split, load_plugins
-from bench.core.arguments import add_workers, csv_list, seed
+from bench.cli.options import STEPS_HELP, UsageError, add_plugin, add_split, check_names, check_split, load_plugins
+from bench.core.arguments import add_workers, csv_list, positive, positive_int, seed
 from bench.core.csv_format import read_csv
 from bench.core.protocols import NAMES
 from bench.core.fileio import check_output
@@ -17,9 +17,9 @@ from bench.runner.execute import given_data
 from bench.tools.select import CANDIDATES, select
 from systems import SYSTEMS
 
-#: select's seconds per candidate where neither --budget nor --steps is given: its search fits every
-#: combination on every fold, the last rung at the final fit's steps (bench.evaluation.tuning)
-SELECT_BUDGET_S = 180.0
+#: the seconds past which a candidate is killed (``--budget``): a ceiling, not its work, which is steps
+#: (bench.tools.select.Candidate.work); five times the 180 s a candidate had when its work was seconds
+SELECT_CEILING_S = 900.0
 
 HELP = "choose a model of a measured arm by validation on its training data; write it, and a page of every candidate"
 
@@ -28,7 +28,12 @@ def add_arguments(p) -> None:
     p.add_argument("--system", required=True, help="a measured arm (kuka_lwr4, measured:PATH)")
     p.add_argument("--out", type=Path, required=True,
                    help="output folder: select.md, select.json, model.npz, and the candidates' runs (a rerun resumes)")
-    add_budget(p, "per candidate", SELECT_BUDGET_S)
+    p.add_argument("--steps", type=positive_int, default=None,
+                   help=STEPS_HELP.replace("each run", "every candidate") + " (default: each candidate's own steps, "
+                        "the same on any machine: the page's work column)")
+    p.add_argument("--budget", type=positive, default=SELECT_CEILING_S, metavar="SECONDS",
+                   help="a candidate still running after SECONDS is killed and recorded as timeout "
+                        f"(default {SELECT_CEILING_S:g}); a ceiling only, the candidates' work being steps")
     add_split(p)
     p.add_argument("--seed", type=seed, default=0, help="the candidates' seed (default 0)")
     add_workers(p, "candidates", None)
@@ -67,7 +72,6 @@ def main(args) -> int:
                          f"URDF's rigid body); {name} is {'simulated' if system.simulated else 'not an arm'}")
     check_names(args, [name], names)
     check_split(args.split, [name])
-    budget_s, steps = budget(args)
     arm = SYSTEMS[name](split=args.split)
     data = given_data(arm, None, None)
     target = None if args.target_states is None else read_csv(args.target_states, dof=arm.dof, system=name,
@@ -78,7 +82,7 @@ def main(args) -> int:
     elif protocol == "knndm" and len(data[0].trajectories()) < 2:
         raise UsageError("--folds knndm: the training data hold one trajectory; name the states the model will be "
                          "asked with --target-states LOG")
-    result = select(name, args.out, split=args.split, budget_s=budget_s, steps=steps, seed=args.seed,
+    result = select(name, args.out, split=args.split, budget_s=args.budget, steps=args.steps, seed=args.seed,
                     workers=args.workers, cluster=args.cluster, plugins=plugins, command=args.invocation,
                     candidates=candidates,
                     rollout=args.rollout, data=data, target=target, protocol=protocol)

@@ -9,10 +9,12 @@ is one run of the matrix with ``--tune`` (:mod:`bench.evaluation.tuning`):
 its hyperparameters chosen by the
 suite's validation protocol (:mod:`bench.core.folds`) on the training
 trajectories, within the run's budget, then fitted on all the training data
-and saved (:mod:`methods.saving`). The loop's candidates are bounded by
-work whatever select's budget: ``loop`` runs its rounds until one accepts
-nothing (:attr:`Candidate.work`), and ``loop+gp``'s prior does the same before
-its residual's budget starts (:mod:`bench.residual.prior`). The candidate chosen is the one with the
+and saved (:mod:`methods.saving`). Every candidate is bounded by work, so
+that the same command gives the same page on any machine: its own steps
+(:attr:`Candidate.work`) unless ``--steps`` gives them all one count, the
+seconds only a ceiling. ``loop`` runs its rounds until one accepts nothing,
+and ``loop+gp``'s prior does the same before its residual's steps start
+(:mod:`bench.residual.prior`). The candidate chosen is the one with the
 lowest validation MSE; the test data are read by each run to score it, and
 nothing is chosen on them. The runs' records are kept, so that the same
 command resumes where it stopped, as a matrix does.
@@ -47,32 +49,33 @@ from bench.runner.spec import RunSpec
 @dataclass(frozen=True)
 class Candidate:
     """A candidate: its name on the page, the method, its configuration and the hyperparameters it fixes.
-    ``work``, where given, is the steps the candidate's run does under select's time budget, which is then only
-    their ceiling (x :data:`WORK_CEILING`): the residual loop's rounds, which are bounded by work so that the
-    candidate is the same on any machine (its fold fits run the final fit's rounds)."""
+    ``work`` is the steps its final fit does where ``--steps`` is not given (its fold fits do the same,
+    :mod:`bench.evaluation.tuning`); select's seconds are then only a ceiling, past which it is killed."""
 
     name: str
     method: str
     profile: str = "default"
     fixed: tuple[tuple[str, object], ...] = ()
-    work: int | None = None
+    work: int = 1
 
 
-#: a candidate with :attr:`Candidate.work` is killed past this multiple of select's seconds a candidate
-WORK_CEILING = 5.0
+#: the learned residuals' steps: a GP's (:mod:`methods.gp`) and a network's (the MLP's, DeLaN's). They are the
+#: steps the final fits did when select's default was 180 s a candidate, on 2 cores (the records of
+#: results/measured/select_default at 88b40e8: 30 and 32 for the GP residuals, 405 and 406 for the networks),
+#: rounded down, and fixed so that a candidate does the same work on any machine; no score chose them
+GP_STEPS, NETWORK_STEPS = 30, 400
 
-
-#: the candidates, in the page's order
+#: the candidates, in the page's order; the closed-form fits (SysId, sparse regression) are one step
 CANDIDATES = (
     Candidate("standard", "sysid", "standard"),
     Candidate("feasible", "sysid", "feasible"),
-    Candidate("standard+gp", "standard+gp"),
-    Candidate("feasible+gp", "feasible+gp"),
-    Candidate("standard+mlp", "standard+mlp"),
-    Candidate("feasible+delan", "feasible+delan"),
+    Candidate("standard+gp", "standard+gp", work=GP_STEPS),
+    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS),
+    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS),
+    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS),
     Candidate("feasible+sparse_torque", "feasible+sparse_torque"),
     Candidate("loop", "loop", work=MAX_ROUNDS),
-    Candidate("loop+gp", "loop+gp"),
+    Candidate("loop+gp", "loop+gp", work=GP_STEPS),
 )
 #: the order the candidates' runs start in: the longest first (the loop's rounds on every fold, twice for
 #: loop+gp, whose budget starts after them; then the searches of the learned residuals; the records of
@@ -90,10 +93,10 @@ def specs(system: str, split: str | None, budget_s: float | None, steps: int | N
     out = Path(out).resolve()
     rows = []
     for c in candidates:
-        work = c.work if steps is None and c.work is not None else None
         spec = RunSpec(system=system, method=c.method, experiment="indirect", seed=seed,
-                       budget_s=budget_s if work is None else WORK_CEILING * budget_s,
-                       steps=steps if work is None else work, profile=c.profile, hyperparameters=dict(c.fixed), split=split, plugins=plugins,
+                       budget_s=budget_s,
+                       steps=c.work if steps is None else steps, profile=c.profile, hyperparameters=dict(c.fixed),
+                       split=split, plugins=plugins,
                        tune=True, rollout=rollout, save=str(out / "models" / f"{c.name.replace('+', '_')}.npz"),
                        folds=protocol)
         rows.append((c, spec))
@@ -159,7 +162,7 @@ def page(result: dict) -> str:
     chosen = result["chosen"]
     lines = [f"# A model of {result['system']}, chosen by validation", "",
              f"Command: `{result['command']}`", "",
-             f"Split: {result['split'] or 'default'}; budget per candidate: {result['budget']}{own_budgets(result)}; "
+             f"Split: {result['split'] or 'default'}; budget per candidate: {result['budget']}; "
              f"seed {result['seed']}. "
              f"Each candidate is {PROTOCOL} (validation folds: {result['folds'] or 'none'}) by successive halving over "
              f"work, each fold fit of the combination it keeps doing the steps of the final fit on all the training "
@@ -216,12 +219,6 @@ def farther(entries: list[dict], chosen: dict | None) -> str:
             f"from the states it is fitted on), validation puts {ranked[0]} first{then}: {same}.")
 
 
-def own_budgets(result: dict) -> str:
-    """The candidates whose budget is their own (the loop's rounds, bounded by work), in words for the page."""
-    own = [f"{e['name']} {e['budget']}" for e in result["candidates"] if e.get("budget") not in (None, result["budget"])]
-    return f" ({'; '.join(own)}: the residual loop's rounds, bounded by work)" if own else ""
-
-
 def work_cell(work: dict | None) -> str:
     """The work of a candidate's fold fits beside its final fit's: median steps and seconds of the
     folds → the final fit's (``—`` for a record made before tuning recorded it)."""
@@ -263,7 +260,8 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
     chosen = choose(entries)
     folds = next(((r.details or {}).get("tuning", {}).get("folds", {}).get("description") for _, r in done
                   if (r.details or {}).get("tuning", {}).get("folds")), None)
-    budget = rows[0][1].budget.describe()
+    ceiling = f", at most {budget_s:g} s" if budget_s is not None else ""
+    budget = f"{steps} steps{ceiling}" if steps is not None else f"each candidate's own steps (its work column){ceiling}"
     result = {"system": system, "split": split, "seed": seed, "budget": budget, "command": command,
               "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds, "chosen": chosen, "candidates": entries,
               "domain": None if data is None else applicability(data[0], data[1], target, protocol)}

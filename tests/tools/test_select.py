@@ -15,7 +15,7 @@ import pytest
 
 from bench.core.budget import Budget
 from bench.residual.loop import MAX_ROUNDS
-from bench.tools.select import CANDIDATES, WORK_CEILING, choose, page, specs
+from bench.tools.select import CANDIDATES, GP_STEPS, NETWORK_STEPS, choose, page, specs
 from systems import SYSTEMS
 from bench.core.csv_format import write_csv
 from bench.core.scoring import opened
@@ -115,13 +115,17 @@ def test_the_test_trajectorys_torques_change_no_choice(tmp_path):
         assert b["test_mse"] > 2 * a["test_mse"]  # the test data were read, to score
 
 
-def test_the_loops_candidate_is_bounded_by_its_rounds_whatever_selects_seconds(tmp_path):
-    """Under select's time budget the loop runs its rounds (work, the same on any machine), the seconds only their
-    ceiling; every other candidate has the seconds. Under --steps every candidate has the steps."""
-    timed = {c.name: spec.budget for c, spec in specs("kuka_lwr4", None, 180.0, None, 0, tmp_path, ())}
-    assert timed["loop"] == Budget(seconds=WORK_CEILING * 180.0, steps=MAX_ROUNDS)
-    assert all(b == Budget(seconds=180.0) for name, b in timed.items() if name != "loop")
+def test_every_candidate_is_bounded_by_work_whatever_selects_seconds(tmp_path):
+    """Without --steps every candidate does its own steps (the same on any machine), the seconds only their
+    ceiling: the loop its rounds, the learned residuals their fixed steps, the closed-form fits one. Under
+    --steps every candidate has the steps."""
+    own = {c.name: spec.budget for c, spec in specs("kuka_lwr4", None, 900.0, None, 0, tmp_path, ())}
+    assert own["loop"] == Budget(seconds=900.0, steps=MAX_ROUNDS)
+    assert own["standard+gp"] == own["loop+gp"] == Budget(seconds=900.0, steps=GP_STEPS)
+    assert own["standard+mlp"] == own["feasible+delan"] == Budget(seconds=900.0, steps=NETWORK_STEPS)
+    assert own["standard"] == own["feasible+sparse_torque"] == Budget(seconds=900.0, steps=1)
+    assert all(b.steps is not None for b in own.values()) and len(own) == len(CANDIDATES)
     worked = {c.name: spec.budget for c, spec in specs("kuka_lwr4", None, None, 3, 0, tmp_path, ())}
     assert set(worked.values()) == {Budget(steps=3)} and len(worked) == len(CANDIDATES)
     # the driven rollouts, which neither the choice nor the page uses, only where asked for
-    assert not any(spec.rollout for _, spec in specs("kuka_lwr4", None, 180.0, None, 0, tmp_path, ()))
+    assert not any(spec.rollout for _, spec in specs("kuka_lwr4", None, 900.0, None, 0, tmp_path, ()))
