@@ -6,9 +6,10 @@ processes started here), a scheduler's address (``"tcp://host:8786"``), a
 Dask cluster object (``dask_jobqueue.SLURMCluster(...)``) or a ``Client``.
 Each job is one task: on its worker it runs as :func:`~bench.runner.job.run_isolated`
 runs it locally, in its own process, in a scratch folder there
-(:meth:`~bench.runner.job.Job.elsewhere`), and its result comes back to be
-kept here (:meth:`~bench.runner.job.Job.land`: a run's record is written into
-the caller's folder). Workers need the suite installed, not a shared file system.
+(:meth:`~bench.runner.job.Job.elsewhere`), and its result comes back
+(:meth:`~bench.runner.job.Job.packed`) to be kept here
+(:meth:`~bench.runner.job.Job.land`: a run's record and model file are written
+where the caller asked). Workers need the suite installed, not a shared file system.
 """
 
 from __future__ import annotations

@@ -116,9 +116,16 @@ class Job:
         caller's files: what it writes goes under ``scratch`` instead. By default the job itself."""
         return self
 
+    def packed(self, result: Any) -> Any:
+        """On a cluster's worker, the result of the job :meth:`elsewhere` made, as it travels back: with the
+        files the caller keeps that it wrote under the scratch folder (a run's model file). By default the
+        result itself."""
+        return result
+
     def land(self, result: Any) -> Any:
-        """In the caller, a result that came back from a cluster's worker, with what the job keeps written
-        where it would have written it here (a run's record). By default the result itself."""
+        """In the caller, what :meth:`packed` sent back from a cluster's worker, with what the job keeps
+        written where it would have written it here (a run's record and model file). By default the result
+        itself."""
         return result
 
     def code(self) -> str | None:
@@ -203,11 +210,12 @@ def run_isolated(job: Job, work: str | Path | None = None, name: str = "job", *,
 
 def run_remote(job: Job, name: str) -> tuple[bool, Any]:
     """A cluster's task (:mod:`bench.runner.cluster`): ``job`` in its own process on the worker, in a
-    scratch folder there (:meth:`Job.elsewhere`); ``(True, result)``, or ``(False, why)`` where it did not
-    finish."""
+    scratch folder there (:meth:`Job.elsewhere`); ``(True, result)`` (:meth:`Job.packed`), or
+    ``(False, why)`` where it did not finish."""
     with tempfile.TemporaryDirectory(prefix="syrenets-bench-") as scratch:
+        there = job.elsewhere(Path(scratch))
         try:
-            return True, run_isolated(job.elsewhere(Path(scratch)), scratch, name, checked=True)
+            return True, there.packed(run_isolated(there, scratch, name, checked=True))
         except CallFailed as exc:
             return False, str(exc)
 

@@ -20,6 +20,7 @@ import pickle
 from dataclasses import dataclass
 from pathlib import Path
 
+from bench.core.fileio import atomic_write
 from bench.runner.code import code_hash
 from bench.runner.execute import execute, preflight
 from bench.runner.isolation import STARTUP_TIMEOUT_S, Outcome
@@ -116,11 +117,26 @@ class RunJob(Job):
         return self.run_spec.to_dict()
 
     def elsewhere(self, scratch: Path) -> "RunJob":
-        """On a cluster's worker the run writes its record and log under ``scratch``."""
-        return dataclasses.replace(self, out_dir=str(scratch))
+        """On a cluster's worker the run writes its record, its log and its model file under ``scratch``."""
+        spec = self.run_spec
+        if spec.save:
+            spec = dataclasses.replace(spec, save=str(Path(scratch) / "models" / Path(spec.save).name))
+        return dataclasses.replace(self, spec=spec.to_dict(), out_dir=str(scratch))
 
-    def land(self, record: Record) -> Record:
-        """A record that came back from a cluster's worker, written into this job's folder."""
+    def packed(self, record: Record) -> tuple[Record, bytes | None]:
+        """On the worker, the record with the model file it wrote (``None`` where none was written)."""
+        saved = Path(self.run_spec.save) if self.run_spec.save else None
+        return record, saved.read_bytes() if saved is not None and saved.is_file() else None
+
+    def land(self, result: tuple[Record, bytes | None]) -> Record:
+        """A record and model file that came back from a cluster's worker (:meth:`packed`), written where this
+        job writes them, the record naming this job's spec and model file."""
+        record, model = result
+        details = dict(record.details or {})
+        if model is not None and self.run_spec.save:
+            atomic_write(self.run_spec.save, lambda f: f.write(model), binary=True)
+            details["saved"] = {**details.get("saved", {}), "path": self.run_spec.save}
+        record = record.replace(spec=self.identity(), details=details)
         write_record(record_path(self.out_dir, record.run_id), record)
         return record
 

@@ -106,8 +106,7 @@ def specs(system: str, split: str | None, budget_s: float | None, steps: int | N
 def run(rows, out: Path, workers: int | None, report=print, cluster=None) -> list[tuple[Candidate, Record]]:
     """The candidates' runs, as one matrix in ``out/runs`` (resumed from their records), started in
     :data:`RUN_ORDER`: the longest first, so that the workers end together; on a Dask ``cluster``
-    (:mod:`bench.runner.cluster`) each is a task, and its model file is written at its path by the worker
-    (a cluster without the caller's file system keeps the records, not the model files)."""
+    (:mod:`bench.runner.cluster`) each is a task, whose record and model file come back to ``out``."""
     folder = Path(out).resolve() / "runs"
     for _, spec in rows:  # a run whose model file is missing is redone: the file is part of its result
         path = record_path(folder, spec.run_id)

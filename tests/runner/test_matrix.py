@@ -14,7 +14,8 @@ from bench.runner.execute import execute, load_data, make_system, preflight, rai
 from bench.runner.isolation import fork_server
 from bench.runner.progress import print_now, quiet
 from bench.runner.spec import build_specs
-from bench.runner.records import SCHEMA, read_records
+from bench.runner.records import SCHEMA, read_record, read_records, record_path
+from methods.saving import load_model
 
 PLUGIN = str(Path(__file__).resolve().parents[1] / "plugins" / "faulty.py")
 
@@ -150,6 +151,22 @@ def test_matrix_on_a_real_dask_local_cluster(tmp_path, dask_client):
     assert len(read_records(tmp_path)) == 2 and any("2/2 done, 1 not ok" in line for line in lines)
     again = matrix.run_matrix(todo, tmp_path, workers=2, report=lines.append, cluster=dask_client)
     assert [r.provenance for r in again] == [r.provenance for r in records]  # resumed, not run again
+
+
+@pytest.mark.xdist_group("dask")
+def test_a_model_file_written_on_a_clusters_worker_comes_back_to_where_the_caller_asked(tmp_path, dask_client):
+    """On the worker the run writes under its scratch folder, removed after it (as on a worker without the
+    caller's file system); the record and the model file are written here, naming the caller's path."""
+    save = tmp_path / "models" / "sparse.npz"
+    (spec,) = build_specs(["double_pendulum"], ["sparse"], ["indirect"], [0], None, steps=1, n_train=64, n_test=32,
+                          save=str(save))
+    (record,) = matrix.run_matrix([spec], tmp_path / "runs", workers=1, report=quiet, cluster=dask_client)
+    assert record.status == "ok" and not record.failed_stages, record.error
+    assert record.details["saved"]["path"] == str(save) and record.spec["save"] == str(save)
+    assert save.is_file() and load_model(save) is not None
+    assert read_record(record_path(tmp_path / "runs", spec.run_id)).details["saved"]["path"] == str(save)
+    (again,) = matrix.run_matrix([spec], tmp_path / "runs", workers=1, report=quiet, cluster=dask_client)
+    assert again.provenance == record.provenance  # resumed: the landed record stands for the caller's spec
 
 
 def test_runs_fork_from_the_server_in_the_callers_directory(tmp_path, monkeypatch):
