@@ -1,7 +1,7 @@
 """Sparse Lagrangian regression, in the manner of Lagrangian-SINDy / xL-SINDy
 (Purnomo & Hayashibe, 2023).
 
-The Lagrangian is sought as a sparse combination of a candidate library built
+The Lagrangian is sought as a sparse combination of a library of terms built
 generically from the system's coordinates:
 
 * position terms ``P``: 1; ``sin q_i`` and ``cos q_i`` of every angle;

@@ -46,7 +46,7 @@ class SparseTorqueConfig(MethodConfig):
 
 
 def terms(data: Dataset, j: int) -> tuple[list[str], np.ndarray]:
-    """Joint ``j``'s candidate terms (0-based ``j``): their names and columns ``(n, k)``."""
+    """Joint ``j``'s library of terms (0-based ``j``): their names and columns ``(n, k)``."""
     n, k = len(data), j + 1
     q, qd, sign = data.q[:, j], data.qd[:, j], data.velocity_sign()[:, j]
     names = ["1", f"sign(qd_{k})", f"qd_{k}", f"qd_{k}*|qd_{k}|", f"q_{k}", f"sin(q_{k})", f"cos(q_{k})"]
@@ -134,6 +134,6 @@ def _load(tree: dict, unpacker, context: dict) -> SparseTorque:
 
 
 def terms_names(dof: int, j: int) -> list[str]:
-    """The names of joint ``j``'s candidate terms, for a system of ``dof`` joints."""
+    """The names of joint ``j``'s library of terms, for a system of ``dof`` joints."""
     zero = Dataset(np.zeros((1, dof)), np.zeros((1, dof)), np.zeros((1, dof)), np.zeros((1, dof)))
     return terms(zero, j)[0]

@@ -78,7 +78,7 @@ class Folds:
     trajectories: int = 0
     #: how a protocol of :mod:`bench.core.protocols` made the folds, in words (``None``: the kinds above)
     detail: str | None = None
-    #: what a protocol that chooses among fold sets tried (kNNDM's candidates and their match)
+    #: what a protocol that chooses among fold sets tried (kNNDM's fold sets and their match)
     choices: list | None = None
 
     def __len__(self) -> int:

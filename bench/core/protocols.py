@@ -51,7 +51,7 @@ from bench.core.folds import MAX_SPANS, Fold, Folds, folds as time_folds, mask
 NAMES = ("time", "regions", "knndm", "auto")
 #: at most this many scored samples a fold's distances are measured on, drawn with a fixed seed
 DISTANCE_SAMPLES = 2000
-#: kNNDM's candidate region counts: the folds' count times these
+#: the region counts kNNDM tries: the folds' count times these
 REGION_FACTORS = (1, 2, 4, 8, 16, 32)
 
 
@@ -115,7 +115,7 @@ class KNNDM:
     """kNNDM (see the module docstring): the folds of time or of ``k`` regions whose held-out distances
     match ``target`` (distances to the nearest training state, in the training states' standard deviations)
     best. ``time`` is the folds of time of the same data as ``X`` (held masks, of any count), where they are
-    a candidate."""
+    among the fold sets tried."""
 
     name = "knndm"
 
@@ -130,7 +130,7 @@ class KNNDM:
     def get_n_splits(self, X=None, y=None, groups=None) -> int:
         return self.n_splits
 
-    def _candidates(self, x: np.ndarray):
+    def _fold_sets(self, x: np.ndarray):
         if self.time is not None:
             yield "time", self.time
         for factor in REGION_FACTORS:
@@ -141,12 +141,12 @@ class KNNDM:
             yield f"{k} regions", [mask(len(x), test) for _, test in _grouped(labels, self.n_splits)]
 
     def held(self, X) -> list[np.ndarray]:
-        """The chosen candidate's held-out masks (and :attr:`tried`, :attr:`chosen`)."""
+        """The chosen fold set's held-out masks (and :attr:`tried`, :attr:`chosen`)."""
         from scipy.stats import wasserstein_distance
 
         x = np.asarray(X, dtype=np.float64)
         best, self.tried = None, []
-        for label, held in self._candidates(x):
+        for label, held in self._fold_sets(x):
             d = fold_distances(x, held, self.seed)
             w = float(wasserstein_distance(d, self.target)) if len(d) else math.inf
             self.tried.append({"folds": label, "wasserstein": w, "median_distance": float(np.median(d)) if len(d) else None})

@@ -301,7 +301,7 @@ EFFECTS: dict[str, Effect] = {
 }
 
 def register_effect(effect: Effect) -> Effect:
-    """Add ``effect`` to :data:`EFFECTS`, where the data generator and the residual loop's candidates find it; a
+    """Add ``effect`` to :data:`EFFECTS`, where the data generator and the residual loop's library finds it; a
     name another effect has taken is refused (the same effect again is kept). A law of the joint is declared
     through :meth:`bench.physics.laws.Laws.declare`, which registers its effect here."""
     known = EFFECTS.get(effect.name)

@@ -42,7 +42,7 @@ Trans. Ind. Electron. 43(2), 1996). Its parts are ``a sin(N q)`` and
 ``phi = atan2(b, a)``, ``phi`` in ``(-pi, pi]``. A spring and an offset are
 what it looks like on a joint that moves over a small part of one period,
 so the loop offers it only for the ``N`` whose period the joint's recorded
-range covers (:func:`bench.residual.candidates.resolved_periods`).
+range covers (:func:`bench.residual.library.resolved_periods`).
 
 A law's :attr:`~Law.limits` say, for each of its shaped parts (a Stribeck
 hump, a smoothed Coulomb term), which parts replace it in each limit, the
@@ -202,7 +202,7 @@ class Laws:
     def declare(self, effect: Effect, family: str) -> Law:
         """A law of the joint made of one effect, declared at once: ``effect`` (a term per unit coefficient on
         one joint, :class:`~bench.physics.effects.Effect`) goes into :data:`~bench.physics.effects.EFFECTS`,
-        where the data generator (``bench data --effects``) and the residual loop's candidates find it, and
+        where the data generator (``bench data --effects``) and the residual loop's library finds it, and
         its law into :attr:`arm` under ``family`` (a joint carries at most one law of each family). The
         built-in one-effect laws are declared so, and a plugin's law of the joint the same way
         (docs/extending.md); a declared name is refused again unless it is the same effect."""

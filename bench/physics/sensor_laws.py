@@ -74,7 +74,7 @@ class SensorLaw:
     #: one instance per joint, or one for every joint
     per_joint: ClassVar[bool] = True
     #: the law as an effect (place ``sensor``: its term per unit coefficient), where it has one: :func:`register`
-    #: puts it into :data:`~bench.physics.effects.EFFECTS` beside the arm's, where the candidates' terms and the
+    #: puts it into :data:`~bench.physics.effects.EFFECTS` beside the arm's, where the loop's library and the
     #: loop's reports look a law up by name; a law is declared once, here
     effect: ClassVar[Effect | None] = None
 
@@ -97,7 +97,7 @@ class SensorLaw:
 
     @classmethod
     def term(cls, joint: int | None, dof: int) -> Term:
-        """The law on ``joint`` as a candidate term (place ``sensor``): its :attr:`effect`'s, else one of
+        """The law on ``joint`` as a term of the loop's library (place ``sensor``): its :attr:`effect`'s, else one of
         :meth:`expression`."""
         if cls.effect is not None and cls.effect.expr is not None:
             return cls.effect.term(joint)

@@ -18,7 +18,7 @@ column of a design matrix. A term is either
 A :class:`TermLibrary` is an ordered collection of terms; its
 :meth:`~TermLibrary.design` gives their columns in an experiment's target:
 ``L`` (direct; Lagrangian terms only) or ``tau`` flattened sample-major
-(indirect). Sparse regression's candidate library, the residual loop's
+(indirect). Sparse regression's library, the residual loop's
 effects and open-ended terms, and the DFKI filter study's rigid-body and
 friction columns are all term libraries.
 """
@@ -173,7 +173,7 @@ _REMEMBERED: "weakref.WeakKeyDictionary[Dataset, list]" = weakref.WeakKeyDiction
 def remembered_columns(*datasets: Dataset | None):
     """Within the block, each term's column on each of ``datasets`` is
     computed once (:meth:`Term.column`): the residual loop asks for the same
-    candidates' and effects' columns in every step of every round. Blocks may
+    columns of its library's terms in every step of every round. Blocks may
     nest; the columns are dropped when the outermost block of a data set ends."""
     held = [d for d in datasets if d is not None]
     for d in held:

@@ -1,7 +1,7 @@
 """The residual loop: trace what a fitted model lacks to physical effects,
 add them, refit, and report the error before and after.
 
-* :mod:`~bench.residual.candidates`: the named effects and the open-ended
+* :mod:`~bench.residual.library`: the named effects and the open-ended
   library, as terms;
 * :mod:`~bench.residual.tracing`: stepwise selection with its statistics,
   on :mod:`~bench.residual.basis` (projections off the design) and
@@ -21,11 +21,11 @@ add them, refit, and report the error before and after.
   result and its outputs.
 """
 
-from bench.residual.candidates import candidates
+from bench.residual.library import loop_library
 from bench.residual.job import ResidualJob, run_residual
 from bench.residual.loop import residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.residual.tracing import trace
 
-__all__ = ["ResidualJob", "ResidualResult", "candidates", "residual_loop", "run_residual", "trace", "write_outputs"]
+__all__ = ["ResidualJob", "ResidualResult", "loop_library", "residual_loop", "run_residual", "trace", "write_outputs"]

@@ -1,5 +1,5 @@
 """Orthonormal bases of design columns and projections off them: how the
-residual loop fits a candidate beside the columns already in its design
+residual loop fits a term beside the columns already in its design
 (Frisch–Waugh–Lovell) without refitting the whole design."""
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ from typing import Callable
 
 from bench.core.data import Dataset
 from bench.physics.effects import EFFECTS
-from bench.residual.candidates import is_named, label, law_text
+from bench.residual.library import is_named, label, law_text
 from bench.residual.checks import heldout
 from bench.residual.model import LoopModel
 from bench.residual.strategies import Strategy

@@ -1,4 +1,4 @@
-"""The residual loop's candidates: terms of the suite's term library
+"""The residual loop's library: the terms it tries, from the suite's term library
 (:class:`~bench.physics.terms.TermLibrary`), each one physical cause.
 
 * the named effects of :mod:`bench.physics.effects` on every joint (viscous and
@@ -24,7 +24,7 @@
     non-negative, they are physical only with a coefficient >= 0.
 
   Generalized forces that are neither (a product of ``sin q`` and ``qdd``,
-  say) are not candidates: on measured data they mended the fitted model's
+  say) are not in it: on measured data they mended the fitted model's
   own errors on its training recordings and made it worse on others.
 """
 
@@ -61,12 +61,12 @@ def open_ended(dof: int, kinds: tuple[str, ...]) -> TermLibrary:
 
 
 #: the velocities (rad/s, or m/s) of a shaped effect (a Stribeck hump, smoothed Coulomb friction)
-#: the candidates start from; the loop refines an accepted one
+#: the library's terms start from; the loop refines an accepted one
 SHAPE_GRID = (0.03, 0.1, 0.3, 1.0, 3.0)
 
 
-def candidates(dof: int, coupled: bool = True, system=None) -> TermLibrary:
-    """Every candidate: the named effects on every joint (the coupled ones on
+def loop_library(dof: int, coupled: bool = True, system=None) -> TermLibrary:
+    """Every term the loop tries: the named effects on every joint (the coupled ones on
     every pair, where ``coupled``: the coordinates are absolute angles; the
     shaped ones at each velocity of :data:`SHAPE_GRID`), the effects of
     the whole ``system`` that apply to it (a tip payload and a gravity tilt
@@ -80,7 +80,7 @@ def candidates(dof: int, coupled: bool = True, system=None) -> TermLibrary:
 
 
 def _shapes(effect) -> tuple:
-    """The shapes an effect's candidates take: none, its own grid, or :data:`SHAPE_GRID`."""
+    """The shapes an effect's terms take: none, its own grid, or :data:`SHAPE_GRID`."""
     if not effect.shaped:
         return (None,)
     return effect.grid if effect.grid is not None else SHAPE_GRID

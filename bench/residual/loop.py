@@ -15,14 +15,14 @@ can undo a round) is the model's refit strategy, chosen once from the model
    method's own as ``method_mse``); a kept fit is cross-fitted.
 2. **Residual.** ``r = tau - g(L_hat) - Phi c`` on the training and test sets.
 3. **Trace.** Forward stepwise selection (:mod:`bench.residual.tracing`)
-   over the candidates of :mod:`bench.residual.candidates`: the named
+   over the terms of its library (:mod:`bench.residual.library`): the named
    effects on every joint, those of the whole system (a payload, a gravity
    tilt), the laws of the torque sensor (a gain, a time shift:
    :mod:`bench.residual.sensors`, their columns linearised at the model) and
    an open-ended library of terms of ``L`` and ``D``. The named
-   effects are tried first at each step. Candidates are judged beside the
+   effects are tried first at each step. Terms are judged beside the
    model's own freedom (:meth:`~bench.residual.strategies.Strategy.freedom`),
-   so a candidate the model could already express gains nothing.
+   so a term the model could already express gains nothing.
 4. **Add** the accepted effects: conservative ones to the Lagrangian
    (armature ``+c qd^2/2``, spring ``-c q^2/2``, open-ended ``L`` terms),
    dissipative ones through the Rayleigh function ``D`` (torque ``dD/dqd``:
@@ -31,7 +31,7 @@ can undo a round) is the model's refit strategy, chosen once from the model
 5. **Refit jointly**, without fitting the method again
    (:meth:`~bench.residual.strategies.Strategy.refit`), the sensor's laws
    applied exactly to the training data (:meth:`_Loop.choose`); where the
-   trace's linearisation may have ranked two candidates wrongly, or an
+   trace's linearisation may have ranked two terms wrongly, or an
    open-ended term explained the residual far better than the named law it
    accepted, both are refitted and the lower BIC kept. Effects made
    redundant by the refit are dropped again (backward elimination on the
@@ -87,7 +87,7 @@ from bench.core.data import Dataset, mse
 from bench.core.errors import first_line
 from bench.physics.models import FittedModel
 from bench.physics.terms import Term, TermLibrary, remembered_columns, share_columns
-from bench.residual.candidates import candidates, describe_all, is_named, label, mismatch, resolved_periods, structural
+from bench.residual.library import describe_all, is_named, loop_library, label, mismatch, resolved_periods, structural
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import shape_stderr
@@ -119,7 +119,7 @@ CROSS_FIT_SHARE = 0.15
 
 #: the training samples the loop works on at most: a longer log is thinned to every k-th sample of each
 #: recording (:meth:`bench.core.data.Dataset.thinned`). On a 7-joint log of 71,388 samples the loop's
-#: statistics took 340 of its 356 s, most of it projecting candidates' columns off the design; on one
+#: statistics took 340 of its 356 s, most of it projecting the library's columns off the design; on one
 #: sample in 5 they took 43 of 46 s, with the same test MSE to four figures (results/measured/README.md)
 MAX_SAMPLES = 16384
 
@@ -163,7 +163,7 @@ def residual_loop(method: str, train: Dataset, test: Dataset | None, *, budget: 
     if thinned > 1:
         report(f"the loop works on one sample in {thinned} of each training recording, {len(train)} samples: "
                f"neighbouring samples are near copies, and its statistics grow with the rows (at most {MAX_SAMPLES})")
-    with remembered_columns(train, test):  # each candidate's and effect's columns once, for every round
+    with remembered_columns(train, test):  # each term's and effect's columns once, for every round
         loop = _Loop(method, train, test, budget, seed, dict(hyperparameters or {}),
                      report, open_ended, device)
         loop.thinned, loop.max_rounds = thinned, min(int(max_rounds), MAX_ROUNDS)
@@ -200,9 +200,9 @@ class _Loop(Tidying):
         self.unnamed: dict[str, dict] = {}  # open-ended terms taken where a named law was only the nearest: label -> entry
         self.thinned = 1  # the loop works on one training sample in this many (residual_loop)
         self.max_rounds = MAX_ROUNDS  # the most rounds it runs (residual_loop)
-        self.statistics = 0.0  # seconds in selection, pruning and the held-out and mass-matrix checks
+        self.statistics = 0.0  # seconds in the trace, pruning and the held-out and mass-matrix checks
         # the share of the held-out error a round must save: on trajectories, whose held-out spans are not
-        # independent of the rest, what each candidate must (a smaller gain is a fit to the one motion)
+        # independent of the rest, what each round must (a smaller gain is a fit to the one motion)
         self.round_gain = MIN_HELDOUT_GAIN if train.trajectories() else 0.0
 
     def timed(self, fn, *args, **kwargs):
@@ -312,7 +312,7 @@ class _Loop(Tidying):
             feasibility=None if self.feasible_before is None else {"before": self.feasible_before, "after": feasible_after},
             stopped=self.stopped, heldout_holds_out=strategy.holds_out(), ending=self.ending or None,
             equivalent_laws=self.equivalent or None,
-            sensor_laws_offered=list(dict.fromkeys(t.name for t in Sensor.exact(self.measured).candidates(self.measured))),
+            sensor_laws_offered=list(dict.fromkeys(t.name for t in Sensor.exact(self.measured).terms(self.measured))),
         )
 
     def save(self, model: LoopModel, held: float, mass: float, rounds: list[Round], findings: dict) -> None:
@@ -324,10 +324,10 @@ class _Loop(Tidying):
         (applied exactly, :func:`~bench.residual.sensors.settle`, the laws it has
         settled again beside the new effects): the model, the sensor and the
         corrected training data."""
-        candidate = self.strategy.refit(model, self.train, effects)
+        proposed = self.strategy.refit(model, self.train, effects)
         if not on_sensor and not self.sensor.found_any:
-            return candidate, self.sensor, self.train
-        return settle(self.strategy, candidate, self.measured, self.sensor, on_sensor)
+            return proposed, self.sensor, self.train
+        return settle(self.strategy, proposed, self.measured, self.sensor, on_sensor)
 
     def compare(self, model: LoopModel, effects: list[Term], on_sensor: list[Term], chosen: list[Term],
                 other: list[Term], built: tuple, margin: float):
@@ -353,17 +353,19 @@ class _Loop(Tidying):
             return alternative
         return None
 
-    def candidates(self) -> TermLibrary:
+    def library(self) -> TermLibrary:
+        """The terms this loop tries (:func:`~bench.residual.library.loop_library`), less periodic parts whose
+        period the data do not resolve and, where they are off, the open-ended terms."""
         train = self.train
         system = SYSTEMS[train.system]() if train.system in SYSTEMS else None
-        pool = [t for t in candidates(train.dof, coupled=bool(getattr(system, "absolute_angles", False)), system=system)
+        pool = [t for t in loop_library(train.dof, coupled=bool(getattr(system, "absolute_angles", False)), system=system)
                 if resolved_periods(t, train)]
         return TermLibrary([t for t in pool if is_named(t) or self.open_ended is not False])
 
     def choose(self, model: LoopModel, traced: Trace, laws: dict, k: int) -> LoopModel:
         """The round's model: ``model`` refitted with what the trace accepted
         (:meth:`build`), where refitting shows it better, with a runner-up in place
-        of the accepted candidate, and with an open-ended term in place of a named
+        of the accepted term, and with an open-ended term in place of a named
         law it explains far better (a structural finding, :attr:`unnamed`); the
         sensor's new laws applied."""
         sensor, train, report = self.sensor, self.train, self.report
@@ -390,19 +392,19 @@ class _Loop(Tidying):
                 built, effects = other, other[0].effects
                 self.unnamed[label(rival)] = mismatch(named, rival, *seen)
                 report(f"round {k}: structural finding: {self.unnamed[label(rival)]['finding']}")
-        candidate, new_sensor, new_train = built
+        proposed, new_sensor, new_train = built
         if new_sensor is not sensor:  # the sensor's laws applied exactly: the model refitted to the corrected torques
             self.use(new_train, new_sensor)
             report("  " + "; ".join(f"{e['name']} on joint(s) {e['joints']}: "
                                     + ", ".join(f"{n} = {v['value']:.5g} ± {v['stderr']:.2g}" for n, v in e["parameters"].items())
                                     for e in new_sensor.entries(train.dof)))
-        return candidate
+        return proposed
 
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
         """Rounds 1 to :attr:`max_rounds`; returns the final model, its held-out
         error and mass-matrix eigenvalue, and the structural findings."""
         report = self.report
-        pool, findings, longest = self.candidates(), {}, 0.0
+        pool, findings, longest = self.library(), {}, 0.0
         for k in range(1, self.max_rounds + 1):
             began = now()
             if began - self.start + longest >= self.horizon:
@@ -463,7 +465,7 @@ class _Loop(Tidying):
         train, sensor = self.train, self.sensor
         target, fixed = strategy.problem(model, train)
         excluded = model.effects + [term for term, _ in self.beyond.values()]
-        laws = {t: sensor_column(t, model, train, sensor) for t in sensor.candidates(train) if t not in excluded}
+        laws = {t: sensor_column(t, model, train, sensor) for t in sensor.terms(train) if t not in excluded}
         traced = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
                                deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
                                runner_up=not strategy.fixed_freedom)
@@ -484,9 +486,9 @@ class _Loop(Tidying):
             else:
                 report(f"round {k}: nothing significant left")
                 self.ending = {"reason": "nothing_significant", "round": k,
-                               "detail": f"round {k}'s trace found no candidate that passes every test"}
+                               "detail": f"round {k}'s trace found no term that passes every test"}
             return model, held, mass, findings, True
-        self.pending = {"found": [{"law": step["candidate"], **{key: step.get(key) for key in
+        self.pending = {"found": [{"law": step["term"], **{key: step.get(key) for key in
                                                                ("coefficient", "bic_drop", "heldout_gain")}}
                                   for step in traced.steps if step.get("accepted")],
                         "equivalent": [entry for _, _, entry in traced.equivalents]}
@@ -494,36 +496,36 @@ class _Loop(Tidying):
         accepted = [label(c) for c in traced.accepted]
         report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
         before_round = (train, sensor)
-        candidate = self.choose(model, traced, laws, k)
+        proposed = self.choose(model, traced, laws, k)
         self.in_budget("refitting jointly")
-        candidate, removed, simplified = self.tidy(candidate, findings)
+        proposed, removed, simplified = self.tidy(proposed, findings)
         train = self.train
-        candidate_held = self.timed(self.heldout, candidate)
-        self.pending["heldout_mse"] = {"before": held, "with_them": candidate_held}
-        candidate_mass = self.timed(smallest_mass_eigenvalue, candidate, train)
+        proposed_held = self.timed(self.heldout, proposed)
+        self.pending["heldout_mse"] = {"before": held, "with_them": proposed_held}
+        proposed_mass = self.timed(smallest_mass_eigenvalue, proposed, train)
         self.in_budget("scoring the refitted model on held-out data")
         undo = None  # why the round is undone: the JSON's words, then the progress line's
-        if mass > 0 and not candidate_mass > 0:
+        if mass > 0 and not proposed_mass > 0:
             undo = (f"with these effects the mass matrix is not positive definite on the training data "
-                    f"(smallest eigenvalue {candidate_mass:.4g})",
-                    f"the mass matrix would not be positive definite (smallest eigenvalue {candidate_mass:.4g})")
-        elif not candidate_held < (1 - self.round_gain) * held:
+                    f"(smallest eigenvalue {proposed_mass:.4g})",
+                    f"the mass matrix would not be positive definite (smallest eigenvalue {proposed_mass:.4g})")
+        elif not proposed_held < (1 - self.round_gain) * held:
             undo = ("the refitted model does not lower the held-out error"
-                    + (f" by {self.round_gain:.0%}, as each candidate must on trajectories" if self.round_gain else ""),
-                    f"held-out MSE {candidate_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")
+                    + (f" by {self.round_gain:.0%}, as each round must on trajectories" if self.round_gain else ""),
+                    f"held-out MSE {proposed_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")
         else:
-            undo = self.timed(strategy.check, candidate, model, train)
+            undo = self.timed(strategy.check, proposed, model, train)
         equivalent = [entry for _, _, entry in traced.equivalents] or None
         if undo is not None:
             self.use(*before_round)
             rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed, f"undone: {undo[0]}",
-                                candidate_held, simplified=simplified or None, seconds=self.elapsed(),
+                                proposed_held, simplified=simplified or None, seconds=self.elapsed(),
                                 equivalent=equivalent))
             report(f"round {k}: undone, {undo[1]}")
             self.ending = {"reason": "undone", "round": k, "detail": f"round {k} was undone: {undo[0]}", **self.pending}
             return model, held, mass, findings, True
-        s = self.scores(candidate)
-        rounds.append(Round(k, s, candidate_held, accepted, traced.steps, removed, simplified=simplified or None,
+        s = self.scores(proposed)
+        rounds.append(Round(k, s, proposed_held, accepted, traced.steps, removed, simplified=simplified or None,
                             seconds=self.elapsed(), equivalent=equivalent))
         for entry in equivalent or ():
             self.equivalent.append({"round": k, **entry})
@@ -533,9 +535,9 @@ class _Loop(Tidying):
             report(f"round {k}: every effect it added became redundant; stopping")
             self.ending = {"reason": "redundant", "round": k,
                            "detail": f"every effect round {k} added became redundant in the joint refit"}
-            return candidate, candidate_held, candidate_mass, findings, True
-        report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {candidate_held:.4g}")
-        return candidate, candidate_held, candidate_mass, findings, False
+            return proposed, proposed_held, proposed_mass, findings, True
+        report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {proposed_held:.4g}")
+        return proposed, proposed_held, proposed_mass, findings, False
 
 
 def _fmt(x) -> str:

@@ -15,7 +15,7 @@ from bench.physics.effects import EFFECTS
 from bench.physics.laws import FAMILIES, led_by, one_law_per_family
 from bench.physics.regression import Compressed
 from bench.physics.terms import Term
-from bench.residual.candidates import admissible, label
+from bench.residual.library import admissible, label
 from bench.residual.model import LoopModel
 from bench.residual.basis import extend_basis
 from bench.residual.tracing import MIN_BIC_DROP, ROUNDOFF, bic

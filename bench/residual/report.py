@@ -116,11 +116,11 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         added = ", ".join(r["accepted"]) or "nothing"
         removed = f"; dropped as redundant: {', '.join(r['removed'])}" if r.get("removed") else ""
         stop = f" ({r['stop']})" if r.get("stop") else ""
-        last = next((t for t in reversed(r["trace"]) if "candidate" in t and not t["accepted"]), None)
+        last = next((t for t in reversed(r["trace"]) if "term" in t and not t["accepted"]), None)
         why = ""
         if last:
             t, gain = last.get("t"), last.get("heldout_gain")
-            why = (f" (best rejected: {last['candidate']}, BIC drop {last['bic_drop']:.3g}"
+            why = (f" (best rejected: {last['term']}, BIC drop {last['bic_drop']:.3g}"
                    + ("" if "t" not in last else f", |t| {'∞' if t is None else format(t, '.3g')}")
                    + ("" if gain is None else f", held-out gain {gain:.2%}") + ")")
         held = f", held out {cell(r['heldout_mse'])}" if r.get("heldout_mse") is not None else ""

@@ -35,7 +35,7 @@ class ResidualResult(Provenanced):
     ``mass_matrix`` gives the smallest eigenvalue of ``d^2 L / dqd^2`` over
     the training states checked, before and after, and whether the final
     model's is positive definite there. ``statistics_seconds`` is the part of
-    ``seconds`` spent in the loop's statistics: selection, pruning (with its
+    ``seconds`` spent in the loop's statistics: the trace, pruning (with its
     refits), and the held-out, mass-matrix and standard-error checks.
     ``budget`` is the loop's budget, seconds or steps of work
     (:meth:`bench.core.budget.Budget.to_json`); under a work budget
@@ -118,7 +118,22 @@ class ResidualResult(Provenanced):
     def from_json(cls, obj: dict, source: str = "the residual loop's result") -> "ResidualResult":
         """The result in a record's JSON (or in the loop's JSON as it was written before it was a record);
         :class:`~bench.runner.records.RecordError` naming ``source`` otherwise."""
-        return cls(**residual_fields(Record.from_json(obj, source)))
+        fields = residual_fields(Record.from_json(obj, source))
+        if isinstance(fields.get("rounds"), list):
+            fields["rounds"] = [renamed(r) for r in fields["rounds"]]
+        return cls(**fields)
+
+
+def renamed(round_):
+    """A round of the JSON with the keys the loop wrote before a term of its library was called a term
+    (``candidate_heldout_mse``; a trace step's ``candidate``) under today's names."""
+    if not isinstance(round_, dict):
+        return round_
+    out = {("undone_heldout_mse" if k == "candidate_heldout_mse" else k): v for k, v in round_.items()}
+    if isinstance(out.get("trace"), list):
+        out["trace"] = [{("term" if k == "candidate" else k): v for k, v in step.items()}
+                        if isinstance(step, dict) else step for step in out["trace"]]
+    return out
 
 
 @dataclass
@@ -129,7 +144,7 @@ class Round:
     refit made redundant or impossible, ``simplified`` each law replaced by a
     simpler one it contains, and why, ``trace`` the statistics of each step;
     ``stop`` says why the loop ended here (undone, not started, the budget);
-    ``candidate_heldout_mse`` is an undone round's held-out error; round 0 has
+    ``undone_heldout_mse`` is an undone round's held-out error; round 0 has
     ``method_mse`` (the method's own model, before its strategy's start) and
     ``cross_fit`` (a kept fit's cross-fits) where those apply.
     """
@@ -141,7 +156,7 @@ class Round:
     trace: list[dict] = field(default_factory=list)
     removed: list[str] | None = None
     stop: str | None = None
-    candidate_heldout_mse: float | None = None
+    undone_heldout_mse: float | None = None
     method_mse: dict | None = None
     cross_fit: dict | None = None
     simplified: list[str] | None = None

@@ -14,7 +14,7 @@ best-conditioned footing; a user who knows which sensor is calibrated reads
 the others as ratios to it.
 
 Each law is bilinear in the model and the law (``g_j`` times the model's
-torque), so each is judged like any candidate
+torque), so each is judged like any term
 (:func:`bench.residual.tracing.trace`) by its column linearised at the
 model where it stands (:func:`column`). An accepted law is then applied
 exactly (:func:`settle`): the model is refitted on the corrected training
@@ -43,7 +43,7 @@ from bench.physics.models import FittedModel
 from bench.physics.regression import fit_statistics
 from bench.physics.terms import Term
 from bench.residual.beyond_data import held_out_verdict
-from bench.residual.candidates import law_text, structural
+from bench.residual.library import law_text, structural
 from bench.residual.tracing import bic
 from bench.physics.laws import LAWS
 from bench.physics.sensor_laws import SensorLaw, has_time, law_of
@@ -140,7 +140,7 @@ class Sensor:
                 tau = tau * f
         return tau
 
-    def candidates(self, train: Dataset) -> list[Term]:
+    def terms(self, train: Dataset) -> list[Term]:
         """The laws not yet found, wherever each is offered on ``train``
         (:meth:`~bench.physics.sensor_laws.SensorLaw.offered`: a gain on each
         joint but the reference, a load-dependent friction on each joint, a

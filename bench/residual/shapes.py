@@ -3,7 +3,7 @@ smoothed Coulomb velocity) where the residual loop refines it: a bounded
 scalar search of the residual sum of squares, the linear coefficients fitted
 at each value (variable projection). A shape on a grid of whole numbers (a
 periodic torque's periods a revolution) is not refined: each value is a
-candidate of its own."""
+term of its own."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ from bench.core.data import Dataset
 from bench.physics.effects import EFFECTS
 from bench.physics.terms import Term
 from bench.residual.basis import project_off
-from bench.residual.candidates import SHAPE_GRID
+from bench.residual.library import SHAPE_GRID
 
-#: a shaped candidate's parameter is refined within this factor of its grid value
+#: a shaped term's parameter is refined within this factor of its grid value
 SHAPE_RANGE = 4.0
 #: the range a shape is searched in: past the grid's ends by :data:`SHAPE_RANGE`;
 #: a shape at either end is not identified (:func:`at_limit`)
@@ -88,7 +88,7 @@ def refined_shape(Q: np.ndarray, r: np.ndarray, term: Term, data: Dataset) -> fl
 def refinable(term: Term) -> bool:
     """Whether ``term``'s shape is on a continuous scale, to refine (a Stribeck
     velocity), rather than one of its effect's :attr:`~bench.physics.effects.Effect.grid`
-    (a whole number of periods, each value a candidate of its own)."""
+    (a whole number of periods, each value a term of its own)."""
     return term.shape is not None and EFFECTS[term.name].grid is None
 
 

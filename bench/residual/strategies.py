@@ -8,7 +8,7 @@ A strategy owns what differs between kinds of model:
 * :meth:`Strategy.start`: what the loop's round 0 does with the fit (a
   parametric model's parameters are polished; a kept fit is cross-fitted);
 * :meth:`Strategy.freedom`: the columns of what the model can already
-  express, which every candidate is judged beside, so that one the model
+  express, which every term is judged beside, so that one the model
   could express gains nothing;
 * :meth:`Strategy.problem`: what tracing and pruning fit (the target and the
   columns always in the fit);
@@ -90,7 +90,7 @@ class Strategy(abc.ABC):
     def of(cls, fitted: FittedModel) -> "Strategy | None":
         """The strategy for ``fitted``, or ``None`` where it cannot take it."""
         return cls()
-    #: candidates a trace step may accept (``None``: as many as pass)
+    #: terms a trace step may accept (``None``: as many as pass)
     trace_steps: ClassVar[int | None] = None
     #: whether the model's own columns span its torque, so that tracing fits the torque itself
     spans_its_torque: ClassVar[bool] = False
@@ -133,7 +133,7 @@ class Strategy(abc.ABC):
     def refit(self, model: LoopModel, train: Dataset, effects: list[Term]) -> LoopModel:
         """The model's own freedom and ``effects`` fitted together; the method is not fitted again."""
 
-    def check(self, candidate: LoopModel, model: LoopModel, train: Dataset) -> tuple[str, str] | None:
+    def check(self, proposed: LoopModel, model: LoopModel, train: Dataset) -> tuple[str, str] | None:
         """A reason of the strategy's own to undo a round (the JSON's words, then the
         progress line's), or ``None``."""
         return None
@@ -225,7 +225,7 @@ class Feasible(Linear):
     (:class:`~bench.physics.models.FeasibleSet`): refitted with the effects
     under the same constraints (:func:`bench.physics.feasible.feasible_fit`),
     so that the effects are not judged beside a rigid model no rigid body
-    has. Tracing, pruning and the held-out checks judge candidates by
+    has. Tracing, pruning and the held-out checks judge terms by
     unconstrained least squares, as for :class:`Linear`; the effects'
     standard errors are least squares' too."""
 
@@ -321,11 +321,11 @@ class KeptFit(Strategy):
             return "the model and its effects (the fit was made on other data)"
         return "the effects only: the fit saw every training row"
 
-    def check(self, candidate, model, train):
+    def check(self, proposed, model, train):
         if not self.cross_fitted:  # a given fit has no cross-fits
             return None
         # the kept fit saw every training sample; its cross-fits did not see the half they predict
-        now, then = cross_fitted_mse(candidate, train), cross_fitted_mse(model, train)
+        now, then = cross_fitted_mse(proposed, train), cross_fitted_mse(model, train)
         if np.all(now < then):
             return None
         return (f"the effects do not lower the error of the method fitted on one half of the training "

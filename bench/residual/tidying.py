@@ -7,7 +7,7 @@ not confirm, dropped with its finding."""
 from __future__ import annotations
 
 from bench.residual.beyond_data import beyond_data, earns_place, finding, not_identified
-from bench.residual.candidates import label, structural
+from bench.residual.library import label, structural
 from bench.residual.model import LoopModel
 from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, simplest_laws
 from bench.residual.tracing import MIN_BIC_DROP
@@ -22,18 +22,18 @@ class Tidying:
     time), ``in_budget`` (a stage's check of the time budget), ``heldout``
     and ``use`` (fit from now on to corrected data)."""
 
-    def tidy(self, candidate: LoopModel, findings: dict):
+    def tidy(self, proposed: LoopModel, findings: dict):
         """What follows a round's joint refit: redundant effects and sensor laws
         dropped, shapes refined, each law its simplest and possible, and what the
         data do not identify or a held-out trajectory does not confirm dropped
         (findings go to ``findings`` and :attr:`beyond`). Returns the model, the
         labels removed and the laws simplified."""
         strategy, report = self.strategy, self.report
-        candidate, removed = self.timed(prune, strategy, candidate, self.train, report)
+        proposed, removed = self.timed(prune, strategy, proposed, self.train, report)
         self.in_budget("dropping redundant effects")
         if self.sensor.found_any:
-            candidate, new_sensor, impossible = self.timed(inadmissible_sensor, strategy, candidate, self.measured,
-                                                           self.sensor)
+            proposed, new_sensor, impossible = self.timed(inadmissible_sensor, strategy, proposed, self.measured,
+                                                          self.sensor)
             for term, entry in impossible:
                 findings[label(term)] = entry
                 report(f"  dropping {label(term)}: {entry['finding']}")
@@ -41,25 +41,25 @@ class Tidying:
                 self.use(new_sensor.correct(self.measured), new_sensor)
                 removed += [label(term) for term, _ in impossible]
         if self.sensor.found_any:
-            candidate, new_sensor, new_train, gone = self.timed(redundant, strategy, candidate, self.measured,
-                                                                self.sensor, MIN_BIC_DROP)
+            proposed, new_sensor, new_train, gone = self.timed(redundant, strategy, proposed, self.measured,
+                                                               self.sensor, MIN_BIC_DROP)
             for text in gone:
                 report(f"  dropping {text}: redundant after the joint refit")
             if gone:
                 self.use(new_train, new_sensor)
             removed += gone
-        candidate = refine_shapes(strategy, candidate, self.train, report)
+        proposed = refine_shapes(strategy, proposed, self.train, report)
         self.in_budget("refining the laws' shapes")
-        candidate, simplified, impossible = self.timed(self.settle, candidate)
+        proposed, simplified, impossible = self.timed(self.settle, proposed)
         self.in_budget("simplifying the laws")
         for term, c, se in impossible:
             findings[label(term)] = structural(term, c, se)
             removed.append(label(term))
-        candidate, beyond = self.timed(self.confine, candidate)
+        proposed, beyond = self.timed(self.confine, proposed)
         self.in_budget("checking what the data identify")
         if self.sensor.found_any:
-            candidate, new_sensor, new_train, gone = self.timed(
-                confine_sensor, strategy, candidate, self.measured, self.sensor, self.heldout)
+            proposed, new_sensor, new_train, gone = self.timed(
+                confine_sensor, strategy, proposed, self.measured, self.sensor, self.heldout)
             for term, entry in gone:
                 self.beyond[label(term)] = (term, entry)
                 report(f"  dropping {label(term)}: a law of the sensor that no held-out trajectory confirms")
@@ -68,12 +68,12 @@ class Tidying:
                 self.use(new_train, new_sensor)
         removed += beyond
         if beyond:  # a refit without what was dropped can leave a law impossible or not itself again
-            candidate, more, impossible = self.timed(self.settle, candidate)
+            proposed, more, impossible = self.timed(self.settle, proposed)
             simplified += more
             for term, c, se in impossible:
                 findings[label(term)] = structural(term, c, se)
                 removed.append(label(term))
-        return candidate, removed, simplified
+        return proposed, removed, simplified
 
     def settle(self, model: LoopModel):
         """Each law its simplest (:func:`~bench.residual.pruning.simplest_laws`), then

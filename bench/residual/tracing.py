@@ -1,7 +1,7 @@
-"""Which candidates explain a residual: forward stepwise selection judged by
+"""Which terms explain a residual: forward stepwise selection judged by
 information, significance and held-out error.
 
-A candidate is accepted only if all hold:
+A term is accepted only if all hold:
 
 * the Bayesian information criterion of the residual fit, over all training
   rows, falls by more than :data:`MIN_BIC_DROP` (strong evidence on Kass &
@@ -22,9 +22,9 @@ A candidate is accepted only if all hold:
 * the residual is above the floor of numerical round-off
   (:data:`ROUNDOFF` of the torque's mean square), so a model that already
   fits exactly is left alone;
-* its coefficient is physical (:func:`~bench.residual.candidates.admissible`:
+* its coefficient is physical (:func:`~bench.residual.library.admissible`:
   no negative friction, damping, rotor inertia or stiffness). Where the best
-  candidate of a step passes the other tests with an impossible coefficient,
+  term of a step passes the other tests with an impossible coefficient,
   the best admissible one that passes them and fits as well (removes at
   least :data:`AS_WELL` of the residual sum of squares the best removes) is
   taken instead; where none does, the step makes a *structural finding*: the
@@ -32,13 +32,13 @@ A candidate is accepted only if all hold:
   finding's column stays in the later steps' fits (and in no model), so no
   admissible term is accepted for mimicking it, while other effects still can be.
 
-Where other candidates that pass every test explain the same part of the
+Where other terms that pass every test explain the same part of the
 residual as the one chosen (as much of it, and nothing significant beside it)
 and give the same held-out error, within the standard error of the difference (paired over the
 scored samples, counted as the independent samples they hold; or both at
 round-off), the data cannot tell them apart (a law of the whole system, a
 payload or a tilt, whose torque is a sum of terms, is also compared with the
-best pair of other candidates): the step records them as
+best pair of other terms): the step records them as
 *equivalent on these data* (:attr:`Trace.equivalents`), and the one kept
 is chosen by :data:`EQUIVALENCE_RULE`: the fewest parameters, then the law
 declared first (:func:`declared`), not by a difference in fit the data do not
@@ -46,8 +46,8 @@ support.
 
 Noise alone fails the first two tests: with Gaussian residuals, a useless
 column lowers ``n log RSS`` by a chi-squared(1) amount, and ``log n`` plus the
-drop of 10 asks for a chi-squared value above 20 (p < 1e-5 per candidate).
-A candidate is fitted beside the columns already in the design by projecting
+drop of 10 asks for a chi-squared value above 20 (p < 1e-5 per term).
+A term is fitted beside the columns already in the design by projecting
 it off them (Frisch–Waugh–Lovell: the same coefficients, errors and residual
 as refitting the whole design, at a fraction of the cost when the design has
 a linear form's dozens of base columns).
@@ -66,7 +66,7 @@ from bench.physics.laws import led_by
 from bench.physics.terms import Term, TermLibrary
 from bench.core.budget import now
 from bench.residual.basis import extend_basis, orthonormal_basis, project_off
-from bench.residual.candidates import admissible, is_named, label
+from bench.residual.library import admissible, is_named, label
 from bench.residual.shapes import SHAPE_LIMITS, at_limit, refinable, refined_shape
 from bench.residual.validation import FoldFits, paired_difference, row_folds
 
@@ -76,11 +76,11 @@ MIN_HELDOUT_GAIN = 0.01
 #: on independent samples, a held-out gain this many rows' worth of residual is enough (see the module docstring)
 MIN_HELDOUT_CHI2 = MIN_BIC_DROP
 ROUNDOFF = 1e-20
-#: a candidate column whose part off the design is below this share of its norm is one the design spans
+#: a term column whose part off the design is below this share of its norm is one the design spans
 SPANNED = 1e-9
-#: candidates tried a step, best first, past ones that fail on significance or held-out error
+#: terms tried a step, best first, past ones that fail on significance or held-out error
 MAX_TRIES = 8
-#: an admissible candidate replaces a better one with an impossible coefficient
+#: an admissible term replaces a better one with an impossible coefficient
 #: only if it removes at least this share of what that one removes
 AS_WELL = 0.9
 
@@ -88,9 +88,9 @@ AS_WELL = 0.9
 BUDGET_STOP = "the loop's budget: no further step started"
 #: two held-out errors this close, relatively, are the same fit to round-off (two columns the same beside the design)
 SAME = 1e-6
-#: a law of the whole system is compared with pairs of the best candidate and one of this many next best
+#: a law of the whole system is compared with pairs of the best term and one of this many next best
 PAIRED = 20
-#: how the trace chooses among candidates equivalent on the data (see the module docstring)
+#: how the trace chooses among terms equivalent on the data (see the module docstring)
 EQUIVALENCE_RULE = ("the fewest parameters, then the law declared first (the arm's laws in the order "
                     "bench/physics/effects.py declares them, each from joint 1 on, then the whole system's, the laws "
                     "of the sensor and the drive, and the open-ended terms last)")
@@ -110,9 +110,9 @@ class Trace:
     #: ``(named group, open-ended term, BIC margin, its torque's RMS, the residual's RMS)`` where an
     #: open-ended term explained the residual far better than the named law accepted for it
     mismatched: list[tuple] = field(default_factory=list)
-    #: ``(accepted group, runner-up group)``: the next best named candidate that passed every test
+    #: ``(accepted group, runner-up group)``: the next best named term that passed every test
     runners_up: list[tuple] = field(default_factory=list)
-    #: ``(kept group, [equivalent groups], entry)``: candidates of one step that the held-out error cannot
+    #: ``(kept group, [equivalent groups], entry)``: terms of one step that the held-out error cannot
     #: tell apart, the one kept by :data:`EQUIVALENCE_RULE`; ``entry`` is what the loop's JSON gives of them
     equivalents: list[tuple] = field(default_factory=list)
 
@@ -120,7 +120,7 @@ class Trace:
 def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
           exclude: list[Term] = (), max_steps: int | None = None, deadline: float = math.inf,
           given: dict[Term, np.ndarray] | None = None, runner_up: bool = False) -> Trace:
-    """Forward stepwise selection of candidates explaining ``target`` (``(n, dof)``).
+    """Forward stepwise selection of terms explaining ``target`` (``(n, dof)``).
 
     Each step tries the named effects first and the open-ended (symbolic)
     terms only when no named effect passes: a physical effect is preferred
@@ -132,26 +132,26 @@ def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarra
     the loop settles it by refitting both (:meth:`bench.residual.loop._Loop.compare`;
     a parametric model's linearisation can favour either).
     ``fixed`` columns (the model's own terms and effects already accepted)
-    stay in every fit, so a candidate that only repeats them gains nothing.
-    At most ``max_steps`` candidates (or laws) are accepted, where given, and
+    stay in every fit, so a term that only repeats them gains nothing.
+    At most ``max_steps`` terms (or laws) are accepted, where given, and
     no step starts after ``deadline`` (:func:`bench.core.budget.now`).
-    ``given`` adds candidates whose columns depend on more than the data (a
+    ``given`` adds terms whose columns depend on more than the data (a
     sensor's laws, linearised at the model: :mod:`bench.residual.sensors`),
-    with those columns; they are named candidates like the effects.
-    With ``runner_up``, each step also records the next best named candidate
+    with those columns; they are named terms like the effects.
+    With ``runner_up``, each step also records the next best named term
     of another slot that passes every test (:attr:`Trace.runners_up`),
     for a model whose linearisation may rank the two wrongly (a parametric
     form: :meth:`bench.residual.loop._Loop.compare` refits both).
-    Returns the newly accepted candidates, per step the statistics of the
-    best candidate, accepted or not, and any structural finding.
+    Returns the newly accepted terms, per step the statistics of the
+    best term, accepted or not, and any structural finding.
     """
     return Tracer(target, data, pool, fixed, exclude, max_steps, deadline, given, runner_up).run()
 
 
 class Tracer:
-    """One trace (:func:`trace`): its data, the candidates' columns, what the steps have accepted so far, the
+    """One trace (:func:`trace`): its data, the terms' columns, what the steps have accepted so far, the
     design's basis and residual, and each step's held-out fits. :meth:`run` takes the steps and returns the
-    :class:`Trace`; the other methods are what a step asks of a candidate (its statistics beside the design,
+    :class:`Trace`; the other methods are what a step asks of a term (its statistics beside the design,
     its group and refined shape, its physical sense, its equivalents and rivals)."""
 
     def __init__(self, target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
@@ -170,7 +170,7 @@ class Tracer:
         self.fixed = np.zeros((self.n_rows, 0)) if self.fixed is None else self.fixed
         self.F_all = {c: c.column(self.data, "indirect") for c in self.pool if c not in self.exclude}
         self.F_all.update({c: np.asarray(f, dtype=np.float64) for c, f in (self.given or {}).items()})
-        # a term not finite on the data is no candidate
+        # a term not finite on the data is left out
         self.F_all = {c: f for c, f in self.F_all.items() if np.isfinite(f).all()}
         self.accepted, self.steps, self.structural = [], [], []
         self.taken = {slot(t) for t in self.exclude}
@@ -179,8 +179,8 @@ class Tracer:
         # named laws an open-ended term explained far better: (group, term, margin, size, rms)
         self.mismatched: list[tuple] = []
         self.runners_up: list[tuple] = []  # (accepted group, the next best group that passed every test)
-        self.off: dict[Term, np.ndarray] = {}  # this step's candidate columns projected off the design
-        self.spanned: set[Term] = set()  # candidates the design already expresses (the model's own friction columns)
+        self.off: dict[Term, np.ndarray] = {}  # this step's term columns projected off the design
+        self.spanned: set[Term] = set()  # terms the design already expresses (the model's own friction columns)
         self.Q, self.in_basis = orthonormal_basis(self.fixed), set()
         self.named = list(self.given or ()) + [c for c in self.pool if is_named(c)]
         self.tiers = [[c for c in self.named if c in self.F_all],
@@ -211,9 +211,9 @@ class Tracer:
 
     def _size(self, best: dict) -> float:
         """The root mean square of the torque ``best``'s term fits, over its joints' rows."""
-        column = best["coefs"][-1] * self.F_all[best["candidate"]]
+        column = best["coefs"][-1] * self.F_all[best["term"]]
         rows = np.zeros(self.data.dof, dtype=bool)
-        rows[list(best["candidate"].joints)] = True
+        rows[list(best["term"].joints)] = True
         mine = column.reshape(-1, self.data.dof)[:, rows]
         return float(np.sqrt(np.mean(mine**2)))
 
@@ -222,11 +222,11 @@ class Tracer:
         return self.held_fits.residuals(np.column_stack([self.F_all[t] for t in group]))
 
     def params(self, best: dict) -> int:
-        """A candidate's parameters: its group's coefficients, and its shape."""
-        return len(best["group"]) + (best["candidate"].shape is not None)
+        """A term's parameters: its group's coefficients, and its shape."""
+        return len(best["group"]) + (best["term"].shape is not None)
 
     def redundant(self, chosen: dict, other: dict, k_now: int) -> bool:
-        """Whether each of the two candidates adds nothing significant beside the other (a BIC
+        """Whether each of the two terms adds nothing significant beside the other (a BIC
         drop of at most :data:`MIN_BIC_DROP`, residuals floored at round-off): they explain the
         same part of the residual, rather than two parts that a later step would take both of."""
         both = chosen["group"] + [t for t in other["group"] if t not in chosen["group"]]
@@ -237,7 +237,7 @@ class Tracer:
                    <= MIN_BIC_DROP for one in (chosen, other))
 
     def _equivalents(self, chosen: dict, info: dict, k_now: int, rss_now: float):
-        """The candidates (of either tier) that pass every test, are physical, explain the same part
+        """The terms (of either tier) that pass every test, are physical, explain the same part
         of the residual as ``chosen`` (as much of it, and nothing beside it: :func:`redundant`) and
         whose held-out error differs from ``chosen``'s by no more than the standard error of the difference
         (:func:`~bench.residual.validation.paired_difference`), or both at round-off; the kept
@@ -272,16 +272,16 @@ class Tracer:
         self.project(t for c in others for t in self.group(c))
         singles, seen = [], set()
         for best in sorted((self.stats(c, k_now, rss_now) for c in others), key=lambda b: -b["bic_drop"]):
-            if slot(best["candidate"]) in seen or not best["bic_drop"] > MIN_BIC_DROP:
+            if slot(best["term"]) in seen or not best["bic_drop"] > MIN_BIC_DROP:
                 continue
-            seen.add(slot(best["candidate"]))
+            seen.add(slot(best["term"]))
             if not {slot(t) for t in best["group"]} & mine and self.physical(best) is None:
                 singles.append(best)
         found = [x for x in map(rival, singles) if x is not None]
-        if not found and self.whole(chosen["candidate"]) and len(singles) >= 2:
+        if not found and self.whole(chosen["term"]) and len(singles) >= 2:
             # a law of the whole system is a sum of terms each of which others may give: the best pair stands too
             first = singles[0]
-            pairs = [self.stats(b["candidate"], k_now, rss_now, first["group"] + b["group"])
+            pairs = [self.stats(b["term"], k_now, rss_now, first["group"] + b["group"])
                      for b in singles[1:PAIRED + 1]
                      if not {slot(t) for t in b["group"]} & {slot(t) for t in first["group"]}]
             pairs = [p for p in pairs if len(p["group"]) == len(first["group"]) + 1 and p["bic_drop"] > MIN_BIC_DROP]
@@ -290,7 +290,7 @@ class Tracer:
         if not found:
             return chosen, info, [], None
         every = sorted([(chosen, info, cv_c, None)] + found,
-                       key=lambda e: (self.params(e[0]), self.declared(e[0]["candidate"])))
+                       key=lambda e: (self.params(e[0]), self.declared(e[0]["term"])))
         kept = every[0][0]
         name = {id(b): " + ".join(label(t) for t in b["group"]) for b, *_ in every}
         entry = {"kept": name[id(kept)], "equivalent": [name[id(b)] for b, *_ in every if b is not kept],
@@ -304,7 +304,7 @@ class Tracer:
         return is_named(term) and term.place != "sensor" and EFFECTS[term.name].arity == 0
 
     def declared(self, term: Term) -> tuple:
-        """Where ``term`` stands in the order the candidates are declared in (see :data:`EQUIVALENCE_RULE`)."""
+        """Where ``term`` stands in the order the terms are declared in (see :data:`EQUIVALENCE_RULE`)."""
         return self.declared_order.get(slot(term), (len(self.declared_order),))
 
     def design(self, cands):
@@ -316,7 +316,7 @@ class Tracer:
         return self.held_fits.cv(np.column_stack([self.F_all[t] for t in group]))
 
     def group(self, c: Term) -> list[Term]:
-        """A shaped candidate with the other parts of the law it leads
+        """A shaped term with the other parts of the law it leads
         (:func:`bench.physics.laws.led_by`; a Stribeck hump comes with Coulomb
         and viscous friction on its joint), where those are not in the model yet."""
         law = led_by(c.name) if c.shape is not None else None
@@ -362,8 +362,8 @@ class Tracer:
         # columns' part orthogonal to the design, fitted to the design's residual
         g = self.group(c) if g is None else g
         coef, stderr, rss = self.beside(g, k_now)
-        if self.spanned & set(g):  # nothing the model could already express is a candidate, nor a finding
-            return {"candidate": c, "group": g, "bic_drop": -math.inf, "coef": 0.0, "stderr": math.inf,
+        if self.spanned & set(g):  # nothing the model could already express is tried, nor a finding
+            return {"term": c, "group": g, "bic_drop": -math.inf, "coef": 0.0, "stderr": math.inf,
                     "coefs": [0.0] * len(g), "stderrs": [math.inf] * len(g), "rss": rss_now}
         if len(g) > 1:  # companions the data do not support leave the law (a Stribeck law without viscous friction)
             weak = [t for t, a, e in zip(g[:-1], coef, stderr) if not abs(a) >= MIN_T * e]
@@ -377,11 +377,11 @@ class Tracer:
             rss_mates = self.beside(g[:-1], k_now)[2]
             extra = bic(rss_mates, self.n_rows, k_new - 2) - bic(rss, self.n_rows, k_new)
             drop = drop if extra > MIN_BIC_DROP else -math.inf
-        return {"candidate": c, "group": g, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]),
+        return {"term": c, "group": g, "bic_drop": drop, "coef": float(coef[-1]), "stderr": float(stderr[-1]),
                 "coefs": [float(v) for v in coef[-len(g):]], "stderrs": [float(v) for v in stderr[-len(g):]], "rss": rss}
 
     def limit(self, c: Term, k_now: int, rss_now: float) -> dict | None:
-        """The statistics of the limit law a shaped candidate at an end of its
+        """The statistics of the limit law a shaped term at an end of its
         range stands for (:attr:`bench.physics.laws.Law.limits`: the first at the
         low end, the second at the high end) with the companions of the law it
         leads; ``None`` where that limit adds nothing new."""
@@ -394,7 +394,7 @@ class Tracer:
         return self.stats(new[-1], k_now, rss_now, mates + new)
 
     def physical(self, best: dict) -> tuple[Term, float, float] | None:
-        """The first member of the candidate's group with an impossible coefficient, or ``None``."""
+        """The first member of the term's group with an impossible coefficient, or ``None``."""
         for t, a, e in zip(best["group"], best["coefs"], best["stderrs"]):
             if not admissible(t, a):
                 return t, a, e
@@ -419,7 +419,7 @@ class Tracer:
                 break
             chosen = inadmissible = self.before = None
             for tier in self.tiers:
-                # a shaped candidate (a Stribeck velocity from a grid) stands for its best shape: the
+                # a shaped term (a Stribeck velocity from a grid) stands for its best shape: the
                 # best of its slot (a physical one first) is refined, the others of that slot dropped
                 # all at once: one matrix product
                 self.project(t for c in tier if slot(c) not in self.taken for t in self.group(c))
@@ -427,11 +427,11 @@ class Tracer:
                                 key=lambda b: (self.physical(b) is not None, -b["bic_drop"]))
                 seen, unique = set(), []
                 for best in ranked:
-                    if slot(best["candidate"]) in seen:
+                    if slot(best["term"]) in seen:
                         continue
-                    seen.add(slot(best["candidate"]))
-                    if refinable(best["candidate"]) and best["bic_drop"] > MIN_BIC_DROP:
-                        refined = self.refine(best["candidate"])
+                    seen.add(slot(best["term"]))
+                    if refinable(best["term"]) and best["bic_drop"] > MIN_BIC_DROP:
+                        refined = self.refine(best["term"])
                         if at_limit(refined.shape):  # there it is the simpler law it contains: that law stands instead
                             best = self.limit(refined, k_now, self.rss_now)
                             if best is None:
@@ -463,7 +463,7 @@ class Tracer:
                         chosen_info = {**info, "accepted": True}
                         self.steps.append(chosen_info)
                         chosen = best
-                        if not self.runner_up or not is_named(best["candidate"]):
+                        if not self.runner_up or not is_named(best["term"]):
                             break
                         continue
                     if ok:
@@ -472,10 +472,10 @@ class Tracer:
                             inadmissible = {**best, "impossible": impossible}
                         continue
                     if inadmissible is None and not tried:
-                        self.steps.append(info)  # the best candidate, rejected
+                        self.steps.append(info)  # the best term, rejected
                     tried += 1
                     if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
-                        break  # weaker candidates explain less still
+                        break  # weaker terms explain less still
                 if chosen is not None or inadmissible is not None:
                     break  # an impossible coefficient is not handed to the open-ended terms to mimic
             if chosen is not None and now() <= self.deadline:
@@ -490,10 +490,10 @@ class Tracer:
                                                    chosen["group"] if runner == kept["group"] else runner)
                         chosen = kept
                     self.equivalents.append((kept["group"], [b["group"] for b in others], entry))
-            if chosen is not None and is_named(chosen["candidate"]):
+            if chosen is not None and is_named(chosen["term"]):
                 rival = self._rival(chosen)
                 if rival is not None:
-                    self.mismatched.append((chosen["group"], rival["candidate"], rival["bic_drop"] - chosen["bic_drop"],
+                    self.mismatched.append((chosen["group"], rival["term"], rival["bic_drop"] - chosen["bic_drop"],
                                        self._size(rival), math.sqrt(self.rss_now / self.n_rows)))
             if chosen is None:
                 if inadmissible is None:
@@ -502,7 +502,7 @@ class Tracer:
                 # the selection goes on for what else is there
                 self.structural.append(inadmissible["impossible"])
                 wrong = inadmissible["impossible"][0]
-                self.nuisance.append(wrong)  # its companions (a law's Coulomb part, say) stay candidates
+                self.nuisance.append(wrong)  # its companions (a law's Coulomb part, say) stay in the library
                 self.taken.add(slot(wrong))
                 continue
             self.accepted.extend(chosen["group"])
@@ -532,7 +532,7 @@ def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.nd
 
 
 def slot(term: Term):
-    """What a candidate occupies: a shaped effect's name and joints (one
+    """What a term occupies: a shaped effect's name and joints (one
     Stribeck hump a joint, whatever its velocity), else the term itself."""
     return (term.name, term.joints) if term.shape is not None else term
 
@@ -542,12 +542,12 @@ def _passes(best: dict, before: float, heldout, min_gain: float = MIN_HELDOUT_GA
     the design's held-out error without it; ``heldout(group)``: with the group's
     columns added; ``min_gain``: the share of it the group must save), with its statistics."""
     if not (best["bic_drop"] > MIN_BIC_DROP):  # the cheap test first
-        return False, {"candidate": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
+        return False, {"term": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
                        "coefficient": best["coef"], "accepted": False}
     after = heldout(best["group"])
     gain = (before - after) / before if before > 0 else 0.0
     t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
     ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= min_gain
-    info = {"candidate": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
+    info = {"term": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
             "t": t if math.isfinite(t) else None, "coefficient": best["coef"], "heldout_gain": gain, "accepted": False}
     return ok, info

@@ -234,14 +234,14 @@ HELP = "the residual loop's benchmark of undeclared effects: recall, precision, 
 
 #: the loop's rules of acceptance, and the data each was chosen on: every one before the evaluation set existed
 RULES = (
-    (f"a candidate lowers the BIC by more than {MIN_BIC_DROP:g}",
+    (f"a term lowers the BIC by more than {MIN_BIC_DROP:g}",
      "Kass and Raftery's scale of evidence, before any case was run"),
     (f"its coefficient is at least {MIN_T:g} standard errors from zero", "the development set's cases"),
     (f"it lowers the held-out residual by at least {MIN_HELDOUT_GAIN:.0%}",
      "the development set's cases and the DFKI recordings"),
     (f"on independent samples, by {MIN_HELDOUT_CHI2:g} rows' worth of the residual where that is less",
      "the development set's Coulomb-plus-viscous case at 5 % noise, whose viscous part it otherwise missed"),
-    (f"an admissible candidate stands in for a better one with an impossible coefficient where it removes "
+    (f"an admissible term stands in for a better one with an impossible coefficient where it removes "
      f"{AS_WELL:.0%} as much",
      "the development set's cases"),
     (f"an effect that claims beyond the data, or a law of the sensor or the drive, saves {BEYOND_GAIN:.0%} on a "

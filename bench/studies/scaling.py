@@ -130,7 +130,7 @@ def sources() -> str:
         "Euler–Lagrange transform, whose mass matrix and Coriolis terms are second derivatives of L, n torque rows",
         "per sample. Sparse regression's library for n = 1 … {} joint angles holds {} terms, and the indirect".format(LINKS[-1], sizes),
         "design matrix holds the Euler–Lagrange transform of every term, so that method outgrows a small budget first.",
-        "SyReNets' candidate layer holds the pairwise sums and products of its inputs, quadratic in their number.",
+        "A SyReNets layer's terms are the pairwise sums and products of its inputs, quadratic in their number.",
         "SysId on the pendulums descends the gradient of the known model's parameters; on the arms it is one",
         "least-squares solve on Pinocchio's joint-torque regressor, one step. MGGP and Operon evaluate a population",
         "of a fixed size per generation; MGGP's indirect fitness takes the Euler–Lagrange transform of every gene of every individual.",

@@ -1,7 +1,7 @@
 """Where SyReNets' training step spends its time, and the heads' output layer in it.
 
-Each selection head ends in a layer over the candidates: ``W2`` of shape
-(heads, candidates, hidden units) applied to the hidden units
+Each selection head ends in a layer over the terms: ``W2`` of shape
+(heads, terms, hidden units) applied to the hidden units
 (``methods.syrenets.network.HeadsOutput``, forward and backward). torch.profiler
 attributes a large and varying share of a step to it. This command times
 the same step in one process, three ways, and reports each per step:
@@ -418,7 +418,7 @@ def main(args) -> int:
         "",
         *_header(args, f"medians of {args.rounds} rounds of {args.steps} steps per mode, the modes in turn"),
         "",
-        "The product is the heads' output layer, `W2` of shape (heads, candidates, hidden units) applied to the "
+        "The product is the heads' output layer, `W2` of shape (heads, terms, hidden units) applied to the "
         "hidden units, forward and backward, all layers.",
         "",
         "| mode | step (ms) | heads' product (ms per step) | product's share of the step | minor page faults per step |",

@@ -1,8 +1,8 @@
 """SyReNets: Symbolic Residual Neural Networks (Valle & Haddadin, 2021).
 
 A stack of symbolic layers. Layer ``l`` sees the system inputs ``x`` and the
-outputs of the previous layer's heads, builds every candidate term from them,
-and each of its selection heads outputs a weighted sum of the candidates; the
+outputs of the previous layer's heads, builds every term from them,
+and each of its selection heads outputs a weighted sum of the terms; the
 last layer's heads are summed into the Lagrangian.
 
 Architecture (the paper's, with the public code's facts where the paper is open)
@@ -18,9 +18,9 @@ Architecture (the paper's, with the public code's facts where the paper is open)
   pairwise sums over the upper triangle (row-major; the diagonal stands for
   ``u_i`` itself), the pairwise products over the upper triangle (squares
   included), ``sin(u_i)``, ``cos(u_i)``. For n inputs, n(n+1)/2 + n(n+1)/2 + n
-  + n candidates: 378 for 6 + 12 inputs, 304 for 4 + 12. Further operators
+  + n terms: 378 for 6 + 12 inputs, 304 for 4 + 12. Further operators
   (``diff`` = u_i - u_j for i < j, ``exp``) can be enabled with ``operators``.
-* **Shared representation block**: layer normalisation of the candidates of
+* **Shared representation block**: layer normalisation of the terms of
   each sample; a contractive auto-encoder shared by all layers (encoder
   C -> 128 -> 128 -> 16, softplus, linear latent; mirrored decoder; biases
   only here); the cosine-similarity Gram matrix of the 16 latent dimensions
@@ -28,11 +28,11 @@ Architecture (the paper's, with the public code's facts where the paper is open)
 * **Selection head** (all heads of a layer are computed as one batched tensor
   operation): a bias-free weighted sum d x d -> d; a hidden layer of 64
   softplus units with layer normalisation before the activation; an output
-  over the candidates with layer normalisation and softmax, giving the
-  selection distribution ``P`` shared by the batch; a per-candidate scale
+  over the terms with layer normalisation and softmax, giving the
+  selection distribution ``P`` shared by the batch; a per-term scale
   ``S``; an on-off gate ``phi = sigmoid(w1 . P_j + w2 . prod_j' p_j'(previous
   layer))``; the head outputs ``h_j = phi_j sum_b S_jb v_b P_jb`` over the raw
-  candidates ``v``.
+  terms ``v``.
 * **Losses**: ``L_b + L_ae + L_c``. ``L_ae`` = reconstruction MSE +
   ``lambda1 * ||J_encoder||^2``. ``L_c`` = per layer
   ``lambda2 * H(p_j) - lambda3 * sum_{j' != j} H(p_j', p_j)`` with
@@ -118,14 +118,14 @@ Choices and deviations, each deliberate
   which the transform's reverse passes need, so in a compiled pass the
   indirect torques come from derivatives
   propagated *forward* through the frozen function
-  (:meth:`~methods.syrenets.candidates.CandidateSpec.tangent`, the product and chain rules of
-  ``methods/jets.py`` applied to a layer's candidates at once, on tensors the
+  (:meth:`~methods.syrenets.layer_terms.LayerTerms.tangent`, the product and chain rules of
+  ``methods/jets.py`` applied to a layer's terms at once, on tensors the
   loss differentiates), which the one Euler–Lagrange transform takes from
   :class:`~methods.syrenets.training.Fixed`'s ``tangent`` method. The two agree to rounding
   (``test_derivatives_propagated_forward_match_the_reverse_passes``). A
   compiling network stores its heads' output weights ``W2`` as (heads,
-  hidden units, candidates), the same numbers transposed, so that the
-  generated code sums the heads' products along the candidates instead of
+  hidden units, terms), the same numbers transposed, so that the
+  generated code sums the heads' products along the terms instead of
   across a vector register (see :class:`~methods.syrenets.network.HeadsOutput`). Eager
   passes keep the reverse passes, which are faster uncompiled.
 
@@ -136,7 +136,7 @@ but long, since softmax weights are never zero. After training, within the
 budget (``post_fraction`` of it is reserved), two variants are derived and
 reported beside the paper's model:
 
-* ``pruned``: the fewest terms, ranked by ``|weight| * rms(candidate)``, whose
+* ``pruned``: the fewest terms, ranked by ``|weight| * rms(term)``, whose
   frozen model is within 10 % of the full model's training MSE; its equation
   is what records store as the run's expression;
 * ``refined``: the dominant terms' structure with its inner constants rounded
@@ -145,8 +145,8 @@ reported beside the paper's model:
 
 Modules
 -------
-:mod:`~methods.syrenets.config` the hyperparameters; :mod:`~methods.syrenets.candidates`
-a layer's candidate terms; :mod:`~methods.syrenets.network` the network and its
+:mod:`~methods.syrenets.config` the hyperparameters; :mod:`~methods.syrenets.layer_terms`
+a layer's terms; :mod:`~methods.syrenets.network` the network and its
 two hand-written autograd kernels; :mod:`~methods.syrenets.training` one network's
 training state and pass; :mod:`~methods.syrenets.multistart` successive halving over
 several networks; :mod:`~methods.syrenets.equations` pruning, refinement and the

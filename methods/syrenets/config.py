@@ -10,7 +10,7 @@ from bench.core.errors import ConfigError
 from methods.config import Range
 from methods.torch_method import TorchConfig
 
-#: the candidate operators a layer may use
+#: the operators a layer may use
 BINARY = ("sum", "prod", "diff")
 UNARY = ("sin", "cos", "exp")
 
@@ -26,7 +26,7 @@ class SyReNetsConfig(TorchConfig):
     inputs
         ``"q_qd"`` (default, consistent) or ``"q_qd_qdd"`` (the public code's).
     operators
-        Candidate operators, a subset of ``sum, prod, diff, sin, cos, exp``.
+        Operators, a subset of ``sum, prod, diff, sin, cos, exp``.
     latent, ae_hidden, head_hidden
         Auto-encoder latent (d) and hidden widths; head hidden units.
     lambda_contractive, lambda_entropy, lambda_diversity

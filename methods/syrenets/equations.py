@@ -35,7 +35,7 @@ class Equations:
     (its network ``model``, frozen weights ``frozen`` and ``config``)."""
 
     def _layer_values(self, data, weights):
-        """Candidate values of every layer on ``data`` (frozen function)."""
+        """Term values of every layer on ``data`` (frozen function)."""
         t = data.tensors(self.dtype, self.device)
         x = self._inputs(t["q"], t["qd"], t["qdd"])
         h = x.new_zeros(x.shape[0], self.config.heads)
@@ -50,8 +50,8 @@ class Equations:
     def _prune(self, ref, experiment, tolerance: float = 0.1) -> "FrozenVariant":
         """Keep the fewest terms whose frozen model is within ``tolerance`` of the full one.
 
-        Terms (layer, head, candidate) are ranked by their contribution
-        ``|w| * rms(candidate)`` on ``ref``; the smallest prefix of that ranking
+        Terms (layer, head, term) are ranked by their contribution
+        ``|w| * rms(term)`` on ``ref``; the smallest prefix of that ranking
         whose MSE on ``ref`` is at most ``(1 + tolerance)`` times the full
         model's is kept (found by bisection).
         """
@@ -94,7 +94,7 @@ class Equations:
             keep.append([torch.nonzero(m[j]).flatten().tolist() for j in range(W.shape[0])])
         return FrozenVariant(self, weights, keep)
 
-    #: sizes of the candidate structures the refinement tries, smallest first
+    #: sizes of the structures the refinement tries, smallest first
     REFINE_SIZES = (8, 16, 32, 64)
 
     def _refine(self, train, experiment, deadline):
@@ -186,7 +186,7 @@ class Equations:
         return syms
 
     def expression_terms_bound(self) -> int:
-        """The candidates of a layer to the power of the layers: pushing the
+        """The terms of a layer to the power of the layers: pushing the
         frozen model through sympy takes minutes, so callers that only need
         a small expression ask this first."""
         return int(self.model.spec.size) ** len(self.frozen)

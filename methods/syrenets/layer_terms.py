@@ -1,4 +1,4 @@
-"""A symbolic layer's candidate terms: every pairwise sum and product of its
+"""A symbolic layer's terms: every pairwise sum and product of its
 inputs, and their sines and cosines, in one fixed order (the package
 docstring), computed by matrix products, with their forward derivatives and
 their sympy form."""
@@ -11,8 +11,8 @@ import torch
 
 
 
-class CandidateSpec:
-    """The candidate terms of a layer with ``n`` inputs, in order.
+class LayerTerms:
+    """The terms of a layer with ``n`` inputs, in order.
 
     ``names(symbols)`` returns them as sympy expressions; :meth:`__call__`
     evaluates them on a batch.
@@ -66,12 +66,12 @@ class CandidateSpec:
         return torch.cat(parts, dim=1)
 
     def tangent(self, X: torch.Tensor, w: torch.Tensor, k: int) -> torch.Tensor:
-        """The candidates with their derivatives, propagated forward.
+        """The terms with their derivatives, propagated forward.
 
         ``X`` is ``(B, 1 + m + k, n)``: for each input, its value, its gradient
         over ``m`` coordinates ``z``, and the derivative of its gradient's last
         ``k`` components along the per-sample direction ``w`` (``(B, m)``), i.e.
-        those rows of ``Hess(u) w``. Returns the same rows for the candidates,
+        those rows of ``Hess(u) w``. Returns the same rows for the terms,
         ``(B, 1 + m + k, size)``, by the product and chain rules: for
         ``a b``, ``H w = a H_b w + b H_a w + grad a (grad b . w) + grad b (grad a . w)``;
         for ``f(a)``, ``H w = f'(a) H_a w + f''(a) grad a (grad a . w)``.

@@ -10,7 +10,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-from methods.syrenets.candidates import CandidateSpec
+from methods.syrenets.layer_terms import LayerTerms
 from methods.syrenets.config import SyReNetsConfig
 
 EPS_LOG = 1e-5
@@ -45,7 +45,7 @@ def _heads_backward(W: torch.Tensor, h: torch.Tensor, g: torch.Tensor, hidden_fi
 
 class HeadsOutput(torch.autograd.Function):
     """``(W * h.unsqueeze(1)).sum(-1)`` for ``W`` (heads, C, k) and ``h``
-    (heads, k): every head's output layer over the candidates. With
+    (heads, k): every head's output layer over the terms. With
     ``hidden_first``, ``W`` is stored as (heads, k, C) and the product is
     ``(W * h.unsqueeze(-1)).sum(1)``, the same numbers.
 
@@ -162,7 +162,7 @@ class SyReNet(torch.nn.Module):
         super().__init__()
         self.n_x, self.cfg = n_x, cfg
         H, d, L = cfg.heads, cfg.latent, cfg.layers
-        self.spec = CandidateSpec(n_x + H, cfg.operators)
+        self.spec = LayerTerms(n_x + H, cfg.operators)
         C = self.spec.size
         self.C = C
         k = cfg.head_hidden
@@ -181,7 +181,7 @@ class SyReNet(torch.nn.Module):
         self.Q = per_layer((d, d), 1 / math.sqrt(d))            # row-wise linear map of the Gram matrix
         self.Wq = per_layer((H, d), 1 / math.sqrt(d))           # weighted sum d x d -> d, per head
         self.W1 = per_layer((H, k, d), 1 / math.sqrt(d))        # head hidden layer
-        self.W2 = per_layer((H, C, k), 1 / math.sqrt(k))        # head output over the candidates
+        self.W2 = per_layer((H, C, k), 1 / math.sqrt(k))        # head output over the terms
         if cfg.compile:  # the same weights, stored (H, k, C) for the compiled pass (see HeadsOutput)
             for w in self.W2:
                 w.data = w.data.transpose(1, 2).contiguous()
@@ -295,14 +295,14 @@ class SyReNet(torch.nn.Module):
         return cfg.lambda_entropy * diagonal / H - cfg.lambda_diversity * off
 
     def evaluate(self, x: torch.Tensor, weights: list[torch.Tensor]) -> torch.Tensor:
-        """The frozen function: each layer's heads are fixed weighted sums of its candidates."""
+        """The frozen function: each layer's heads are fixed weighted sums of its terms."""
         h = x.new_zeros(x.shape[0], self.cfg.heads)
         for W in weights:
             h = self.spec(torch.cat([x, h], dim=1)) @ W.T
         return h.sum(dim=1)
 
     def evaluate_tangent(self, x: torch.Tensor, weights: list[torch.Tensor], w: torch.Tensor, k: int) -> torch.Tensor:
-        """:meth:`evaluate` with its derivatives (see :meth:`CandidateSpec.tangent`)
+        """:meth:`evaluate` with its derivatives (see :meth:`LayerTerms.tangent`)
         over the first ``m = w.shape[1]`` inputs; the others are constants.
         Returns ``(B, 1 + m + k)``: the value, the gradient, and the last ``k``
         rows of ``Hess w``."""

@@ -1,4 +1,4 @@
-"""SyReNets: candidates, selection, losses, the frozen function and its equations."""
+"""SyReNets: terms, selection, losses, the frozen function and its equations."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from bench.core.data import generate, mse
 from bench.core.experiment import Experiment
 from bench.physics.dynamics import euler_lagrange
 from methods import METHODS
-from methods.syrenets.candidates import CandidateSpec
+from methods.syrenets.layer_terms import LayerTerms
 from methods.syrenets.config import SyReNetsConfig
 from methods.syrenets.equations import round_inner_constants
 from methods.syrenets.multistart import halve
@@ -24,7 +24,7 @@ SMALL = dict(layers=2, heads=3, latent=4, ae_hidden=8, head_hidden=8)
 
 
 def test_candidate_count_and_order():
-    spec = CandidateSpec(3, ("sum", "prod", "sin", "cos"))
+    spec = LayerTerms(3, ("sum", "prod", "sin", "cos"))
     u = torch.tensor([[2.0, 3.0, 5.0]], dtype=torch.float64)
     expected = [2, 5, 7, 3, 8, 5,  # sums: u1, u1+u2, u1+u3, u2, u2+u3, u3
                 4, 6, 10, 9, 15, 25,  # products: u1^2, u1u2, u1u3, u2^2, u2u3, u3^2
@@ -33,9 +33,9 @@ def test_candidate_count_and_order():
     a, b, c = sympy.symbols("a b c")
     assert spec.symbolic([a, b, c])[:6] == [a, a + b, a + c, b, b + c, c]
     assert spec.symbolic([a, b, c])[6:9] == [a**2, a * b, a * c]
-    assert CandidateSpec(6 + 12, ("sum", "prod", "sin", "cos")).size == 378
-    assert CandidateSpec(4 + 12, ("sum", "prod", "sin", "cos")).size == 304
-    assert CandidateSpec(3, ("diff", "exp")).size == 3 + 3
+    assert LayerTerms(6 + 12, ("sum", "prod", "sin", "cos")).size == 378
+    assert LayerTerms(4 + 12, ("sum", "prod", "sin", "cos")).size == 304
+    assert LayerTerms(3, ("diff", "exp")).size == 3 + 3
 
 
 def test_operator_set_is_validated():
@@ -147,7 +147,7 @@ def test_six_input_variant_runs_and_is_flagged(data):
 
 
 def _encoder_pre_activations(rows: int):
-    """A small network, its encoder's two pre-activations on ``rows`` random candidate rows, and the exact penalty."""
+    """A small network, its encoder's two pre-activations on ``rows`` random term rows, and the exact penalty."""
     net = _net()
     _, a1, a2 = net.encode(torch.randn(rows, net.C, dtype=torch.float64))
     return net, a1, a2, net.contractive(a1, a2).item()
@@ -353,7 +353,7 @@ ALL_OPERATORS = ("sum", "prod", "diff", "sin", "cos", "exp")
 
 @pytest.mark.parametrize("hp", [{}, {"inputs": "q_qd_qdd"}, {"operators": ALL_OPERATORS}])
 def test_derivatives_propagated_forward_match_the_reverse_passes(data, hp):
-    """The torques of the fixed function from CandidateSpec.tangent equal
+    """The torques of the fixed function from LayerTerms.tangent equal
     those of the transform's reverse passes, and so do their gradients with
     respect to every parameter."""
     m = METHODS["syrenets"](**hp)

@@ -134,7 +134,7 @@ def test_the_feasible_configuration_holds_friction_nonnegative_and_a_body_feasib
 
 
 def test_the_residual_loop_refits_a_feasible_fit_under_its_constraints(panda):
-    from bench.residual.candidates import candidates
+    from bench.residual.library import loop_library
     from bench.residual.model import LoopModel
     from bench.residual.strategies import Feasible, Linear, strategy_for
 
@@ -143,7 +143,7 @@ def test_the_residual_loop_refits_a_feasible_fit_under_its_constraints(panda):
     ls = METHODS["sysid"](feasible=False).fit(train, "indirect", 0, budget=Budget(steps=1))
     assert type(strategy_for(ls)) is Linear and type(strategy_for(feasible)) is Feasible
     strategy = strategy_for(feasible)
-    offsets = [t for t in candidates(train.dof) if t.name == "offset"]
+    offsets = [t for t in loop_library(train.dof) if t.name == "offset"]
     assert len(offsets) == 7
     refitted = strategy.refit(LoopModel.bare(feasible.linear), train, offsets)
     after = strategy.feasibility(refitted, train)

@@ -14,7 +14,7 @@ from bench.core.budget import Budget
 from bench.core.data import add_noise, generate
 from bench.physics.undeclared import add_effects
 from bench.physics.models import ExpressionModel
-from bench.residual import loop as loop_module, residual_loop, trace, candidates
+from bench.residual import loop as loop_module, residual_loop, trace, loop_library
 from bench.runner.records import read_record, residual_fields
 from systems import get_system
 from tests.commandline import cli
@@ -124,8 +124,8 @@ def test_noise_alone_produces_no_effect_and_noisy_effects_are_still_found():
 def test_pure_noise_residual_accepts_nothing():
     data = generate(get_system("double_pendulum"), 5000, 2)
     rng = np.random.default_rng(0)
-    selection = trace(rng.normal(size=data.tau.shape), data, candidates(2))
-    assert selection.accepted == [] and selection.steps[-1]["accepted"] is False
+    traced = trace(rng.normal(size=data.tau.shape), data, loop_library(2))
+    assert traced.accepted == [] and traced.steps[-1]["accepted"] is False
 
 
 def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):

@@ -48,6 +48,15 @@ def test_the_loops_json_as_written_before_reads_as_a_record():
         ResidualResult.from_json({**old, "mse_after": None, "budget": "sixty"}, "old.json")
 
 
+def test_a_round_written_when_a_term_was_called_a_candidate_reads_under_todays_names():
+    rounds = [{"round": 0, "mse": {"train": 3.0}, "heldout_mse": 3.2},
+              {"round": 1, "mse": {"train": 2.0}, "heldout_mse": 3.0, "candidate_heldout_mse": 3.1, "stop": "undone",
+               "trace": [{"candidate": "viscous_friction[1]", "bic_drop": 40.0, "accepted": True}, "not a step"]}]
+    read = ResidualResult.from_json(result(rounds=rounds).to_json()).rounds
+    assert read[0] == rounds[0] and read[1]["undone_heldout_mse"] == 3.1 and "candidate_heldout_mse" not in read[1]
+    assert read[1]["trace"] == [{"term": "viscous_friction[1]", "bic_drop": 40.0, "accepted": True}, "not a step"]
+
+
 def test_a_record_of_a_run_is_not_read_as_the_loops(tmp_path):
     record = result().to_record().replace(kind="run")
     with pytest.raises(RecordError, match="not of the residual loop"):

@@ -72,7 +72,7 @@ def test_a_registered_law_outside_its_range_is_a_finding(speed_loss):
 def test_a_sensor_offers_each_registered_law_where_it_applies(speed_loss):
     train = generate(get_system("double_pendulum"), 50, 0)
     sensor = Sensor.exact(train)
-    names = [(t.name, t.joint) for t in sensor.candidates(train)]
+    names = [(t.name, t.joint) for t in sensor.terms(train)]
     assert names == [("torque_gain", 1 - sensor.reference), ("load_friction", 0), ("load_friction", 1),
                      ("speed_loss", 0), ("speed_loss", 1)]  # no time stamps: no time shift
 

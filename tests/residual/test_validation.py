@@ -89,7 +89,7 @@ def test_a_round_that_does_not_lower_the_held_out_error_is_undone(monkeypatch):
     out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
     assert out.effects == [] and out.mse_after == out.mse_before
     last = out.rounds[-1]
-    assert last["stop"].startswith("undone") and last["candidate_heldout_mse"] == 2.0 and last["heldout_mse"] == 1.0
+    assert last["stop"].startswith("undone") and last["undone_heldout_mse"] == 2.0 and last["heldout_mse"] == 1.0
     assert [r["heldout_mse"] for r in out.rounds] == [1.0, 1.0]
 
 

@@ -28,7 +28,7 @@ def test_each_measured_system_holds_out_whole_trajectories_with_time_on_both_spl
         for index in test.in_time_order():  # time runs forward within each recording
             assert np.all(np.diff(test.time[index]) > 0)
         # a time shift is among the laws the residual loop offers on it
-        assert "time_shift" in {t.name for t in Sensor.exact(train).candidates(train)}
+        assert "time_shift" in {t.name for t in Sensor.exact(train).terms(train)}
     default, swapped = SYSTEMS[name](split="default"), SYSTEMS[name](split="swapped")
     assert default.measured.parts("default")["train"] == swapped.measured.parts("swapped")["test"]
 
