@@ -281,7 +281,7 @@ def page(result: dict) -> str:
               ""] + _rows(result["table"])
     if result.get("real"):
         lines += ["", "## The shipped real arm", "",
-                  "`bench select` at its default (180 s a candidate, `--folds auto`) on each split of the KUKA, "
+                  "`bench select` at its default (each candidate its own steps, `--folds auto`) on each split of the KUKA, "
                   "read from the pages it wrote (`source`); they are not rerun here.", ""] + _rows(result["real"])
     return "\n".join(lines) + "\n"
 
