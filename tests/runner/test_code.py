@@ -7,7 +7,7 @@ from bench.runner.code import code_files
 
 def test_a_method_that_is_a_package_is_hashed_with_every_module_of_it():
     files = code_files("syrenets", "double_pendulum")
-    for module in ("config", "candidates", "network", "training", "multistart", "equations", "method"):
+    for module in ("config", "layer_terms", "network", "training", "multistart", "equations", "method"):
         assert f"methods/syrenets/{module}.py" in files
     assert {"methods/base.py", "methods/torch_method.py", "systems/double_pendulum.py"} <= set(files)
 
