@@ -171,7 +171,7 @@ def residuals(root: Path) -> str:
 
 def _loop(root: Path, stem: str, split: str) -> dict | None:
     path = Path(root) / LOOPS_DIR / f"{stem}_{split}.json"
-    return residual_fields(read_record(path)) if path.is_file() else None
+    return residual_fields(read_record(path), path) if path.is_file() else None
 
 
 def holds_out(result: dict) -> str:

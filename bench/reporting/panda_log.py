@@ -22,7 +22,8 @@ DRAWS = ((0, "cutoff_60hz.json"), (10, "seed_10_60hz.json"), (20, "seed_20_60hz.
 
 
 def _read(root: Path, name: str) -> dict:
-    return residual_fields(read_record(Path(root) / FOLDER / name))
+    path = Path(root) / FOLDER / name
+    return residual_fields(read_record(path), path)
 
 
 def _laws(result: dict) -> dict[int, dict[str, tuple[str, float, float]]]:

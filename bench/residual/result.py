@@ -118,7 +118,7 @@ class ResidualResult(Provenanced):
     def from_json(cls, obj: dict, source: str = "the residual loop's result") -> "ResidualResult":
         """The result in a record's JSON (or in the loop's JSON as it was written before it was a record);
         :class:`~bench.runner.records.RecordError` naming ``source`` otherwise."""
-        fields = residual_fields(Record.from_json(obj, source))
+        fields = residual_fields(Record.from_json(obj, source), source)
         if isinstance(fields.get("rounds"), list):
             fields["rounds"] = [renamed(r) for r in fields["rounds"]]
         return cls(**fields)

@@ -256,11 +256,13 @@ def residual_record(loop: dict) -> Record:
                   details={k: v for k, v in loop.items() if k not in RESIDUAL_OWN}, **own)
 
 
-def residual_fields(record: Record) -> dict:
+def residual_fields(record: Record, source: str | os.PathLike | None = None) -> dict:
     """The residual loop's results in ``record`` (kind ``residual``), by the loop's names: the inverse of
-    :func:`residual_record`."""
+    :func:`residual_record`; a record of another kind is refused in one line naming ``source`` (the file it was
+    read from), else its run id."""
     if record.kind != "residual":
-        raise RecordError(f"record {record.run_id}: a record of a {record.kind}, not of the residual loop")
+        where = str(source) if source is not None else f"record {record.run_id}"
+        raise RecordError(f"{where}: a record of a {record.kind}, not of the residual loop")
     return {**record.details, **{name: getattr(record, field) for name, field in RESIDUAL_OWN.items()}}
 
 

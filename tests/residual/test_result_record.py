@@ -61,6 +61,11 @@ def test_a_record_of_a_run_is_not_read_as_the_loops(tmp_path):
     record = result().to_record().replace(kind="run")
     with pytest.raises(RecordError, match="not of the residual loop"):
         residual_fields(record)
+    write_record(tmp_path / "run.json", record)
+    with pytest.raises(RecordError, match=r"^\S*run\.json: a record of a run, not of the residual loop$"):
+        residual_fields(read_record(tmp_path / "run.json"), tmp_path / "run.json")
+    with pytest.raises(RecordError, match="run.json: a record of a run"):
+        ResidualResult.from_json(record.to_json(), str(tmp_path / "run.json"))
     with pytest.raises(RecordError, match="field kind must be one of run, residual"):
         write_record(tmp_path / "x.json", record.replace(kind="study")) or read_record(tmp_path / "x.json")
 
