@@ -11,6 +11,9 @@ samples by how far they are from what the model saw
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -23,6 +26,14 @@ THINNED_ABOVE = 20000
 KEPT = 5000
 #: ... where no state lies farther than this from the nearest kept one (else the plain tree)
 REACH_MAX = 0.5
+#: the indexes a process keeps (:meth:`NearestStates.of`), and the queries each keeps the answers to
+KEPT_INDEXES, KEPT_QUERIES = 6, 8
+
+
+def digest(states: np.ndarray) -> tuple:
+    """What identifies an array of states: its shape and a hash of its bytes."""
+    states = np.ascontiguousarray(states, dtype=np.float64)
+    return states.shape, hashlib.blake2b(memoryview(states).cast("B"), digest_size=16).digest()
 
 
 class NearestStates:
@@ -40,10 +51,36 @@ class NearestStates:
     states of a 7-joint arm (``make benchmark``, group ``gate-query``). Where
     the states are not samples of smooth motion (a state farther than
     :data:`REACH_MAX` from every kept one), the balls would hold most states,
-    and the plain tree is used."""
+    and the plain tree is used.
+
+    :meth:`of` gives the index of states a process has indexed before, and an
+    index answers a query it was asked before from what it measured then. A
+    tuned hybrid's fold fits (:mod:`bench.evaluation.tuning`) are gated by
+    their fold's training states and scored on its held-out states, one fit
+    for each combination and rung, so the same index and the same queries
+    recur; held-out trajectories lie far from the fitted states, where the
+    balls hold many states and a query is slow."""
+
+    #: the indexes built in this process, by their states' :func:`digest`, the last used last
+    _built: "OrderedDict[tuple, NearestStates]" = OrderedDict()
+
+    @classmethod
+    def of(cls, states: np.ndarray) -> "NearestStates":
+        """The index of ``states``: the one built before in this process for the same states (at most
+        :data:`KEPT_INDEXES` are kept), else a new one."""
+        states = np.ascontiguousarray(states, dtype=np.float64)
+        key = digest(states)
+        index = cls._built.get(key)
+        if index is None:
+            index = cls._built[key] = cls(states)
+            while len(cls._built) > KEPT_INDEXES:
+                cls._built.popitem(last=False)
+        cls._built.move_to_end(key)
+        return index
 
     def __init__(self, states: np.ndarray):
         self.states = np.ascontiguousarray(states, dtype=np.float64)
+        self._answers: OrderedDict[tuple, np.ndarray] = OrderedDict()
         n = len(self.states)
         self.coarse: cKDTree | None = None
         if n > THINNED_ABOVE:
@@ -57,10 +94,21 @@ class NearestStates:
         self.tree = cKDTree(self.states) if self.coarse is None else None
 
     def query(self, x: np.ndarray) -> np.ndarray:
-        """The distances, shape ``(len(x),)``."""
-        x = np.asarray(x, dtype=np.float64)
+        """The distances, shape ``(len(x),)``; the answer to a query asked before (the last
+        :data:`KEPT_QUERIES`) is given again, not measured."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
         if not len(x):
             return np.zeros(0)
+        key = digest(x)
+        if key not in self._answers:
+            self._answers[key] = self._measure(x)
+            self._answers[key].setflags(write=False)
+            while len(self._answers) > KEPT_QUERIES:
+                self._answers.popitem(last=False)
+        self._answers.move_to_end(key)
+        return self._answers[key]
+
+    def _measure(self, x: np.ndarray) -> np.ndarray:
         if self.coarse is None:
             return np.asarray(self.tree.query(x)[0], dtype=np.float64)
         d, _ = self.coarse.query(x)
@@ -79,14 +127,14 @@ class TrainingStates:
     def __init__(self, train: Dataset):
         states = np.hstack([train.q, train.qd])
         self.scale = np.maximum(states.std(axis=0), 1e-12)
-        self.index = NearestStates(states / self.scale)
+        self.index = NearestStates.of(states / self.scale)
 
     @classmethod
     def scaled(cls, states: np.ndarray, scale: np.ndarray) -> "TrainingStates":
         """The training states already divided by their ``scale`` (as a saved model holds them)."""
         out = cls.__new__(cls)
         out.scale = np.asarray(scale, dtype=np.float64)
-        out.index = NearestStates(states)
+        out.index = NearestStates.of(states)
         return out
 
     @property

@@ -99,3 +99,30 @@ def test_states_that_are_not_smooth_motion_use_the_plain_tree(monkeypatch):
     asked = rng.normal(size=(50, 6))
     np.testing.assert_array_equal(scattered.query(asked), cKDTree(scattered.states).query(asked)[0])
     assert NearestStates(_motion(rng, 3000, 3, 2)).coarse is not None
+
+
+def test_an_index_and_its_answers_are_built_once_a_process_for_the_same_states(monkeypatch):
+    """A tuned hybrid's fold fits share their fold's states: the same training states give the same index, and
+    the same query its answer again, measured once; other states, or a query changed in one number, do not."""
+    rng = np.random.default_rng(3)
+    train, asked = rng.normal(size=(400, 4)), rng.normal(size=(60, 4)) * 3
+    measured = []
+    real = NearestStates._measure
+    monkeypatch.setattr(NearestStates, "_measure", lambda self, x: measured.append(len(x)) or real(self, x))
+    first, again = TrainingStates(_data(train, 2)), TrainingStates(_data(train.copy(), 2))
+    assert again.index is first.index
+    d1, d2 = first.distance(_data(asked, 2)), again.distance(_data(asked.copy(), 2))
+    np.testing.assert_array_equal(d1, cKDTree(first.states).query(asked / first.scale)[0])
+    np.testing.assert_array_equal(d1, d2)
+    assert measured == [60]
+    moved = asked.copy()
+    moved[7, 1] += 1e-9
+    first.distance(_data(moved, 2))
+    assert measured == [60, 60]
+    other = train.copy()
+    other[0, 0] += 1.0
+    assert TrainingStates(_data(other, 2)).index is not first.index
+    for k in range(distance.KEPT_INDEXES + 1):  # at most KEPT_INDEXES are kept
+        NearestStates.of(rng.normal(size=(50, 4)) + k)
+    assert len(NearestStates._built) == distance.KEPT_INDEXES
+    assert NearestStates.of(first.states) is not first.index  # pushed out, built again
