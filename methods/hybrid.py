@@ -176,7 +176,7 @@ class Hybrid(Method):
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         self.prior = identified_prior(self.prior_name, train, self.system, self.seed)
-        self._residual_data = train.replace(tau=train.tau - self.prior.predict_torque(train))
+        self._residual_data = train.replace(tau=train.tau - prior_torque(self.prior, train))
         self.gate = None if self.residual.falls_back_to_zero else TrainingStates(train)
         # the residual starts as a fit of its own would (its seed, its one-time work), on the hybrid's clock
         self.residual.begin_fit(self._residual_data, INDIRECT, self.seed, self.budget, system=self.system)
@@ -208,7 +208,7 @@ class Hybrid(Method):
         return self.weight(data)[:, None] * self.residual.predict_torque(data)
 
     def predict_torque(self, data: Dataset) -> np.ndarray:
-        return self.prior.predict_torque(data) + self.residual_torque(data)
+        return prior_torque(self.prior, data) + self.residual_torque(data)
 
     def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The prior's ``M`` and ``c`` plus the residual's, weighted: the gate's
@@ -266,7 +266,7 @@ def identified_prior(prior: str, train: Dataset, system: System | None, seed: in
     are kept and reused (a tuned hybrid fits every combination on the same
     folds, each fold's prior identified before the search)."""
     entry = PRIORS[prior]
-    key = (prior, None if system is None else system.name, seed, fingerprint(train))
+    key = (prior, None if system is None else system.name, seed, fingerprint(train, STATES + ("tau",)))
     if key in _priors:
         _priors.move_to_end(key)
         return _priors[key]
@@ -277,12 +277,38 @@ def identified_prior(prior: str, train: Dataset, system: System | None, seed: in
     return fitted
 
 
-def fingerprint(data: Dataset) -> str:
-    """A digest of ``data``'s samples."""
+#: what a model's torque may read of a data set: every array but the torque itself
+STATES = ("q", "qd", "qdd", "sign_qd", "recording", "trajectory", "time")
+
+
+def fingerprint(data: Dataset, arrays: tuple[str, ...] = ("q", "qd", "qdd", "tau")) -> str:
+    """A digest of ``data``'s samples (of those of its ``arrays`` it has)."""
     digest = hashlib.sha1()
-    for array in (data.q, data.qd, data.qdd, data.tau):
-        digest.update(np.ascontiguousarray(array).tobytes())
+    for name in arrays:
+        array = getattr(data, name)
+        if array is not None:
+            digest.update(name.encode() + np.ascontiguousarray(array).tobytes())
     return digest.hexdigest()
+
+
+_torques: "OrderedDict[tuple, tuple[FittedModel, np.ndarray]]" = OrderedDict()
+
+
+def prior_torque(prior: FittedModel, data: Dataset) -> np.ndarray:
+    """``prior``'s torque at ``data``'s states, the last :data:`PRIOR_CACHE` kept and given again: a tuned
+    hybrid's fold fits share their fold's prior (:func:`identified_prior`) and subtract it from the same
+    training samples and add it on the same held-out samples, once for each combination and rung."""
+    key = (id(prior), fingerprint(data, STATES))
+    kept = _torques.get(key)
+    if kept is not None and kept[0] is prior:
+        _torques.move_to_end(key)
+        return kept[1]
+    torque = np.asarray(prior.predict_torque(data))
+    torque.setflags(write=False)
+    _torques[key] = (prior, torque)  # the prior itself is kept, so that its id is not another's
+    while len(_torques) > PRIOR_CACHE:
+        _torques.popitem(last=False)
+    return torque
 
 
 def prior_unavailable(prior: str, system: System) -> str:

@@ -127,3 +127,27 @@ def test_a_hybrids_mass_matrix_and_bias_are_its_torques_and_a_residual_of_the_st
     np.testing.assert_allclose(c, c_torques, rtol=1e-9, atol=1e-9)
     per_state = 1 if name != "standard+mlp" else system.dof + 1  # the MLP's torque takes accelerations
     assert asked[0] == per_state * len(q)
+
+
+def test_two_fits_on_the_same_samples_share_their_priors_torques_and_give_the_same_numbers(panda, monkeypatch):
+    """As a tuned hybrid's fold fits do, one for each combination: the prior is identified once and its torque at
+    the training and at the held-out states computed once; other samples are computed afresh."""
+    from methods import hybrid as hybrid_module
+
+    system, train, test = panda
+    train = train.subset(slice(0, 256))
+    hybrid_module._torques.clear()
+    first = METHODS["standard+mlp"](**SMALL_MLP).fit(train, "indirect", seed=0, budget=Budget(steps=3), system=system)
+    asked = []
+    real = type(first.prior).predict_torque
+    monkeypatch.setattr(type(first.prior), "predict_torque", lambda self, data: asked.append(len(data)) or real(self, data))
+    first_test = first.predict_torque(test)
+    second = METHODS["standard+mlp"](**{**SMALL_MLP, "lr": 3e-4}).fit(train, "indirect", seed=0, budget=Budget(steps=3),
+                                                                      system=system)
+    assert second.prior is first.prior and asked == [len(test)]  # the training samples' torque was kept
+    second.predict_torque(test)
+    assert asked == [len(test)]
+    np.testing.assert_array_equal(first.prior.predict_torque(test), hybrid_module.prior_torque(first.prior, test))
+    second.predict_torque(test.subset(slice(0, 50)))
+    assert asked == [len(test), len(test), 50]
+    assert np.isfinite(first_test).all()
