@@ -7,7 +7,7 @@ import argparse
 
 from pathlib import Path
 
-from bench.cli.options import STEPS_HELP, UsageError, add_plugin, add_split, check_names, check_split, load_plugins
+from bench.cli.options import UsageError, add_plugin, add_split, check_names, check_split, load_plugins
 from bench.core.arguments import add_workers, csv_list, positive, positive_int, seed
 from bench.core.csv_format import read_csv
 from bench.core.protocols import NAMES
@@ -29,8 +29,9 @@ def add_arguments(p) -> None:
     p.add_argument("--out", type=Path, required=True,
                    help="output folder: select.md, select.json, model.npz, and the candidates' runs (a rerun resumes)")
     p.add_argument("--steps", type=positive_int, default=None,
-                   help=STEPS_HELP.replace("each run", "every candidate") + " (default: each candidate's own steps, "
-                        "the same on any machine: the page's work column)")
+                   help="give every candidate N steps of its method's work (gradient steps, GP steps, solves, the "
+                        "loop's rounds) instead of its own (default: each candidate's own steps, the page's work "
+                        "column); either way the same numbers on any machine")
     p.add_argument("--budget", type=positive, default=SELECT_CEILING_S, metavar="SECONDS",
                    help="a candidate still running after SECONDS is killed and recorded as timeout "
                         f"(default {SELECT_CEILING_S:g}); a ceiling only, the candidates' work being steps")
