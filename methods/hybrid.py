@@ -40,8 +40,6 @@ How the field learns a real arm (Nguyen-Tuong & Peters, ICRA 2010; Reuss et al.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Annotated, Callable, ClassVar
 
@@ -51,6 +49,7 @@ from bench.core.experiment import INDIRECT
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
+from bench.core.kept import Kept, digest
 from bench.core.modelfile import Unpacker, build, loader
 from bench.physics.models import FittedModel
 from bench.core.names import MethodName, MethodNameError
@@ -257,7 +256,7 @@ def _load(tree: dict, unpacker: Unpacker, context: dict) -> Hybrid:
     return method
 
 
-_priors: "OrderedDict[tuple, Method]" = OrderedDict()
+_priors = Kept(PRIOR_CACHE)
 
 
 def identified_prior(prior: str, train: Dataset, system: System | None, seed: int) -> FittedModel:
@@ -265,50 +264,32 @@ def identified_prior(prior: str, train: Dataset, system: System | None, seed: in
     the same fit for the same samples and seed, so the last :data:`PRIOR_CACHE`
     are kept and reused (a tuned hybrid fits every combination on the same
     folds, each fold's prior identified before the search)."""
-    entry = PRIORS[prior]
     key = (prior, None if system is None else system.name, seed, fingerprint(train, STATES + ("tau",)))
-    if key in _priors:
-        _priors.move_to_end(key)
-        return _priors[key]
-    fitted = entry.identify(train, system, seed)
-    _priors[key] = fitted
-    while len(_priors) > PRIOR_CACHE:
-        _priors.popitem(last=False)
-    return fitted
+    return _priors.get(key, lambda: PRIORS[prior].identify(train, system, seed))
 
 
 #: what a model's torque may read of a data set: every array but the torque itself
 STATES = ("q", "qd", "qdd", "sign_qd", "recording", "trajectory", "time")
 
 
-def fingerprint(data: Dataset, arrays: tuple[str, ...] = ("q", "qd", "qdd", "tau")) -> str:
-    """A digest of ``data``'s samples (of those of its ``arrays`` it has)."""
-    digest = hashlib.sha1()
-    for name in arrays:
-        array = getattr(data, name)
-        if array is not None:
-            digest.update(name.encode() + np.ascontiguousarray(array).tobytes())
-    return digest.hexdigest()
+def fingerprint(data: Dataset, arrays: tuple[str, ...]) -> tuple:
+    """What identifies ``data``'s ``arrays`` (:func:`~bench.core.kept.digest`; an array it lacks counts as such)."""
+    return digest(*(getattr(data, name) for name in arrays))
 
 
-_torques: "OrderedDict[tuple, tuple[FittedModel, np.ndarray]]" = OrderedDict()
+#: a prior's torques, each beside the prior, so that the prior's id in the key stays its own while kept
+_torques = Kept(PRIOR_CACHE)
 
 
 def prior_torque(prior: FittedModel, data: Dataset) -> np.ndarray:
     """``prior``'s torque at ``data``'s states, the last :data:`PRIOR_CACHE` kept and given again: a tuned
     hybrid's fold fits share their fold's prior (:func:`identified_prior`) and subtract it from the same
     training samples and add it on the same held-out samples, once for each combination and rung."""
-    key = (id(prior), fingerprint(data, STATES))
-    kept = _torques.get(key)
-    if kept is not None and kept[0] is prior:
-        _torques.move_to_end(key)
-        return kept[1]
-    torque = np.asarray(prior.predict_torque(data))
-    torque.setflags(write=False)
-    _torques[key] = (prior, torque)  # the prior itself is kept, so that its id is not another's
-    while len(_torques) > PRIOR_CACHE:
-        _torques.popitem(last=False)
-    return torque
+    def make():
+        torque = np.array(prior.predict_torque(data))
+        torque.setflags(write=False)
+        return prior, torque
+    return _torques.get((id(prior), fingerprint(data, STATES)), make)[1]
 
 
 def prior_unavailable(prior: str, system: System) -> str:

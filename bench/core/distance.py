@@ -11,13 +11,11 @@ samples by how far they are from what the model saw
 
 from __future__ import annotations
 
-import hashlib
-from collections import OrderedDict
-
 import numpy as np
 from scipy.spatial import cKDTree
 
 from bench.core.data import Dataset
+from bench.core.kept import Kept, digest
 
 
 #: a log of more states than this is searched through a coarse tree of about :data:`KEPT` of them first
@@ -28,12 +26,6 @@ KEPT = 5000
 REACH_MAX = 0.5
 #: the indexes a process keeps (:meth:`NearestStates.of`), and the queries each keeps the answers to
 KEPT_INDEXES, KEPT_QUERIES = 6, 8
-
-
-def digest(states: np.ndarray) -> tuple:
-    """What identifies an array of states: its shape and a hash of its bytes."""
-    states = np.ascontiguousarray(states, dtype=np.float64)
-    return states.shape, hashlib.blake2b(memoryview(states).cast("B"), digest_size=16).digest()
 
 
 class NearestStates:
@@ -61,26 +53,19 @@ class NearestStates:
     recur; held-out trajectories lie far from the fitted states, where the
     balls hold many states and a query is slow."""
 
-    #: the indexes built in this process, by their states' :func:`digest`, the last used last
-    _built: "OrderedDict[tuple, NearestStates]" = OrderedDict()
+    #: the indexes built in this process, by their states' :func:`~bench.core.kept.digest`
+    _built = Kept(KEPT_INDEXES)
 
     @classmethod
     def of(cls, states: np.ndarray) -> "NearestStates":
         """The index of ``states``: the one built before in this process for the same states (at most
         :data:`KEPT_INDEXES` are kept), else a new one."""
         states = np.ascontiguousarray(states, dtype=np.float64)
-        key = digest(states)
-        index = cls._built.get(key)
-        if index is None:
-            index = cls._built[key] = cls(states)
-            while len(cls._built) > KEPT_INDEXES:
-                cls._built.popitem(last=False)
-        cls._built.move_to_end(key)
-        return index
+        return cls._built.get(digest(states), lambda: cls(states))
 
     def __init__(self, states: np.ndarray):
         self.states = np.ascontiguousarray(states, dtype=np.float64)
-        self._answers: OrderedDict[tuple, np.ndarray] = OrderedDict()
+        self._answers = Kept(KEPT_QUERIES)
         n = len(self.states)
         self.coarse: cKDTree | None = None
         if n > THINNED_ABOVE:
@@ -99,14 +84,7 @@ class NearestStates:
         x = np.ascontiguousarray(x, dtype=np.float64)
         if not len(x):
             return np.zeros(0)
-        key = digest(x)
-        if key not in self._answers:
-            self._answers[key] = self._measure(x)
-            self._answers[key].setflags(write=False)
-            while len(self._answers) > KEPT_QUERIES:
-                self._answers.popitem(last=False)
-        self._answers.move_to_end(key)
-        return self._answers[key]
+        return self._answers.get(digest(x), lambda: _read_only(self._measure(x)))
 
     def _measure(self, x: np.ndarray) -> np.ndarray:
         if self.coarse is None:
@@ -119,6 +97,11 @@ class NearestStates:
         per_query = np.add.reduceat(owned, np.cumsum([0] + [len(b) for b in balls[:-1]]))
         diff = self.states[rows] - np.repeat(x, per_query, axis=0)
         return np.sqrt(np.minimum.reduceat(np.einsum("ij,ij->i", diff, diff), np.cumsum(per_query) - per_query))
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
 
 
 class TrainingStates:
