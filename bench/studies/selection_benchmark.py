@@ -282,7 +282,10 @@ def page(result: dict) -> str:
     if result.get("real"):
         lines += ["", "## The shipped real arm", "",
                   "`bench select` at its default (each candidate its own steps, `--folds auto`) on each split of the KUKA, "
-                  "read from the pages it wrote (`source`); they are not rerun here.", ""] + _rows(result["real"])
+                  "read from the pages it wrote (`source`); they are not rerun here."
+                  + (f" Read again by `{result['real_command']}`, at commit {result['real_commit']}; the cases above "
+                     "are as their own command made them." if result.get("real_command") else ""), ""]
+        lines += _rows(result["real"])
     return "\n".join(lines) + "\n"
 
 
@@ -316,9 +319,34 @@ def add_arguments(parser) -> None:
     add_workers(parser, "candidates")
     parser.add_argument("--out", type=Path, default=Path("results/selection/benchmark.md"),
                         help="the page (default results/selection/benchmark.md); the cases' runs go beside it")
+    parser.add_argument("--real-only", action="store_true",
+                        help="read the shipped real arm's select pages again into the page already at --out, "
+                             "keeping its cases' rows as they were made (their runs are not redone)")
+
+
+def real_rows() -> list[dict]:
+    """The shipped real cases' rows, scored from the ``select.json`` each split's ``bench select`` wrote."""
+    pages = {name: (path, json.loads(Path(path).read_text())) for name, path in REAL.items() if Path(path).exists()}
+    return [{"case": name, "protocol": "auto", "folds": page.get("folds_protocol"), "source": path,
+             "scores": scores(page)} for name, (path, page) in pages.items()]
+
+
+def _publish(out: Path, result: dict) -> None:
+    write_json(out.with_suffix(".json"), result)
+    text = page(result)
+    atomic_write(out, lambda f: f.write(text))
+    print(f"wrote {out}")
 
 
 def main(args) -> int:
+    if args.real_only:
+        made = args.out.with_suffix(".json")
+        if not made.exists():
+            raise SystemExit(f"{made}: no page to read the real arm into; run the study without --real-only first")
+        result = json.loads(made.read_text())
+        result.update(real=real_rows(), real_command=args.invocation, real_commit=provenance().get("commit"))
+        _publish(args.out, result)
+        return 0
     chosen = [c for c in cases(args.set) if not args.cases or c.name.startswith(tuple(args.cases))]
     root = args.out.parent / f"cases_{args.set}"
     table = []
@@ -336,14 +364,8 @@ def main(args) -> int:
             print(f"[{i + 1}/{len(chosen)}] {case.name} {protocol} ({folds}): " +
                   (s.get("error") or ", ".join(f"{r} chose {v['chosen']} (regret {v['regret']:.3g})"
                                                for r, v in s["rules"].items())), flush=True)
-    pages = {name: (path, json.loads(Path(path).read_text())) for name, path in REAL.items() if Path(path).exists()}
-    real = [{"case": name, "protocol": "auto", "folds": page.get("folds_protocol"), "source": path,
-             "scores": scores(page)} for name, (path, page) in pages.items()]
     result = {"command": args.invocation, "commit": provenance().get("commit"), "set": args.set,
               "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
-              "table": table, "summary": summary(table), "real": real}
-    write_json(args.out.with_suffix(".json"), result)
-    text = page(result)
-    atomic_write(args.out, lambda f: f.write(text))
-    print(f"wrote {args.out}")
+              "table": table, "summary": summary(table), "real": real_rows()}
+    _publish(args.out, result)
     return 0

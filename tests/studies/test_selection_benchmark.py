@@ -57,3 +57,29 @@ def test_select_default_folds_are_regions_of_one_trajectory_and_whole_trajectori
     assert sb.resolve("auto", "one") == "regions" and sb.resolve("auto", "several") == "time"
     assert sb.resolve("knndm", "one") is None and sb.resolve("knndm", "several") == "knndm"
     assert sb.resolve("time", "one") == "time"
+
+
+def test_real_only_reads_the_real_arms_pages_again_and_keeps_the_cases_rows(tmp_path, monkeypatch):
+    import json
+    from types import SimpleNamespace
+
+    select = tmp_path / "select.json"
+    select.write_text(json.dumps({"folds_protocol": "regions",
+                                  "candidates": [_entry("standard", 0.5, 0.8), _entry("loop", 0.6, 0.4)]}))
+    monkeypatch.setattr(sb, "REAL", {"an arm": str(select)})
+    out = tmp_path / "benchmark.md"
+    args = SimpleNamespace(real_only=True, out=out, invocation="python -m bench study selection --real-only")
+    with pytest.raises(SystemExit, match="benchmark.json: no page"):
+        sb.main(args)
+    cases = [{"case": "a", "protocol": "time", "scores": sb.scores({"candidates": [_entry("standard", 0.5, 0.6)]})}]
+    made = {"command": "the cases' command", "commit": "c0", "set": "evaluation", "cases": ["a"], "candidates": ["x"],
+            "steps": 20, "table": cases, "summary": sb.summary(cases), "real": []}
+    out.with_suffix(".json").write_text(json.dumps(made))
+    assert sb.main(args) == 0
+    result = json.loads(out.with_suffix(".json").read_text())
+    assert result["table"] == cases and result["command"] == "the cases' command" and result["commit"] == "c0"
+    (row,) = result["real"]
+    assert row["case"] == "an arm" and row["scores"]["rules"]["lowest"] == {"chosen": "standard", "regret": 2.0}
+    text = out.read_text()
+    assert "Command: `the cases' command`, at commit c0" in text
+    assert "Read again by `python -m bench study selection --real-only`" in text and "standard (2.000)" in text
