@@ -255,7 +255,23 @@ def summary(table: list[dict]) -> list[dict]:
     return rows
 
 
+#: what each rule chooses, as a page says it
+RULE_TEXT = {"lowest": "the lowest validation MSE (select's)",
+             "one_se": "the first candidate, in the order " + " → ".join(SIMPLICITY) + ", whose validation MSE is "
+                       "within one standard error (over the folds) of the lowest",
+             "farther": "the lowest validation MSE on the farther half of each fold's scored samples (those at least "
+                        "the fold's median distance from the states it is fitted on)"}
+
+
+def _rules(result: dict) -> list[str]:
+    """The rules any of the page's rows was scored by, in :data:`RULES`' order (rows made before a rule existed
+    lack it, and show a dash)."""
+    had = {r for t in result["table"] + result.get("real", []) for r in t["scores"].get("rules", {})}
+    return [r for r in RULES if r in had] or list(RULES)
+
+
 def page(result: dict) -> str:
+    rules = _rules(result)
     lines = ["# How well each way of choosing a model chooses", "",
              f"Command: `{result['command']}`" + (f", at commit {result['commit']}" if result.get("commit") else ""), "",
              f"Set: {result['set']}; {len(result['cases'])} cases; candidates {', '.join(result['candidates'])}; "
@@ -267,37 +283,34 @@ def page(result: dict) -> str:
              f"another {FASTER:g} times as fast; `several`: {SEVERAL} training trajectories, tested on another. "
              f"Protocols: `time` spans in time of one trajectory, whole trajectories of several (select's folds "
              "before it had others); `auto` select's default (regions of the states on one trajectory, whole "
-             "trajectories on several). Rules: `lowest` the lowest validation MSE (select's); `farther` the lowest "
-             "validation MSE on the farther half of each fold's scored samples (those at least the fold's median "
-             "distance from the states it is fitted on); `one_se` the "
-             "first candidate, in the order " + " → ".join(SIMPLICITY) + ", whose validation MSE is within one "
-             "standard error (over the folds) of the lowest.", "",
+             "trajectories on several). Rules: " + "; ".join(f"`{r}` {RULE_TEXT[r]}" for r in rules) + ".", "",
              "| protocol | rule | cases | median regret | worst regret | chose the best |", "|---|---|---:|---:|---:|---:|"]
     for r in result["summary"]:
         lines.append(f"| {r['protocol']} | {r['rule']} | {r['cases']} | {r['median_regret']:.3f} | "
                      f"{r['worst_regret']:.3f} | {r['best_chosen']} of {r['cases']} |")
     lines += ["", "Each case under each protocol: the candidate each rule chose (its regret). `auto` is select's "
               "default, which is `regions` on one trajectory and `time` (whole trajectories) on several: the same run.",
-              ""] + _rows(result["table"])
+              ""] + _rows(result["table"], rules)
     if result.get("real"):
         lines += ["", "## The shipped real arm", "",
                   "`bench select` at its default (each candidate its own steps, `--folds auto`) on each split of the KUKA, "
                   "read from the pages it wrote (`source`); they are not rerun here."
                   + (f" Read again by `{result['real_command']}`, at commit {result['real_commit']}; the cases above "
                      "are as their own command made them." if result.get("real_command") else ""), ""]
-        lines += _rows(result["real"])
+        lines += _rows(result["real"], rules)
     return "\n".join(lines) + "\n"
 
 
-def _rows(table: list[dict]) -> list[str]:
-    lines = ["| case | protocol (folds) | best on the test | " + " | ".join(RULES) + " | Spearman (validation, test) |",
-             "|---|---|---|" + "---|" * len(RULES) + "---:|"]
+def _rows(table: list[dict], rules: list[str]) -> list[str]:
+    lines = ["| case | protocol (folds) | best on the test | " + " | ".join(rules) + " | Spearman (validation, test) |",
+             "|---|---|---|" + "---|" * len(rules) + "---:|"]
     for t in table:
         s, protocol = t["scores"], f"{t['protocol']} ({t.get('folds') or t['protocol']})"
         if "rules" not in s:
-            lines.append(f"| {t['case']} | {protocol} | failed: {s['error']} |" + " |" * (len(RULES) + 1))
+            lines.append(f"| {t['case']} | {protocol} | failed: {s['error']} |" + " |" * (len(rules) + 1))
             continue
-        cells = [f"{s['rules'][r]['chosen']} ({s['rules'][r]['regret']:.3f})" for r in RULES]
+        cells = [f"{s['rules'][r]['chosen']} ({s['rules'][r]['regret']:.3f})" if r in s["rules"] else "—"
+                 for r in rules]
         rho = "—" if s["spearman"] is None else f"{s['spearman']:.2f}"
         lines.append(f"| {t['case']} | {protocol} | {s['best']} | " + " | ".join(cells) + f" | {rho} |")
     return lines
