@@ -16,7 +16,11 @@ On each case ``bench select`` runs once per validation protocol
 ``auto``, its default, :func:`resolve`; ``regions``; and ``knndm`` where the
 training data hold several trajectories), under a work budget (``--steps``),
 so that the study gives the same numbers on any machine; a protocol that
-gives a case the folds of another shares its run. Each run's
+gives a case the folds of another shares its run. Each run is a job of the
+one scheduler (:class:`SelectCase`): the cases run one after another, each
+``bench select`` its candidates ``--workers`` at a time, or each case a task
+of a Dask ``--cluster``; each is kept as it finishes (``PAGE.partial.jsonl``),
+and the same command run again resumes from them. Each run's
 candidates are then chosen by each rule (:data:`RULES`):
 
 * ``lowest``: the lowest validation MSE (``bench select``'s);
@@ -39,7 +43,9 @@ per seed) is run once a rule is fixed, and no test reads it.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 import subprocess
 import sys
 import zlib
@@ -53,7 +59,10 @@ from bench.core.arguments import positive_int, add_workers
 from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
 from bench.core.fileio import atomic_write, write_json
+from bench.runner.job import CaseJob, run_jobs
+from bench.runner.ledger import Ledger
 from bench.runner.plugins import register_by_file
+from bench.runner.progress import print_now
 from bench.runner.provenance import provenance
 from bench.tools import select as selection
 from bench.tools.robot_log import simulate
@@ -208,6 +217,37 @@ def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tu
     return json.loads(result.read_text())
 
 
+@dataclass(frozen=True)
+class SelectCase(CaseJob):
+    """One case under one fold protocol, as a job of the one scheduler (:func:`~bench.runner.job.run_jobs`):
+    ``bench select`` on it (:func:`run_case`), ``workers`` candidates at a time, in ``where``; its result is
+    the case's :func:`scores`. Bounded by work (``steps``), so it has no limit of its own: each candidate has
+    select's ceiling."""
+
+    arm: str
+    layout: str
+    effects: str
+    seed: int
+    folds: str
+    steps: int
+    candidates: tuple[str, ...]
+    workers: int
+    where: str
+
+    def folder(self) -> Path:
+        return Path(self.where)
+
+    def run_limit(self) -> float:
+        return math.inf
+
+    def compute(self) -> dict:
+        case = Case(self.arm, self.layout, self.effects, self.seed)
+        return scores(run_case(case, Path(self.where), self.folds, self.steps, self.candidates, self.workers))
+
+    def elsewhere(self, scratch: Path) -> "SelectCase":
+        return dataclasses.replace(self, where=str(scratch / Path(self.where).name))
+
+
 def choose(entries: list[dict], rule: str) -> dict | None:
     """The candidate ``rule`` chooses among those ``bench select`` may choose (:func:`bench.tools.select.usable`);
     ``lowest`` is ``bench select``'s own choice; ``farther`` falls back on it where no candidate has a figure on
@@ -337,6 +377,12 @@ def add_arguments(parser) -> None:
                              "keeping its cases' rows as they were made (their runs are not redone)")
 
 
+def _said(s: dict) -> str:
+    """A finished case in one line: what each rule chose, and its regret."""
+    return s.get("error") or ", ".join(f"{r} chose {v['chosen']} (regret {v['regret']:.3g})"
+                                       for r, v in s["rules"].items())
+
+
 def real_rows() -> list[dict]:
     """The shipped real cases' rows, scored from the ``select.json`` each split's ``bench select`` wrote."""
     pages = {name: (path, json.loads(Path(path).read_text())) for name, path in REAL.items() if Path(path).exists()}
@@ -362,23 +408,20 @@ def main(args) -> int:
         return 0
     chosen = [c for c in cases(args.set) if not args.cases or c.name.startswith(tuple(args.cases))]
     root = args.out.parent / f"cases_{args.set}"
-    table = []
-    for i, case in enumerate(chosen):
-        done = {}  # each folds' run once a case: auto is one of the others
-        for protocol in args.protocols:
-            folds = resolve(protocol, case.layout)
-            if folds is None:
-                continue
-            if folds not in done:
-                done[folds] = scores(run_case(case, root / case.name, folds, args.steps, CANDIDATES, args.workers,
-                                                 args.cluster))
-            s = done[folds]
-            table.append({"case": case.name, "protocol": protocol, "folds": folds, "scores": s})
-            print(f"[{i + 1}/{len(chosen)}] {case.name} {protocol} ({folds}): " +
-                  (s.get("error") or ", ".join(f"{r} chose {v['chosen']} (regret {v['regret']:.3g})"
-                                               for r, v in s["rules"].items())), flush=True)
+    # each folds' run once a case: auto is one of the others
+    runs = {(case, folds): f"{case.name} {folds}" for case in chosen for protocol in args.protocols
+            if (folds := resolve(protocol, case.layout)) is not None}
+    jobs = {name: SelectCase(case.arm, case.layout, case.effects, case.seed, folds, args.steps, CANDIDATES,
+                             args.workers, str(root / case.name))
+            for (case, folds), name in runs.items()}
+    ledger = Ledger(args.out)
+    done = run_jobs(jobs, 1, _said, print_now, ledger, cluster=args.cluster)
+    table = [{"case": case.name, "protocol": protocol, "folds": folds, "scores": done[runs[case, folds]]}
+             for case in chosen for protocol in args.protocols
+             if (folds := resolve(protocol, case.layout)) is not None]
     result = {"command": args.invocation, "commit": provenance().get("commit"), "set": args.set,
               "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
               "table": table, "summary": summary(table), "real": real_rows()}
     _publish(args.out, result)
+    ledger.close()
     return 0

@@ -83,3 +83,28 @@ def test_real_only_reads_the_real_arms_pages_again_and_keeps_the_cases_rows(tmp_
     text = out.read_text()
     assert "Command: `the cases' command`, at commit c0" in text
     assert "Read again by `python -m bench study selection --real-only`" in text and "standard (2.000)" in text
+
+
+def test_the_cases_are_jobs_of_the_one_scheduler_and_a_second_run_resumes_from_the_ledger(tmp_path, monkeypatch):
+    import json
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from bench.runner.ledger import Ledger
+
+    monkeypatch.setattr(sb, "REAL", {})
+    case = sb.Case("ur5", "one", "drive", 0)
+    out = tmp_path / "benchmark.md"
+    job = sb.SelectCase(case.arm, case.layout, case.effects, case.seed, "regions", 2, sb.CANDIDATES, 1,
+                        str(tmp_path / "cases_development" / case.name))
+    assert sb.SelectCase.from_payload(json.loads(json.dumps(job.payload()))) == job  # it travels as JSON
+    assert job.elsewhere(Path("/scratch")).folder() == Path(f"/scratch/{case.name}")  # on a cluster's worker
+    kept = sb.scores({"candidates": [_entry("standard", 0.5, 0.6), _entry("feasible", 0.4, 0.3)]})
+    Ledger(out).add(f"{case.name} regions", job, kept)  # as a run stopped after this case would have left it
+    args = SimpleNamespace(real_only=False, out=out, set="development", cases=[case.name], protocols=["auto"],
+                           steps=2, workers=1, cluster=None, invocation="python -m bench study selection")
+    assert sb.main(args) == 0  # nothing left to run: no select is started
+    result = json.loads(out.with_suffix(".json").read_text())
+    assert result["table"] == [{"case": case.name, "protocol": "auto", "folds": "regions", "scores": kept}]
+    assert not Ledger(out).path.exists()  # the page is written: its ledger goes
+    assert not (tmp_path / "cases_development").exists()
