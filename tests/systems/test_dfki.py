@@ -106,3 +106,30 @@ def test_rigid_body_form_at_the_labs_values_matches_the_lab_model_without_rotor_
     coef[0] -= coef[5] + coef[5] / 36  # remove the rotor inertia from the first column (gr = 6)
     coef[5:] = 0.0
     np.testing.assert_allclose(tau.numpy().ravel(), lab_design(test) @ coef, rtol=1e-9, atol=1e-9)
+
+
+def test_the_pendulum_declared_as_an_arm_has_the_recordings_and_pinocchio_gives_its_symbolic_forms_torque():
+    """``dfki_double_pendulum_arm.toml`` holds the same samples as the registered system, and Pinocchio's
+    torque from the lab's description (at its own masses and inertias) is the suite's symbolic form's at the
+    same parameters: the description's joint axes, placements and angles are the recordings' coordinates."""
+    import torch
+
+    from systems.dfki_double_pendulum import DfkiDoublePendulum, DfkiParams
+    from systems.measured_arm import register_measured
+
+    arm = get_system(register_measured("measured:systems/data/dfki_double_pendulum_arm.toml"))
+    ours = get_system("dfki_double_pendulum")
+    train = arm.load("train")
+    assert train.trajectories() == ours.load("train").trajectories() and arm.splits == ours.splits
+    np.testing.assert_array_equal(train.tau, ours.load("train").tau)
+    form = arm.linear_form()
+    assert form.bodies == 2 and form.true_values is None  # the description's inertias are no truth
+    # the description's two links as the symbolic form's parameters: centre-of-mass distances from the joint axes,
+    # inertias about them (each link's own about its centre of mass, plus m r^2)
+    prior = np.asarray(form.prior).reshape(2, 10)  # Pinocchio's order: m, m c, then the inertia about the frame
+    m, r = prior[:, 0], np.abs(prior[:, 3] / prior[:, 0])
+    p = DfkiParams(m1=m[0], m2=m[1], l1=0.3, r1=r[0], r2=r[1], I1=prior[0, 4], I2=prior[1, 4])
+    data = train.subset(slice(0, 400))
+    want = DfkiDoublePendulum(params=p).torque(*(torch.tensor(getattr(data, k)) for k in ("q", "qd", "qdd")))[0]
+    got = form.torque_regressor(data.q, data.qd, data.qdd) @ np.asarray(form.prior)
+    np.testing.assert_allclose(got, want.numpy(), rtol=0, atol=1e-10 * np.abs(got).max())
