@@ -141,6 +141,7 @@ def trajectory_path(name: str) -> Path:
 class DfkiDoublePendulum(Measured, System):
     coordinates = ("q1", "q2_relative")
     planar_chain = True  # its second link's length is not given: no tip payload
+    as_arm = f"measured:{DATA_DIR / 'dfki_double_pendulum_arm.toml'}"
     Params = DfkiParams
     sysid_unknowns = ("m1", "m2", "r1", "r2", "I1", "I2")
     measured = DECLARATION

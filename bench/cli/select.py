@@ -70,7 +70,8 @@ def main(args) -> int:
     system = SYSTEMS[name]()
     if system.simulated or system.linear_form() is None:
         raise UsageError(f"{name}: bench select chooses among models of a measured arm (its recordings and its "
-                         f"URDF's rigid body); {name} is {'simulated' if system.simulated else 'not an arm'}")
+                         f"URDF's rigid body); {name} is {'simulated' if system.simulated else 'not an arm'}"
+                         + (f" (as an arm: --system {system.as_arm})" if system.as_arm else ""))
     check_names(args, [name], names)
     check_split(args.split, [name])
     arm = SYSTEMS[name](split=args.split)

@@ -241,6 +241,9 @@ class System(abc.ABC):
     symbolic: ClassVar[bool] = True
     #: each coordinate's position limits ``(lower, upper)``, where the system declares them (an arm's URDF)
     position_limits: ClassVar[tuple[tuple[float, float], ...] | None] = None
+    #: a system without an arm's rigid bodies: the name of a system that declares the same robot as an arm
+    #: (a ``measured:`` file with its description), which commands that need an arm name (``bench select``)
+    as_arm: ClassVar[str | None] = None
 
     def __init__(self, params=None, domain: Domain | None = None, split: str | None = None):
         self.params = params if params is not None else self.Params()

@@ -86,9 +86,12 @@ NOISE = 0.02
 #: the protocols compared: ``time`` is what select did before it had others, ``auto`` its default now
 #: (:func:`resolve`)
 PROTOCOLS = ("time", "auto", "regions", "knndm")
-#: the shipped real cases: ``bench select`` at its default on each split of the KUKA, their pages' JSON
+#: the shipped real cases: ``bench select`` at its default on each split of the KUKA and of the DFKI pendulum
+#: (declared as an arm, ``systems/data/dfki_double_pendulum_arm.toml``), their pages' JSON
 REAL = {"kuka_lwr4 (default split)": "results/measured/select_default/select.json",
-        "kuka_lwr4 (swapped split)": "results/measured/select_swapped/select.json"}
+        "kuka_lwr4 (swapped split)": "results/measured/select_swapped/select.json",
+        "dfki_double_pendulum (default split)": "results/measured/select_dfki_default/select.json",
+        "dfki_double_pendulum (swapped split)": "results/measured/select_dfki_swapped/select.json"}
 #: the candidates from the rigid body to the flexible residuals: the ``one_se`` rule's order
 SIMPLICITY = ("standard", "feasible", "loop", "feasible+sparse_torque", "standard+gp", "feasible+gp", "loop+gp",
               "standard+mlp", "feasible+delan")
@@ -332,8 +335,9 @@ def page(result: dict) -> str:
               "default, which is `regions` on one trajectory and `time` (whole trajectories) on several: the same run.",
               ""] + _rows(result["table"], rules)
     if result.get("real"):
-        lines += ["", "## The shipped real arm", "",
-                  "`bench select` at its default (each candidate its own steps, `--folds auto`) on each split of the KUKA, "
+        lines += ["", "## The shipped real arms", "",
+                  "`bench select` at its default (each candidate its own steps, `--folds auto`) on each split of the KUKA "
+                  "and of the DFKI pendulum (declared as an arm: `measured:systems/data/dfki_double_pendulum_arm.toml`), "
                   "read from the pages it wrote (`source`); they are not rerun here."
                   + (f" Read again by `{result['real_command']}`, at commit {result['real_commit']}; the cases above "
                      "are as their own command made them." if result.get("real_command") else ""), ""]
@@ -373,7 +377,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out", type=Path, default=Path("results/selection/benchmark.md"),
                         help="the page (default results/selection/benchmark.md); the cases' runs go beside it")
     parser.add_argument("--real-only", action="store_true",
-                        help="read the shipped real arm's select pages again into the page already at --out, "
+                        help="read the shipped real arms' select pages again into the page already at --out, "
                              "keeping its cases' rows as they were made (their runs are not redone)")
 
 

@@ -58,6 +58,10 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
 def test_select_refuses_in_one_line_what_it_cannot_choose_among(tmp_path):
     r = cli("select", "--system", "double_pendulum", "--out", tmp_path / "s")
     assert r.returncode == 2 and "measured arm" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = cli("select", "--system", "dfki_double_pendulum", "--out", tmp_path / "s")  # not an arm; its file is one
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert r.stderr.strip().endswith("(as an arm: --system measured:"
+                                     f"{Path('systems/data/dfki_double_pendulum_arm.toml').resolve()})")
     r = cli("select", "--system", "kuka_lwr4", "--candidates", "standard,nonsense", "--out", tmp_path / "s")
     assert r.returncode == 2 and "nonsense" in r.stderr
     assert not (tmp_path / "s" / "select.json").exists()
