@@ -50,13 +50,18 @@ from bench.runner.spec import RunSpec
 class Candidate:
     """A candidate: its name on the page, the method, its configuration and the hyperparameters it fixes.
     ``work`` is the steps its final fit does where ``--steps`` is not given (its fold fits do the same,
-    :mod:`bench.evaluation.tuning`); select's seconds are then only a ceiling, past which it is killed."""
+    :mod:`bench.evaluation.tuning`); select's seconds are then only a ceiling, past which it is killed.
+    ``start`` is when its run starts among the others, the lowest first (:func:`run`): the longest runs first
+    (the loop's rounds on every fold, twice for loop+gp, whose budget starts after them; then the searches of
+    the learned residuals; the records of results/measured/select_default say how long each took), so that two
+    workers end close together."""
 
     name: str
     method: str
     profile: str = "default"
     fixed: tuple[tuple[str, object], ...] = ()
     work: int = 1
+    start: int = 0
 
 
 #: the learned residuals' steps: a GP's (:mod:`methods.gp`) and a network's (the MLP's, DeLaN's). They are the
@@ -67,21 +72,16 @@ GP_STEPS, NETWORK_STEPS = 30, 400
 
 #: the candidates, in the page's order; the closed-form fits (SysId, sparse regression) are one step
 CANDIDATES = (
-    Candidate("standard", "sysid", "standard"),
-    Candidate("feasible", "sysid", "feasible"),
-    Candidate("standard+gp", "standard+gp", work=GP_STEPS),
-    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS),
-    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS),
-    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS),
-    Candidate("feasible+sparse_torque", "feasible+sparse_torque"),
-    Candidate("loop", "loop", work=MAX_ROUNDS),
-    Candidate("loop+gp", "loop+gp", work=GP_STEPS),
+    Candidate("standard", "sysid", "standard", start=8),
+    Candidate("feasible", "sysid", "feasible", start=7),
+    Candidate("standard+gp", "standard+gp", work=GP_STEPS, start=5),
+    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS, start=3),
+    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=4),
+    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=2),
+    Candidate("feasible+sparse_torque", "feasible+sparse_torque", start=6),
+    Candidate("loop", "loop", work=MAX_ROUNDS, start=1),
+    Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=0),
 )
-#: the order the candidates' runs start in: the longest first (the loop's rounds on every fold, twice for
-#: loop+gp, whose budget starts after them; then the searches of the learned residuals; the records of
-#: results/measured/select_default say how long each took), so that two workers end close together
-RUN_ORDER = ("loop+gp", "loop", "feasible+delan", "feasible+gp", "standard+mlp", "standard+gp",
-             "feasible+sparse_torque", "feasible", "standard")
 
 
 def specs(system: str, split: str | None, budget_s: float | None, steps: int | None, seed: int, out: Path,
@@ -104,15 +104,15 @@ def specs(system: str, split: str | None, budget_s: float | None, steps: int | N
 
 
 def run(rows, out: Path, workers: int | None, report=print, cluster=None) -> list[tuple[Candidate, Record]]:
-    """The candidates' runs, as one matrix in ``out/runs`` (resumed from their records), started in
-    :data:`RUN_ORDER`: the longest first, so that the workers end together; on a Dask ``cluster``
+    """The candidates' runs, as one matrix in ``out/runs`` (resumed from their records), started in the order of
+    their :attr:`Candidate.start`: the longest first, so that the workers end together; on a Dask ``cluster``
     (:mod:`bench.runner.cluster`) each is a task, whose record and model file come back to ``out``."""
     folder = Path(out).resolve() / "runs"
     for _, spec in rows:  # a run whose model file is missing is redone: the file is part of its result
         path = record_path(folder, spec.run_id)
         if path.exists() and not Path(spec.save).exists():
             path.unlink()
-    ordered = sorted(rows, key=lambda row: RUN_ORDER.index(row[0].name) if row[0].name in RUN_ORDER else len(RUN_ORDER))
+    ordered = sorted(rows, key=lambda row: row[0].start)
     report(f"select: {len(rows)} candidate(s) in {folder}: {', '.join(c.name for c, _ in ordered)}")
     records = matrix.run_matrix([s for _, s in ordered], folder, workers=workers, cluster=cluster)
     done = dict(zip((c.name for c, _ in ordered), records))

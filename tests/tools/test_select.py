@@ -133,3 +133,10 @@ def test_every_candidate_is_bounded_by_work_whatever_selects_seconds(tmp_path):
     assert set(worked.values()) == {Budget(steps=3)} and len(worked) == len(CANDIDATES)
     # the driven rollouts, which neither the choice nor the page uses, only where asked for
     assert not any(spec.rollout for _, spec in specs("kuka_lwr4", None, 900.0, None, 0, tmp_path, ()))
+
+
+def test_the_candidates_runs_start_the_longest_first_each_at_its_own_place():
+    starts = sorted(CANDIDATES, key=lambda c: c.start)
+    assert len({c.start for c in CANDIDATES}) == len(CANDIDATES)  # one place each
+    assert [c.name for c in starts[:2]] == ["loop+gp", "loop"]  # the loop's rounds on every fold
+    assert {c.name for c in starts[-2:]} == {"standard", "feasible"}  # closed-form: one step
