@@ -16,8 +16,9 @@ from bench.runner.records import Record
 #: the learners tuned beside their defaults, in the page's order, with their names there
 TUNED = LEARNERS + HYBRIDS + (("loop", "the residual loop's model from SysId"),
                               ("loop+gp", "the loop's model + GP"))
-#: the select pages' folders, per split
+#: the select pages' folders, per split: the KUKA's, and the DFKI pendulum's (declared as an arm)
 SELECT = ("measured/select_default", "measured/select_swapped")
+SELECT_DFKI = ("measured/select_dfki_default", "measured/select_dfki_swapped")
 
 
 def _all_n(records: list[Record]) -> float | None:
@@ -96,9 +97,21 @@ def validation_against_test(root: Path) -> str:
 
 @block("measured.kuka.select")
 def selected(root: Path) -> str:
-    """What ``bench select`` chose on each split, and every candidate's validation and test figures."""
+    """What ``bench select`` chose on each split of the KUKA, and every candidate's validation and test figures."""
+    return select_table(root, SELECT)
+
+
+@block("measured.dfki.select")
+def selected_dfki(root: Path) -> str:
+    """The same for the DFKI pendulum, declared as an arm."""
+    return select_table(root, SELECT_DFKI)
+
+
+def select_table(root: Path, folders: tuple[str, ...]) -> str:
+    """Each split's ``select.json`` under ``root`` (``folders``, one a split): every candidate's validation and test
+    MSE, its test MSE over the standard model's, and which was chosen."""
     lines = ["| split | candidate | validation MSE | test MSE | test / standard | chosen |", "|---|---|---:|---:|---:|---|"]
-    for folder, split in zip(SELECT, SPLIT_NAMES):
+    for folder, split in zip(folders, SPLIT_NAMES):
         path = Path(root) / folder / "select.json"
         if not path.exists():
             continue
