@@ -1,6 +1,7 @@
 """No process outlives the command that started it: after ``kill -9`` of a
 matrix whose method hangs, its fork server, its run and the resource tracker
-end within 5 s; after Ctrl-C, the run is killed and left unrecorded, so that
+end within :data:`GONE_S` (the run hangs: without them ending with it, it would outlive the matrix);
+after Ctrl-C, the run is killed and left unrecorded, so that
 the resume runs it."""
 
 from __future__ import annotations
@@ -14,6 +15,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 PLUGIN = str(ROOT / "tests" / "plugins" / "faulty.py")
+#: seconds the killed tree may take to end: the kernel kills it at once, but its three processes took 1.3 to
+#: 2.7 s to be gone with both cores busy and the test niced, and more than 5 s in a fresh clone's suite run
+#: beside two busy processes
+GONE_S = 30
 
 
 def start_hanging_matrix(out: Path) -> subprocess.Popen:
@@ -66,7 +71,7 @@ def test_kill_9_of_the_matrix_leaves_no_process_behind(tmp_path):
     t0 = time.monotonic()
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
-    while any(running(p) for p in tree) and time.monotonic() - t0 < 5:
+    while any(running(p) for p in tree) and time.monotonic() - t0 < GONE_S:
         time.sleep(0.05)
     assert [p for p in tree if running(p)] == [], "processes outlived the matrix"
 
@@ -86,6 +91,6 @@ def test_ctrl_c_kills_the_runs_and_records_none_of_them(tmp_path):
     assert "interrupted" in proc.stderr.read()
     assert not list((out / "records").glob("*.json"))  # the resume will run it
     t0 = time.monotonic()
-    while any(running(p) for p in tree) and time.monotonic() - t0 < 5:
+    while any(running(p) for p in tree) and time.monotonic() - t0 < GONE_S:
         time.sleep(0.05)
     assert [p for p in tree if running(p)] == []
