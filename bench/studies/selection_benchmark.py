@@ -36,6 +36,10 @@ MSE over the best candidate's; the page gives it per case with the rank
 correlation (Spearman) between validation and test, and per protocol and rule
 the median and worst regret and how often the best was chosen.
 
+The shipped real arms (:data:`REAL`: the KUKA and the DFKI pendulum, each split) go in as their
+``bench select`` pages left them: each page's candidates are chosen by every rule, and their test MSEs
+give the regret. ``--real-only`` reads those pages again into a published page, keeping its cases.
+
 The **development** set (seeds :data:`DEVELOPMENT_SEEDS`) is for trying rules;
 the **evaluation** set (seeds :data:`EVALUATION_SEEDS`, effect values drawn
 per seed) is run once a rule is fixed, and no test reads it.
