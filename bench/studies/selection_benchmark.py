@@ -208,15 +208,13 @@ def resolve(protocol: str, layout: str) -> str | None:
     return protocols.resolve(protocol, 1 if layout == "one" else SEVERAL)
 
 
-def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tuple[str, ...], workers: int,
-             cluster: str | None = None) -> dict:
-    """``bench select`` on ``case`` under ``protocol`` (its candidates on ``cluster``, where one is named);
-    its ``select.json``."""
+def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tuple[str, ...], workers: int) -> dict:
+    """``bench select`` on ``case`` under ``protocol``, ``workers`` candidates at a time; its ``select.json``."""
     declared = make(case, folder)
     out = folder / protocol
     command = [sys.executable, "-m", "bench", "select", "--system", f"measured:{declared}", "--steps", str(steps),
                "--candidates", ",".join(candidates), "--folds", protocol, "--no-rollout", "--workers", str(workers),
-               "--out", str(out)] + (["--cluster", cluster] if cluster else [])
+               "--out", str(out)]
     done = subprocess.run(command, capture_output=True, text=True)
     result = out / "select.json"
     if not result.exists():
