@@ -14,6 +14,7 @@ from bench.core.protocols import NAMES
 from bench.core.fileio import check_output
 from bench.evaluation.domain import sentences
 from bench.runner.execute import given_data
+from bench.runner.plugins import file_prefix
 from bench.tools.select import CANDIDATES, select
 from systems import SYSTEMS
 
@@ -87,7 +88,8 @@ def main(args) -> int:
     result = select(name, args.out, split=args.split, budget_s=args.budget, steps=args.steps, seed=args.seed,
                     workers=args.workers, cluster=args.cluster, plugins=plugins, command=args.invocation,
                     candidates=candidates,
-                    rollout=args.rollout, data=data, target=target, protocol=protocol)
+                    rollout=args.rollout, data=data, target=target, protocol=protocol,
+                    declared=args.system if file_prefix(args.system) else None)
     chosen = result["chosen"]
     if chosen is None:
         print(f"nothing chosen: no candidate ran and validated (see {args.out / 'select.md'})")

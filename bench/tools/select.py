@@ -190,7 +190,7 @@ def page(result: dict) -> str:
         lines += [f"Chosen: **{chosen['name']}**, validation MSE {chosen['validation_mse']:.4g}, test MSE "
                   f"{chosen['test_mse']:.4g}" + (f" ({chosen['test_over_standard']:.3f}x the standard model)"
                                                   if chosen["test_over_standard"] else "") + f"; {verdict}. "
-                  f"Its model: `model.npz` (`python -m bench predict --model model.npz --log LOG.csv --out PRED.csv`)."]
+                  f"Its model: `model.npz` (`{predict_command(result)}`)."]
     else:
         lines.append("No candidate ran and validated: nothing chosen.")
     report = result.get("domain")
@@ -244,11 +244,20 @@ def applicability(train: Dataset, test: Dataset | None, target: Dataset | None, 
     return report
 
 
+def predict_command(result: dict) -> str:
+    """How to use the chosen model: ``bench predict``, naming the file that declares the arm where it is not
+    built in (``declared``, the ``--system`` given: ``urdf:PATH`` or ``measured:PATH``)."""
+    declared = f" --system {result['declared']}" if result.get("declared") else ""
+    return f"python -m bench predict --model model.npz{declared} --log LOG.csv --out PRED.csv"
+
+
 def select(system: str, out: Path, *, split: str | None, budget_s: float | None, steps: int | None, seed: int,
            workers: int | None, plugins: tuple[str, ...], command: str, candidates=CANDIDATES, rollout: bool = False,
            report=print, data: tuple[Dataset, Dataset | None] | None = None, target: Dataset | None = None,
-           protocol: str | None = None, cluster=None) -> dict:
+           protocol: str | None = None, cluster=None, declared: str | None = None) -> dict:
     """Run the candidates, choose one, write ``select.json``, ``select.md`` and ``model.npz`` into ``out``.
+    ``declared`` is the ``--system`` as given where a file declares the arm (``measured:PATH``), which
+    ``bench predict`` then needs too.
     ``data`` is the system's training and test data, for the page's report of what validation could see
     (with ``target``, the states the user says the model will be asked: :mod:`bench.evaluation.domain`).
     ``protocol`` names the validation folds (:mod:`bench.core.protocols`)."""
@@ -261,7 +270,7 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
                   if (r.details or {}).get("tuning", {}).get("folds")), None)
     ceiling = f", at most {budget_s:g} s" if budget_s is not None else ""
     budget = f"{steps} steps{ceiling}" if steps is not None else f"each candidate's own steps (its work column){ceiling}"
-    result = {"system": system, "split": split, "seed": seed, "budget": budget, "command": command,
+    result = {"system": system, "declared": declared, "split": split, "seed": seed, "budget": budget, "command": command,
               "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds, "chosen": chosen, "candidates": entries,
               "domain": None if data is None else applicability(data[0], data[1], target, protocol)}
     if chosen:

@@ -39,6 +39,7 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     assert result["chosen"]["name"] == best["name"] and set(result["chosen"]) >= {"name", "validation_mse", "test_mse"}
     text = (out / "select.md").read_text()
     assert f"| {best['name']} **(chosen)** |" in text and "rank by validation" in text
+    assert "(`python -m bench predict --model model.npz --log LOG.csv --out PRED.csv`)" in text  # a built-in arm
     far = min(result["candidates"], key=lambda c: c["validation_far_mse"])["name"]  # and on the farther half
     assert "validation MSE, farther half" in text and f"validation puts {far} first" in text
     for c in result["candidates"]:  # under --steps each fold fit does the final fit's work, and the page says so
@@ -112,6 +113,8 @@ def test_the_test_trajectorys_torques_change_no_choice(tmp_path):
                 "--no-rollout", "--out", out)
         assert r.returncode == 0, r.stderr
         results.append(json.loads((out / "select.json").read_text()))
+        # the page's predict line names the file that declares the arm, as predict needs it
+        assert f"python -m bench predict --model model.npz --system measured:{arm} --log" in (out / "select.md").read_text()
     same, scaled = results
     assert same["chosen"]["name"] == scaled["chosen"]["name"]
     for a, b in zip(same["candidates"], scaled["candidates"]):
