@@ -49,7 +49,7 @@ from bench.core.experiment import INDIRECT
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
-from bench.core.kept import Kept, digest
+from bench.core.kept import Kept, digest, read_only
 from bench.core.modelfile import Unpacker, build, loader
 from bench.physics.models import FittedModel
 from bench.core.names import MethodName, MethodNameError
@@ -285,11 +285,8 @@ def prior_torque(prior: FittedModel, data: Dataset) -> np.ndarray:
     """``prior``'s torque at ``data``'s states, the last :data:`PRIOR_CACHE` kept and given again: a tuned
     hybrid's fold fits share their fold's prior (:func:`identified_prior`) and subtract it from the same
     training samples and add it on the same held-out samples, once for each combination and rung."""
-    def make():
-        torque = np.array(prior.predict_torque(data))
-        torque.setflags(write=False)
-        return prior, torque
-    return _torques.get((id(prior), fingerprint(data, STATES)), make)[1]
+    return _torques.get((id(prior), fingerprint(data, STATES)),
+                        lambda: (prior, read_only(np.array(prior.predict_torque(data)))))[1]
 
 
 def prior_unavailable(prior: str, system: System) -> str:

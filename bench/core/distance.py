@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from bench.core.data import Dataset
-from bench.core.kept import Kept, digest
+from bench.core.kept import Kept, digest, read_only
 
 
 #: a log of more states than this is searched through a coarse tree of about :data:`KEPT` of them first
@@ -84,7 +84,7 @@ class NearestStates:
         x = np.ascontiguousarray(x, dtype=np.float64)
         if not len(x):
             return np.zeros(0)
-        return self._answers.get(digest(x), lambda: _read_only(self._measure(x)))
+        return self._answers.get(digest(x), lambda: read_only(self._measure(x)))
 
     def _measure(self, x: np.ndarray) -> np.ndarray:
         if self.coarse is None:
@@ -97,11 +97,6 @@ class NearestStates:
         per_query = np.add.reduceat(owned, np.cumsum([0] + [len(b) for b in balls[:-1]]))
         diff = self.states[rows] - np.repeat(x, per_query, axis=0)
         return np.sqrt(np.minimum.reduceat(np.einsum("ij,ij->i", diff, diff), np.cumsum(per_query) - per_query))
-
-
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
 
 
 class TrainingStates:

@@ -11,6 +11,12 @@ import numpy as np
 V = TypeVar("V")
 
 
+def read_only(array: np.ndarray) -> np.ndarray:
+    """``array``, no longer writable: a kept value is handed to every caller that asks for it again."""
+    array.setflags(write=False)
+    return array
+
+
 def digest(*arrays: np.ndarray | None) -> tuple:
     """What identifies ``arrays`` (``None`` among them too): each one's shape and a hash of all their bytes."""
     h = hashlib.blake2b(digest_size=16)
