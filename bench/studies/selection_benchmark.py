@@ -62,6 +62,7 @@ from bench.core import protocols
 from bench.core.arguments import positive_int, add_workers
 from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
+from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, write_json
 from bench.runner.job import CaseJob, run_jobs
 from bench.runner.ledger import Ledger
@@ -407,24 +408,23 @@ def main(args) -> int:
     if args.real_only:
         made = args.out.with_suffix(".json")
         if not made.exists():
-            raise SystemExit(f"{made}: no page to read the real arm into; run the study without --real-only first")
+            raise UserError(f"{made}: no page to read the real arms into; run the study without --real-only first")
         result = json.loads(made.read_text())
         result.update(real=real_rows(), real_command=args.invocation, real_commit=provenance().get("commit"))
         _publish(args.out, result)
         return 0
     chosen = [c for c in cases(args.set) if not args.cases or c.name.startswith(tuple(args.cases))]
     root = args.out.parent / f"cases_{args.set}"
+    planned = [(case, protocol, folds) for case in chosen for protocol in args.protocols
+               if (folds := resolve(protocol, case.layout)) is not None]
     # each folds' run once a case: auto is one of the others
-    runs = {(case, folds): f"{case.name} {folds}" for case in chosen for protocol in args.protocols
-            if (folds := resolve(protocol, case.layout)) is not None}
-    jobs = {name: SelectCase(case.arm, case.layout, case.effects, case.seed, folds, args.steps, CANDIDATES,
-                             args.workers, str(root / case.name))
-            for (case, folds), name in runs.items()}
+    jobs = {f"{case.name} {folds}": SelectCase(case.arm, case.layout, case.effects, case.seed, folds, args.steps,
+                                               CANDIDATES, args.workers, str(root / case.name))
+            for case, _, folds in planned}
     ledger = Ledger(args.out)
     done = run_jobs(jobs, 1, _said, print_now, ledger, cluster=args.cluster)
-    table = [{"case": case.name, "protocol": protocol, "folds": folds, "scores": done[runs[case, folds]]}
-             for case in chosen for protocol in args.protocols
-             if (folds := resolve(protocol, case.layout)) is not None]
+    table = [{"case": case.name, "protocol": protocol, "folds": folds, "scores": done[f"{case.name} {folds}"]}
+             for case, protocol, folds in planned]
     result = {"command": args.invocation, "commit": provenance().get("commit"), "set": args.set,
               "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
               "table": table, "summary": summary(table), "real": real_rows()}

@@ -69,7 +69,9 @@ def test_real_only_reads_the_real_arms_pages_again_and_keeps_the_cases_rows(tmp_
     monkeypatch.setattr(sb, "REAL", {"an arm": str(select)})
     out = tmp_path / "benchmark.md"
     args = SimpleNamespace(real_only=True, out=out, invocation="python -m bench study selection --real-only")
-    with pytest.raises(SystemExit, match="benchmark.json: no page"):
+    from bench.core.errors import UserError
+
+    with pytest.raises(UserError, match="benchmark.json: no page"):  # one line, exit 2, on the command line
         sb.main(args)
     cases = [{"case": "a", "protocol": "time", "scores": sb.scores({"candidates": [_entry("standard", 0.5, 0.6)]})}]
     made = {"command": "the cases' command", "commit": "c0", "set": "evaluation", "cases": ["a"], "candidates": ["x"],
