@@ -121,20 +121,21 @@ def fork_server():
             else:
                 os.environ[var] = value
     _FORK_SERVER["context"] = ctx
-    atexit.register(_stop_fork_server, os.getpid())
+    atexit.register(stop_fork_server, os.getpid())
     return ctx
 
 
-def _stop_fork_server(owner: int, wait_s: float = 10.0) -> None:
+def stop_fork_server(owner: int, server=None, wait_s: float = 10.0) -> None:
     """At the exit of the process that started the fork server: ask the
     server to end (close the pipe that keeps it alive) and reap it, so that it
     does not outlive its caller and the CPU it and the processes forked from it
     used counts as the caller's children's (``getrusage``, ``time``), as a
     fresh child's does. Waits at most ``wait_s`` seconds: a forked process
-    still running holds a copy of the pipe, and the server then ends after it."""
+    still running holds a copy of the pipe, and the server then ends after it.
+    ``server``: multiprocessing's (the default) or another ``ForkServer``."""
     from multiprocessing import forkserver
 
-    server = getattr(forkserver, "_forkserver", None)
+    server = server or getattr(forkserver, "_forkserver", None)
     pid, fd = getattr(server, "_forkserver_pid", None), getattr(server, "_forkserver_alive_fd", None)
     if os.getpid() != owner or pid is None or fd is None:
         return
