@@ -81,6 +81,15 @@ LAYOUTS = (
 RAW_COLUMNS = LAYOUTS[0].columns
 #: the lab's own identified friction (model 2.0), for reference
 LAB_FRICTION = {"viscous": (0.001, 0.001), "coulomb": (0.093, 0.078), "coulomb_slope": 100.0}
+#: the recordings whose torques chose the declaration's 6 Hz cut-off on training data alone (each held out in turn,
+#: ``python -m bench study dfki-filter``; docs/choices.md). A figure tested on any of them rests on a choice
+#: that read its test torques: test-informed (:func:`cutoff_informed`).
+CUTOFF_CHOSEN_ON = ("00", "01", "02", "04")
+
+
+def cutoff_informed(test_recordings) -> list[str]:
+    """Which of ``test_recordings`` the filter's cut-off was chosen on: a figure tested on any is test-informed."""
+    return sorted(set(test_recordings) & set(CUTOFF_CHOSEN_ON))
 
 
 @dataclass(frozen=True)

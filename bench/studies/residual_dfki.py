@@ -36,6 +36,7 @@ from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance
 from systems import SYSTEMS
+from systems.dfki_double_pendulum import cutoff_informed
 
 SYSTEM = "dfki_double_pendulum"
 METHODS_DEFAULT = ["sysid", "sparse", "mlp", "syrenets", "mggp"]
@@ -141,6 +142,17 @@ def add_arguments(parser) -> None:
                         help="the tables to write (default results/residual/dfki.md)")
 
 
+def informed_line(recordings) -> str:
+    """What a leave-one-recording-out row rests on: the rows holding out a recording that the filter's
+    cut-off was chosen on are test-informed (:func:`systems.dfki_double_pendulum.cutoff_informed`)."""
+    informed = cutoff_informed(recordings)
+    clean = sorted(set(recordings) - set(informed))
+    return (f"**Test-informed:** the rows holding out {', '.join(informed)} rest on a choice that read the held-out "
+            "recording's torques: the pre-processing's 6 Hz low-pass cut-off was chosen with each of them held out "
+            "in turn (`python -m bench study dfki-filter`, docs/choices.md). The rows holding out "
+            f"{', '.join(clean) or 'none'} do not." if informed else "")
+
+
 def main(args) -> int:
     check_output(args.out)
     recordings = SYSTEMS[SYSTEM]().load("all").recordings()
@@ -178,6 +190,8 @@ def main(args) -> int:
         summary(loro_rows, args.methods),
         "",
         table(loro_rows),
+        "",
+        informed_line(recordings),
         "",
     ])
     atomic_write(args.out, lambda f: f.write(text))

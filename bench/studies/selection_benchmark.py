@@ -72,6 +72,7 @@ from bench.runner.provenance import provenance
 from bench.tools import select as selection
 from bench.tools.robot_log import simulate
 from systems import get_system
+from systems.dfki_double_pendulum import DECLARATION as DFKI, cutoff_informed
 
 DEVELOPMENT, EVALUATION = "development", "evaluation"
 #: each set's data seeds
@@ -345,6 +346,9 @@ def page(result: dict) -> str:
                   + (f" Read again by `{result['real_command']}`, at commit {result['real_commit']}; the cases above "
                      "are as their own command made them." if result.get("real_command") else ""), ""]
         lines += _rows(result["real"], rules)
+        lines += [f"\n**Test-informed:** {r['case']} tests on {', '.join(r['test_informed'])}, which the recordings' "
+                  "6 Hz low-pass cut-off was chosen on (`python -m bench study dfki-filter`, docs/choices.md)."
+                  for r in result["real"] if r.get("test_informed")]
     return "\n".join(lines) + "\n"
 
 
@@ -394,7 +398,15 @@ def real_rows() -> list[dict]:
     """The shipped real cases' rows, scored from the ``select.json`` each split's ``bench select`` wrote."""
     pages = {name: (path, json.loads(Path(path).read_text())) for name, path in REAL.items() if Path(path).exists()}
     return [{"case": name, "protocol": "auto", "folds": page.get("folds_protocol"), "source": path,
-             "scores": scores(page)} for name, (path, page) in pages.items()]
+             "scores": scores(page), "test_informed": _informed(name, page)} for name, (path, page) in pages.items()]
+
+
+def _informed(case: str, page: dict) -> list[str]:
+    """The test trajectories of a real case that its filter's cut-off was chosen on (the DFKI pendulum's), else
+    none: a row tested on any of them is test-informed."""
+    if not case.startswith("dfki_double_pendulum"):
+        return []
+    return cutoff_informed(DFKI.parts(page.get("split", "default"))["test"])
 
 
 def _publish(out: Path, result: dict) -> None:

@@ -21,3 +21,11 @@ def test_a_run_reports_before_after_and_its_time():
     row = run_case("sparse", "05", None, steps=1)
     assert row["held_out"] == "05" and row["after"] <= row["before"] and row["cut_short"] == 0
     assert 0 <= row["statistics_seconds"] <= row["seconds"]
+
+
+def test_the_rows_holding_out_a_recording_the_cut_off_was_chosen_on_are_flagged_test_informed():
+    from bench.studies.residual_dfki import informed_line
+
+    line = informed_line(["00", "01", "02", "03", "04", "05"])
+    assert "holding out 00, 01, 02, 04 rest on a choice" in line and "holding out 03, 05 do not" in line
+    assert informed_line(["03", "05"]) == ""

@@ -5,6 +5,9 @@ evaluation set."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 
 from bench.studies import selection_benchmark as sb
@@ -110,3 +113,16 @@ def test_the_cases_are_jobs_of_the_one_scheduler_and_a_second_run_resumes_from_t
     assert result["table"] == [{"case": case.name, "protocol": "auto", "folds": "regions", "scores": kept}]
     assert not Ledger(out).path.exists()  # the page is written: its ledger goes
     assert not (tmp_path / "cases_development").exists()
+
+
+def test_a_real_row_tested_on_recordings_its_filter_was_chosen_on_is_flagged_test_informed():
+    """The DFKI pendulum's 6 Hz cut-off was chosen on 00, 01, 02 and 04: its swapped split tests on them, its
+    default split (03, 05) does not; the KUKA's filter was not chosen on a score."""
+    rows = {r["case"]: r for r in sb.real_rows()}
+    assert rows["dfki_double_pendulum (swapped split)"]["test_informed"] == ["00", "01", "02", "04"]
+    assert rows["dfki_double_pendulum (default split)"]["test_informed"] == []
+    assert rows["kuka_lwr4 (default split)"]["test_informed"] == []
+    made = json.loads(Path("results/selection/development.json").read_text())
+    text = sb.page({**made, "real": list(rows.values())})
+    assert text.count("**Test-informed:**") == 1
+    assert "**Test-informed:** dfki_double_pendulum (swapped split) tests on 00, 01, 02, 04" in text
