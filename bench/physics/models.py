@@ -44,6 +44,7 @@ import torch
 from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.core.experiment import Experiment
+from bench.core.kept import read_only
 from bench.physics.dynamics import euler_lagrange_chunked
 from bench.core.modelfile import ModelFileError, Packer, Unpacker, expression_from_json, expression_to_json, loader
 from bench.physics.terms import Term, TermLibrary
@@ -343,8 +344,7 @@ def torque_regressor(form, data: Dataset) -> np.ndarray:
         if form.terms:
             extra = TermLibrary(form.terms).design(data, "indirect").reshape(len(data), data.dof, len(form.terms))
             Y = np.concatenate([Y, extra], axis=2)
-        Y.setflags(write=False)
-        kept[form] = Y
+        kept[form] = read_only(Y)
     return kept[form]
 
 

@@ -39,6 +39,7 @@ import sympy
 from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.core.experiment import Experiment
+from bench.core.kept import read_only
 from bench.physics.dynamics import euler_lagrange_chunked
 from bench.core.timeouts import Timeout
 
@@ -160,8 +161,7 @@ class Term:
             return kept[1][(self, experiment)]
         column = self.torque(data).ravel() if experiment.learns_torque else self.value(data)
         if kept is not None:
-            column.setflags(write=False)
-            kept[1][(self, experiment)] = column
+            kept[1][(self, experiment)] = read_only(column)
         return column
 
 
