@@ -18,4 +18,5 @@ from bench.runner import execute, provenance  # noqa: E402
 import sklearn.model_selection  # noqa: E402,F401  (imported where folds or a search need it: once here, for every run)
 
 provenance.git_state()  # cached: the forked runs' provenance
+provenance.package_versions()
 execute.warm_up_torch()

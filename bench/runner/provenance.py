@@ -121,6 +121,13 @@ def machine(prov: dict) -> str:
 
 
 def package_versions() -> dict:
+    """The versions of Python and of the packages a record names, read once per process (reading an installed
+    package's metadata scans the environment: tens of milliseconds a package, in every run)."""
+    return dict(_package_versions())
+
+
+@functools.lru_cache(maxsize=1)
+def _package_versions() -> dict:
     out = {"python": platform.python_version()}
     for name in _PACKAGES:
         try:
