@@ -84,3 +84,28 @@ def test_an_unknown_method_that_a_file_here_registers_hints_at_plugin(tmp_path):
     assert "unknown residual learner" in hybrid.stderr and "add --plugin my_ridge.py" in hybrid.stderr
     elsewhere = cli("fit", "--system", "double_pendulum", "--method", "my_ridge", "--experiment", "indirect", cwd=tmp_path.parent)
     assert "needs --plugin FILE.py" in elsewhere.stderr
+
+
+def test_a_plugin_file_already_imported_by_another_name_or_link_is_not_imported_again(tmp_path):
+    """A plugin file that this process imported already (a test runner's import, through a link of another name)
+    is the same file: its registrations stand, and importing it as a plugin registers nothing twice."""
+    import importlib.util
+
+    from bench.runner.plugins import import_plugins
+    from methods import METHODS
+
+    plugin = tmp_path / "my_once_method.py"
+    plugin.write_text("from methods.base import METHODS\nfrom tests.test_extension import QuadraticLagrangian\n\n"
+                      "METHODS.add('toy_once')(type('ToyOnce', (QuadraticLagrangian,), {}))\n")
+    link = tmp_path / "elsewhere.py"
+    link.symlink_to(plugin)
+    spec = importlib.util.spec_from_file_location("elsewhere_module", link)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["elsewhere_module"] = module
+    spec.loader.exec_module(module)
+    try:
+        import_plugins([str(plugin)])  # the same file: not imported again, so 'toy_once' is not registered twice
+        assert "toy_once" in METHODS.names()
+    finally:
+        del sys.modules["elsewhere_module"]
+        METHODS.remove("toy_once")

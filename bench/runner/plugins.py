@@ -46,7 +46,7 @@ def _import_plugin(plugin: str) -> None:
     path = Path(plugin).resolve()
     if not path.is_file():
         raise UserError(f"plugin {plugin}: no such file")
-    if any(Path(f).resolve() == path for f in _files_named(path.name)):
+    if _imported(path):
         return  # already imported (for instance by a test runner): do not register twice
     name = f"_bench_plugin_{path.stem}_{zlib.crc32(str(path).encode()):08x}"
     spec = importlib.util.spec_from_file_location(name, path)
@@ -61,11 +61,21 @@ def _import_plugin(plugin: str) -> None:
         raise
 
 
-def _files_named(name: str) -> list[str]:
-    """The files of the imported modules whose file is called ``name``: only these are resolved and compared
-    (resolving every module's path, thousands once torch is imported, cost a third of a second a run)."""
-    files = (getattr(m, "__file__", None) for m in list(sys.modules.values()))
-    return [f for f in files if isinstance(f, str) and os.path.basename(f) == name]
+def _imported(path: Path) -> bool:
+    """Whether an imported module was loaded from the file ``path`` (the same file, by any name or link). Each
+    module's file is compared by ``os.stat``: resolving every module's path, thousands once torch is imported,
+    cost a third of a second in every run of a plugin's method."""
+    target = os.stat(path)
+    for module in list(sys.modules.values()):
+        file = getattr(module, "__file__", None)
+        if isinstance(file, str):
+            try:
+                st = os.stat(file)
+            except OSError:
+                continue
+            if st.st_ino == target.st_ino and st.st_dev == target.st_dev:
+                return True
+    return False
 
 
 def system_plugins(names: Iterable[str]) -> tuple[list[str], tuple[str, ...]]:
