@@ -8,6 +8,7 @@ import math
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -128,12 +129,14 @@ def test_rerun_replays_every_record_of_a_time_budgeted_matrix(tmp_path, capsys, 
         assert text.count("relative difference") == 1 and "train_mse" in text and "test_mse" in text
 
 
-def test_a_failed_fit_names_the_log_that_holds_its_traceback():
+def test_a_failed_fit_names_the_log_that_holds_its_traceback(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # the kept scratch folder goes with the test's
     plugin = str(ROOT / "tests" / "plugins" / "faulty.py")
     r = cli("fit", "--system", "double_pendulum", "--method", "toy_crasher", "--plugin", plugin, "--experiment",
             "indirect", "--n-train", "64", "--n-test", "32", "--steps", "1")
     assert r.returncode == 1 and "failed (RuntimeError: the toy fell over; traceback in " in r.stdout
     log = Path(r.stdout.strip().rsplit("traceback in ", 1)[1].rstrip(")"))
+    assert log.is_relative_to(tmp_path)  # kept for the user to read: a scratch folder of bench fit's, not removed
     assert "Traceback (most recent call last)" in log.read_text() and "the toy fell over" in log.read_text()
 
 
