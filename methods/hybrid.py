@@ -40,7 +40,10 @@ How the field learns a real arm (Nguyen-Tuong & Peters, ICRA 2010; Reuss et al.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated, Callable, ClassVar
 
 import numpy as np
@@ -263,9 +266,78 @@ def identified_prior(prior: str, train: Dataset, system: System | None, seed: in
     """The prior ``prior`` identified on ``train`` with ``seed`` (:class:`Prior`):
     the same fit for the same samples and seed, so the last :data:`PRIOR_CACHE`
     are kept and reused (a tuned hybrid fits every combination on the same
-    folds, each fold's prior identified before the search)."""
-    key = (prior, None if system is None else system.name, seed, fingerprint(train, STATES + ("tau",)))
-    return _priors.get(key, lambda: PRIORS[prior].identify(train, system, seed))
+    folds, each fold's prior identified before the search), and where this
+    process shares priors (:func:`share_priors`), one identified by another
+    process is read instead of identified again."""
+    key = _prior_key(prior, train, system, seed)
+    return _priors.get(key, lambda: _shared_or_identified(prior, key, train, system, seed))
+
+
+def _prior_key(prior: str, train: Dataset, system: System | None, seed: int) -> tuple:
+    return prior, None if system is None else system.name, seed, fingerprint(train, STATES + ("tau",))
+
+
+#: where this process shares the priors it identifies (:func:`share_priors`): a folder, and what names the code
+_SHARED: dict = {"folder": None, "code": None}
+
+
+def share_priors(folder: str | os.PathLike | None, code: Callable[[], str | None] | None = None) -> None:
+    """Share the priors this process identifies through ``folder``, as model files
+    (:mod:`methods.saving`): a prior that another process identified there, on the
+    same samples with the same seed and by the same code (``code()``, a digest of
+    the code now; where it gives ``None``, nothing is shared), is read back instead
+    of identified again, and one identified here is written there. A run of a
+    matrix shares through its output folder (:class:`bench.runner.run.RunJob`), so
+    that ``bench select``'s ``loop+gp`` reads the loop's models that the ``loop``
+    candidate's fits made (:func:`keep_shared`), instead of running the same rounds
+    again. A prior is written only where it loads back with the same torques
+    (:func:`~methods.saving.save_model`); ``None`` stops the sharing."""
+    _SHARED.update(folder=None if folder is None else Path(folder), code=code)
+
+
+def _shared_path(key: tuple) -> Path | None:
+    folder, code = _SHARED["folder"], _SHARED["code"]
+    digest_now = code() if folder is not None and code is not None else None
+    if digest_now is None:
+        return None
+    name = hashlib.sha256(repr((key, digest_now)).encode()).hexdigest()[:32]
+    return folder / f"{key[0]}-{name}.npz"
+
+
+def _shared_or_identified(prior: str, key: tuple, train: Dataset, system: System | None, seed: int) -> FittedModel:
+    path = _shared_path(key)
+    if path is not None and path.is_file():
+        from methods.saving import load_model
+
+        try:
+            return load_model(path, system)[0]
+        except Exception:  # noqa: BLE001  (a file another process left unreadable: the prior is identified here)
+            pass
+    model = PRIORS[prior].identify(train, system, seed)
+    _write_shared(path, prior, train, system, seed, model)
+    return model
+
+
+def keep_shared(prior: str, train: Dataset, system: System | None, seed: int, model: FittedModel) -> None:
+    """Keep ``model`` as the prior ``prior`` identified on ``train`` with ``seed``, where this process shares
+    priors (:func:`share_priors`): for a method whose own fit is that identification (the ``loop`` method at
+    its full rounds)."""
+    key = _prior_key(prior, train, system, seed)
+    _priors.get(key, lambda: model)
+    _write_shared(_shared_path(key), prior, train, system, seed, model)
+
+
+def _write_shared(path: Path | None, prior: str, train: Dataset, system: System | None, seed: int,
+                  model: FittedModel) -> None:
+    if path is None or path.exists():
+        return
+    from methods.saving import save_model
+
+    header = {"method": prior, "system": None if system is None else system.name, "seed": int(seed)}
+    try:
+        save_model(model, path, header, train, system)
+    except (ValueError, OSError):  # cannot be saved, or not the same loaded back: not shared
+        pass
 
 
 #: what a model's torque may read of a data set: every array but the torque itself

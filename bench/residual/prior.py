@@ -38,7 +38,7 @@ from bench.physics.models import FittedModel
 from bench.residual.loop import MAX_ROUNDS, not_started, residual_loop
 from bench.residual.result import ResidualResult
 from methods.base import METHODS, Method
-from methods.hybrid import Prior, prior_unavailable, register_prior
+from methods.hybrid import Prior, keep_shared, prior_unavailable, register_prior
 from methods.progress import Progress
 
 #: the method whose model the loop extends
@@ -105,6 +105,8 @@ class Loop(Method):
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         result = run(train, self.seed, self.budget)
         self.model, self._rounds = result.models[1], rounds_run(result)
+        if self.budget.steps is not None and self.budget.steps >= MAX_ROUNDS:
+            keep_shared(PRIOR.name, train, self.system, self.seed, self.model)  # the prior's own rounds: shared
         progress.stop("solved")
 
     def _work_done(self, progress: Progress) -> int:

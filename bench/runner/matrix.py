@@ -78,6 +78,7 @@ def run_matrix(
     cluster=None,
     retry_failed: bool = False,
     stack: bool = False,
+    share_priors: bool = False,
 ) -> list[Record]:
     """Run every spec, ``workers`` at a time, each in its own process.
 
@@ -101,13 +102,18 @@ def run_matrix(
     ``stack`` trains the seeds of a stackable method's runs that differ only
     in their seed as one model, in one process (:mod:`bench.runner.stacked`),
     on the local pool.
+
+    ``share_priors`` lets the runs share the hybrids' priors they identify through
+    ``out_dir/priors`` (:func:`methods.hybrid.share_priors`): a prior identified by
+    one run, on the same samples with the same seed, is read by the others.
     """
     import_plugins({p for s in specs for p in s.plugins})
     report = report if report is not None else print_now
     workers = workers or default_workers()
     out_dir = Path(out_dir)
     with FolderLock(out_dir):
-        return _run_matrix(specs, out_dir, workers, resume, report, cluster, retry_failed, stack)
+        return _run_matrix(specs, out_dir, workers, resume, report, cluster, retry_failed, stack,
+                           out_dir / "priors" if share_priors else None)
 
 
 def stale(record: Record, job: RunJob, retry_failed: bool = False) -> str | None:
@@ -121,7 +127,7 @@ def stale(record: Record, job: RunJob, retry_failed: bool = False) -> str | None
 
 
 def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool, report: Report, cluster,
-                retry_failed: bool, stack: bool = False) -> list[Record]:
+                retry_failed: bool, stack: bool = False, priors: Path | None = None) -> list[Record]:
     results: dict[str, Record] = {}
     todo: list[RunSpec] = []
     resumed = cannot_run = 0
@@ -173,7 +179,7 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
         jobs: dict[str, Job] = {}
         first: dict[str, RunSpec] = {}
         for group in groups(todo, report) if stack else [[s] for s in todo]:
-            job = RunJob.of(group[0], out_dir) if len(group) == 1 else StackedJob.of(group, out_dir)
+            job = RunJob.of(group[0], out_dir, priors=priors) if len(group) == 1 else StackedJob.of(group, out_dir)
             name = group[0].run_id if len(group) == 1 else job.name
             jobs[name], first[name] = job, group[0]
 

@@ -24,9 +24,11 @@ from bench.core.fileio import atomic_write
 from bench.runner.code import code_hash
 from bench.runner.execute import execute, preflight
 from bench.runner.isolation import STARTUP_TIMEOUT_S, Outcome
+from bench.runner.ledger import code_digest
 from bench.runner.job import PREPARE_MIN_S, Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
 from bench.runner.records import Record, record_path, write_record
 from bench.runner.spec import RunSpec
+from methods.hybrid import share_priors
 
 
 def phase_limits(spec: RunSpec) -> dict[str, float]:
@@ -58,10 +60,13 @@ class RunJob(Job):
     spec: dict
     out_dir: str
     data_file: str | None = None
+    #: a folder through which the run shares the priors it identifies with the other runs (:func:`share_priors`)
+    priors: str | None = None
 
     @classmethod
-    def of(cls, spec: RunSpec, out_dir: str | os.PathLike, data_file: str | None = None) -> "RunJob":
-        return cls(spec.to_dict(), str(out_dir), data_file)
+    def of(cls, spec: RunSpec, out_dir: str | os.PathLike, data_file: str | None = None,
+           priors: str | os.PathLike | None = None) -> "RunJob":
+        return cls(spec.to_dict(), str(out_dir), data_file, None if priors is None else str(priors))
 
     @property
     def run_spec(self) -> RunSpec:
@@ -92,6 +97,8 @@ class RunJob(Job):
             with open(self.data_file, "rb") as f:
                 data = pickle.load(f)
         spec = self.run_spec
+        if self.priors:
+            share_priors(self.priors, code_digest)
         record = execute(spec, on_phase, data=data, checked=True)
         return record.replace(code=self.code_entry()).to_json()
 
@@ -117,11 +124,12 @@ class RunJob(Job):
         return self.run_spec.to_dict()
 
     def elsewhere(self, scratch: Path) -> "RunJob":
-        """On a cluster's worker the run writes its record, its log and its model file under ``scratch``."""
+        """On a cluster's worker the run writes its record, its log and its model file under ``scratch``, and
+        shares no prior (the workers need no shared file system)."""
         spec = self.run_spec
         if spec.save:
             spec = dataclasses.replace(spec, save=str(Path(scratch) / "models" / Path(spec.save).name))
-        return dataclasses.replace(self, spec=spec.to_dict(), out_dir=str(scratch))
+        return dataclasses.replace(self, spec=spec.to_dict(), out_dir=str(scratch), priors=None)
 
     def packed(self, record: Record) -> tuple[Record, bytes | None]:
         """On the worker, the record with the model file it wrote (``None`` where none was written)."""

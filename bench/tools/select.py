@@ -52,9 +52,10 @@ class Candidate:
     ``work`` is the steps its final fit does where ``--steps`` is not given (its fold fits do the same,
     :mod:`bench.evaluation.tuning`); select's seconds are then only a ceiling, past which it is killed.
     ``start`` is when its run starts among the others, the lowest first (:func:`run`): the longest runs first
-    (the loop's rounds on every fold, twice for loop+gp, whose budget starts after them; then the searches of
-    the learned residuals; the records of results/measured/select_default say how long each took), so that two
-    workers end close together."""
+    (the loop's rounds on every fold; then the searches of the learned residuals; the records of
+    results/measured/select_default say how long each took), so that two workers end close together. ``loop+gp``
+    starts after them: its prior is the loop's model on each fold, which the ``loop`` candidate's fits share
+    through the runs' folder (:func:`methods.hybrid.share_priors`), so that it does not run the rounds again."""
 
     name: str
     method: str
@@ -74,13 +75,13 @@ GP_STEPS, NETWORK_STEPS = 30, 400
 CANDIDATES = (
     Candidate("standard", "sysid", "standard", start=8),
     Candidate("feasible", "sysid", "feasible", start=7),
-    Candidate("standard+gp", "standard+gp", work=GP_STEPS, start=5),
-    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS, start=3),
-    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=4),
-    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=2),
+    Candidate("standard+gp", "standard+gp", work=GP_STEPS, start=4),
+    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS, start=2),
+    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=3),
+    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=1),
     Candidate("feasible+sparse_torque", "feasible+sparse_torque", start=6),
-    Candidate("loop", "loop", work=MAX_ROUNDS, start=1),
-    Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=0),
+    Candidate("loop", "loop", work=MAX_ROUNDS, start=0),
+    Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=5),
 )
 
 
@@ -114,7 +115,7 @@ def run(rows, out: Path, workers: int | None, report=print, cluster=None) -> lis
             path.unlink()
     ordered = sorted(rows, key=lambda row: row[0].start)
     report(f"select: {len(rows)} candidate(s) in {folder}: {', '.join(c.name for c, _ in ordered)}")
-    records = matrix.run_matrix([s for _, s in ordered], folder, workers=workers, cluster=cluster)
+    records = matrix.run_matrix([s for _, s in ordered], folder, workers=workers, cluster=cluster, share_priors=True)
     done = dict(zip((c.name for c, _ in ordered), records))
     return [(c, done[c.name]) for c, _ in rows]
 

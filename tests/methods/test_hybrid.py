@@ -4,6 +4,7 @@ the prior where the data end, and refused in one line where a name is wrong."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -151,3 +152,33 @@ def test_two_fits_on_the_same_samples_share_their_priors_torques_and_give_the_sa
     second.predict_torque(test.subset(slice(0, 50)))
     assert asked == [len(test), len(test), 50]
     assert np.isfinite(first_test).all()
+
+
+def test_a_prior_shared_through_a_folder_is_read_by_another_process_and_only_from_the_same_code(panda, tmp_path,
+                                                                                                 monkeypatch):
+    """Where a process shares priors (``bench select``'s runs), a prior identified by one is written as a model
+    file and read back by the next, giving the same torques to the bit; one written by other code is not read."""
+    from methods import hybrid as hybrid_module
+
+    system, train, test = panda
+    train = train.subset(slice(0, 256))
+    code = {"digest": "code A"}
+    monkeypatch.setattr(hybrid_module, "_SHARED", dict(hybrid_module._SHARED))
+    hybrid_module.share_priors(tmp_path, lambda: code["digest"])
+    hybrid_module._priors.clear()
+    first = hybrid_module.identified_prior("standard", train, system, 0)
+    (written,) = tmp_path.glob("standard-*.npz")
+
+    identified = []
+    real = hybrid_module.PRIORS["standard"]
+    monkeypatch.setitem(hybrid_module.PRIORS, "standard", dataclasses.replace(
+        real, identify=lambda *args: identified.append(1) or real.identify(*args)))
+    hybrid_module._priors.clear()  # another process: nothing kept in memory
+    read = hybrid_module.identified_prior("standard", train, system, 0)
+    assert identified == [] and read is not first  # read from the file, not identified
+    np.testing.assert_array_equal(read.predict_torque(test), first.predict_torque(test))
+
+    code["digest"] = "code B"  # the code changed: the file is not its prior
+    hybrid_module._priors.clear()
+    hybrid_module.identified_prior("standard", train, system, 0)
+    assert identified == [1] and len(list(tmp_path.glob("standard-*.npz"))) == 2
