@@ -61,6 +61,7 @@ from bench.physics.system import System
 from methods.base import METHODS, Method, restored, saved_hyperparameters
 from methods.config import POSITIVE
 from methods.progress import Progress
+from methods.saving import load_model, save_model
 
 #: the method that identifies the prior
 PRIOR_METHOD = "sysid"
@@ -307,8 +308,6 @@ def _shared_path(key: tuple) -> Path | None:
 def _shared_or_identified(prior: str, key: tuple, train: Dataset, system: System | None, seed: int) -> FittedModel:
     path = _shared_path(key)
     if path is not None and path.is_file():
-        from methods.saving import load_model
-
         try:
             return load_model(path, system)[0]
         except Exception:  # noqa: BLE001  (a file another process left unreadable: the prior is identified here)
@@ -331,8 +330,6 @@ def _write_shared(path: Path | None, prior: str, train: Dataset, system: System 
                   model: FittedModel) -> None:
     if path is None or path.exists():
         return
-    from methods.saving import save_model
-
     header = {"method": prior, "system": None if system is None else system.name, "seed": int(seed)}
     try:
         save_model(model, path, header, train, system)
