@@ -333,7 +333,7 @@ def _write_shared(path: Path | None, prior: str, train: Dataset, system: System 
     header = {"method": prior, "system": None if system is None else system.name, "seed": int(seed)}
     try:
         save_model(model, path, header, train, system)
-    except (ValueError, OSError):  # cannot be saved, or not the same loaded back: not shared
+    except Exception:  # noqa: BLE001  (cannot be saved, or not the same loaded back: not shared; the run goes on)
         pass
 
 
