@@ -310,8 +310,8 @@ def _shared_or_identified(prior: str, key: tuple, train: Dataset, system: System
     if path is not None and path.is_file():
         try:
             return load_model(path, system)[0]
-        except Exception:  # noqa: BLE001  (a file another process left unreadable: the prior is identified here)
-            pass
+        except Exception:  # noqa: BLE001  (a file another process left unreadable: identified here, written anew)
+            path.unlink(missing_ok=True)
     model = PRIORS[prior].identify(train, system, seed)
     _write_shared(path, prior, train, system, seed, model)
     return model

@@ -14,6 +14,7 @@ from bench.core.data import generate, mse
 from bench.physics.models import FittedModel
 from bench.physics.undeclared import add_effects
 from methods import METHODS
+from methods.saving import load_model
 from systems import get_system
 from tests.commandline import cli
 from tests.contract import check_method
@@ -182,3 +183,15 @@ def test_a_prior_shared_through_a_folder_is_read_by_another_process_and_only_fro
     hybrid_module._priors.clear()
     hybrid_module.identified_prior("standard", train, system, 0)
     assert identified == [1] and len(list(tmp_path.glob("standard-*.npz"))) == 2
+
+    written.write_bytes(b"not a model file")  # left unreadable: identified again and written anew, no error
+    code["digest"] = "code A"
+    hybrid_module._priors.clear()
+    again = hybrid_module.identified_prior("standard", train, system, 0)
+    assert identified == [1, 1] and load_model(written, system)[0] is not None
+    np.testing.assert_array_equal(again.predict_torque(test), first.predict_torque(test))
+
+    monkeypatch.setattr(hybrid_module, "save_model", lambda *args: 1 / 0)  # cannot be written: the fit goes on
+    hybrid_module._priors.clear()
+    assert hybrid_module.identified_prior("standard", train.subset(slice(0, 200)), system, 0) is not None
+    assert identified == [1, 1, 1] and len(list(tmp_path.glob("standard-*.npz"))) == 2
