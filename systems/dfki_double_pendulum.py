@@ -85,6 +85,8 @@ LAB_FRICTION = {"viscous": (0.001, 0.001), "coulomb": (0.093, 0.078), "coulomb_s
 #: ``python -m bench study dfki-filter``; docs/choices.md). A figure tested on any of them rests on a choice
 #: that read its test torques: test-informed (:func:`cutoff_informed`).
 CUTOFF_CHOSEN_ON = ("00", "01", "02", "04")
+#: that cut-off, as the declaration gives it
+CUTOFF_HZ = DECLARATION.filter.cutoff_hz
 
 
 def cutoff_informed(test_recordings) -> list[str]:

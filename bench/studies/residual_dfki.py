@@ -36,7 +36,7 @@ from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance
 from systems import SYSTEMS
-from systems.dfki_double_pendulum import cutoff_informed
+from systems.dfki_double_pendulum import CUTOFF_HZ, cutoff_informed
 
 SYSTEM = "dfki_double_pendulum"
 METHODS_DEFAULT = ["sysid", "sparse", "mlp", "syrenets", "mggp"]
@@ -148,7 +148,8 @@ def informed_line(recordings) -> str:
     informed = cutoff_informed(recordings)
     clean = sorted(set(recordings) - set(informed))
     return (f"**Test-informed:** the rows holding out {', '.join(informed)} rest on a choice that read the held-out "
-            "recording's torques: the pre-processing's 6 Hz low-pass cut-off was chosen with each of them held out "
+            f"recording's torques: the pre-processing's {CUTOFF_HZ:g} Hz low-pass cut-off was chosen with each of them "
+            "held out "
             "in turn (`python -m bench study dfki-filter`, docs/choices.md). The rows holding out "
             f"{', '.join(clean) or 'none'} do not." if informed else "")
 

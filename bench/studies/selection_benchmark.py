@@ -72,7 +72,7 @@ from bench.runner.provenance import provenance
 from bench.tools import select as selection
 from bench.tools.robot_log import simulate
 from systems import get_system
-from systems.dfki_double_pendulum import DECLARATION as DFKI, cutoff_informed
+from systems.dfki_double_pendulum import CUTOFF_HZ, DECLARATION as DFKI, cutoff_informed
 
 DEVELOPMENT, EVALUATION = "development", "evaluation"
 #: each set's data seeds
@@ -347,7 +347,7 @@ def page(result: dict) -> str:
                      "are as their own command made them." if result.get("real_command") else ""), ""]
         lines += _rows(result["real"], rules)
         lines += [f"\n**Test-informed:** {r['case']} tests on {', '.join(r['test_informed'])}, which the recordings' "
-                  "6 Hz low-pass cut-off was chosen on (`python -m bench study dfki-filter`, docs/choices.md)."
+                  f"{CUTOFF_HZ:g} Hz low-pass cut-off was chosen on (`python -m bench study dfki-filter`, docs/choices.md)."
                   for r in result["real"] if r.get("test_informed")]
     return "\n".join(lines) + "\n"
 
