@@ -102,3 +102,14 @@ def test_no_run_debris_is_committed():
     except (OSError, subprocess.CalledProcessError):
         pytest.skip("not a git checkout")
     assert [f for f in tracked.splitlines() if DEBRIS.search(f)] == []
+
+
+@pytest.mark.xdist_group("torch.compile")
+def test_the_suites_groups_each_run_on_one_worker(request):
+    """``make test`` runs with ``--dist loadgroup``, which sends the tests of one ``xdist_group`` (those that
+    compile, those that start a Dask cluster) to one worker by adding the group to each test's id; where a
+    version of pytest or pytest-xdist stops doing so, the group's tests are spread over the workers and each
+    worker compiles, or starts a cluster, again."""
+    if not getattr(request.config.option, "loadgroup", False):
+        pytest.skip("not run with --dist loadgroup")
+    assert request.node.nodeid.endswith("@torch.compile"), request.node.nodeid
