@@ -104,6 +104,9 @@ def _quick_start() -> list[list[str]]:
 
 
 @pytest.mark.long
+# with the tests that compile DeLaN's loss (tests/methods/test_delan.py): the matrix's DeLaN run compiles the same
+# graph, so that whichever runs first compiles it and the other finds it in torch's cache on disk
+@pytest.mark.xdist_group("torch.compile")
 def test_the_quick_starts_commands_run_every_method_that_applies(tmp_path):
     commands = _quick_start()
     assert any("run" in c for c in commands) and any("list" in c for c in commands)
