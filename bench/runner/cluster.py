@@ -32,7 +32,12 @@ def client_for(cluster, workers: int):
         raise UserError("--cluster needs Dask distributed: pip install 'syrenets-bench[dask]'") from None
     own = None
     if cluster == "local":
-        own = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        import dask
+
+        # workers that are not daemonic processes may start the fork server that jobs fork from
+        # (bench.runner.isolation.fork_server), instead of a fresh interpreter for each job
+        with dask.config.set({"distributed.worker.daemon": False}):
+            own = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
         client = Client(own)
     elif isinstance(cluster, Client):
         client = cluster

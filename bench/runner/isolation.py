@@ -9,8 +9,9 @@ stays in a phase longer than that phase's limit.
 The child is forked from a fork server (:func:`fork_server`) that has
 imported torch, the suite and both registries once (:mod:`bench.runner.preload`),
 so a run does not pay for those imports; where the server cannot be used (no
-``fork`` on the platform, inside a daemonic process such as a Dask worker,
-a call with more than one thread, or ``fresh=True``) the child is a fresh
+``fork`` on the platform, inside a daemonic process such as a Dask worker
+started as Dask starts them by default, a call with more than one thread, or
+``fresh=True``) the child is a fresh
 interpreter, ``python -m bench.runner.worker``.
 """
 
@@ -97,7 +98,8 @@ def fork_server():
     """The multiprocessing fork server that calls are forked from, started on
     first use with :mod:`bench.runner.preload` imported, or ``None`` where it
     cannot be used: no ``fork`` on this platform, inside a daemonic process (a
-    Dask worker), or it failed to start."""
+    Dask worker, unless started otherwise as ``--cluster local`` starts them:
+    :func:`bench.runner.cluster.client_for`), or it failed to start."""
     if _FORK_SERVER["context"] is not None or _FORK_SERVER["failed"]:
         return _FORK_SERVER["context"]
     if "forkserver" not in multiprocessing.get_all_start_methods() or multiprocessing.current_process().daemon:

@@ -62,3 +62,18 @@ class Tally(Job):
         with open(self.tally, "a") as f:
             f.write(f"{self.x}\n")
         return {"x": self.x}
+
+
+@dataclass(frozen=True)
+class Forked(Job):
+    """Whether it runs in a process forked from the fork server, which imported :mod:`bench.runner.preload`
+    before forking (a fresh interpreter has not imported it)."""
+
+    def limits(self):
+        return {"run": 60.0}
+
+    def run(self, on_phase):
+        import sys
+
+        on_phase("run")
+        return {"forked": "bench.runner.preload" in sys.modules}

@@ -10,7 +10,7 @@ import pytest
 from bench.runner.isolation import CallFailed
 from bench.runner.job import run_jobs
 from bench.runner.ledger import Ledger, suite_code
-from tests.runner.jobs import Sleep, Tally
+from tests.runner.jobs import Forked, Sleep, Tally
 
 
 def test_a_study_stopped_part_way_resumes_with_the_jobs_that_did_not_finish(tmp_path):
@@ -70,3 +70,6 @@ def test_a_studys_jobs_run_on_a_dask_cluster_and_resume_from_the_same_ledger(tmp
     lines.clear()
     assert run_jobs({"quick": Tally(str(tally), 3)}, 1, str, lines.append, ledger) == {"quick": {"x": 3}}
     assert tally.read_text() == "3\n" and lines == [f"1 of 1 job(s) finished before, by this code: taken from {ledger.path}"]
+    # the workers of a local cluster are not daemonic processes: a job there forks from a fork server, as it does
+    # here, instead of starting a fresh interpreter
+    assert run_jobs({"forked": Forked()}, 1, str, lines.append, cluster=dask_client) == {"forked": {"forked": True}}
