@@ -82,9 +82,9 @@ RAW_COLUMNS = LAYOUTS[0].columns
 #: the lab's own identified friction (model 2.0), for reference
 LAB_FRICTION = {"viscous": (0.001, 0.001), "coulomb": (0.093, 0.078), "coulomb_slope": 100.0}
 #: the recordings whose torques chose the declaration's 6 Hz cut-off on training data alone (each held out in turn,
-#: ``python -m bench study dfki-filter``; docs/choices.md). A figure tested on any of them rests on a choice
-#: that read its test torques: test-informed (:func:`cutoff_informed`).
-CUTOFF_CHOSEN_ON = ("00", "01", "02", "04")
+#: ``python -m bench study dfki-filter``; docs/choices.md), as the declaration says (``[filter] chosen_on``). A
+#: figure tested on any of them rests on a choice that read its test torques: test-informed (:func:`cutoff_informed`).
+CUTOFF_CHOSEN_ON = DECLARATION.filter_chosen_on
 #: that cut-off, as the declaration gives it
 CUTOFF_HZ = DECLARATION.filter.cutoff_hz
 

@@ -99,6 +99,9 @@ class MeasuredSpec:
     joints: tuple[str, ...] | None = None
     #: where the URDF's other joints are locked, where not at their neutral positions: ``((joint, value), ...)``
     locked_at: tuple[tuple[str, float], ...] = ()
+    #: the trajectories whose torques chose the filter (``[filter] chosen_on``): a figure tested on any of them
+    #: rests on a choice that read its test torques (:meth:`test_informed`)
+    filter_chosen_on: tuple[str, ...] = ()
 
     @property
     def trajectories(self) -> tuple[str, ...]:
@@ -114,6 +117,11 @@ class MeasuredSpec:
         if split == "swapped":
             train, test = test, train
         return {"train": train, "test": test, "all": self.trajectories}
+
+    def test_informed(self, split: str) -> list[str]:
+        """The test trajectories of ``split`` that chose the filter (:attr:`filter_chosen_on`): a figure tested
+        on any of them is test-informed."""
+        return sorted(set(self.parts(split)["test"]) & set(self.filter_chosen_on))
 
     def describe(self) -> str:
         """How the recordings become samples, in words."""
@@ -158,8 +166,20 @@ def read_spec(path: str | Path) -> MeasuredSpec:
                         f"follow {', '.join(named)}")
     if set(test) == set(named):
         raise DataError(f"{path}: test holds every trajectory ({', '.join(named)}); leave at least one to train on")
+    settings = raw.get("filter", {})
+    if not isinstance(settings, dict):
+        raise DataError(f"{path}: [filter] must be a table (its keys: "
+                        f"{', '.join(f.name for f in dataclasses.fields(FilterSpec))}, chosen_on)")
+    settings = dict(settings)
+    chosen_on = settings.pop("chosen_on", [])
+    if isinstance(chosen_on, str):
+        chosen_on = [chosen_on]
+    unknown_chosen = [str(t) for t in chosen_on if str(t) not in named] if isinstance(chosen_on, list) else None
+    if unknown_chosen is None or unknown_chosen:
+        raise DataError(f"{path}: [filter] chosen_on must list trajectories of the recordings ({', '.join(named)}), "
+                        f"got {chosen_on!r}")
     try:
-        spec = FilterSpec(**raw.get("filter", {}))
+        spec = FilterSpec(**settings)
     except TypeError as exc:
         raise DataError(f"{path}: [filter]: {exc} (its keys: {', '.join(f.name for f in dataclasses.fields(FilterSpec))})") from None
     except ConfigError as exc:
@@ -180,7 +200,8 @@ def read_spec(path: str | Path) -> MeasuredSpec:
         raise DataError(f"{path}: columns name a time column ({columns.time}) and rate_hz is {rate:g}: give one of them")
     root, tip, joints, locked_at = _chain_keys(path, raw)
     return MeasuredSpec(path, columns, tuple(recordings), test, spec, time_unit, degrees, as_recorded, urdf,
-                        None if rate is None else float(rate), root, tip, joints, locked_at)
+                        None if rate is None else float(rate), root, tip, joints, locked_at,
+                        tuple(dict.fromkeys(map(str, chosen_on))))
 
 
 def _chain_keys(path: Path, raw: dict):

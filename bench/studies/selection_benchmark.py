@@ -72,7 +72,7 @@ from bench.runner.provenance import provenance
 from bench.tools import select as selection
 from bench.tools.robot_log import simulate
 from systems import get_system
-from systems.dfki_double_pendulum import CUTOFF_HZ, DECLARATION as DFKI, cutoff_informed
+from systems.dfki_double_pendulum import CUTOFF_HZ
 
 DEVELOPMENT, EVALUATION = "development", "evaluation"
 #: each set's data seeds
@@ -398,15 +398,8 @@ def real_rows() -> list[dict]:
     """The shipped real cases' rows, scored from the ``select.json`` each split's ``bench select`` wrote."""
     pages = {name: (path, json.loads(Path(path).read_text())) for name, path in REAL.items() if Path(path).exists()}
     return [{"case": name, "protocol": "auto", "folds": page.get("folds_protocol"), "source": path,
-             "scores": scores(page), "test_informed": _informed(name, page)} for name, (path, page) in pages.items()]
-
-
-def _informed(case: str, page: dict) -> list[str]:
-    """The test trajectories of a real case that its filter's cut-off was chosen on (the DFKI pendulum's), else
-    none: a row tested on any of them is test-informed."""
-    if not case.startswith("dfki_double_pendulum"):
-        return []
-    return cutoff_informed(DFKI.parts(page.get("split", "default"))["test"])
+             "scores": scores(page), "test_informed": page.get("test_informed") or []}
+            for name, (path, page) in pages.items()]
 
 
 def _publish(out: Path, result: dict) -> None:

@@ -44,6 +44,7 @@ from bench.residual.loop import MAX_ROUNDS
 from bench.runner import matrix
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
+from systems import SYSTEMS
 
 
 @dataclass(frozen=True)
@@ -168,10 +169,13 @@ def page(result: dict) -> str:
              f"work, each fold fit of the combination it keeps doing the steps of the final fit on all the training "
              f"data; its validation MSE is {SCORE_RULE}. The one with the lowest validation MSE is chosen, and the "
              f"test data are read only to score. The test columns are there to show whether validation chose well.",
-             "",
-             "| candidate | hyperparameters chosen | work: each fold fit → the final fit | validation MSE | "
-             "validation MSE, farther half | test MSE | test / standard model | rank by validation | rank by test |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             ""]
+    flag = informed_sentence(result)
+    if flag:
+        lines += [flag, ""]
+    lines += ["| candidate | hyperparameters chosen | work: each fold fit → the final fit | validation MSE | "
+              "validation MSE, farther half | test MSE | test / standard model | rank by validation | rank by test |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for e in entries:
         mark = " **(chosen)**" if chosen and e["name"] == chosen["name"] else ""
         hp = ", ".join(f"{k}={v}" for k, v in sorted(e["hyperparameters"].items())) or "—"
@@ -245,6 +249,24 @@ def applicability(train: Dataset, test: Dataset | None, target: Dataset | None, 
     return report
 
 
+def test_informed(system: str, split: str | None) -> list[str]:
+    """The test trajectories of ``split`` whose torques chose a setting of the file that declares the system (its
+    filter's cut-off: ``[filter] chosen_on``), so that a test figure rests on a choice that read them; none for a
+    system that no such file declares."""
+    declaration = getattr(SYSTEMS[system], "measured", None)
+    return declaration.test_informed(split or "default") if declaration is not None else []
+
+
+def informed_sentence(result: dict) -> str | None:
+    """The page's flag where its test figures are test-informed (:func:`test_informed`)."""
+    informed = result.get("test_informed")
+    if not informed:
+        return None
+    return (f"**Test-informed:** the test trajectories {', '.join(informed)} chose the cut-off of the filter that "
+            f"the system's file declares (`[filter] chosen_on`), so every test figure below rests on a choice that "
+            f"read their torques. The choice of candidate read none of them.")
+
+
 def predict_command(result: dict) -> str:
     """How to use the chosen model: ``bench predict``, naming the file that declares the arm where it is not
     built in (``declared``, the ``--system`` given: ``urdf:PATH`` or ``measured:PATH``)."""
@@ -273,7 +295,8 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
     budget = f"{steps} steps{ceiling}" if steps is not None else f"each candidate's own steps (its work column){ceiling}"
     result = {"system": system, "declared": declared, "split": split, "seed": seed, "budget": budget, "command": command,
               "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds, "chosen": chosen, "candidates": entries,
-              "domain": None if data is None else applicability(data[0], data[1], target, protocol)}
+              "domain": None if data is None else applicability(data[0], data[1], target, protocol),
+              "test_informed": test_informed(system, split)}
     if chosen:
         content = (out / chosen["model"]).read_bytes()
         atomic_write(out / "model.npz", lambda f: f.write(content), binary=True)

@@ -60,6 +60,18 @@ def test_one_log_may_hold_every_recording_named_by_a_column(tmp_path):
     assert spec.parts("swapped") == {"train": ("b",), "test": ("a",), "all": ("a", "b")}
 
 
+def test_a_declaration_says_which_trajectories_chose_its_filter_and_so_which_tests_are_test_informed(tmp_path):
+    spec = read_spec(write(tmp_path, 'columns = "time=t,q_1=q_1,qd_1=qd_1,qdd_1=qdd_1,tau_1=tau_1"\ntest = ["b"]\n'
+                                     'recordings_in = { file = "all.csv", column = "run" }\n'
+                                     '[filter]\ncutoff_hz = 10\nchosen_on = ["a"]\n'))
+    assert spec.filter.cutoff_hz == 10 and spec.filter_chosen_on == ("a",)
+    assert spec.test_informed("default") == [] and spec.test_informed("swapped") == ["a"]
+    # the DFKI pendulum's cut-off was chosen on 00, 01, 02 and 04, which its swapped split tests on
+    assert SYSTEMS["dfki_double_pendulum"].measured.test_informed("swapped") == ["00", "01", "02", "04"]
+    assert SYSTEMS["dfki_double_pendulum"].measured.test_informed("default") == []
+    assert SYSTEMS["kuka_lwr4"].measured.filter_chosen_on == ()
+
+
 @pytest.mark.parametrize("text, message", [
     ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\nas_recorded = true\n'
      'recordings_in = { file = "all.csv", column = "run" }\n', "as_recorded needs the logged accelerations"),
@@ -70,6 +82,13 @@ def test_one_log_may_hold_every_recording_named_by_a_column(tmp_path):
      "one of the two"),
     ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["c"]\n'
      'recordings_in = { file = "all.csv", column = "run" }\n', "test names trajectory"),
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\n'
+     'recordings_in = { file = "all.csv", column = "run" }\n[filter]\nchosen_on = ["a", "c"]\n',
+     r"\[filter\] chosen_on must list trajectories of the recordings \(a, b\)"),
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\n'
+     'recordings_in = { file = "all.csv", column = "run" }\n[filter]\nchosen_on = 3\n', r"\[filter\] chosen_on"),
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\nfilter = 6\n'
+     'recordings_in = { file = "all.csv", column = "run" }\n', r"\[filter\] must be a table"),
 ])
 def test_a_bad_declaration_is_refused_in_one_line_naming_the_file(tmp_path, text, message):
     with pytest.raises(DataError, match=message) as caught:

@@ -145,3 +145,19 @@ def test_the_candidates_runs_start_the_longest_first_each_at_its_own_place():
     # loop+gp after the longest searches: by then the loop's models, its prior on each fold, are shared
     assert [c.name for c in starts].index("loop+gp") > [c.name for c in starts].index("standard+mlp")
     assert {c.name for c in starts[-2:]} == {"standard", "feasible"}  # closed-form: one step
+
+
+def test_a_page_whose_test_trajectories_chose_the_filter_says_it_is_test_informed():
+    """The DFKI pendulum's swapped split tests on the trajectories that chose its filter's cut-off: its page is
+    flagged, on the page itself; a split, or a system, whose tests chose nothing is not."""
+    from bench.tools.select import test_informed
+
+    assert test_informed("dfki_double_pendulum", "swapped") == ["00", "01", "02", "04"]
+    assert test_informed("dfki_double_pendulum", None) == [] and test_informed("kuka_lwr4", "swapped") == []
+    assert test_informed("double_pendulum", None) == []  # no file declares a simulated system
+    published = Path("results/measured/select_dfki_swapped")
+    result = json.loads((published / "select.json").read_text())
+    assert result["test_informed"] == ["00", "01", "02", "04"]
+    flag = "**Test-informed:** the test trajectories 00, 01, 02, 04 chose the cut-off of the filter"
+    assert page(result).count(flag) == 1 and flag in (published / "select.md").read_text()
+    assert "Test-informed" not in page({**result, "test_informed": []})
