@@ -20,9 +20,11 @@ nothing is chosen on them. The runs' records are kept, so that the same
 command resumes where it stopped, as a matrix does.
 
 Writes ``DIR/select.json`` (``chosen`` and ``candidates``, each with its
-``name``, ``validation_mse`` and ``test_mse``), ``DIR/select.md`` (every
-candidate's validation and test figures side by side, ranked by each) and
-``DIR/model.npz``, the chosen model (``python -m bench predict``).
+``name``, ``validation_mse`` and ``test_mse``; ``test_informed``, the test
+trajectories that chose a setting of the system's file), ``DIR/select.md``
+(every candidate's validation and test figures side by side, ranked by each,
+flagged where they are test-informed) and ``DIR/model.npz``, the chosen
+model (``python -m bench predict``).
 """
 
 from __future__ import annotations
