@@ -17,10 +17,13 @@ STAMP := $(VENV)/.installed
 
 .PHONY: bench test benchmark paper leaderboard gpu-figures gpu-prepare clean-venv
 
+# pip byte-compiles what it installs one file after another; compileall does the same files on every core
+# (a file written for another Python version, such as one of torch's tests, is skipped, as pip skips it)
 $(STAMP): pyproject.toml Makefile
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet $(TORCH_INDEX) "$(TORCH)"
-	$(BIN)/python -m pip install --quiet -e ".[test,sr]"
+	$(BIN)/python -m pip install --quiet --no-compile $(TORCH_INDEX) "$(TORCH)"
+	$(BIN)/python -m pip install --quiet --no-compile -e ".[test,sr]"
+	$(BIN)/python -m compileall -qq -j 0 $(VENV)/lib || true
 	touch $(STAMP)
 
 bench: $(STAMP)
