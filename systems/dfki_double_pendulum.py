@@ -81,17 +81,10 @@ LAYOUTS = (
 RAW_COLUMNS = LAYOUTS[0].columns
 #: the lab's own identified friction (model 2.0), for reference
 LAB_FRICTION = {"viscous": (0.001, 0.001), "coulomb": (0.093, 0.078), "coulomb_slope": 100.0}
-#: the recordings whose torques chose the declaration's 6 Hz cut-off on training data alone (each held out in turn,
-#: ``python -m bench study dfki-filter``; docs/choices.md), as the declaration says (``[filter] chosen_on``). A
-#: figure tested on any of them rests on a choice that read its test torques: test-informed (:func:`cutoff_informed`).
-CUTOFF_CHOSEN_ON = DECLARATION.filter_chosen_on
-#: that cut-off, as the declaration gives it
+#: the low-pass cut-off, as the declaration gives it; the recordings whose torques chose it on training data alone (each held
+#: out in turn, ``python -m bench study dfki-filter``; docs/choices.md) are the declaration's ``[filter] chosen_on``,
+#: and a figure tested on any of them is test-informed (:meth:`~systems.measured.MeasuredSpec.chose_filter`)
 CUTOFF_HZ = DECLARATION.filter.cutoff_hz
-
-
-def cutoff_informed(test_recordings) -> list[str]:
-    """Which of ``test_recordings`` the filter's cut-off was chosen on: a figure tested on any is test-informed."""
-    return sorted(set(test_recordings) & set(CUTOFF_CHOSEN_ON))
 
 
 @dataclass(frozen=True)

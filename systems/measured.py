@@ -118,10 +118,14 @@ class MeasuredSpec:
             train, test = test, train
         return {"train": train, "test": test, "all": self.trajectories}
 
+    def chose_filter(self, trajectories) -> list[str]:
+        """Which of ``trajectories`` chose the filter (:attr:`filter_chosen_on`): a figure tested on any of them
+        is test-informed."""
+        return sorted(set(trajectories) & set(self.filter_chosen_on))
+
     def test_informed(self, split: str) -> list[str]:
-        """The test trajectories of ``split`` that chose the filter (:attr:`filter_chosen_on`): a figure tested
-        on any of them is test-informed."""
-        return sorted(set(self.parts(split)["test"]) & set(self.filter_chosen_on))
+        """The test trajectories of ``split`` that chose the filter (:meth:`chose_filter`)."""
+        return self.chose_filter(self.parts(split)["test"])
 
     def describe(self) -> str:
         """How the recordings become samples, in words."""
@@ -174,8 +178,7 @@ def read_spec(path: str | Path) -> MeasuredSpec:
     chosen_on = settings.pop("chosen_on", [])
     if isinstance(chosen_on, str):
         chosen_on = [chosen_on]
-    unknown_chosen = [str(t) for t in chosen_on if str(t) not in named] if isinstance(chosen_on, list) else None
-    if unknown_chosen is None or unknown_chosen:
+    if not isinstance(chosen_on, list) or any(str(t) not in named for t in chosen_on):
         raise DataError(f"{path}: [filter] chosen_on must list trajectories of the recordings ({', '.join(named)}), "
                         f"got {chosen_on!r}")
     try:

@@ -36,7 +36,7 @@ from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance
 from systems import SYSTEMS
-from systems.dfki_double_pendulum import CUTOFF_HZ, cutoff_informed
+from systems.dfki_double_pendulum import CUTOFF_HZ, DECLARATION
 
 SYSTEM = "dfki_double_pendulum"
 METHODS_DEFAULT = ["sysid", "sparse", "mlp", "syrenets", "mggp"]
@@ -144,8 +144,9 @@ def add_arguments(parser) -> None:
 
 def informed_line(recordings) -> str:
     """What a leave-one-recording-out row rests on: the rows holding out a recording that the filter's
-    cut-off was chosen on are test-informed (:func:`systems.dfki_double_pendulum.cutoff_informed`)."""
-    informed = cutoff_informed(recordings)
+    cut-off was chosen on (``[filter] chosen_on`` in the declaration:
+    :meth:`systems.measured.MeasuredSpec.chose_filter`) are test-informed."""
+    informed = DECLARATION.chose_filter(recordings)
     clean = sorted(set(recordings) - set(informed))
     return (f"**Test-informed:** the rows holding out {', '.join(informed)} rest on a choice that read the held-out "
             f"recording's torques: the pre-processing's {CUTOFF_HZ:g} Hz low-pass cut-off was chosen with each of them "
