@@ -24,7 +24,7 @@ from bench.core.fileio import atomic_write
 from bench.runner.code import code_hash
 from bench.runner.execute import execute, preflight
 from bench.runner.isolation import STARTUP_TIMEOUT_S, Outcome
-from bench.runner.ledger import code_digest
+from bench.runner.ledger import suite_code
 from bench.runner.job import PREPARE_MIN_S, Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
 from bench.runner.records import Record, record_path, write_record
 from bench.runner.spec import RunSpec
@@ -98,7 +98,7 @@ class RunJob(Job):
                 data = pickle.load(f)
         spec = self.run_spec
         if self.priors:
-            share_priors(self.priors, code_digest)
+            share_priors(self.priors, suite_code)
         record = execute(spec, on_phase, data=data, checked=True)
         return record.replace(code=self.code_entry()).to_json()
 
