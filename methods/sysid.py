@@ -65,8 +65,8 @@ from bench.core.experiment import Experiment
 from bench.core.data import Dataset
 from bench.core.errors import DataError
 from bench.physics.effects import EFFECTS
-from bench.physics.models import (FeasibleSet, LinearParametricModel, ParametricModel, lagrangian_regressor, mass_and_bias,
-                               torque_regressor)
+from bench.physics.linear import FeasibleSet, LinearParametricModel, lagrangian_regressor, torque_regressor
+from bench.physics.models import ParametricModel, mass_and_bias
 from bench.physics.feasible import Feasibility, feasible_fit, nearest_completion
 from bench.physics.regression import Compressed, base_columns, least_squares
 from bench.physics.system import LinearForm
@@ -273,7 +273,7 @@ class SysId(TorchLagrangianMethod):
                 "mass_matrix_indefinite_states": int(np.sum(~(smallest > 0)))}
 
     def saved(self, packer):
-        """The linear model (:meth:`~bench.physics.models.LinearParametricModel.saved`), or the parameter network."""
+        """The linear model (:meth:`~bench.physics.linear.LinearParametricModel.saved`), or the parameter network."""
         return self.linear.saved(packer) if self.linear is not None else super().saved(packer)
 
     def predict_lagrangian(self, data):

@@ -78,6 +78,25 @@ def _pinocchio():
     return pinocchio
 
 
+@functools.lru_cache(maxsize=8)
+def _engines(model, parameters: bytes) -> tuple[tuple, tuple]:
+    """``(model, data)`` of ``model`` with each link's inertial ``parameters``
+    (float64 bytes, 10 a link) plus a point mass at its joint, and of
+    ``model`` with those point masses alone (:meth:`UrdfArm.mass_and_bias_at`);
+    kept for the last few parameter vectors, since a rollout asks at each step."""
+    pin = _pinocchio()
+    pi = np.frombuffer(parameters, dtype=np.float64).reshape(-1, 10)
+    extra = 1.0 + float(np.max(np.abs(pi[:, 0])))  # every link's mass plus this is at least 1
+    out = []
+    for own in (pi, np.zeros_like(pi)):
+        m = model.copy()
+        m.armature[:] = 0.0  # the regressor has no rotor inertia
+        for i, p in enumerate(own, start=1):
+            m.inertias[i] = pin.Inertia.FromDynamicParameters(p + np.eye(10)[0] * extra)
+        out.append((m, m.createData()))
+    return out[0], out[1]
+
+
 #: what a joint that shares its name with a link is called inside the engine
 JOINT_SUFFIX = "__joint"
 
@@ -267,7 +286,27 @@ class UrdfArm(System):
 
         names = tuple(f"{p}_{i}" for i in range(1, dof + 1) for p in INERTIAL)
         urdf = tuple(self.inertial_parameters())
-        return LinearForm(names, dof, torque_regressor, lagrangian_regressor, urdf, bodies=dof, prior=urdf)
+        return LinearForm(names, dof, torque_regressor, lagrangian_regressor, urdf, bodies=dof, prior=urdf,
+                          dynamics=self.mass_and_bias_at)
+
+    def mass_and_bias_at(self, parameters: np.ndarray, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``M`` and ``c`` (``tau = M qdd + c``, gravity included) of the arm
+        whose links have the inertial ``parameters`` (:meth:`inertial_parameters`'
+        layout; the torque regressor's ``Y pi``), by Pinocchio's CRBA and RNEA:
+        two passes a state where the regressor at ``dof + 1`` accelerations
+        takes ``dof + 1`` passes of a larger algorithm. The parameters need not
+        be a rigid body's (a fit's base parameters, zero elsewhere), and the
+        engine keeps a link as mass, centre and inertia, so each link is given
+        one more point mass at its joint, in this model and in a second one
+        that has it alone; ``M`` and ``c`` are linear in the parameters, and
+        the second model's are subtracted."""
+        pin = _pinocchio()
+        loaded, alone = _engines(self.model, np.asarray(parameters, dtype=np.float64).tobytes())
+        out_M, out_c = np.zeros((len(q), self.dof, self.dof)), np.zeros((len(q), self.dof))
+        for k, (qk, vk) in enumerate(zip(np.asarray(q, dtype=np.float64), np.asarray(qd, dtype=np.float64))):
+            out_M[k] = pin.crba(*loaded, qk) - pin.crba(*alone, qk)
+            out_c[k] = pin.nonLinearEffects(*loaded, qk, vk) - pin.nonLinearEffects(*alone, qk, vk)
+        return out_M, out_c
 
     # -- description ----------------------------------------------------------------
     def scaled_domain(self, half_width: float) -> Domain:

@@ -12,6 +12,8 @@
 * :mod:`~bench.physics.feasible`: physically feasible identification;
 * :mod:`~bench.physics.models`: the one fitted-model interface and the
   expression-backed and parametric models;
+* :mod:`~bench.physics.linear`: the models linear in their coefficients (a
+  linear form at its base parameters, terms at their coefficients);
 * :mod:`~bench.physics.system`: what a physical system is, and the system
   registry (below ``methods/``, because a method reads a system's declared
   form and coordinate kinds).

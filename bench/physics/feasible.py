@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bench.core.errors import DataError
-from bench.physics.models import torque_regressor
+from bench.physics.linear import torque_regressor
 from bench.physics.regression import Compressed
 
 #: parameters per rigid body
@@ -192,7 +192,7 @@ def nearest_completion(W: np.ndarray, columns: np.ndarray, coef: np.ndarray, pri
 
 
 def feasibility_of(model, data) -> dict | None:
-    """Whether a :class:`~bench.physics.models.LinearParametricModel` of rigid
+    """Whether a :class:`~bench.physics.linear.LinearParametricModel` of rigid
     bodies is a rigid body's (:meth:`Feasibility.as_dict`): its parameters
     where it holds all of them, else the full set nearest its form's prior
     that gives the same torques at the states of ``data``

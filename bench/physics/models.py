@@ -44,9 +44,8 @@ import torch
 from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.core.experiment import Experiment
-from bench.core.kept import read_only
 from bench.physics.dynamics import euler_lagrange_chunked
-from bench.core.modelfile import ModelFileError, Packer, Unpacker, expression_from_json, expression_to_json, loader
+from bench.core.modelfile import Packer, Unpacker, expression_from_json, expression_to_json, loader
 from bench.physics.terms import Term, TermLibrary
 
 #: rows per call when a model's Lagrangian is evaluated on a large data set
@@ -327,106 +326,6 @@ def separate(form) -> Separation | None:
     return Separation(form.unknowns, list(groups.values()), list(groups))
 
 
-#: each linear form's torque regressor on each data set, ``{data: {form: (n, dof, p)}}``; an
-#: entry goes with its data set
-_REGRESSORS: "weakref.WeakKeyDictionary[Dataset, dict]" = weakref.WeakKeyDictionary()
-
-
-def torque_regressor(form, data: Dataset) -> np.ndarray:
-    """``form.torque_regressor`` at the states of ``data``, with the form's
-    further :attr:`~bench.physics.system.LinearForm.terms`' columns, computed once
-    per form and data set (read-only): the residual loop refits a linear model's
-    coefficients many times on the same data, and an arm's regressor costs
-    a pass of its rigid-body algorithm per sample."""
-    kept = _REGRESSORS.setdefault(data, {})
-    if form not in kept:
-        Y = np.asarray(form.torque_regressor(data.q, data.qd, data.qdd), dtype=np.float64)
-        if form.terms:
-            extra = TermLibrary(form.terms).design(data, "indirect").reshape(len(data), data.dof, len(form.terms))
-            Y = np.concatenate([Y, extra], axis=2)
-        kept[form] = read_only(Y)
-    return kept[form]
-
-
-def lagrangian_regressor(form, data: Dataset) -> np.ndarray:
-    """``form.lagrangian_regressor`` at the states of ``data``, with each of
-    the form's further :attr:`~bench.physics.system.LinearForm.terms`' value in
-    ``L`` (zero for friction): ``(n, p)``."""
-    Y = form.lagrangian_regressor(data.q, data.qd)
-    if not form.terms:
-        return Y
-    return np.column_stack([Y] + [t.value(data) for t in form.terms])
-
-
-class LinearParametricModel(FittedModel):
-    """A :class:`~bench.physics.system.LinearForm` at fitted values of some of its
-    columns (its base parameters): ``tau = Y[:, :, columns] @ coef`` and
-    ``L = Y_L[:, columns] @ coef + offset``.
-
-    ``names`` say what each coefficient is (a base parameter is a parameter
-    plus the combination of those that act only together with it).
-    """
-
-    def __init__(self, form, columns, coef, names: Sequence[str] | None = None, offset: float = 0.0,
-                 feasible: "FeasibleSet | None" = None):
-        self.form, self.columns = form, np.asarray(columns, dtype=int)
-        self.coef, self.offset = np.asarray(coef, dtype=np.float64), float(offset)
-        self.names = tuple(names) if names is not None else tuple(form.names[i] for i in self.columns)
-        self.feasible = feasible
-
-    def torque_columns(self, data: Dataset) -> np.ndarray:
-        """The model's columns in torque space, flattened sample-major: ``(n * dof, k)``
-        (the form's regressor on ``data`` is computed once, :func:`torque_regressor`)."""
-        return torque_regressor(self.form, data)[:, :, self.columns].reshape(-1, len(self.columns))
-
-    def predict_torque(self, data: Dataset) -> np.ndarray:
-        return (self.torque_columns(data) @ self.coef).reshape(len(data), data.dof)
-
-    def predict_lagrangian(self, data: Dataset) -> np.ndarray:
-        return lagrangian_regressor(self.form, data)[:, self.columns] @ self.coef + self.offset
-
-    def with_coefficients(self, coef) -> "LinearParametricModel":
-        return LinearParametricModel(self.form, self.columns, coef, self.names, self.offset, self.feasible)
-
-    def parameters(self) -> dict[str, float]:
-        """The fitted values, by name."""
-        return dict(zip(self.names, self.coef.tolist()))
-
-    def parametric(self) -> "LinearParametricModel":
-        return self
-
-    def structure(self) -> str:
-        """``"feasible"`` for a model whose parameters are held physically
-        feasible (:attr:`feasible`), ``"linear"`` otherwise."""
-        return "linear" if self.feasible is None else "feasible"
-
-    def saved(self, packer: Packer) -> dict:
-        """Its coefficients, the form's further terms, and the form's regressor
-        at :data:`PROBE_STATES` fixed states, by which loading checks that the
-        system gives the same form."""
-        extra = len(self.form.terms)
-        return {"kind": "linear", "columns": packer.array(self.columns), "coef": packer.array(self.coef),
-                "names": list(self.names), "offset": self.offset,
-                "terms": [term_to_json(t) for t in self.form.terms],
-                "term_names": list(self.form.names[len(self.form.names) - extra:]),
-                "feasible": None if self.feasible is None else {
-                    "bodies": self.feasible.bodies, "prior": packer.array(self.feasible.prior),
-                    "regularisation": self.feasible.regularisation,
-                    "nonnegative": [int(i) for i in self.feasible.nonnegative]},
-                "probe": packer.array(_probe(self.form))}
-
-
-#: the states at which a saved linear model's form is checked against the system's when it is loaded
-PROBE_STATES = 3
-
-
-def _probe(form) -> np.ndarray:
-    """``form``'s torque regressor at :data:`PROBE_STATES` fixed states."""
-    rng = np.random.default_rng(0)
-    q, qd, qdd = (rng.uniform(-1.0, 1.0, (PROBE_STATES, form.dof)) for _ in range(3))
-    return torque_regressor(form, Dataset(q, qd, qdd, np.zeros_like(q)))
-
-
 def term_to_json(term) -> dict:
     """A :class:`~bench.physics.terms.Term` as JSON (its expression by :func:`~bench.core.modelfile.expression_to_json`)."""
     return {"expr": expression_to_json(term.expr), "place": term.place, "name": term.name, "joint": term.joint,
@@ -438,40 +337,6 @@ def term_from_json(obj: dict, source: str):
     joint, shape = obj.get("joint"), obj.get("shape")
     return Term(expression_from_json(obj["expr"], source), str(obj["place"]), str(obj.get("name", "")),
                 None if joint is None else int(joint), None if shape is None else float(shape))
-
-
-@loader("linear")
-def _load_linear(tree: dict, unpacker: Unpacker, context: dict) -> "LinearParametricModel":
-    system = context.get("system")
-    form = None if system is None else system.linear_form()
-    if form is None:
-        raise ModelFileError(f"{unpacker.source}: its model is an arm's linear form, and "
-                             f"{getattr(system, 'name', 'no system')} gives none")
-    terms = [term_from_json(t, unpacker.source) for t in tree["terms"]]
-    form = form.with_terms(terms[len(form.terms):], tree["term_names"][len(form.terms):])
-    probe = unpacker.array(tree["probe"])
-    if probe.shape != _probe(form).shape or not np.allclose(_probe(form), probe, rtol=1e-9, atol=1e-12):
-        raise ModelFileError(f"{unpacker.source}: {system.name}'s model is not the one this model was fitted on "
-                             f"(its regressor differs at the probe states)")
-    feasible = tree.get("feasible")
-    return LinearParametricModel(
-        form, unpacker.array(tree["columns"]), unpacker.array(tree["coef"]), tree["names"], float(tree["offset"]),
-        None if feasible is None else FeasibleSet(int(feasible["bodies"]), tuple(unpacker.array(feasible["prior"])),
-                                                  float(feasible["regularisation"]),
-                                                  tuple(int(i) for i in feasible.get("nonnegative", ()))))
-
-
-@dataclass(frozen=True)
-class FeasibleSet:
-    """How a linear model's parameters are held feasible (:func:`bench.physics.feasible.feasible_fit`):
-    its first ``bodies`` blocks of 10 columns are rigid bodies', pulled toward
-    ``prior`` with weight ``regularisation``, and the columns ``nonnegative``
-    (a joint's friction) are held at 0 or above."""
-
-    bodies: int
-    prior: tuple[float, ...]
-    regularisation: float
-    nonnegative: tuple[int, ...] = ()
 
 
 def mass_and_bias(model: FittedModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -154,7 +154,12 @@ class LinearForm:
         Further columns after the regressors' (:meth:`with_terms`): terms of
         the suite's term library (:class:`~bench.physics.terms.Term`), such as
         joint friction, each with one coefficient; the regressors above do
-        not give them, :func:`bench.physics.models.torque_regressor` does.
+        not give them, :func:`bench.physics.linear.torque_regressor` does.
+    dynamics
+        ``(pi, q, qd) -> (M, c)`` with ``Y(q, qd, qdd) pi = M qdd + c``, for
+        the regressors' columns at parameters ``pi``, from an engine that
+        computes them faster than the regressor at ``dof + 1`` accelerations
+        (an arm's rigid-body algorithms); ``None`` where there is none.
     """
 
     names: tuple[str, ...]
@@ -165,6 +170,7 @@ class LinearForm:
     bodies: int = 0
     prior: tuple[float, ...] | None = None
     terms: tuple = ()
+    dynamics: Callable | None = None
 
     def with_terms(self, terms, names) -> "LinearForm":
         """The form with ``terms`` as further columns, named ``names``."""

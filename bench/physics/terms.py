@@ -112,6 +112,20 @@ class Term:
         """``conservative``, ``dissipative`` or ``force``, by :attr:`place` (:data:`PLACES`)."""
         return PLACES[self.place]
 
+    @functools.cached_property
+    def takes_accelerations(self) -> bool:
+        """Whether the term's torque may depend on ``qdd``: a term of ``L``
+        whose expression uses a velocity (``d/dt dL/dqd`` then carries
+        ``qdd``), a force that uses an acceleration, or a law of the sensor
+        (whose column depends on the model it corrects). A potential, a
+        term of ``D`` and a force of the state do not."""
+        if self.place == "sensor":
+            return True
+        if self.place == "D":
+            return False
+        prefix = "qd_" if self.place == "L" else "qdd_"
+        return any(str(s).startswith(prefix) for s in self.expr.free_symbols)
+
     @property
     def joints(self) -> tuple[int, ...]:
         """The joints (0-based) the term acts on: its :attr:`joint`, or else

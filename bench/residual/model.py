@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy as np
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.core.modelfile import Packer, Unpacker, build, loader
+from bench.physics.linear import TermModel
 from bench.physics.models import FittedModel, term_from_json, term_to_json
 from bench.physics.terms import Term, TermLibrary
 from methods import METHODS
@@ -53,6 +55,12 @@ class CrossFitted(FittedModel):
     def predict_torque(self, data: Dataset) -> np.ndarray:
         return self.fit.predict_torque(data)
 
+    def takes_accelerations(self) -> bool:
+        return self.fit.takes_accelerations()
+
+    def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.fit.mass_and_bias(q, qd)
+
     def expression(self):
         return self.fit.expression()
 
@@ -88,10 +96,26 @@ class LoopModel(FittedModel):
             tau = tau + (self.columns(data) @ self.coef).reshape(tau.shape)
         return tau
 
+    def takes_accelerations(self) -> bool:
+        return self.rigid.takes_accelerations() or self._effects.takes_accelerations()
+
+    def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rigid model's ``M`` and ``c`` plus the effects'
+        (:class:`~bench.physics.linear.TermModel`): each is asked for its own,
+        the rigid model's from its engine where it has one (a driven rollout
+        asks this at each of its steps)."""
+        M, c = self.rigid.mass_and_bias(q, qd)
+        M_e, c_e = self._effects.mass_and_bias(q, qd)
+        return M + M_e, c + c_e
+
+    @functools.cached_property
+    def _effects(self) -> TermModel:
+        return TermModel(self.effects, self.coef)
+
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         """The rigid model's ``L`` plus the conservative effects' terms."""
         L = np.asarray(self.rigid.predict_lagrangian(data), dtype=np.float64)
-        return L + sum((c * t.value(data) for c, t in zip(self.coef, self.effects)), np.zeros(len(data)))
+        return L + self._effects.predict_lagrangian(data)
 
     def expression(self):
         return self.rigid.expression()

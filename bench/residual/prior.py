@@ -121,6 +121,12 @@ class Loop(Method):
     def predict_torque(self, data: Dataset) -> np.ndarray:
         return self.model.predict_torque(data)
 
+    def takes_accelerations(self) -> bool:
+        return self.model.takes_accelerations()
+
+    def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.model.mass_and_bias(q, qd)
+
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         return self.model.predict_lagrangian(data)
 

@@ -196,7 +196,7 @@ class Parametric(Strategy):
 
 @refits("linear")
 class Linear(Strategy):
-    """A model linear in its parameters (:class:`~bench.physics.models.LinearParametricModel`):
+    """A model linear in its parameters (:class:`~bench.physics.linear.LinearParametricModel`):
     least squares has reached its optimum already, so round 0 keeps it."""
 
     name = "linear"
@@ -222,7 +222,7 @@ class Linear(Strategy):
 @refits("feasible")
 class Feasible(Linear):
     """A model linear in its parameters held physically feasible
-    (:class:`~bench.physics.models.FeasibleSet`): refitted with the effects
+    (:class:`~bench.physics.linear.FeasibleSet`): refitted with the effects
     under the same constraints (:func:`bench.physics.feasible.feasible_fit`),
     so that the effects are not judged beside a rigid model no rigid body
     has. Tracing, pruning and the held-out checks judge terms by

@@ -127,7 +127,7 @@ def test_a_linear_models_regressor_is_computed_once_per_data_set():
     import dataclasses
 
     from bench.core.data import generate
-    from bench.physics.models import LinearParametricModel
+    from bench.physics.linear import LinearParametricModel
     from bench.physics.system import LinearForm
 
     calls = []

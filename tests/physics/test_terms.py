@@ -8,7 +8,7 @@ import pytest
 import sympy
 
 from bench.core import symbolic
-from bench.core.data import generate
+from bench.core.data import Dataset, generate
 from bench.physics.terms import Term, TermLibrary
 from bench.evaluation.recovery import euler_lagrange_symbolic
 from systems import get_system
@@ -82,3 +82,55 @@ def test_smoothed_coulomb_friction_stays_finite_far_beyond_its_velocity(data):
 
     tau = EFFECTS["smooth_coulomb"].term(0, shape=1e-3).torque(data)  # qd / v_s up to about 1500: cosh overflows
     np.testing.assert_allclose(tau[:, 0], np.tanh(data.qd[:, 0] / 1e-3), rtol=0, atol=1e-15)
+
+
+def _terms_of_every_effect(system) -> list[Term]:
+    from bench.physics.effects import EFFECTS
+    out = []
+    for effect in EFFECTS.values():
+        if effect.sensor:
+            continue
+        shape = None if effect.shaped is None else (3 if effect.grid is not None else 0.2)
+        joints = () if effect.on_system is not None else tuple(range(effect.arity))
+        out.append(effect.term(*joints, shape=shape, system=system))
+    return out
+
+
+def test_a_term_takes_accelerations_exactly_where_its_torque_depends_on_them(data):
+    """Checked on the torque itself: the same states at zero and at random
+    accelerations give the same torque where the term says it takes none."""
+    system = get_system("double_pendulum")
+    still = Dataset(data.q, data.qd, np.zeros_like(data.qdd), data.tau)
+    (q1, _), (v1, _) = symbolic.coordinate_symbols(2)
+    terms = _terms_of_every_effect(system) + [Term.force(symbolic.acceleration_symbols(2)[1] * v1, 0, "inertial"),
+                                              Term.force(sympy.sign(v1) * q1, 1, "state")]
+    taking = {t.label for t in terms if t.takes_accelerations}
+    assert {"armature", "tip_payload", "inertial"} <= taking
+    assert not taking & {"spring", "offset", "viscous_friction", "coulomb_friction", "periodic_sin", "state"}
+    for term in terms:
+        moved = np.abs(term.torque(data) - term.torque(still)).max()
+        assert (moved > 1e-6) == term.takes_accelerations, term.label
+
+
+def test_a_loop_models_mass_matrix_and_bias_are_those_of_its_torque(data, monkeypatch):
+    """Its effects of the state alone are asked once a state, the others at
+    dof + 1 accelerations; the sum is what the torque's own decomposition
+    (``dof + 1`` torques a state) gives, and it predicts the torque."""
+    from bench.evaluation.rollout import TrueModel
+    from bench.physics.models import FittedModel
+    from bench.residual.model import LoopModel
+    system = get_system("double_pendulum")
+    terms = _terms_of_every_effect(system)
+    coef = np.linspace(0.1, 0.5, len(terms))
+    model = LoopModel(TrueModel(system), terms, coef, np.zeros(len(terms)))
+    asked, torque = [], Term.torque
+    monkeypatch.setattr(Term, "torque", lambda self, d: asked.append((self.place, len(d))) or torque(self, d))
+    M, c = model.mass_and_bias(data.q, data.qd)
+    monkeypatch.undo()
+    n = len(data)  # one transform of L for the effects of the state alone, one at dof + 1 accelerations for the rest
+    assert sorted(asked) == [("D", n), ("L", n), ("L", 3 * n), ("force", n)]
+    M_all, c_all = FittedModel.mass_and_bias(model, data.q, data.qd)
+    np.testing.assert_allclose(M, M_all, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(c, c_all, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", M, data.qdd) + c, model.predict_torque(data), rtol=1e-10, atol=1e-10)
+    assert not np.allclose(M, FittedModel.mass_and_bias(TrueModel(system), data.q, data.qd)[0])  # the armature's

@@ -4,6 +4,7 @@ against Pinocchio's RNEA on a mechanism both can build."""
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
 
 import numpy as np
@@ -98,6 +99,34 @@ def test_sysid_identifies_the_pandas_base_parameters(monkeypatch):
     assert mse(m.predict_torque(test), test.tau) < 1e-20
     rollout = rollout_error(m, panda, test)
     assert rollout["status"] == "ok" and rollout["q_rmse"] < 1e-8  # against Pinocchio's own forward dynamics
+
+
+@pytest.mark.parametrize("system_name", ["panda", "kuka_lwr4"])
+def test_a_linear_models_mass_matrix_and_bias_from_the_engine_are_its_regressors(system_name):
+    """``M`` and ``c`` by CRBA and RNEA at the model's parameters equal the
+    torque regressor's at ``dof + 1`` accelerations, for parameters that are
+    no rigid body's (half the columns, random signs, zero masses) and for a
+    form with a further term; the engine is asked, not the regressor."""
+    from bench.physics.effects import EFFECTS
+    from bench.physics.linear import LinearParametricModel
+    from bench.physics.models import FittedModel
+    system = get_system(system_name)
+    rng = np.random.default_rng(4)
+    form = system.linear_form()
+    form = form.with_terms([EFFECTS["armature"].term(1), EFFECTS["coulomb_friction"].term(2)], ["I_2", "F_c_3"])
+    p = len(form.names)
+    half = np.sort(rng.choice(p, p // 2, replace=False))
+    q, qd = rng.uniform(-1, 1, (40, system.dof)), rng.uniform(-2, 2, (40, system.dof))
+    for model in (LinearParametricModel(form, half, rng.normal(size=len(half))),
+                  LinearParametricModel(form, np.arange(p), np.array(form.full_prior()) + 0.1)):
+        asked = []
+        model.form = dataclasses.replace(form, torque_regressor=lambda *a: asked.append(a) or form.torque_regressor(*a))
+        M, c = model.mass_and_bias(q, qd)
+        assert asked == []
+        M_regressor, c_regressor = FittedModel.mass_and_bias(model, q, qd)
+        assert len(asked) == 1
+        np.testing.assert_allclose(M, M_regressor, rtol=1e-10, atol=1e-10 * np.abs(M_regressor).max())
+        np.testing.assert_allclose(c, c_regressor, rtol=1e-10, atol=1e-10 * np.abs(c_regressor).max())
 
 
 def test_the_urdf_parameters_are_physically_consistent_and_a_broken_set_is_named():
