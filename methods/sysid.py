@@ -282,6 +282,9 @@ class SysId(TorchLagrangianMethod):
     def predict_torque(self, data):
         return self.linear.predict_torque(data) if self.linear is not None else super().predict_torque(data)
 
+    def mass_and_bias(self, q, qd):
+        return self.linear.mass_and_bias(q, qd) if self.linear is not None else super().mass_and_bias(q, qd)
+
     def record_details(self):
         if self.linear is None:
             return {}
