@@ -5,7 +5,7 @@ measurement that writes one of the project's published pages under
 from __future__ import annotations
 
 from bench.cli.options import Parser
-from bench.studies import (adaptation, dfki_filter, generalisation, gpu_figures, overhead, residual_acceptance,
+from bench.studies import (adaptation, dfki_filter, generalisation, gpu_figures, long_log, overhead, residual_acceptance,
                                residual_dfki, scaling, selection_benchmark, stacking_speed, syrenets_profile, syrenets_speed, trajectories)
 
 HELP = "the project's studies: measurements that write its published pages (python -m bench study --help lists them)"
@@ -15,7 +15,7 @@ STUDIES = {
     "adaptation": adaptation, "residual-acceptance": residual_acceptance, "residual-dfki": residual_dfki,
     "overhead": overhead, "dfki-filter": dfki_filter, "scaling": scaling, "syrenets-speed": syrenets_speed,
     "syrenets-profile": syrenets_profile, "stacking-speed": stacking_speed, "generalisation": generalisation,
-    "gpu": gpu_figures, "trajectories": trajectories, "selection": selection_benchmark,
+    "gpu": gpu_figures, "trajectories": trajectories, "selection": selection_benchmark, "long-log": long_log,
 }
 
 

@@ -11,6 +11,10 @@ one's own (a TOML file beside its logs). Two layouts:
   trajectory :data:`FASTER` times as fast, as the shipped KUKA's;
 * ``several``: :data:`SEVERAL` training trajectories, tested on another.
 
+(A third, ``long``, is not among the benchmark's cases: :data:`LONG`
+trajectories of :data:`LONG_SECONDS`, the last the test; ``python -m bench
+study long-log`` runs ``bench select`` at its default on it.)
+
 On each case ``bench select`` runs once per validation protocol
 (:mod:`bench.core.protocols`: ``time``, select's folds before it had others;
 ``auto``, its default, :func:`resolve`; ``regions``; and ``knndm`` where the
@@ -85,6 +89,9 @@ FASTER = 1.5
 #: training trajectories of the ``several`` layout
 SEVERAL = 4
 LAYOUTS = ("one", "several")
+#: the ``long`` layout (:mod:`bench.studies.long_log`): trajectories (the last the test) and the seconds of each,
+#: 12 x 5,840 = 70,080 samples at :data:`RATE_HZ`
+LONG, LONG_SECONDS = 12, 58.4
 #: seconds of each recording, and its rate
 SECONDS, RATE_HZ, BASE_HZ = 10.0, 100.0, 0.1
 #: the torque noise, a fraction of each joint's torque standard deviation
@@ -160,10 +167,11 @@ def _urdf(arm: str) -> Path:
     return _data() / {"panda": "panda.urdf.gz", "ur5": "ur5_robot.urdf.gz", "kuka": "kuka_lwr4.urdf.gz"}[arm]
 
 
-def recording(system, effects: list[str], trajectory_seed: int, noise_seed: int, base_hz: float) -> Dataset:
+def recording(system, effects: list[str], trajectory_seed: int, noise_seed: int, base_hz: float,
+              seconds: float = SECONDS) -> Dataset:
     """One recording of the Fourier trajectory of ``trajectory_seed`` (:func:`bench.tools.robot_log.simulate`),
-    its torque the arm's with ``effects`` and noise drawn with ``noise_seed``, with its time stamps."""
-    time, data = simulate(system.name, SECONDS, RATE_HZ, base_hz, effects, NOISE, trajectory_seed,
+    ``seconds`` long, its torque the arm's with ``effects`` and noise drawn with ``noise_seed``, with its time stamps."""
+    time, data = simulate(system.name, seconds, RATE_HZ, base_hz, effects, NOISE, trajectory_seed,
                           noise_seed=noise_seed)
     return data.replace(L=None, time=time)
 
@@ -178,16 +186,20 @@ def make(case: Case, folder: Path) -> Path:
     rng = np.random.default_rng(zlib.crc32(case.name.encode()))
     effects = EFFECT_SETS[case.effects](system.dof, rng)
     base = 1000 * case.seed
+    seconds = LONG_SECONDS if case.layout == "long" else SECONDS
     if case.layout == "one":
         plan = [("A", base + 1, base + 11, BASE_HZ), ("A", base + 1, base + 12, BASE_HZ),
                 ("T", base + 2, base + 13, FASTER * BASE_HZ)]
+    elif case.layout == "long":  # noise seeds apart from the trajectories'
+        plan = [(f"A{k}", base + 1 + k, base + 101 + k, BASE_HZ) for k in range(LONG - 1)] + \
+               [("T", base + LONG, base + 100 + LONG, BASE_HZ)]
     else:
         plan = [(f"A{k}", base + 1 + k, base + 11 + k, BASE_HZ) for k in range(SEVERAL)] + \
                [("T", base + 1 + SEVERAL, base + 11 + SEVERAL, BASE_HZ)]
     rows = []
     for k, (trajectory, t_seed, n_seed, hz) in enumerate(plan):
         name = f"rec{k}.csv"
-        write_csv(recording(system, effects, t_seed, n_seed, hz), folder / name)
+        write_csv(recording(system, effects, t_seed, n_seed, hz, seconds), folder / name)
         rows.append(f'rec{k} = {{ file = "{name}", trajectory = "{trajectory}" }}')
     dof = system.dof
     columns = ",".join(["time=time"] + [f"{k}_{j}={k}_{j}" for j in range(1, dof + 1) for k in ("q", "qd", "qdd", "tau")])

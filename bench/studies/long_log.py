@@ -1,0 +1,108 @@
+"""``python -m bench study long-log``: ``bench select`` at its default on a
+long generated log, as a user with a long log of their own would run it.
+
+The log is the selection benchmark's ``long`` layout of one case
+(:data:`CASE`, made by :func:`bench.studies.selection_benchmark.make`): the
+Panda with a drive's laws the rigid body lacks, :data:`~bench.studies.selection_benchmark.LONG`
+excitation trajectories of :data:`~bench.studies.selection_benchmark.LONG_SECONDS`
+each at :data:`~bench.studies.selection_benchmark.RATE_HZ` (70,080 samples), the last
+one the test, declared as a measured arm of one's own. ``bench select`` runs on it
+in a process of its own, with nothing but ``--system`` and ``--out``; the page
+says whether every candidate finished, how many rounds the loop ran on each
+fold and in its final fit, what was chosen, its regret (its test MSE over the
+best candidate's) and how long the selection took on this machine.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from bench.core.errors import UserError
+from bench.core.fileio import atomic_write, write_json
+from bench.runner.provenance import provenance
+from bench.studies.selection_benchmark import LONG, LONG_SECONDS, NOISE, RATE_HZ, Case, make, scores
+
+HELP = ("bench select at its default on a generated 12-trajectory, 70,080-sample log of the Panda: every "
+        "candidate's status, the loop's rounds, the regret and the time (results/selection/long_log.md)")
+
+#: the case whose log is made: the Panda, a drive's laws, seed 77
+CASE = Case("panda", "long", "drive", 77)
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--out", type=Path, default=Path("results/selection/long_log.md"),
+                        help="the page (default results/selection/long_log.md); select's own page and JSON go in "
+                             "the folder of its name beside it, the log in its data/ (not kept in the repository)")
+
+
+def summary(result: dict) -> dict:
+    """What the page reports of ``bench select``'s ``select.json``: each candidate's status and steps
+    (the loop's are its rounds), the choice and its regret (:func:`~bench.studies.selection_benchmark.scores`)."""
+    entries = result.get("candidates") or []
+    status = {e["name"]: e.get("status") for e in entries}
+    work = {e["name"]: {"folds": (e.get("work") or {}).get("fold_steps"), "final": (e.get("work") or {}).get("final_steps")}
+            for e in entries}
+    scored = scores(result)
+    chosen = (result.get("chosen") or {}).get("name")
+    regret = scored.get("rules", {}).get("lowest", {}).get("regret")
+    over = next((e.get("test_over_standard") for e in entries if e["name"] == chosen), None)
+    return {"status": status, "all_ok": bool(entries) and all(s == "ok" for s in status.values()), "work": work, "chosen": chosen, "best": scored.get("best"), "regret": regret,
+            "chosen_over_standard": over}
+
+
+def page(report: dict) -> str:
+    s = report["summary"]
+    ok = sum(v == "ok" for v in s["status"].values())
+    lines = ["# bench select on a long log", "",
+             f"Command: `{report['command']}`" + (f", at commit {report['commit']}" if report.get("commit") else ""),
+             "",
+             f"The log: the selection benchmark's case `{report['case']}` in its `long` layout: the Panda's URDF "
+             f"with a drive's laws the rigid body lacks ({', '.join(report['effects'])}), torque noise "
+             f"{report['noise']:g} of each joint's standard deviation; {report['trajectories']} excitation "
+             f"trajectories (finite Fourier series) of {report['seconds']:g} s at {report['rate_hz']:g} Hz, "
+             f"{report['samples']:,} samples, the last trajectory the test. The command above writes it again.", "",
+             f"`{report['select']}` ran in {report['select_seconds'] / 60:.1f} min wall on {report['cpus']} cores; "
+             f"its page: [{report['select_page']}]({report['select_page']}).", "",
+             "| candidate | status | steps: each fold fit → the final fit |", "|---|---|---|"]
+    for name, status in s["status"].items():
+        w = s["work"].get(name) or {}
+        lines.append(f"| {name} | {status} | {w.get('folds')} → {w.get('final')} |")
+    over = s["chosen_over_standard"]
+    ratio = "" if over is None else f"{over:.3f}x the standard model on the test, "
+    lines += ["", f"{ok} of {len(s['status'])} candidates finished. Chosen: **{s['chosen']}**, {ratio}"
+              f"regret {s['regret']:.3f} (the best on the test: {s['best']}). The test trajectory was read only to "
+              "score. A step of the loop is a round; `loop+gp`'s are its GP's, on the loop's final fit as its "
+              "prior.", ""]
+    return "\n".join(lines)
+
+
+def main(args) -> int:
+    folder = args.out.with_suffix("")
+    declared = make(CASE, folder / "data")
+    made = json.loads((folder / "data" / "case.json").read_text())
+    out = folder / "select"
+    command = [sys.executable, "-m", "bench", "select", "--system", f"measured:{declared}", "--out", str(out)]
+    shown = f"python -m bench select --system measured:{declared} --out {out}"
+    print(f"running {shown}", flush=True)
+    start = time.perf_counter()
+    if subprocess.run(command).returncode != 0 or not (out / "select.json").exists():
+        raise UserError(f"{shown} failed; its output is above")
+    seconds = time.perf_counter() - start
+    result = json.loads((out / "select.json").read_text())
+    samples = sum(sum(1 for _ in open(p)) - 1 for p in sorted((folder / "data").glob("rec*.csv")))
+    report = {"command": args.invocation, "commit": provenance().get("commit"), "case": CASE.name,
+              "effects": made["effects"], "noise": NOISE, "trajectories": LONG, "seconds": LONG_SECONDS,
+              "rate_hz": RATE_HZ, "samples": samples, "select": shown, "select_seconds": round(seconds, 1),
+              "cpus": os.cpu_count(), "select_page": os.path.relpath(out / "select.md", args.out.parent),
+              "summary": summary(result)}
+    write_json(args.out.with_suffix(".json"), report)
+    text = page(report)
+    atomic_write(args.out, lambda f: f.write(text))
+    print(text)
+    print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,47 @@
+"""An arm's linear model's ``M`` and ``c`` at a driven rollout's batch of
+states (98 windows of the KUKA's test trajectory, one step each): from
+Pinocchio's CRBA and RNEA at the model's parameters (``ours``,
+:meth:`systems.urdf_arm.UrdfArm.mass_and_bias_at`), against Pinocchio's
+torque regressor at ``dof + 1`` accelerations a state (the rule of every
+other model, :meth:`bench.physics.models.FittedModel.mass_and_bias`). The
+model is the KUKA's least-squares fit at random base parameters; both give
+the same ``M`` and ``c`` (tests/systems/test_urdf.py). Run with ``make
+benchmark``; the table after it gives each time relative to ours."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.physics.linear import LinearParametricModel
+from bench.physics.models import FittedModel
+
+pytestmark = pytest.mark.benchmark
+
+N_STATES = 98
+
+
+@pytest.fixture(scope="module")
+def setup():
+    from systems import get_system
+
+    system = get_system("kuka_lwr4")
+    form = system.linear_form()
+    rng = np.random.default_rng(0)
+    columns = np.sort(rng.choice(len(form.names), 40, replace=False))
+    model = LinearParametricModel(form, columns, rng.normal(size=len(columns)))
+    q, qd = rng.uniform(-1, 1, (N_STATES, system.dof)), rng.uniform(-1, 1, (N_STATES, system.dof))
+    model.mass_and_bias(q, qd)  # the engine's two models, built once a parameter vector
+    return model, q, qd
+
+
+def test_mass_and_bias_from_the_engine_ours(benchmark, setup):
+    model, q, qd = setup
+    benchmark.group = "mass-and-bias"
+    benchmark.pedantic(model.mass_and_bias, args=(q, qd), rounds=20, iterations=1)
+
+
+def test_mass_and_bias_from_the_regressor(benchmark, setup):
+    model, q, qd = setup
+    benchmark.group = "mass-and-bias"
+    benchmark.pedantic(FittedModel.mass_and_bias, args=(model, q, qd), rounds=20, iterations=1)

@@ -1,0 +1,47 @@
+"""The long-log study: its log is a measured arm of LONG trajectories, the
+last the test, each of its own seed, and its page reports from select's JSON
+whether every candidate finished, the loop's rounds and the regret."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench.studies import long_log, selection_benchmark as sb
+
+
+def test_the_long_layout_is_LONG_trajectories_the_last_the_test(tmp_path, monkeypatch):
+    from systems import get_system
+    from systems.measured_arm import register_measured
+
+    assert sb.LONG * sb.LONG_SECONDS * sb.RATE_HZ == pytest.approx(70_080)
+    monkeypatch.setattr(sb, "LONG_SECONDS", 0.5)
+    case = sb.Case("ur5", "long", "drive", 3)
+    system = get_system(register_measured(f"measured:{sb.make(case, tmp_path)}"))
+    train, test = system.load("train"), system.load("test")
+    per = int(0.5 * sb.RATE_HZ)
+    assert train.trajectories() == [f"A{k}" for k in range(sb.LONG - 1)] and len(train) == (sb.LONG - 1) * per
+    assert test.trajectories() == ["T"] and len(test) == per
+    starts = [train.q[train.trajectory == name][0] for name in train.trajectories()] + [test.q[0]]
+    assert len({tuple(np.round(s, 9)) for s in starts}) == sb.LONG  # each trajectory its own
+
+
+def test_the_page_says_what_finished_the_loops_rounds_and_the_regret():
+    def entry(name, validation, test, status="ok", work=None):
+        return {"name": name, "status": status, "model": f"{name}.npz", "validation_mse": validation,
+                "test_mse": test, "test_over_standard": None if test is None else test / 0.05, "work": work or {}}
+
+    result = {"chosen": {"name": "loop"},
+              "candidates": [entry("standard", 0.9, 0.05), entry("loop", 0.2, 0.008, work={"fold_steps": [2, 2, 3, 2],
+                                                                                           "final_steps": 2}),
+                             entry("loop+gp", 0.3, 0.007, work={"fold_steps": [2, 2, 2, 2], "final_steps": 2}),
+                             entry("feasible+delan", None, None, status="timeout")]}
+    s = long_log.summary(result)
+    assert s["status"]["feasible+delan"] == "timeout" and not s["all_ok"]
+    assert s["work"]["loop"] == {"folds": [2, 2, 3, 2], "final": 2}
+    assert s["chosen"] == "loop" and s["best"] == "loop+gp" and s["regret"] == pytest.approx(0.008 / 0.007)
+    text = long_log.page({"command": "c", "case": "x", "effects": ["a=1"], "noise": 0.02, "trajectories": 12,
+                          "seconds": 58.4, "rate_hz": 100.0, "samples": 70080, "select": "s", "select_seconds": 60.0,
+                          "cpus": 2, "select_page": "p/select.md", "summary": s})
+    assert "3 of 4 candidates finished" in text and "| loop | ok | [2, 2, 3, 2] → 2 |" in text
+    assert "regret 1.143" in text and "70,080 samples" in text
