@@ -4,6 +4,7 @@ add them, refit, and report the error before and after.
 * :mod:`~bench.residual.library`: the named effects and the open-ended
   library, as terms;
 * :mod:`~bench.residual.tracing`: stepwise selection with its statistics,
+  by the tests of :mod:`~bench.residual.criteria`,
   on :mod:`~bench.residual.basis` (projections off the design) and
   :mod:`~bench.residual.shapes` (a shaped effect's nonlinear parameter);
 * :mod:`~bench.physics.sensor_laws`, :mod:`~bench.residual.sensors`: the

@@ -93,7 +93,8 @@ from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
 from bench.residual.rollouts import driven_rollouts, test_mse
-from bench.residual.tracing import BUDGET_STOP, MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, Trace, bic, trace
+from bench.residual.criteria import MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, bic
+from bench.residual.tracing import BUDGET_STOP, Trace, trace
 from bench.residual.sensors import Sensed, Sensor, column as sensor_column, measured_rss, settle
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.tidying import Tidying
@@ -335,7 +336,7 @@ class _Loop(Tidying):
         ``chosen``, where its BIC on the measured torques, both refitted with the model,
         is lower by more than ``margin``; else ``None``. For an open-ended term far
         better than the named law accepted (:attr:`~bench.residual.tracing.Trace.mismatched`,
-        margin :data:`~bench.residual.tracing.MIN_BIC_DROP`), and for the runner-up
+        margin :data:`~bench.residual.criteria.MIN_BIC_DROP`), and for the runner-up
         of a step whose model's linearisation may rank the two wrongly
         (:attr:`~bench.residual.tracing.Trace.runners_up`, margin 0)."""
         alternative = self.build(model, [t for t in effects if t not in chosen] + [t for t in other if t.place != "sensor"],

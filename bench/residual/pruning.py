@@ -18,7 +18,7 @@ from bench.physics.terms import Term
 from bench.residual.library import admissible, label
 from bench.residual.model import LoopModel
 from bench.residual.basis import extend_basis
-from bench.residual.tracing import MIN_BIC_DROP, ROUNDOFF, bic
+from bench.residual.criteria import MIN_BIC_DROP, ROUNDOFF, bic
 from bench.residual.shapes import at_limit, refinable, refined_shape, shape_rss
 from bench.residual.strategies import Strategy
 from bench.runner.progress import Report

@@ -44,7 +44,7 @@ from bench.physics.regression import fit_statistics
 from bench.physics.terms import Term
 from bench.residual.beyond_data import held_out_verdict
 from bench.residual.library import law_text, structural
-from bench.residual.tracing import bic
+from bench.residual.criteria import bic
 from bench.physics.laws import LAWS
 from bench.physics.sensor_laws import SensorLaw, has_time, law_of
 

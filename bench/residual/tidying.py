@@ -10,7 +10,7 @@ from bench.residual.beyond_data import beyond_data, earns_place, finding, not_id
 from bench.residual.library import label, structural
 from bench.residual.model import LoopModel
 from bench.residual.pruning import drop_inadmissible, prune, refine_shapes, simplest_laws
-from bench.residual.tracing import MIN_BIC_DROP
+from bench.residual.criteria import MIN_BIC_DROP
 from bench.residual.sensors import confine as confine_sensor, inadmissible as inadmissible_sensor, redundant
 
 

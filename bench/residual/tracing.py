@@ -1,36 +1,8 @@
 """Which terms explain a residual: forward stepwise selection judged by
 information, significance and held-out error.
 
-A term is accepted only if all hold:
-
-* the Bayesian information criterion of the residual fit, over all training
-  rows, falls by more than :data:`MIN_BIC_DROP` (strong evidence on Kass &
-  Raftery's scale);
-* its coefficient is at least :data:`MIN_T` standard errors from zero;
-* it lowers the cross-validated mean squared residual on held-out data by at
-  least :data:`MIN_HELDOUT_GAIN` of that residual: leave one trajectory out
-  where the training data name several trajectories, contiguous spans of
-  one trajectory or blocks of independent samples otherwise (:mod:`bench.residual.validation`; on measured trajectories
-  neighbouring samples are near copies, so interleaved rows would not test
-  generalisation). On independent samples (generated data, no trajectory)
-  a smaller gain is enough where it is :data:`MIN_HELDOUT_CHI2` in units of
-  the held-out noise (``gain * rows >= MIN_HELDOUT_CHI2``): at high noise a
-  real effect's share of the residual is small (viscous friction beside a
-  Coulomb level that took most of it, at 5 % noise: a chi-squared of 25 over
-  8,000 rows, 0.3 % of the residual), and each row there is a sample of its
-  own. A trajectory's rows are not independent, so there the share stays;
-* the residual is above the floor of numerical round-off
-  (:data:`ROUNDOFF` of the torque's mean square), so a model that already
-  fits exactly is left alone;
-* its coefficient is physical (:func:`~bench.residual.library.admissible`:
-  no negative friction, damping, rotor inertia or stiffness). Where the best
-  term of a step passes the other tests with an impossible coefficient,
-  the best admissible one that passes them and fits as well (removes at
-  least :data:`AS_WELL` of the residual sum of squares the best removes) is
-  taken instead; where none does, the step makes a *structural finding*: the
-  declared form lacks this freedom, and no term is added for it. The
-  finding's column stays in the later steps' fits (and in no model), so no
-  admissible term is accepted for mimicking it, while other effects still can be.
+A term is accepted only if it passes the tests of :mod:`bench.residual.criteria`:
+the information it adds, its significance, its held-out gain and its physical sense.
 
 Where other terms that pass every test explain the same part of the
 residual as the one chosen (as much of it, and nothing significant beside it)
@@ -44,9 +16,6 @@ is chosen by :data:`EQUIVALENCE_RULE`: the fewest parameters, then the law
 declared first (:func:`declared`), not by a difference in fit the data do not
 support.
 
-Noise alone fails the first two tests: with Gaussian residuals, a useless
-column lowers ``n log RSS`` by a chi-squared(1) amount, and ``log n`` plus the
-drop of 10 asks for a chi-squared value above 20 (p < 1e-5 per term).
 A term is fitted beside the columns already in the design by projecting
 it off them (Frisch–Waugh–Lovell: the same coefficients, errors and residual
 as refitting the whole design, at a fraction of the cost when the design has
@@ -66,23 +35,16 @@ from bench.physics.laws import led_by
 from bench.physics.terms import Term, TermLibrary
 from bench.core.budget import now
 from bench.residual.basis import extend_basis, orthonormal_basis, project_off
+from bench.residual.criteria import (AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T, ROUNDOFF, bic,
+                                     passes, slot)
 from bench.residual.library import admissible, is_named, label
 from bench.residual.shapes import SHAPE_LIMITS, at_limit, refinable, refined_shape
 from bench.residual.validation import FoldFits, paired_difference, row_folds
 
-MIN_BIC_DROP = 10.0
-MIN_T = 5.0
-MIN_HELDOUT_GAIN = 0.01
-#: on independent samples, a held-out gain this many rows' worth of residual is enough (see the module docstring)
-MIN_HELDOUT_CHI2 = MIN_BIC_DROP
-ROUNDOFF = 1e-20
 #: a term column whose part off the design is below this share of its norm is one the design spans
 SPANNED = 1e-9
 #: terms tried a step, best first, past ones that fail on significance or held-out error
 MAX_TRIES = 8
-#: an admissible term replaces a better one with an impossible coefficient
-#: only if it removes at least this share of what that one removes
-AS_WELL = 0.9
 
 #: a trace's last step where the loop's time ran out before it ended
 BUDGET_STOP = "the loop's budget: no further step started"
@@ -94,11 +56,6 @@ PAIRED = 20
 EQUIVALENCE_RULE = ("the fewest parameters, then the law declared first (the arm's laws in the order "
                     "bench/physics/effects.py declares them, each from joint 1 on, then the whole system's, the laws "
                     "of the sensor and the drive, and the open-ended terms last)")
-
-
-def bic(rss: float, n: int, k: int) -> float:
-    """The Bayesian information criterion of a Gaussian fit with ``k`` columns to ``n`` rows."""
-    return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
 
 
 @dataclass
@@ -203,7 +160,7 @@ class Tracer:
         best = max((self.stats(c, k_now, self.rss_now) for c in others), key=lambda b: b["bic_drop"])
         if not best["bic_drop"] > chosen["bic_drop"] + MIN_BIC_DROP or self.physical(best) is not None:
             return None
-        ok, info = _passes(best, self.before, self.held_cv, self.min_gain)
+        ok, info = passes(best, self.before, self.held_cv, self.min_gain)
         if not ok:
             return None
         self.steps.append({**info, "rival_of": " + ".join(label(t) for t in chosen["group"])})
@@ -259,7 +216,7 @@ class Tracer:
                 return None
             if not self.redundant(chosen, best, k_now):  # it explains something else too: another cause, not a rival
                 return None
-            ok, other_info = _passes(best, self.before, self.held_cv, self.min_gain)
+            ok, other_info = passes(best, self.before, self.held_cv, self.min_gain)
             if not ok:
                 return None
             r_b = self.held_residuals(best["group"])
@@ -448,7 +405,7 @@ class Tracer:
                     if self.before is None:
                         self.held_fits = FoldFits(self.design(self.accepted), self.y, self.held)
                         self.before = self.held_fits.cv()
-                    ok, info = _passes(best, self.before, self.held_cv, self.min_gain)
+                    ok, info = passes(best, self.before, self.held_cv, self.min_gain)
                     impossible = self.physical(best)
                     if chosen is not None and not (ok and impossible is None):  # no runner-up
                         tried += 1
@@ -529,25 +486,3 @@ def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.nd
     rss = float(res @ res)
     cov = np.linalg.pinv(G.T @ G) * (rss / max(len(r) - k - G.shape[1], 1))
     return coef, np.sqrt(np.clip(np.diag(cov), 0, None)), rss
-
-
-def slot(term: Term):
-    """What a term occupies: a shaped effect's name and joints (one
-    Stribeck hump a joint, whatever its velocity), else the term itself."""
-    return (term.name, term.joints) if term.shape is not None else term
-
-
-def _passes(best: dict, before: float, heldout, min_gain: float = MIN_HELDOUT_GAIN) -> tuple[bool, dict]:
-    """Whether ``best`` passes the BIC, significance and held-out tests (``before``:
-    the design's held-out error without it; ``heldout(group)``: with the group's
-    columns added; ``min_gain``: the share of it the group must save), with its statistics."""
-    if not (best["bic_drop"] > MIN_BIC_DROP):  # the cheap test first
-        return False, {"term": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
-                       "coefficient": best["coef"], "accepted": False}
-    after = heldout(best["group"])
-    gain = (before - after) / before if before > 0 else 0.0
-    t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
-    ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= min_gain
-    info = {"term": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
-            "t": t if math.isfinite(t) else None, "coefficient": best["coef"], "heldout_gain": gain, "accepted": False}
-    return ok, info

@@ -48,7 +48,7 @@ from bench.studies.acceptance_cases import (CASES, DEVELOPMENT, DEVELOPMENT_SEED
                                                 EVALUATION_SEEDS, SETS, effects)
 from bench.studies.acceptance_scoring import CONSISTENT, GAIN_WITHIN, WITHIN, expected, reported, score
 from bench.residual.beyond_data import MIN_GAIN as BEYOND_GAIN
-from bench.residual.tracing import AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T
+from bench.residual.criteria import AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T
 from bench.residual.loop import residual_loop
 from bench.residual.sensors import Sensor
 from bench.runner.job import CaseJob, fit_limit, run_jobs

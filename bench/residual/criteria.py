@@ -1,0 +1,82 @@
+"""What a term must pass for the residual loop's trace to accept it
+(:mod:`bench.residual.tracing`).
+
+A term is accepted only if all hold:
+
+* the Bayesian information criterion of the residual fit, over all training
+  rows, falls by more than :data:`MIN_BIC_DROP` (strong evidence on Kass &
+  Raftery's scale);
+* its coefficient is at least :data:`MIN_T` standard errors from zero;
+* it lowers the cross-validated mean squared residual on held-out data by at
+  least :data:`MIN_HELDOUT_GAIN` of that residual: leave one trajectory out
+  where the training data name several trajectories, contiguous spans of
+  one trajectory or blocks of independent samples otherwise (:mod:`bench.residual.validation`; on measured trajectories
+  neighbouring samples are near copies, so interleaved rows would not test
+  generalisation). On independent samples (generated data, no trajectory)
+  a smaller gain is enough where it is :data:`MIN_HELDOUT_CHI2` in units of
+  the held-out noise (``gain * rows >= MIN_HELDOUT_CHI2``): at high noise a
+  real effect's share of the residual is small (viscous friction beside a
+  Coulomb level that took most of it, at 5 % noise: a chi-squared of 25 over
+  8,000 rows, 0.3 % of the residual), and each row there is a sample of its
+  own. A trajectory's rows are not independent, so there the share stays;
+* the residual is above the floor of numerical round-off
+  (:data:`ROUNDOFF` of the torque's mean square), so a model that already
+  fits exactly is left alone;
+* its coefficient is physical (:func:`~bench.residual.library.admissible`:
+  no negative friction, damping, rotor inertia or stiffness). Where the best
+  term of a step passes the other tests with an impossible coefficient,
+  the best admissible one that passes them and fits as well (removes at
+  least :data:`AS_WELL` of the residual sum of squares the best removes) is
+  taken instead; where none does, the step makes a *structural finding*: the
+  declared form lacks this freedom, and no term is added for it. The
+  finding's column stays in the later steps' fits (and in no model), so no
+  admissible term is accepted for mimicking it, while other effects still can be.
+
+Noise alone fails the first two tests: with Gaussian residuals, a useless
+column lowers ``n log RSS`` by a chi-squared(1) amount, and ``log n`` plus the
+drop of 10 asks for a chi-squared value above 20 (p < 1e-5 per term).
+"""
+
+from __future__ import annotations
+
+import math
+
+from bench.physics.terms import Term
+from bench.residual.library import label
+
+MIN_BIC_DROP = 10.0
+MIN_T = 5.0
+MIN_HELDOUT_GAIN = 0.01
+#: on independent samples, a held-out gain this many rows' worth of residual is enough (see the module docstring)
+MIN_HELDOUT_CHI2 = MIN_BIC_DROP
+ROUNDOFF = 1e-20
+#: an admissible term replaces a better one with an impossible coefficient
+#: only if it removes at least this share of what that one removes
+AS_WELL = 0.9
+
+
+def bic(rss: float, n: int, k: int) -> float:
+    """The Bayesian information criterion of a Gaussian fit with ``k`` columns to ``n`` rows."""
+    return n * math.log(max(rss, 1e-300) / n) + k * math.log(n)
+
+
+def slot(term: Term):
+    """What a term occupies: a shaped effect's name and joints (one
+    Stribeck hump a joint, whatever its velocity), else the term itself."""
+    return (term.name, term.joints) if term.shape is not None else term
+
+
+def passes(best: dict, before: float, heldout, min_gain: float = MIN_HELDOUT_GAIN) -> tuple[bool, dict]:
+    """Whether ``best`` passes the BIC, significance and held-out tests (``before``:
+    the design's held-out error without it; ``heldout(group)``: with the group's
+    columns added; ``min_gain``: the share of it the group must save), with its statistics."""
+    if not (best["bic_drop"] > MIN_BIC_DROP):  # the cheap test first
+        return False, {"term": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
+                       "coefficient": best["coef"], "accepted": False}
+    after = heldout(best["group"])
+    gain = (before - after) / before if before > 0 else 0.0
+    t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
+    ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= min_gain
+    info = {"term": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
+            "t": t if math.isfinite(t) else None, "coefficient": best["coef"], "heldout_gain": gain, "accepted": False}
+    return ok, info
