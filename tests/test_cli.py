@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 COMMANDS = ("list", "run", "table", "data", "fit", "predict", "select", "residual", "convert", "robot-log", "rerun", "leaderboard", "index",
             "study")
 STUDIES = ("gpu", "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling", "syrenets-speed",
-           "syrenets-profile", "stacking-speed", "generalisation", "trajectories", "selection")
+           "syrenets-profile", "stacking-speed", "generalisation", "trajectories", "selection", "long-log")
 
 
 def _subparsers_of(parser):
