@@ -213,20 +213,30 @@ class GaussianProcess(Method):
         self._weights = None
 
     def predict_torque(self, data: Dataset) -> np.ndarray:
-        """The GP's mean torque (on the CPU, in float64): from the weights of the
-        fitted GP (:meth:`_mean_weights`), or, during the fit, through GPyTorch."""
+        """The GP's mean torque (in float64): from the weights of the GP
+        (:meth:`_mean_weights`: those of the fitted GP, or during the fit, at
+        each of its evaluations, those of its variational parameters then),
+        or through GPyTorch where ``K_ZZ`` needs more jitter than
+        GPyTorch's first (which GPyTorch then adds, and the weights do not)."""
+        if not len(data):
+            return np.zeros((0, data.dof))
         weights = getattr(self, "_weights", None)
-        if weights is not None:
-            Z, length, scale, alpha = weights
-            x = torch.as_tensor(features(data, self.config.inputs) / self.x_scale, dtype=torch.float64)
-            with torch.no_grad():
-                k = scale[:, None, None] * torch.exp(-0.5 * torch.cdist(x / length, Z / length) ** 2)
-                return (k @ alpha)[..., 0].T.numpy() * self.y_scale
+        if weights is None:
+            try:
+                weights = self._mean_weights()
+            except torch.linalg.LinAlgError:
+                return self._predict_through_gpytorch(data)
+        Z, length, scale, alpha = weights
+        x = torch.as_tensor(features(data, self.config.inputs) / self.x_scale, dtype=torch.float64, device=Z.device)
+        with torch.no_grad():
+            out = torch.cat([(scale[:, None, None] * torch.exp(-0.5 * torch.cdist(chunk / length, Z / length) ** 2))
+                             @ alpha for chunk in x.split(CHUNK, dim=1)], dim=1)
+        return out[..., 0].T.cpu().numpy() * self.y_scale
+
+    def _predict_through_gpytorch(self, data: Dataset) -> np.ndarray:
         gpytorch = _gpytorch()
         model = self.model
         device = next(model.parameters()).device
-        if not len(data):
-            return np.zeros((0, data.dof))
         x = torch.as_tensor(features(data, self.config.inputs) / self.x_scale, dtype=torch.float64, device=device)
         model.eval()
         try:
