@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from bench.core.data import generate, mse
 from bench.physics.models import FittedModel
@@ -90,13 +91,22 @@ def test_a_matrix_runs_a_hybrid_by_its_name_and_records_its_prior(tmp_path):
     assert again.returncode == 0 and "the same up to" in again.stdout, again.stdout + again.stderr
 
 
-def test_the_fitted_gps_mean_is_gpytorchs(panda):
+def test_the_fitted_gps_mean_is_gpytorchs(panda, monkeypatch):
+    """After the fit (its kept weights), during it (the weights of its parameters then) and where
+    ``K_ZZ`` needs more jitter (GPyTorch's own path) alike."""
     system, train, test = panda
     gp = METHODS["gp"](**SMALL_GP).fit(train, "indirect", seed=0, budget=Budget(steps=20), system=system)
     fast = gp.predict_torque(test)
-    weights, gp._weights = gp._weights, None  # through GPyTorch's variational strategy instead
-    np.testing.assert_allclose(fast, gp.predict_torque(test), rtol=1e-9, atol=1e-9 * np.abs(fast).max())
-    gp._weights = weights
+    gpytorchs = gp._predict_through_gpytorch(test)  # through GPyTorch's variational strategy
+    np.testing.assert_allclose(fast, gpytorchs, rtol=1e-9, atol=1e-9 * np.abs(fast).max())
+    gp._weights = None  # as during the fit
+    np.testing.assert_allclose(gp.predict_torque(test), gpytorchs, rtol=1e-9, atol=1e-9 * np.abs(fast).max())
+
+    def singular():
+        raise torch.linalg.LinAlgError("not positive definite")
+
+    monkeypatch.setattr(gp, "_mean_weights", singular)
+    np.testing.assert_array_equal(gp.predict_torque(test), gpytorchs)
 
 
 def test_the_gps_elbo_counts_the_independent_samples_of_a_recording(panda):
