@@ -93,14 +93,21 @@ class LinearParametricModel(FittedModel):
         dynamics = self.form.dynamics
         if dynamics is None:
             return super().mass_and_bias(q, qd)
+        pi, further = self._parameters
+        M, c = dynamics(pi, q, qd)
+        if further is not None:
+            M_t, c_t = further.mass_and_bias(q, qd)
+            M, c = M + M_t, c + c_t
+        return M, c
+
+    @functools.cached_property
+    def _parameters(self) -> tuple[np.ndarray, "TermModel | None"]:
+        """The regressors' columns at the model's values (zero where not a base
+        column), and the form's further terms at theirs (``None`` without any)."""
         rigid = len(self.form.names) - len(self.form.terms)
         pi = np.zeros(len(self.form.names))
         pi[self.columns] = self.coef
-        M, c = dynamics(pi[:rigid], q, qd)
-        if self.form.terms:
-            M_t, c_t = TermModel(list(self.form.terms), pi[rigid:]).mass_and_bias(q, qd)
-            M, c = M + M_t, c + c_t
-        return M, c
+        return pi[:rigid], TermModel(list(self.form.terms), pi[rigid:]) if self.form.terms else None
 
     def with_coefficients(self, coef) -> "LinearParametricModel":
         return LinearParametricModel(self.form, self.columns, coef, self.names, self.offset, self.feasible)
