@@ -293,8 +293,8 @@ class UrdfArm(System):
         """``M`` and ``c`` (``tau = M qdd + c``, gravity included) of the arm
         whose links have the inertial ``parameters`` (:meth:`inertial_parameters`'
         layout; the torque regressor's ``Y pi``), by Pinocchio's CRBA and RNEA:
-        two passes a state where the regressor at ``dof + 1`` accelerations
-        takes ``dof + 1`` passes of a larger algorithm. The parameters need not
+        four passes a state (two models, below) where the regressor at ``dof + 1``
+        accelerations takes ``dof + 1`` passes of a larger algorithm. The parameters need not
         be a rigid body's (a fit's base parameters, zero elsewhere), and the
         engine keeps a link as mass, centre and inertia, so each link is given
         one more point mass at its joint, in this model and in a second one
@@ -304,7 +304,8 @@ class UrdfArm(System):
         loaded, alone = _engines(self.model, np.asarray(parameters, dtype=np.float64).tobytes())
         out_M, out_c = np.zeros((len(q), self.dof, self.dof)), np.zeros((len(q), self.dof))
         for k, (qk, vk) in enumerate(zip(np.asarray(q, dtype=np.float64), np.asarray(qd, dtype=np.float64))):
-            out_M[k] = pin.crba(*loaded, qk) - pin.crba(*alone, qk)
+            out_M[k] = np.triu(pin.crba(*loaded, qk) - pin.crba(*alone, qk))  # the upper triangle is CRBA's
+            out_M[k] += np.triu(out_M[k], 1).T
             out_c[k] = pin.nonLinearEffects(*loaded, qk, vk) - pin.nonLinearEffects(*alone, qk, vk)
         return out_M, out_c
 
