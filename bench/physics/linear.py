@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-import sympy
 
 from bench.core.data import Dataset
 from bench.core.kept import read_only
@@ -188,7 +187,7 @@ class FeasibleSet:
 class TermModel(FittedModel):
     """Terms of the term library at their coefficients, ``tau = Phi c``.
 
-    It predicts from the terms summed where they act (:func:`summed_terms`):
+    It predicts from the terms summed where they act (:meth:`~bench.physics.terms.TermLibrary.summed`):
     a driven rollout asks for the torque of a few states at each of its
     steps, and pays one Euler–Lagrange transform a step for all the terms of
     ``L``. Its ``M`` and ``c`` come from the terms whose torque does not depend
@@ -204,7 +203,7 @@ class TermModel(FittedModel):
         for moving in (False, True):
             chosen = [k for k, t in enumerate(self.terms) if t.takes_accelerations == moving]
             if chosen:
-                parts.append(_Summed(summed_terms([self.terms[k] for k in chosen], self.coef[chosen])))
+                parts.append(_Summed(TermLibrary([self.terms[k] for k in chosen]).summed(self.coef[chosen])))
         return parts
 
     def predict_torque(self, data: Dataset) -> np.ndarray:
@@ -239,14 +238,3 @@ class _Summed(FittedModel):
 
     def takes_accelerations(self) -> bool:
         return any(t.takes_accelerations for t in self.terms)
-
-
-def summed_terms(terms: list[Term], coef) -> list[Term]:
-    """``sum_k c_k t_k`` as one term per place (of ``L``, of ``D``) and per
-    joint a generalized force acts on: the torque is linear in each term, so
-    the sum's torque is the terms' at their coefficients."""
-    groups: dict[tuple, sympy.Expr] = {}
-    for term, c in zip(terms, coef):
-        key = (term.place, term.joint if term.place == "force" else None)
-        groups[key] = groups.get(key, sympy.Integer(0)) + sympy.Float(float(c)) * term.expr
-    return [Term(expr, place, "summed", joint) for (place, joint), expr in groups.items()]

@@ -327,6 +327,17 @@ class TermLibrary(Sequence[Term]):
             raise ValueError(f"{len(coef)} coefficients for {len(self)} terms")
         return sympy.Add(*[sympy.Float(float(c)) * t.expr for c, t in zip(coef, self.terms) if c != 0.0 and t.in_lagrangian])
 
+    def summed(self, coef: Sequence[float]) -> list[Term]:
+        """The terms at ``coef`` as one term per place (of ``L``, as :meth:`lagrangian`
+        gives its expression; of ``D``) and per joint a generalized force acts on:
+        the torque is linear in each term, so the sum's torque is the terms' at
+        their coefficients."""
+        groups: dict[tuple, sympy.Expr] = {}
+        for term, c in zip(self.terms, coef):
+            key = (term.place, term.joint if term.place == "force" else None)
+            groups[key] = groups.get(key, sympy.Integer(0)) + sympy.Float(float(c)) * term.expr
+        return [Term(expr, place, "summed", joint) for (place, joint), expr in groups.items()]
+
 
 def lagrangian_library_size(dof: int, kinds: tuple[str, ...]) -> int:
     """The number of terms of :func:`lagrangian_library`, without building it."""
