@@ -81,6 +81,12 @@ def page(report: dict) -> str:
     return "\n".join(lines)
 
 
+def _rows(csv: Path) -> int:
+    """A recording's samples: its lines less the header."""
+    with open(csv) as f:
+        return sum(1 for _ in f) - 1
+
+
 def main(args) -> int:
     folder = args.out.with_suffix("")
     declared = make(CASE, folder / "data")
@@ -94,7 +100,7 @@ def main(args) -> int:
         raise UserError(f"{shown} failed; its output is above")
     seconds = time.perf_counter() - start
     result = json.loads((out / "select.json").read_text())
-    samples = sum(sum(1 for _ in open(p)) - 1 for p in sorted((folder / "data").glob("rec*.csv")))
+    samples = sum(_rows(p) for p in sorted((folder / "data").glob("rec*.csv")))
     report = {"command": args.invocation, "commit": provenance().get("commit"), "case": CASE.name,
               "effects": made["effects"], "noise": NOISE, "trajectories": LONG, "seconds": LONG_SECONDS,
               "rate_hz": RATE_HZ, "samples": samples, "select": shown, "select_seconds": round(seconds, 1),

@@ -45,3 +45,18 @@ def test_the_page_says_what_finished_the_loops_rounds_and_the_regret():
                           "cpus": 2, "select_page": "p/select.md", "summary": s})
     assert "3 of 4 candidates finished" in text and "| loop | ok | [2, 2, 3, 2] → 2 |" in text
     assert "regret 1.143" in text and "70,080 samples" in text
+
+
+def test_a_select_that_fails_is_one_line_and_writes_no_page(tmp_path, monkeypatch):
+    import subprocess
+    from types import SimpleNamespace
+
+    from bench.core.errors import UserError
+
+    monkeypatch.setattr(sb, "LONG_SECONDS", 0.2)
+    monkeypatch.setattr(long_log, "CASE", sb.Case("ur5", "long", "drive", 1))
+    monkeypatch.setattr(subprocess, "run", lambda command: SimpleNamespace(returncode=2))
+    out = tmp_path / "long_log.md"
+    with pytest.raises(UserError, match=r"python -m bench select --system measured:.* failed; its output is above"):
+        long_log.main(SimpleNamespace(out=out, invocation="python -m bench study long-log"))
+    assert not out.exists() and not out.with_suffix(".json").exists()
