@@ -14,7 +14,7 @@ from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import atomic_write, check_output
 from bench.evaluation.per_joint import per_joint_lines
 from bench.runner import run
-from bench.runner.execute import given_data, make_system, method_config, preflight
+from bench.runner.run import given_data, make_system, method_config, preflight
 from bench.runner.records import Record, record_path
 from bench.runner.spec import N_TEST, N_TRAIN, RunSpec
 from methods import METHODS

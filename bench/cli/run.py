@@ -13,8 +13,7 @@ from bench.core.arguments import add_workers, csv_list, noise_level, positive, p
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
 from bench.runner import matrix
-from bench.runner.run import log_path
-from bench.runner.execute import given_data, make_system, method_config, raised
+from bench.runner.run import given_data, log_path, make_system, method_config, raised
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, build_specs, seed_count
 from methods import METHODS
 from systems import SYSTEMS

@@ -13,7 +13,7 @@ from bench.core.csv_format import read_csv
 from bench.core.protocols import NAMES
 from bench.core.fileio import check_output
 from bench.evaluation.domain import sentences
-from bench.runner.execute import given_data
+from bench.runner.run import given_data
 from bench.runner.plugins import file_prefix
 from bench.tools.select import CANDIDATES, select
 from systems import SYSTEMS

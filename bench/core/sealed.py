@@ -3,8 +3,8 @@
 The test set is read once, to score ([docs/choices.md](../../docs/choices.md)).
 Test data are a :class:`SealedSplit` from the moment they are loaded (a
 measured system's ``load("test")``, :mod:`systems.measured`; a run's test
-files or generated test set, :func:`bench.runner.execute.given_data` and
-:func:`bench.runner.execute.execute`): anyone may read their states, labels
+files or generated test set, :func:`bench.runner.run.given_data` and
+:func:`bench.runner.run.execute`): anyone may read their states, labels
 and times, since a model predicts there and a domain report measures how far
 they lie, but reading their targets (``tau``, ``L``) raises
 :class:`SealedRead` unless it happens inside

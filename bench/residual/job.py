@@ -22,7 +22,7 @@ from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.runner.code import code_hash
-from bench.runner.execute import given_data, make_system, method_config, preflight
+from bench.runner.run import given_data, make_system, method_config, preflight
 from bench.runner.isolation import CallFailed, Outcome
 from bench.runner.job import Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
 from bench.runner.plugins import import_plugins
@@ -76,11 +76,11 @@ class ResidualJob(Job):
     @property
     def settings(self) -> dict:
         """The method's hyperparameters: its named configuration, then the ``--set`` values
-        (:func:`~bench.runner.execute.method_config`)."""
+        (:func:`~bench.runner.run.method_config`)."""
         return method_config(self.run_spec)
 
     def check(self) -> None:
-        """The method can run here and fits torques (:func:`~bench.runner.execute.preflight`), its
+        """The method can run here and fits torques (:func:`~bench.runner.run.preflight`), its
         hyperparameters are valid, and a simulated system has data given; else one line."""
         spec = self.run_spec
         early = preflight(spec)

@@ -2,9 +2,9 @@
 
 Every job of the suite (:mod:`bench.runner.job`) runs through :func:`run_call`.
 A :class:`Call` names a function by its import path and
-gives it a JSON payload; the child (:mod:`bench.runner.worker`) reports
-the phases it enters, and the parent kills its whole process group when it
-stays in a phase longer than that phase's limit.
+gives it a JSON payload; the child reports the phases it enters, and the
+parent kills its whole process group when it stays in a phase longer than
+that phase's limit.
 
 The child is forked from a fork server (:func:`fork_server`) that has
 imported torch, the suite and both registries once (:mod:`bench.runner.preload`),
@@ -12,12 +12,21 @@ so a run does not pay for those imports; where the server cannot be used (no
 ``fork`` on the platform, inside a daemonic process such as a Dask worker
 started as Dask starts them by default, a call with more than one thread, or
 ``fresh=True``) the child is a fresh
-interpreter, ``python -m bench.runner.worker``.
+interpreter started with the thread variables set (:func:`main`).
+
+The child's side (:func:`run_target`): a call is a JSON file ``{"target":
+"module:function", "payload": {...}, "threads": n}``. The child first asks
+to be killed when its parent ends (:func:`bench.core.processes.die_with_parent`),
+pins its threads, imports the target by name, calls ``target(payload,
+on_phase)``, and writes the JSON it returns to the result file, atomically.
+``on_phase(name)`` appends the phase's name to the phase file, from which the
+parent times its limits.
 """
 
 from __future__ import annotations
 
 import atexit
+import importlib
 import json
 import multiprocessing
 import os
@@ -32,9 +41,9 @@ from pathlib import Path
 from typing import Callable, Iterator, Mapping
 
 from bench.core.fileio import write_json
+from bench.core.processes import die_with_parent
 from bench.runner.provenance import PROJECT_ROOT
-from bench.runner.threads import THREAD_VARS, thread_env
-from bench.runner.worker import forked_main
+from bench.runner.threads import THREAD_VARS, pin_threads, pin_torch, thread_env
 
 #: the phase a child is in until it reports another
 STARTUP = "startup"
@@ -188,7 +197,7 @@ class _Child:
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         with open(log_file, "wb") as log:
             self.popen = subprocess.Popen(
-                [sys.executable, "-m", "bench.runner.worker", *map(str, files)],
+                [sys.executable, "-c", _FRESH_CHILD, *map(str, files)],
                 env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
             )
         self._register()
@@ -339,3 +348,66 @@ def _tail(path: Path, lines: int = 3) -> str:
     except OSError:
         return "(no log)"
     return " | ".join(text[-lines:]) or "(empty log)"
+
+
+# The child's side.
+
+#: what a fresh interpreter runs: :func:`run_target` on the three files it is given
+_FRESH_CHILD = "import sys; from bench.runner.isolation import run_target; run_target(*sys.argv[1:])"
+
+
+def run_target(call_file: str, result_file: str, phase_file: str) -> None:
+    """The call in ``call_file``, run in this (child) process; what it returns goes to ``result_file``, the
+    phases it enters to ``phase_file``. The thread variables numpy's and torch's BLAS read were set before
+    they were imported: in a fresh interpreter's environment by the parent (:func:`thread_env`), in the fork
+    server by the server; torch's own thread counts are set here."""
+    die_with_parent()
+    with open(call_file) as f:
+        call = json.load(f)
+    threads = int(call.get("threads", 1))
+    pin_threads(threads)
+    pin_torch(threads)
+    module, _, name = call["target"].partition(":")
+    target = getattr(importlib.import_module(module), name)
+
+    def on_phase(phase: str) -> None:
+        with open(phase_file, "a") as f:
+            f.write(phase + "\n")
+
+    write_json(result_file, target(call["payload"], on_phase))
+
+
+def forked_main(call_file: str, result_file: str, phase_file: str, log_file: str, cwd: str) -> None:
+    """The target of a process forked from the fork server: its own session
+    (so the parent can kill its whole process group), the parent's working
+    directory (the server keeps the one it started in), output to ``log_file``.
+
+    multiprocessing hands each forked process a copy of the pipe that keeps
+    the fork server alive, so that the server outlives the process that
+    started it while any forked process runs. Closed here: the server then
+    ends with the process that started it, and this process with the server
+    (:func:`bench.core.processes.die_with_parent`), even after ``kill -9``.
+    """
+    _release_fork_server()
+    os.setsid()
+    os.chdir(cwd)
+    fd = os.open(log_file, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
+    run_target(call_file, result_file, phase_file)
+
+
+def _release_fork_server() -> None:
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    fd = getattr(server, "_forkserver_alive_fd", None)
+    if fd is not None:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+        server._forkserver_alive_fd = None

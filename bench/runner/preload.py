@@ -14,9 +14,9 @@ from bench.runner.threads import pin_threads, pin_torch
 pin_threads(1)
 pin_torch(1)
 
-from bench.runner import execute, provenance  # noqa: E402
+from bench.runner import provenance, run  # noqa: E402
 import sklearn.model_selection  # noqa: E402,F401  (imported where folds or a search need it: once here, for every run)
 
 provenance.git_state()  # cached: the forked runs' provenance
 provenance.package_versions()
-execute.warm_up_torch()
+run.warm_up_torch()

@@ -6,7 +6,7 @@ written as ordinary records.
   grouped with the seeds whose specs equal it in all else;
 * :class:`StackedJob`: one group in its own process, killed like any run
   (its fit shares one limit, its evaluations have one each); each seed's
-  record is then what :func:`~bench.runner.execute.execute` writes for a fit
+  record is then what :func:`~bench.runner.run.execute` writes for a fit
   made alone, its ``details.stacked`` the number of seeds that trained with it.
   Where the group's process fails or is killed, each of its seeds runs again
   on its own (:func:`~bench.runner.run.run_one`), so that no seed's record is
@@ -23,10 +23,9 @@ from typing import Callable
 
 from bench.core.errors import UserError
 from bench.runner.code import code_hash
-from bench.runner.execute import execute, load_data, make_method, make_system, warm_up_torch
 from bench.runner.isolation import Outcome
 from bench.runner.job import Job
-from bench.runner.run import phase_limits, run_one
+from bench.runner.run import execute, load_data, make_method, make_system, phase_limits, run_one, warm_up_torch
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record, record_path, write_record
 from bench.runner.spec import RunSpec

@@ -131,7 +131,7 @@ def test_dataset_checks_shapes():
 
 
 def test_train_and_test_come_from_different_seeds():
-    from bench.runner.execute import load_data, make_system
+    from bench.runner.run import load_data, make_system
     from bench.runner.spec import RunSpec
 
     spec = RunSpec("double_pendulum", "mlp", "direct", 3, 1.0, n_train=50, n_test=40)

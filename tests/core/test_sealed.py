@@ -13,7 +13,7 @@ from bench.core.data import Dataset
 from bench.core.scoring import scoring
 from bench.core.sealed import SealedRead, SealedSplit, seal
 from bench.evaluation.tuning import tune
-from bench.runner.execute import given_data
+from bench.runner.run import given_data
 from methods import METHODS
 from systems import SYSTEMS
 

@@ -7,7 +7,7 @@ import numpy as np
 import sympy
 
 from bench.core import symbolic
-from bench.runner import execute
+from bench.runner.run import execute
 from bench.runner.spec import RunSpec, build_specs
 from bench.core.data import generate
 from bench.physics.models import mass_and_bias
@@ -81,11 +81,11 @@ def test_indefinite_and_singular_mass_matrices_are_findings_not_crashes():
 
 def test_records_of_simulated_systems_carry_a_rollout(tmp_path):
     spec = build_specs(["single_pendulum"], ["sparse"], ["indirect"], [0], None, steps=SOLVED, n_train=256, n_test=64)[0]
-    record = execute.execute(spec)
+    record = execute(spec)
     assert record.status == "ok", record.error
     assert record.rollout["status"] == "ok" and record.rollout["q_rmse"] < 1e-6
-    skipped = execute.execute(RunSpec(**{**spec.to_dict(), "rollout": False, "plugins": ()}))
+    skipped = execute(RunSpec(**{**spec.to_dict(), "rollout": False, "plugins": ()}))
     assert skipped.rollout is None
     # a measured system's recordings carry their time: its records get rollouts driven by the measured torques
     measured = build_specs(["delan_characters"], ["sparse"], ["indirect"], [0], None, steps=SOLVED)[0]
-    assert execute.execute(measured).rollout["kind"] == "driven"
+    assert execute(measured).rollout["kind"] == "driven"

@@ -10,7 +10,7 @@ from bench.core.data import generate
 from bench.physics.models import ExpressionModel
 from bench.evaluation import recovery
 from bench.evaluation import scores as scores_module
-from bench.runner import execute
+from bench.runner.run import execute
 from bench.runner.spec import build_specs
 from systems import get_system
 
@@ -35,10 +35,10 @@ def test_a_run_whose_judgement_is_stopped_keeps_its_record(monkeypatch):
     check made to hang, the run still ends ok with its scores, ``exact`` unset
     and the limit in its details."""
     spec = build_specs(["single_pendulum"], ["sparse"], ["indirect"], [0], None, steps=1, n_train=256, n_test=64)[0]  # one solve
-    assert execute.execute(spec).exact is True
+    assert execute(spec).exact is True
     monkeypatch.setattr(scores_module, "JUDGE_LIMIT_S", 0.5)
     monkeypatch.setattr(recovery, "_vanishes", lambda *a, **k: time.sleep(30))
-    record = execute.execute(spec)
+    record = execute(spec)
     assert record.status == "ok", record.error
     assert record.exact is None and record.details["exact_timed_out"] == 0.5
     assert record.test_mse < 1e-12 and record.expression

@@ -10,7 +10,7 @@ import pytest
 
 from bench.evaluation.scores import MAX_EXPRESSION_CHARS, clip
 from bench.runner import job, matrix, run
-from bench.runner.execute import execute, load_data, make_system, preflight, raised
+from bench.runner.run import execute, load_data, make_system, preflight, raised
 from bench.runner.isolation import fork_server
 from bench.runner.progress import print_now, quiet
 from bench.runner.spec import build_specs

@@ -132,7 +132,7 @@ def test_a_measured_arm_file_says_its_units_and_its_logs_in_degrees_stop_at_the_
     import pandas as pd
 
     from bench.core.errors import DataError
-    from bench.runner.execute import given_data
+    from bench.runner.run import given_data
     from systems.measured_arm import measured_arm
     from systems.urdf_arm import DATA_DIR
 
