@@ -115,7 +115,11 @@ class Equations:
         The size whose refits predict the held-out samples of the validation
         protocol's folds best (:func:`bench.core.protocols.folds`, ``auto``:
         whole trajectories, regions of one trajectory's states, or blocks of
-        independent samples) is refitted on all of them and kept. The samples
+        independent samples) is kept, refitted on all of them. A size is
+        refitted on all of them as soon as it predicts better than the smaller
+        ones, so a larger size that runs out of budget (its symbolic expansion
+        takes far longer than any refit) leaves the best refit finished, and
+        the record's ``refine_left_out`` says which sizes were left out, and why. The samples
         are at most :data:`REFINE_SAMPLES` of the training data, evenly spaced
         in its order. The symbolic steps run under a hard time limit (they
         cannot be interrupted otherwise), so the refinement never overruns the
@@ -148,27 +152,22 @@ class Equations:
                     continue
                 library, F = regression.design(basis, sample, experiment, deadline)
                 err = regression.held_out_mse(F, y, len(sample), held, deadline)
+                if err < best_err:
+                    coef = regression.fit_columns(F, y, len(sample), deadline=deadline, folds=held)
+                    best, best_err = (k, library, coef), err
             except Timeout:
                 reasons.append(f"{k} terms: out of budget")
                 break
-            if err < best_err:
-                best, best_err = (k, library, F), err
-        if best is not None:
-            k, library, F = best
-            try:
-                coef = regression.fit_columns(F, y, len(sample), deadline=deadline, folds=held)
-            except Timeout:
-                reasons.append(f"{k} terms: out of budget")
-                best = None
-            else:
-                best = ExpressionModel(library.lagrangian(coef), self.dof)
-                self._notes["refined_from_terms"] = k
-                self._notes["refined_terms"] = int(np.count_nonzero(coef))
-                self._notes["refined_heldout_mse"] = best_err
         if best is None:
             out_of_budget = bool(reasons) and reasons[-1].endswith("out of budget")
             return NoVariant("no refit finished: " + "; ".join(reasons), "timeout" if out_of_budget else "failed")
-        return best
+        k, library, coef = best
+        self._notes["refined_from_terms"] = k
+        self._notes["refined_terms"] = int(np.count_nonzero(coef))
+        self._notes["refined_heldout_mse"] = best_err
+        if reasons:
+            self._notes["refine_left_out"] = "; ".join(reasons)
+        return ExpressionModel(library.lagrangian(coef), self.dof)
 
     def variants(self):
         return dict(getattr(self, "_variants", {}))

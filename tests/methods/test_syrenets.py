@@ -10,6 +10,7 @@ import torch
 from bench.core import symbolic
 from bench.core.data import generate, mse
 from bench.core.experiment import Experiment
+from bench.core.timeouts import Timeout
 from bench.physics.dynamics import euler_lagrange
 from methods import METHODS
 from methods.syrenets.layer_terms import LayerTerms
@@ -138,6 +139,31 @@ def test_refinement_recovers_the_exact_lagrangian_from_a_near_miss(data, double_
     assert "blocks" in m._notes["refine_folds"]  # the protocol's folds of independent samples, not a random split
     terms = sympy.Add.make_args(sympy.expand(refined.expression()))
     assert len([t for t in terms if t.free_symbols]) == 5
+
+
+def test_refinement_keeps_the_best_refit_when_a_larger_size_runs_out_of_budget(data):
+    """The 8-term structure is refitted as soon as it is the best so far, so the 16-term one running out of
+    budget in its symbolic expansion (the refinement's slow step) leaves a refined equation, not a timeout."""
+    (q1, q2), (qd1, qd2) = symbolic.coordinate_symbols(2)
+    near = (7.13 * qd1**2 + 0.4651 * qd2**2 + 2.2301 * qd1 * qd2 * sympy.cos(1.0003 * q1 - 0.9996 * q2)
+            + 65.47 * sympy.cos(0.9998 * q1) + 8.19 * sympy.cos(q2))
+    m = METHODS["syrenets"](**SMALL, max_steps=1, eval_samples=64).fit(data[0], "indirect", 0, Budget(seconds=60))
+
+    class Terms:  # the dominant terms of a trained model: the 8 in time, the 16 past the deadline
+        def __init__(self, k):
+            self.k = k
+
+        def expression(self):
+            if self.k > 8:
+                raise Timeout("expansion past the deadline")
+            return near
+
+    m._notes["pruned_terms"] = 16
+    m._top_terms = Terms
+    refined = m._refine(data[0], "indirect", deadline=float("inf"))
+    assert mse(refined.predict(data[1], "indirect"), data[1].tau) < 1e-20
+    assert m._notes["refined_from_terms"] == 8
+    assert m._notes["refine_left_out"] == "16 terms: out of budget"
 
 
 def test_six_input_variant_runs_and_is_flagged(data):
