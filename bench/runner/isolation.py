@@ -12,7 +12,7 @@ so a run does not pay for those imports; where the server cannot be used (no
 ``fork`` on the platform, inside a daemonic process such as a Dask worker
 started as Dask starts them by default, a call with more than one thread, or
 ``fresh=True``) the child is a fresh
-interpreter started with the thread variables set (:func:`main`).
+interpreter started with the thread variables set (:data:`_FRESH_CHILD`).
 
 The child's side (:func:`run_target`): a call is a JSON file ``{"target":
 "module:function", "payload": {...}, "threads": n}``. The child first asks
@@ -352,8 +352,10 @@ def _tail(path: Path, lines: int = 3) -> str:
 
 # The child's side.
 
-#: what a fresh interpreter runs: :func:`run_target` on the three files it is given
-_FRESH_CHILD = "import sys; from bench.runner.isolation import run_target; run_target(*sys.argv[1:])"
+#: what a fresh interpreter runs: :func:`run_target` on the three files it is given, having asked to die with its
+#: parent before anything slow is imported (this module imports torch)
+_FRESH_CHILD = ("import sys; from bench.core.processes import die_with_parent; die_with_parent(); "
+                "from bench.runner.isolation import run_target; run_target(*sys.argv[1:])")
 
 
 def run_target(call_file: str, result_file: str, phase_file: str) -> None:
