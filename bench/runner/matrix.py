@@ -28,7 +28,7 @@ from bench.runner.progress import MatrixProgress, Report, print_now
 from bench.runner.provenance import CODE_FOLDERS, code_state
 from bench.runner.records import Record, RecordError, quarantine, read_record, record_path
 from bench.runner.run import RunJob, log_path
-from bench.runner.spec import RunSpec
+from bench.runner.spec import UNNAMED, RunSpec
 from bench.runner.stacked import StackedJob, groups
 
 class FolderLock:
@@ -202,4 +202,6 @@ def _describe(record: Record, log: Path | None = None) -> str:
             outcome += f" (failed after the fit: {', '.join(record.failed_stages)}{f'; log {log}' if log else ''})"
     else:
         outcome = f"{record.status} ({record.error}{f'; log {log}' if log else ''})"
-    return f"{record.system} {record.method} {record.experiment} seed={record.seed}: {outcome}"
+    profile = (record.spec or {}).get("profile", "default")
+    named = "" if profile in UNNAMED else f" ({profile})"  # two configurations of one method are two runs
+    return f"{record.system} {record.method}{named} {record.experiment} seed={record.seed}: {outcome}"

@@ -13,8 +13,8 @@ from bench.runner import job, matrix, run
 from bench.runner.run import execute, load_data, make_system, preflight, raised
 from bench.runner.isolation import fork_server
 from bench.runner.progress import print_now, quiet
-from bench.runner.spec import build_specs
-from bench.runner.records import SCHEMA, read_record, read_records, record_path
+from bench.runner.spec import RunSpec, build_specs
+from bench.runner.records import SCHEMA, Record, read_record, read_records, record_path
 from methods.saving import load_model
 
 PLUGIN = str(Path(__file__).resolve().parents[1] / "plugins" / "faulty.py")
@@ -421,3 +421,13 @@ def test_a_matrix_whose_code_changes_under_it_stops_before_its_next_run(tmp_path
                                         r"double_pendulum__toy_constant__indirect__seed1"):
         matrix.run_matrix(todo, tmp_path, workers=1, report=quiet)
     assert [p.name for p in (tmp_path / "records").glob("*.json")] == ["double_pendulum__toy_constant__indirect__seed0.json"]
+
+
+def test_a_progress_line_names_a_runs_named_configuration():
+    """Two configurations of one method (select's standard and feasible SysId) are two runs; each line of the
+    matrix's progress says which it is, and a run in the method's defaults says nothing more."""
+    named = Record.new(RunSpec("kuka_lwr4", "sysid", "indirect", 0, 5.0, profile="feasible"), "ok",
+                       train_mse=0.5, test_mse=0.25)
+    plain = Record.new(RunSpec("kuka_lwr4", "sysid", "indirect", 0, 5.0), "ok", train_mse=0.5, test_mse=0.25)
+    assert matrix._describe(named) == "kuka_lwr4 sysid (feasible) indirect seed=0: ok train 0.5 test 0.25"
+    assert matrix._describe(plain) == "kuka_lwr4 sysid indirect seed=0: ok train 0.5 test 0.25"
