@@ -151,7 +151,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
     loaded from the spec. ``fitted`` is the spec's method already fitted on
     ``data`` (one seed of a stack, :mod:`bench.runner.stacked`): the run then
     evaluates it. ``checked``: the caller has made :func:`preflight`'s checks
-    (:meth:`bench.runner.run.RunJob.check`), which are then not repeated.
+    (:meth:`RunJob.check`), which are then not repeated.
 
     Which scores apply beyond the train and test MSE (rollouts, references, the
     force decomposition) is the policy of :func:`bench.evaluation.assessment.assess`.
