@@ -164,6 +164,18 @@ def test_the_public_configuration_with_qdd_as_an_input_keeps_its_fit(capsys, tmp
     assert record["budget"] == {"kind": "steps", "steps": 10, "ceiling_s": None}
 
 
+def test_fit_prints_each_variant_of_its_fit_or_why_it_has_none():
+    from bench.cli.fit import variant_lines
+
+    variants = {"pruned": {"status": "ok", "train_mse": 0.41713, "test_mse": 0.42244},
+                "refined": {"status": "timeout", "error": "no refit finished: 8 terms: out of budget"}}
+    record = Record.new(RunSpec("double_pendulum", "syrenets", "indirect", 0, 5.0), "ok", train_mse=0.38,
+                        test_mse=0.39, details={"variants": variants})
+    assert variant_lines(record) == ["  syrenets@pruned: train MSE 0.4171 | test MSE 0.4224",
+                                     "  syrenets@refined: timeout (no refit finished: 8 terms: out of budget)"]
+    assert variant_lines(record.replace(status="failed", error="it broke")) == []
+
+
 @pytest.mark.parametrize(
     "content, message",
     [

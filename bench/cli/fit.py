@@ -80,7 +80,7 @@ def main(args) -> int:
         print(line)
     record, log = run_one(spec, checked=runs, data=given, copy_to=args.json)
     print(summary_line(record, log))
-    for line in per_joint_summary(record):
+    for line in variant_lines(record) + per_joint_summary(record):
         print(line)
     if args.save and record.status == "ok":
         if "save" in record.failed_stages:
@@ -108,6 +108,21 @@ def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None,
         return record, run.log_path(work, spec.run_id)
     shutil.rmtree(work, ignore_errors=True)
     return record, None
+
+
+def variant_lines(record: Record) -> list[str]:
+    """One line per variant the method derived from its fit (:meth:`methods.base.Method.variants`: SyReNets'
+    pruned and refined equations), scored on the same data, or why it has no score."""
+    lines = []
+    for name, entry in ((record.details or {}).get("variants") or {}).items() if record.status == "ok" else ():
+        head = f"  {record.method}@{name}: "
+        if entry.get("status") != "ok":
+            lines.append(head + f"{entry.get('status')} ({entry.get('error') or 'no reason given'})")
+            continue
+        test = entry.get("test_mse")
+        lines.append(head + f"train MSE {entry['train_mse']:.4g} | test MSE "
+                     + ("n/a (no test data)" if test is None else f"{test:.4g}"))
+    return lines
 
 
 def per_joint_summary(record: Record) -> list[str]:
