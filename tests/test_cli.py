@@ -167,11 +167,11 @@ def test_the_public_configuration_with_qdd_as_an_input_keeps_its_fit(capsys, tmp
 def test_fit_prints_each_variant_of_its_fit_or_why_it_has_none():
     from bench.cli.fit import variant_lines
 
-    variants = {"pruned": {"status": "ok", "train_mse": 0.41713, "test_mse": 0.42244},
+    variants = {"pruned": {"status": "ok", "train_mse": 0.41713, "test_mse": 0.42244, "exact": False},
                 "refined": {"status": "timeout", "error": "no refit finished: 8 terms: out of budget"}}
     record = Record.new(RunSpec("double_pendulum", "syrenets", "indirect", 0, 5.0), "ok", train_mse=0.38,
                         test_mse=0.39, details={"variants": variants})
-    assert variant_lines(record) == ["  syrenets@pruned: train MSE 0.4171 | test MSE 0.4224",
+    assert variant_lines(record) == ["  syrenets@pruned: train MSE 0.4171 | test MSE 0.4224 | not the true Lagrangian",
                                      "  syrenets@refined: timeout (no refit finished: 8 terms: out of budget)"]
     assert variant_lines(record.replace(status="failed", error="it broke")) == []
 

@@ -112,7 +112,8 @@ def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None,
 
 def variant_lines(record: Record) -> list[str]:
     """One line per variant the method derived from its fit (:meth:`methods.base.Method.variants`: SyReNets'
-    pruned and refined equations), scored on the same data, or why it has no score."""
+    pruned and refined equations), scored on the same data, and whether its equation is the system's true
+    Lagrangian where that is judged (``exact``); or why it has no score."""
     lines = []
     for name, entry in ((record.details or {}).get("variants") or {}).items() if record.status == "ok" else ():
         head = f"  {record.method}@{name}: "
@@ -120,8 +121,9 @@ def variant_lines(record: Record) -> list[str]:
             lines.append(head + f"{entry.get('status')} ({entry.get('error') or 'no reason given'})")
             continue
         test = entry.get("test_mse")
+        exact = {True: " | the true Lagrangian recovered", False: " | not the true Lagrangian"}.get(entry.get("exact"), "")
         lines.append(head + f"train MSE {entry['train_mse']:.4g} | test MSE "
-                     + ("n/a (no test data)" if test is None else f"{test:.4g}"))
+                     + ("n/a (no test data)" if test is None else f"{test:.4g}") + exact)
     return lines
 
 
