@@ -287,6 +287,25 @@ class Sensed(FittedModel):
         states = self.sensor.states(data)
         return self.sensor.measure(np.asarray(self.model.predict_torque(states), dtype=np.float64), states)
 
+    def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The measured torque's ``M`` and ``c`` as :meth:`FittedModel.mass_and_bias` takes them, from the
+        torque at ``dof + 1`` accelerations a state; the arm's torques there are its own ``M`` and ``c``,
+        asked once a state (from its engine where it has one: a driven rollout asks at each of its steps),
+        read through the sensor. Where a law of the sensor moves the states (a time shift, on data with
+        time stamps), from the arm's torque at the moved states."""
+        n, dof = q.shape
+        accelerations = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
+        batch = Dataset(np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0),
+                        np.tile(accelerations, (n, 1)), np.zeros((n * (dof + 1), dof)))
+        states = self.sensor.states(batch)
+        if states is not batch:
+            return super().mass_and_bias(q, qd)
+        M_arm, c_arm = self.model.mass_and_bias(q, qd)
+        arm = np.concatenate([c_arm[:, None, :], c_arm[:, None, :] + np.transpose(M_arm, (0, 2, 1))], axis=1)
+        tau = self.sensor.measure(arm.reshape(n * (dof + 1), dof), states).reshape(n, dof + 1, dof)
+        c = tau[:, 0]
+        return np.transpose(tau[:, 1:] - c[:, None, :], (0, 2, 1)), c
+
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         return self.model.predict_lagrangian(self.sensor.states(data))
 

@@ -208,3 +208,43 @@ def test_a_drive_law_found_first_is_settled_again_when_a_later_round_adds_fricti
     assert found[("load_friction", (1,))]["parameters"]["mu"]["value"] == pytest.approx(0.1, rel=1e-6)
     assert found[("coulomb_friction", (1,))]["parameters"]["F_c"]["value"] == pytest.approx(0.5, rel=1e-6)
     assert out.mse_after["test"] < 1e-12
+
+
+def test_a_sensed_models_mass_matrix_and_bias_read_the_arms_own_through_the_sensor():
+    """Read through a gain and a load-dependent friction (not affine in the torque), the measured torque's M and
+    c are what the torque at dof + 1 accelerations a state gives; the arm's torques there come from its own M
+    and c, never from its torque. A time shift leaves states without time stamps as they are."""
+    from bench.physics.models import FittedModel
+    from bench.physics.sensor_laws import LoadFriction, TimeShift, TorqueGain
+
+    class Arm(FittedModel):  # tau = M(q) qdd + c(q, qd), counting what it is asked
+        asked = {"torque": 0, "mass_and_bias": 0}
+
+        def parts(self, q, qd):
+            M = np.stack([np.stack([2 + np.cos(q[:, 1]), 0.3 + 0 * q[:, 0]], -1),
+                          np.stack([0.3 + 0 * q[:, 0], 1 + 0.5 * np.sin(q[:, 0]) ** 2], -1)], 1)
+            c = np.stack([qd[:, 0] * qd[:, 1] - 9.8 * np.sin(q[:, 0]), qd[:, 0] ** 2 + 2 * np.cos(q[:, 1])], -1)
+            return M, c
+
+        def predict_torque(self, data):
+            self.asked["torque"] += 1
+            M, c = self.parts(data.q, data.qd)
+            return np.einsum("nij,nj->ni", M, data.qdd) + c
+
+        def mass_and_bias(self, q, qd):
+            self.asked["mass_and_bias"] += 1
+            return self.parts(q, qd)
+
+        def predict_lagrangian(self, data):
+            raise NotImplementedError
+
+    rng = np.random.default_rng(0)
+    q, qd = rng.normal(size=(40, 2)), rng.normal(size=(40, 2))
+    sensor = Sensor(0, (TorqueGain(1, 1.07), LoadFriction(0, 0.2), TimeShift(None, 0.01)))
+    sensed = Sensed(Arm(), sensor)
+    M, c = sensed.mass_and_bias(q, qd)
+    assert Arm.asked == {"torque": 0, "mass_and_bias": 1}
+    M_ref, c_ref = FittedModel.mass_and_bias(sensed, q, qd)  # the torque at dof + 1 accelerations a state
+    np.testing.assert_allclose(M, M_ref, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(c, c_ref, rtol=1e-12, atol=1e-12)
+    assert np.abs(M - Arm().parts(q, qd)[0]).max() > 0.01  # the sensor's laws are in it
