@@ -291,8 +291,10 @@ class Sensed(FittedModel):
         """The measured torque's ``M`` and ``c`` as :meth:`FittedModel.mass_and_bias` takes them, from the
         torque at ``dof + 1`` accelerations a state; the arm's torques there are its own ``M`` and ``c``,
         asked once a state (from its engine where it has one: a driven rollout asks at each of its steps),
-        read through the sensor. Where a law of the sensor moves the states (a time shift, on data with
-        time stamps), from the arm's torque at the moved states."""
+        read through the sensor (a sensor without laws: the arm's). Where a law of the sensor moves the
+        states (a time shift, on data with time stamps), from the arm's torque at the moved states."""
+        if not self.sensor.laws:
+            return self.model.mass_and_bias(q, qd)
         n, dof = q.shape
         accelerations = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
         batch = Dataset(np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0),

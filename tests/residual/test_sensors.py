@@ -248,3 +248,6 @@ def test_a_sensed_models_mass_matrix_and_bias_read_the_arms_own_through_the_sens
     np.testing.assert_allclose(M, M_ref, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(c, c_ref, rtol=1e-12, atol=1e-12)
     assert np.abs(M - Arm().parts(q, qd)[0]).max() > 0.01  # the sensor's laws are in it
+    plain = Sensed(Arm(), Sensor(0)).mass_and_bias(q, qd)  # a sensor without laws: the arm's own
+    np.testing.assert_array_equal(plain[0], Arm().parts(q, qd)[0])
+    np.testing.assert_array_equal(plain[1], Arm().parts(q, qd)[1])
