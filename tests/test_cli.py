@@ -96,7 +96,8 @@ def test_data_then_fit_on_the_csv(tmp_path):
     r = cli("fit", "--system", "double_pendulum", "--method", "sysid", "--experiment", "indirect",
             "--train", str(train), "--test", str(test), "--smoke", "--budget", "5", "--json", str(out))
     assert r.returncode == 0, r.stderr
-    line = r.stdout.strip()
+    start, line = r.stdout.strip().splitlines()
+    assert start == "double_pendulum sysid indirect seed=0: fitting within 5 s, then scoring"
     assert line.startswith("double_pendulum sysid indirect seed=0: ok | train MSE ") and "test MSE" in line
     record = json.loads(out.read_text())
     assert record["status"] == "ok" and record["details"]["train_source"] == str(train)
@@ -106,9 +107,13 @@ def test_data_then_fit_on_the_csv(tmp_path):
 def test_fit_without_test_data_reports_none(tmp_path, capsys):
     train = tmp_path / "train.csv"
     main(["data", "--system", "double_pendulum", "--n", "64", "--seed", "1", "--out", str(train)])
+    capsys.readouterr()
     assert main(["fit", "--system", "double_pendulum", "--method", "mlp", "--experiment", "direct",
                  "--train", str(train), "--smoke"]) == 0
-    assert "test MSE n/a (no test data)" in capsys.readouterr().out
+    lines = capsys.readouterr().out.splitlines()
+    # what it is about to do comes first, the summary when it ends
+    assert lines[0] == "double_pendulum mlp direct seed=0: fitting within 60 s, then scoring"
+    assert lines[1].startswith("double_pendulum mlp direct seed=0: ok") and "test MSE n/a (no test data)" in lines[1]
 
 
 def test_rerun_replays_every_record_of_a_time_budgeted_matrix(tmp_path, capsys, monkeypatch):

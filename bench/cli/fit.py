@@ -78,6 +78,8 @@ def main(args) -> int:
             part.check_target(args.experiment)  # bad files: exit 2 now, before the run's process starts
     for line in resampled(given):
         print(line)
+    if runs:
+        print(starting_line(spec), flush=True)
     record, log = run_one(spec, checked=runs, data=given, copy_to=args.json)
     print(summary_line(record, log))
     for line in variant_lines(record) + per_joint_summary(record):
@@ -108,6 +110,14 @@ def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None,
         return record, run.log_path(work, spec.run_id)
     shutil.rmtree(work, ignore_errors=True)
     return record, None
+
+
+def starting_line(spec: RunSpec) -> str:
+    """What the run is about to do and for how long, printed before its process starts: the summary comes
+    when it ends."""
+    tuned = ", its hyperparameters searched first" if spec.tune else ""
+    return (f"{spec.system} {spec.method} {spec.experiment} seed={spec.seed}: fitting within {spec.budget.describe()}"
+            f"{tuned}, then scoring")
 
 
 def variant_lines(record: Record) -> list[str]:
