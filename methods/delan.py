@@ -223,6 +223,17 @@ class DeepLagrangian(torch.nn.Module):
         forward through its layers (as DeLaN's own code does), so that a
         loss on the torques needs one ordinary backward pass
         (:class:`bench.physics.dynamics.TangentLagrangian`)."""
+        return self._tangent(q, qd, dq, dqd)[:4]
+
+    def mass_and_bias(self, q: torch.Tensor, qd: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``H(q)`` and the torque at ``qdd = 0`` (what the one transform makes of :meth:`tangent` there,
+        ``D - dL/dq``), from one pass through the network."""
+        _, dL_dq, _, along, factor = self._tangent(q, qd, qd, torch.zeros_like(qd))
+        eye = torch.eye(self.dof, dtype=q.dtype, device=q.device)
+        return factor @ factor.transpose(1, 2) + self.epsilon * eye, along - dL_dq
+
+    def _tangent(self, q, qd, dq, dqd):
+        """:meth:`tangent`'s four, and ``Lambda``."""
         h, jac = self._features_and_jacobian(self.trunk, q)
         hv, jac_v = (h, jac) if self.potential_trunk is None else self._features_and_jacobian(self.potential_trunk, q)
         a_diag = self.diagonal(h) + self.shift
@@ -239,7 +250,7 @@ class DeepLagrangian(torch.nn.Module):
         H_qd = (factor @ u[:, :, None])[..., 0] + self.epsilon * qd
         along = rate @ u[:, :, None] + factor @ (rate.transpose(1, 2) @ qd[:, :, None])
         along = along[..., 0] + (factor @ (factor.transpose(1, 2) @ dqd[:, :, None]))[..., 0] + self.epsilon * dqd
-        return L, dL_dq, H_qd, along
+        return L, dL_dq, H_qd, along, factor
 
 
 def torque_loss(model: DeepLagrangian, q, qd, qdd, tau) -> torch.Tensor:
@@ -325,3 +336,12 @@ class DeLaN(TorchLagrangianMethod):
         with torch.no_grad():
             H, _ = self.model.parts(torch.as_tensor(q, dtype=self.dtype))
         return H.double().numpy()
+
+    def mass_and_bias(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``M = H(q)``, the network's own (``L = 1/2 qd^T H qd - V``, so ``d^2 L / dqd^2 = H``), and ``c``,
+        the torque at ``qdd = 0``, from one pass through the network a state where the default asks the
+        torque at ``dof + 1`` accelerations (a driven rollout asks this at each of its steps)."""
+        with torch.no_grad():
+            H, c = self.model.mass_and_bias(torch.as_tensor(q, dtype=self.dtype, device=self.device),
+                                            torch.as_tensor(qd, dtype=self.dtype, device=self.device))
+        return H.double().cpu().numpy(), c.double().cpu().numpy()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from bench.core.data import generate, mse
+from bench.core.data import Dataset, generate, mse
 from bench.physics.dynamics import euler_lagrange
 from bench.evaluation.forces import decomposition
 from methods import METHODS
@@ -106,3 +106,20 @@ def test_the_compiled_loss_and_its_gradients_are_the_eager_ones(double_pendulum)
     assert compiled == pytest.approx(eager, rel=1e-5)
     for a, b in zip(g_eager, g_compiled):
         torch.testing.assert_close(b, a, rtol=1e-4, atol=1e-6)
+
+
+def test_its_mass_matrix_and_bias_are_the_networks_own_and_the_transforms(double_pendulum):
+    """``M`` is the network's ``H(q)`` and ``c`` the transform's torque at ``qdd = 0``, bit for bit, from one
+    pass; both are what the torque at dof + 1 accelerations a state decomposes into."""
+    from bench.physics.models import FittedModel
+
+    train = generate(double_pendulum, 256, 0)
+    m = METHODS["delan"](**METHODS["delan"].smoke_config()).fit(train, "indirect", 0, budget=Budget(steps=5))
+    q, qd = train.q[:40], train.qd[:40]
+    M, c = m.mass_and_bias(q, qd)
+    zeros = np.zeros_like(q)
+    np.testing.assert_array_equal(M, m.mass_matrix(q))
+    np.testing.assert_array_equal(c, m.predict_torque(Dataset(q, qd, zeros, zeros)))
+    M_ref, c_ref = FittedModel.mass_and_bias(m, q, qd)
+    np.testing.assert_allclose(M, M_ref, rtol=1e-9, atol=1e-9 * np.abs(M_ref).max())
+    np.testing.assert_allclose(c, c_ref, rtol=0, atol=0)
