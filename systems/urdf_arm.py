@@ -304,10 +304,9 @@ class UrdfArm(System):
         loaded, alone = _engines(self.model, np.asarray(parameters, dtype=np.float64).tobytes())
         out_M, out_c = np.zeros((len(q), self.dof, self.dof)), np.zeros((len(q), self.dof))
         for k, (qk, vk) in enumerate(zip(np.asarray(q, dtype=np.float64), np.asarray(qd, dtype=np.float64))):
-            out_M[k] = np.triu(pin.crba(*loaded, qk) - pin.crba(*alone, qk))  # the upper triangle is CRBA's
-            out_M[k] += np.triu(out_M[k], 1).T
+            out_M[k] = pin.crba(*loaded, qk) - pin.crba(*alone, qk)
             out_c[k] = pin.nonLinearEffects(*loaded, qk, vk) - pin.nonLinearEffects(*alone, qk, vk)
-        return out_M, out_c
+        return np.triu(out_M) + np.swapaxes(np.triu(out_M, 1), 1, 2), out_c  # the upper triangle is CRBA's
 
     # -- description ----------------------------------------------------------------
     def scaled_domain(self, half_width: float) -> Domain:
