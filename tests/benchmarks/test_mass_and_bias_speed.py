@@ -5,8 +5,10 @@ Pinocchio's CRBA and RNEA at the model's parameters (``ours``,
 torque regressor at ``dof + 1`` accelerations a state (the rule of every
 other model, :meth:`bench.physics.models.FittedModel.mass_and_bias`). The
 model is the KUKA's least-squares fit at random base parameters; both give
-the same ``M`` and ``c`` (tests/systems/test_urdf.py). Run with ``make
-benchmark``; the table after it gives each time relative to ours."""
+the same ``M`` and ``c`` (tests/systems/test_urdf.py). A second group does
+the same for DeLaN's network (tests/methods/test_delan.py checks the two
+agree). Run with ``make benchmark``; the table after it gives each time
+relative to ours."""
 
 from __future__ import annotations
 
@@ -44,4 +46,32 @@ def test_mass_and_bias_from_the_engine_ours(benchmark, setup):
 def test_mass_and_bias_from_the_regressor(benchmark, setup):
     model, q, qd = setup
     benchmark.group = "mass-and-bias"
+    benchmark.pedantic(FittedModel.mass_and_bias, args=(model, q, qd), rounds=20, iterations=1)
+
+
+@pytest.fixture(scope="module")
+def delan_setup():
+    """A DeLaN of the KUKA's seven joints in its default size, a few steps into its fit, evaluated in float64
+    as after any fit, at the same states."""
+    from bench.core.budget import Budget
+    from methods import METHODS
+    from systems import get_system
+
+    train = get_system("kuka_lwr4").load("train")
+    model = METHODS["delan"](compile=False).fit(train, "indirect", 0, budget=Budget(steps=2))
+    rng = np.random.default_rng(0)
+    return model, rng.uniform(-1, 1, (N_STATES, train.dof)), rng.uniform(-1, 1, (N_STATES, train.dof))
+
+
+def test_delan_mass_and_bias_from_one_pass_ours(benchmark, delan_setup):
+    """DeLaN's ``H(q)`` and its torque at ``qdd = 0`` from one pass of its own derivatives
+    (:meth:`methods.delan.DeLaN.mass_and_bias`), against the torque at ``dof + 1`` accelerations a state."""
+    model, q, qd = delan_setup
+    benchmark.group = "delan-mass-and-bias"
+    benchmark.pedantic(model.mass_and_bias, args=(q, qd), rounds=20, iterations=1)
+
+
+def test_delan_mass_and_bias_from_the_torque(benchmark, delan_setup):
+    model, q, qd = delan_setup
+    benchmark.group = "delan-mass-and-bias"
     benchmark.pedantic(FittedModel.mass_and_bias, args=(model, q, qd), rounds=20, iterations=1)
