@@ -37,16 +37,20 @@ def setup():
     return model, q, qd
 
 
-def test_mass_and_bias_from_the_engine_ours(benchmark, setup):
+def _time(benchmark, group: str, setup, own: bool) -> None:
+    """The model's own ``M`` and ``c`` (``own``), or the rule of every other model, at the setup's states."""
     model, q, qd = setup
-    benchmark.group = "mass-and-bias"
-    benchmark.pedantic(model.mass_and_bias, args=(q, qd), rounds=20, iterations=1)
+    benchmark.group = group
+    fn = model.mass_and_bias if own else (lambda q, qd: FittedModel.mass_and_bias(model, q, qd))
+    benchmark.pedantic(fn, args=(q, qd), rounds=20, iterations=1)
+
+
+def test_mass_and_bias_from_the_engine_ours(benchmark, setup):
+    _time(benchmark, "mass-and-bias", setup, own=True)
 
 
 def test_mass_and_bias_from_the_regressor(benchmark, setup):
-    model, q, qd = setup
-    benchmark.group = "mass-and-bias"
-    benchmark.pedantic(FittedModel.mass_and_bias, args=(model, q, qd), rounds=20, iterations=1)
+    _time(benchmark, "mass-and-bias", setup, own=False)
 
 
 @pytest.fixture(scope="module")
@@ -66,12 +70,8 @@ def delan_setup():
 def test_delan_mass_and_bias_from_one_pass_ours(benchmark, delan_setup):
     """DeLaN's ``H(q)`` and its torque at ``qdd = 0`` from one pass of its own derivatives
     (:meth:`methods.delan.DeLaN.mass_and_bias`), against the torque at ``dof + 1`` accelerations a state."""
-    model, q, qd = delan_setup
-    benchmark.group = "delan-mass-and-bias"
-    benchmark.pedantic(model.mass_and_bias, args=(q, qd), rounds=20, iterations=1)
+    _time(benchmark, "delan-mass-and-bias", delan_setup, own=True)
 
 
 def test_delan_mass_and_bias_from_the_torque(benchmark, delan_setup):
-    model, q, qd = delan_setup
-    benchmark.group = "delan-mass-and-bias"
-    benchmark.pedantic(FittedModel.mass_and_bias, args=(model, q, qd), rounds=20, iterations=1)
+    _time(benchmark, "delan-mass-and-bias", delan_setup, own=False)
