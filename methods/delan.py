@@ -209,9 +209,13 @@ class DeepLagrangian(torch.nn.Module):
         """``H(q)`` of shape ``(batch, dof, dof)`` and ``V(q)`` of shape ``(batch,)``."""
         h = self._features(self.trunk, q)
         factor = self._factor(self.diag_act(self.diagonal(h) + self.shift), self.lower(h))
-        eye = torch.eye(self.dof, dtype=q.dtype, device=q.device)
         hv = h if self.potential_trunk is None else self._features(self.potential_trunk, q)
-        return factor @ factor.transpose(1, 2) + self.epsilon * eye, self.potential(hv).squeeze(-1)
+        return self._mass(factor), self.potential(hv).squeeze(-1)
+
+    def _mass(self, factor: torch.Tensor) -> torch.Tensor:
+        """``H = Lambda Lambda^T + eps I`` from ``Lambda``."""
+        eye = torch.eye(self.dof, dtype=factor.dtype, device=factor.device)
+        return factor @ factor.transpose(1, 2) + self.epsilon * eye
 
     def forward(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
         H, V = self.parts(q)
@@ -229,8 +233,7 @@ class DeepLagrangian(torch.nn.Module):
         """``H(q)`` and the torque at ``qdd = 0`` (what the one transform makes of :meth:`tangent` there,
         ``D - dL/dq``), from one pass through the network."""
         _, dL_dq, _, along, factor = self._tangent(q, qd, qd, torch.zeros_like(qd))
-        eye = torch.eye(self.dof, dtype=q.dtype, device=q.device)
-        return factor @ factor.transpose(1, 2) + self.epsilon * eye, along - dL_dq
+        return self._mass(factor), along - dL_dq
 
     def _tangent(self, q, qd, dq, dqd):
         """:meth:`tangent`'s four, and ``Lambda``."""

@@ -142,15 +142,7 @@ class FittedModel(abc.ABC):
             zeros = np.zeros((n, dof))
             c = np.asarray(self.predict_torque(Dataset(q, qd, zeros, zeros)), dtype=np.float64)
             return np.zeros((n, dof, dof)), c
-        qdd = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
-        batch = Dataset(
-            np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0),
-            np.tile(qdd, (n, 1)), np.zeros((n * (dof + 1), dof)),
-        )
-        tau = np.asarray(self.predict_torque(batch), dtype=np.float64).reshape(n, dof + 1, dof)
-        c = tau[:, 0]
-        M = np.transpose(tau[:, 1:] - c[:, None, :], (0, 2, 1))  # column j is tau(e_j) - c
-        return M, c
+        return affine_parts(self.predict_torque(unit_accelerations(q, qd)), n)
 
     def saved(self, packer: Packer) -> dict:
         """The model as a model file holds it (:mod:`bench.core.modelfile`): a
@@ -337,6 +329,24 @@ def term_from_json(obj: dict, source: str):
     joint, shape = obj.get("joint"), obj.get("shape")
     return Term(expression_from_json(obj["expr"], source), str(obj["place"]), str(obj.get("name", "")),
                 None if joint is None else int(joint), None if shape is None else float(shape))
+
+
+def unit_accelerations(q: np.ndarray, qd: np.ndarray) -> Dataset:
+    """Each state ``(q, qd)`` at ``qdd = 0`` and at each unit acceleration ``e_j``: ``dof + 1`` rows a
+    state, in that order, whose torques :func:`affine_parts` takes ``M`` and ``c`` from."""
+    n, dof = q.shape
+    qdd = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
+    return Dataset(np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0), np.tile(qdd, (n, 1)),
+                   np.zeros((n * (dof + 1), dof)))
+
+
+def affine_parts(tau: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``M`` ``(n, dof, dof)`` and ``c`` ``(n, dof)`` from torques at :func:`unit_accelerations`' rows of ``n``
+    states: ``c`` is a state's torque at ``qdd = 0``, and column ``j`` of ``M`` its torque at ``e_j`` less ``c``."""
+    tau = np.asarray(tau, dtype=np.float64)
+    tau = tau.reshape(n, -1, tau.shape[-1])
+    c = tau[:, 0]
+    return np.transpose(tau[:, 1:] - c[:, None, :], (0, 2, 1)), c
 
 
 def mass_and_bias(model: FittedModel, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -39,7 +39,7 @@ import numpy as np
 
 from bench.core.data import Dataset
 from bench.core.modelfile import Packer, Unpacker, build, loader
-from bench.physics.models import FittedModel
+from bench.physics.models import FittedModel, affine_parts, unit_accelerations
 from bench.physics.regression import fit_statistics
 from bench.physics.terms import Term
 from bench.residual.beyond_data import held_out_verdict
@@ -295,18 +295,13 @@ class Sensed(FittedModel):
         states (a time shift, on data with time stamps), from the arm's torque at the moved states."""
         if not self.sensor.laws:
             return self.model.mass_and_bias(q, qd)
-        n, dof = q.shape
-        accelerations = np.concatenate([np.zeros((1, dof)), np.eye(dof)])  # (dof + 1, dof)
-        batch = Dataset(np.repeat(q, dof + 1, axis=0), np.repeat(qd, dof + 1, axis=0),
-                        np.tile(accelerations, (n, 1)), np.zeros((n * (dof + 1), dof)))
+        batch = unit_accelerations(q, qd)
         states = self.sensor.states(batch)
         if states is not batch:
-            return super().mass_and_bias(q, qd)
+            return affine_parts(self.predict_torque(batch), len(q))
         M_arm, c_arm = self.model.mass_and_bias(q, qd)
         arm = np.concatenate([c_arm[:, None, :], c_arm[:, None, :] + np.transpose(M_arm, (0, 2, 1))], axis=1)
-        tau = self.sensor.measure(arm.reshape(n * (dof + 1), dof), states).reshape(n, dof + 1, dof)
-        c = tau[:, 0]
-        return np.transpose(tau[:, 1:] - c[:, None, :], (0, 2, 1)), c
+        return affine_parts(self.sensor.measure(arm.reshape(len(batch), -1), states), len(q))
 
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         return self.model.predict_lagrangian(self.sensor.states(data))
