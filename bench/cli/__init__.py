@@ -24,7 +24,7 @@ from bench.cli import convert, data, fit, index, leaderboard, listing, predict, 
 from bench.cli.options import Parser
 from bench.core.errors import UserError
 from bench.tools import robot_log
-from bench.runner.isolation import CallFailed
+from bench.runner.job import CallFailed
 
 EXIT_USAGE = 2
 

@@ -113,7 +113,7 @@ CLUSTER_HELP = ("run on Dask distributed: 'local' starts a LocalCluster of --wor
 
 def add_workers(parser, what: str, default: int | None = 2) -> None:
     """``--workers N`` (``what`` at a time, one process each) and ``--cluster local|ADDRESS``: where the
-    jobs of a command or a study run (:func:`bench.runner.job.run_jobs`)."""
+    jobs of a command or a study run (:func:`bench.runner.schedule.run_jobs`)."""
     told = "one per core" if default is None else default
     parser.add_argument("--workers", type=positive_int, default=default,
                         help=f"{what} at a time, one process each (default {told})")

@@ -21,10 +21,8 @@ from bench.evaluation.per_joint import logged_test_torque, per_joint, per_joint_
 from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
-from bench.runner.code import code_hash
 from bench.runner.run import given_data, make_system, method_config, preflight
-from bench.runner.isolation import CallFailed, Outcome
-from bench.runner.job import Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
+from bench.runner.job import CallFailed, Job, Outcome, evaluation_limit, fit_limit, fit_limit_words, run_isolated
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import Report, print_now
 from bench.runner.spec import RunSpec
@@ -124,7 +122,7 @@ class ResidualJob(Job):
         import_plugins(spec.plugins)
         system = make_system(spec)
         train, test = self.data(system)
-        own = {"inputs": self.inputs(), "spec": self.spec, "code": code_hash(spec.method, spec.system, spec.plugins)}
+        own = {"inputs": self.inputs(), "spec": self.spec, "code": spec.code()}
 
         def checkpoint(result: ResidualResult) -> None:
             if self.checkpoint_path is not None:

@@ -1,4 +1,4 @@
-"""Jobs on Dask distributed: where :func:`bench.runner.job.run_jobs` runs its
+"""Jobs on Dask distributed: where :func:`bench.runner.schedule.run_jobs` runs its
 jobs when it is given a cluster instead of its local pool.
 
 ``cluster`` is ``"local"`` (a ``LocalCluster`` of ``workers`` single-threaded

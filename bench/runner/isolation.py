@@ -1,33 +1,24 @@
-"""Process isolation: a call runs in its own process, under time limits per phase.
+"""Process isolation: the processes jobs run in (:mod:`bench.runner.job`).
 
-Every job of the suite (:mod:`bench.runner.job`) runs through :func:`run_call`.
-A :class:`Call` names a function by its import path and
-gives it a JSON payload; the child reports the phases it enters, and the
-parent kills its whole process group when it stays in a phase longer than
-that phase's limit.
+A :class:`Child` calls a function, named by its import path (``"module:function"``), with string
+arguments, in a process of its own session, so that its whole process group can be killed
+(:meth:`Child.kill`, and :func:`kill_children` for an interrupted caller). It first asks to be killed
+when its parent ends (:func:`bench.core.processes.die_with_parent`).
 
 The child is forked from a fork server (:func:`fork_server`) that has
 imported torch, the suite and both registries once (:mod:`bench.runner.preload`),
 so a run does not pay for those imports; where the server cannot be used (no
 ``fork`` on the platform, inside a daemonic process such as a Dask worker
-started as Dask starts them by default, a call with more than one thread, or
-``fresh=True``) the child is a fresh
-interpreter started with the thread variables set (:data:`_FRESH_CHILD`).
-
-The child's side (:func:`run_target`): a call is a JSON file ``{"target":
-"module:function", "payload": {...}, "threads": n}``. The child first asks
-to be killed when its parent ends (:func:`bench.core.processes.die_with_parent`),
-pins its threads, imports the target by name, calls ``target(payload,
-on_phase)``, and writes the JSON it returns to the result file, atomically.
-``on_phase(name)`` appends the phase's name to the phase file, from which the
-parent times its limits.
+started as Dask starts them by default, a child with more than one thread, or
+``fresh=True``) the child is a fresh interpreter started with the thread
+variables set (:data:`_FRESH_CHILD`). What the function is given and returns,
+and the limits it runs under, are the job's (:func:`bench.runner.job.run_watched`).
 """
 
 from __future__ import annotations
 
 import atexit
 import importlib
-import json
 import multiprocessing
 import os
 import signal
@@ -36,69 +27,12 @@ import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator, Mapping
+from typing import Callable, Iterator, Sequence
 
-from bench.core.fileio import write_json
 from bench.core.processes import die_with_parent
 from bench.runner.provenance import PROJECT_ROOT
-from bench.runner.threads import THREAD_VARS, pin_threads, pin_torch, thread_env
-
-#: the phase a child is in until it reports another
-STARTUP = "startup"
-#: seconds a child may take to import and load its data before its first phase
-STARTUP_TIMEOUT_S = 300.0
-
-
-@dataclass(frozen=True)
-class Call:
-    """``target(payload, on_phase) -> JSON``, run in a child process.
-
-    ``target`` is ``"module:function"``; ``payload`` must be JSON; the
-    child pins ``threads`` torch and BLAS threads.
-    """
-
-    target: str
-    payload: dict
-    threads: int = 1
-
-    def to_json(self) -> dict:
-        return {"target": self.target, "payload": self.payload, "threads": self.threads}
-
-
-class CallFailed(RuntimeError):
-    """A call that did not return: killed at its limit, or its process died."""
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """How a call ended.
-
-    Attributes
-    ----------
-    result
-        The JSON the target returned; ``None`` when it did not return.
-    phase
-        The last phase the child reported (``"startup"`` if none).
-    killed
-        The child stayed in ``phase`` past its limit and was killed.
-    exit_code
-        The child's exit code (``None`` when killed).
-    log_tail
-        The last lines of the child's output, for a child that died.
-    interrupted
-        The caller was interrupted and killed the child (:func:`kill_children`):
-        the call neither finished nor failed.
-    """
-
-    result: dict | None
-    phase: str
-    killed: bool = False
-    exit_code: int | None = None
-    log_tail: str = ""
-    interrupted: bool = False
-
+from bench.runner.threads import THREAD_VARS, thread_env
 
 _FORK_SERVER = {"context": None, "failed": None}
 
@@ -166,7 +100,7 @@ def stop_fork_server(owner: int, server=None, wait_s: float = 10.0) -> None:
 
 
 #: the children running now, killed by :func:`kill_children` when their caller is interrupted
-_RUNNING: set["_Child"] = set()
+_RUNNING: set["Child"] = set()
 _RUNNING_LOCK = threading.Lock()
 
 
@@ -180,15 +114,17 @@ def kill_children() -> int:
     return len(children)
 
 
-class _Child:
-    """A running child: a process forked from the fork server, or a fresh interpreter."""
+class Child:
+    """A running child: ``entry(*args)`` (``entry`` is ``"module:function"``) in a process forked from the
+    fork server, or in a fresh interpreter, with ``threads`` torch and BLAS threads; its output goes to
+    ``log_file``."""
 
-    def __init__(self, threads: int, files: tuple[Path, Path, Path], log_file: Path, fresh: bool):
+    def __init__(self, entry: str, args: Sequence[str], threads: int, log_file: Path, fresh: bool):
         ctx = None if fresh or threads != 1 else fork_server()
         self.proc = self.popen = None
         self.interrupted = False
         if ctx is not None:
-            self.proc = ctx.Process(target=forked_main, args=(*map(str, files), str(log_file), os.getcwd()))
+            self.proc = ctx.Process(target=forked_main, args=(entry, tuple(args), str(log_file), os.getcwd()))
             self.proc.start()
             self._register()
             return
@@ -197,7 +133,7 @@ class _Child:
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         with open(log_file, "wb") as log:
             self.popen = subprocess.Popen(
-                [sys.executable, "-c", _FRESH_CHILD, *map(str, files)],
+                [sys.executable, "-c", _FRESH_CHILD, entry, *args],
                 env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
             )
         self._register()
@@ -242,50 +178,6 @@ class _Child:
         self.wait(None)
 
 
-def run_call(call: Call, result_file: str | os.PathLike, log_dir: str | os.PathLike, name: str,
-             limits: Mapping[str, float], *, fresh: bool = False, poll_s: float = 0.05,
-             echo: Callable[[str], None] | None = None) -> Outcome:
-    """Run ``call`` in its own process and wait for it.
-
-    The child writes what the target returns to ``result_file``; its call,
-    phases and output go to ``log_dir/<name>.*``. ``limits`` gives the
-    seconds allowed in each phase, counted from the phase's start; the
-    start-up phase has :data:`STARTUP_TIMEOUT_S` unless ``limits`` says
-    otherwise, and a phase without a limit has none. ``echo``, if given,
-    receives each line the child prints, as it prints it.
-    """
-    result_file, log_dir = Path(result_file), Path(log_dir)
-    log_dir.mkdir(parents=True, exist_ok=True)
-    call_file, phase_file, log_file = (log_dir / f"{name}{s}" for s in (".call.json", ".phase", ".log"))
-    for f in (phase_file, result_file, log_file):
-        f.unlink(missing_ok=True)
-    write_json(call_file, call.to_json())
-    limits = {STARTUP: STARTUP_TIMEOUT_S, **limits}
-    child = _Child(call.threads, (call_file, result_file, phase_file), log_file, fresh)
-    phase = STARTUP
-    kill_at = time.monotonic() + limits[STARTUP]
-    output = _Lines(log_file, echo)
-    while not child.wait(poll_s):
-        output.read()
-        now = time.monotonic()
-        new_phase = _read_phase(phase_file) or phase
-        if new_phase != phase:
-            phase = new_phase
-            kill_at = now + limits.get(phase, float("inf"))
-        if now >= kill_at:
-            child.kill()
-            output.read(final=True)
-            return Outcome(None, phase, killed=True)
-    output.read(final=True)
-    if child.interrupted:
-        return Outcome(None, phase, interrupted=True)
-    phase = _read_phase(phase_file) or phase
-    result = _read_result(result_file)
-    if result is None:
-        return Outcome(None, phase, exit_code=child.returncode, log_tail=_tail(log_file))
-    return Outcome(result, phase, exit_code=child.returncode)
-
-
 def map_interruptibly(fn: Callable, items: list, workers: int) -> Iterator:
     """``fn`` over ``items`` on ``workers`` threads, results in order, like
     ``ThreadPoolExecutor.map``; if the caller is interrupted (Ctrl-C, or any
@@ -302,87 +194,25 @@ def map_interruptibly(fn: Callable, items: list, workers: int) -> Iterator:
         pool.shutdown(wait=True)
 
 
-class _Lines:
-    """The lines a child has added to its log since the last read, passed to ``echo``."""
-
-    def __init__(self, path: Path, echo: Callable[[str], None] | None):
-        self.path, self.echo, self.offset, self.partial = path, echo, 0, b""
-
-    def read(self, final: bool = False) -> None:
-        if self.echo is None:
-            return
-        try:
-            with open(self.path, "rb") as f:
-                f.seek(self.offset)
-                chunk = f.read()
-        except OSError:
-            return
-        self.offset += len(chunk)
-        *lines, self.partial = (self.partial + chunk).split(b"\n")
-        if final and self.partial:
-            lines.append(self.partial)
-            self.partial = b""
-        for line in lines:
-            self.echo(line.decode(errors="replace"))
-
-
-def _read_result(path: Path) -> dict | None:
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except (OSError, ValueError):
-        return None
-
-
-def _read_phase(path: Path) -> str | None:
-    try:
-        lines = path.read_text().split()
-    except OSError:
-        return None
-    return lines[-1] if lines else None
-
-
-def _tail(path: Path, lines: int = 3) -> str:
-    try:
-        text = path.read_text(errors="replace").strip().splitlines()
-    except OSError:
-        return "(no log)"
-    return " | ".join(text[-lines:]) or "(empty log)"
-
-
 # The child's side.
 
-#: what a fresh interpreter runs: :func:`run_target` on the three files it is given, having asked to die with its
-#: parent before anything slow is imported (this module imports torch)
+#: what a fresh interpreter runs: ``entry(*args)`` from its command line, having asked to die with its parent
+#: before anything slow is imported (this module imports torch)
 _FRESH_CHILD = ("import sys; from bench.core.processes import die_with_parent; die_with_parent(); "
-                "from bench.runner.isolation import run_target; run_target(*sys.argv[1:])")
+                "from bench.runner.isolation import call_entry; call_entry(sys.argv[1], sys.argv[2:])")
 
 
-def run_target(call_file: str, result_file: str, phase_file: str) -> None:
-    """The call in ``call_file``, run in this (child) process; what it returns goes to ``result_file``, the
-    phases it enters to ``phase_file``. The thread variables numpy's and torch's BLAS read were set before
-    they were imported: in a fresh interpreter's environment by the parent (:func:`thread_env`), in the fork
-    server by the server; torch's own thread counts are set here."""
-    die_with_parent()
-    with open(call_file) as f:
-        call = json.load(f)
-    threads = int(call.get("threads", 1))
-    pin_threads(threads)
-    pin_torch(threads)
-    module, _, name = call["target"].partition(":")
-    target = getattr(importlib.import_module(module), name)
-
-    def on_phase(phase: str) -> None:
-        with open(phase_file, "a") as f:
-            f.write(phase + "\n")
-
-    write_json(result_file, target(call["payload"], on_phase))
+def call_entry(entry: str, args: Sequence[str]) -> None:
+    """``entry(*args)``, ``entry`` imported by its name, ``"module:function"``."""
+    module, _, name = entry.partition(":")
+    getattr(importlib.import_module(module), name)(*args)
 
 
-def forked_main(call_file: str, result_file: str, phase_file: str, log_file: str, cwd: str) -> None:
+def forked_main(entry: str, args: Sequence[str], log_file: str, cwd: str) -> None:
     """The target of a process forked from the fork server: its own session
     (so the parent can kill its whole process group), the parent's working
-    directory (the server keeps the one it started in), output to ``log_file``.
+    directory (the server keeps the one it started in), output to ``log_file``;
+    then ``entry(*args)``.
 
     multiprocessing hands each forked process a copy of the pipe that keeps
     the fork server alive, so that the server outlives the process that
@@ -399,7 +229,8 @@ def forked_main(call_file: str, result_file: str, phase_file: str, log_file: str
     os.dup2(fd, 1)
     os.dup2(fd, 2)
     os.close(fd)
-    run_target(call_file, result_file, phase_file)
+    die_with_parent()
+    call_entry(entry, args)
 
 
 def _release_fork_server() -> None:

@@ -10,16 +10,23 @@ as JSON. Its life has four steps, each a method it may override:
 * :meth:`Job.run`, in the child: the work, returning JSON; it names its
   phases through ``on_phase`` and checks nothing :meth:`Job.check` checked;
 * :meth:`Job.finish`, in the caller's process: the job's result from how
-  its process ended (:class:`~bench.runner.isolation.Outcome`), a kill or a
-  crash included.
+  its process ended (:class:`Outcome`), a kill or a crash included.
 
-:func:`run_isolated` runs one job this way and :func:`run_jobs`, the one
-scheduler, runs many side by side: a matrix's runs
+:func:`run_isolated` runs one job this way; :func:`bench.runner.schedule.run_jobs`,
+the one scheduler, runs many side by side. Jobs are a matrix's runs
 (:class:`bench.runner.run.RunJob`) and its stacked groups
 (:class:`bench.runner.stacked.StackedJob`), the residual loop
 (:class:`bench.residual.job.ResidualJob`) and the studies' cases
-(:class:`CaseJob`). The process itself, its fork server and the
-killing at a phase's limit are :mod:`bench.runner.isolation`'s.
+(:class:`CaseJob`).
+
+How a job travels (:func:`run_watched`): its call, a JSON file ``{"job":
+"module:Class", "fields": {...}, "threads": n}``, is written to the job's
+folder; a child process (:class:`bench.runner.isolation.Child`) runs
+:func:`run_in_child` on it, which pins the threads, makes the job again from
+its fields, runs it and writes the JSON it returns to the result file,
+atomically. ``on_phase(name)`` appends the phase's name to the phase file,
+from which the parent times each phase's limit, and kills the child's whole
+process group when it stays in a phase longer than that.
 
 The limits every job shares are here: a fit is killed at
 :data:`KILL_FACTOR` x its time budget (:func:`fit_limit`), and what follows
@@ -34,14 +41,16 @@ import json
 import math
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
 from bench.core.budget import SECONDS, Budget
-from bench.runner.cluster import run_on_cluster
-from bench.runner.isolation import Call, CallFailed, Outcome, map_interruptibly, run_call
-from bench.runner.ledger import Ledger, suite_code
+from bench.core.fileio import write_json
+from bench.runner.isolation import Child
+from bench.runner.ledger import suite_code
 from bench.runner.progress import print_now
+from bench.runner.threads import pin_threads, pin_torch
 
 #: A fit is killed at this multiple of its time budget.
 KILL_FACTOR = 1.5
@@ -53,6 +62,12 @@ EVALUATION_MIN_S = 120.0
 #: each set of samples it fits, :meth:`methods.base.Method.prepare_samples`)
 #: may take its budget, and at least this many seconds.
 PREPARE_MIN_S = 900.0
+
+
+#: the phase a child is in until it reports another
+STARTUP = "startup"
+#: seconds a child may take to import and load its data before its first phase
+STARTUP_TIMEOUT_S = 300.0
 
 
 def fit_limit(budget: Budget) -> float:
@@ -71,6 +86,39 @@ def evaluation_limit(budget_s: float | None, factor: float = 1.0) -> float:
     """Seconds a job may take after its fit: ``max(EVALUATION_MIN_S, factor *
     budget_s)``, none for a work budget without a ceiling (``budget_s`` ``None``)."""
     return math.inf if budget_s is None else max(EVALUATION_MIN_S, factor * budget_s)
+
+
+class CallFailed(RuntimeError):
+    """A job whose process did not return: killed at its limit, or it died."""
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a job's process ended.
+
+    Attributes
+    ----------
+    result
+        The JSON the job's :meth:`~Job.run` returned; ``None`` when it did not return.
+    phase
+        The last phase the child reported (``"startup"`` if none).
+    killed
+        The child stayed in ``phase`` past its limit and was killed.
+    exit_code
+        The child's exit code (``None`` when killed).
+    log_tail
+        The last lines of the child's output, for a child that died.
+    interrupted
+        The caller was interrupted and killed the child (:func:`~bench.runner.isolation.kill_children`):
+        the call neither finished nor failed.
+    """
+
+    result: dict | None
+    phase: str
+    killed: bool = False
+    exit_code: int | None = None
+    log_tail: str = ""
+    interrupted: bool = False
 
 
 class Job:
@@ -97,7 +145,7 @@ class Job:
     def finish(self, outcome: Outcome, report: Callable[[str], None]) -> Any:
         """The job's result from how its process ended, saying through ``report``
         what the caller should hear of it: by default the JSON it returned,
-        else :class:`~bench.runner.isolation.CallFailed`."""
+        else :class:`CallFailed`."""
         if outcome.result is None:
             raise CallFailed(f"killed in its {outcome.phase} phase" if outcome.killed else outcome.log_tail)
         return outcome.result
@@ -107,7 +155,7 @@ class Job:
         return work / f"{name}.result.json"
 
     def folder(self) -> Path | None:
-        """Where :func:`run_jobs` keeps the job's call, phases and output (``None``: a scratch folder, removed
+        """Where :func:`~bench.runner.schedule.run_jobs` keeps the job's call, phases and output (``None``: a scratch folder, removed
         once every job has ended)."""
         return None
 
@@ -170,12 +218,10 @@ class CaseJob(Job):
         return self.compute()
 
 
-def run_job(payload: dict, on_phase: Callable[[str], None]) -> dict:
-    """The one entry point of a job's process: ``payload`` names the job's
-    class (``"module:Class"``) and gives its fields."""
-    module, _, name = payload["job"].partition(":")
-    cls = getattr(importlib.import_module(module), name)
-    return cls.from_payload(payload["fields"]).run(on_phase)
+def job_fields(job: Job) -> dict:
+    """What a job is, as its ledger compares it: its class and its fields, as JSON reads them back."""
+    return json.loads(json.dumps({"job": f"{type(job).__module__}:{type(job).__qualname__}",
+                                  "fields": job.payload()}))
 
 
 def run_isolated(job: Job, work: str | Path | None = None, name: str = "job", *, checked: bool = False,
@@ -198,102 +244,121 @@ def run_isolated(job: Job, work: str | Path | None = None, name: str = "job", *,
     if work is None:
         with tempfile.TemporaryDirectory(prefix="bench-job-") as scratch:
             return run_isolated(job, scratch, name, checked=True, fresh=fresh, poll_s=poll_s, echo=echo)
-    work = Path(work)
-    call = Call("bench.runner.job:run_job", {"job": f"{type(job).__module__}:{type(job).__qualname__}",
-                                             "fields": job.payload()}, job.threads)
-    outcome = run_call(call, job.result_file(work, name), work, name, job.limits(), fresh=fresh, poll_s=poll_s,
-                       echo=echo)
+    outcome = run_watched(job, Path(work), name, fresh=fresh, poll_s=poll_s, echo=echo)
     if outcome.interrupted:
         raise KeyboardInterrupt(f"{name} interrupted")
     return job.finish(outcome, echo or print_now)
 
 
-def run_remote(job: Job, name: str) -> tuple[bool, Any]:
-    """A cluster's task (:mod:`bench.runner.cluster`): ``job`` in its own process on the worker, in a
-    scratch folder there (:meth:`Job.elsewhere`); ``(True, result)`` (:meth:`Job.packed`), or
-    ``(False, why)`` where it did not finish."""
-    with tempfile.TemporaryDirectory(prefix="syrenets-bench-") as scratch:
-        there = job.elsewhere(Path(scratch))
-        try:
-            return True, there.packed(run_isolated(there, scratch, name, checked=True))
-        except CallFailed as exc:
-            return False, str(exc)
+def run_watched(job: Job, work: Path, name: str, *, fresh: bool = False, poll_s: float = 0.05,
+                echo: Callable[[str], None] | None = None) -> Outcome:
+    """Run ``job`` in its own process and wait for it: how its process ended.
 
-
-def job_fields(job: Job) -> dict:
-    """What a job is, as its ledger compares it: its class and its fields, as JSON reads them back."""
-    return json.loads(json.dumps({"job": f"{type(job).__module__}:{type(job).__qualname__}",
-                                  "fields": job.payload()}))
-
-
-def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], str] | None,
-             report: Callable[[str], None], ledger: Ledger | None = None, *, checked: bool = False,
-             before: Callable[[str], None] | None = None,
-             on_done: Callable[[str, Any], None] | None = None, cluster=None) -> dict[str, Any]:
-    """The one scheduler: run each named job with :func:`run_isolated`, ``workers`` at a time, in the order
-    given, or each as a task of a Dask ``cluster`` (:mod:`bench.runner.cluster`); returns the results by
-    name, in the order given.
-
-    Every job is checked before any starts (unless the caller did: ``checked``). ``before(name)`` is called
-    as each starts, or is handed to the cluster (it may raise to stop the rest). Each finished job is
-    reported in one line, ``[k/n, t s] name: describe(result)``, or handed to ``on_done(name, result)``
-    instead; jobs that did not finish raise
-    :class:`~bench.runner.isolation.CallFailed`, named, once all have ended. A job's call, phases and output
-    go to its :meth:`Job.folder`, else to a scratch folder. With a ``ledger``, each job that finishes is kept
-    in it as it finishes, and a job it already holds is not run again where its result stands
-    (:func:`~bench.runner.ledger.rerun_reason`): the studies' cases resume so; a matrix resumes
-    from its records by the same rule (:mod:`bench.runner.matrix`) and gives only the runs left.
+    The child writes what :meth:`Job.run` returns to :meth:`Job.result_file`; the job's call, phases and
+    output go to ``work/<name>.*``. :meth:`Job.limits` gives the seconds allowed in each phase, counted
+    from the phase's start; the start-up phase has :data:`STARTUP_TIMEOUT_S` unless the job says
+    otherwise, and a phase without a limit has none. ``echo``, if given, receives each line the child
+    prints, as it prints it.
     """
-    early = {name: None if checked else job.check() for name, job in jobs.items()}
-    kept, other = ledger.finished(jobs) if ledger else ({}, 0)
-    if kept:
-        report(f"{len(kept)} of {len(jobs)} job(s) finished before, by this code: taken from {ledger.path}")
-    if other:
-        report(f"{other} job(s) in {ledger.path} were made by other code or with other fields: they run again")
-    start = time.monotonic()
-    finished: list[str] = []
-    todo = [name for name in jobs if name not in kept]
+    result_file = job.result_file(work, name)
+    work.mkdir(parents=True, exist_ok=True)
+    call_file, phase_file, log_file = (work / f"{name}{s}" for s in (".call.json", ".phase", ".log"))
+    for f in (phase_file, result_file, log_file):
+        f.unlink(missing_ok=True)
+    write_json(call_file, {**job_fields(job), "threads": job.threads})
+    limits = {STARTUP: STARTUP_TIMEOUT_S, **job.limits()}
+    child = Child("bench.runner.job:run_in_child", tuple(map(str, (call_file, result_file, phase_file))),
+                  job.threads, log_file, fresh)
+    phase = STARTUP
+    kill_at = time.monotonic() + limits[STARTUP]
+    output = _Lines(log_file, echo)
+    while not child.wait(poll_s):
+        output.read()
+        now = time.monotonic()
+        new_phase = _read_phase(phase_file) or phase
+        if new_phase != phase:
+            phase = new_phase
+            kill_at = now + limits.get(phase, float("inf"))
+        if now >= kill_at:
+            child.kill()
+            output.read(final=True)
+            return Outcome(None, phase, killed=True)
+    output.read(final=True)
+    if child.interrupted:
+        return Outcome(None, phase, interrupted=True)
+    phase = _read_phase(phase_file) or phase
+    result = _read_result(result_file)
+    if result is None:
+        return Outcome(None, phase, exit_code=child.returncode, log_tail=_tail(log_file))
+    return Outcome(result, phase, exit_code=child.returncode)
 
-    def ended(name: str, ok: bool, result: Any) -> tuple[bool, Any]:
-        if ok and ledger:
-            ledger.add(name, jobs[name], result)
-        finished.append(name)
-        if ok and on_done is not None:
-            on_done(name, result)
-        else:
-            what = (describe(result) if describe else "done") if ok else f"did not finish ({result})"
-            report(f"[{len(finished)}/{len(todo)}, {time.monotonic() - start:.0f} s] {name}: {what}")
-        return ok, result
 
-    def one(item: tuple[str, Path]) -> tuple[bool, Any]:
-        name, work = item
-        if before is not None:
-            before(name)
+class _Lines:
+    """The lines a child has added to its log since the last read, passed to ``echo``."""
+
+    def __init__(self, path: Path, echo: Callable[[str], None] | None):
+        self.path, self.echo, self.offset, self.partial = path, echo, 0, b""
+
+    def read(self, final: bool = False) -> None:
+        if self.echo is None:
+            return
         try:
-            result, ok = (early[name] if early[name] is not None
-                          else run_isolated(jobs[name], work, name, checked=True)), True
-        except CallFailed as exc:
-            result, ok = str(exc), False
-        return ended(name, ok, result)
+            with open(self.path, "rb") as f:
+                f.seek(self.offset)
+                chunk = f.read()
+        except OSError:
+            return
+        self.offset += len(chunk)
+        *lines, self.partial = (self.partial + chunk).split(b"\n")
+        if final and self.partial:
+            lines.append(self.partial)
+            self.partial = b""
+        for line in lines:
+            self.echo(line.decode(errors="replace"))
 
-    outcomes = {name: (True, result) for name, result in kept.items()}
-    if cluster is not None:
-        remote = {}
-        for name in todo:
-            if early[name] is not None:
-                outcomes[name] = ended(name, True, early[name])
-                continue
-            if before is not None:
-                before(name)
-            remote[name] = jobs[name]
-        for name, ok, result in run_on_cluster(remote, cluster, workers, run_remote):
-            outcomes[name] = ended(name, ok, result)
-    else:
-        with tempfile.TemporaryDirectory(prefix="bench-jobs-") as work:
-            items = [(name, jobs[name].folder() or Path(work) / str(i)) for i, name in enumerate(todo)]
-            outcomes.update(zip(todo, map_interruptibly(one, items, workers)))
-    outcomes = {name: outcomes[name] for name in jobs}
-    failed = [name for name, (ok, _) in outcomes.items() if not ok]
-    if failed:
-        raise CallFailed(f"{len(failed)} of {len(jobs)} job(s) did not finish: {', '.join(failed)}")
-    return {name: result for name, (_, result) in outcomes.items()}
+
+def _read_result(path: Path) -> dict | None:
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def _read_phase(path: Path) -> str | None:
+    try:
+        lines = path.read_text().split()
+    except OSError:
+        return None
+    return lines[-1] if lines else None
+
+
+def _tail(path: Path, lines: int = 3) -> str:
+    try:
+        text = path.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return "(no log)"
+    return " | ".join(text[-lines:]) or "(empty log)"
+
+
+# The child's side.
+
+def run_in_child(call_file: str, result_file: str, phase_file: str) -> None:
+    """The job in ``call_file``, made again from its fields and run in this (child) process; what it returns
+    goes to ``result_file``, the phases it enters to ``phase_file``. The thread variables numpy's and torch's
+    BLAS read were set before they were imported: in a fresh interpreter's environment by the parent
+    (:func:`~bench.runner.threads.thread_env`), in the fork server by the server; torch's own thread counts
+    are set here."""
+    with open(call_file) as f:
+        call = json.load(f)
+    threads = int(call.get("threads", 1))
+    pin_threads(threads)
+    pin_torch(threads)
+    module, _, name = call["job"].partition(":")
+    job = getattr(importlib.import_module(module), name).from_payload(call["fields"])
+
+    def on_phase(phase: str) -> None:
+        with open(phase_file, "a") as f:
+            f.write(phase + "\n")
+
+    write_json(result_file, job.run(on_phase))

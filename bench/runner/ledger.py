@@ -3,7 +3,7 @@ command, run again, resumes where it stopped; and the one rule by which a
 stored result stands for a job, a study's or a matrix's (:func:`rerun_reason`).
 
 A :class:`Ledger` is a JSON-lines file beside the study's page
-(``PAGE.partial.jsonl``). :func:`bench.runner.job.run_jobs` appends one line
+(``PAGE.partial.jsonl``). :func:`bench.runner.schedule.run_jobs` appends one line
 per job that finished (its name, what it is, the code that ran it and its
 result) and, when started again, takes a job's result from the ledger instead
 of running it where it stands for the job by the one resume rule

@@ -3,7 +3,7 @@
 * Each run is a :class:`~bench.runner.run.RunJob`, run in its own process,
   which writes its record (:mod:`bench.runner.run`).
 * :func:`run_matrix` runs many specs through the one scheduler,
-  :func:`~bench.runner.job.run_jobs`, each stacked group of seeds as one
+  :func:`~bench.runner.schedule.run_jobs`, each stacked group of seeds as one
   :class:`~bench.runner.stacked.StackedJob` (``stack``), or on Dask
   distributed, writes one record per run atomically, and skips runs that
   already have a valid record, so a killed matrix loses no finished run and
@@ -21,7 +21,8 @@ from pathlib import Path
 
 from bench.core.errors import UserError
 from bench.core.processes import process_alive
-from bench.runner.job import Job, run_jobs
+from bench.runner.job import Job
+from bench.runner.schedule import run_jobs
 from bench.runner.ledger import rerun_reason
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import MatrixProgress, Report, print_now
@@ -84,7 +85,7 @@ def run_matrix(
 
     Runs that already have a valid record in ``out_dir`` are skipped
     (``resume``), unless the record was made by other code (its ``code``
-    hash, :mod:`bench.runner.code`, differs from the code's now) or for
+    hash, :func:`bench.runner.spec.code_hash`, differs from the code's now) or for
     another configuration (its spec differs), or, with ``retry_failed``,
     the run failed or timed out; each such run is redone, and the report
     says how many and why. A record file that is not valid is reported in

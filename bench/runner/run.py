@@ -13,7 +13,7 @@
   either gives status ``timeout``.
 * :func:`run_one` runs one spec so, by itself (``bench fit``); a matrix
   (:mod:`bench.runner.matrix`) hands many to the scheduler,
-  :func:`~bench.runner.job.run_jobs`.
+  :func:`~bench.runner.schedule.run_jobs`.
 """
 
 from __future__ import annotations
@@ -43,9 +43,8 @@ from bench.evaluation.scores import Stages, errors, exact_entry, expression_entr
 from bench.evaluation.tuning import prepare as prepare_search, tune
 from bench.physics.models import NoVariant
 from bench.physics.system import System
-from bench.runner.code import code_hash
-from bench.runner.isolation import STARTUP_TIMEOUT_S, Outcome
-from bench.runner.job import PREPARE_MIN_S, Job, evaluation_limit, fit_limit, fit_limit_words, run_isolated
+from bench.runner.job import (PREPARE_MIN_S, STARTUP_TIMEOUT_S, Job, Outcome, evaluation_limit, fit_limit,
+                              fit_limit_words, run_isolated)
 from bench.runner.ledger import suite_code
 from bench.runner.plugins import import_plugins
 from bench.runner.provenance import device_entry, provenance
@@ -372,7 +371,7 @@ class RunJob(Job):
         early = preflight(spec)
         if early is None:
             return None
-        early = early.replace(code=self.code_entry())
+        early = early.replace(code=self.run_spec.code())
         write_record(record_path(self.out_dir, spec.run_id), early)
         return early
 
@@ -380,7 +379,7 @@ class RunJob(Job):
         return phase_limits(self.run_spec)
 
     def run(self, on_phase) -> dict:
-        """The run, in the child: its record, with the code it ran (:func:`~bench.runner.code.code_hash`), is what
+        """The run, in the child: its record, with the code it ran (:meth:`~bench.runner.spec.RunSpec.code`), is what
         the child writes, once, to the record's path (:meth:`result_file`)."""
         data = None
         if self.data_file:
@@ -390,7 +389,7 @@ class RunJob(Job):
         if self.priors:
             share_priors(self.priors, suite_code)
         record = execute(spec, on_phase, data=data, checked=True)
-        return record.replace(code=self.code_entry()).to_json()
+        return record.replace(code=self.run_spec.code()).to_json()
 
     def result_file(self, work: Path, name: str) -> Path:
         return record_path(self.out_dir, name)
@@ -399,15 +398,9 @@ class RunJob(Job):
         """``OUT/logs``: the run's call, phases and output (a failed run's traceback among it)."""
         return Path(self.out_dir) / "logs"
 
-    def code_entry(self) -> dict | None:
-        """The record's ``code``: the files that define the run's method and system, and their hash
-        (:func:`~bench.runner.code.code_hash`)."""
-        spec = self.run_spec
-        return code_hash(spec.method, spec.system, spec.plugins)
-
     def code(self) -> str | None:
-        """The hash of :meth:`code_entry`."""
-        return (self.code_entry() or {}).get("hash")
+        """The hash of the code that defines the run (:meth:`~bench.runner.spec.RunSpec.code`)."""
+        return (self.run_spec.code() or {}).get("hash")
 
     def identity(self) -> dict:
         """The run's spec, as JSON (wherever its record goes)."""
@@ -445,7 +438,7 @@ class RunJob(Job):
         if outcome.result is not None:
             return Record.from_json(outcome.result, str(path))
         limits = self.limits()
-        code = self.code_entry()
+        code = self.run_spec.code()
         if not outcome.killed:
             error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
             record = Record.new(spec, "failed", elsewhere=True, error=error, code=code)

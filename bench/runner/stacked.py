@@ -11,7 +11,7 @@ written as ordinary records.
   Where the group's process fails or is killed, each of its seeds runs again
   on its own (:func:`~bench.runner.run.run_one`), so that no seed's record is
   lost to another's failure. The matrix hands the groups to the one
-  scheduler, :func:`~bench.runner.job.run_jobs`.
+  scheduler, :func:`~bench.runner.schedule.run_jobs`.
 """
 
 from __future__ import annotations
@@ -22,8 +22,7 @@ from pathlib import Path
 from typing import Callable
 
 from bench.core.errors import UserError
-from bench.runner.code import code_hash
-from bench.runner.isolation import Outcome
+from bench.runner.job import Outcome
 from bench.runner.job import Job
 from bench.runner.run import execute, load_data, make_method, make_system, phase_limits, run_one, warm_up_torch
 from bench.runner.plugins import import_plugins
@@ -104,7 +103,7 @@ class StackedJob(Job):
         fit_stacked(methods, [train for train, _ in data], first.experiment, [s.seed for s in specs], first.budget,
                     system=system, on_fit=lambda: on_phase("fit"))
         on_phase("evaluate")
-        code = code_hash(first.method, first.system, first.plugins)
+        code = first.code()
         records = []
         for spec, pair, method in zip(specs, data, methods):
             record = execute(spec, data=pair, fitted=method, checked=True).replace(code=code)

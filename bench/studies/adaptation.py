@@ -55,7 +55,8 @@ from bench.core.errors import ConfigError
 from bench.core.fileio import atomic_write, check_output, link, write_json
 from bench.reporting.plots import adaptation_plot, step_values
 from bench.residual.loop import residual_loop
-from bench.runner.job import KILL_FACTOR, CaseJob, run_jobs
+from bench.runner.job import KILL_FACTOR, CaseJob
+from bench.runner.schedule import run_jobs
 from bench.runner.progress import Report, quiet
 from bench.runner.provenance import machine, made_at, provenance
 from bench.runner.spec import TEST_SEED_OFFSET

@@ -33,7 +33,8 @@ from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, check_output, write_json
 from bench.evaluation.reference import CONFIGURATION, METHOD as STANDARD_METHOD
 from bench.reporting.plots import line_plot
-from bench.runner.job import KILL_FACTOR, CaseJob, run_jobs
+from bench.runner.job import KILL_FACTOR, CaseJob
+from bench.runner.schedule import run_jobs
 from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now
 from bench.runner.provenance import made_at, provenance

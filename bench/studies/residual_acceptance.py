@@ -51,7 +51,8 @@ from bench.residual.beyond_data import MIN_GAIN as BEYOND_GAIN
 from bench.residual.criteria import AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T
 from bench.residual.loop import residual_loop
 from bench.residual.sensors import Sensor
-from bench.runner.job import CaseJob, fit_limit, run_jobs
+from bench.runner.job import CaseJob, fit_limit
+from bench.runner.schedule import run_jobs
 from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance

@@ -31,7 +31,8 @@ from bench.core.arguments import positive, positive_int, add_workers
 from bench.core.fileio import atomic_write, check_output, link
 from bench.residual import validation
 from bench.residual.loop import residual_loop
-from bench.runner.job import CaseJob, fit_limit, run_jobs
+from bench.runner.job import CaseJob, fit_limit
+from bench.runner.schedule import run_jobs
 from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now, quiet
 from bench.runner.provenance import made_at, provenance

@@ -68,7 +68,8 @@ from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, write_json
-from bench.runner.job import CaseJob, run_jobs
+from bench.runner.job import CaseJob
+from bench.runner.schedule import run_jobs
 from bench.runner.ledger import Ledger
 from bench.runner.plugins import register_by_file
 from bench.runner.progress import print_now
@@ -238,7 +239,7 @@ def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tu
 
 @dataclass(frozen=True)
 class SelectCase(CaseJob):
-    """One case under one fold protocol, as a job of the one scheduler (:func:`~bench.runner.job.run_jobs`):
+    """One case under one fold protocol, as a job of the one scheduler (:func:`~bench.runner.schedule.run_jobs`):
     ``bench select`` on it (:func:`run_case`), ``workers`` candidates at a time, in ``where``; its result is
     the case's :func:`scores`. Bounded by work (``steps``), so it has no limit of its own: each candidate has
     select's ceiling."""

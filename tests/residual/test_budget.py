@@ -17,12 +17,12 @@ import pytest
 import bench.core.budget as budget_module
 import bench.residual.loop as loop_module
 import bench.residual.rollouts as rollouts_module
-import bench.runner.isolation as isolation
+import bench.runner.job as runner_job
 from bench.core.csv_format import write_csv
 from bench.residual import residual_loop
 from bench.residual.job import ResidualJob, run_residual
 from bench.residual.model import Fitter
-from bench.runner.isolation import CallFailed
+from bench.runner.job import CallFailed
 from bench.runner.records import read_record, residual_fields
 from tests.residual.test_loop import SYSID, data_with, quiet
 
@@ -76,7 +76,7 @@ def _jump_when_hanging(monkeypatch, folder: Path) -> None:
             jumped[0] += 86400.0
         return real() + jumped[0]
 
-    monkeypatch.setattr(isolation, "time", SimpleNamespace(monotonic=monotonic, sleep=time.sleep))
+    monkeypatch.setattr(runner_job, "time", SimpleNamespace(monotonic=monotonic, sleep=time.sleep))
 
 
 def _hanging_job(tmp_path: Path, place: str, monkeypatch) -> ResidualJob:

@@ -332,7 +332,7 @@ def test_the_loops_job_checks_its_input_once_before_its_process_starts(monkeypat
     from bench.residual.job import ResidualJob, run_residual
     from bench.runner import job as runner_job
 
-    monkeypatch.setattr(runner_job, "run_call", lambda *a, **k: pytest.fail("a process started before the refusal"))
+    monkeypatch.setattr(runner_job, "run_watched", lambda *a, **k: pytest.fail("a process started before the refusal"))
     for job, words in ((ResidualJob.of("double_pendulum", "sysid"), "double_pendulum is simulated: give --train"),
                        (ResidualJob.of("double_pendulum", "operon", train_path="t.csv"), "operon cannot run the loop"),
                        (ResidualJob.of("double_pendulum", "sysid", train_path="t.csv", hyperparameters={"nope": 1}),

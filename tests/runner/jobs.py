@@ -1,4 +1,4 @@
-"""Targets for isolated calls in the runner's tests (imported by name in the child)."""
+"""Jobs for the runner's tests (made again from their fields, by name, in the child)."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from bench.runner.code import code_files
+from bench.runner.spec import code_files
 
 
 def test_a_method_that_is_a_package_is_hashed_with_every_module_of_it():
@@ -20,7 +20,7 @@ def test_a_method_in_one_module_is_hashed_with_its_bases_only():
 
 def test_a_plugin_is_the_code_of_the_runs_of_what_it_defines_only(tmp_path):
     """One edited plugin redoes its own method's records, not every method's of the matrix."""
-    from bench.runner.code import code_hash
+    from bench.runner.spec import code_hash
 
     plugin = tmp_path / "mine.py"
     plugin.write_text(PLUGIN.format(value=1.0))

@@ -8,22 +8,22 @@ from pathlib import Path
 
 import pytest
 
-from bench.runner.isolation import Call, CallFailed, stop_fork_server, run_call
-from bench.runner.job import run_isolated, run_jobs
+from bench.runner.isolation import stop_fork_server
+from bench.runner.job import CallFailed, run_isolated, run_watched
+from bench.runner.schedule import run_jobs
 from tests.runner.jobs import Echo, Sleep
 
 
-def test_a_call_returns_its_result_and_echoes_its_output(tmp_path):
+def test_a_jobs_process_returns_its_result_and_echoes_its_output(tmp_path):
     lines = []
-    outcome = run_call(Call("tests.runner.jobs:echo", {"x": 3}), tmp_path / "r.json", tmp_path, "echo", {"run": 60},
-                       echo=lines.append)
+    outcome = run_watched(Echo(3), tmp_path, "echo", echo=lines.append)
     assert outcome.result == {"x": 3, "squared": 9} and outcome.phase == "run" and not outcome.killed
     assert "working on 3" in lines
-    assert (tmp_path / "echo.call.json").is_file() and (tmp_path / "r.json").is_file()
+    assert (tmp_path / "echo.call.json").is_file() and (tmp_path / "echo.result.json").is_file()
 
 
-def test_a_call_is_killed_at_its_phases_limit(tmp_path):
-    outcome = run_call(Call("tests.runner.jobs:sleep", {"seconds": 60}), tmp_path / "r.json", tmp_path, "s", {"run": 0.5})
+def test_a_jobs_process_is_killed_at_its_phases_limit(tmp_path):
+    outcome = run_watched(Sleep(60, 0.5), tmp_path, "s")
     assert outcome.killed and outcome.phase == "run" and outcome.result is None  # killed, not waited for
 
 
