@@ -26,9 +26,8 @@ import subprocess
 import sys
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import Sequence
 
 from bench.core.processes import die_with_parent
 from bench.runner.provenance import PROJECT_ROOT
@@ -176,22 +175,6 @@ class Child:
             else:
                 self.popen.kill()
         self.wait(None)
-
-
-def map_interruptibly(fn: Callable, items: list, workers: int) -> Iterator:
-    """``fn`` over ``items`` on ``workers`` threads, results in order, like
-    ``ThreadPoolExecutor.map``; if the caller is interrupted (Ctrl-C, or any
-    error), queued items are dropped and running children killed at once
-    instead of being waited for."""
-    pool = ThreadPoolExecutor(max_workers=workers)
-    try:
-        yield from pool.map(fn, items)
-    except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
-        kill_children()
-        raise
-    finally:
-        pool.shutdown(wait=True)
 
 
 # The child's side.

@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Iterator, Mapping
 
 from bench.runner.cluster import run_on_cluster
-from bench.runner.isolation import map_interruptibly
+from bench.runner.isolation import kill_children
 from bench.runner.job import CallFailed, Job, run_isolated
 from bench.runner.ledger import Ledger
 
@@ -103,3 +104,19 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
     if failed:
         raise CallFailed(f"{len(failed)} of {len(jobs)} job(s) did not finish: {', '.join(failed)}")
     return {name: result for name, (_, result) in outcomes.items()}
+
+
+def map_interruptibly(fn: Callable, items: list, workers: int) -> Iterator:
+    """``fn`` over ``items`` on ``workers`` threads, results in order, like
+    ``ThreadPoolExecutor.map``; if the caller is interrupted (Ctrl-C, or any
+    error), queued items are dropped and running children killed at once
+    instead of being waited for."""
+    pool = ThreadPoolExecutor(max_workers=workers)
+    try:
+        yield from pool.map(fn, items)
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        kill_children()
+        raise
+    finally:
+        pool.shutdown(wait=True)
