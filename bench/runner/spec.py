@@ -35,6 +35,8 @@ from bench.core.errors import UserError
 from bench.core.fileio import file_digest
 from bench.runner.plugins import file_prefix, import_plugins
 from bench.runner.provenance import PROJECT_ROOT
+from methods import METHODS
+from systems import SYSTEMS
 
 #: The ten seeds of every table, written once.
 SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9)
@@ -235,9 +237,6 @@ def code_files(method: str, system: str, plugins: tuple[str, ...] = ()) -> dict[
     """``{file: sha256 prefix}`` of the code that defines ``method`` and ``system``
     (a ``.py`` plugin among it where it defines one of their classes), with the
     files of a system that a ``urdf:`` or ``measured:`` plugin gives (the file, and the URDF and logs it names)."""
-    from methods import METHODS  # here, so that a spec or a record is read without importing every method
-    from systems import SYSTEMS
-
     paths = _class_files(METHODS[method]) + _class_files(SYSTEMS[system])
     sources = [Path(p).resolve() for p in SYSTEMS[system].source_files() if p]
     given = {Path(p[len(file_prefix(p)):]).expanduser().resolve() for p in plugins if file_prefix(p)}
