@@ -297,11 +297,13 @@ class Sensed(FittedModel):
             return self.model.mass_and_bias(q, qd)
         batch = unit_accelerations(q, qd)
         states = self.sensor.states(batch)
-        if states is not batch:
-            return affine_parts(self.predict_torque(batch), len(q))
-        M_arm, c_arm = self.model.mass_and_bias(q, qd)
-        arm = np.concatenate([c_arm[:, None, :], c_arm[:, None, :] + np.transpose(M_arm, (0, 2, 1))], axis=1)
-        return affine_parts(self.sensor.measure(arm.reshape(len(batch), -1), states), len(q))
+        if states is batch:
+            M_arm, c_arm = self.model.mass_and_bias(q, qd)
+            arm = np.concatenate([c_arm[:, None, :], c_arm[:, None, :] + np.transpose(M_arm, (0, 2, 1))], axis=1)
+            arm = arm.reshape(len(batch), -1)
+        else:
+            arm = np.asarray(self.model.predict_torque(states), dtype=np.float64)
+        return affine_parts(self.sensor.measure(arm, states), len(q))
 
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         return self.model.predict_lagrangian(self.sensor.states(data))

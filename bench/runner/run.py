@@ -371,7 +371,7 @@ class RunJob(Job):
         early = preflight(spec)
         if early is None:
             return None
-        early = early.replace(code=self.run_spec.code())
+        early = early.replace(code=spec.code())
         write_record(record_path(self.out_dir, spec.run_id), early)
         return early
 
@@ -389,7 +389,7 @@ class RunJob(Job):
         if self.priors:
             share_priors(self.priors, suite_code)
         record = execute(spec, on_phase, data=data, checked=True)
-        return record.replace(code=self.run_spec.code()).to_json()
+        return record.replace(code=spec.code()).to_json()
 
     def result_file(self, work: Path, name: str) -> Path:
         return record_path(self.out_dir, name)
@@ -438,7 +438,7 @@ class RunJob(Job):
         if outcome.result is not None:
             return Record.from_json(outcome.result, str(path))
         limits = self.limits()
-        code = self.run_spec.code()
+        code = spec.code()
         if not outcome.killed:
             error = f"worker exited with code {outcome.exit_code} and wrote no record: {outcome.log_tail}"
             record = Record.new(spec, "failed", elsewhere=True, error=error, code=code)

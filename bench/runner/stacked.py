@@ -22,8 +22,7 @@ from pathlib import Path
 from typing import Callable
 
 from bench.core.errors import UserError
-from bench.runner.job import Outcome
-from bench.runner.job import Job
+from bench.runner.job import Job, Outcome
 from bench.runner.run import execute, load_data, make_method, make_system, phase_limits, run_one, warm_up_torch
 from bench.runner.plugins import import_plugins
 from bench.runner.records import Record, record_path, write_record
