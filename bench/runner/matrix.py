@@ -197,8 +197,14 @@ def _run_matrix(specs: list[RunSpec], out_dir: Path, workers: int, resume: bool,
 
 def _describe(record: Record, log: Path | None = None) -> str:
     if record.status == "ok":
-        test = record.test_mse
-        outcome = f"ok train {record.train_mse:.3g} test {'-' if test is None else f'{test:.3g}'}"
+        tuning = (record.details or {}).get("tuning")
+        if tuning:  # a tuned run's line gives the figure it was validated by; its test MSE waits for the table or
+            # the page, after any choice among the runs (``bench select``'s) is made
+            validation = tuning.get("validation_mse")
+            outcome = f"ok train {record.train_mse:.3g} validation {'-' if validation is None else f'{validation:.3g}'}"
+        else:
+            test = record.test_mse
+            outcome = f"ok train {record.train_mse:.3g} test {'-' if test is None else f'{test:.3g}'}"
         if record.failed_stages:
             outcome += f" (failed after the fit: {', '.join(record.failed_stages)}{f'; log {log}' if log else ''})"
     else:

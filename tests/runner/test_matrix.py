@@ -431,3 +431,13 @@ def test_a_progress_line_names_a_runs_named_configuration():
     plain = Record.new(RunSpec("kuka_lwr4", "sysid", "indirect", 0, 5.0), "ok", train_mse=0.5, test_mse=0.25)
     assert matrix._describe(named) == "kuka_lwr4 sysid (feasible) indirect seed=0: ok train 0.5 test 0.25"
     assert matrix._describe(plain) == "kuka_lwr4 sysid indirect seed=0: ok train 0.5 test 0.25"
+
+
+def test_a_tuned_runs_progress_line_gives_its_validation_not_its_test():
+    """A tuned run (each of ``bench select``'s candidates) is judged by its validation: its line of progress gives
+    that, and its test MSE waits for the page, after the choice."""
+    tuned = Record.new(RunSpec("kuka_lwr4", "sysid", "indirect", 0, 5.0, tune=True), "ok", train_mse=0.5,
+                       test_mse=0.25, details={"tuning": {"validation_mse": 0.75}})
+    line = matrix._describe(tuned)
+    assert line == "kuka_lwr4 sysid indirect seed=0: ok train 0.5 validation 0.75"
+    assert "0.25" not in line and "test" not in line
