@@ -26,14 +26,19 @@ CHECK_SAMPLES = 256
 TOLERANCE = 1e-10
 
 
-def save_model(model, path: str | Path, header: dict, check: Dataset, system: System | None) -> dict:
+def save_model(model, path: str | Path, header: dict, check: Dataset, system: System | None,
+               held_out: dict | None = None) -> dict:
     """Write ``model`` (fitted on data of ``check``'s joints) to ``path`` with
-    ``header`` (what it was fitted with); returns the check's figures. A
-    ``ValueError`` where the model cannot be saved or does not load back the same."""
+    ``header`` (what it was fitted with) and, where it was tuned, the held-out
+    predictions its validation made (:attr:`bench.evaluation.tuning.Tuned.held_out`);
+    returns the check's figures. A ``ValueError`` where the model cannot be saved
+    or does not load back the same."""
     packer = Packer()
     tree = model.saved(packer)
     path = Path(path)
     header = {**header, "dof": int(check.dof), "kind": tree["kind"]}
+    if held_out:
+        header["held_out"] = {name: packer.array(value) for name, value in held_out.items()}
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".check")
     os.close(fd)
@@ -53,6 +58,19 @@ def save_model(model, path: str | Path, header: dict, check: Dataset, system: Sy
         if os.path.exists(tmp):
             os.unlink(tmp)
     return {"checked_samples": len(part), "largest_relative_difference": difference}
+
+
+def held_out(path: str | Path) -> dict[str, np.ndarray] | None:
+    """The held-out predictions a tuned model's file keeps (:func:`save_model`): ``index``, ``fold`` and
+    ``prediction``; ``None`` where it keeps none."""
+    header, unpacker = modelfile.read(path)
+    refs = header.get("held_out")
+    if not isinstance(refs, dict):
+        return None
+    out = {name: unpacker.array(refs.get(name)) for name in ("index", "fold", "prediction")}
+    if not (len(out["index"]) == len(out["fold"]) == len(out["prediction"])):
+        raise ModelFileError(f"{path}: its held-out predictions' arrays differ in length")
+    return out
 
 
 def load_model(path: str | Path, system: System | None = None):

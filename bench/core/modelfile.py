@@ -87,6 +87,9 @@ HEADER_SCHEMA = {
         "n_train": {"type": "integer", "minimum": 0},
         "tuned": {"type": "boolean"},
         "provenance": {"type": "object"},
+        "held_out": {"type": "object", "required": ["index", "fold", "prediction"],
+                     "properties": {k: {"type": "object", "required": ["$array"]}
+                                    for k in ("index", "fold", "prediction")}},
     },
 }
 

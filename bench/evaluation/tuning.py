@@ -48,6 +48,10 @@ What it chose, every combination's validation MSE per fold at the highest rung
 it reached, the rungs and the folds are the record's ``details.tuning``; its
 ``work`` gives the steps and seconds of the chosen combination's fold fits
 beside those of the final fit.
+
+The chosen combination's predictions on each fold's scored samples (its
+held-out predictions: :attr:`Tuned.held_out`) are kept for the model file, from
+which ``bench select`` stacks its candidates (:mod:`bench.evaluation.stacking`).
 """
 
 from __future__ import annotations
@@ -164,6 +168,8 @@ class _Fit:
     far: list = field(default_factory=list)
     steps: list = field(default_factory=list)
     seconds: list = field(default_factory=list)
+    #: each fold's predictions on its scored samples
+    predictions: list = field(default_factory=list)
     failed: str | None = None
 
     @property
@@ -254,6 +260,7 @@ class _Search:
                 out.far.append(float(mse(prediction[far], target[far])) if far.any() else math.nan)
                 out.steps.append(done)
                 out.seconds.append(round(seconds, 3))
+                out.predictions.append(prediction.astype(np.float32))
             except Exception as exc:  # a combination that fails is not chosen; the record says why
                 out.failed = f"{type(exc).__name__}: {exc}"[:300]
                 break
@@ -284,6 +291,8 @@ class Tuned:
 
     method: object
     details: dict
+    #: the kept combination's held-out predictions (:func:`held_out`); ``None`` where a fold has none
+    held_out: dict | None = None
 
 
 def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int, budget: Budget,
@@ -378,7 +387,20 @@ def tune(method_cls, settings: dict, train: Dataset, experiment: str, seed: int,
                 "nothing to tune: the hyperparameters of its search space are set") + "; its configuration is validated"
     if note:
         details["note"] = note
-    return Tuned(method, details)
+    kept = search.fits.get((_key(chosen), chosen_row["steps"])) if chosen_row else None
+    return Tuned(method, details, held_out(fold_set, kept))
+
+
+def held_out(fold_set: Folds, fit: _Fit | None) -> dict | None:
+    """A combination's predictions on every fold's scored samples, in the folds' order: ``index`` (each
+    prediction's sample in the training data), ``fold`` (its fold) and ``prediction``; ``None`` where the
+    combination was not scored on every fold."""
+    if fit is None or fit.score is None or len(fit.predictions) != len(fold_set):
+        return None
+    index = [np.flatnonzero(f.score) for f in fold_set]
+    return {"index": np.concatenate(index).astype(np.int64),
+            "fold": np.concatenate([np.full(len(i), k, dtype=np.int64) for k, i in enumerate(index)]),
+            "prediction": np.concatenate(fit.predictions).astype(np.float32)}
 
 
 def _row(choice: dict, rung: int, steps: int, fit: _Fit) -> dict:

@@ -183,7 +183,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         timing = {"load_s": time.perf_counter() - clock}
         memory = {"start_mb": resident_mb()}
         prepared = None
-        tuning = None
+        tuning = held_out = None
         if fitted is None:
             phase("prepare")
             prepared = method.prepare(train, spec.experiment)
@@ -197,7 +197,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
                 tuned = tune(METHODS[spec.method], method_config(spec), train, spec.experiment, spec.seed, budget,
                              system=system, device=spec.device, report=lambda line: print(line, flush=True),
                              protocol=spec.folds)
-                method, tuning = tuned.method, tuned.details
+                method, tuning, held_out = tuned.method, tuned.details, tuned.held_out
             else:
                 method.fit(train, spec.experiment, spec.seed, budget, system=system)
         phase("evaluate")
@@ -245,7 +245,7 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
                                                  own_data=not spec.train_path)
             fields["details"].update(assessed)
         if spec.save:
-            fields["details"]["saved"] = stages.run("save", save_fitted, method, spec, train, system)
+            fields["details"]["saved"] = stages.run("save", save_fitted, method, spec, train, system, held_out)
         fields["details"]["timing"] = {k: round(v, 3) for k, v in timing.items()}
         memory["peak_mb"] = peak_resident_mb()
         fields["details"]["memory"] = {k: round(v, 1) for k, v in memory.items()}
@@ -264,14 +264,15 @@ def execute(spec: RunSpec, on_phase: Callable[[str], None] | None = None, data: 
         return Record.new(spec, "failed", error=f"{type(exc).__name__}: {exc}", **kept)
 
 
-def save_fitted(method, spec: RunSpec, train: Dataset, system: System) -> dict:
+def save_fitted(method, spec: RunSpec, train: Dataset, system: System, held_out: dict | None = None) -> dict:
     """Write the run's fitted model to ``spec.save`` (:func:`methods.saving.save_model`),
-    its header saying how it was fitted; returns the record's ``details.saved``."""
+    its header saying how it was fitted (with a tuned run's held-out predictions,
+    :attr:`bench.evaluation.tuning.Tuned.held_out`); returns the record's ``details.saved``."""
     header = {"method": spec.method, "system": spec.system, "plugins": list(spec.plugins), "split": spec.split,
               "experiment": spec.experiment, "seed": spec.seed, "hyperparameters": json_safe(method.hyperparameters()),
               "budget": spec.budget.to_json(), "train_source": train.source, "n_train": len(train),
               "tuned": spec.tune, "provenance": provenance(spec.threads)}
-    return {"path": str(spec.save), **save_model(method, spec.save, header, train, system)}
+    return {"path": str(spec.save), **save_model(method, spec.save, header, train, system, held_out)}
 
 
 def raised(record: Record) -> bool:

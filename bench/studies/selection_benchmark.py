@@ -33,7 +33,12 @@ candidates are then chosen by each rule (:data:`RULES`):
   error (over the folds) of the lowest;
 * ``farther``: the lowest validation MSE on the farther half of each fold's
   scored samples only (:data:`bench.evaluation.tuning.FAR_RULE`), the half
-  that lies as far from the fit as validation reaches.
+  that lies as far from the fit as validation reaches;
+* ``stack``: the lowest validation MSE among the candidates and their stack
+  (:mod:`bench.evaluation.stacking`: Breiman's nonnegative weights on the
+  candidates' held-out predictions, its validation MSE nested), which ``bench
+  select`` reports beside its choice. Its regret may be under 1: the stack is
+  not one of the candidates it is compared with.
 
 A case's **regret** under a protocol and a rule is the chosen candidate's test
 MSE over the best candidate's; the page gives it per case with the rank
@@ -112,7 +117,7 @@ SIMPLICITY = ("standard", "feasible", "loop", "feasible+sparse_torque", "standar
 #: the candidates the study runs: select's own less DeLaN and the loop's two, whose fits take the longest
 #: (the loop's step is a round, so every work budget gives it all its rounds)
 CANDIDATES = ("standard", "feasible", "standard+gp", "feasible+gp", "standard+mlp", "feasible+sparse_torque")
-RULES = ("lowest", "one_se", "farther")
+RULES = ("lowest", "one_se", "farther", "stack")
 #: steps of each candidate's fits (a round of the loop's, a gradient step of the learners')
 STEPS = 20
 
@@ -268,11 +273,18 @@ class SelectCase(CaseJob):
         return dataclasses.replace(self, where=str(scratch / Path(self.where).name))
 
 
-def choose(entries: list[dict], rule: str) -> dict | None:
+def choose(entries: list[dict], rule: str, stack: dict | None = None) -> dict | None:
     """The candidate ``rule`` chooses among those ``bench select`` may choose (:func:`bench.tools.select.usable`);
     ``lowest`` is ``bench select``'s own choice; ``farther`` falls back on it where no candidate has a figure on
-    the farther half (a page made before they were kept)."""
+    the farther half (a page made before they were kept); ``stack`` chooses the page's ``stack`` (named
+    ``stack``) where its nested validation MSE is the lowest and it has a test figure."""
     best = selection.choose(entries)
+    if rule == "stack":
+        nested = (stack or {}).get("validation_mse")
+        if nested is not None and (stack or {}).get("test_mse") is not None and \
+                (best is None or nested < best["validation_mse"]):
+            return {"name": "stack", "validation_mse": nested, "test_mse": stack["test_mse"]}
+        return best
     far = [e for e in selection.usable(entries) if e.get("validation_far_mse") is not None]
     if rule == "farther" and far:
         return min(far, key=lambda e: e["validation_far_mse"])
@@ -295,7 +307,9 @@ def scores(result: dict) -> dict:
     rho = float(spearmanr([e["validation_mse"] for e in ok], [e["test_mse"] for e in ok])[0]) if len(ok) > 2 else None
     out = {"best": best["name"], "best_test_mse": best["test_mse"], "spearman": rho, "rules": {}}
     for rule in RULES:
-        c = choose(entries, rule)
+        if rule == "stack" and "stack" not in result:  # a page made before select stacked its candidates
+            continue
+        c = choose(entries, rule, result.get("stack"))
         out["rules"][rule] = {"chosen": c["name"], "regret": c["test_mse"] / best["test_mse"]}
     return out
 
@@ -306,7 +320,7 @@ def summary(table: list[dict]) -> list[dict]:
     for protocol in PROTOCOLS:
         for rule in RULES:
             regrets = [t["scores"]["rules"][rule]["regret"] for t in table
-                       if t["protocol"] == protocol and "rules" in t["scores"]]
+                       if t["protocol"] == protocol and rule in t["scores"].get("rules", {})]
             if not regrets:
                 continue
             rows.append({"protocol": protocol, "rule": rule, "cases": len(regrets),
@@ -320,7 +334,10 @@ RULE_TEXT = {"lowest": "the lowest validation MSE (select's)",
              "one_se": "the first candidate, in the order " + " → ".join(SIMPLICITY) + ", whose validation MSE is "
                        "within one standard error (over the folds) of the lowest",
              "farther": "the lowest validation MSE on the farther half of each fold's scored samples (those at least "
-                        "the fold's median distance from the states it is fitted on)"}
+                        "the fold's median distance from the states it is fitted on)",
+             "stack": "the lowest validation MSE among the candidates and their stack (Breiman's nonnegative weights "
+                      "on the candidates' held-out predictions; its validation MSE nested, each fold scored with the "
+                      "weights fitted on the others), which may beat the best candidate (a regret under 1)"}
 
 
 def _rules(result: dict) -> list[str]:

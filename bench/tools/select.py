@@ -25,6 +25,13 @@ trajectories that chose a setting of the system's file), ``DIR/select.md``
 (every candidate's validation and test figures side by side, ranked by each,
 flagged where they are test-informed) and ``DIR/model.npz``, the chosen
 model (``python -m bench predict``).
+
+Beside the choice, ``select.json``'s ``stack`` and the page give the
+candidates' stack (:func:`stacked`, :mod:`bench.evaluation.stacking`):
+Breiman's nonnegative weights on their held-out predictions, its nested
+validation MSE, and its test MSE, read after the choice to score
+(:mod:`bench.tools.stack_score`). It is reported, not chosen: the model kept
+is one candidate's.
 """
 
 from __future__ import annotations
@@ -39,13 +46,17 @@ import numpy as np
 from bench.core.data import Dataset
 from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, write_json
+from bench.core.modelfile import ModelFileError
 from bench.core.protocols import folds as fold_data
+from bench.evaluation import stacking
 from bench.evaluation.domain import domain, sentences
 from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL, SCORE_RULE
 from bench.residual.loop import MAX_ROUNDS
 from bench.runner import matrix
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
+from bench.tools import stack_score
+from methods.saving import held_out
 from systems import SYSTEMS
 
 
@@ -156,6 +167,46 @@ def choose(entries: list[dict]) -> dict | None:
     return min(candidates, key=lambda e: e["validation_mse"]) if candidates else None
 
 
+def stacked(entries: list[dict], out: Path, train: Dataset | None) -> dict:
+    """The stack of the :func:`usable` candidates (:func:`bench.evaluation.stacking.stack`) from the held-out
+    predictions their model files keep, with ``models`` (each one's file, relative to ``out``); or
+    ``{"unavailable": why}``."""
+    if train is None:
+        return {"unavailable": "select was not handed the training data"}
+    kept = []
+    try:
+        for e in usable(entries):
+            predictions = held_out(Path(out) / e["model"])
+            if predictions is not None:
+                kept.append((e, predictions))
+    except ModelFileError as exc:
+        return {"unavailable": str(exc)}
+    if len(kept) < 2:
+        return {"unavailable": "fewer than two candidates kept their held-out predictions"}
+    first = kept[0][1]
+    if not all(np.array_equal(h["index"], first["index"]) and np.array_equal(h["fold"], first["fold"])
+               for _, h in kept):
+        return {"unavailable": "the candidates were validated on different folds"}
+    target = np.asarray(train.target("indirect"), np.float64)[first["index"]]
+    result = stacking.stack([e["name"] for e, _ in kept], [h["prediction"] for _, h in kept], target, first["fold"])
+    return {**result, "models": {e["name"]: e["model"] for e, _ in kept}}
+
+
+def score_stack(stack: dict, entries: list[dict], out: Path, test: Dataset | None) -> dict:
+    """``stack`` with its ``test_mse`` and ``test_over_standard``, scored after the choice
+    (:mod:`bench.tools.stack_score`); as it is where it has no weights or there is no test data."""
+    if "weights" not in stack or test is None:
+        return stack
+    models = {name: Path(out) / path for name, path in stack["models"].items()}
+    try:
+        value = stack_score.test_mse(models, stack["weights"], test)
+    except (ModelFileError, ValueError, RuntimeError) as exc:  # the page says why the stack has no test figure
+        return {**stack, "test_mse": None, "test_error": f"{type(exc).__name__}: {exc}"[:300]}
+    standard = next((e["test_mse"] / e["test_over_standard"] for e in entries
+                     if e.get("test_mse") and e.get("test_over_standard")), None)
+    return {**stack, "test_mse": value, "test_over_standard": None if not standard else value / standard}
+
+
 def page(result: dict) -> str:
     """``select.md``: every candidate's validation and test figures side by side."""
     entries = result["candidates"]
@@ -200,6 +251,7 @@ def page(result: dict) -> str:
                   f"Its model: `model.npz` (`{predict_command(result)}`)."]
     else:
         lines.append("No candidate ran and validated: nothing chosen.")
+    lines += stack_lines(result.get("stack"), chosen)
     report = result.get("domain")
     if report:
         lines += ["", "## What validation could see", "", sentences(report) + farther(entries, chosen)]
@@ -209,6 +261,24 @@ def page(result: dict) -> str:
                           f"it): it lies a median {report['test_median_distance']:.3g} from the training states, "
                           + ("beyond" if beyond else "within") + " what validation reached."]
     return "\n".join(lines) + "\n"
+
+
+def stack_lines(stack: dict | None, chosen: dict | None) -> list[str]:
+    """The page's paragraph on the candidates' stack (:func:`stacked`)."""
+    if not stack:
+        return []
+    if "weights" not in stack:
+        return ["", f"The candidates' stack: unavailable ({stack['unavailable']})."]
+    used = ", ".join(f"{n} {w:.3g}" for n, w in sorted(stack["weights"].items(), key=lambda kv: -kv[1]) if w > 0)
+    nested = "—" if stack["validation_mse"] is None else f"{stack['validation_mse']:.4g}"
+    test = "" if stack.get("test_mse") is None else (
+        f"; test MSE {stack['test_mse']:.4g}" + (f" ({stack['test_over_standard']:.3f}x the standard model)"
+                                                  if stack.get("test_over_standard") else ""))
+    beside = "" if chosen is None else f", against the chosen candidate's {chosen['validation_mse']:.4g}"
+    return ["", f"The candidates' stack (Breiman's nonnegative weights on their held-out predictions, "
+                f"`bench.evaluation.stacking`): weights {used or 'none'}; validation MSE {nested} (nested: each fold "
+                f"scored with the weights of the others){beside}{test}. It is reported beside the choice, not "
+                f"chosen."]
 
 
 def farther(entries: list[dict], chosen: dict | None) -> str:
@@ -298,7 +368,9 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
     result = {"system": system, "declared": declared, "split": split, "seed": seed, "budget": budget, "command": command,
               "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds, "chosen": chosen, "candidates": entries,
               "domain": None if data is None else applicability(data[0], data[1], target, protocol),
-              "test_informed": test_informed(system, split)}
+              "test_informed": test_informed(system, split),
+              "stack": stacked(entries, out, None if data is None else data[0])}
+    result["stack"] = score_stack(result["stack"], entries, out, None if data is None else data[1])
     if chosen:
         content = (out / chosen["model"]).read_bytes()
         atomic_write(out / "model.npz", lambda f: f.write(content), binary=True)

@@ -20,7 +20,7 @@ from bench.core.csv_format import write_csv
 from bench.core.data import generate
 from bench.core.modelfile import ModelFileError, expression_from_json, expression_to_json
 from methods import METHODS
-from methods.saving import TOLERANCE, load_model, save_model
+from methods.saving import TOLERANCE, held_out, load_model, save_model
 from systems import SYSTEMS
 from bench.core.scoring import opened
 from tests.commandline import cli
@@ -48,6 +48,26 @@ def test_a_saved_arm_model_predicts_the_fitted_torques(tmp_path, kuka, name, set
     expected = fitted.predict_torque(test)
     assert np.max(np.abs(loaded.predict_torque(test) - expected)) <= TOLERANCE * np.max(np.abs(expected))
     assert header["method"] == name and header["dof"] == 7
+
+
+def test_a_tuned_models_file_keeps_its_held_out_predictions_and_predict_ignores_them(tmp_path, kuka):
+    system, train, test = kuka
+    fitted = METHODS["sysid"]().fit(train, "indirect", 0, budget=Budget(steps=1), system=system)
+    kept = {"index": np.arange(5, dtype=np.int64), "fold": np.array([0, 0, 1, 1, 1]),
+            "prediction": np.arange(35, dtype=np.float32).reshape(5, 7)}
+    save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": "sysid"}, train, system, kept)
+    back = held_out(tmp_path / "m.npz")
+    for name, value in kept.items():
+        np.testing.assert_array_equal(back[name], value)
+    loaded, header = load_model(tmp_path / "m.npz")
+    np.testing.assert_array_equal(loaded.predict_torque(test), fitted.predict_torque(test))
+    save_model(fitted, tmp_path / "plain.npz", {"system": system.name, "method": "sysid"}, train, system)
+    assert held_out(tmp_path / "plain.npz") is None  # an untuned fit keeps none
+    # a file whose held-out arrays disagree in length is refused in one line
+    short = dict(kept, fold=kept["fold"][:3])
+    save_model(fitted, tmp_path / "bad.npz", {"system": system.name, "method": "sysid"}, train, system, short)
+    with pytest.raises(ModelFileError, match="bad.npz: its held-out predictions' arrays differ in length"):
+        held_out(tmp_path / "bad.npz")
 
 
 @pytest.mark.parametrize("name", ["sparse", "mggp", "mlp", "delan"])

@@ -47,6 +47,11 @@ def test_the_rules_choose_as_stated_and_regret_is_against_the_best_on_the_test()
     assert s["best"] == "standard+mlp"
     assert s["rules"]["lowest"]["regret"] == pytest.approx(3.0) and s["rules"]["one_se"]["regret"] == pytest.approx(2.0)
     assert s["spearman"] == pytest.approx(-1.0)  # validation ranks them exactly against the test
+    assert "stack" not in s["rules"]  # a page made before select stacked its candidates: no figure, no fallback
+    stacked = {"candidates": entries, "stack": {"validation_mse": 0.4, "test_mse": 0.15}}
+    assert sb.scores(stacked)["rules"]["stack"] == {"chosen": "stack", "regret": pytest.approx(0.5)}
+    worse = {"candidates": entries, "stack": {"validation_mse": 0.6, "test_mse": 0.15}}
+    assert sb.scores(worse)["rules"]["stack"]["chosen"] == "standard+gp"  # validated worse than the lowest
     table = [{"case": "a", "protocol": "time", "scores": s},
              {"case": "b", "protocol": "time", "scores": sb.scores({"candidates": entries[:2]})}]
     lowest = next(r for r in sb.summary(table) if r["rule"] == "lowest")

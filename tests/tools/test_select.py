@@ -15,6 +15,7 @@ import pytest
 
 from bench.core.budget import Budget
 from bench.residual.loop import MAX_ROUNDS
+from bench.tools import stack_score
 from bench.tools.select import CANDIDATES, GP_STEPS, NETWORK_STEPS, choose, page, specs
 from systems import SYSTEMS
 from bench.core.csv_format import write_csv
@@ -49,6 +50,16 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     p = cli("predict", "--model", out / "model.npz", "--log", tmp_path / "test.csv", "--out", tmp_path / "p.csv")
     assert p.returncode == 0
     assert float(p.stdout.split("torque MSE ")[1].split()[0]) == pytest.approx(result["chosen"]["test_mse"], rel=1e-5)
+    # beside the choice, the candidates' stack: its weights, nested validation and test MSE; scored by the
+    # stack's scorer with all its weight on one candidate, that candidate's test MSE as its own run scored it
+    stack = result["stack"]
+    assert set(stack["weights"]) == set(names) and stack["validation_mse"] > 0 and stack["test_mse"] > 0
+    assert "The candidates' stack (Breiman's nonnegative weights" in text
+    models = {n: out / m for n, m in stack["models"].items()}
+    test = SYSTEMS["kuka_lwr4"]().load("test")
+    for c in result["candidates"]:
+        alone = {n: float(n == c["name"]) for n in names}
+        assert stack_score.test_mse(models, alone, test) == pytest.approx(c["test_mse"], rel=1e-9)
     # SysId's two bodies are two runs of one matrix, each with its own record
     assert len(list((out / "runs" / "records").glob("*.json"))) == 3
     again = cli(*args)  # resumes: every candidate has its record and its model
@@ -120,6 +131,10 @@ def test_the_test_trajectorys_torques_change_no_choice(tmp_path):
     for a, b in zip(same["candidates"], scaled["candidates"]):
         assert a["validation_mse"] == b["validation_mse"] and a["hyperparameters"] == b["hyperparameters"]
         assert b["test_mse"] > 2 * a["test_mse"]  # the test data were read, to score
+    # nor do they change the stack's weights or its validation, only its test figure
+    assert same["stack"]["weights"] == scaled["stack"]["weights"]
+    assert same["stack"]["validation_mse"] == scaled["stack"]["validation_mse"]
+    assert scaled["stack"]["test_mse"] > 2 * same["stack"]["test_mse"]
 
 
 def test_every_candidate_is_bounded_by_work_whatever_selects_seconds(tmp_path):

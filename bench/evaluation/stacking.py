@@ -1,0 +1,70 @@
+"""Stacking: the candidates' predictions combined with weights chosen on their
+held-out predictions (Breiman, "Stacked regressions", Machine Learning 24, 1996).
+
+Each tuned candidate keeps its predictions on every validation fold's scored
+samples, made by its fold fits at the final fit's work
+(:attr:`bench.evaluation.tuning.Tuned.held_out`). The stack's weights are
+Breiman's: nonnegative least squares (``scipy.optimize.nnls``) of the training
+targets on those predictions, each fold's samples weighted by one over their
+count, so that the least squares minimise the mean over the folds of each
+fold's MSE, as a candidate's validation MSE is. The stack predicts the weighted
+sum of the candidates' final models.
+
+Fitting the weights on the predictions they are then scored on would flatter
+the stack. Its **validation MSE** is therefore nested: each fold is scored with
+the weights fitted on the other folds' predictions, and the figure is the mean
+over the folds, comparable with each candidate's. (The candidates' own
+predictions still come from fits whose hyperparameters the same folds chose,
+as every candidate's validation MSE does.)
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import nnls
+
+from bench.core.data import mse
+
+
+def weights(predictions: list[np.ndarray], target: np.ndarray, fold: np.ndarray) -> np.ndarray:
+    """Breiman's nonnegative weights of ``predictions`` (one array per candidate, shaped as ``target``) for
+    ``target``, each sample weighted by one over its ``fold``'s count."""
+    counts = np.bincount(fold)
+    scale = 1.0 / np.sqrt(counts[fold]).reshape((-1,) + (1,) * (target.ndim - 1))
+    design = np.stack([np.broadcast_to(scale, p.shape).ravel() * np.asarray(p, np.float64).ravel()
+                       for p in predictions], axis=1)
+    goal = (np.broadcast_to(scale, target.shape) * np.asarray(target, np.float64)).ravel()
+    w, _ = nnls(design, goal)
+    return w
+
+
+def combine(predictions: list[np.ndarray], w: np.ndarray) -> np.ndarray:
+    """The weighted sum of ``predictions``."""
+    return sum(float(wk) * np.asarray(p, np.float64) for wk, p in zip(w, predictions))
+
+
+def stack(names: list[str], predictions: list[np.ndarray], target: np.ndarray, fold: np.ndarray) -> dict:
+    """The stack of the candidates ``names`` from their held-out ``predictions``: its ``weights`` (by name,
+    fitted on every fold), its nested ``validation_mse`` (each fold scored with the weights of the others) and
+    that figure's ``validation_stderr`` over the folds, each fold's nested MSE (``fold_mse``), and
+    ``in_sample_mse``, the weights' own fit (which the nesting corrects)."""
+    folds = np.unique(fold)
+    nested = []
+    for k in folds:
+        inside = fold == k
+        if folds.size < 2:
+            break
+        w = weights([p[~inside] for p in predictions], target[~inside], np.unique(fold[~inside],
+                                                                                  return_inverse=True)[1])
+        nested.append(mse(combine([p[inside] for p in predictions], w), target[inside]))
+    w = weights(predictions, target, np.unique(fold, return_inverse=True)[1])
+    whole = combine(predictions, w)
+    in_sample = float(np.mean([mse(whole[fold == k], target[fold == k]) for k in folds]))
+    finite = nested and all(math.isfinite(v) for v in nested)
+    return {"weights": {n: float(v) for n, v in zip(names, w)},
+            "validation_mse": float(np.mean(nested)) if finite else None,
+            "validation_stderr": float(np.std(nested, ddof=1) / np.sqrt(len(nested))) if finite and len(nested) > 1
+            else None,
+            "fold_mse": nested, "in_sample_mse": in_sample}
