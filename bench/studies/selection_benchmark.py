@@ -35,7 +35,7 @@ candidates are then chosen by each rule (:data:`RULES`):
   scored samples only (:data:`bench.evaluation.tuning.FAR_RULE`), the half
   that lies as far from the fit as validation reaches;
 * ``stack``: the lowest validation MSE among the candidates and their stack
-  (:mod:`bench.evaluation.stacking`: Breiman's nonnegative weights on the
+  (:mod:`bench.evaluation.stacking`: convex weights fitted on the
   candidates' held-out predictions, its validation MSE nested), which ``bench
   select`` reports beside its choice. Its regret may be under 1: the stack is
   not one of the candidates it is compared with.
@@ -335,7 +335,7 @@ RULE_TEXT = {"lowest": "the lowest validation MSE (select's)",
                        "within one standard error (over the folds) of the lowest",
              "farther": "the lowest validation MSE on the farther half of each fold's scored samples (those at least "
                         "the fold's median distance from the states it is fitted on)",
-             "stack": "the lowest validation MSE among the candidates and their stack (Breiman's nonnegative weights "
+             "stack": "the lowest validation MSE among the candidates and their stack (convex weights fitted "
                       "on the candidates' held-out predictions; its validation MSE nested, each fold scored with the "
                       "weights fitted on the others), which may beat the best candidate (a regret under 1)"}
 

@@ -28,7 +28,7 @@ model (``python -m bench predict``).
 
 Beside the choice, ``select.json``'s ``stack`` and the page give the
 candidates' stack (:func:`stacked`, :mod:`bench.evaluation.stacking`):
-Breiman's nonnegative weights on their held-out predictions, its nested
+convex weights fitted on their held-out predictions, its nested
 validation MSE, and its test MSE, read after the choice to score
 (:mod:`bench.tools.stack_score`). It is reported, not chosen: the model kept
 is one candidate's.
@@ -275,7 +275,7 @@ def stack_lines(stack: dict | None, chosen: dict | None) -> list[str]:
         f"; test MSE {stack['test_mse']:.4g}" + (f" ({stack['test_over_standard']:.3f}x the standard model)"
                                                   if stack.get("test_over_standard") else ""))
     beside = "" if chosen is None else f", against the chosen candidate's {chosen['validation_mse']:.4g}"
-    return ["", f"The candidates' stack (Breiman's nonnegative weights on their held-out predictions, "
+    return ["", f"The candidates' stack (convex weights fitted on their held-out predictions, "
                 f"`bench.evaluation.stacking`): weights {used or 'none'}; validation MSE {nested} (nested: each fold "
                 f"scored with the weights of the others){beside}{test}. It is reported beside the choice, not "
                 f"chosen."]

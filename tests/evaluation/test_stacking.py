@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.optimize import minimize
+import cvxpy as cp
 
 from bench.core.budget import Budget
 from bench.core.data import mse
@@ -26,20 +26,38 @@ def _candidates(seed: int = 0, n: int = 240):
     return target, fold, [good, biased, noise]
 
 
-def test_the_weights_minimise_the_mean_fold_mse_over_nonnegative_weights():
-    target, fold, predictions = _candidates()
-
+def _objective(predictions, target, fold):
     def objective(w):
         combined = sum(wk * p for wk, p in zip(w, predictions))
-        return np.mean([mse(combined[fold == k], target[fold == k]) for k in range(3)])
+        return np.mean([mse(combined[fold == k], target[fold == k]) for k in np.unique(fold)])
+    return objective
 
+
+def test_the_weights_minimise_the_mean_fold_mse_over_the_convex_combinations():
+    target, fold, predictions = _candidates()
+    objective = _objective(predictions, target, fold)
     w = weights(predictions, target, fold)
-    best = minimize(objective, x0=np.full(3, 0.3), bounds=[(0, None)] * 3, method="L-BFGS-B",
-                    options={"ftol": 1e-15, "gtol": 1e-12})
-    assert (w >= 0).all()
-    assert objective(w) <= best.fun + 1e-9
-    np.testing.assert_allclose(w, best.x, atol=1e-4)
+    assert (w >= 0).all() and w.sum() == pytest.approx(1.0, abs=1e-12)
+    # against cvxpy's solution of the same program, and against every point of a fine grid of the simplex
+    x = cp.Variable(3, nonneg=True)
+    cp.Problem(cp.Minimize(sum(cp.sum_squares(sum(x[j] * predictions[j][fold == k] for j in range(3))
+                                              - target[fold == k]) / target[fold == k].size for k in range(3)) / 3),
+               [cp.sum(x) == 1]).solve()
+    np.testing.assert_allclose(w, x.value, atol=1e-5)
+    grid = [(a, b, 1 - a - b) for a in np.linspace(0, 1, 101) for b in np.linspace(0, 1 - a, max(1, round((1 - a) * 100)) + 1)]
+    assert objective(w) <= min(objective(np.array(g)) for g in grid) + 1e-12
     assert w[0] > 0.8 and w[2] < 0.05  # the good candidate carries the stack, noise gets next to nothing
+
+
+def test_the_stack_mixes_and_never_rescales():
+    # two candidates each off by a gain the other way: a convex stack mixes them back to the target; a third that
+    # is the target scaled by 1.04 cannot be scaled back, and the stack is never worse than its best candidate
+    target, fold, _ = _candidates()
+    w = weights([0.9 * target, 1.1 * target], target, fold)
+    np.testing.assert_allclose(w, [0.5, 0.5], atol=1e-7)
+    scaled = [1.04 * target, 1.5 * target]
+    w = weights(scaled, target, fold)
+    np.testing.assert_allclose(w, [1.0, 0.0], atol=1e-7)
 
 
 def test_the_nested_validation_scores_each_fold_with_the_weights_of_the_others():

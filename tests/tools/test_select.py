@@ -54,7 +54,7 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     # stack's scorer with all its weight on one candidate, that candidate's test MSE as its own run scored it
     stack = result["stack"]
     assert set(stack["weights"]) == set(names) and stack["validation_mse"] > 0 and stack["test_mse"] > 0
-    assert "The candidates' stack (Breiman's nonnegative weights" in text
+    assert "The candidates' stack (convex weights fitted on their held-out predictions" in text
     models = {n: out / m for n, m in stack["models"].items()}
     test = SYSTEMS["kuka_lwr4"]().load("test")
     for c in result["candidates"]:
