@@ -109,7 +109,8 @@ def selected_dfki(root: Path) -> str:
 
 def select_table(root: Path, folders: tuple[str, ...]) -> str:
     """Each split's ``select.json`` under ``root`` (``folders``, one a split): every candidate's validation and test
-    MSE, its test MSE over the standard model's, and which was chosen."""
+    MSE, its test MSE over the standard model's, and which was chosen; then the candidates' stack, where the page
+    has one (:func:`bench.tools.select.stacked`), which is reported and never chosen."""
     lines = ["| split | candidate | validation MSE | test MSE | test / standard | chosen |", "|---|---|---:|---:|---:|---|"]
     for folder, split in zip(folders, SPLIT_NAMES):
         path = Path(root) / folder / "select.json"
@@ -124,4 +125,9 @@ def select_table(root: Path, folders: tuple[str, ...]) -> str:
             ratio = "—" if c.get("test_over_standard") is None else times(c["test_over_standard"])
             lines.append(f"| {split} | {c['name']} | {c['validation_mse']:.3g} | {c['test_mse']:.3g} | {ratio} | "
                          f"{'**chosen**' if c['name'] == chosen else ''} |")
+        stack = result.get("stack") or {}
+        if stack.get("validation_mse") is not None and stack.get("test_mse") is not None:
+            ratio = "—" if stack.get("test_over_standard") is None else times(stack["test_over_standard"])
+            lines.append(f"| {split} | the candidates' stack (nested validation) | {stack['validation_mse']:.3g} | "
+                         f"{stack['test_mse']:.3g} | {ratio} | reported, not chosen |")
     return "\n".join(lines)

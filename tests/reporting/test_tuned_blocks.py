@@ -50,3 +50,9 @@ def test_the_select_block_lists_every_candidate_and_marks_the_chosen(tmp_path):
     (folder / "select.json").write_text(json.dumps({"chosen": candidates[0], "candidates": candidates}))
     text = tuned.selected(tmp_path)
     assert "| default | loop+gp | 0.3 | 0.4 | 0.54× | **chosen** |" in text and "| default | feasible+delan | timeout |" in text
+    # the candidates' stack follows them, reported and never chosen
+    stack = {"weights": {"loop+gp": 1.0}, "validation_mse": 0.35, "test_mse": 0.41, "test_over_standard": 0.55}
+    (folder / "select.json").write_text(json.dumps({"chosen": candidates[0], "candidates": candidates, "stack": stack}))
+    text = tuned.selected(tmp_path)
+    assert text.splitlines()[-1] == ("| default | the candidates' stack (nested validation) | 0.35 | 0.41 | 0.55× | "
+                                     "reported, not chosen |")
