@@ -263,22 +263,29 @@ def page(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: the least weight the page names a candidate of the stack with
+SHOWN_WEIGHT = 1e-3
+
+
 def stack_lines(stack: dict | None, chosen: dict | None) -> list[str]:
     """The page's paragraph on the candidates' stack (:func:`stacked`)."""
     if not stack:
         return []
     if "weights" not in stack:
         return ["", f"The candidates' stack: unavailable ({stack['unavailable']})."]
-    used = ", ".join(f"{n} {w:.3g}" for n, w in sorted(stack["weights"].items(), key=lambda kv: -kv[1]) if w > 0)
+    used = ", ".join(f"{n} {w:.3g}" for n, w in sorted(stack["weights"].items(), key=lambda kv: -kv[1])
+                     if w >= SHOWN_WEIGHT)
+    rest = sum(w < SHOWN_WEIGHT for w in stack["weights"].values())
     nested = "—" if stack["validation_mse"] is None else f"{stack['validation_mse']:.4g}"
     test = "" if stack.get("test_mse") is None else (
         f"; test MSE {stack['test_mse']:.4g}" + (f" ({stack['test_over_standard']:.3f}x the standard model)"
                                                   if stack.get("test_over_standard") else ""))
     beside = "" if chosen is None else f", against the chosen candidate's {chosen['validation_mse']:.4g}"
+    others = f" (the other {rest} under {SHOWN_WEIGHT:g})" if rest else ""
     return ["", f"The candidates' stack (convex weights fitted on their held-out predictions, "
-                f"`bench.evaluation.stacking`): weights {used or 'none'}; validation MSE {nested} (nested: each fold "
-                f"scored with the weights of the others){beside}{test}. It is reported beside the choice, not "
-                f"chosen."]
+                f"`bench.evaluation.stacking`): weights {used or 'none'}{others}; validation MSE {nested} (nested: "
+                f"each fold scored with the weights of the others){beside}{test}. It is reported beside the choice, "
+                f"not chosen."]
 
 
 def farther(entries: list[dict], chosen: dict | None) -> str:
