@@ -140,6 +140,13 @@ class Dataset:
         """A copy with the given fields changed (the rest, recordings included, kept)."""
         return dataclasses.replace(self, **changes)
 
+    def with_torque(self, tau: np.ndarray) -> "Dataset":
+        """A plain copy of these states (labels and times kept) with the torques ``tau`` and no ``L``: the
+        torques a model predicts at them, read without reading this data's own targets (a sealed test
+        split's, :mod:`bench.core.sealed`)."""
+        kept = {f.name: getattr(self, f.name) for f in dataclasses.fields(Dataset) if f.name not in ("tau", "L")}
+        return Dataset(**kept, tau=tau, L=None)
+
     def velocity_sign(self) -> np.ndarray:
         """``(n, dof)``: :attr:`sign_qd` where the data carry it, else ``sign(qd)``."""
         return np.sign(self.qd) if self.sign_qd is None else self.sign_qd

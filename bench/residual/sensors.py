@@ -135,7 +135,7 @@ class Sensor:
     def measure(self, tau: np.ndarray, states: Dataset) -> np.ndarray:
         """The measured torques of the arm's torques ``tau`` at ``states``."""
         for law in self.laws:
-            f = law.factor(states.replace(tau=tau))
+            f = law.factor(states.with_torque(tau))
             if f is not None:
                 tau = tau * f
         return tau

@@ -277,7 +277,8 @@ def stack_lines(stack: dict | None, chosen: dict | None) -> list[str]:
                      if w >= SHOWN_WEIGHT)
     rest = sum(w < SHOWN_WEIGHT for w in stack["weights"].values())
     nested = "—" if stack["validation_mse"] is None else f"{stack['validation_mse']:.4g}"
-    test = "" if stack.get("test_mse") is None else (
+    test = (f"; no test figure ({stack['test_error']})" if stack.get("test_error") else "") \
+        if stack.get("test_mse") is None else (
         f"; test MSE {stack['test_mse']:.4g}" + (f" ({stack['test_over_standard']:.3f}x the standard model)"
                                                   if stack.get("test_over_standard") else ""))
     beside = "" if chosen is None else f", against the chosen candidate's {chosen['validation_mse']:.4g}"

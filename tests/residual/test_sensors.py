@@ -251,3 +251,20 @@ def test_a_sensed_models_mass_matrix_and_bias_read_the_arms_own_through_the_sens
     plain = Sensed(Arm(), Sensor(0)).mass_and_bias(q, qd)  # a sensor without laws: the arm's own
     np.testing.assert_array_equal(plain[0], Arm().parts(q, qd)[0])
     np.testing.assert_array_equal(plain[1], Arm().parts(q, qd)[1])
+
+
+def test_a_sensed_model_predicts_a_sealed_test_split_without_reading_its_targets():
+    """A law of the sensor that reads the torque (a gain, load-dependent friction) reads the torques the model
+    predicts, never the test split's own: predicting a sealed split outside scoring gives the plain split's
+    torques."""
+    from bench.core.sealed import seal
+    from bench.physics.models import ExpressionModel
+    from bench.physics.sensor_laws import LoadFriction, TorqueGain
+
+    system = get_system("double_pendulum")
+    test = generate(system, 50, 3)
+    arm = ExpressionModel(system.lagrangian_sympy, 2)
+    sensed = Sensed(arm, Sensor(0, (TorqueGain(1, 1.07), LoadFriction(0, 0.2))))
+    expected = sensed.predict_torque(test)
+    np.testing.assert_array_equal(sensed.predict_torque(seal(test)), expected)
+    assert np.abs(expected - arm.predict_torque(test)).max() > 0.01  # the laws are in it
