@@ -16,7 +16,6 @@ import sympy
 from hypothesis import given, settings, strategies as st
 
 from bench.core import modelfile
-from bench.core.csv_format import write_csv
 from bench.core.data import generate
 from bench.core.modelfile import ModelFileError, expression_from_json, expression_to_json
 from methods import METHODS
