@@ -307,8 +307,9 @@ def scores(result: dict) -> dict:
     rho = float(spearmanr([e["validation_mse"] for e in ok], [e["test_mse"] for e in ok])[0]) if len(ok) > 2 else None
     out = {"best": best["name"], "best_test_mse": best["test_mse"], "spearman": rho, "rules": {}}
     for rule in RULES:
-        if rule == "stack" and "stack" not in result:  # a page made before select stacked its candidates
-            continue
+        stack = result.get("stack") or {}
+        if rule == "stack" and ("stack" not in result or ("weights" in stack and stack.get("test_mse") is None)):
+            continue  # a page made before select stacked its candidates, or a stack without a test figure
         c = choose(entries, rule, result.get("stack"))
         out["rules"][rule] = {"chosen": c["name"], "regret": c["test_mse"] / best["test_mse"]}
     return out

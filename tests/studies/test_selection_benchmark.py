@@ -52,6 +52,8 @@ def test_the_rules_choose_as_stated_and_regret_is_against_the_best_on_the_test()
     assert sb.scores(stacked)["rules"]["stack"] == {"chosen": "stack", "regret": pytest.approx(0.5)}
     worse = {"candidates": entries, "stack": {"validation_mse": 0.6, "test_mse": 0.15}}
     assert sb.scores(worse)["rules"]["stack"]["chosen"] == "standard+gp"  # validated worse than the lowest
+    unscored = {"candidates": entries, "stack": {"weights": {"standard": 1.0}, "validation_mse": 0.4, "test_mse": None}}
+    assert "stack" not in sb.scores(unscored)["rules"]  # no test figure: no regret, rather than the lowest's
     table = [{"case": "a", "protocol": "time", "scores": s},
              {"case": "b", "protocol": "time", "scores": sb.scores({"candidates": entries[:2]})}]
     lowest = next(r for r in sb.summary(table) if r["rule"] == "lowest")
