@@ -182,7 +182,10 @@ def stacked(entries: list[dict], out: Path, train: Dataset | None) -> dict:
     except ModelFileError as exc:
         return {"unavailable": str(exc)}
     if len(kept) < 2:
-        return {"unavailable": "fewer than two candidates kept their held-out predictions"}
+        missing = len(usable(entries)) - len(kept)
+        return {"unavailable": "fewer than two candidates kept their held-out predictions"
+                + (f" ({missing} model file(s) made before tuned runs kept them: bench select into a new --out "
+                   f"makes them again)" if missing else "")}
     first = kept[0][1]
     if not all(np.array_equal(h["index"], first["index"]) and np.array_equal(h["fold"], first["fold"])
                for _, h in kept):

@@ -176,3 +176,23 @@ def test_a_page_whose_test_trajectories_chose_the_filter_says_it_is_test_informe
     flag = "**Test-informed:** the test trajectories 00, 01, 02, 04 chose the cut-off of the filter"
     assert page(result).count(flag) == 1 and flag in (published / "select.md").read_text()
     assert "Test-informed" not in page({**result, "test_informed": []})
+
+
+def test_a_stack_of_model_files_without_held_out_predictions_says_how_to_get_them(tmp_path):
+    from bench.tools.select import stacked
+    from methods import METHODS
+    from methods.saving import save_model
+
+    system = SYSTEMS["kuka_lwr4"]()
+    train = system.load("train").subset(slice(0, 200))
+    fitted = METHODS["sysid"]().fit(train, "indirect", 0, budget=Budget(steps=1), system=system)
+    entries = []
+    for name in ("a", "b"):  # files saved without their validation's predictions, as before tuning kept them
+        save_model(fitted, tmp_path / f"{name}.npz", {"system": system.name, "method": "sysid"}, train, system)
+        entries.append({"name": name, "status": "ok", "validation_mse": 0.5, "model": f"{name}.npz"})
+    out = stacked(entries, tmp_path, train)
+    assert out == {"unavailable": "fewer than two candidates kept their held-out predictions (2 model file(s) made "
+                                  "before tuned runs kept them: bench select into a new --out makes them again)"}
+    assert "The candidates' stack: unavailable (fewer than two" in page(
+        {"system": "arm", "command": "c", "split": None, "budget": "1 steps", "seed": 0, "folds": "f", "chosen": None,
+         "candidates": [], "stack": out})
