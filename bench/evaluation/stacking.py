@@ -37,8 +37,8 @@ from bench.core.data import mse
 def weights(predictions: list[np.ndarray], target: np.ndarray, fold: np.ndarray) -> np.ndarray:
     """The convex weights of ``predictions`` (one array per candidate, shaped as ``target``) that fit
     ``target`` best, each sample weighted by one over its ``fold``'s count."""
-    counts = np.bincount(fold)
-    scale = 1.0 / np.sqrt(counts[fold]).reshape((-1,) + (1,) * (target.ndim - 1))
+    _, label, counts = np.unique(fold, return_inverse=True, return_counts=True)
+    scale = 1.0 / np.sqrt(counts[label]).reshape((-1,) + (1,) * (target.ndim - 1))
     design = np.stack([np.broadcast_to(scale, p.shape).ravel() * np.asarray(p, np.float64).ravel()
                        for p in predictions], axis=1)
     goal = (np.broadcast_to(scale, target.shape) * np.asarray(target, np.float64)).ravel()
@@ -65,14 +65,11 @@ def stack(names: list[str], predictions: list[np.ndarray], target: np.ndarray, f
     ``in_sample_mse``, the weights' own fit (which the nesting corrects)."""
     folds = np.unique(fold)
     nested = []
-    for k in folds:
+    for k in folds if folds.size > 1 else ():
         inside = fold == k
-        if folds.size < 2:
-            break
-        w = weights([p[~inside] for p in predictions], target[~inside], np.unique(fold[~inside],
-                                                                                  return_inverse=True)[1])
+        w = weights([p[~inside] for p in predictions], target[~inside], fold[~inside])
         nested.append(mse(combine([p[inside] for p in predictions], w), target[inside]))
-    w = weights(predictions, target, np.unique(fold, return_inverse=True)[1])
+    w = weights(predictions, target, fold)
     whole = combine(predictions, w)
     in_sample = float(np.mean([mse(whole[fold == k], target[fold == k]) for k in folds]))
     finite = nested and all(math.isfinite(v) for v in nested)
