@@ -280,8 +280,9 @@ def choose(entries: list[dict], rule: str, stack: dict | None = None) -> dict | 
     ``stack``) where its nested validation MSE is the lowest and it has a test figure."""
     best = selection.choose(entries)
     if rule == "stack":
-        nested = (stack or {}).get("validation_mse")
-        if nested is not None and (stack or {}).get("test_mse") is not None and \
+        stack = stack or {}
+        nested = stack.get("validation_mse")
+        if nested is not None and stack.get("test_mse") is not None and \
                 (best is None or nested < best["validation_mse"]):
             return {"name": "stack", "validation_mse": nested, "test_mse": stack["test_mse"]}
         return best
@@ -306,11 +307,11 @@ def scores(result: dict) -> dict:
     best = min(ok, key=lambda e: e["test_mse"])
     rho = float(spearmanr([e["validation_mse"] for e in ok], [e["test_mse"] for e in ok])[0]) if len(ok) > 2 else None
     out = {"best": best["name"], "best_test_mse": best["test_mse"], "spearman": rho, "rules": {}}
+    stack = result.get("stack")
     for rule in RULES:
-        stack = result.get("stack") or {}
-        if rule == "stack" and ("stack" not in result or ("weights" in stack and stack.get("test_mse") is None)):
+        if rule == "stack" and (stack is None or ("weights" in stack and stack.get("test_mse") is None)):
             continue  # a page made before select stacked its candidates, or a stack without a test figure
-        c = choose(entries, rule, result.get("stack"))
+        c = choose(entries, rule, stack)
         out["rules"][rule] = {"chosen": c["name"], "regret": c["test_mse"] / best["test_mse"]}
     return out
 

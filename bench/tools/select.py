@@ -380,8 +380,8 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
               "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds, "chosen": chosen, "candidates": entries,
               "domain": None if data is None else applicability(data[0], data[1], target, protocol),
               "test_informed": test_informed(system, split),
-              "stack": stacked(entries, out, None if data is None else data[0])}
-    result["stack"] = score_stack(result["stack"], entries, out, None if data is None else data[1])
+              "stack": score_stack(stacked(entries, out, None if data is None else data[0]), entries, out,
+                                   None if data is None else data[1])}
     if chosen:
         content = (out / chosen["model"]).read_bytes()
         atomic_write(out / "model.npz", lambda f: f.write(content), binary=True)
