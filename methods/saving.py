@@ -68,7 +68,14 @@ def held_out(path: str | Path) -> dict[str, np.ndarray] | None:
     if not isinstance(refs, dict):
         return None
     out = {name: unpacker.array(refs.get(name)) for name in ("index", "fold", "prediction")}
-    if not (len(out["index"]) == len(out["fold"]) == len(out["prediction"])):
+    for name in ("index", "fold"):
+        value = out[name]
+        if value.ndim != 1 or value.dtype.kind not in "iu" or (value.size and value.min() < 0):
+            raise ModelFileError(f"{path}: its held-out {name} is not a list of sample numbers (0 or more)")
+    prediction = out["prediction"]
+    if prediction.ndim not in (1, 2) or prediction.dtype.kind != "f" or not np.isfinite(prediction).all():
+        raise ModelFileError(f"{path}: its held-out predictions are not finite numbers a sample")
+    if not (len(out["index"]) == len(out["fold"]) == len(prediction)):
         raise ModelFileError(f"{path}: its held-out predictions' arrays differ in length")
     return out
 

@@ -190,7 +190,11 @@ def stacked(entries: list[dict], out: Path, train: Dataset | None) -> dict:
     if not all(np.array_equal(h["index"], first["index"]) and np.array_equal(h["fold"], first["fold"])
                for _, h in kept):
         return {"unavailable": "the candidates were validated on different folds"}
-    target = np.asarray(train.target("indirect"), np.float64)[first["index"]]
+    target = np.asarray(train.target("indirect"), np.float64)
+    if (first["index"].size and first["index"].max() >= len(target)) or \
+            any(h["prediction"].shape[1:] != target.shape[1:] for _, h in kept):
+        return {"unavailable": "the candidates' held-out predictions are not of these training data"}
+    target = target[first["index"]]
     result = stacking.stack([e["name"] for e, _ in kept], [h["prediction"] for _, h in kept], target, first["fold"])
     return {**result, "models": {e["name"]: e["model"] for e, _ in kept}}
 

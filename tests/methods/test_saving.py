@@ -69,6 +69,27 @@ def test_a_tuned_models_file_keeps_its_held_out_predictions_and_predict_ignores_
         held_out(tmp_path / "bad.npz")
 
 
+GOOD = {"index": np.arange(4), "fold": np.array([0, 0, 1, 1]), "prediction": np.zeros((4, 7), np.float32)}
+
+
+@pytest.mark.parametrize("crafted,why", [
+    ({"index": np.array([0, -1, 2, 3])}, "its held-out index is not a list of sample numbers"),
+    ({"index": np.arange(4.0)}, "its held-out index is not a list of sample numbers"),
+    ({"fold": np.zeros((2, 2), np.int64)}, "its held-out fold is not a list of sample numbers"),
+    ({"fold": np.array(["a", "b", "c", "d"])}, "its held-out fold is not a list of sample numbers"),
+    ({"prediction": np.full((4, 7), np.nan)}, "its held-out predictions are not finite numbers a sample"),
+    ({"prediction": np.zeros((4, 7, 1))}, "its held-out predictions are not finite numbers a sample"),
+    ({"prediction": np.zeros((3, 7))}, "its held-out predictions' arrays differ in length"),
+])
+def test_crafted_held_out_predictions_are_refused_in_one_line(tmp_path, kuka, crafted, why):
+    system, train, _ = kuka
+    fitted = METHODS["sysid"]().fit(train, "indirect", 0, budget=Budget(steps=1), system=system)
+    save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": "sysid"}, train, system,
+               {**GOOD, **crafted})
+    with pytest.raises(ModelFileError, match=f"m.npz: {why}"):
+        held_out(tmp_path / "m.npz")
+
+
 @pytest.mark.parametrize("name", ["sparse", "mggp", "mlp", "delan"])
 def test_a_saved_lagrangian_predicts_the_fitted_torques(tmp_path, name):
     system = SYSTEMS["double_pendulum"]()

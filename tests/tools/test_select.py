@@ -11,6 +11,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bench.core.budget import Budget
@@ -196,3 +197,10 @@ def test_a_stack_of_model_files_without_held_out_predictions_says_how_to_get_the
     assert "The candidates' stack: unavailable (fewer than two" in page(
         {"system": "arm", "command": "c", "split": None, "budget": "1 steps", "seed": 0, "folds": "f", "chosen": None,
          "candidates": [], "stack": out})
+    # predictions whose samples the training data do not hold are not stacked
+    for name in ("a", "b"):
+        kept = {"index": np.array([0, 500]), "fold": np.array([0, 1]), "prediction": np.zeros((2, 7), np.float32)}
+        save_model(fitted, tmp_path / f"{name}.npz", {"system": system.name, "method": "sysid"}, train, system, kept)
+    assert stacked(entries, tmp_path, train) == {
+        "unavailable": "the candidates' held-out predictions are not of these training data"}
+
