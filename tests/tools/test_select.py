@@ -204,3 +204,15 @@ def test_a_stack_of_model_files_without_held_out_predictions_says_how_to_get_the
     assert stacked(entries, tmp_path, train) == {
         "unavailable": "the candidates' held-out predictions are not of these training data"}
 
+
+
+def test_a_stack_whose_test_figure_failed_says_why_on_the_page(tmp_path):
+    from bench.tools.select import score_stack
+
+    stack = {"weights": {"a": 1.0}, "validation_mse": 0.3, "models": {"a": "missing.npz"}}
+    scored = score_stack(stack, [], tmp_path, SYSTEMS["kuka_lwr4"]().load("test"))
+    assert scored["test_mse"] is None and scored["test_error"].startswith("ModelFileError: ")
+    assert "missing.npz: no such file" in scored["test_error"]
+    text = page({"system": "arm", "command": "c", "split": None, "budget": "1 steps", "seed": 0, "folds": "f",
+                 "chosen": None, "candidates": [], "stack": scored})
+    assert "validation MSE 0.3 (nested" in text and "; no test figure (ModelFileError: " in text
