@@ -195,6 +195,13 @@ class Method(FittedModel):
         return None
 
     @classmethod
+    def code_objects(cls) -> tuple:
+        """The classes and functions whose source files, with the suite's modules they import, are the code of
+        the method's runs (:func:`bench.runner.sources.code_files`): the class itself by default. A method that
+        looks other code up by name at run time names it here (a hybrid names its residual and its prior)."""
+        return (cls,)
+
+    @classmethod
     def refused_on(cls, system: System) -> str | None:
         """Why a command line refuses the method on ``system`` outright (exit 2,
         nothing run) rather than recording a run that does not apply; ``None``

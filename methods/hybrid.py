@@ -62,6 +62,7 @@ from methods.base import METHODS, Method, restored, saved_hyperparameters
 from methods.config import POSITIVE
 from methods.progress import Progress
 from methods.saving import load_model, save_model
+from methods.sysid import SysId
 
 #: the method that identifies the prior
 PRIOR_METHOD = "sysid"
@@ -81,6 +82,14 @@ class Prior:
     identify: Callable[[Dataset, "System | None", int], FittedModel]
     #: its name on the pages, before its residual's (``standard model + GP``)
     title: str = ""
+    #: what else is the code of its identification, where ``identify`` looks it up by name as it runs (a
+    #: registered method's class): part of a hybrid's code (:meth:`Hybrid.code_objects`)
+    extra_code: tuple = ()
+
+    @property
+    def code(self) -> tuple:
+        """``identify`` and :attr:`extra_code`."""
+        return (self.identify, *self.extra_code)
 
 
 #: the priors a hybrid may name, by name (:func:`register_prior`)
@@ -103,9 +112,11 @@ def sysid_prior(configuration: str):
     return identify
 
 
-register_prior(Prior("standard", "SysId's standard configuration", sysid_prior("standard"), "standard model"))
+register_prior(Prior("standard", "SysId's standard configuration", sysid_prior("standard"), "standard model",
+                     extra_code=(SysId,)))
 register_prior(Prior("feasible", "SysId's feasible configuration (the feasible rigid bodies and nonnegative "
-                                 "joint friction)", sysid_prior("feasible"), "feasible rigid body"))
+                                 "joint friction)", sysid_prior("feasible"), "feasible rigid body",
+                     extra_code=(SysId,)))
 
 #: the gate lengths a tuned hybrid tries, where its residual is gated (:mod:`bench.evaluation.tuning`)
 GATE_LENGTHS = (1.0, 3.0)
@@ -156,6 +167,12 @@ class Hybrid(Method):
         if system is not None and system.linear_form() is None:
             return prior_unavailable(cls.prior_name, system)
         return METHODS[cls.residual_name].not_applicable_reason(INDIRECT, system)
+
+    @classmethod
+    def code_objects(cls) -> tuple:
+        """The hybrid's class, its residual's and what identifies its prior (looked up by name as it runs)."""
+        prior = PRIORS.get(cls.prior_name)
+        return (cls, METHODS[cls.residual_name], *(() if prior is None else prior.code))
 
     @classmethod
     def refused_on(cls, system: System) -> str | None:

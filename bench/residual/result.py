@@ -22,7 +22,7 @@ class ResidualResult(Provenanced):
     :class:`~bench.runner.spec.RunSpec` as JSON (``None`` for a loop run
     outside a job: the record makes one from the system, method, seed and
     budget), ``code`` the hash of the code that ran it
-    (:func:`bench.runner.spec.code_hash`).
+    (:func:`bench.runner.sources.code_hash`).
 
     ``validation`` says how held-out data were formed (:mod:`bench.residual.validation`);
     ``mse_heldout_trajectories`` is the cross-validated torque MSE before and

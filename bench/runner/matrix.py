@@ -85,7 +85,7 @@ def run_matrix(
 
     Runs that already have a valid record in ``out_dir`` are skipped
     (``resume``), unless the record was made by other code (its ``code``
-    hash, :func:`bench.runner.spec.code_hash`, differs from the code's now) or for
+    hash, :func:`bench.runner.sources.code_hash`, differs from the code's now) or for
     another configuration (its spec differs), or, with ``retry_failed``,
     the run failed or timed out; each such run is redone, and the report
     says how many and why. A record file that is not valid is reported in

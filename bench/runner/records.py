@@ -14,7 +14,7 @@ number of steps, the learned expression where there is one, and provenance
 * ``replay``: what ``python -m bench rerun`` needs to repeat the run: the
   work it did and its schedule (:class:`~bench.core.budget.Schedule`), or
   ``{"unavailable": why}``;
-* ``code``: a hash of the code that ran (:func:`bench.runner.spec.code_hash`), by
+* ``code``: a hash of the code that ran (:func:`bench.runner.sources.code_hash`), by
   which a resumed matrix knows a run made by other code;
 * ``failed_stages``: the stages after the fit that failed
   (``{"exact": "ValueError: ..."}``); the run keeps its fit's MSE and stays

@@ -1,8 +1,8 @@
-"""A record's code hash covers the files that define its method and system."""
+"""A record's code hash covers the files its run's result depends on (bench.runner.sources)."""
 
 from __future__ import annotations
 
-from bench.runner.spec import code_files
+from bench.runner.sources import code_files
 
 
 def test_a_method_that_is_a_package_is_hashed_with_every_module_of_it():
@@ -18,9 +18,53 @@ def test_a_method_in_one_module_is_hashed_with_its_bases_only():
     assert not any(name.startswith("methods/syrenets/") or name == "methods/mlp.py" for name in files)
 
 
+def test_what_every_run_imports_is_its_code_however_deep():
+    """The data format, the tuning and the scoring are imported by the runner, not by a method's class."""
+    files = code_files("sparse", "double_pendulum")
+    assert {"bench/core/data.py", "bench/evaluation/tuning.py", "bench/evaluation/scores.py",
+            "bench/physics/regression.py", "methods/__init__.py"} <= set(files)
+    assert not any(name.startswith(("bench/cli/", "bench/reporting/", "bench/studies/")) for name in files)
+
+
+def test_a_hybrids_code_is_its_residuals_and_its_priors_too():
+    """An edited Gaussian process or SysId redoes the hybrids' runs; a loop prior's code is the loop's."""
+    gp = code_files("standard+gp", "kuka_lwr4")
+    assert {"methods/hybrid.py", "methods/gp.py", "methods/sysid.py", "bench/physics/feasible.py"} <= set(gp)
+    assert "methods/delan.py" not in gp and not any(name.startswith("bench/residual/") for name in gp)
+    loop = code_files("loop+gp", "kuka_lwr4")
+    assert {"methods/gp.py", "bench/residual/prior.py", "bench/residual/loop.py"} <= set(loop)
+
+
+def test_imports_are_read_from_the_source_relative_and_inside_functions(tmp_path):
+    from bench.runner.provenance import PROJECT_ROOT
+    from bench.runner.sources import imported
+
+    source = tmp_path / "mine.py"
+    source.write_text("import numpy\nfrom bench.core import errors\n\ndef f():\n    from bench.physics.regression import fit_columns\n"
+                      "    import methods.sparse_torque as st\n")
+    assert {p.relative_to(PROJECT_ROOT).as_posix() for p in imported(source)} == {
+        "bench/__init__.py", "bench/core/__init__.py", "bench/core/errors.py", "bench/physics/__init__.py",
+        "bench/physics/regression.py", "methods/__init__.py", "methods/sparse_torque.py"}
+
+
+def test_relative_imports_resolve_from_the_modules_package(tmp_path, monkeypatch):
+    from bench.runner import sources
+
+    for name in ("bench/__init__.py", "bench/a/__init__.py", "bench/a/c.py", "bench/d.py", "bench/a/e/__init__.py"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("")
+    (tmp_path / "bench/a/b.py").write_text("from . import c\nfrom .e import thing\nfrom ..d import f\n")
+    (tmp_path / "bench/a/__init__.py").write_text("from .c import g\n")
+    monkeypatch.setattr(sources, "PROJECT_ROOT", tmp_path)
+    assert {p.relative_to(tmp_path).as_posix() for p in sources.imported(tmp_path / "bench/a/b.py")} == {
+        "bench/__init__.py", "bench/a/__init__.py", "bench/a/c.py", "bench/a/e/__init__.py", "bench/d.py"}
+    assert {p.relative_to(tmp_path).as_posix() for p in sources.imported(tmp_path / "bench/a/__init__.py")} == {
+        "bench/__init__.py", "bench/a/__init__.py", "bench/a/c.py"}
+
+
 def test_a_plugin_is_the_code_of_the_runs_of_what_it_defines_only(tmp_path):
     """One edited plugin redoes its own method's records, not every method's of the matrix."""
-    from bench.runner.spec import code_hash
+    from bench.runner.sources import code_hash
 
     plugin = tmp_path / "mine.py"
     plugin.write_text(PLUGIN.format(value=1.0))
