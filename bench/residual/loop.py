@@ -30,7 +30,7 @@ can undo a round) is the model's refit strategy, chosen once from the model
    offset as a generalized force.
 5. **Refit jointly**, without fitting the method again
    (:meth:`~bench.residual.strategies.Strategy.refit`), the sensor's laws
-   applied exactly to the training data (:meth:`_Loop.choose`); where the
+   applied exactly to the training data (:meth:`~bench.residual.choosing.Choosing.choose`); where the
    trace's linearisation may have ranked two terms wrongly, or an
    open-ended term explained the residual far better than the named law it
    accepted, both are refitted and the lower BIC kept. Effects made
@@ -86,16 +86,17 @@ from bench.core.budget import Budget, now
 from bench.core.data import Dataset, mse
 from bench.core.errors import first_line
 from bench.physics.models import FittedModel
-from bench.physics.terms import Term, TermLibrary, remembered_columns, share_columns
-from bench.residual.library import describe_all, is_named, loop_library, label, mismatch, resolved_periods, structural
+from bench.physics.terms import TermLibrary, remembered_columns, share_columns
+from bench.residual.library import describe_all, is_named, loop_library, label, resolved_periods, structural
+from bench.residual.choosing import Choosing
 from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
 from bench.residual.rollouts import driven_rollouts, test_mse
-from bench.residual.criteria import MIN_BIC_DROP, MIN_HELDOUT_GAIN, ROUNDOFF, bic
-from bench.residual.tracing import BUDGET_STOP, Trace, trace
-from bench.residual.sensors import Sensed, Sensor, column as sensor_column, measured_rss, settle
+from bench.residual.criteria import MIN_HELDOUT_GAIN
+from bench.residual.tracing import BUDGET_STOP, trace
+from bench.residual.sensors import Sensed, Sensor, column as sensor_column
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.tidying import Tidying
 from bench.residual.validation import describe as describe_validation
@@ -176,9 +177,10 @@ class _BudgetSpent(Exception):
     """The loop's time budget ended during a round (the message says in which of its stages)."""
 
 
-class _Loop(Tidying):
-    """One run of the loop: its data, budget, strategy and running figures; what follows a round's
-    joint refit is :class:`~bench.residual.tidying.Tidying`'s."""
+class _Loop(Tidying, Choosing):
+    """One run of the loop: its data, budget, strategy and running figures; the choice of a round's model is
+    :class:`~bench.residual.choosing.Choosing`'s, what follows its joint refit
+    :class:`~bench.residual.tidying.Tidying`'s."""
 
     def __init__(self, method: str, train: Dataset, test: Dataset | None, budget: Budget, seed: int,
                  hyperparameters: dict, report: Report, open_ended: bool | None, device: str = "cpu"):
@@ -320,40 +322,6 @@ class _Loop(Tidying):
         """Hand the result as it stands to the checkpoint (see :func:`residual_loop`)."""
         self.checkpoint(self.result(model, held, mass, rounds, findings))
 
-    def build(self, model: LoopModel, effects: list[Term], on_sensor: list[Term]):
-        """``model`` refitted with ``effects`` and the sensor's new laws ``on_sensor``
-        (applied exactly, :func:`~bench.residual.sensors.settle`, the laws it has
-        settled again beside the new effects): the model, the sensor and the
-        corrected training data."""
-        proposed = self.strategy.refit(model, self.train, effects)
-        if not on_sensor and not self.sensor.found_any:
-            return proposed, self.sensor, self.train
-        return settle(self.strategy, proposed, self.measured, self.sensor, on_sensor)
-
-    def compare(self, model: LoopModel, effects: list[Term], on_sensor: list[Term], chosen: list[Term],
-                other: list[Term], built: tuple, margin: float):
-        """The build (:meth:`build`) with the group ``other`` in place of the accepted
-        ``chosen``, where its BIC on the measured torques, both refitted with the model,
-        is lower by more than ``margin``; else ``None``. For an open-ended term far
-        better than the named law accepted (:attr:`~bench.residual.tracing.Trace.mismatched`,
-        margin :data:`~bench.residual.criteria.MIN_BIC_DROP`), and for the runner-up
-        of a step whose model's linearisation may rank the two wrongly
-        (:attr:`~bench.residual.tracing.Trace.runners_up`, margin 0)."""
-        alternative = self.build(model, [t for t in effects if t not in chosen] + [t for t in other if t.place != "sensor"],
-                                 [t for t in on_sensor if t not in chosen] + [t for t in other if t.place == "sensor"])
-        n = self.measured.tau.size
-        floor = ROUNDOFF * float(np.mean(self.measured.tau**2)) * n  # below it, two fits are equally exact
-
-        def rss(m, s):
-            return max(measured_rss(m, s, self.measured), floor)
-
-        def size(group):  # a law's parameters, its shape among them
-            return len(group) + sum(t.shape is not None for t in group[-1:])
-
-        if bic(rss(*alternative[:2]), n, size(other)) + margin < bic(rss(*built[:2]), n, size(chosen)):
-            return alternative
-        return None
-
     def library(self) -> TermLibrary:
         """The terms this loop tries (:func:`~bench.residual.library.loop_library`), less periodic parts whose
         period the data do not resolve and, where they are off, the open-ended terms."""
@@ -362,44 +330,6 @@ class _Loop(Tidying):
         pool = [t for t in loop_library(train.dof, coupled=bool(getattr(system, "absolute_angles", False)), system=system)
                 if resolved_periods(t, train)]
         return TermLibrary([t for t in pool if is_named(t) or self.open_ended is not False])
-
-    def choose(self, model: LoopModel, traced: Trace, laws: dict, k: int) -> LoopModel:
-        """The round's model: ``model`` refitted with what the trace accepted
-        (:meth:`build`), where refitting shows it better, with a runner-up in place
-        of the accepted term, and with an open-ended term in place of a named
-        law it explains far better (a structural finding, :attr:`unnamed`); the
-        sensor's new laws applied."""
-        sensor, train, report = self.sensor, self.train, self.report
-        on_sensor = [t for t in traced.accepted if t in laws]
-        effects = model.effects + [t for t in traced.accepted if t not in laws]
-        built = self.build(model, effects, on_sensor)
-        for chosen, runner in traced.runners_up:
-            other = self.compare(model, effects, on_sensor, chosen, runner, built, 0.0)
-            if other is not None:
-                report(f"  {' + '.join(map(label, runner))} instead of {' + '.join(map(label, chosen))}: "
-                       f"a lower BIC once refitted with the model")
-                built, effects = other, other[0].effects
-                for kept, _, entry in traced.equivalents:  # the refit, not the rule, chose among them
-                    if kept is chosen:
-                        now_kept = " + ".join(map(label, runner))
-                        entry.update(kept=now_kept, equivalent=[entry["kept"]] + [e for e in entry["equivalent"]
-                                                                                  if e != now_kept],
-                                     chosen_by="a lower BIC once refitted with the model, which the linearised "
-                                               "comparison of the trace may rank wrongly")
-                on_sensor = [t for t in on_sensor if t not in chosen] + [t for t in runner if t in laws]
-        for named, rival, *seen in traced.mismatched:
-            other = self.compare(model, effects, on_sensor, named, [rival], built, MIN_BIC_DROP)
-            if other is not None:
-                built, effects = other, other[0].effects
-                self.unnamed[label(rival)] = mismatch(named, rival, *seen)
-                report(f"round {k}: structural finding: {self.unnamed[label(rival)]['finding']}")
-        proposed, new_sensor, new_train = built
-        if new_sensor is not sensor:  # the sensor's laws applied exactly: the model refitted to the corrected torques
-            self.use(new_train, new_sensor)
-            report("  " + "; ".join(f"{e['name']} on joint(s) {e['joints']}: "
-                                    + ", ".join(f"{n} = {v['value']:.5g} ± {v['stderr']:.2g}" for n, v in e["parameters"].items())
-                                    for e in new_sensor.entries(train.dof)))
-        return proposed
 
     def rounds(self, model: LoopModel, held: float, mass: float, rounds: list[Round]):
         """Rounds 1 to :attr:`max_rounds`; returns the final model, its held-out
