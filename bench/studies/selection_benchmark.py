@@ -68,7 +68,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.core import protocols
-from bench.core.arguments import positive_int, add_workers
+from bench.core.arguments import add_workers, csv_list, positive_int
 from bench.core.csv_format import write_csv
 from bench.core.data import Dataset
 from bench.core.errors import UserError
@@ -412,6 +412,9 @@ def add_arguments(parser) -> None:
                              "trajectories of several), regions, knndm (only where there are several training "
                              "trajectories) (default time auto)")
     parser.add_argument("--steps", type=positive_int, default=STEPS, help=f"steps a fit (default {STEPS})")
+    parser.add_argument("--candidates", type=csv_list, default=list(CANDIDATES),
+                        help=f"the candidates, any of select's ({', '.join(c.name for c in selection.CANDIDATES)}) "
+                             f"(default {','.join(CANDIDATES)}: select's less the three whose fits take longest)")
     add_workers(parser, "candidates")
     parser.add_argument("--out", type=Path, default=Path("results/selection/benchmark.md"),
                         help="the page (default results/selection/benchmark.md); the cases' runs go beside it")
@@ -450,20 +453,26 @@ def main(args) -> int:
         result.update(real=real_rows(), real_command=args.invocation, real_commit=provenance().get("commit"))
         _publish(args.out, result)
         return 0
+    known = [c.name for c in selection.CANDIDATES]
+    unknown = [n for n in args.candidates if n not in known]
+    if unknown or len(set(args.candidates)) < 2:
+        raise UserError(f"--candidates: {'unknown candidate(s) ' + ', '.join(unknown) if unknown else 'two at least'}; "
+                        f"select's are {', '.join(known)}")
+    candidates = tuple(n for n in known if n in args.candidates)  # select's order, each once
     chosen = [c for c in cases(args.set) if not args.cases or c.name.startswith(tuple(args.cases))]
     root = args.out.parent / f"cases_{args.set}"
     planned = [(case, protocol, folds) for case in chosen for protocol in args.protocols
                if (folds := resolve(protocol, case.layout)) is not None]
     # each folds' run once a case: auto is one of the others
     jobs = {f"{case.name} {folds}": SelectCase(case.arm, case.layout, case.effects, case.seed, folds, args.steps,
-                                               CANDIDATES, args.workers, str(root / case.name))
+                                               candidates, args.workers, str(root / case.name))
             for case, _, folds in planned}
     ledger = Ledger(args.out)
     done = run_jobs(jobs, 1, _said, print_now, ledger, cluster=args.cluster)
     table = [{"case": case.name, "protocol": protocol, "folds": folds, "scores": done[f"{case.name} {folds}"]}
              for case, protocol, folds in planned]
     result = {"command": args.invocation, "commit": provenance().get("commit"), "set": args.set,
-              "cases": [c.name for c in chosen], "candidates": list(CANDIDATES), "steps": args.steps,
+              "cases": [c.name for c in chosen], "candidates": list(candidates), "steps": args.steps,
               "table": table, "summary": summary(table), "real": real_rows()}
     _publish(args.out, result)
     ledger.close()

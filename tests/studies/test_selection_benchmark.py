@@ -6,6 +6,7 @@ evaluation set."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -114,7 +115,8 @@ def test_the_cases_are_jobs_of_the_one_scheduler_and_a_second_run_resumes_from_t
     kept = sb.scores({"candidates": [_entry("standard", 0.5, 0.6), _entry("feasible", 0.4, 0.3)]})
     Ledger(out).add(f"{case.name} regions", job, kept)  # as a run stopped after this case would have left it
     args = SimpleNamespace(real_only=False, out=out, set="development", cases=[case.name], protocols=["auto"],
-                           steps=2, workers=1, cluster=None, invocation="python -m bench study selection")
+                           steps=2, workers=1, cluster=None, invocation="python -m bench study selection",
+                           candidates=list(reversed(sb.CANDIDATES)))  # select's order whatever the order given
     assert sb.main(args) == 0  # nothing left to run: no select is started
     result = json.loads(out.with_suffix(".json").read_text())
     assert result["table"] == [{"case": case.name, "protocol": "auto", "folds": "regions", "scores": kept}]
@@ -133,3 +135,17 @@ def test_a_real_row_tested_on_recordings_its_filter_was_chosen_on_is_flagged_tes
     text = sb.page({**made, "real": list(rows.values())})
     assert text.count("**Test-informed:**") == 1
     assert "**Test-informed:** dfki_double_pendulum (swapped split) tests on 00, 01, 02, 04" in text
+
+
+@pytest.mark.parametrize("given, said", [(["standard", "nonsense"], "unknown candidate(s) nonsense"),
+                                         (["standard", "standard"], "two at least")])
+def test_candidates_other_than_selects_or_fewer_than_two_are_refused_in_one_line(tmp_path, given, said):
+    from types import SimpleNamespace
+
+    from bench.core.errors import UserError
+
+    args = SimpleNamespace(real_only=False, out=tmp_path / "benchmark.md", set="development", cases=["ur5_one"],
+                           protocols=["auto"], steps=2, workers=1, cluster=None, invocation="", candidates=given)
+    with pytest.raises(UserError, match=re.escape(said)):
+        sb.main(args)
+    assert not list(tmp_path.iterdir())
