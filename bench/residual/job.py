@@ -122,7 +122,7 @@ class ResidualJob(Job):
         import_plugins(spec.plugins)
         system = make_system(spec)
         train, test = self.data(system)
-        own = {"inputs": self.inputs(), "spec": self.spec, "code": spec.code(runs_in=__name__)}
+        own = {"inputs": self.inputs(), "spec": self.spec, "code": spec.code(runs_in=(__name__,))}
 
         def checkpoint(result: ResidualResult) -> None:
             if self.checkpoint_path is not None:

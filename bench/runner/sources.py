@@ -9,7 +9,7 @@ A run's code is
   files; for a class of a package of its own (``methods/syrenets/``), every
   module of that package;
 * every module of the suite (``bench``, ``methods``, ``systems``) that those
-  files and the module that runs a method (:data:`RUNS_IN`: the fit, the
+  files and the modules that run a method (:data:`RUNS_IN`: the fit, the
   tuning, the scoring) import, however deep: the import statements are read
   from the source (:func:`imported`), function-level ones included. The two
   registries' package modules (``methods/__init__.py``, ``systems/__init__.py``)
@@ -46,8 +46,8 @@ from systems import SYSTEMS
 PACKAGES = ("bench", "methods", "systems")
 #: the registries' package modules: hashed, their imports (every method, every system) not followed
 REGISTRIES = ("methods/__init__.py", "systems/__init__.py")
-#: the module in which a run of a method is fitted, tuned and scored
-RUNS_IN = "bench.runner.run"
+#: the modules in which a run of a method is fitted, tuned and scored: on its own, or as one seed of a stack
+RUNS_IN = ("bench.runner.run", "bench.runner.stacked")
 
 
 def module_file(name: str) -> Path | None:
@@ -159,14 +159,14 @@ def _digest(path: Path, mtime_ns: int, size: int) -> str:
     return file_digest(path)[:16]
 
 
-def code_files(method: str, system: str, plugins: tuple[str, ...] = (), runs_in: str = RUNS_IN) -> dict[str, str]:
-    """``{file: sha256 prefix}`` of a run's code (the module docstring); ``runs_in`` names the module that runs it
+def code_files(method: str, system: str, plugins: tuple[str, ...] = (),
+               runs_in: tuple[str, ...] = RUNS_IN) -> dict[str, str]:
+    """``{file: sha256 prefix}`` of a run's code (the module docstring); ``runs_in`` names the modules that run it
     (the residual loop's job names its own)."""
     roots: list[Path] = []
     for obj in (*METHODS[method].code_objects(), SYSTEMS[system]):
         roots += [p for p in object_files(obj) if p not in roots]
-    entry = module_file(runs_in)
-    paths = closure(roots + ([entry] if entry is not None else []))
+    paths = closure(roots + [f for f in map(module_file, runs_in) if f is not None])
     sources = [Path(p).resolve() for p in SYSTEMS[system].source_files() if p]
     given = {Path(p[len(file_prefix(p)):]).expanduser().resolve() for p in plugins if file_prefix(p)}
     if given & set(sources):  # a system given by a plugin's file: that file and the files it names
@@ -177,7 +177,8 @@ def code_files(method: str, system: str, plugins: tuple[str, ...] = (), runs_in:
     return dict(sorted(out.items()))
 
 
-def code_hash(method: str, system: str, plugins: tuple[str, ...] = (), runs_in: str = RUNS_IN) -> dict | None:
+def code_hash(method: str, system: str, plugins: tuple[str, ...] = (),
+              runs_in: tuple[str, ...] = RUNS_IN) -> dict | None:
     """The record's ``code`` entry: ``{"hash": ..., "files": {file: digest}}``, with the plugins imported first;
     ``None`` where a name does not resolve (the run's own process then records why)."""
     try:

@@ -144,9 +144,9 @@ class RunSpec:
     def run_id(self) -> str:
         return run_id(self.system, self.method, self.experiment, self.seed, self.noise, self.tune, self.profile)
 
-    def code(self, runs_in: str = RUNS_IN) -> dict | None:
+    def code(self, runs_in: tuple[str, ...] = RUNS_IN) -> dict | None:
         """The record's ``code``: the files the run's result depends on, and their hash
-        (:func:`bench.runner.sources.code_hash`; ``runs_in``: the module that runs it)."""
+        (:func:`bench.runner.sources.code_hash`; ``runs_in``: the modules that run it)."""
         return code_hash(self.method, self.system, self.plugins, runs_in)
 
     @property
