@@ -296,8 +296,14 @@ def choose(entries: list[dict], rule: str, stack: dict | None = None) -> dict | 
     return min(within, key=lambda e: SIMPLICITY.index(e["name"]) if e["name"] in SIMPLICITY else len(SIMPLICITY))
 
 
+#: each candidate's figures a case keeps, so that a rule that reads only these can be tried on a page's JSON
+#: without running its cases again
+KEPT_FIGURES = ("validation_mse", "validation_far_mse", "validation_stderr", "train_mse", "test_mse")
+
+
 def scores(result: dict) -> dict:
-    """Per rule: the chosen candidate and its regret; and the rank correlation of validation and test."""
+    """Per rule: the chosen candidate and its regret; the rank correlation of validation and test; and each
+    candidate's :data:`KEPT_FIGURES`."""
     from scipy.stats import spearmanr
 
     entries = result.get("candidates") or []
@@ -306,7 +312,8 @@ def scores(result: dict) -> dict:
         return {"error": result.get("error", "no candidate validated")}
     best = min(ok, key=lambda e: e["test_mse"])
     rho = float(spearmanr([e["validation_mse"] for e in ok], [e["test_mse"] for e in ok])[0]) if len(ok) > 2 else None
-    out = {"best": best["name"], "best_test_mse": best["test_mse"], "spearman": rho, "rules": {}}
+    out = {"best": best["name"], "best_test_mse": best["test_mse"], "spearman": rho, "rules": {},
+           "candidates": {e["name"]: {k: e.get(k) for k in KEPT_FIGURES} for e in entries}}
     stack = result.get("stack")
     for rule in RULES:
         if rule == "stack" and (stack is None or ("weights" in stack and stack.get("test_mse") is None)):

@@ -49,6 +49,10 @@ def test_the_rules_choose_as_stated_and_regret_is_against_the_best_on_the_test()
     assert s["rules"]["lowest"]["regret"] == pytest.approx(3.0) and s["rules"]["one_se"]["regret"] == pytest.approx(2.0)
     assert s["spearman"] == pytest.approx(-1.0)  # validation ranks them exactly against the test
     assert "stack" not in s["rules"]  # a page made before select stacked its candidates: no figure, no fallback
+    # each candidate's figures are kept, so that a rule can be tried on the page's JSON without running the cases
+    assert s["candidates"]["standard"] == {"validation_mse": 0.53, "validation_far_mse": None, "validation_stderr": 0.02,
+                                           "train_mse": None, "test_mse": 0.6}
+    assert s["candidates"]["loop"]["test_mse"] is None
     stacked = {"candidates": entries, "stack": {"validation_mse": 0.4, "test_mse": 0.15}}
     assert sb.scores(stacked)["rules"]["stack"] == {"chosen": "stack", "regret": pytest.approx(0.5)}
     worse = {"candidates": entries, "stack": {"validation_mse": 0.6, "test_mse": 0.15}}
