@@ -29,6 +29,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from bench.runner.sources import absolute
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("bench", "methods", "systems")
 
@@ -57,14 +59,6 @@ def suite_modules(root: Path = ROOT) -> dict[str, Path]:
     return out
 
 
-def _resolve(node: ast.ImportFrom, importer: str, is_package: bool) -> str:
-    if not node.level:
-        return node.module or ""
-    base = importer.split(".") if is_package else importer.split(".")[:-1]
-    base = base[: len(base) - (node.level - 1)]
-    return ".".join(base + ([node.module] if node.module else []))
-
-
 def imports(modules: dict[str, Path]) -> list[Import]:
     """The imports of suite modules by suite modules."""
     found = []
@@ -78,7 +72,7 @@ def imports(modules: dict[str, Path]) -> list[Import]:
                 if isinstance(child, ast.Import):
                     targets = [a.name for a in child.names]
                 elif isinstance(child, ast.ImportFrom):
-                    base = _resolve(child, name, is_package)
+                    base = absolute(child, name.split("."), is_package)
                     targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in child.names]
                 else:
                     visit(child, inside)

@@ -80,6 +80,17 @@ def _stamp(path: Path) -> tuple[int, int]:
     return stat.st_mtime_ns, stat.st_size
 
 
+def absolute(node: ast.ImportFrom, module: list[str], package: bool) -> str:
+    """The absolute name of the module that ``from ... import`` ``node`` reads from, in the module named
+    ``module`` (its parts; ``package``: whether it is a package's ``__init__.py``): a relative import climbs
+    one package a dot above the first."""
+    if not node.level:
+        return node.module or ""
+    base = module if package else module[:-1]
+    base = base[:len(base) - node.level + 1]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 @functools.lru_cache(maxsize=1024)
 def _imported(path: Path, mtime_ns: int, size: int) -> tuple[Path, ...]:
     inside = path.is_relative_to(PROJECT_ROOT)
@@ -89,14 +100,9 @@ def _imported(path: Path, mtime_ns: int, size: int) -> tuple[Path, ...]:
         if isinstance(node, ast.Import):
             names += [alias.name for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
-            if node.level:  # relative: from the module's package, one level up a dot
-                if not inside:
-                    continue
-                base = here if package else here[:-1]
-                base = base[:len(base) - node.level + 1]
-                module = ".".join(base + ([node.module] if node.module else []))
-            else:
-                module = node.module or ""
+            if node.level and not inside:  # relative, in a file outside the suite: not the suite's
+                continue
+            module = absolute(node, here, package)
             names += [module] + [f"{module}.{alias.name}" for alias in node.names]
     found = set()
     for name in names:
