@@ -245,7 +245,7 @@ _FITTED = re.compile(r"^(?P<law>.*?) on (?:joints? [\d, -]+|every joint) fits th
 @block("measured.kuka.unconfirmed")
 def unconfirmed(root: Path) -> str:
     """Per loop, the laws of the sensor and the drive and the periodic torques it
-    fitted that no held-out trajectory can confirm, with their fitted values."""
+    fitted that held-out data did not confirm, with their fitted values."""
     lines = []
     for stem, label in LOOPS:
         for split in SPLIT_NAMES:

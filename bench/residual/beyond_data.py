@@ -29,7 +29,9 @@ Independent samples (generated data) have no trajectory to overfit, and the
 loop's held-out blocks have judged the effect already. Training data that
 hold one trajectory have no other to judge by, so there such an effect
 never stays: the loop drops it, reports it as a finding with
-its fitted value and the reason, and does not offer it again.
+its fitted value and the reason, and does not offer it again. (A law of
+the sensor or the drive, of a fixed form, is judged there on held-out
+regions of the trajectory's states instead.)
 """
 
 from __future__ import annotations
@@ -75,27 +77,35 @@ def not_identified(model: LoopModel) -> list[tuple[int, str]]:
             for i, (c, se) in enumerate(zip(model.coef, model.stderr)) if se > 0 and se >= abs(c)]
 
 
-def held_out_verdict(train: Dataset, errors: Callable[[], tuple[float, float]]):
+def held_out_verdict(train: Dataset, errors: Callable[[], tuple[float, float]], *, regions: bool = False):
     """The one test a law that may fit its own trajectory rather than the arm
     must pass to stay: an effect that claims beyond the data
     (:func:`earns_place`) and a law of the sensor or the drive
     (:func:`bench.residual.sensors.confine`). ``errors()`` gives the held-out
-    errors over whole trajectories with the law and without it; without it
-    the error must be at least :data:`MIN_GAIN` higher. Training data without
-    trajectories (independent samples) have none to overfit, and the law
-    stays; data that hold one trajectory have no other to judge by, and it
-    never does. Returns ``(None, errors)`` where it stays, else
-    ``(verdict in words, errors)``; ``errors`` is ``None`` where they were not needed."""
+    errors over the loop's folds (:mod:`bench.residual.validation`: whole
+    trajectories, or regions of the states of one) with the law and without
+    it; without it the error must be at least :data:`MIN_GAIN` higher.
+    Training data without trajectories (independent samples) have none to
+    overfit, and the law stays. On data that hold one trajectory, a law of a
+    fixed form (``regions``: a sensor's gain, load-dependent friction, a
+    time shift, each of one parameter) is judged on held-out regions of
+    its states, where it must predict torques it was not fitted on; an effect
+    that claims beyond the data has no other trajectory to judge by, and
+    never stays: a periodic torque's period and an open-ended term are chosen
+    among many on all of the trajectory, which its regions then cannot judge,
+    and a spring's rest angle lies where no region reaches. Returns ``(None,
+    errors)`` where it stays, else ``(verdict in words, errors)``; ``errors``
+    is ``None`` where they were not needed."""
     names = train.trajectories()
     if not names:
         return None, None
-    if len(names) < 2:
+    if len(names) < 2 and not regions:
         return "the training data hold one trajectory, so no held-out trajectory can confirm it", None
     kept, dropped = errors()
     if dropped >= (1 + MIN_GAIN) * kept:
         return None, (kept, dropped)
-    return (f"on held-out trajectories it does not pay: held-out MSE {kept:.4g} with it, {dropped:.4g} without",
-            (kept, dropped))
+    where = "held-out trajectories" if len(names) >= 2 else "held-out regions of its one trajectory's states"
+    return f"on {where} it does not pay: held-out MSE {kept:.4g} with it, {dropped:.4g} without", (kept, dropped)
 
 
 def earns_place(strategy: Strategy, model: LoopModel, train: Dataset, index: int) -> tuple[bool, str]:

@@ -239,13 +239,14 @@ def redundant(strategy, model, measured: Dataset, sensor: Sensor, min_drop: floa
 
 def confine(strategy, model, measured: Dataset, sensor: Sensor, heldout):
     """On measured trajectories, each law the sensor has found must earn its
-    place on a held-out trajectory (:func:`bench.residual.beyond_data.held_out_verdict`,
+    place on held-out data (:func:`bench.residual.beyond_data.held_out_verdict`,
     the test an open-ended term passes): it rescales or delays whatever the
-    model does, so along the one trajectory it was fitted on it can absorb
-    the model's own error there. The held-out errors are
-    ``heldout(model, train, sensor)``, over whole trajectories. Returns the
-    model, the sensor, the corrected training data and, per law dropped,
-    ``(term, finding)``."""
+    model does, so along the trajectory it was fitted on it can absorb the
+    model's own error there. The held-out errors are ``heldout(model, train,
+    sensor)``, over the loop's folds: whole trajectories, or, where the data
+    hold one, regions of its states, on which a law of one parameter must
+    predict torques it was not fitted on. Returns the model, the sensor,
+    the corrected training data and, per law dropped, ``(term, finding)``."""
     dropped, train = [], sensor.correct(measured)
     if not measured.trajectories():
         return model, sensor, train, dropped
@@ -254,7 +255,8 @@ def confine(strategy, model, measured: Dataset, sensor: Sensor, heldout):
         law = sensor.law(term)
         m, s, t = settle(strategy, model, measured, sensor.without(term), [])
         verdict, errors = held_out_verdict(
-            measured, lambda: (heldout(model, train, sensor) if kept is None else kept, heldout(m, t, s)))
+            measured, lambda: (heldout(model, train, sensor) if kept is None else kept, heldout(m, t, s)),
+            regions=True)
         if verdict is None:
             kept = errors[0]
             continue

@@ -1,7 +1,7 @@
 """What follows a round's joint refit in the residual loop
 (:class:`Tidying`, a part of :class:`bench.residual.loop._Loop`): redundant
 effects and sensor laws dropped, shapes refined, each law its simplest and
-possible, and what the data do not identify, or a held-out trajectory does
+possible, and what the data do not identify, or held-out data do
 not confirm, dropped with its finding."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ class Tidying:
     def tidy(self, proposed: LoopModel, findings: dict):
         """What follows a round's joint refit: redundant effects and sensor laws
         dropped, shapes refined, each law its simplest and possible, and what the
-        data do not identify or a held-out trajectory does not confirm dropped
+        data do not identify or held-out data do not confirm dropped
         (findings go to ``findings`` and :attr:`beyond`). Returns the model, the
         labels removed and the laws simplified."""
         strategy, report = self.strategy, self.report
@@ -62,7 +62,7 @@ class Tidying:
                 confine_sensor, strategy, proposed, self.measured, self.sensor, self.heldout)
             for term, entry in gone:
                 self.beyond[label(term)] = (term, entry)
-                report(f"  dropping {label(term)}: a law of the sensor that no held-out trajectory confirms")
+                report(f"  dropping {label(term)}: a law of the sensor that held-out data do not confirm")
                 beyond.append(label(term))
             if gone:
                 self.use(new_train, new_sensor)

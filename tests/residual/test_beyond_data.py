@@ -1,4 +1,5 @@
-"""Laws that claim beyond the data: found, and kept only where a held-out trajectory confirms them."""
+"""Laws that claim beyond the data: found, and kept only where a held-out trajectory confirms them; a law of
+the sensor on one trajectory judged on held-out regions of its states."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from bench.core.data import add_noise, generate
 from bench.physics.effects import EFFECTS
 from bench.physics.terms import Term
 from bench.residual.model import LoopModel
-from bench.residual.beyond_data import beyond_data, earns_place, not_identified
+from bench.residual.beyond_data import beyond_data, earns_place, held_out_verdict, not_identified
 from bench.residual.strategies import strategy_for
 from bench.physics.models import ExpressionModel
 from systems import get_system
@@ -54,3 +55,22 @@ def test_one_trajectory_cannot_confirm_a_law_and_two_can_judge_it():
     two = noisy.replace(recording=np.where(np.arange(len(data)) < 200, "a", "b"))
     keep, why = earns_place(strategy, model, two, 0)  # a zero spring on data without one saves nothing
     assert not keep and "held-out MSE" in why
+
+
+def test_on_one_trajectory_only_a_law_of_a_fixed_form_is_judged_on_held_out_regions():
+    one = _data().replace(recording=np.full(400, "run1"), trajectory=np.full(400, "A"))
+    asked = []
+
+    def errors(kept, without):
+        return lambda: asked.append(1) or (kept, without)
+
+    # an effect that claims beyond the data: refused without asking the held-out errors
+    verdict, figures = held_out_verdict(one, errors(1.0, 2.0))
+    assert "one trajectory" in verdict and figures is None and not asked
+    # a sensor's law: the held-out regions' errors decide, by MIN_GAIN, either way
+    assert held_out_verdict(one, errors(1.0, 1.02), regions=True) == (None, (1.0, 1.02))
+    verdict, figures = held_out_verdict(one, errors(1.0, 1.005), regions=True)
+    assert "held-out regions of its one trajectory's states" in verdict and figures == (1.0, 1.005)
+    assert len(asked) == 2
+    # independent samples: nothing to overfit, it stays unasked
+    assert held_out_verdict(_data(), errors(1.0, 1.0), regions=True) == (None, None) and len(asked) == 2
