@@ -55,6 +55,15 @@ class SealedSplit(Dataset):
                              f"a choice must be made on the training data")
         return object.__getattribute__(self, name)
 
+    def replace(self, **changes) -> "SealedSplit":
+        """A copy with ``changes`` (states moved along the recording, a time shift's), sealed as this one
+        is: its targets are carried over, not read."""
+        _GATE.depth += 1  # the copy's construction and checks read them
+        try:
+            return dataclasses.replace(self, **changes)
+        finally:
+            _GATE.depth -= 1
+
     def readable(self) -> tuple[str, ...]:
         """The states only, outside :func:`bench.core.scoring.scoring` (a model predicts from them)."""
         return super().readable() if _GATE.depth else STATES

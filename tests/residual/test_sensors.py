@@ -254,16 +254,21 @@ def test_a_sensed_models_mass_matrix_and_bias_read_the_arms_own_through_the_sens
 
 def test_a_sensed_model_predicts_a_sealed_test_split_without_reading_its_targets():
     """A law of the sensor that reads the torque (a gain, load-dependent friction) reads the torques the model
-    predicts, never the test split's own: predicting a sealed split outside scoring gives the plain split's
-    torques."""
-    from bench.core.sealed import seal
+    predicts, never the test split's own, and a time shift moves its states without reading them: predicting
+    a sealed split outside scoring gives the plain split's torques, and the states moved stay sealed."""
+    from bench.core.sealed import SealedRead, SealedSplit, seal
     from bench.physics.models import ExpressionModel
-    from bench.physics.sensor_laws import LoadFriction, TorqueGain
+    from bench.physics.sensor_laws import LoadFriction, TimeShift, TorqueGain
 
     system = get_system("double_pendulum")
-    test = generate(system, 50, 3)
+    time, test = simulate("double_pendulum", 2.0, 100.0, 0.5, [], 0.0, 3)
+    test = test.replace(recording=np.full(len(test), "r0"), time=time)
     arm = ExpressionModel(system.lagrangian_sympy, 2)
-    sensed = Sensed(arm, Sensor(0, (TorqueGain(1, 1.07), LoadFriction(0, 0.2))))
+    sensed = Sensed(arm, Sensor(0, (TorqueGain(1, 1.07), LoadFriction(0, 0.2), TimeShift(None, 0.02))))
     expected = sensed.predict_torque(test)
     np.testing.assert_array_equal(sensed.predict_torque(seal(test)), expected)
     assert np.abs(expected - arm.predict_torque(test)).max() > 0.01  # the laws are in it
+    moved = shifted(seal(test), 0.02)
+    assert isinstance(moved, SealedSplit) and not np.array_equal(moved.q, test.q)
+    with pytest.raises(SealedRead):
+        moved.tau
