@@ -58,7 +58,9 @@ can undo a round) is the model's refit strategy, chosen once from the model
    training states (:data:`~bench.residual.checks.MASS_STATES` of them) is
    undone too; a fitted model whose own mass matrix is not is reported as such.
 7. **Repeat** until a round accepts nothing, for at most :data:`MAX_ROUNDS`
-   rounds.
+   rounds. A round whose every law became a finding (step 5) leaves the model
+   as it was and is not undone: the findings are not offered again, and the
+   next round traces without them.
 
 The budget's seconds bound the whole loop (under a work budget, its steps,
 nothing below depends on time: see :func:`residual_loop`): the method's fit has
@@ -426,7 +428,7 @@ class _Loop(Tidying, Choosing):
         self.in_budget("tracing")
         accepted = [label(c) for c in traced.accepted]
         report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
-        before_round = (train, sensor)
+        before_round, refused_before = (train, sensor), set(self.beyond)
         proposed = self.choose(model, traced, laws, k)
         self.in_budget("refitting jointly")
         proposed, removed, simplified = self.tidy(proposed, findings)
@@ -435,6 +437,16 @@ class _Loop(Tidying, Choosing):
         self.pending["heldout_mse"] = {"before": held, "with_them": proposed_held}
         proposed_mass = self.timed(smallest_mass_eigenvalue, proposed, train)
         self.in_budget("scoring the refitted model on held-out data")
+        equivalent = [entry for _, _, entry in traced.equivalents] or None
+        refused = [name for name in accepted if name in set(self.beyond) - refused_before]
+        if refused and not set(accepted) - set(removed):
+            # every law it found is a finding, which the trace does not offer again: the model is as it was,
+            # and the next round traces without them
+            self.use(*before_round)
+            rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed,
+                                simplified=simplified or None, seconds=self.elapsed(), equivalent=equivalent))
+            report(f"round {k}: every law it found is a finding, not offered again; the next round traces without them")
+            return model, held, mass, findings, False
         undo = None  # why the round is undone: the JSON's words, then the progress line's
         if mass > 0 and not proposed_mass > 0:
             undo = (f"with these effects the mass matrix is not positive definite on the training data "
@@ -446,7 +458,6 @@ class _Loop(Tidying, Choosing):
                     f"held-out MSE {proposed_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")
         else:
             undo = self.timed(strategy.check, proposed, model, train)
-        equivalent = [entry for _, _, entry in traced.equivalents] or None
         if undo is not None:
             self.use(*before_round)
             rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed, f"undone: {undo[0]}",

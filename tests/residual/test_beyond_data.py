@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bench.core.budget import Budget
 from bench.core.data import add_noise, generate
 from bench.physics.effects import EFFECTS
 from bench.physics.terms import Term
@@ -12,6 +13,8 @@ from bench.residual.model import LoopModel
 from bench.residual.beyond_data import beyond_data, earns_place, held_out_verdict, not_identified
 from bench.residual.strategies import strategy_for
 from bench.physics.models import ExpressionModel
+from bench.residual import residual_loop
+from bench.tools.robot_log import simulate
 from systems import get_system
 
 
@@ -74,3 +77,16 @@ def test_on_one_trajectory_only_a_law_of_a_fixed_form_is_judged_on_held_out_regi
     assert len(asked) == 2
     # independent samples: nothing to overfit, it stays unasked
     assert held_out_verdict(_data(), errors(1.0, 1.0), regions=True) == (None, None) and len(asked) == 2
+
+
+def test_a_round_whose_every_law_is_a_finding_leaves_the_model_as_it_was_and_the_loop_goes_on():
+    # a cogging torque on one trajectory: round 1 finds its periodic parts, which one trajectory cannot confirm;
+    # they are findings, not offered again, and the loop traces on without them instead of ending undone
+    time, d = simulate("double_pendulum", 8.0, 100.0, 0.2, ["periodic_torque=1:0.8,6,0.5"], 0.01, 0)
+    one = d.replace(recording=np.full(len(d), "r0"), trajectory=np.full(len(d), "A"), time=time)
+    out = residual_loop("sysid", one, None, budget=Budget(steps=1000), max_rounds=2, report=lambda line: None)
+    first, second = out.rounds[1], out.rounds[2]
+    assert first["accepted"] and set(first["accepted"]) <= set(first["removed"]) and "stop" not in first
+    assert first["heldout_mse"] == out.rounds[0]["heldout_mse"]
+    assert all(e["kind"] == "beyond_data" for e in out.effects if e["name"].startswith("periodic"))
+    assert second["round"] == 2 and not (out.ending["reason"] == "undone" and out.ending["round"] == 1)
