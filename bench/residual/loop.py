@@ -47,7 +47,7 @@ can undo a round) is the model's refit strategy, chosen once from the model
    (:mod:`bench.physics.laws`).
 6. **Keep the round only if it generalises.** The round's model is scored by
    cross-validation over whole trajectories (:mod:`bench.residual.validation`:
-   leave one trajectory out, contiguous spans of the one trajectory the
+   leave one trajectory out, regions of the states of the one trajectory the
    training data hold, or contiguous blocks of independent samples); a round
    that does not lower that held-out error is undone and the loop ends, so
    the final model is never worse than the starting one on held-out data. A strategy may undo a round too (a
@@ -433,20 +433,20 @@ class _Loop(Tidying, Choosing):
         self.in_budget("refitting jointly")
         proposed, removed, simplified = self.tidy(proposed, findings)
         train = self.train
-        proposed_held = self.timed(self.heldout, proposed)
-        self.pending["heldout_mse"] = {"before": held, "with_them": proposed_held}
-        proposed_mass = self.timed(smallest_mass_eigenvalue, proposed, train)
-        self.in_budget("scoring the refitted model on held-out data")
         equivalent = [entry for _, _, entry in traced.equivalents] or None
-        refused = [name for name in accepted if name in set(self.beyond) - refused_before]
+        refused = set(accepted) & (self.beyond.keys() - refused_before)
         if refused and not set(accepted) - set(removed):
-            # every law it found is a finding, which the trace does not offer again: the model is as it was,
-            # and the next round traces without them
+            # every law it found is a finding, which the trace does not offer again: the model is as it was
+            # (nothing to score), and the next round traces without them
             self.use(*before_round)
             rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed,
                                 simplified=simplified or None, seconds=self.elapsed(), equivalent=equivalent))
             report(f"round {k}: every law it found is a finding, not offered again; the next round traces without them")
             return model, held, mass, findings, False
+        proposed_held = self.timed(self.heldout, proposed)
+        self.pending["heldout_mse"] = {"before": held, "with_them": proposed_held}
+        proposed_mass = self.timed(smallest_mass_eigenvalue, proposed, train)
+        self.in_budget("scoring the refitted model on held-out data")
         undo = None  # why the round is undone: the JSON's words, then the progress line's
         if mass > 0 and not proposed_mass > 0:
             undo = (f"with these effects the mass matrix is not positive definite on the training data "
