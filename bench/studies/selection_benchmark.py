@@ -360,6 +360,9 @@ def page(result: dict) -> str:
     rules = _rules(result)
     lines = ["# How well each way of choosing a model chooses", "",
              f"Command: `{result['command']}`" + (f", at commit {result['commit']}" if result.get("commit") else ""), "",
+             *[f"Run again, {', '.join(r['candidates'])} only, by `{r['command']}` at commit {r['commit']}: the other "
+               "candidates' figures are as the command above made them; the rows run again have no stack, which needs "
+               "every candidate's held-out predictions.\n" for r in result.get("reruns", [])],
              f"Set: {result['set']}; {len(result['cases'])} cases; candidates {', '.join(result['candidates'])}; "
              f"{result['steps']} steps a fit. Regret: the chosen candidate's test MSE over the best candidate's. "
              "The test trajectory is read only to score.", "",
@@ -428,6 +431,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--real-only", action="store_true",
                         help="read the shipped real arms' select pages again into the page already at --out, "
                              "keeping its cases' rows as they were made (their runs are not redone)")
+    parser.add_argument("--rerun", type=csv_list, default=None, metavar="CANDIDATES",
+                        help="run only these candidates again on the cases of the page already at --out, keeping "
+                             "the others' figures from it, and score the rules again (not the stack, which needs "
+                             "every candidate's held-out predictions)")
 
 
 def _said(s: dict) -> str:
@@ -452,6 +459,9 @@ def _publish(out: Path, result: dict) -> None:
 
 
 def main(args) -> int:
+    if getattr(args, "rerun", None):
+        from bench.studies.selection_rerun import rerun  # it builds on this module
+        return rerun(args)
     if args.real_only:
         made = args.out.with_suffix(".json")
         if not made.exists():

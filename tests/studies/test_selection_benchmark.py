@@ -153,3 +153,42 @@ def test_candidates_other_than_selects_or_fewer_than_two_are_refused_in_one_line
     with pytest.raises(UserError, match=re.escape(said)):
         sb.main(args)
     assert not list(tmp_path.iterdir())
+
+
+def test_rerun_runs_only_the_named_candidates_and_scores_the_rules_on_the_merged_figures(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    from bench.core.errors import UserError
+    from bench.studies import selection_rerun
+
+    monkeypatch.setattr(sb, "REAL", {})
+    case = sb.Case("ur5", "one", "drive", 0)
+    kept = sb.scores({"candidates": [_entry("standard", 0.5, 0.6), _entry("feasible", 0.4, 0.3),
+                                     _entry("loop", 0.3, 0.5)], "stack": {"validation_mse": 0.1, "test_mse": 0.1}})
+    rows = [{"case": case.name, "protocol": "auto", "folds": "regions", "scores": kept}]
+    out = tmp_path / "benchmark.md"
+    out.with_suffix(".json").write_text(json.dumps(
+        {"command": "the cases' command", "commit": "c0", "set": "development", "cases": [case.name],
+         "candidates": ["standard", "feasible", "loop"], "steps": 2, "table": rows, "summary": sb.summary(rows),
+         "real": []}))
+    ran = {}
+
+    def run_jobs(jobs, *_, **__):  # the loop, run again, is now validated best, and is the best on the test
+        ran.update(jobs)
+        return {name: sb.scores({"candidates": [_entry("loop", 0.2, 0.1)]}) for name in jobs}
+
+    monkeypatch.setattr(selection_rerun, "run_jobs", run_jobs)
+    args = SimpleNamespace(out=out, rerun=["loop"], workers=1, cluster=None, real_only=False,
+                           invocation="python -m bench study selection --rerun loop")
+    assert sb.main(args) == 0
+    (job,) = ran.values()
+    assert job.candidates == ("loop",) and job.folds == "regions" and job.where.endswith(f"cases_development_rerun/{case.name}")
+    result = json.loads(out.with_suffix(".json").read_text())
+    s = result["table"][0]["scores"]
+    assert s["best"] == "loop" and s["rules"]["lowest"] == {"chosen": "loop", "regret": 1.0}
+    assert s["candidates"]["feasible"]["test_mse"] == 0.3 and s["candidates"]["loop"]["test_mse"] == 0.1
+    assert "stack" not in s["rules"]  # the stack needs every candidate's held-out predictions
+    assert result["commit"] == "c0" and result["reruns"][0]["candidates"] == ["loop"]
+    assert "Run again, loop only, by `python -m bench study selection --rerun loop`" in out.read_text()
+    with pytest.raises(UserError, match=re.escape("--rerun: loop+gp not among the page's candidates")):
+        sb.main(SimpleNamespace(**(vars(args) | {"rerun": ["loop+gp"]})))

@@ -1,0 +1,64 @@
+"""``python -m bench study selection --rerun CANDIDATES``: the selection
+benchmark's page already at ``--out``, with only these candidates run again.
+
+Each case's run of ``bench select`` is redone with the named candidates only,
+at this commit, in ``cases_SET_rerun`` beside the page; the other candidates'
+figures are those the page keeps (:data:`~bench.studies.selection_benchmark.KEPT_FIGURES`),
+and every rule is scored again on the merged figures, except the ``stack``,
+which needs every candidate's held-out predictions: a row run again has none.
+The page keeps its command and commit, and says which candidates were run
+again, by which command, at which commit. A change that touches only some
+candidates' code is measured so without running the others again.
+"""
+
+from __future__ import annotations
+
+import json
+
+from bench.core.errors import UserError
+from bench.runner.ledger import Ledger
+from bench.runner.progress import print_now
+from bench.runner.provenance import provenance
+from bench.runner.schedule import run_jobs
+from bench.studies.selection_benchmark import SelectCase, _publish, _said, cases, scores, summary
+
+
+def merged(kept: dict, again: dict, order: list[str]) -> dict:
+    """A row's scores from the figures ``kept`` on the page and those of the candidates run ``again``, which
+    replace theirs; candidates in ``order`` (select's)."""
+    if "error" in again:
+        return {"error": f"run again: {again['error']}"}
+    figures = {**kept.get("candidates", {}), **again["candidates"]}
+    entries = [{"name": n, **f, "status": "ok" if f.get("validation_mse") is not None else "failed",
+                "model": n if f.get("validation_mse") is not None else None}
+               for n in order if (f := figures.get(n)) is not None]
+    return scores({"candidates": entries})
+
+
+def rerun(args) -> int:
+    made = args.out.with_suffix(".json")
+    if not made.exists():
+        raise UserError(f"{made}: no page to run candidates again on; run the study without --rerun first")
+    before = json.loads(made.read_text())
+    unknown = [n for n in args.rerun if n not in before["candidates"]]
+    if unknown:
+        raise UserError(f"--rerun: {', '.join(unknown)} not among the page's candidates "
+                        f"({', '.join(before['candidates'])})")
+    again = tuple(n for n in before["candidates"] if n in args.rerun)
+    by_name = {c.name: c for c in cases(before["set"])}
+    root = args.out.parent / f"cases_{before['set']}_rerun"
+    runs = sorted({(t["case"], t.get("folds") or t["protocol"]) for t in before["table"] if "rules" in t["scores"]})
+    jobs = {f"{name} {folds}": SelectCase(by_name[name].arm, by_name[name].layout, by_name[name].effects,
+                                          by_name[name].seed, folds, before["steps"], again, args.workers,
+                                          str(root / name))
+            for name, folds in runs}
+    ledger = Ledger(args.out)
+    done = run_jobs(jobs, 1, _said, print_now, ledger, cluster=args.cluster)
+    table = [dict(t, scores=merged(t["scores"], done[f"{t['case']} {t.get('folds') or t['protocol']}"],
+                                   before["candidates"]))
+             if "rules" in t["scores"] else t for t in before["table"]]
+    reruns = before.get("reruns", []) + [{"candidates": list(again), "command": args.invocation,
+                                          "commit": provenance().get("commit")}]
+    _publish(args.out, {**before, "table": table, "summary": summary(table), "reruns": reruns})
+    ledger.close()
+    return 0
