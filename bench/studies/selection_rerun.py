@@ -20,7 +20,7 @@ from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now
 from bench.runner.provenance import provenance
 from bench.runner.schedule import run_jobs
-from bench.studies.selection_benchmark import SelectCase, _publish, _said, cases, scores, summary
+from bench.studies.selection_benchmark import SelectCase, _publish, cases, scores, summary
 
 
 def merged(kept: dict, again: dict, order: list[str]) -> dict:
@@ -33,6 +33,13 @@ def merged(kept: dict, again: dict, order: list[str]) -> dict:
                 "model": n if f.get("validation_mse") is not None else None}
                for n in order if (f := figures.get(n)) is not None]
     return scores({"candidates": entries})
+
+
+def _said(s: dict) -> str:
+    """A case's candidates run again, in one line: their validation and test MSEs (the rules wait for the merge)."""
+    return s.get("error") or ", ".join(f"{n} validation {f['validation_mse']:.4g}, test {f['test_mse']:.4g}"
+                                       if f.get("validation_mse") is not None and f.get("test_mse") is not None
+                                       else f"{n} failed" for n, f in s["candidates"].items())
 
 
 def rerun(args) -> int:
