@@ -2,8 +2,7 @@
 prior, ``loop+RESIDUAL`` (``loop+gp``), wherever a method name goes.
 
 The loop (:func:`bench.residual.loop.residual_loop`) fits SysId's feasible
-rigid body with friction on each joint (:data:`HYPERPARAMETERS`) on the
-training data and adds the laws of the arm, the sensor and
+rigid body on the training data and adds the laws of the arm, the sensor and
 the drive that the data identify; its final model (the rigid body, its named
 laws, read through the sensor's laws) is the prior, and the residual learner
 of :mod:`methods.hybrid` is fitted to what it leaves.
@@ -42,11 +41,8 @@ from methods.base import METHODS, Method
 from methods.hybrid import Prior, keep_shared, prior_unavailable, register_prior
 from methods.progress import Progress
 
-#: the method whose model the loop extends, and its configuration: select's ``feasible``, SysId's feasible rigid
-#: body with Coulomb and viscous friction on each joint (held at 0 or above). From the rigid body alone the loop
-#: must trace each joint's friction before it reaches what the standard model lacks, and on one trajectory a
-#: round it cannot finish leaves inertial parameters that stand in for friction (docs/choices.md)
-METHOD, HYPERPARAMETERS = "sysid", {"feasible": True, "friction": True}
+#: the method whose model the loop extends
+METHOD = "sysid"
 
 
 def identify(train: Dataset, system, seed: int) -> FittedModel:
@@ -62,7 +58,7 @@ def run(train: Dataset, seed: int, budget: Budget, rounds: int | None = None) ->
     if rounds is None:
         rounds = MAX_ROUNDS if budget.steps is None else budget.steps
     return residual_loop(METHOD, train, None, budget=Budget(steps=budget.steps) if budget.steps is not None else budget,
-                         seed=seed, hyperparameters=HYPERPARAMETERS, max_rounds=min(rounds, MAX_ROUNDS),
+                         seed=seed, max_rounds=min(rounds, MAX_ROUNDS),
                          report=lambda line: print(f"prior: {line}", flush=True))
 
 
@@ -72,8 +68,7 @@ def rounds_run(result: ResidualResult) -> int:
     return sum(1 for r in result.rounds if r["round"] > 0 and (skipped is None or r.get("stop") != skipped))
 
 
-PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the feasible rigid body, its friction and "
-                             "the named laws)",
+PRIOR = register_prior(Prior("loop", "the residual loop's model from SysId (the feasible rigid body and its named laws)",
                              identify, "the loop's model"))
 
 
@@ -86,8 +81,8 @@ class Loop(Method):
 
     title = "the residual loop's model from SysId"
     #: what the method is, for docs/methods_and_systems.md (generated from the registry)
-    summary = ("the residual loop's final model as a method: SysId's feasible rigid body with Coulomb and viscous "
-               "friction on each joint, and the laws of the arm, the sensor and the drive that the data identify (a round a step); also a hybrid's prior, "
+    summary = ("the residual loop's final model as a method: SysId's rigid body and the laws of the arm, the "
+               "sensor and the drive that the data identify (a round a step); also a hybrid's prior, "
                "`loop+RESIDUAL` (`loop+gp`)")
 
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)

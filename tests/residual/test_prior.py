@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from bench.residual.loop import not_started, residual_loop
-from bench.residual.prior import HYPERPARAMETERS, METHOD, rounds_run
+from bench.residual.prior import rounds_run
 from methods import METHODS
 from methods.hybrid import PRIORS
 from methods.saving import TOLERANCE, load_model, save_model
@@ -33,8 +33,7 @@ def test_the_loop_method_is_the_loops_final_model_a_round_its_step(arm, capsys):
     system, train, test = arm
     for steps in (1, 2):
         fitted = METHODS["loop"]().fit(train, "indirect", 0, budget=Budget(steps=steps), system=system)
-        result = residual_loop(METHOD, train, None, budget=Budget(steps=steps), seed=0, max_rounds=steps,
-                               hyperparameters=HYPERPARAMETERS, report=lambda line: None)
+        result = residual_loop("sysid", train, None, budget=Budget(steps=steps), seed=0, max_rounds=steps, report=lambda line: None)
         np.testing.assert_array_equal(fitted.predict_torque(test), result.models[1].predict_torque(test))
         ran = [r for r in result.rounds if r["round"] > 0]
         assert fitted.fit_info["steps"] == len(ran) <= steps
@@ -47,8 +46,7 @@ def test_a_loop_hybrid_fits_its_residual_to_what_the_loop_leaves_and_saves(arm, 
     hybrid = METHODS["loop+sparse_torque"]().fit(train, "indirect", 0, budget=Budget(steps=1), system=system)
     # the prior is the loop run to its end by work (a round that accepts nothing, or MAX_ROUNDS), whatever the
     # hybrid's budget: two rounds or more, where the residual's budget is one step
-    loop = residual_loop(METHOD, train, None, budget=Budget(steps=1), seed=0, hyperparameters=HYPERPARAMETERS,
-                         report=lambda line: None)
+    loop = residual_loop("sysid", train, None, budget=Budget(steps=1), seed=0, report=lambda line: None)
     assert len([r for r in loop.rounds if r["round"] > 0]) >= 2
     np.testing.assert_allclose(hybrid.prior.predict_torque(test), loop.models[1].predict_torque(test),
                                rtol=1e-12, atol=1e-12)
