@@ -27,6 +27,7 @@ as an entry point of the registry's group (:mod:`bench.core.registry`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -38,11 +39,21 @@ from bench.physics.models import FittedModel
 from bench.residual.loop import MAX_ROUNDS, not_started, residual_loop
 from bench.residual.result import ResidualResult
 from methods.base import METHODS, Method
+from methods.config import MethodConfig, Named
 from methods.hybrid import Prior, keep_shared, prior_unavailable, register_prior
 from methods.progress import Progress
 
 #: the method whose model the loop extends
 METHOD = "sysid"
+
+
+@dataclass(frozen=True)
+class LoopConfig(MethodConfig):
+    """``friction``: the loop starts from SysId's feasible rigid body with Coulomb and viscous friction on each
+    joint held at 0 or above (select's ``feasible``), rather than from the rigid body alone; the friction is then
+    the start's, and the loop traces what that model lacks."""
+
+    friction: bool = False
 
 
 def identify(train: Dataset, system, seed: int) -> FittedModel:
@@ -51,14 +62,16 @@ def identify(train: Dataset, system, seed: int) -> FittedModel:
     return run(train, seed, Budget(steps=1), MAX_ROUNDS).models[1]
 
 
-def run(train: Dataset, seed: int, budget: Budget, rounds: int | None = None) -> ResidualResult:
+def run(train: Dataset, seed: int, budget: Budget, rounds: int | None = None, friction: bool = False) -> ResidualResult:
     """The loop on ``train`` within ``budget``, at most ``rounds`` rounds (default: under a work budget of ``N``
-    steps, ``N``; under a time budget, :data:`~bench.residual.loop.MAX_ROUNDS`), its progress printed line by
-    line."""
+    steps, ``N``; under a time budget, :data:`~bench.residual.loop.MAX_ROUNDS`), from the rigid body alone or,
+    with ``friction``, from the feasible body with friction on each joint (:class:`LoopConfig`), its progress
+    printed line by line."""
     if rounds is None:
         rounds = MAX_ROUNDS if budget.steps is None else budget.steps
     return residual_loop(METHOD, train, None, budget=Budget(steps=budget.steps) if budget.steps is not None else budget,
-                         seed=seed, max_rounds=min(rounds, MAX_ROUNDS),
+                         seed=seed, hyperparameters={"friction": True} if friction else None,
+                         max_rounds=min(rounds, MAX_ROUNDS),
                          report=lambda line: print(f"prior: {line}", flush=True))
 
 
@@ -85,6 +98,9 @@ class Loop(Method):
                "sensor and the drive that the data identify (a round a step); also a hybrid's prior, "
                "`loop+RESIDUAL` (`loop+gp`)")
 
+    Config = LoopConfig
+    configurations = {"feasible": Named("the loop from select's feasible model: the feasible rigid body with Coulomb "
+                                        "and viscous friction on each joint", {"friction": True})}
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "the residual loop traces torques: the direct experiment has none"
     smoke = {"max_steps": 1, "eval_samples": 128}
@@ -103,9 +119,9 @@ class Loop(Method):
         return None if system.linear_form() is not None else f"loop: {prior_unavailable('loop', system)}"
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
-        result = run(train, self.seed, self.budget)
+        result = run(train, self.seed, self.budget, friction=self.config.friction)
         self.model, self._rounds = result.models[1], rounds_run(result)
-        if self.budget.steps is not None and self.budget.steps >= MAX_ROUNDS:
+        if not self.config.friction and self.budget.steps is not None and self.budget.steps >= MAX_ROUNDS:
             keep_shared(PRIOR.name, train, self.system, self.seed, self.model)  # the prior's own rounds: shared
         progress.stop("solved")
 

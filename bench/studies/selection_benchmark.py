@@ -112,8 +112,8 @@ REAL = {"kuka_lwr4 (default split)": "results/measured/select_default/select.jso
         "dfki_double_pendulum (default split)": "results/measured/select_dfki_default/select.json",
         "dfki_double_pendulum (swapped split)": "results/measured/select_dfki_swapped/select.json"}
 #: the candidates from the rigid body to the flexible residuals: the ``one_se`` rule's order
-SIMPLICITY = ("standard", "feasible", "loop", "feasible+sparse_torque", "standard+gp", "feasible+gp", "loop+gp",
-              "standard+mlp", "feasible+delan")
+SIMPLICITY = ("standard", "feasible", "loop", "loop_feasible", "feasible+sparse_torque", "standard+gp", "feasible+gp",
+              "loop+gp", "standard+mlp", "feasible+delan")
 #: the candidates the study runs: select's own less DeLaN and the loop's two, whose fits take the longest
 #: (the loop's step is a round, so every work budget gives it all its rounds)
 CANDIDATES = ("standard", "feasible", "standard+gp", "feasible+gp", "standard+mlp", "feasible+sparse_torque")

@@ -1,7 +1,8 @@
 """``python -m bench study selection --rerun CANDIDATES``: the selection
 benchmark's page already at ``--out``, with only these candidates run again.
 
-Each case's run of ``bench select`` is redone with the named candidates only,
+Each case's run of ``bench select`` is redone with the named candidates only
+(any of select's: one the page lacks is added),
 at this commit, in ``cases_SET_rerun`` beside the page; the other candidates'
 figures are those the page keeps (:data:`~bench.studies.selection_benchmark.KEPT_FIGURES`),
 and every rule is scored again on the merged figures, except the ``stack``,
@@ -21,6 +22,7 @@ from bench.runner.progress import print_now
 from bench.runner.provenance import provenance
 from bench.runner.schedule import run_jobs
 from bench.studies.selection_benchmark import SelectCase, _publish, cases, scores, summary
+from bench.tools import select as selection
 
 
 def merged(kept: dict, again: dict, order: list[str]) -> dict:
@@ -47,11 +49,12 @@ def rerun(args) -> int:
     if not made.exists():
         raise UserError(f"{made}: no page to run candidates again on; run the study without --rerun first")
     before = json.loads(made.read_text())
-    unknown = [n for n in args.rerun if n not in before["candidates"]]
+    known = [c.name for c in selection.CANDIDATES]
+    unknown = [n for n in args.rerun if n not in known]
     if unknown:
-        raise UserError(f"--rerun: {', '.join(unknown)} not among the page's candidates "
-                        f"({', '.join(before['candidates'])})")
-    again = tuple(n for n in before["candidates"] if n in args.rerun)
+        raise UserError(f"--rerun: unknown candidate(s) {', '.join(unknown)}; select's are {', '.join(known)}")
+    again = tuple(n for n in known if n in args.rerun)
+    order = [n for n in known if n in before["candidates"] or n in again]  # select's order; a new one is added
     by_name = {c.name: c for c in cases(before["set"])}
     root = args.out.parent / f"cases_{before['set']}_rerun"
     runs = sorted({(t["case"], t.get("folds") or t["protocol"]) for t in before["table"] if "rules" in t["scores"]})
@@ -61,11 +64,10 @@ def rerun(args) -> int:
             for name, folds in runs}
     ledger = Ledger(args.out)
     done = run_jobs(jobs, 1, _said, print_now, ledger, cluster=args.cluster)
-    table = [dict(t, scores=merged(t["scores"], done[f"{t['case']} {t.get('folds') or t['protocol']}"],
-                                   before["candidates"]))
+    table = [dict(t, scores=merged(t["scores"], done[f"{t['case']} {t.get('folds') or t['protocol']}"], order))
              if "rules" in t["scores"] else t for t in before["table"]]
     reruns = before.get("reruns", []) + [{"candidates": list(again), "command": args.invocation,
                                           "commit": provenance().get("commit")}]
-    _publish(args.out, {**before, "table": table, "summary": summary(table), "reruns": reruns})
+    _publish(args.out, {**before, "candidates": order, "table": table, "summary": summary(table), "reruns": reruns})
     ledger.close()
     return 0

@@ -4,7 +4,10 @@ on its training data alone, fitted on all of it and scored on the test data once
 The candidates (:data:`CANDIDATES`) are the field's models of a real arm: the
 standard model, the feasible rigid body with nonnegative joint friction,
 hybrids of either with a learned residual, the residual loop's model from
-SysId, and the loop's model with a Gaussian process of what it leaves. Each
+SysId's rigid body alone and from its feasible body with friction on each
+joint (``loop_feasible``: which start generalises better is a question for
+validation), and the first loop's model with a Gaussian process of what it
+leaves. Each
 is one run of the matrix with ``--tune`` (:mod:`bench.evaluation.tuning`):
 its hyperparameters chosen by the
 suite's validation protocol (:mod:`bench.core.folds`) on the training
@@ -87,15 +90,16 @@ GP_STEPS, NETWORK_STEPS = 30, 400
 
 #: the candidates, in the page's order; the closed-form fits (SysId, sparse regression) are one step
 CANDIDATES = (
-    Candidate("standard", "sysid", "standard", start=8),
-    Candidate("feasible", "sysid", "feasible", start=7),
-    Candidate("standard+gp", "standard+gp", work=GP_STEPS, start=4),
-    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS, start=3),
-    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=1),
-    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=2),
-    Candidate("feasible+sparse_torque", "feasible+sparse_torque", start=6),
+    Candidate("standard", "sysid", "standard", start=9),
+    Candidate("feasible", "sysid", "feasible", start=8),
+    Candidate("standard+gp", "standard+gp", work=GP_STEPS, start=5),
+    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS, start=4),
+    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=2),
+    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=3),
+    Candidate("feasible+sparse_torque", "feasible+sparse_torque", start=7),
     Candidate("loop", "loop", work=MAX_ROUNDS, start=0),
-    Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=5),
+    Candidate("loop_feasible", "loop", "feasible", work=MAX_ROUNDS, start=1),
+    Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=6),
 )
 
 

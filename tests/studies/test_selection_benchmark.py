@@ -190,5 +190,13 @@ def test_rerun_runs_only_the_named_candidates_and_scores_the_rules_on_the_merged
     assert "stack" not in s["rules"]  # the stack needs every candidate's held-out predictions
     assert result["commit"] == "c0" and result["reruns"][0]["candidates"] == ["loop"]
     assert "Run again, loop only, by `python -m bench study selection --rerun loop`" in out.read_text()
-    with pytest.raises(UserError, match=re.escape("--rerun: loop+gp not among the page's candidates")):
-        sb.main(SimpleNamespace(**(vars(args) | {"rerun": ["loop+gp"]})))
+    with pytest.raises(UserError, match=re.escape("--rerun: unknown candidate(s) nonsense")):
+        sb.main(SimpleNamespace(**(vars(args) | {"rerun": ["nonsense"]})))
+    # a candidate the page lacks is added, in select's order
+    monkeypatch.setattr(selection_rerun, "run_jobs", lambda jobs, *_, **__: {
+        name: sb.scores({"candidates": [_entry("loop+gp", 0.1, 0.05)]}) for name in jobs})
+    assert sb.main(SimpleNamespace(**(vars(args) | {"rerun": ["loop+gp"]}))) == 0
+    result = json.loads(out.with_suffix(".json").read_text())
+    assert result["candidates"] == ["standard", "feasible", "loop", "loop+gp"]
+    assert result["table"][0]["scores"]["rules"]["lowest"] == {"chosen": "loop+gp", "regret": 1.0}
+    assert [r["candidates"] for r in result["reruns"]] == [["loop"], ["loop+gp"]]
