@@ -431,10 +431,6 @@ def add_arguments(parser) -> None:
     parser.add_argument("--real-only", action="store_true",
                         help="read the shipped real arms' select pages again into the page already at --out, "
                              "keeping its cases' rows as they were made (their runs are not redone)")
-    parser.add_argument("--rerun", type=csv_list, default=None, metavar="CANDIDATES",
-                        help="run only these candidates again on the cases of the page already at --out, keeping "
-                             "the others' figures from it, and score the rules again (not the stack, which needs "
-                             "every candidate's held-out predictions)")
 
 
 def _said(s: dict) -> str:
@@ -459,9 +455,6 @@ def _publish(out: Path, result: dict) -> None:
 
 
 def main(args) -> int:
-    if getattr(args, "rerun", None):
-        from bench.studies.selection_rerun import rerun  # it builds on this module
-        return rerun(args)
     if args.real_only:
         made = args.out.with_suffix(".json")
         if not made.exists():

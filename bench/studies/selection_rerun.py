@@ -1,5 +1,6 @@
-"""``python -m bench study selection --rerun CANDIDATES``: the selection
-benchmark's page already at ``--out``, with only these candidates run again.
+"""``python -m bench study selection-rerun --candidates C1,C2 --out PAGE``: the
+selection benchmark's page already at ``--out`` (``python -m bench study
+selection``), with only these candidates run again.
 
 Each case's run of ``bench select`` is redone with the named candidates only
 (any of select's: one the page lacks is added),
@@ -16,6 +17,9 @@ from __future__ import annotations
 
 import json
 
+from pathlib import Path
+
+from bench.core.arguments import add_workers, csv_list
 from bench.core.errors import UserError
 from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now
@@ -44,16 +48,29 @@ def _said(s: dict) -> str:
                                        else f"{n} failed" for n, f in s["candidates"].items())
 
 
-def rerun(args) -> int:
+HELP = "the selection benchmark's page with only some candidates run again, the others' figures kept"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--candidates", type=csv_list, required=True,
+                        help="the candidates to run again, any of select's "
+                             f"({', '.join(c.name for c in selection.CANDIDATES)}); one the page lacks is added")
+    add_workers(parser, "candidates")
+    parser.add_argument("--out", type=Path, default=Path("results/selection/benchmark.md"),
+                        help="the page made by python -m bench study selection (default "
+                             "results/selection/benchmark.md); the cases run again go beside it")
+
+
+def main(args) -> int:
     made = args.out.with_suffix(".json")
     if not made.exists():
-        raise UserError(f"{made}: no page to run candidates again on; run the study without --rerun first")
+        raise UserError(f"{made}: no page to run candidates again on; make it with python -m bench study selection")
     before = json.loads(made.read_text())
     known = [c.name for c in selection.CANDIDATES]
-    unknown = [n for n in args.rerun if n not in known]
+    unknown = [n for n in args.candidates if n not in known]
     if unknown:
-        raise UserError(f"--rerun: unknown candidate(s) {', '.join(unknown)}; select's are {', '.join(known)}")
-    again = tuple(n for n in known if n in args.rerun)
+        raise UserError(f"--candidates: unknown candidate(s) {', '.join(unknown)}; select's are {', '.join(known)}")
+    again = tuple(n for n in known if n in args.candidates)
     order = [n for n in known if n in before["candidates"] or n in again]  # select's order; a new one is added
     by_name = {c.name: c for c in cases(before["set"])}
     root = args.out.parent / f"cases_{before['set']}_rerun"

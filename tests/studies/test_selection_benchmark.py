@@ -178,9 +178,9 @@ def test_rerun_runs_only_the_named_candidates_and_scores_the_rules_on_the_merged
         return {name: sb.scores({"candidates": [_entry("loop", 0.2, 0.1)]}) for name in jobs}
 
     monkeypatch.setattr(selection_rerun, "run_jobs", run_jobs)
-    args = SimpleNamespace(out=out, rerun=["loop"], workers=1, cluster=None, real_only=False,
-                           invocation="python -m bench study selection --rerun loop")
-    assert sb.main(args) == 0
+    args = SimpleNamespace(out=out, candidates=["loop"], workers=1, cluster=None,
+                           invocation="python -m bench study selection-rerun --candidates loop")
+    assert selection_rerun.main(args) == 0
     (job,) = ran.values()
     assert job.candidates == ("loop",) and job.folds == "regions" and job.where.endswith(f"cases_development_rerun/{case.name}")
     result = json.loads(out.with_suffix(".json").read_text())
@@ -189,13 +189,13 @@ def test_rerun_runs_only_the_named_candidates_and_scores_the_rules_on_the_merged
     assert s["candidates"]["feasible"]["test_mse"] == 0.3 and s["candidates"]["loop"]["test_mse"] == 0.1
     assert "stack" not in s["rules"]  # the stack needs every candidate's held-out predictions
     assert result["commit"] == "c0" and result["reruns"][0]["candidates"] == ["loop"]
-    assert "Run again, loop only, by `python -m bench study selection --rerun loop`" in out.read_text()
-    with pytest.raises(UserError, match=re.escape("--rerun: unknown candidate(s) nonsense")):
-        sb.main(SimpleNamespace(**(vars(args) | {"rerun": ["nonsense"]})))
+    assert "Run again, loop only, by `python -m bench study selection-rerun --candidates loop`" in out.read_text()
+    with pytest.raises(UserError, match=re.escape("--candidates: unknown candidate(s) nonsense")):
+        selection_rerun.main(SimpleNamespace(**(vars(args) | {"candidates": ["nonsense"]})))
     # a candidate the page lacks is added, in select's order
     monkeypatch.setattr(selection_rerun, "run_jobs", lambda jobs, *_, **__: {
         name: sb.scores({"candidates": [_entry("loop+gp", 0.1, 0.05)]}) for name in jobs})
-    assert sb.main(SimpleNamespace(**(vars(args) | {"rerun": ["loop+gp"]}))) == 0
+    assert selection_rerun.main(SimpleNamespace(**(vars(args) | {"candidates": ["loop+gp"]}))) == 0
     result = json.loads(out.with_suffix(".json").read_text())
     assert result["candidates"] == ["standard", "feasible", "loop", "loop+gp"]
     assert result["table"][0]["scores"]["rules"]["lowest"] == {"chosen": "loop+gp", "regret": 1.0}
