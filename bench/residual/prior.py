@@ -95,7 +95,8 @@ class Loop(Method):
     title = "the residual loop's model from SysId"
     #: what the method is, for docs/methods_and_systems.md (generated from the registry)
     summary = ("the residual loop's final model as a method: SysId's rigid body and the laws of the arm, the "
-               "sensor and the drive that the data identify (a round a step); also a hybrid's prior, "
+               "sensor and the drive that the data identify (a round a step); `--config loop=feasible` starts it "
+               "from the feasible body with Coulomb and viscous friction on each joint; also a hybrid's prior, "
                "`loop+RESIDUAL` (`loop+gp`)")
 
     Config = LoopConfig
