@@ -28,7 +28,8 @@ ROOT = Path(__file__).resolve().parent.parent
 COMMANDS = ("list", "run", "table", "data", "fit", "predict", "select", "residual", "convert", "robot-log", "rerun", "leaderboard", "index",
             "study")
 STUDIES = ("gpu", "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling", "syrenets-speed",
-           "syrenets-profile", "stacking-speed", "generalisation", "trajectories", "selection", "long-log")
+           "syrenets-profile", "stacking-speed", "generalisation", "trajectories", "selection", "long-log",
+           "selection-rerun")
 
 
 def _subparsers_of(parser):
