@@ -454,6 +454,20 @@ def _publish(out: Path, result: dict) -> None:
     print(f"wrote {out}")
 
 
+WORDS = {1: "one", 2: "two"}
+
+
+def named_candidates(names: list[str], at_least: int = 1) -> tuple[str, ...]:
+    """``names`` in select's order, each once; a :class:`UserError` in one line where one is not select's or
+    fewer than ``at_least`` are named."""
+    known = [c.name for c in selection.CANDIDATES]
+    unknown = [n for n in names if n not in known]
+    if unknown or len(set(names)) < at_least:
+        raise UserError(f"--candidates: {'unknown candidate(s) ' + ', '.join(unknown) if unknown else f'{WORDS[at_least]} at least'}; "
+                        f"select's are {', '.join(known)}")
+    return tuple(n for n in known if n in names)
+
+
 def main(args) -> int:
     if args.real_only:
         made = args.out.with_suffix(".json")
@@ -463,12 +477,7 @@ def main(args) -> int:
         result.update(real=real_rows(), real_command=args.invocation, real_commit=provenance().get("commit"))
         _publish(args.out, result)
         return 0
-    known = [c.name for c in selection.CANDIDATES]
-    unknown = [n for n in args.candidates if n not in known]
-    if unknown or len(set(args.candidates)) < 2:
-        raise UserError(f"--candidates: {'unknown candidate(s) ' + ', '.join(unknown) if unknown else 'two at least'}; "
-                        f"select's are {', '.join(known)}")
-    candidates = tuple(n for n in known if n in args.candidates)  # select's order, each once
+    candidates = named_candidates(args.candidates, at_least=2)
     chosen = [c for c in cases(args.set) if not args.cases or c.name.startswith(tuple(args.cases))]
     root = args.out.parent / f"cases_{args.set}"
     planned = [(case, protocol, folds) for case in chosen for protocol in args.protocols

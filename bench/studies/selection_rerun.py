@@ -25,7 +25,7 @@ from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now
 from bench.runner.provenance import provenance
 from bench.runner.schedule import run_jobs
-from bench.studies.selection_benchmark import SelectCase, _publish, cases, scores, summary
+from bench.studies.selection_benchmark import SelectCase, _publish, cases, named_candidates, scores, summary
 from bench.tools import select as selection
 
 
@@ -66,12 +66,8 @@ def main(args) -> int:
     if not made.exists():
         raise UserError(f"{made}: no page to run candidates again on; make it with python -m bench study selection")
     before = json.loads(made.read_text())
-    known = [c.name for c in selection.CANDIDATES]
-    unknown = [n for n in args.candidates if n not in known]
-    if unknown:
-        raise UserError(f"--candidates: unknown candidate(s) {', '.join(unknown)}; select's are {', '.join(known)}")
-    again = tuple(n for n in known if n in args.candidates)
-    order = [n for n in known if n in before["candidates"] or n in again]  # select's order; a new one is added
+    again = named_candidates(args.candidates)
+    order = [c.name for c in selection.CANDIDATES if c.name in before["candidates"] or c.name in again]  # a new one added
     by_name = {c.name: c for c in cases(before["set"])}
     root = args.out.parent / f"cases_{before['set']}_rerun"
     runs = sorted({(t["case"], t.get("folds") or t["protocol"]) for t in before["table"] if "rules" in t["scores"]})
