@@ -7,9 +7,10 @@ How the field learns a real arm (Nguyen-Tuong & Peters, ICRA 2010; Reuss et al.
 
 * **The prior** is SysId identified on the training data in one of its
   configurations (:data:`PRIORS`): ``standard`` (rigid-body base parameters
-  plus Coulomb and viscous friction per joint, by least squares) or
-  ``feasible`` (SysId's ``feasible`` configuration: the physically feasible
-  rigid body with nonnegative Coulomb and viscous friction per joint). It
+  plus Coulomb and viscous friction, rotor inertia and a torque offset per
+  joint, by least squares) or ``feasible`` (SysId's ``feasible``
+  configuration: the physically feasible rigid body with nonnegative
+  friction and rotor inertia and a free offset per joint). It
   needs an arm's linear form (a URDF).
 * **The residual** is any registered method that fits torques (the indirect
   experiment), a user's plugin included, fitted to ``tau - tau_prior`` on the
@@ -114,8 +115,9 @@ def sysid_prior(configuration: str):
 
 register_prior(Prior("standard", "SysId's standard configuration", sysid_prior("standard"), "standard model",
                      extra_code=(SysId,)))
-register_prior(Prior("feasible", "SysId's feasible configuration (the feasible rigid bodies and nonnegative "
-                                 "joint friction)", sysid_prior("feasible"), "feasible rigid body",
+register_prior(Prior("feasible", "SysId's feasible configuration (the feasible rigid bodies, nonnegative joint "
+                                 "friction and rotor inertia, and joint offsets)", sysid_prior("feasible"),
+                     "feasible rigid body",
                      extra_code=(SysId,)))
 
 #: the gate lengths a tuned hybrid tries, where its residual is gated (:mod:`bench.evaluation.tuning`)

@@ -41,14 +41,32 @@ optimum.
 
 The standard model (``--config sysid=standard``)
 ------------------------------------------------
-The field's textbook identified model of an arm, which every measured-arm
-table reads its learners against: the rigid-body base parameters plus
-Coulomb and viscous friction on each joint (``F_c sign(qd_j) + b qd_j``;
+The field's standard identified model of an arm, which every measured-arm
+table reads its learners against: the rigid-body base parameters plus, on
+each joint ``j``, Coulomb and viscous friction, the rotor's inertia
+(armature) and a torque offset::
+
+    tau_j = Y_j(q, qd, qdd) pi + F_c_j sign(qd_j) + b_j qd_j + I_a_j qdd_j + tau_0_j
+
+by ordinary least squares (``friction=True, drive=True, feasible=False``;
 the Coulomb column uses the data's filtered velocity sign where they carry
-it, :meth:`~bench.core.data.Dataset.velocity_sign`), by ordinary least
-squares (``friction=True, feasible=False``). See, for instance, Swevers,
-Verdonck & De Schutter, "Dynamic model identification for industrial
-robots", IEEE Control Systems 27(5), 2007.
+it, :meth:`~bench.core.data.Dataset.velocity_sign`). This is the model of
+Khalil & Dombre, *Modeling, Identification and Control of Robots* (2002),
+in its chapters on the dynamic model (friction and the rotors' inertia) and
+on identifying its parameters (the offset), whose base parameters Gautier
+(1990), "Numerical calculation of the base inertial parameters of robots",
+finds by QR as here; see also Swevers, Verdonck & De Schutter, "Dynamic model
+identification for industrial robots", IEEE Control Systems 27(5), 2007.
+The base-parameter reduction (:func:`~bench.physics.regression.base_columns`)
+drops the joint columns the data do not identify apart from the others
+(the first joint's rotor inertia acts as the first link's ``ZZ`` does);
+the record names them (``dropped_joint_columns``), and names the joint
+columns whose standard error exceeds their value
+(``joint_columns_not_significant``), each a finding rather than a parameter.
+On an arm whose torque is measured at the joint, behind the gear, the rotor's
+inertia is not in the torque: what its column takes there is something else
+the model lacks. ``friction=True`` alone gives friction without the drive's
+columns.
 """
 
 from __future__ import annotations
@@ -68,7 +86,7 @@ from bench.physics.effects import EFFECTS
 from bench.physics.linear import FeasibleSet, LinearParametricModel, lagrangian_regressor, torque_regressor
 from bench.physics.models import ParametricModel, mass_and_bias
 from bench.physics.feasible import Feasibility, feasible_fit, nearest_completion
-from bench.physics.regression import Compressed, base_columns, least_squares
+from bench.physics.regression import Compressed, base_columns, fit_statistics, least_squares
 from bench.physics.system import LinearForm
 from methods.base import METHODS
 from methods.config import Named, Range
@@ -84,23 +102,47 @@ class SysIdConfig(TorchConfig):
     identify pulled toward the form's prior (the URDF) with weight
     ``regularisation`` (:mod:`bench.physics.feasible`); ``False`` gives the
     base parameters by least squares. ``friction``: a linear form fitted
-    with Coulomb and viscous friction on each joint (:func:`with_friction`)."""
+    with Coulomb and viscous friction on each joint; ``drive``: with each
+    joint's rotor inertia and a torque offset (:func:`with_joint_terms`)."""
 
     hidden: Annotated[int, Range(1)] = 64
     linear_samples: Annotated[int, Range(1)] = 8192
     feasible: bool = True
     regularisation: Annotated[float, Range(0)] = 1e-6
     friction: bool = False
+    drive: bool = False
 
 
-def with_friction(form: LinearForm) -> LinearForm:
-    """``form`` with viscous and Coulomb friction on each joint as further
-    columns (``b_j``, ``F_c_j``), in the suite's effects' terms."""
+#: the further columns of each joint, in the suite's effects' terms: with friction, then with the drive
+FRICTION_COLUMNS = (("viscous_friction", "b"), ("coulomb_friction", "F_c"))
+DRIVE_COLUMNS = (("armature", "I_a"), ("offset", "tau_0"))
+
+
+def with_joint_terms(form: LinearForm, friction: bool = True, drive: bool = False) -> LinearForm:
+    """``form`` with further columns on each joint: viscous and Coulomb friction (``b_j``, ``F_c_j``) with
+    ``friction``, the rotor's inertia and a torque offset (``I_a_j``, ``tau_0_j``) with ``drive``."""
+    kinds = (FRICTION_COLUMNS if friction else ()) + (DRIVE_COLUMNS if drive else ())
     terms, names = [], []
     for j in range(form.dof):
-        terms += [EFFECTS["viscous_friction"].term(j), EFFECTS["coulomb_friction"].term(j)]
-        names += [f"b_{j + 1}", f"F_c_{j + 1}"]
-    return form.with_terms(terms, names)
+        for effect, symbol in kinds:
+            terms.append(EFFECTS[effect].term(j))
+            names.append(f"{symbol}_{j + 1}")
+    return form.with_terms(terms, names) if terms else form
+
+
+def _joint_column_facts(form: LinearForm, W: np.ndarray, y: np.ndarray, independent: np.ndarray,
+                        dependent: np.ndarray, coef: np.ndarray) -> dict:
+    """The record's facts on ``form``'s further columns in a least-squares fit: those the base-parameter reduction
+    dropped (``dropped_joint_columns``), and those kept whose standard error exceeds their value
+    (``joint_columns_not_significant``), each by name."""
+    first = len(form.names) - len(form.terms)
+    if not form.terms:
+        return {}
+    dropped = [form.names[j] for j in sorted(dependent) if first <= j < len(form.names)]
+    _, stderr, _ = fit_statistics(W[:, independent], y)
+    weak = [form.names[j] for i, j in enumerate(independent)
+            if first <= j < len(form.names) and not stderr[i] < abs(coef[i])]
+    return {"dropped_joint_columns": dropped, "joint_columns_not_significant": weak}
 
 
 def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: bool = False,
@@ -135,6 +177,8 @@ def fit_linear_form(form: LinearForm, data: Dataset, experiment: str, feasible: 
     names = [form.names[j] + ("+" if np.any(beta[i] != 0) else "") for i, j in enumerate(independent) if j != constant]
     model = LinearParametricModel(form, independent[keep], coef[keep], names, offset)
     facts = {"base_parameters": int(keep.sum()), "regressor_columns": len(form.names)}
+    if experiment.learns_torque:
+        facts.update(_joint_column_facts(form, W, y, independent, dependent, coef))
     if form.true_values is not None:
         true = np.asarray(form.true_values + (0.0,))  # the constant's true value is unknown: 0 is not used below
         base_true = (true[independent] + beta @ true[dependent])[keep]
@@ -212,22 +256,25 @@ class SysId(TorchLagrangianMethod):
     stackable = False  # an arm's linear form is solved, not trained; one seed's solve is the work
     configurations = {
         "standard": Named("the field's standard identified model of an arm: rigid-body base parameters plus Coulomb "
-                          "and viscous friction on each joint, by least squares", {"feasible": False, "friction": True}),
+                          "and viscous friction, rotor inertia and a torque offset on each joint, by least squares "
+                          "(Khalil & Dombre 2002)", {"feasible": False, "friction": True, "drive": True}),
         "feasible": Named("a physically feasible model of an arm: rigid bodies whose pseudo-inertias are positive "
-                          "semidefinite, and Coulomb and viscous friction on each joint held at 0 or above",
-                          {"feasible": True, "friction": True}),
+                          "semidefinite, Coulomb and viscous friction and rotor inertia on each joint held at 0 or "
+                          "above, and a torque offset on each joint", {"feasible": True, "friction": True, "drive": True}),
     }
     linear: LinearParametricModel | None = None
 
     def _fit(self, train, experiment, progress):
         form = self.system.linear_form() if self.system is not None else None
-        if form is not None and self.config.friction:
+        joints = self.config.friction or self.config.drive
+        what = " and ".join(w for w, on in (("friction", self.config.friction), ("drive", self.config.drive)) if on)
+        if form is not None and joints:
             if not experiment.learns_torque:
-                raise DataError("sysid's friction columns act on torques: the direct experiment (samples of L) has none")
-            form = with_friction(form)
-        if form is None and self.config.friction:
-            raise DataError(f"sysid's friction columns extend an arm's linear form; {train.system} has a symbolic "
-                            f"form instead (leave friction off, or let the residual loop find the friction)")
+                raise DataError(f"sysid's {what} columns act on torques: the direct experiment (samples of L) has none")
+            form = with_joint_terms(form, self.config.friction, self.config.drive)
+        if form is None and joints:
+            raise DataError(f"sysid's {what} columns extend an arm's linear form; {train.system} has a symbolic "
+                            f"form instead (leave {what} off, or let the residual loop find them)")
         if form is None:
             self.linear = None
             return super()._fit(train, experiment, progress)

@@ -3,8 +3,8 @@ the standard model of a measured arm, and the constant of any measured system.
 
 Each learner on a measured arm reads against what the field would identify
 from the same samples: SysId's standard configuration, the rigid-body base
-parameters plus Coulomb and viscous friction on each joint by least squares
-(:mod:`methods.sysid`). :func:`standard_reference` fits it on the run's
+parameters plus Coulomb and viscous friction, the rotor's inertia and a
+torque offset on each joint, by least squares (:mod:`methods.sysid`). :func:`standard_reference` fits it on the run's
 training data (a solve of a few seconds, the same in every run of one data
 split) and scores it as a run is scored: torque MSE on the training and test
 data, the driven rollouts of the test recordings
@@ -25,6 +25,7 @@ from bench.core.data import Dataset, mse
 from bench.physics.system import System
 from bench.evaluation.driven import driven_entry
 from methods import METHODS
+from methods.sysid import DRIVE_COLUMNS, FRICTION_COLUMNS
 
 #: the method and configuration of the standard model
 METHOD, CONFIGURATION = "sysid", "standard"
@@ -38,12 +39,19 @@ def applies(system: System) -> bool:
 def standard_reference(system: System, train: Dataset, test: Dataset | None) -> dict:
     """The record's ``details.standard_model``: the standard model's train and
     test torque MSE, its driven rollouts where the test data name their
-    recordings' times, and its fit's facts (the mass matrix's definiteness)."""
+    recordings' times, and its fit's facts: the mass matrix's definiteness, and the joint columns it has
+    (``joint_columns``), those the data did not identify (``dropped_joint_columns``) and those whose standard
+    error exceeds their value (``joint_columns_not_significant``)."""
     model = METHODS[METHOD](**METHODS[METHOD].configuration(CONFIGURATION))
     model.fit(train, "indirect", 0, Budget(steps=1), system=system)
     facts = model.record_details()
+    config = model.config
     out = {
         "method": METHOD, "configuration": CONFIGURATION,
+        "joint_columns": [symbol for kinds, on in ((FRICTION_COLUMNS, config.friction), (DRIVE_COLUMNS, config.drive))
+                          if on for _, symbol in kinds],
+        "dropped_joint_columns": facts.get("dropped_joint_columns", []),
+        "joint_columns_not_significant": facts.get("joint_columns_not_significant", []),
         "train_mse": mse(model.predict_torque(train), train.tau),
         "test_mse": None if test is None else mse(model.predict_torque(test), test.tau),
         "mass_matrix_positive_definite": facts.get("mass_matrix_positive_definite"),

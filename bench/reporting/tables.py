@@ -149,13 +149,28 @@ def constant_line(records: list[Record]) -> str:
             f"All n test MSE (the mean over its seeds) is above it is marked ‡.")
 
 
+#: the joint columns of the standard model, in words (:data:`methods.sysid.FRICTION_COLUMNS`, ``DRIVE_COLUMNS``)
+JOINT_COLUMN_WORDS = {"b": "viscous friction", "F_c": "Coulomb friction", "I_a": "rotor inertia", "tau_0": "a torque offset"}
+
+
+def standard_columns(standard: dict) -> str:
+    """The joint columns of a record's standard model in words, the dropped ones named; a record that does not
+    name them had Coulomb and viscous friction alone."""
+    columns = list(standard.get("joint_columns", ("b", "F_c")))
+    words = ["Coulomb and viscous friction"] if {"b", "F_c"} <= set(columns) else []
+    words += [JOINT_COLUMN_WORDS.get(c, c) for c in columns if not (words and c in ("b", "F_c"))]
+    text = ", ".join(words[:-1]) + " and " + words[-1] if len(words) > 1 else "".join(words)
+    dropped = standard.get("dropped_joint_columns")
+    return text + (f" (not identified apart from the rest: {', '.join(dropped)})" if dropped else "")
+
+
 def standard_line(records: list[Record]) -> str:
     """The standard model as the line a measured arm's table reads against; empty where the records carry none."""
     s = _standard(records)
     if not s:
         return ""
-    text = (f"Standard model (SysId's `{s['configuration']}` configuration: rigid-body base parameters plus Coulomb and "
-            f"viscous friction per joint, least squares, on the same samples): train MSE {fmt(s['train_mse'])}, test MSE "
+    text = (f"Standard model (SysId's `{s['configuration']}` configuration: rigid-body base parameters plus "
+            f"{standard_columns(s)} per joint, least squares, on the same samples): train MSE {fmt(s['train_mse'])}, test MSE "
             f"{fmt(s['test_mse']) if s.get('test_mse') is not None else '—'}")
     rollout = s.get("rollout") or {}
     for length, e in sorted(rollout.get("windows", {}).items(), key=lambda kv: float(kv[0])):

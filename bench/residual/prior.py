@@ -49,9 +49,10 @@ METHOD = "sysid"
 
 @dataclass(frozen=True)
 class LoopConfig(MethodConfig):
-    """``friction``: the loop starts from SysId's feasible rigid body with Coulomb and viscous friction on each
-    joint held at 0 or above (select's ``feasible``), rather than from the rigid body alone; the friction is then
-    the start's, and the loop traces what that model lacks."""
+    """``friction``: the loop starts from select's ``feasible`` model (SysId's ``feasible`` configuration: the
+    feasible rigid body with Coulomb and viscous friction and rotor inertia held at 0 or above and a torque offset
+    on each joint), rather than from the rigid body alone; those laws are then the start's, and the loop traces
+    what that model lacks."""
 
     friction: bool = False
 
@@ -65,12 +66,12 @@ def identify(train: Dataset, system, seed: int) -> FittedModel:
 def run(train: Dataset, seed: int, budget: Budget, rounds: int | None = None, friction: bool = False) -> ResidualResult:
     """The loop on ``train`` within ``budget``, at most ``rounds`` rounds (default: under a work budget of ``N``
     steps, ``N``; under a time budget, :data:`~bench.residual.loop.MAX_ROUNDS`), from the rigid body alone or,
-    with ``friction``, from the feasible body with friction on each joint (:class:`LoopConfig`), its progress
+    with ``friction``, from SysId's feasible model with each joint's laws (:class:`LoopConfig`), its progress
     printed line by line."""
     if rounds is None:
         rounds = MAX_ROUNDS if budget.steps is None else budget.steps
     return residual_loop(METHOD, train, None, budget=Budget(steps=budget.steps) if budget.steps is not None else budget,
-                         seed=seed, hyperparameters={"friction": True} if friction else None,
+                         seed=seed, hyperparameters=METHODS[METHOD].configuration("feasible") if friction else None,
                          max_rounds=min(rounds, MAX_ROUNDS),
                          report=lambda line: print(f"prior: {line}", flush=True))
 
@@ -96,12 +97,14 @@ class Loop(Method):
     #: what the method is, for docs/methods_and_systems.md (generated from the registry)
     summary = ("the residual loop's final model as a method: SysId's rigid body and the laws of the arm, the "
                "sensor and the drive that the data identify (a round a step); `--config loop=feasible` starts it "
-               "from the feasible body with Coulomb and viscous friction on each joint; also a hybrid's prior, "
+               "from the feasible body with Coulomb and viscous friction, rotor inertia and a torque offset on each "
+               "joint; also a hybrid's prior, "
                "`loop+RESIDUAL` (`loop+gp`)")
 
     Config = LoopConfig
     configurations = {"feasible": Named("the loop from select's feasible model: the feasible rigid body with Coulomb "
-                                        "and viscous friction on each joint", {"friction": True})}
+                                        "and viscous friction, rotor inertia and a torque offset on each joint",
+                                        {"friction": True})}
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "the residual loop traces torques: the direct experiment has none"
     smoke = {"max_steps": 1, "eval_samples": 128}

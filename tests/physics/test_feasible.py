@@ -115,22 +115,26 @@ def test_columns_held_nonnegative_stay_at_zero_or_above_and_the_rest_are_free(pa
         feasible_fit(Compressed(np.hstack([W, offset]), y), 7, np.asarray(form.prior), 1e-6, [3])
 
 
-def test_the_feasible_configuration_holds_friction_nonnegative_and_a_body_feasible(panda):
+def test_the_feasible_configuration_holds_friction_and_rotor_inertia_nonnegative_and_a_body_feasible(panda):
     from bench.physics.effects import EFFECTS
 
     data = generate(panda, 512, 0)
     b, fc = np.linspace(0.2, 0.8, 7), np.linspace(0.3, 1.2, 7)
-    friction = b * data.qd + fc * np.sign(data.qd)
-    train = data.replace(tau=data.tau + friction)
+    rotor, offset = np.linspace(0.0, 0.6, 7), np.linspace(-1.0, 1.0, 7)  # joint 1's rotor acts as link 1's ZZ does
+    drive = b * data.qd + fc * np.sign(data.qd) + rotor * data.qdd + offset
+    train = data.replace(tau=data.tau + drive)
     model = METHODS["sysid"](**METHODS["sysid"].configuration("feasible")).fit(train, "indirect", 0, budget=Budget(steps=1))
     values = model.identified_parameters()
-    fitted_b = np.array([values[f"b_{j}"] for j in range(1, 8)])
-    fitted_fc = np.array([values[f"F_c_{j}"] for j in range(1, 8)])
-    np.testing.assert_allclose(fitted_b, b, atol=0.05)
-    np.testing.assert_allclose(fitted_fc, fc, atol=0.05)
-    assert model.linear.feasible.nonnegative == tuple(range(70, 84))
+    fitted = {name: np.array([values[f"{name}_{j}"] for j in range(1, 8)]) for name in ("b", "F_c", "I_a", "tau_0")}
+    np.testing.assert_allclose(fitted["b"], b, atol=0.05)
+    np.testing.assert_allclose(fitted["F_c"], fc, atol=0.05)
+    np.testing.assert_allclose(fitted["I_a"][1:], rotor[1:], atol=0.05)
+    np.testing.assert_allclose(fitted["tau_0"], offset, atol=0.05)  # an offset may be negative
+    # b, F_c and I_a of each joint held at 0 or above; tau_0 free
+    assert model.linear.feasible.nonnegative == tuple(70 + 4 * j + k for j in range(7) for k in range(3))
     assert min(smallest_eigenvalues(model.linear.coef[:70], 7)) >= 0.0
-    assert EFFECTS["viscous_friction"].nonnegative and EFFECTS["coulomb_friction"].nonnegative
+    assert all(EFFECTS[e].nonnegative for e in ("viscous_friction", "coulomb_friction", "armature"))
+    assert not EFFECTS["offset"].nonnegative
 
 
 def test_the_residual_loop_refits_a_feasible_fit_under_its_constraints(panda):

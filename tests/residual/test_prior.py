@@ -65,7 +65,7 @@ def test_a_loop_hybrid_fits_its_residual_to_what_the_loop_leaves_and_saves(arm, 
     np.testing.assert_array_equal(timed.prior.predict_torque(test), hybrid.prior.predict_torque(test))
 
 
-def test_the_loop_from_the_feasible_body_starts_with_friction_on_each_joint_and_is_not_the_hybrids_prior(arm, monkeypatch):
+def test_the_loop_from_the_feasible_body_starts_from_selects_feasible_model_and_is_not_the_hybrids_prior(arm, monkeypatch):
     from bench.residual import prior
 
     system, train, test = arm
@@ -73,10 +73,12 @@ def test_the_loop_from_the_feasible_body_starts_with_friction_on_each_joint_and_
     assert config == {"friction": True}
     fitted = METHODS["loop"](**config).fit(train, "indirect", 0, budget=Budget(steps=1), system=system)
     result = residual_loop("sysid", train, None, budget=Budget(steps=1), seed=0, max_rounds=1,
-                           hyperparameters={"friction": True}, report=lambda line: None)
+                           hyperparameters=METHODS["sysid"].configuration("feasible"), report=lambda line: None)
+    assert METHODS["sysid"].configuration("feasible") == {"feasible": True, "friction": True, "drive": True}
     np.testing.assert_array_equal(fitted.predict_torque(test), result.models[1].predict_torque(test))
     plain = residual_loop("sysid", train, None, budget=Budget(steps=1), seed=0, max_rounds=1, report=lambda line: None)
-    # round 0's model holds the rigid body alone among its fits (friction at 0): it fits the training data closer
+    # round 0's model holds the rigid body alone among its fits (each joint's laws at 0): it fits the training data
+    # closer
     assert result.rounds[0]["mse"]["train"] < plain.rounds[0]["mse"]["train"]
     # only the loop from the rigid body alone, at its full rounds, is kept as the hybrids' prior ``loop``
     kept = []

@@ -135,21 +135,60 @@ def test_no_fit_needs_the_urdfs_placeholder_inertias(tmp_path, config):
     assert np.sqrt(np.mean((mine - theirs) ** 2)) < 1e-4 * np.sqrt(np.mean(theirs ** 2))
 
 
-def test_the_standard_model_recovers_friction_on_torques_from_pinocchio():
-    """Rigid-body torques from Pinocchio's RNEA plus known Coulomb and viscous
-    friction: the standard model identifies the friction exactly."""
-    arm = SYSTEMS["ur5"]()
+def _geared_ur5_torques(arm, n: int, seed: int, b, fc, rotor, offset):
+    """States drawn at random and their torques: Pinocchio's RNEA plus, on each joint, viscous and Coulomb friction,
+    a rotor's inertia and an offset."""
     model, data = arm.model, arm.model.createData()
-    rng = np.random.default_rng(0)
-    n = 600
+    rng = np.random.default_rng(seed)
     q, qd, qdd = (rng.uniform(-1.5, 1.5, (n, arm.dof)) for _ in range(3))
+    tau = np.stack([pin.rnea(model, data, *row) for row in zip(q, qd, qdd)])
+    return q, qd, qdd, tau + b * qd + fc * np.sign(qd) + rotor * qdd + offset
+
+
+def test_the_standard_model_recovers_friction_rotor_inertia_and_offsets_on_torques_from_pinocchio():
+    """Rigid-body torques from Pinocchio's RNEA plus known friction, rotor inertias and offsets: the standard
+    model identifies each exactly, but the rotor inertias of joints 1 and 2: the first acts as the first link's
+    ZZ does, and is named in the record as dropped; the second's base parameter is a combination with the
+    inertia of the links about the parallel axes that follow it."""
+    arm = SYSTEMS["ur5"]()
     b, fc = np.linspace(0.2, 0.8, arm.dof), np.linspace(1.0, 0.4, arm.dof)
-    tau = np.stack([pin.rnea(model, data, *row) for row in zip(q, qd, qdd)]) + b * qd + fc * np.sign(qd)
+    rotor, offset = np.linspace(0.5, 0.1, arm.dof), np.linspace(-0.6, 0.9, arm.dof)
+    q, qd, qdd, tau = _geared_ur5_torques(arm, 600, 0, b, fc, rotor, offset)
     train = Dataset(q, qd, qdd, tau, None, "ur5")
     method = METHODS["sysid"](**METHODS["sysid"].configuration("standard"))
     method.fit(train, "indirect", 0, Budget(steps=1), system=arm)
-    found = method.linear.parameters()
+    found = {k.rstrip("+"): v for k, v in method.linear.parameters().items()}
     for j in range(arm.dof):
-        assert found[next(k for k in found if k.rstrip("+") == f"b_{j + 1}")] == pytest.approx(b[j], rel=1e-6)
-        assert found[next(k for k in found if k.rstrip("+") == f"F_c_{j + 1}")] == pytest.approx(fc[j], rel=1e-6)
+        assert found[f"b_{j + 1}"] == pytest.approx(b[j], rel=1e-6)
+        assert found[f"F_c_{j + 1}"] == pytest.approx(fc[j], rel=1e-6)
+        assert found[f"tau_0_{j + 1}"] == pytest.approx(offset[j], rel=1e-6)
+        if j >= 2:
+            assert found[f"I_a_{j + 1}"] == pytest.approx(rotor[j], rel=1e-6)
+    assert "I_a_1" not in found
+    facts = method.record_details()
+    assert facts["dropped_joint_columns"] == ["I_a_1"] and facts["joint_columns_not_significant"] == []
     np.testing.assert_allclose(method.predict_torque(train), tau, atol=1e-8)
+
+
+def test_the_standard_models_test_error_is_plain_least_squares_with_rotor_inertia_and_offset_columns():
+    """On noisy torques of a geared arm, the standard model's test MSE is that of numpy's least squares on
+    Pinocchio's joint torque regressor with each joint's friction, rotor inertia and offset columns, built here."""
+    arm = SYSTEMS["ur5"]()
+    b, fc = np.linspace(2.0, 8.0, arm.dof), np.linspace(10.0, 4.0, arm.dof)
+    rotor, offset = np.linspace(3.0, 0.5, arm.dof), np.linspace(-2.0, 3.0, arm.dof)
+    rng = np.random.default_rng(7)
+    (q, qd, qdd, tau), test = (_geared_ur5_torques(arm, n, seed, b, fc, rotor, offset) for n, seed in ((1500, 1), (500, 2)))
+    tau = tau + rng.normal(0.0, 0.1 * tau.std(axis=0), tau.shape)
+    model, data = arm.model, arm.model.createData()
+
+    def columns(q, qd, qdd):
+        rows = [np.hstack([pin.computeJointTorqueRegressor(model, data, *row), np.diag(row[1]), np.diag(np.sign(row[1])),
+                           np.diag(row[2]), np.eye(arm.dof)]) for row in zip(q, qd, qdd)]
+        return np.vstack(rows)
+
+    coef = np.linalg.lstsq(columns(q, qd, qdd), tau.ravel(), rcond=None)[0]
+    expected = np.mean((columns(*test[:3]) @ coef - test[3].ravel()) ** 2)
+    method = METHODS["sysid"](**METHODS["sysid"].configuration("standard"))
+    method.fit(Dataset(q, qd, qdd, tau, None, "ur5"), "indirect", 0, Budget(steps=1), system=arm)
+    mine = np.mean((method.predict_torque(Dataset(*test, None, "ur5")) - test[3]) ** 2)
+    assert mine == pytest.approx(expected, rel=1e-6)
