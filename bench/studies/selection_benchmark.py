@@ -5,11 +5,18 @@ Each case is a simulated arm (the Panda, the UR5, the KUKA's URDF) whose
 torque holds laws the rigid body lacks (:data:`EFFECT_SETS`), logged as a robot
 logs it (:func:`bench.tools.robot_log.fourier_trajectory`: excitation
 trajectories of finite Fourier series) and declared as a measured arm of
-one's own (a TOML file beside its logs). Two layouts:
+one's own (a TOML file beside its logs). Its layouts:
 
 * ``one``: one training trajectory recorded twice, tested on another
   trajectory :data:`FASTER` times as fast, as the shipped KUKA's;
+* ``two`` and ``three``: two or three training trajectories, each recorded
+  twice, tested on another, as an identification lab records an arm;
 * ``several``: :data:`SEVERAL` training trajectories, tested on another.
+
+Beside the shipped arms' URDFs, the development set has a large geared
+industrial arm (``geared``, :mod:`bench.studies.geared_arm`): its rotors'
+inertia, heavy friction and a shoulder counterbalance, its torque the
+motor's with a motor current's noise, in the ``two`` layout.
 
 (A third, ``long``, is not among the benchmark's cases: :data:`LONG`
 trajectories of :data:`LONG_SECONDS`, the last the test; ``python -m bench
@@ -79,6 +86,7 @@ from bench.runner.ledger import Ledger
 from bench.runner.plugins import register_by_file
 from bench.runner.progress import print_now
 from bench.runner.provenance import provenance
+from bench.studies import geared_arm
 from bench.tools import select as selection
 from bench.tools.robot_log import simulate
 from systems import get_system
@@ -95,6 +103,13 @@ FASTER = 1.5
 #: training trajectories of the ``several`` layout
 SEVERAL = 4
 LAYOUTS = ("one", "several")
+#: the layouts of several trajectories each recorded twice, by their training trajectories
+RECORDED_TWICE = {"two": 2, "three": 3}
+#: training trajectories of each layout but ``long``
+TRAJECTORIES = {"one": 1, "several": SEVERAL, **RECORDED_TWICE}
+#: the development set's cases beyond every arm in :data:`LAYOUTS`: the shipped arms with two and three
+#: trajectories each recorded twice, and the geared arm with two
+GEARED = "geared"
 #: the ``long`` layout (:mod:`bench.studies.long_log`): trajectories (the last the test) and the seconds of each,
 #: 12 x 5,840 = 70,080 samples at :data:`RATE_HZ`
 LONG, LONG_SECONDS = 12, 58.4
@@ -139,6 +154,8 @@ EFFECT_SETS = {
                                 f"armature={_values(rng, dof, 0.05, 0.3)}", f"offset={_values(rng, dof, -0.5, 0.5)}",
                                 f"torque_gain={_values(rng, dof, 0.93, 1.07)}",
                                 f"load_friction={_values(rng, dof, 0.02, 0.1)}"],
+    # a geared arm's drives: rotor inertia, heavy friction and a shoulder counterbalance (the geared arm only)
+    "geared": geared_arm.effects,
 }
 
 
@@ -156,11 +173,16 @@ class Case:
 
 def cases(which: str) -> list[Case]:
     seeds = DEVELOPMENT_SEEDS if which == DEVELOPMENT else EVALUATION_SEEDS
-    return [Case(a, lay, e, s) for s in seeds for a in ARMS for lay in LAYOUTS for e in EFFECT_SETS]
+    every = [Case(a, lay, e, s) for s in seeds for a in ARMS for lay in LAYOUTS for e in EFFECT_SETS
+             if e != GEARED]
+    if which != DEVELOPMENT:
+        return every
+    return every + [Case(a, lay, e, s) for s in seeds for a in ARMS for lay in RECORDED_TWICE for e in EFFECT_SETS
+                    if e != GEARED] + [Case(GEARED, "two", GEARED, s) for s in seeds]
 
 
 def _system(arm: str):
-    if arm == "kuka":
+    if arm in ("kuka", GEARED):
         return get_system(register_by_file(f"urdf:{_urdf(arm)}"))
     return get_system(arm)
 
@@ -170,14 +192,16 @@ def _data() -> Path:
 
 
 def _urdf(arm: str) -> Path:
-    return _data() / {"panda": "panda.urdf.gz", "ur5": "ur5_robot.urdf.gz", "kuka": "kuka_lwr4.urdf.gz"}[arm]
+    return _data() / {"panda": "panda.urdf.gz", "ur5": "ur5_robot.urdf.gz", "kuka": "kuka_lwr4.urdf.gz",
+                      GEARED: geared_arm.URDF.name}[arm]
 
 
 def recording(system, effects: list[str], trajectory_seed: int, noise_seed: int, base_hz: float,
-              seconds: float = SECONDS) -> Dataset:
+              seconds: float = SECONDS, noise: float = NOISE) -> Dataset:
     """One recording of the Fourier trajectory of ``trajectory_seed`` (:func:`bench.tools.robot_log.simulate`),
-    ``seconds`` long, its torque the arm's with ``effects`` and noise drawn with ``noise_seed``, with its time stamps."""
-    time, data = simulate(system.name, seconds, RATE_HZ, base_hz, effects, NOISE, trajectory_seed,
+    ``seconds`` long, its torque the arm's with ``effects`` and ``noise`` (a share of each joint's torque
+    standard deviation) drawn with ``noise_seed``, with its time stamps."""
+    time, data = simulate(system.name, seconds, RATE_HZ, base_hz, effects, noise, trajectory_seed,
                           noise_seed=noise_seed)
     return data.replace(L=None, time=time)
 
@@ -191,11 +215,16 @@ def make(case: Case, folder: Path) -> Path:
     system = _system(case.arm)
     rng = np.random.default_rng(zlib.crc32(case.name.encode()))
     effects = EFFECT_SETS[case.effects](system.dof, rng)
+    noise = geared_arm.NOISE if case.arm == GEARED else NOISE
     base = 1000 * case.seed
     seconds = LONG_SECONDS if case.layout == "long" else SECONDS
     if case.layout == "one":
         plan = [("A", base + 1, base + 11, BASE_HZ), ("A", base + 1, base + 12, BASE_HZ),
                 ("T", base + 2, base + 13, FASTER * BASE_HZ)]
+    elif case.layout in RECORDED_TWICE:  # each trajectory twice, with noise of its own
+        n = RECORDED_TWICE[case.layout]
+        plan = [(f"A{k}", base + 1 + k, base + 11 + 2 * k + r, BASE_HZ) for k in range(n) for r in range(2)] + \
+               [("T", base + 1 + n, base + 11 + 2 * n, BASE_HZ)]
     elif case.layout == "long":  # noise seeds apart from the trajectories'
         plan = [(f"A{k}", base + 1 + k, base + 101 + k, BASE_HZ) for k in range(LONG - 1)] + \
                [("T", base + LONG, base + 100 + LONG, BASE_HZ)]
@@ -205,11 +234,11 @@ def make(case: Case, folder: Path) -> Path:
     rows = []
     for k, (trajectory, t_seed, n_seed, hz) in enumerate(plan):
         name = f"rec{k}.csv"
-        write_csv(recording(system, effects, t_seed, n_seed, hz, seconds), folder / name)
+        write_csv(recording(system, effects, t_seed, n_seed, hz, seconds, noise), folder / name)
         rows.append(f'rec{k} = {{ file = "{name}", trajectory = "{trajectory}" }}')
     dof = system.dof
     columns = ",".join(["time=time"] + [f"{k}_{j}={k}_{j}" for j in range(1, dof + 1) for k in ("q", "qd", "qdd", "tau")])
-    text = (f"# {case.name}: simulated {case.arm}, effects {' '.join(effects)}, noise {NOISE:g}\n"
+    text = (f"# {case.name}: simulated {case.arm}, effects {' '.join(effects)}, noise {noise:g}\n"
             f'urdf = "{_urdf(case.arm)}"\n' + ('joints = [' + ", ".join(f'"panda_joint{j}"' for j in range(1, 8))
                                                 + ']\n' if case.arm == "panda" else "")
             + f'columns = "{columns}"\ntest = ["T"]\nas_recorded = true\n\n'
@@ -225,7 +254,7 @@ def resolve(protocol: str, layout: str) -> str | None:
     trajectory, with no target named)."""
     if protocol == "knndm" and layout == "one":
         return None
-    return protocols.resolve(protocol, 1 if layout == "one" else SEVERAL)
+    return protocols.resolve(protocol, TRAJECTORIES[layout])
 
 
 def run_case(case: Case, folder: Path, protocol: str, steps: int, candidates: tuple[str, ...], workers: int) -> dict:
@@ -369,7 +398,10 @@ def page(result: dict) -> str:
              "Cases: the Panda, the UR5 and the KUKA's URDF, each with the laws of a drive (viscous and Coulomb "
              "friction, a cogging torque, a Stribeck dip) or of a drive and its sensor (armature, offsets, gains, "
              "load-dependent friction), drawn per seed; `one`: one training trajectory recorded twice, tested on "
-             f"another {FASTER:g} times as fast; `several`: {SEVERAL} training trajectories, tested on another. "
+             f"another {FASTER:g} times as fast; `two` and `three`: two or three training trajectories, each "
+             f"recorded twice, tested on another; `several`: {SEVERAL} training trajectories, tested on another; "
+             "the development set's `geared` arm is a large geared arm with rotor inertia, heavy friction and a "
+             "shoulder counterbalance (bench/studies/geared_arm.py). "
              f"Protocols: `time` spans in time of one trajectory, whole trajectories of several (select's folds "
              "before it had others); `auto` select's default (regions of the states on one trajectory, whole "
              "trajectories on several). Rules: " + "; ".join(f"`{r}` {RULE_TEXT[r]}" for r in rules) + ".", "",
