@@ -223,6 +223,14 @@ class _Loop(Tidying, Choosing):
         return {"train": mse(model.predict_torque(self.measured), self.measured.tau),
                 "test": None if self.test is None else test_mse(model, self.test)}
 
+    def unexplained(self, model: FittedModel) -> dict:
+        """The share of the measured training torques' variance that ``model``, read through the sensor, leaves:
+        pooled over the joints (``train``) and each joint's (``per_joint``)."""
+        tau = self.measured.tau
+        left = np.sum((Sensed(model, self.sensor).predict_torque(self.measured) - tau) ** 2, axis=0)
+        total = np.maximum(np.sum((tau - tau.mean(axis=0)) ** 2, axis=0), 1e-300)
+        return {"train": float(left.sum() / total.sum()), "per_joint": [float(x) for x in left / total]}
+
     def heldout(self, model: LoopModel, train: Dataset | None = None, sensor: Sensor | None = None) -> float:
         """:func:`~bench.residual.checks.heldout` in the measured torque's units."""
         sensor = self.sensor if sensor is None else sensor
@@ -316,7 +324,7 @@ class _Loop(Tidying, Choosing):
             test_source=None if self.test is None else self.test.source, provenance=provenance(),
             feasibility=None if self.feasible_before is None else {"before": self.feasible_before, "after": feasible_after},
             stopped=self.stopped, heldout_holds_out=strategy.holds_out(), ending=self.ending or None,
-            equivalent_laws=self.equivalent or None,
+            equivalent_laws=self.equivalent or None, unexplained=self.unexplained(model),
             sensor_laws_offered=list(dict.fromkeys(t.name for t in Sensor.exact(self.measured).terms(self.measured))),
         )
 
@@ -417,7 +425,9 @@ class _Loop(Tidying, Choosing):
                 self.ending = {"reason": "budget", "round": k, "detail": self.stopped, "found": [],
                                "budget_needed_s": self.needed(self.round_began)}
             else:
-                report(f"round {k}: nothing significant left")
+                left = self.unexplained(model)
+                report(f"round {k}: nothing significant left: no law passes every test, and the model leaves "
+                       f"{left['train']:.0%} of the training torques' variance")
                 self.ending = {"reason": "nothing_significant", "round": k,
                                "detail": f"round {k}'s trace found no term that passes every test"}
             return model, held, mass, findings, True

@@ -64,6 +64,9 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         + (f"; what it holds out: {result.heldout_holds_out}" if result.heldout_holds_out else "") + ".",
         "",
     ]
+    most = unexplained_line(result)
+    if most:
+        lines += [f"**{most}**", ""]
     if result.stopped:
         lines += [f"**Stopped early:** {result.stopped}.", ""]
     lines += [
@@ -136,6 +139,26 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: a final model that leaves more than this share of the training torques' variance has left most of it
+MOST = 0.5
+
+
+def _left(result: ResidualResult) -> str:
+    """What the final model leaves of the training torques' variance, pooled and per joint, in words."""
+    u = result.unexplained
+    joints = ", ".join(f"{x:.0%}" for x in u["per_joint"])
+    return f"{u['train']:.0%} of the training torques' variance (per joint {joints})"
+
+
+def unexplained_line(result: ResidualResult) -> str:
+    """Where the final model leaves most of the training torques' variance (:data:`MOST`), a sentence that says so
+    in numbers; else empty (as for a result that does not carry :attr:`~ResidualResult.unexplained`)."""
+    if not result.unexplained or not result.unexplained["train"] > MOST:
+        return ""
+    return (f"Most of the torque is unexplained: the final model leaves {_left(result)}; what it lacks is none "
+            f"of the laws the loop tried, or one that failed a test (the rounds below say which)")
+
+
 def summary_lines(result: ResidualResult) -> list[str]:
     """Why the loop ended and what that means for the laws it reports, in sentences
     (the report's and the console's): where nothing was added, whether the residual held
@@ -144,6 +167,8 @@ def summary_lines(result: ResidualResult) -> list[str]:
     law that the data could not tell from others, with the rule that kept it."""
     ending = result.ending or {}
     reason, lines = ending.get("reason"), []
+    if unexplained_line(result):
+        lines.append(unexplained_line(result) + ".")
     added = [e for e in result.effects if "finding" not in e]
     found = ending.get("found") or []
     laws = ", ".join(f"{f['law']}" + ("" if f.get("heldout_gain") is None else
@@ -170,7 +195,8 @@ def summary_lines(result: ResidualResult) -> list[str]:
     elif reason == "failed":
         lines.append(f"{'No effect added: ' if not added else ''}{ending['detail']}; the rounds before it are kept.")
     elif not added:
-        lines.append("No effect added: nothing significant in the residual.")
+        lines.append("No effect added: no law passed every test (significance, held-out gain, physical sense) on a "
+                     "residual of " + (_left(result) if result.unexplained else "the declared model") + ".")
     for entry in result.equivalent_laws or ():
         figures = ", ".join(f"{law} {mse:.3g}" for law, mse in entry["heldout_mse"].items())
         lines.append(f"Equivalent on these data (round {entry['round']}): {' ≡ '.join([entry['kept'], *entry['equivalent']])}: "

@@ -104,6 +104,10 @@ class ResidualResult(Provenanced):
     #: the kept rounds' laws that the data could not tell from others: per round, the law ``kept``, the
     #: ``equivalent`` ones, each one's held-out error with the kept one's standard error, and the rule that chose
     equivalent_laws: list | None = None
+    #: what the final model leaves of the training torques: ``train``, its residual's sum of squares over the
+    #: torques' about each joint's mean, pooled over the joints, and ``per_joint``, each joint's
+    #: (:meth:`bench.residual.loop._Loop.unexplained`)
+    unexplained: dict | None = None
     spec: dict | None = None
     code: dict | None = None
     models: tuple[FittedModel, FittedModel] | None = field(default=None, repr=False, compare=False)

@@ -13,14 +13,17 @@
 
 from __future__ import annotations
 
-from bench.core.budget import Budget
+import dataclasses
 
+import pytest
 import sympy
+
+from bench.core.budget import Budget
 
 from bench.core.symbolic import coordinate_symbols
 from bench.physics.models import ExpressionModel
 from bench.residual import residual_loop
-from bench.residual.report import summary_lines
+from bench.residual.report import markdown, summary_lines
 from bench.residual.tracing import EQUIVALENCE_RULE
 from bench.runner.records import read_record, residual_fields
 from tests.commandline import cli
@@ -74,11 +77,34 @@ def test_a_payload_that_explains_the_fits_own_missing_term_is_named_with_that_te
                for line in summary_lines(out))
 
 
-def test_a_loop_that_finds_nothing_says_so():
+def test_a_loop_that_finds_nothing_says_so_with_what_the_model_leaves_in_numbers():
+    train, test = data_with({}, n=1000)
+    lines = []
+    out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=lines.append)
+    assert out.ending["reason"] == "nothing_significant" and not out.equivalent_laws
+    fitted = out.models[1].predict_torque(train)
+    per_joint = ((fitted - train.tau) ** 2).sum(axis=0) / ((train.tau - train.tau.mean(axis=0)) ** 2).sum(axis=0)
+    assert out.unexplained["per_joint"] == pytest.approx(per_joint.tolist(), rel=1e-9)
+    assert out.unexplained["train"] < 0.01  # the clean double pendulum is all but explained
+    assert summary_lines(out) == [
+        "No effect added: no law passed every test (significance, held-out gain, physical sense) on a residual of "
+        f"{out.unexplained['train']:.0%} of the training torques' variance (per joint "
+        + ", ".join(f"{x:.0%}" for x in per_joint) + ")."]
+    assert any(line.startswith("round 1: nothing significant left: no law passes every test, and the model "
+                               "leaves ") for line in lines)
+
+
+def test_a_loop_that_ends_with_most_of_the_variance_unexplained_says_so_first_in_numbers():
     train, test = data_with({}, n=1000)
     out = residual_loop("sparse", train, test, budget=Budget(steps=SOLVED), report=quiet)
-    assert out.ending["reason"] == "nothing_significant" and not out.equivalent_laws
-    assert summary_lines(out) == ["No effect added: nothing significant in the residual."]
+    left = dataclasses.replace(out, unexplained={"train": 0.7, "per_joint": [0.47, 0.93]})
+    lines = summary_lines(left)
+    assert lines[0] == ("Most of the torque is unexplained: the final model leaves 70% of the training torques' "
+                        "variance (per joint 47%, 93%); what it lacks is none of the laws the loop tried, or one "
+                        "that failed a test (the rounds below say which).")
+    assert "nothing significant" not in " ".join(lines)
+    page = markdown(left).splitlines()
+    assert page.index(f"**{lines[0][:-1]}**") < page.index("| torque MSE | train | test |")
 
 
 def test_a_loop_its_budget_ends_in_round_1_names_what_the_round_had_found(monkeypatch):
