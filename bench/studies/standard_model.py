@@ -29,7 +29,6 @@ from bench.evaluation.reference import METHOD
 from bench.physics.system import get_system
 from bench.runner.provenance import provenance
 from methods import METHODS
-from systems.measured_arm import register_measured
 
 #: the shipped measured arms, by the name a command gives
 ARMS = ("kuka_lwr4", "measured:systems/data/dfki_double_pendulum_arm.toml")
@@ -79,6 +78,8 @@ def published(root: Path = RESULTS) -> dict[tuple[str, str, str], list[float]]:
 def measure() -> dict:
     """The four models on each arm and split, by system, then split, then :data:`MODELS`' key, and the factor
     that reads a figure over friction alone over the field's standard model (``factor``)."""
+    from systems.measured_arm import register_measured  # Pinocchio's arms: only when the study runs
+
     out: dict[str, dict] = {}
     for arm in ARMS:
         name = register_measured(arm) if arm.startswith("measured:") else arm
