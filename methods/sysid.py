@@ -118,10 +118,17 @@ FRICTION_COLUMNS = (("viscous_friction", "b"), ("coulomb_friction", "F_c"))
 DRIVE_COLUMNS = (("armature", "I_a"), ("offset", "tau_0"))
 
 
+def joint_columns(friction: bool = True, drive: bool = False) -> tuple[tuple[str, str], ...]:
+    """The further columns of each joint, ``(effect, symbol)``: :data:`FRICTION_COLUMNS` with ``friction``, then
+    :data:`DRIVE_COLUMNS` with ``drive``."""
+    return (FRICTION_COLUMNS if friction else ()) + (DRIVE_COLUMNS if drive else ())
+
+
 def with_joint_terms(form: LinearForm, friction: bool = True, drive: bool = False) -> LinearForm:
-    """``form`` with further columns on each joint: viscous and Coulomb friction (``b_j``, ``F_c_j``) with
-    ``friction``, the rotor's inertia and a torque offset (``I_a_j``, ``tau_0_j``) with ``drive``."""
-    kinds = (FRICTION_COLUMNS if friction else ()) + (DRIVE_COLUMNS if drive else ())
+    """``form`` with further columns on each joint (:func:`joint_columns`): viscous and Coulomb friction
+    (``b_j``, ``F_c_j``) with ``friction``, the rotor's inertia and a torque offset (``I_a_j``, ``tau_0_j``) with
+    ``drive``."""
+    kinds = joint_columns(friction, drive)
     terms, names = [], []
     for j in range(form.dof):
         for effect, symbol in kinds:

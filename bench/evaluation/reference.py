@@ -25,7 +25,7 @@ from bench.core.data import Dataset, mse
 from bench.physics.system import System
 from bench.evaluation.driven import driven_entry
 from methods import METHODS
-from methods.sysid import DRIVE_COLUMNS, FRICTION_COLUMNS
+from methods.sysid import joint_columns
 
 #: the method and configuration of the standard model
 METHOD, CONFIGURATION = "sysid", "standard"
@@ -48,8 +48,7 @@ def standard_reference(system: System, train: Dataset, test: Dataset | None) -> 
     config = model.config
     out = {
         "method": METHOD, "configuration": CONFIGURATION,
-        "joint_columns": [symbol for kinds, on in ((FRICTION_COLUMNS, config.friction), (DRIVE_COLUMNS, config.drive))
-                          if on for _, symbol in kinds],
+        "joint_columns": [symbol for _, symbol in joint_columns(config.friction, config.drive)],
         "dropped_joint_columns": facts.get("dropped_joint_columns", []),
         "joint_columns_not_significant": facts.get("joint_columns_not_significant", []),
         "train_mse": mse(model.predict_torque(train), train.tau),

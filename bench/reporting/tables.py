@@ -149,7 +149,7 @@ def constant_line(records: list[Record]) -> str:
             f"All n test MSE (the mean over its seeds) is above it is marked ‡.")
 
 
-#: the joint columns of the standard model, in words (:data:`methods.sysid.FRICTION_COLUMNS`, ``DRIVE_COLUMNS``)
+#: the joint columns of the standard model, in words (:func:`methods.sysid.joint_columns`)
 JOINT_COLUMN_WORDS = {"b": "viscous friction", "F_c": "Coulomb friction", "I_a": "rotor inertia", "tau_0": "a torque offset"}
 
 

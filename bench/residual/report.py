@@ -167,8 +167,9 @@ def summary_lines(result: ResidualResult) -> list[str]:
     law that the data could not tell from others, with the rule that kept it."""
     ending = result.ending or {}
     reason, lines = ending.get("reason"), []
-    if unexplained_line(result):
-        lines.append(unexplained_line(result) + ".")
+    most = unexplained_line(result)
+    if most:
+        lines.append(most + ".")
     added = [e for e in result.effects if "finding" not in e]
     found = ending.get("found") or []
     laws = ", ".join(f"{f['law']}" + ("" if f.get("heldout_gain") is None else

@@ -107,8 +107,8 @@ LAYOUTS = ("one", "several")
 RECORDED_TWICE = {"two": 2, "three": 3}
 #: training trajectories of each layout but ``long``
 TRAJECTORIES = {"one": 1, "several": SEVERAL, **RECORDED_TWICE}
-#: the development set's cases beyond every arm in :data:`LAYOUTS`: the shipped arms with two and three
-#: trajectories each recorded twice, and the geared arm with two
+#: the geared arm, and the name of its effects (:mod:`bench.studies.geared_arm`): in the development set only,
+#: in the ``two`` layout
 GEARED = "geared"
 #: the ``long`` layout (:mod:`bench.studies.long_log`): trajectories (the last the test) and the seconds of each,
 #: 12 x 5,840 = 70,080 samples at :data:`RATE_HZ`
@@ -173,12 +173,12 @@ class Case:
 
 def cases(which: str) -> list[Case]:
     seeds = DEVELOPMENT_SEEDS if which == DEVELOPMENT else EVALUATION_SEEDS
-    every = [Case(a, lay, e, s) for s in seeds for a in ARMS for lay in LAYOUTS for e in EFFECT_SETS
-             if e != GEARED]
+    shipped = [e for e in EFFECT_SETS if e != GEARED]  # the shipped arms' effects
+    every = [Case(a, lay, e, s) for s in seeds for a in ARMS for lay in LAYOUTS for e in shipped]
     if which != DEVELOPMENT:
         return every
-    return every + [Case(a, lay, e, s) for s in seeds for a in ARMS for lay in RECORDED_TWICE for e in EFFECT_SETS
-                    if e != GEARED] + [Case(GEARED, "two", GEARED, s) for s in seeds]
+    return every + [Case(a, lay, e, s) for s in seeds for a in ARMS for lay in RECORDED_TWICE for e in shipped] + \
+        [Case(GEARED, "two", GEARED, s) for s in seeds]
 
 
 def _system(arm: str):
