@@ -27,6 +27,7 @@ from bench.core.fileio import atomic_write, check_output, write_json
 from bench.core.scoring import scoring
 from bench.evaluation.reference import METHOD
 from bench.physics.system import get_system
+from bench.runner.plugins import file_prefix, register_by_file
 from bench.runner.provenance import provenance
 from methods import METHODS
 
@@ -78,11 +79,9 @@ def published(root: Path = RESULTS) -> dict[tuple[str, str, str], list[float]]:
 def measure() -> dict:
     """The four models on each arm and split, by system, then split, then :data:`MODELS`' key, and the factor
     that reads a figure over friction alone over the field's standard model (``factor``)."""
-    from systems.measured_arm import register_measured  # Pinocchio's arms: only when the study runs
-
     out: dict[str, dict] = {}
     for arm in ARMS:
-        name = register_measured(arm) if arm.startswith("measured:") else arm
+        name = register_by_file(arm) if file_prefix(arm) else arm
         for split in SPLITS:
             system = get_system(name, split=split)
             row = out.setdefault(name, {})[split] = {key: fitted(system, h) for key, _, h, _ in MODELS}
