@@ -25,7 +25,7 @@ from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now
 from bench.runner.provenance import provenance
 from bench.runner.schedule import run_jobs
-from bench.studies.selection_benchmark import SelectCase, _publish, cases, named_candidates, scores, summary
+from bench.studies.selection_benchmark import SelectCase, _publish, cases, named_candidates, scores, set_of, summary
 from bench.tools import select as selection
 
 
@@ -68,7 +68,7 @@ def main(args) -> int:
     before = json.loads(made.read_text())
     again = named_candidates(args.candidates)
     order = [c.name for c in selection.CANDIDATES if c.name in before["candidates"] or c.name in again]  # a new one added
-    by_name = {c.name: c for c in cases(before["set"])}
+    by_name = {c.name: c for c in cases(set_of(before))}
     root = args.out.parent / f"cases_{before['set']}_rerun"
     runs = sorted({(t["case"], t.get("folds") or t["protocol"]) for t in before["table"] if "rules" in t["scores"]})
     jobs = {f"{name} {folds}": SelectCase(by_name[name].arm, by_name[name].layout, by_name[name].effects,

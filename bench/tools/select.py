@@ -151,6 +151,7 @@ def entry(candidate: Candidate, record: Record, out: Path) -> dict:
             "validation_mse": tuning.get("validation_mse"), "validation_far_mse": tuning.get("validation_far_mse"),
             "test_mse": record.test_mse,
             "validation_stderr": float(np.std(folds, ddof=1) / np.sqrt(len(folds))) if len(folds) > 1 else None,
+            "fold_mse": folds or None,
             "train_mse": record.train_mse, "test_over_standard": None if not (standard and record.test_mse) else
             record.test_mse / standard, "hyperparameters": tuning.get("chosen", {}),
             "model": None if saved is None else os.path.relpath(saved, Path(out).resolve()),
@@ -238,18 +239,20 @@ def page(result: dict) -> str:
     if flag:
         lines += [flag, ""]
     lines += ["| candidate | hyperparameters chosen | work: each fold fit → the final fit | validation MSE | "
-              "validation MSE, farther half | test MSE | test / standard model | rank by validation | rank by test |",
-              "|---|---|---|---|---|---|---|---|---|"]
+              "each fold's validation MSE | validation MSE, farther half | test MSE | test / standard model | "
+              "rank by validation | rank by test |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for e in entries:
         mark = " **(chosen)**" if chosen and e["name"] == chosen["name"] else ""
         hp = ", ".join(f"{k}={v}" for k, v in sorted(e["hyperparameters"].items())) or "—"
         if e["status"] != "ok" or e["validation_mse"] is None:
             lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['status']}: "
-                         f"{e['error'] or 'no validation'} | | | | | |")
+                         f"{e['error'] or 'no validation'} | | | | | | |")
             continue
         ratio = "—" if e["test_over_standard"] is None else f"{e['test_over_standard']:.3f}x"
         far = "—" if e.get("validation_far_mse") is None else f"{e['validation_far_mse']:.4g}"
-        lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['validation_mse']:.4g} | {far} | "
+        lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['validation_mse']:.4g} | "
+                     f"{spread_cell(e.get('fold_mse'))} | {far} | "
                      f"{e['test_mse']:.4g} | {ratio} | {by_validation.get(e['name'], '—')} | {by_test.get(e['name'], '—')} |")
     lines.append("")
     if chosen:
@@ -312,6 +315,16 @@ def farther(entries: list[dict], chosen: dict | None) -> str:
             "not the candidate chosen on all of them: the ranking changes as validation moves away from the fit")
     return (f" Scored on the farther half of each fold's samples only (those at least the fold's median distance "
             f"from the states it is fitted on), validation puts {ranked[0]} first{then}: {same}.")
+
+
+def spread_cell(folds: list[float] | None) -> str:
+    """Each fold's validation MSE, lowest to highest, and the highest over the lowest: how far the folds agree
+    (``—`` for a record made before tuning kept them)."""
+    if not folds:
+        return "—"
+    ordered = sorted(folds)
+    ratio = f" ({ordered[-1] / ordered[0]:.3g}x)" if len(ordered) > 1 and ordered[0] > 0 else ""
+    return ", ".join(f"{v:.4g}" for v in ordered) + ratio
 
 
 def work_cell(work: dict | None) -> str:

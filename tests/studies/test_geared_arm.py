@@ -42,7 +42,7 @@ def test_the_development_set_holds_the_geared_arm_and_two_and_three_trajectories
     assert {f"{a}_{lay}_{e}_0" for a in selection_benchmark.ARMS for lay in ("two", "three")
             for e in ("drive", "sensor")} <= set(names)
     assert not any("two" in c.name or "three" in c.name or "geared" in c.name
-                   for c in selection_benchmark.cases("evaluation"))
+                   for c in selection_benchmark.cases("former_evaluation"))
     assert selection_benchmark.resolve("auto", "two") == selection_benchmark.resolve("auto", "several")
     declared = selection_benchmark.make(selection_benchmark.Case("ur5", "three", "drive", 0), tmp_path)
     text = declared.read_text()

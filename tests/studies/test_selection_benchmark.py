@@ -51,7 +51,7 @@ def test_the_rules_choose_as_stated_and_regret_is_against_the_best_on_the_test()
     assert "stack" not in s["rules"]  # a page made before select stacked its candidates: no figure, no fallback
     # each candidate's figures are kept, so that a rule can be tried on the page's JSON without running the cases
     assert s["candidates"]["standard"] == {"validation_mse": 0.53, "validation_far_mse": None, "validation_stderr": 0.02,
-                                           "train_mse": None, "test_mse": 0.6}
+                                           "fold_mse": None, "train_mse": None, "test_mse": 0.6}
     assert s["candidates"]["loop"]["test_mse"] is None
     stacked = {"candidates": entries, "stack": {"validation_mse": 0.4, "test_mse": 0.15}}
     assert sb.scores(stacked)["rules"]["stack"] == {"chosen": "stack", "regret": pytest.approx(0.5)}
@@ -200,3 +200,20 @@ def test_rerun_runs_only_the_named_candidates_and_scores_the_rules_on_the_merged
     assert result["candidates"] == ["standard", "feasible", "loop", "loop+gp"]
     assert result["table"][0]["scores"]["rules"]["lowest"] == {"chosen": "loop+gp", "regret": 1.0}
     assert [r["candidates"] for r in result["reruns"]] == [["loop"], ["loop+gp"]]
+
+
+def test_the_former_evaluation_set_is_development_data_and_the_evaluation_set_is_new_and_of_every_layout():
+    former, development, evaluation = (sb.cases(s) for s in (sb.FORMER_EVALUATION, sb.DEVELOPMENT, sb.EVALUATION))
+    assert {c.seed for c in former} == set(sb.FORMER_EVALUATION_SEEDS) and {c.layout for c in former} == {"one", "several"}
+    assert not {c.seed for c in evaluation} & {c.seed for c in former + development}  # seeds no rule was tried on
+    assert {c.layout for c in evaluation} == {"one", "several", "two", "three"} and \
+        {c.arm for c in evaluation} == set(sb.ARMS) | {sb.GEARED}
+    assert not {c.name for c in evaluation} & {c.name for c in former + development}
+    # the published pages of the former evaluation set say that it is development data, and how to run it now
+    for path in ("results/selection/benchmark.json", "results/selection/all_candidates/benchmark.json"):
+        made = json.loads(Path(path).read_text())
+        assert sb.set_of(made) == sb.FORMER_EVALUATION
+        text = Path(path).with_suffix(".md").read_text()
+        assert text == sb.page(made)
+        assert "Set: former_evaluation (development data: this set (seeds 5113 and 6271) was the evaluation set" in text
+        assert "which is `--set former_evaluation` now" in text

@@ -44,6 +44,9 @@ def test_select_chooses_by_validation_and_keeps_the_model(tmp_path):
     assert "(`python -m bench predict --model model.npz --log LOG.csv --out PRED.csv`)" in text  # a built-in arm
     far = min(result["candidates"], key=lambda c: c["validation_far_mse"])["name"]  # and on the farther half
     assert "validation MSE, farther half" in text and f"validation puts {far} first" in text
+    for c in result["candidates"]:  # each fold's score, whose mean is the validation MSE, and their spread on the page
+        assert len(c["fold_mse"]) >= 2 and min(c["fold_mse"]) <= c["validation_mse"] <= max(c["fold_mse"])
+        assert ", ".join(f"{v:.4g}" for v in sorted(c["fold_mse"])) in text
     for c in result["candidates"]:  # under --steps each fold fit does the final fit's work, and the page says so
         assert set(c["work"]["fold_steps"]) == {c["work"]["final_steps"]}
     assert "work: each fold fit → the final fit" in text and " steps, " in text
