@@ -29,7 +29,7 @@ COMMANDS = ("list", "run", "table", "data", "fit", "predict", "select", "residua
             "study")
 STUDIES = ("gpu", "adaptation", "residual-acceptance", "residual-dfki", "overhead", "dfki-filter", "scaling", "syrenets-speed",
            "syrenets-profile", "stacking-speed", "generalisation", "trajectories", "selection", "long-log",
-           "selection-rerun", "standard-model")
+           "selection-rerun", "standard-model", "loop-speed")
 
 
 def _subparsers_of(parser):

@@ -5,9 +5,9 @@ measurement that writes one of the project's published pages under
 from __future__ import annotations
 
 from bench.cli.options import Parser
-from bench.studies import (adaptation, dfki_filter, generalisation, gpu_figures, long_log, overhead, residual_acceptance,
-                               residual_dfki, scaling, selection_benchmark, selection_rerun, stacking_speed, standard_model,
-                           syrenets_profile, syrenets_speed, trajectories)
+from bench.studies import (adaptation, dfki_filter, generalisation, gpu_figures, long_log, loop_speed, overhead,
+                           residual_acceptance, residual_dfki, scaling, selection_benchmark, selection_rerun, stacking_speed,
+                           standard_model, syrenets_profile, syrenets_speed, trajectories)
 
 HELP = "the project's studies: measurements that write its published pages (python -m bench study --help lists them)"
 
@@ -17,7 +17,7 @@ STUDIES = {
     "overhead": overhead, "dfki-filter": dfki_filter, "scaling": scaling, "syrenets-speed": syrenets_speed,
     "syrenets-profile": syrenets_profile, "stacking-speed": stacking_speed, "generalisation": generalisation,
     "gpu": gpu_figures, "trajectories": trajectories, "selection": selection_benchmark, "long-log": long_log,
-    "selection-rerun": selection_rerun, "standard-model": standard_model,
+    "selection-rerun": selection_rerun, "standard-model": standard_model, "loop-speed": loop_speed,
 }
 
 

@@ -122,10 +122,12 @@ CROSS_FIT_SHARE = 0.15
 
 
 #: the training samples the loop works on at most: a longer log is thinned to every k-th sample of each
-#: recording (:meth:`bench.core.data.Dataset.thinned`). On a 7-joint log of 71,388 samples the loop's
-#: statistics took 340 of its 356 s, most of it projecting the library's columns off the design; on one
-#: sample in 5 they took 43 of 46 s, with the same test MSE to four figures (results/measured/README.md)
-MAX_SAMPLES = 16384
+#: recording (:meth:`bench.core.data.Dataset.thinned`), so that a round's statistics, which grow with the
+#: rows, stay bounded. Chosen on training data alone: on the long log the loop ends with the same laws from
+#: at most 4,096, 8,192 and 16,384 samples (results/residual/loop_speed.md, ``python -m bench study
+#: loop-speed``), and the shipped arms' logs (the KUKA's 4,926 training samples, the DFKI pendulum's 3,800)
+#: and the geared arm's (4,000) are not thinned
+MAX_SAMPLES = 8192
 
 
 def not_started(budget_s: float) -> str:

@@ -136,7 +136,9 @@ class Tracer:
         # named laws an open-ended term explained far better: (group, term, margin, size, rms)
         self.mismatched: list[tuple] = []
         self.runners_up: list[tuple] = []  # (accepted group, the next best group that passed every test)
-        self.off: dict[Term, np.ndarray] = {}  # this step's term columns projected off the design
+        self.off: dict[Term, np.ndarray] = {}  # term columns projected off the design, as it stands (project)
+        self.blocks: list[tuple] = []  # the projected columns' blocks: (terms, columns, their norms before)
+        self.memo: dict[tuple, dict] = {}  # this step's statistics of each term's group (stats)
         self.spanned: set[Term] = set()  # terms the design already expresses (the model's own friction columns)
         self.Q, self.in_basis = orthonormal_basis(self.fixed), set()
         self.named = list(self.given or ()) + [c for c in self.pool if is_named(c)]
@@ -300,24 +302,53 @@ class Tracer:
         return refined
 
     def project(self, terms) -> None:
-        """Project the columns of ``terms`` not yet projected this step, in one product;
-        a column the design already spans (its part off it at round-off) is noted in ``spanned``."""
+        """Project the columns of ``terms`` not yet projected, in one product; a column the design already
+        spans (its part off it at round-off) is noted in ``spanned``. The projected columns are kept, as
+        blocks, and follow the design as it grows (:meth:`extend`)."""
         new = [t for t in dict.fromkeys(terms) if t not in self.off]
         if new:
             F = np.column_stack([self.F_all[t] for t in new])
-            P = project_off(self.Q, F)
+            P = np.asfortranarray(project_off(self.Q, F))  # each term's column contiguous: the fits read it whole
             self.off.update({t: P[:, i] for i, t in enumerate(new)})
-            left = np.linalg.norm(P, axis=0) <= SPANNED * np.linalg.norm(F, axis=0)
-            self.spanned.update(t for t, inside in zip(new, left) if inside)
+            self.blocks.append((new, P, np.linalg.norm(F, axis=0)))
+            self.note_spanned(new, P, self.blocks[-1][2])
+
+    def note_spanned(self, terms: list[Term], P: np.ndarray, norms: np.ndarray) -> None:
+        left = np.linalg.norm(P, axis=0) <= SPANNED * norms
+        self.spanned.update(t for t, inside in zip(terms, left) if inside)
+
+    def extend(self, G: np.ndarray) -> None:
+        """The design's basis with what the columns ``G`` add (:func:`~bench.residual.basis.extend_basis`),
+        and every kept projected column taken off the new basis vectors too (twice, as
+        :func:`~bench.residual.basis.project_off` does), in place: a projection on the few columns a step
+        adds, rather than on the whole design, and the same columns to round-off."""
+        before = self.Q.shape[1]
+        self.Q = extend_basis(self.Q, G)
+        E = self.Q[:, before:]
+        if not E.shape[1]:
+            return
+        for terms, P, norms in self.blocks:
+            P -= E @ (E.T @ P)
+            P -= E @ (E.T @ P)
+            self.note_spanned(terms, P, norms)
 
     def beside(self, terms: list[Term], k: int):
         self.project(terms)
         return _fit_beside(self.r, np.column_stack([self.off[t] for t in terms]), k)
 
     def stats(self, c: Term, k_now: int, rss_now: float, g: list[Term] | None = None) -> dict:
+        """The statistics of ``c``'s group (or of ``g``) beside this step's design; a term's own group's
+        once a step, however many of the step's choices ask for them (they depend on the design alone)."""
+        if g is None:
+            key = (c, k_now, rss_now)
+            if key not in self.memo:
+                self.memo[key] = self._stats(c, k_now, rss_now, self.group(c))
+            return self.memo[key]
+        return self._stats(c, k_now, rss_now, g)
+
+    def _stats(self, c: Term, k_now: int, rss_now: float, g: list[Term]) -> dict:
         # Frisch-Waugh-Lovell: the group's coefficients, errors and residual are those of its
         # columns' part orthogonal to the design, fitted to the design's residual
-        g = self.group(c) if g is None else g
         coef, stderr, rss = self.beside(g, k_now)
         if self.spanned & set(g):  # nothing the model could already express is tried, nor a finding
             return {"term": c, "group": g, "bic_drop": -math.inf, "coef": 0.0, "stderr": math.inf,
@@ -362,11 +393,12 @@ class Tracer:
         while self.max_steps is None or len(self.steps_taken) < self.max_steps:
             k_now = self.fixed.shape[1] + len(self.nuisance) + len(self.accepted)
             new = [t for t in self.nuisance + self.accepted if t not in self.in_basis]
-            self.Q = extend_basis(self.Q, np.column_stack([self.F_all[t] for t in new])) if new else self.Q
+            if new:
+                self.extend(np.column_stack([self.F_all[t] for t in new]))
             self.in_basis.update(new)
             self.r = self.y - self.Q @ (self.Q.T @ self.y)
             self.rss_now = float(self.r @ self.r)
-            self.off.clear()
+            self.memo = {}
             if self.rss_now / self.n_rows <= self.floor:
                 self.steps.append({"stop": "the residual is at round-off level",
                                    "residual_mse": self.rss_now / self.n_rows})

@@ -42,11 +42,11 @@ from bench.core.arguments import positive, positive_int
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, check_output
 from bench.runner.provenance import machine, made_at, provenance
+from bench.studies.trees import ROOT, export
 from methods import METHODS
 
 HELP = "time SyReNets' training step in this tree and in an earlier commit, in turn (results/syrenets/speed/syrenets_speed.md)"
 
-ROOT = Path(__file__).resolve().parents[2]
 CONFIGS = {
     "public": {"hyperparameters": METHODS["syrenets"].configuration("public"), "batch": 48},
     "default": {"hyperparameters": {}, "batch": 32},
@@ -96,18 +96,6 @@ def add_arguments(parser) -> None:
                         help="with --compiled: the earlier tree compiled too (it must have the option)")
     parser.add_argument("--out", type=Path, default=Path("results/syrenets/speed/syrenets_speed.md"),
                         help="the table to write (default results/syrenets/speed/syrenets_speed.md)")
-
-
-def export(revision: str, into: Path) -> str:
-    """``revision``'s tree exported into ``into``; returns its full commit id."""
-    try:
-        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--verify", f"{revision}^{{commit}}"],
-                                capture_output=True, text=True, check=True).stdout.strip()
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit], capture_output=True, check=True).stdout
-    except (OSError, subprocess.CalledProcessError) as e:
-        raise UserError(f"--against {revision}: not a commit of {ROOT} ({getattr(e, 'stderr', e) or e})") from None
-    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
-    return commit
 
 
 def time_step(tree: Path, experiment: str, config: str, seconds: float, extra: dict | None = None) -> dict:

@@ -14,8 +14,9 @@ suite's validation protocol (:mod:`bench.core.folds`) on the training
 trajectories, within the run's budget, then fitted on all the training data
 and saved (:mod:`methods.saving`). Every candidate is bounded by work, so
 that the same command gives the same page on any machine: its own steps
-(:attr:`Candidate.work`) unless ``--steps`` gives them all one count, the
-seconds only a ceiling. ``loop`` runs its rounds until one accepts nothing,
+(:meth:`Candidate.steps`: a learned residual's grow with the training
+samples) unless ``--steps`` gives them all one count, the seconds only a
+ceiling. ``loop`` runs its rounds until one accepts nothing,
 and ``loop+gp``'s prior does the same before its residual's steps start
 (:mod:`bench.residual.prior`). The candidate chosen is the one with the
 lowest validation MSE; the test data are read by each run to score it, and
@@ -59,6 +60,7 @@ from bench.runner import matrix
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
 from bench.tools import stack_score
+from methods import METHODS
 from methods.saving import held_out
 from systems import SYSTEMS
 
@@ -80,41 +82,57 @@ class Candidate:
     fixed: tuple[tuple[str, object], ...] = ()
     work: int = 1
     start: int = 0
+    #: passes over the training samples its fits make at least (0: its ``work`` alone), in the batches of the
+    #: learned residual ``learner`` (a method's name: its default ``batch_size`` samples a step)
+    epochs: float = 0.0
+    learner: str | None = None
+
+    def steps(self, samples: int | None) -> int:
+        """The steps of its fits on ``samples`` training samples: ``work``, or more where ``epochs`` passes over
+        them in the learner's batches take more (an iterative fit's work grows with the data)."""
+        if not self.epochs or not samples:
+            return self.work
+        batch = METHODS[self.learner].Config().batch_size
+        return max(self.work, math.ceil(self.epochs * samples / batch))
 
 
-#: the learned residuals' steps: a GP's (:mod:`methods.gp`) and a network's (the MLP's, DeLaN's). They are the
-#: steps the final fits did when select's default was 180 s a candidate, on 2 cores (the records of
+#: the learned residuals' steps at least: a GP's (:mod:`methods.gp`) and a network's (the MLP's, DeLaN's). They
+#: are the steps the final fits did when select's default was 180 s a candidate, on 2 cores (the records of
 #: results/measured/select_default at 88b40e8: 30 and 32 for the GP residuals, 405 and 406 for the networks),
 #: rounded down, and fixed so that a candidate does the same work on any machine; no score chose them
 GP_STEPS, NETWORK_STEPS = 30, 400
+#: the passes over the training samples those steps make of the KUKA's 4,926 (a GP's batch of 512, the MLP's
+#: of 32, DeLaN's of 256), rounded down: on a longer log a fit makes as many passes, and so more steps
+GP_EPOCHS, MLP_EPOCHS, DELAN_EPOCHS = 3.0, 2.5, 20.0
 
 #: the candidates, in the page's order; the closed-form fits (SysId, sparse regression) are one step
 CANDIDATES = (
     Candidate("standard", "sysid", "standard", start=9),
     Candidate("feasible", "sysid", "feasible", start=8),
-    Candidate("standard+gp", "standard+gp", work=GP_STEPS, start=5),
-    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS, start=4),
-    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=2),
-    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=3),
+    Candidate("standard+gp", "standard+gp", work=GP_STEPS, start=5, epochs=GP_EPOCHS, learner="gp"),
+    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS, start=4, epochs=GP_EPOCHS, learner="gp"),
+    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=2, epochs=MLP_EPOCHS, learner="mlp"),
+    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=3, epochs=DELAN_EPOCHS, learner="delan"),
     Candidate("feasible+sparse_torque", "feasible+sparse_torque", start=7),
     Candidate("loop", "loop", work=MAX_ROUNDS, start=0),
     Candidate("loop_feasible", "loop", "feasible", work=MAX_ROUNDS, start=1),
-    Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=6),
+    Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=6, epochs=GP_EPOCHS, learner="gp"),
 )
 
 
 def specs(system: str, split: str | None, budget_s: float | None, steps: int | None, seed: int, out: Path,
           plugins: tuple[str, ...], candidates=CANDIDATES, rollout: bool = False,
-          protocol: str | None = None) -> list[tuple[Candidate, RunSpec]]:
+          protocol: str | None = None, samples: int | None = None) -> list[tuple[Candidate, RunSpec]]:
     """Each candidate's tuned run (validated by ``protocol``'s folds, :mod:`bench.core.protocols`), its model
     file under ``out/models``; their records go to ``out/runs`` (two configurations of one method, SysId's
-    standard and feasible bodies, are two runs: :func:`bench.runner.spec.run_id`)."""
+    standard and feasible bodies, are two runs: :func:`bench.runner.spec.run_id`). Without ``steps``, each
+    does its own (:meth:`Candidate.steps` on the ``samples`` of the training data)."""
     out = Path(out).resolve()
     rows = []
     for c in candidates:
         spec = RunSpec(system=system, method=c.method, experiment="indirect", seed=seed,
                        budget_s=budget_s,
-                       steps=c.work if steps is None else steps, profile=c.profile, hyperparameters=dict(c.fixed),
+                       steps=c.steps(samples) if steps is None else steps, profile=c.profile, hyperparameters=dict(c.fixed),
                        split=split, plugins=plugins,
                        tune=True, rollout=rollout, save=str(out / "models" / f"{c.name.replace('+', '_')}.npz"),
                        folds=protocol)
@@ -389,7 +407,8 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
     (with ``target``, the states the user says the model will be asked: :mod:`bench.evaluation.domain`).
     ``protocol`` names the validation folds (:mod:`bench.core.protocols`)."""
     out = Path(out)
-    rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout, protocol)
+    rows = specs(system, split, budget_s, steps, seed, out, plugins, candidates, rollout, protocol,
+                 samples=None if data is None else len(data[0]))
     done = run(rows, out, workers, report, cluster)
     entries = [entry(c, r, out) for c, r in done]
     chosen = choose(entries)

@@ -25,6 +25,13 @@ def pytest_terminal_summary(terminalreporter, config):
         for bench in sorted(evals, key=lambda b: -b.extra_info["evaluations_per_s"]):
             info = bench.extra_info
             terminalreporter.write_line(f"{info['label']:<45} {info['evaluations_per_s']:12.3e}")
+    rounds = [b for b in session.benchmarks if b.extra_info.get("round1_after_s")]
+    if rounds:
+        terminalreporter.write_sep("-", "a residual loop round on the long log, this tree against an earlier commit")
+        for bench in rounds:
+            info = bench.extra_info
+            terminalreporter.write_line(f"round 1: before {info['round1_before_s']:.1f} s, after "
+                                        f"{info['round1_after_s']:.1f} s: {info['ratio']:.2f}x cheaper")
     for group, means in sorted(groups.items()):
         ours = [v for k, v in means.items() if "[ours" in k or k.endswith("ours")]
         if not ours:
