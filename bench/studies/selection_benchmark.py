@@ -146,7 +146,7 @@ SIMPLICITY = ("standard", "feasible", "loop", "loop_feasible", "feasible+sparse_
 #: the candidates the study runs: select's own less DeLaN and the loop's two, whose fits take the longest
 #: (the loop's step is a round, so every work budget gives it all its rounds)
 CANDIDATES = ("standard", "feasible", "standard+gp", "feasible+gp", "standard+mlp", "feasible+sparse_torque")
-RULES = ("lowest", "one_se", "farther", "stack")
+RULES = ("lowest", "select", "one_se", "farther", "stack")
 #: steps of each candidate's fits (a round of the loop's, a gradient step of the learners')
 STEPS = 20
 
@@ -313,18 +313,21 @@ class SelectCase(CaseJob):
 
     def compute(self) -> dict:
         case = Case(self.arm, self.layout, self.effects, self.seed)
-        return scores(run_case(case, Path(self.where), self.folds, self.steps, self.candidates, self.workers))
+        return scores(run_case(case, Path(self.where), self.folds, self.steps, self.candidates, self.workers),
+                      TRAJECTORIES[self.layout])
 
     def elsewhere(self, scratch: Path) -> "SelectCase":
         return dataclasses.replace(self, where=str(scratch / Path(self.where).name))
 
 
-def choose(entries: list[dict], rule: str, stack: dict | None = None) -> dict | None:
+def choose(entries: list[dict], rule: str, stack: dict | None = None, trajectories: int | None = None) -> dict | None:
     """The candidate ``rule`` chooses among those ``bench select`` may choose (:func:`bench.tools.select.usable`);
     ``lowest`` is ``bench select``'s own choice; ``farther`` falls back on it where no candidate has a figure on
     the farther half (a page made before they were kept); ``stack`` chooses the page's ``stack`` (named
     ``stack``) where its nested validation MSE is the lowest and it has a test figure."""
     best = selection.choose(entries)
+    if rule == "select":
+        return selection.choose(entries, trajectories)
     if rule == "stack":
         stack = stack or {}
         nested = stack.get("validation_mse")
@@ -347,9 +350,11 @@ def choose(entries: list[dict], rule: str, stack: dict | None = None) -> dict | 
 KEPT_FIGURES = ("validation_mse", "validation_far_mse", "validation_stderr", "fold_mse", "train_mse", "test_mse")
 
 
-def scores(result: dict) -> dict:
+def scores(result: dict, trajectories: int | None = None) -> dict:
     """Per rule: the chosen candidate and its regret; the rank correlation of validation and test; and each
-    candidate's :data:`KEPT_FIGURES`."""
+    candidate's :data:`KEPT_FIGURES`. ``trajectories``: the training trajectories (default as ``result`` says;
+    the ``select`` rule depends on them)."""
+    trajectories = result.get("training_trajectories") or trajectories
     from scipy.stats import spearmanr
 
     entries = result.get("candidates") or []
@@ -364,7 +369,7 @@ def scores(result: dict) -> dict:
     for rule in RULES:
         if rule == "stack" and (stack is None or ("weights" in stack and stack.get("test_mse") is None)):
             continue  # a page made before select stacked its candidates, or a stack without a test figure
-        c = choose(entries, rule, stack)
+        c = choose(entries, rule, stack, trajectories)
         out["rules"][rule] = {"chosen": c["name"], "regret": c["test_mse"] / best["test_mse"]}
     return out
 
@@ -385,7 +390,8 @@ def summary(table: list[dict]) -> list[dict]:
 
 
 #: what each rule chooses, as a page says it
-RULE_TEXT = {"lowest": "the lowest validation MSE (select's)",
+RULE_TEXT = {"lowest": "the lowest validation MSE (select's before it had a rule for few trajectories)",
+             "select": f"select's rule: {selection.LOWEST_RULE}, or {selection.FEW_RULE}",
              "one_se": "the first candidate, in the order " + " → ".join(SIMPLICITY) + ", whose validation MSE is "
                        "within one standard error (over the folds) of the lowest",
              "farther": "the lowest validation MSE on the farther half of each fold's scored samples (those at least "
@@ -418,6 +424,8 @@ def page(result: dict) -> str:
              f"Command: `{result['command']}`" + (f", at commit {result['commit']}" if result.get("commit") else "")
              + (f"; it ran the set then named `{result['set']}`, which is `--set {set_of(result)}` now"
                 if set_of(result) != result["set"] else ""), "",
+             *([f"Every rule scored again from the cases' select pages by `{result['rescored']['command']}`, at commit "
+                f"{result['rescored']['commit']}.\n"] if result.get("rescored") else []),
              *[f"Run again, {', '.join(r['candidates'])} only, by `{r['command']}` at commit {r['commit']}: the other "
                "candidates' figures are as the command above made them; the rows run again have no stack, which needs "
                "every candidate's held-out predictions.\n" for r in result.get("reruns", [])],
@@ -491,6 +499,9 @@ def add_arguments(parser) -> None:
     add_workers(parser, "candidates")
     parser.add_argument("--out", type=Path, default=Path("results/selection/benchmark.md"),
                         help="the page (default results/selection/benchmark.md); the cases' runs go beside it")
+    parser.add_argument("--rescore", action="store_true",
+                        help="score every rule again on the page already at --out from its cases' select.json files "
+                             "beside it (their runs are not redone): for a rule added after the cases ran")
     parser.add_argument("--real-only", action="store_true",
                         help="read the shipped real arms' select pages again into the page already at --out, "
                              "keeping its cases' rows as they were made (their runs are not redone)")
@@ -531,6 +542,27 @@ def named_candidates(names: list[str], at_least: int = 1) -> tuple[str, ...]:
     return tuple(n for n in known if n in names)
 
 
+def rescore(args) -> int:
+    """The page at ``args.out`` with every rule scored again from its cases' ``select.json`` (in the cases'
+    folder beside it, as the study left them), and the command and commit that scored them."""
+    made = args.out.with_suffix(".json")
+    if not made.exists():
+        raise UserError(f"{made}: no page to score again; run the study first")
+    result = json.loads(made.read_text())
+    root = args.out.parent / f"cases_{result['set']}"
+    layouts = {c.name: c.layout for c in cases(set_of(result))}
+    table = []
+    for t in result["table"]:
+        page_json = root / t["case"] / (t.get("folds") or t["protocol"]) / "select.json"
+        if not page_json.exists():
+            raise UserError(f"{page_json}: missing; --rescore reads each case's select.json where the study wrote it")
+        table.append(dict(t, scores=scores(json.loads(page_json.read_text()), TRAJECTORIES[layouts[t["case"]]])))
+    result.update(table=table, summary=summary(table), rescored={"command": args.invocation,
+                                                                  "commit": provenance().get("commit")})
+    _publish(args.out, result)
+    return 0
+
+
 def main(args) -> int:
     if args.real_only:
         made = args.out.with_suffix(".json")
@@ -540,6 +572,8 @@ def main(args) -> int:
         result.update(real=real_rows(), real_command=args.invocation, real_commit=provenance().get("commit"))
         _publish(args.out, result)
         return 0
+    if getattr(args, "rescore", False):
+        return rescore(args)
     candidates = named_candidates(args.candidates, at_least=2)
     chosen = [c for c in cases(args.set) if not args.cases or c.name.startswith(tuple(args.cases))]
     root = args.out.parent / f"cases_{args.set}"

@@ -19,8 +19,10 @@ samples) unless ``--steps`` gives them all one count, the seconds only a
 ceiling. ``loop`` runs its rounds until one accepts nothing,
 and ``loop+gp``'s prior does the same before its residual's steps start
 (:mod:`bench.residual.prior`). The candidate chosen is the one with the
-lowest validation MSE; the test data are read by each run to score it, and
-nothing is chosen on them. The runs' records are kept, so that the same
+lowest validation MSE, or, where the training data hold two or three
+trajectories, the one whose fold scores agree best among those within one
+standard error of it (:func:`choose`); the test data are read by each run to
+score it, and nothing is chosen on them. The runs' records are kept, so that the same
 command resumes where it stopped, as a matrix does.
 
 Writes ``DIR/select.json`` (``chosen`` and ``candidates``, each with its
@@ -184,10 +186,41 @@ def usable(entries: list[dict]) -> list[dict]:
             and math.isfinite(e["validation_mse"]) and e["model"]]
 
 
-def choose(entries: list[dict]) -> dict | None:
-    """The candidate with the lowest validation MSE among :func:`usable`'s."""
+#: the training trajectories under which select chooses by :data:`FEW_RULE`: its folds, leave one trajectory
+#: out, each fit on one or two trajectories
+FEW_TRAJECTORIES = (2, 3)
+FEW_RULE = ("where the training data hold two or three trajectories, the candidate whose fold scores agree best "
+            "(the least highest over lowest) among those whose validation MSE is within one standard error (over "
+            "the folds) of the lowest: each fold is then fitted on one or two trajectories, farther from the "
+            "final fit on all of them than the use will be, and the lowest mean of two or three such scores "
+            "does not tell the candidates apart")
+LOWEST_RULE = "the lowest validation MSE"
+
+
+def spread(entry: dict) -> float:
+    """A candidate's highest fold score over its lowest (``inf`` where it has fewer than two, or one is zero)."""
+    folds = [v for v in entry.get("fold_mse") or [] if v is not None]
+    return max(folds) / min(folds) if len(folds) > 1 and min(folds) > 0 else math.inf
+
+
+def rule(trajectories: int | None) -> str:
+    """The rule select chooses by on training data of ``trajectories`` trajectories (``None``: unknown)."""
+    return FEW_RULE if trajectories in FEW_TRAJECTORIES else LOWEST_RULE
+
+
+def choose(entries: list[dict], trajectories: int | None = None) -> dict | None:
+    """The candidate :func:`rule` chooses among :func:`usable`'s: the lowest validation MSE, or with two or
+    three training ``trajectories``, among those within one standard error of it, the one whose fold scores
+    agree best (:func:`spread`; ties to the lower validation MSE), declared before the evaluation set ran."""
     candidates = usable(entries)
-    return min(candidates, key=lambda e: e["validation_mse"]) if candidates else None
+    if not candidates:
+        return None
+    lowest = min(candidates, key=lambda e: e["validation_mse"])
+    if rule(trajectories) != FEW_RULE:
+        return lowest
+    bound = lowest["validation_mse"] + (lowest.get("validation_stderr") or 0.0)
+    within = [e for e in candidates if e["validation_mse"] <= bound]
+    return min(within, key=lambda e: (spread(e), e["validation_mse"]))
 
 
 def stacked(entries: list[dict], out: Path, train: Dataset | None) -> dict:
@@ -250,7 +283,7 @@ def page(result: dict) -> str:
              f"seed {result['seed']}. "
              f"Each candidate is {PROTOCOL} (validation folds: {result['folds'] or 'none'}) by successive halving over "
              f"work, each fold fit of the combination it keeps doing the steps of the final fit on all the training "
-             f"data; its validation MSE is {SCORE_RULE}. The one with the lowest validation MSE is chosen, and the "
+             f"data; its validation MSE is {SCORE_RULE}. Chosen: {result.get('rule') or LOWEST_RULE}; the "
              f"test data are read only to score. The test columns are there to show whether validation chose well.",
              ""]
     flag = informed_sentence(result)
@@ -411,13 +444,15 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
                  samples=None if data is None else len(data[0]))
     done = run(rows, out, workers, report, cluster)
     entries = [entry(c, r, out) for c, r in done]
-    chosen = choose(entries)
+    trajectories = None if data is None else len(data[0].trajectories())
+    chosen = choose(entries, trajectories)
     folds = next(((r.details or {}).get("tuning", {}).get("folds", {}).get("description") for _, r in done
                   if (r.details or {}).get("tuning", {}).get("folds")), None)
     ceiling = f", at most {budget_s:g} s" if budget_s is not None else ""
     budget = f"{steps} steps{ceiling}" if steps is not None else f"each candidate's own steps (its work column){ceiling}"
     result = {"system": system, "declared": declared, "split": split, "seed": seed, "budget": budget, "command": command,
-              "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds, "chosen": chosen, "candidates": entries,
+              "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds,
+              "training_trajectories": trajectories, "rule": rule(trajectories), "chosen": chosen, "candidates": entries,
               "domain": None if data is None else applicability(data[0], data[1], target, protocol),
               "test_informed": test_informed(system, split),
               "stack": score_stack(stacked(entries, out, None if data is None else data[0]), entries, out,

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import pytest
@@ -217,3 +218,25 @@ def test_the_former_evaluation_set_is_development_data_and_the_evaluation_set_is
         assert text == sb.page(made)
         assert "Set: former_evaluation (development data: this set (seeds 5113 and 6271) was the evaluation set" in text
         assert "which is `--set former_evaluation` now" in text
+
+
+def test_the_select_rule_is_selects_own_and_the_few_trajectories_page_is_scored_by_it(tmp_path):
+    from types import SimpleNamespace
+
+    entries = [dict(_entry("standard", 0.30, 0.15, 0.05), fold_mse=[0.25, 0.35]),
+               dict(_entry("feasible+sparse_torque", 0.25, 2.4, 0.06), fold_mse=[0.19, 0.31])]
+    assert sb.scores({"candidates": entries}, 2)["rules"]["select"] == {"chosen": "standard", "regret": 1.0}
+    assert sb.scores({"candidates": entries, "training_trajectories": 4}, 2)["rules"]["select"]["chosen"] == \
+        "feasible+sparse_torque"  # what select said it had
+    assert sb.scores({"candidates": entries})["rules"]["lowest"]["chosen"] == "feasible+sparse_torque"
+    # --rescore reads each case's select page again, and the published page is what it gives
+    published = Path("results/selection/few_trajectories/development.md")
+    shutil.copytree(published.parent, tmp_path / "few")
+    out = tmp_path / "few" / "development.md"
+    args = SimpleNamespace(real_only=False, rescore=True, out=out, invocation="python -m bench study selection --rescore")
+    assert sb.main(args) == 0
+    again, before = json.loads(out.with_suffix(".json").read_text()), json.loads(published.with_suffix(".json").read_text())
+    assert again["table"] == before["table"] and again["summary"] == before["summary"]
+    select = next(r for r in again["summary"] if r["protocol"] == "auto" and r["rule"] == "select")
+    lowest = next(r for r in again["summary"] if r["protocol"] == "auto" and r["rule"] == "lowest")
+    assert select["worst_regret"] < 1.25 < lowest["worst_regret"]

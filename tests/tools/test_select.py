@@ -18,7 +18,8 @@ import pytest
 from bench.core.budget import Budget
 from bench.residual.loop import MAX_ROUNDS
 from bench.tools import stack_score
-from bench.tools.select import CANDIDATES, GP_STEPS, NETWORK_STEPS, choose, page, specs
+from bench.tools.select import CANDIDATES, FEW_RULE, GP_STEPS, LOWEST_RULE, NETWORK_STEPS, choose, page, specs
+from bench.tools.select import rule as select_rule
 from systems import SYSTEMS
 from bench.core.csv_format import write_csv
 from bench.core.scoring import opened
@@ -95,6 +96,25 @@ def test_a_candidate_that_failed_or_saved_nothing_is_not_chosen():
     text = page({"system": "arm", "command": "cmd", "split": None, "budget": "1 steps", "seed": 0, "folds": "f",
                  "chosen": entries[2], "candidates": entries})
     assert "| c **(chosen)** | x=1 |" in text and "timeout: killed" in text
+
+
+def test_with_two_or_three_trajectories_select_takes_the_steadiest_within_one_standard_error():
+    """The development case ur5_two_drive_0's figures: the lowest validation MSE's candidate has the folds that
+    disagree most, and its fit on both trajectories failed on the third (16 times the best's test MSE)."""
+    def entry(name, folds, stderr, test):
+        return {"name": name, "status": "ok", "model": f"{name}.npz", "validation_mse": float(np.mean(folds)),
+                "validation_stderr": stderr, "fold_mse": folds, "test_mse": test}
+
+    entries = [entry("standard", [0.3096, 0.4093], 0.0498, 0.1827), entry("feasible", [0.2429, 0.3480], 0.0525, 0.1507),
+               entry("feasible+gp", [0.2429, 0.3482], 0.0527, 0.1486),
+               entry("feasible+sparse_torque", [0.1893, 0.3137], 0.0622, 2.364)]
+    assert choose(entries)["name"] == choose(entries, 1)["name"] == choose(entries, 4)["name"] == "feasible+sparse_torque"
+    for trajectories in (2, 3):  # within 0.2515 + 0.0622: feasible and feasible+gp agree best over their folds
+        assert choose(entries, trajectories)["name"] == "feasible"
+    assert select_rule(2) == FEW_RULE and select_rule(4) == select_rule(None) == LOWEST_RULE
+    # a candidate beyond one standard error is not taken, however steady
+    steady = entries + [entry("loop", [0.40, 0.41], 0.005, 0.1)]
+    assert choose(steady, 2)["name"] == "feasible"
 
 
 def _arm(folder: Path, test_torque_factor: float) -> Path:
