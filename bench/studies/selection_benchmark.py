@@ -572,7 +572,7 @@ def main(args) -> int:
         result.update(real=real_rows(), real_command=args.invocation, real_commit=provenance().get("commit"))
         _publish(args.out, result)
         return 0
-    if getattr(args, "rescore", False):
+    if args.rescore:
         return rescore(args)
     candidates = named_candidates(args.candidates, at_least=2)
     chosen = [c for c in cases(args.set) if not args.cases or c.name.startswith(tuple(args.cases))]

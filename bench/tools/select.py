@@ -303,7 +303,7 @@ def page(result: dict) -> str:
         ratio = "—" if e["test_over_standard"] is None else f"{e['test_over_standard']:.3f}x"
         far = "—" if e.get("validation_far_mse") is None else f"{e['validation_far_mse']:.4g}"
         lines.append(f"| {e['name']}{mark} | {hp} | {work_cell(e.get('work'))} | {e['validation_mse']:.4g} | "
-                     f"{spread_cell(e.get('fold_mse'))} | {far} | "
+                     f"{spread_cell(e)} | {far} | "
                      f"{e['test_mse']:.4g} | {ratio} | {by_validation.get(e['name'], '—')} | {by_test.get(e['name'], '—')} |")
     lines.append("")
     if chosen:
@@ -368,14 +368,13 @@ def farther(entries: list[dict], chosen: dict | None) -> str:
             f"from the states it is fitted on), validation puts {ranked[0]} first{then}: {same}.")
 
 
-def spread_cell(folds: list[float] | None) -> str:
-    """Each fold's validation MSE, lowest to highest, and the highest over the lowest: how far the folds agree
-    (``—`` for a record made before tuning kept them)."""
-    if not folds:
+def spread_cell(entry: dict) -> str:
+    """A candidate's validation MSE on each fold, lowest to highest, and their :func:`spread`: how far the folds
+    agree (``—`` for a record made before tuning kept them)."""
+    if not entry.get("fold_mse"):
         return "—"
-    ordered = sorted(folds)
-    ratio = f" ({ordered[-1] / ordered[0]:.3g}x)" if len(ordered) > 1 and ordered[0] > 0 else ""
-    return ", ".join(f"{v:.4g}" for v in ordered) + ratio
+    ratio = spread(entry)
+    return ", ".join(f"{v:.4g}" for v in sorted(entry["fold_mse"])) + (f" ({ratio:.3g}x)" if math.isfinite(ratio) else "")
 
 
 def work_cell(work: dict | None) -> str:

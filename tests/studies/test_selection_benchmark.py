@@ -119,7 +119,7 @@ def test_the_cases_are_jobs_of_the_one_scheduler_and_a_second_run_resumes_from_t
     assert job.elsewhere(Path("/scratch")).folder() == Path(f"/scratch/{case.name}")  # on a cluster's worker
     kept = sb.scores({"candidates": [_entry("standard", 0.5, 0.6), _entry("feasible", 0.4, 0.3)]})
     Ledger(out).add(f"{case.name} regions", job, kept)  # as a run stopped after this case would have left it
-    args = SimpleNamespace(real_only=False, out=out, set="development", cases=[case.name], protocols=["auto"],
+    args = SimpleNamespace(real_only=False, rescore=False, out=out, set="development", cases=[case.name], protocols=["auto"],
                            steps=2, workers=1, cluster=None, invocation="python -m bench study selection",
                            candidates=list(reversed(sb.CANDIDATES)))  # select's order whatever the order given
     assert sb.main(args) == 0  # nothing left to run: no select is started
@@ -149,7 +149,7 @@ def test_candidates_other_than_selects_or_fewer_than_two_are_refused_in_one_line
 
     from bench.core.errors import UserError
 
-    args = SimpleNamespace(real_only=False, out=tmp_path / "benchmark.md", set="development", cases=["ur5_one"],
+    args = SimpleNamespace(real_only=False, rescore=False, out=tmp_path / "benchmark.md", set="development", cases=["ur5_one"],
                            protocols=["auto"], steps=2, workers=1, cluster=None, invocation="", candidates=given)
     with pytest.raises(UserError, match=re.escape(said)):
         sb.main(args)
