@@ -172,14 +172,14 @@ def test_every_candidate_is_bounded_by_work_whatever_selects_seconds(tmp_path):
     assert own["standard+mlp"] == own["feasible+delan"] == Budget(seconds=900.0, steps=NETWORK_STEPS)
     assert own["standard"] == own["feasible+sparse_torque"] == Budget(seconds=900.0, steps=1)
     assert all(b.steps is not None for b in own.values()) and len(own) == len(CANDIDATES)
-    # on the KUKA's training samples the learned residuals' passes over the data take no more than those steps;
-    # on a longer log they make as many passes, in their learners' batches, and so more steps
+    # on the KUKA's training samples the GP residuals' passes over the data take no more than their steps;
+    # on a longer log they make as many passes, in the GP's batches, and so more steps
     assert {c.name: spec.budget for c, spec in specs("kuka_lwr4", None, 900.0, None, 0, tmp_path, (),
                                                      samples=4926)} == own
     long = {c.name: spec.budget.steps for c, spec in specs("kuka_lwr4", None, 900.0, None, 0, tmp_path, (),
                                                            samples=64240)}
     assert long["standard+gp"] == long["feasible+gp"] == long["loop+gp"] == math.ceil(3.0 * 64240 / 512)
-    assert long["standard+mlp"] == math.ceil(2.5 * 64240 / 32) and long["feasible+delan"] == math.ceil(20 * 64240 / 256)
+    assert long["standard+mlp"] == long["feasible+delan"] == NETWORK_STEPS  # the networks keep their steps
     assert long["loop"] == MAX_ROUNDS and long["standard"] == 1
     worked = {c.name: spec.budget for c, spec in specs("kuka_lwr4", None, None, 3, 0, tmp_path, (), samples=64240)}
     assert set(worked.values()) == {Budget(steps=3)} and len(worked) == len(CANDIDATES)
