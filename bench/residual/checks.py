@@ -9,7 +9,7 @@ from bench.core.data import Dataset
 from bench.physics.models import FittedModel, mass_and_bias
 from bench.residual.model import LoopModel
 from bench.residual.strategies import Strategy
-from bench.residual.validation import cv_mse, row_folds
+from bench.residual.validation import FoldFits, cv_mse, row_folds
 
 #: training states the mass matrix is checked at
 MASS_STATES = 256
@@ -23,12 +23,23 @@ def heldout(strategy: Strategy, model: LoopModel, train: Dataset, scale: np.ndar
     gains and a drive's load-dependent friction, :meth:`bench.residual.sensors.Sensor.factor`)
     turns the corrected torques ``train`` holds back into measured ones, so that
     models read through different laws are compared in the same units."""
+    return cv_mse(*_problem(strategy, model, train, scale), row_folds(train))
+
+
+def heldout_by_joint(strategy: Strategy, model: LoopModel, train: Dataset, scale: np.ndarray | None = None) -> np.ndarray:
+    """Each joint's torque MSE on held-out data, as :func:`heldout` pools it."""
+    r = FoldFits(*_problem(strategy, model, train, scale), row_folds(train)).residuals()
+    return np.nanmean(r.reshape(-1, train.dof) ** 2, axis=0)
+
+
+def _problem(strategy: Strategy, model: LoopModel, train: Dataset, scale: np.ndarray | None):
+    """The columns and the target, over rows, that :func:`heldout` validates, in measured units."""
     target, F = strategy.problem(model, train)
     y = target.ravel()
     if scale is not None:
         rows = np.broadcast_to(np.asarray(scale, dtype=np.float64), train.tau.shape).ravel()
         y, F = y * rows, F * rows[:, None]
-    return cv_mse(F, y, row_folds(train))
+    return F, y
 
 
 def smallest_mass_eigenvalue(model: FittedModel, train: Dataset) -> float:

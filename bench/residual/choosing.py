@@ -34,9 +34,10 @@ class Choosing:
         return settle(self.strategy, proposed, self.measured, self.sensor, on_sensor)
 
     def compare(self, model: LoopModel, effects: list[Term], on_sensor: list[Term], chosen: list[Term],
-                other: list[Term], built: tuple, margin: float):
+                other: list[Term], built: tuple, margin: float, weights: np.ndarray | None = None):
         """The build (:meth:`build`) with the group ``other`` in place of the accepted
-        ``chosen``, where its BIC on the measured torques, both refitted with the model,
+        ``chosen``, where its BIC on the measured torques (each joint's rows times its
+        ``weights``, as the trace weighed them), both refitted with the model,
         is lower by more than ``margin``; else ``None``. For an open-ended term far
         better than the named law accepted (:attr:`~bench.residual.tracing.Trace.mismatched`,
         margin :data:`~bench.residual.criteria.MIN_BIC_DROP`), and for the runner-up
@@ -45,10 +46,11 @@ class Choosing:
         alternative = self.build(model, [t for t in effects if t not in chosen] + [t for t in other if t.place != "sensor"],
                                  [t for t in on_sensor if t not in chosen] + [t for t in other if t.place == "sensor"])
         n = self.measured.tau.size
-        floor = ROUNDOFF * float(np.mean(self.measured.tau**2)) * n  # below it, two fits are equally exact
+        w = np.ones(self.measured.dof) if weights is None else weights
+        floor = ROUNDOFF * float(np.mean((self.measured.tau * w) ** 2)) * n  # below it, two fits are equally exact
 
         def rss(m, s):
-            return max(measured_rss(m, s, self.measured), floor)
+            return max(measured_rss(m, s, self.measured, w), floor)
 
         def size(group):  # a law's parameters, its shape among them
             return len(group) + sum(t.shape is not None for t in group[-1:])
@@ -68,7 +70,7 @@ class Choosing:
         effects = model.effects + [t for t in traced.accepted if t not in laws]
         built = self.build(model, effects, on_sensor)
         for chosen, runner in traced.runners_up:
-            other = self.compare(model, effects, on_sensor, chosen, runner, built, 0.0)
+            other = self.compare(model, effects, on_sensor, chosen, runner, built, 0.0, traced.weights)
             if other is not None:
                 report(f"  {' + '.join(map(label, runner))} instead of {' + '.join(map(label, chosen))}: "
                        f"a lower BIC once refitted with the model")
@@ -82,7 +84,7 @@ class Choosing:
                                                "comparison of the trace may rank wrongly")
                 on_sensor = [t for t in on_sensor if t not in chosen] + [t for t in runner if t in laws]
         for named, rival, *seen in traced.mismatched:
-            other = self.compare(model, effects, on_sensor, named, [rival], built, MIN_BIC_DROP)
+            other = self.compare(model, effects, on_sensor, named, [rival], built, MIN_BIC_DROP, traced.weights)
             if other is not None:
                 built, effects = other, other[0].effects
                 self.unnamed[label(rival)] = mismatch(named, rival, *seen)

@@ -1,7 +1,8 @@
 """What a term must pass for the residual loop's trace to accept it
 (:mod:`bench.residual.tracing`).
 
-A term is accepted only if all hold:
+A term is accepted only if all hold, each joint's rows weighted by the inverse
+of its residual's scale (:func:`joint_weights`):
 
 * the Bayesian information criterion of the residual fit, over all training
   rows, falls by more than :data:`MIN_BIC_DROP` (strong evidence on Kass &
@@ -41,6 +42,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from bench.physics.terms import Term
 from bench.residual.library import label
 
@@ -50,9 +53,29 @@ MIN_HELDOUT_GAIN = 0.01
 #: on independent samples, a held-out gain this many rows' worth of residual is enough (see the module docstring)
 MIN_HELDOUT_CHI2 = MIN_BIC_DROP
 ROUNDOFF = 1e-20
+#: the largest ratio of two joints' weights (:func:`joint_weights`)
+MAX_WEIGHT_RATIO = 1000.0
 #: an admissible term replaces a better one with an impossible coefficient
 #: only if it removes at least this share of what that one removes
 AS_WELL = 0.9
+
+
+def joint_weights(y: np.ndarray, basis: np.ndarray, dof: int) -> np.ndarray:
+    """One weight a row of ``y`` (``tau.ravel()``: ``dof`` rows a sample): the inverse
+    of its joint's root mean square residual off the orthonormal ``basis``, the
+    weighted least squares of robot identification (Gautier & Poignet 2001; Khalil &
+    Dombre 2002, the identification chapters), each joint's equations scaled by
+    its error's standard deviation, so that the BIC, the significance and the
+    held-out error see each joint's residual in its own units. A joint's error
+    is taken at least :data:`MAX_WEIGHT_RATIO` times smaller than the largest,
+    so that one fitted to round-off is not magnified without bound."""
+    r = (y - basis @ (basis.T @ y)).reshape(-1, dof) if basis.shape[1] else y.reshape(-1, dof)
+    sigma = np.sqrt(np.mean(r**2, axis=0))
+    top = float(sigma.max())
+    if not top > 0:
+        return np.ones_like(y)
+    sigma = np.maximum(sigma, top / MAX_WEIGHT_RATIO)
+    return np.tile(top / sigma, len(y) // dof)
 
 
 def bic(rss: float, n: int, k: int) -> float:
@@ -66,15 +89,14 @@ def slot(term: Term):
     return (term.name, term.joints) if term.shape is not None else term
 
 
-def passes(best: dict, before: float, heldout, min_gain: float = MIN_HELDOUT_GAIN) -> tuple[bool, dict]:
-    """Whether ``best`` passes the BIC, significance and held-out tests (``before``:
-    the design's held-out error without it; ``heldout(group)``: with the group's
-    columns added; ``min_gain``: the share of it the group must save), with its statistics."""
+def passes(best: dict, gain_of, min_gain: float = MIN_HELDOUT_GAIN) -> tuple[bool, dict]:
+    """Whether ``best`` passes the BIC, significance and held-out tests
+    (``gain_of(group)``: the share of the held-out error that the group's columns
+    save beside the design; ``min_gain``: the share it must save), with its statistics."""
     if not (best["bic_drop"] > MIN_BIC_DROP):  # the cheap test first
         return False, {"term": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],
                        "coefficient": best["coef"], "accepted": False}
-    after = heldout(best["group"])
-    gain = (before - after) / before if before > 0 else 0.0
+    gain = gain_of(best["group"])
     t = abs(best["coef"]) / best["stderr"] if best["stderr"] > 0 else math.inf
     ok = best["bic_drop"] > MIN_BIC_DROP and t >= MIN_T and gain >= min_gain
     info = {"term": " + ".join(label(t) for t in best["group"]), "bic_drop": best["bic_drop"],

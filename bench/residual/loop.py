@@ -49,7 +49,10 @@ can undo a round) is the model's refit strategy, chosen once from the model
    cross-validation over whole trajectories (:mod:`bench.residual.validation`:
    leave one trajectory out, regions of the states of the one trajectory the
    training data hold, or contiguous blocks of independent samples); a round
-   that does not lower that held-out error is undone and the loop ends, so
+   that does not lower that held-out error is undone and the loop ends (on
+   trajectories it must lower it by :data:`~bench.residual.criteria.MIN_HELDOUT_GAIN`,
+   pooled over the joints or on average with each joint's error in its own
+   units, as the trace weighs each joint's rows), so
    the final model is never worse than the starting one on held-out data. A strategy may undo a round too (a
    kept fit's effects must also lower, on each half, the error of the method
    fitted on the other half). Each round records the figure
@@ -91,7 +94,7 @@ from bench.physics.models import FittedModel
 from bench.physics.terms import TermLibrary, remembered_columns, share_columns
 from bench.residual.library import describe_all, is_named, loop_library, label, resolved_periods, structural
 from bench.residual.choosing import Choosing
-from bench.residual.checks import MASS_STATES, heldout, smallest_mass_eigenvalue
+from bench.residual.checks import MASS_STATES, heldout, heldout_by_joint, smallest_mass_eigenvalue
 from bench.residual.model import Fitter, LoopModel
 from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
@@ -238,6 +241,21 @@ class _Loop(Tidying, Choosing):
         sensor = self.sensor if sensor is None else sensor
         train = self.train if train is None else train
         return heldout(self.strategy, model, train, sensor.factor(train))
+
+    def pays_in_joint_units(self, model: LoopModel, proposed: LoopModel, proposed_held: float, held: float,
+                            before_round: tuple) -> bool:
+        """Whether a round whose held-out error falls by less than ``round_gain`` pooled still pays: it falls
+        pooled, and by ``round_gain`` with each joint's held-out error in its own units (over its error
+        before the round, as the trace weighs each joint: :func:`~bench.residual.criteria.joint_weights`),
+        averaged over the joints. On a geared arm a wrist's rotor inertia is half of the wrist's error
+        and a fraction of a percent of the pooled one."""
+        if not self.round_gain or not proposed_held < held:
+            return False
+        train, sensor = before_round
+        before = heldout_by_joint(self.strategy, model, train, sensor.factor(train))
+        after = heldout_by_joint(self.strategy, proposed, self.train, self.sensor.factor(self.train))
+        kept = before > 0
+        return bool(kept.any()) and float(np.mean(after[kept] / before[kept])) < 1 - self.round_gain
 
     def use(self, train: Dataset, sensor: Sensor) -> None:
         """Fit from now on to ``train``, the measured data as ``sensor`` corrects them;
@@ -464,7 +482,8 @@ class _Loop(Tidying, Choosing):
             undo = (f"with these effects the mass matrix is not positive definite on the training data "
                     f"(smallest eigenvalue {proposed_mass:.4g})",
                     f"the mass matrix would not be positive definite (smallest eigenvalue {proposed_mass:.4g})")
-        elif not proposed_held < (1 - self.round_gain) * held:
+        elif not proposed_held < (1 - self.round_gain) * held and not self.timed(
+                self.pays_in_joint_units, model, proposed, proposed_held, held, before_round):
             undo = ("the refitted model does not lower the held-out error"
                     + (f" by {self.round_gain:.0%}, as each round must on trajectories" if self.round_gain else ""),
                     f"held-out MSE {proposed_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")

@@ -17,8 +17,8 @@ from bench.physics.regression import Compressed
 from bench.physics.terms import Term
 from bench.residual.library import admissible, label
 from bench.residual.model import LoopModel
-from bench.residual.basis import extend_basis
-from bench.residual.criteria import MIN_BIC_DROP, ROUNDOFF, bic
+from bench.residual.basis import extend_basis, orthonormal_basis
+from bench.residual.criteria import MIN_BIC_DROP, ROUNDOFF, bic, joint_weights
 from bench.residual.shapes import at_limit, refinable, refined_shape, shape_rss
 from bench.residual.strategies import Strategy
 from bench.runner.progress import Report
@@ -26,8 +26,9 @@ from bench.runner.progress import Report
 
 def prune(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) -> tuple[LoopModel, list[str]]:
     """Backward elimination after a joint refit: drop an effect whose removal
-    raises the BIC by less than :data:`MIN_BIC_DROP` (it became redundant with
-    the refitted model), then refit; repeat until every effect holds. Each
+    raises the BIC (each joint's rows weighted as the trace weighs them,
+    :func:`~bench.residual.criteria.joint_weights`) by less than :data:`MIN_BIC_DROP`
+    (it became redundant with the refitted model), then refit; repeat until every effect holds. Each
     pass compresses the linear problem once (:class:`~bench.physics.regression.Compressed`)
     and fits it without each effect from that."""
     removed = []
@@ -35,9 +36,11 @@ def prune(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) 
         target, F = strategy.problem(model, train)
         y = target.ravel()
         n, k = len(y), F.shape[1]
+        w = joint_weights(y, orthonormal_basis(F), train.dof)  # each joint in its own units, as the trace sees it
+        y, F = y * w, F * w[:, None]
         first = k - len(model.effects)  # the effects' columns come last
         # residual sums below round-off are equal: their ratios are floating-point noise
-        floor = ROUNDOFF * float(np.mean(train.tau**2)) * n
+        floor = ROUNDOFF * float(np.mean((train.tau.ravel() * w) ** 2)) * n
         problem = Compressed(F, y)
         rss_all = max(problem.rss(), floor)
         weakest, weakest_gain = None, math.inf

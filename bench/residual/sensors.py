@@ -190,11 +190,12 @@ def settle(strategy, model, measured: Dataset, sensor: Sensor, new: list[Term]):
     return model, sensor, train
 
 
-def measured_rss(model: FittedModel, sensor: Sensor, measured: Dataset) -> float:
+def measured_rss(model: FittedModel, sensor: Sensor, measured: Dataset, weights: np.ndarray | None = None) -> float:
     """The residual sum of squares of ``model`` read through ``sensor`` on the
-    measured torques: what fits read through different sensors are compared by."""
+    measured torques, each joint's times its ``weights`` where given: what fits
+    read through different sensors are compared by."""
     r = Sensed(model, sensor).predict_torque(measured) - measured.tau
-    return float(np.sum(r**2))
+    return float(np.sum((r if weights is None else r * weights) ** 2))
 
 
 def inadmissible(strategy, model, measured: Dataset, sensor: Sensor):

@@ -36,7 +36,7 @@ from bench.physics.terms import Term, TermLibrary
 from bench.core.budget import now
 from bench.residual.basis import extend_basis, orthonormal_basis, project_off
 from bench.residual.criteria import (AS_WELL, MIN_BIC_DROP, MIN_HELDOUT_CHI2, MIN_HELDOUT_GAIN, MIN_T, ROUNDOFF, bic,
-                                     passes, slot)
+                                     joint_weights, passes, slot)
 from bench.residual.library import admissible, is_named, label
 from bench.residual.shapes import SHAPE_LIMITS, at_limit, refinable, refined_shape
 from bench.residual.validation import FoldFits, paired_difference, row_folds
@@ -72,6 +72,8 @@ class Trace:
     #: ``(kept group, [equivalent groups], entry)``: terms of one step that the held-out error cannot
     #: tell apart, the one kept by :data:`EQUIVALENCE_RULE`; ``entry`` is what the loop's JSON gives of them
     equivalents: list[tuple] = field(default_factory=list)
+    #: each joint's weight in the trace's fits (:func:`~bench.residual.criteria.joint_weights`)
+    weights: np.ndarray | None = None
 
 
 def trace(target: np.ndarray, data: Dataset, pool: TermLibrary, fixed: np.ndarray | None = None,
@@ -118,15 +120,18 @@ class Tracer:
         self.max_steps, self.deadline, self.given, self.runner_up = max_steps, deadline, given, runner_up
         #: the step's residual off the design, its sum of squares, and its held-out fits and error
         self.r, self.rss_now, self.held_fits, self.before = None, None, None, None
-        self.y = target.ravel()
-        self.n_rows = len(self.y)
+        y = target.ravel()
+        self.n_rows = len(y)
         self.held = row_folds(self.data)
         self.min_gain = MIN_HELDOUT_GAIN if self.data.trajectories() else \
             min(MIN_HELDOUT_GAIN, MIN_HELDOUT_CHI2 / self.n_rows)
-        self.floor = ROUNDOFF * float(np.mean(self.data.tau**2))
-        self.fixed = np.zeros((self.n_rows, 0)) if self.fixed is None else self.fixed
-        self.F_all = {c: c.column(self.data, "indirect") for c in self.pool if c not in self.exclude}
-        self.F_all.update({c: np.asarray(f, dtype=np.float64) for c, f in (self.given or {}).items()})
+        fixed = np.zeros((self.n_rows, 0)) if self.fixed is None else self.fixed
+        # every row in its joint's units (joint_weights): the target, the design and each term's column
+        self.w = joint_weights(y, orthonormal_basis(fixed), data.dof)
+        self.y, self.fixed = y * self.w, fixed * self.w[:, None]
+        self.floor = ROUNDOFF * float(np.mean((self.data.tau.ravel() * self.w) ** 2))
+        self.F_all = {c: self.column(c) for c in self.pool if c not in self.exclude}
+        self.F_all.update({c: np.asarray(f, dtype=np.float64) * self.w for c, f in (self.given or {}).items()})
         # a term not finite on the data is left out
         self.F_all = {c: f for c, f in self.F_all.items() if np.isfinite(f).all()}
         self.accepted, self.steps, self.structural = [], [], []
@@ -150,6 +155,10 @@ class Tracer:
             self.declared_order.setdefault(slot(c), (len(self.declared_order),))
         self.equivalents: list[tuple] = []
 
+    def column(self, term: Term) -> np.ndarray:
+        """``term``'s column on the data, each row weighted as the trace weighs it (:attr:`w`)."""
+        return term.column(self.data, "indirect") * self.w
+
     def _rival(self, chosen: dict) -> dict | None:
         """The open-ended term that explains the residual better than the named law
         ``chosen`` by more than :data:`MIN_BIC_DROP` and passes every test, or ``None``:
@@ -162,7 +171,7 @@ class Tracer:
         best = max((self.stats(c, k_now, self.rss_now) for c in others), key=lambda b: b["bic_drop"])
         if not best["bic_drop"] > chosen["bic_drop"] + MIN_BIC_DROP or self.physical(best) is not None:
             return None
-        ok, info = passes(best, self.before, self.held_cv, self.min_gain)
+        ok, info = passes(best, self.held_gain, self.min_gain)
         if not ok:
             return None
         self.steps.append({**info, "rival_of": " + ".join(label(t) for t in chosen["group"])})
@@ -218,7 +227,7 @@ class Tracer:
                 return None
             if not self.redundant(chosen, best, k_now):  # it explains something else too: another cause, not a rival
                 return None
-            ok, other_info = passes(best, self.before, self.held_cv, self.min_gain)
+            ok, other_info = passes(best, self.held_gain, self.min_gain)
             if not ok:
                 return None
             r_b = self.held_residuals(best["group"])
@@ -270,9 +279,10 @@ class Tracer:
         cands = self.nuisance + list(cands)
         return np.column_stack([self.fixed] + [self.F_all[c][:, None] for c in cands]) if cands else self.fixed
 
-    def held_cv(self, group: list[Term]) -> float:
-        """The held-out error with ``group``'s columns beside this step's design (``held_fits``)."""
-        return self.held_fits.cv(np.column_stack([self.F_all[t] for t in group]))
+    def held_gain(self, group: list[Term]) -> float:
+        """The share of this step's held-out error (``held_fits``) that ``group``'s columns save beside the design."""
+        after = self.held_fits.cv(np.column_stack([self.F_all[t] for t in group]))
+        return (self.before - after) / self.before if self.before > 0 else 0.0
 
     def group(self, c: Term) -> list[Term]:
         """A shaped term with the other parts of the law it leads
@@ -285,7 +295,7 @@ class Tracer:
         mates = [t for t in mates if slot(t) not in self.taken]
         for t in mates:
             if t not in self.F_all:
-                self.F_all[t] = t.column(self.data, "indirect")
+                self.F_all[t] = self.column(t)
         return mates + [c]
 
     def refine(self, c: Term) -> Term:
@@ -295,7 +305,7 @@ class Tracer:
         Qm = self.Q if not mates else np.hstack(
             [self.Q, orthonormal_basis(project_off(self.Q, np.column_stack([self.F_all[t] for t in mates])))])
         refined = effect.term(c.joint, shape=refined_shape(Qm, self.y - Qm @ (Qm.T @ self.y), c, self.data))
-        column = refined.column(self.data, "indirect")
+        column = self.column(refined)
         if not np.isfinite(column).all():
             return c
         self.F_all[refined] = column
@@ -437,7 +447,7 @@ class Tracer:
                     if self.before is None:
                         self.held_fits = FoldFits(self.design(self.accepted), self.y, self.held)
                         self.before = self.held_fits.cv()
-                    ok, info = passes(best, self.before, self.held_cv, self.min_gain)
+                    ok, info = passes(best, self.held_gain, self.min_gain)
                     impossible = self.physical(best)
                     if chosen is not None and not (ok and impossible is None):  # no runner-up
                         tried += 1
@@ -498,7 +508,8 @@ class Tracer:
             self.steps_taken.append(chosen)
             self.taken.update(slot(t) for t in chosen["group"])
             self.rss_now = chosen["rss"]
-        return Trace(self.accepted, self.steps, self.structural, self.mismatched, self.runners_up, self.equivalents)
+        return Trace(self.accepted, self.steps, self.structural, self.mismatched, self.runners_up, self.equivalents,
+                     self.w[:self.data.dof])
 
 
 def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:

@@ -150,16 +150,23 @@ class FoldFits:
         """The held-out residual of ``y ~ [D | G]`` on each row a fold scores
         (by the fit without that fold), ``nan`` on the rows no fold scores; the
         mean of its squares is :meth:`cv`."""
-        F = self.D if G is None else np.hstack([self.D, G])
+        g = 0 if G is None else G.shape[1]
         out = np.full(len(self.y), np.nan)
-        if F.shape[1] == 0:
+        if self.k + g == 0:
             for f in self.held:
                 out[f.score] = self.y[f.score]
             return out
-        fits = [fit.compressed(G) for fit, _ in self.parts] if self.split else None
+        if not self.split:
+            F = self.D if G is None else np.hstack([self.D, G])
+            for f in self.held:
+                out[f.score] = self.y[f.score] - F[f.score] @ least_squares(F[f.fit], self.y[f.fit])
+            return out
+        fits = [fit.compressed(G) for fit, _ in self.parts]
         for i, f in enumerate(self.held):
-            coef = Compressed.stacked(fits[:i] + fits[i + 1:]).coef() if self.split else least_squares(F[f.fit], self.y[f.fit])
-            out[f.score] = self.y[f.score] - F[f.score] @ coef
+            coef = Compressed.stacked(fits[:i] + fits[i + 1:]).coef()
+            # the prediction on every row from the two blocks, rather than a copy of the design's scored rows
+            predicted = self.D @ coef[:self.k] + (G @ coef[self.k:] if g else 0.0)
+            out[f.score] = (self.y - predicted)[f.score]
         return out
 
 

@@ -16,6 +16,7 @@ from bench.physics.terms import TermLibrary
 from bench.residual import loop, residual_loop, strategies, trace
 from bench.residual import model as model_module
 from bench.core.folds import MAX_SPANS as BLOCKS, folds
+from bench.residual.criteria import MAX_WEIGHT_RATIO, joint_weights
 from bench.residual.validation import cv_mse, describe
 from systems import get_system
 from tests.residual.test_loop import SOLVED, SYSID, quiet
@@ -304,7 +305,11 @@ def test_on_trajectories_a_round_must_save_one_percent_of_the_held_out_error(tra
         calls.append(model)
         return 1.0 if len(calls) == 1 else 0.995
 
+    def by_joint(strategy, model, train, scale=None):  # each joint's error falls by as much as the pooled one
+        return np.full(train.dof, 1.0 if model is calls[0] else 0.995)
+
     monkeypatch.setattr(loop_module._Loop, "heldout", heldout)
+    monkeypatch.setattr(loop_module, "heldout_by_joint", by_joint)
     out = residual_loop("sysid", train, None, budget=Budget(steps=SOLVED), report=quiet, open_ended=False)
     first = out.rounds[1]
     if trajectories:
@@ -312,3 +317,48 @@ def test_on_trajectories_a_round_must_save_one_percent_of_the_held_out_error(tra
         assert out.effects == [] or all(e["kind"] != "dissipative" for e in out.effects)
     else:
         assert first.get("stop") is None and any(e["name"] == "viscous_friction" for e in out.effects)
+
+
+def test_a_round_that_pays_on_one_joint_in_its_own_units_is_kept(monkeypatch):
+    # pooled, the held-out error falls by 0.5 %; the small joint's own error by a third: the round stays
+    from bench.tools.robot_log import simulate
+    from bench.residual import loop as loop_module
+
+    parts = []
+    for k in range(2):
+        time, d = simulate("double_pendulum", 6.0, 100.0, 0.2, ["viscous_friction=0.8,0.5"], 0.01, k)
+        label = np.asarray([f"r{k}"] * len(d))
+        parts.append(d.replace(recording=label, trajectory=label, time=time))
+    join = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+    train = parts[0].replace(**{k: join(k) for k in ("q", "qd", "qdd", "tau", "L", "recording", "trajectory", "time")})
+    calls = []
+
+    def heldout(self, model, train=None, sensor=None):
+        calls.append(model)
+        return 1.0 if len(calls) == 1 else 0.995
+
+    def by_joint(strategy, model, train, scale=None):
+        return np.array([1.0, 0.01]) if model is calls[0] else np.array([0.995, 0.0066])
+
+    monkeypatch.setattr(loop_module._Loop, "heldout", heldout)
+    monkeypatch.setattr(loop_module, "heldout_by_joint", by_joint)
+    out = residual_loop("sysid", train, None, budget=Budget(steps=SOLVED), report=quiet, open_ended=False)
+    assert out.rounds[1].get("stop") is None and any(e["kind"] == "dissipative" for e in out.effects)
+
+
+def test_the_trace_weighs_each_joint_by_its_own_residual():
+    # joint 1's residual is noise a hundred times joint 2's, and joint 2's is half a rotor inertia:
+    # pooled, its share of the residual is 0.01 %, below every test; each joint in its own units, it is found
+    data = generate(get_system("double_pendulum"), 4000, 3)
+    rng = np.random.default_rng(0)
+    armature = EFFECTS["armature"].term(1)
+    column = armature.column(data, "indirect").reshape(data.tau.shape)
+    residual = np.column_stack([rng.normal(0, 100.0, len(data)), rng.normal(0, 1.0, len(data))])
+    residual += column / np.sqrt(np.mean(column[:, 1] ** 2))
+    traced = trace(residual, data, TermLibrary([EFFECTS["armature"].term(0), armature]))
+    assert traced.accepted == [armature] and traced.weights[1] / traced.weights[0] == pytest.approx(100 / np.sqrt(2), rel=0.05)
+    assert joint_weights(residual.ravel(), np.zeros((residual.size, 0)), 2)[1] == pytest.approx(traced.weights[1])
+    # a joint fitted to round-off is weighed at most MAX_WEIGHT_RATIO times the largest
+    flat = np.column_stack([rng.normal(0, 1.0, 10), np.zeros(10)]).ravel()
+    w = joint_weights(flat, np.zeros((flat.size, 0)), 2)
+    assert w[1] / w[0] == pytest.approx(MAX_WEIGHT_RATIO)
