@@ -45,6 +45,14 @@ def positive_int(text: str) -> int:
     return value
 
 
+def nonnegative_int(text: str) -> int:
+    """A whole number >= 0."""
+    value = _number(text, int, "a whole number >= 0")
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text}")
+    return value
+
+
 def noise_level(text: str) -> float:
     """Gaussian noise on a target as a fraction of its standard deviation: in [0, 10)."""
     try:

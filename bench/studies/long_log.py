@@ -1,16 +1,21 @@
 """``python -m bench study long-log``: ``bench select`` at its default on a
 long generated log, as a user with a long log of their own would run it.
 
-The log is the selection benchmark's ``long`` layout of one case
-(:data:`CASE`, made by :func:`bench.studies.selection_benchmark.make`): the
-Panda with a drive's laws the rigid body lacks, :data:`~bench.studies.selection_benchmark.LONG`
-excitation trajectories of :data:`~bench.studies.selection_benchmark.LONG_SECONDS`
-each at :data:`~bench.studies.selection_benchmark.RATE_HZ` (70,080 samples), the last
-one the test, declared as a measured arm of one's own. ``bench select`` runs on it
-in a process of its own, with nothing but ``--system`` and ``--out``; the page
-says whether every candidate finished, how many rounds the loop ran on each
-fold and in its final fit, what was chosen, its regret (its test MSE over the
-best candidate's) and how long the selection took on this machine.
+The log is one case of the selection benchmark (:data:`CASES`, made by
+:func:`bench.studies.selection_benchmark.make`), declared as a measured arm
+of one's own: in the ``long`` layout, the Panda with a drive's laws the
+rigid body lacks, :data:`~bench.studies.selection_benchmark.LONG` excitation
+trajectories of :data:`~bench.studies.selection_benchmark.LONG_SECONDS` each
+at :data:`~bench.studies.selection_benchmark.RATE_HZ` (70,080 samples), the
+last one the test; in the ``seven`` layout, the KUKA with the same laws,
+:data:`~bench.studies.selection_benchmark.SEVEN` training trajectories of
+2,000 samples and a test, so that the loop's final fit holds out each of
+seven trajectories in turn. ``bench select`` runs on it in a process of its
+own, with nothing but ``--system`` and ``--out``, and ``--busy`` keeps cores
+busy beside it; the page says whether every candidate finished, how many
+rounds the loop ran on each fold and in its final fit, what was chosen, its
+regret (its test MSE over the best candidate's) and how long the selection
+took on this machine.
 """
 
 from __future__ import annotations
@@ -22,22 +27,37 @@ import sys
 import time
 from pathlib import Path
 
+from bench.core.arguments import nonnegative_int
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, write_json
 from bench.runner.provenance import provenance
-from bench.studies.selection_benchmark import LONG, LONG_SECONDS, NOISE, RATE_HZ, Case, make, scores
+from bench.studies.selection_benchmark import LONG, LONG_SECONDS, NOISE, RATE_HZ, SEVEN, SEVEN_SECONDS, Case, make, scores
 
-HELP = ("bench select at its default on a generated 12-trajectory, 70,080-sample log of the Panda: every "
-        "candidate's status, the loop's rounds, the regret and the time (results/selection/long_log.md)")
+#: each layout's trajectories (the test among them) and the seconds of each
+TRAJECTORIES_OF, SECONDS_OF = {"long": LONG, "seven": SEVEN + 1}, {"long": LONG_SECONDS, "seven": SEVEN_SECONDS}
 
-#: the case whose log is made: the Panda, a drive's laws, seed 77
-CASE = Case("panda", "long", "drive", 77)
+HELP = ("bench select at its default on a generated long log (the Panda's 12 trajectories, 70,080 samples; or, with "
+        "--layout seven, the KUKA's 7 training trajectories of 2,000): every candidate's status, the loop's rounds, "
+        "the regret and the time (results/selection/long_log.md)")
+
+#: the case whose log is made, by layout: the Panda's 12 trajectories of 5,840 samples (``long``) or the
+#: KUKA's 7 training trajectories of 2,000 (``seven``: each held out in turn in the final fit), a drive's laws, seed 77
+CASES = {"long": Case("panda", "long", "drive", 77), "seven": Case("kuka", "seven", "drive", 77)}
+#: the arms' names on the page
+ARM_NAMES = {"panda": "Panda", "kuka": "KUKA LWR4+"}
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--out", type=Path, default=Path("results/selection/long_log.md"),
-                        help="the page (default results/selection/long_log.md); select's own page and JSON go in "
-                             "the folder of its name beside it, the log in its data/ (not kept in the repository)")
+    parser.add_argument("--busy", type=nonnegative_int, default=0, metavar="N",
+                        help="keep N cores busy beside the selection (N processes of `yes > /dev/null`), as on a "
+                             "slower machine or one doing other work (default 0)")
+    parser.add_argument("--layout", choices=sorted(CASES), default="long",
+                        help="the log: long (the Panda, 12 trajectories, 70,080 samples; default) or seven (the KUKA, "
+                             "7 training trajectories of 2,000 samples and a test)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="the page (default results/selection/long_log.md, or seven_trajectories.md for --layout "
+                             "seven); select's own page and JSON go in the folder of its name beside it, the log in "
+                             "its data/ (not kept in the repository)")
 
 
 def summary(result: dict) -> dict:
@@ -61,12 +81,15 @@ def page(report: dict) -> str:
     lines = ["# bench select on a long log", "",
              f"Command: `{report['command']}`" + (f", at commit {report['commit']}" if report.get("commit") else ""),
              "",
-             f"The log: the selection benchmark's case `{report['case']}` in its `long` layout: the Panda's URDF "
+             f"The log: the selection benchmark's case `{report['case']}` in its `{report.get('layout', 'long')}` "
+             f"layout: the {report.get('arm', 'Panda')}'s URDF "
              f"with a drive's laws the rigid body lacks ({', '.join(report['effects'])}), torque noise "
              f"{report['noise']:g} of each joint's standard deviation; {report['trajectories']} excitation "
              f"trajectories (finite Fourier series) of {report['seconds']:g} s at {report['rate_hz']:g} Hz, "
              f"{report['samples']:,} samples, the last trajectory the test. The command above writes it again.", "",
-             f"`{report['select']}` ran in {report['select_seconds'] / 60:.1f} min wall on {report['cpus']} cores; "
+             f"`{report['select']}` ran in {report['select_seconds'] / 60:.1f} min wall on {report['cpus']} cores"
+             + (f", {report['busy']} of them kept busy beside it (`yes > /dev/null`)" if report.get("busy") else "")
+             + "; "
              f"its page: [{report['select_page']}]({report['select_page']}).", "",
              "| candidate | status | steps: each fold fit → the final fit |", "|---|---|---|"]
     for name, status in s["status"].items():
@@ -88,23 +111,36 @@ def _rows(csv: Path) -> int:
 
 
 def main(args) -> int:
+    layout = getattr(args, "layout", "long")
+    case = CASES[layout]
+    if args.out is None:
+        args.out = Path("results/selection") / ("long_log.md" if layout == "long" else "seven_trajectories.md")
     folder = args.out.with_suffix("")
-    declared = make(CASE, folder / "data")
+    declared = make(case, folder / "data")
     made = json.loads((folder / "data" / "case.json").read_text())
     out = folder / "select"
     command = [sys.executable, "-m", "bench", "select", "--system", f"measured:{declared}", "--out", str(out)]
     shown = f"python -m bench select --system measured:{declared} --out {out}"
     print(f"running {shown}", flush=True)
-    start = time.perf_counter()
-    if subprocess.run(command).returncode != 0 or not (out / "select.json").exists():
+    busy = [subprocess.Popen(["yes"], stdout=subprocess.DEVNULL) for _ in range(args.busy)]
+    try:
+        start = time.perf_counter()
+        finished = subprocess.run(command).returncode == 0
+        seconds = time.perf_counter() - start
+    finally:
+        for p in busy:
+            p.kill()
+            p.wait()
+    if not finished or not (out / "select.json").exists():
         raise UserError(f"{shown} failed; its output is above")
-    seconds = time.perf_counter() - start
     result = json.loads((out / "select.json").read_text())
     samples = sum(_rows(p) for p in sorted((folder / "data").glob("rec*.csv")))
-    report = {"command": args.invocation, "commit": provenance().get("commit"), "case": CASE.name,
-              "effects": made["effects"], "noise": NOISE, "trajectories": LONG, "seconds": LONG_SECONDS,
+    report = {"command": args.invocation, "commit": provenance().get("commit"), "case": case.name,
+              "layout": layout, "arm": ARM_NAMES.get(case.arm, case.arm),
+              "effects": made["effects"], "noise": NOISE, "trajectories": TRAJECTORIES_OF[layout],
+              "seconds": SECONDS_OF[layout],
               "rate_hz": RATE_HZ, "samples": samples, "select": shown, "select_seconds": round(seconds, 1),
-              "cpus": os.cpu_count(), "select_page": os.path.relpath(out / "select.md", args.out.parent),
+              "cpus": os.cpu_count(), "busy": args.busy, "select_page": os.path.relpath(out / "select.md", args.out.parent),
               "summary": summary(result)}
     write_json(args.out.with_suffix(".json"), report)
     text = page(report)

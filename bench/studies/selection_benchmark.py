@@ -127,6 +127,9 @@ GEARED = "geared"
 #: the ``long`` layout (:mod:`bench.studies.long_log`): trajectories (the last the test) and the seconds of each,
 #: 12 x 5,840 = 70,080 samples at :data:`RATE_HZ`
 LONG, LONG_SECONDS = 12, 58.4
+#: the ``seven`` layout: seven training trajectories of 2,000 samples and a test (a lab's identification
+#: logs of a KUKA), for :mod:`bench.studies.long_log`
+SEVEN, SEVEN_SECONDS = 7, 20.0
 #: seconds of each recording, and its rate
 SECONDS, RATE_HZ, BASE_HZ = 10.0, 100.0, 0.1
 #: the torque noise, a fraction of each joint's torque standard deviation
@@ -234,7 +237,7 @@ def make(case: Case, folder: Path) -> Path:
     effects = EFFECT_SETS[case.effects](system.dof, rng)
     noise = geared_arm.NOISE if case.arm == GEARED else NOISE
     base = 1000 * case.seed
-    seconds = LONG_SECONDS if case.layout == "long" else SECONDS
+    seconds = {"long": LONG_SECONDS, "seven": SEVEN_SECONDS}.get(case.layout, SECONDS)
     if case.layout == "one":
         plan = [("A", base + 1, base + 11, BASE_HZ), ("A", base + 1, base + 12, BASE_HZ),
                 ("T", base + 2, base + 13, FASTER * BASE_HZ)]
@@ -242,9 +245,10 @@ def make(case: Case, folder: Path) -> Path:
         n = RECORDED_TWICE[case.layout]
         plan = [(f"A{k}", base + 1 + k, base + 11 + 2 * k + r, BASE_HZ) for k in range(n) for r in range(2)] + \
                [("T", base + 1 + n, base + 11 + 2 * n, BASE_HZ)]
-    elif case.layout == "long":  # noise seeds apart from the trajectories'
-        plan = [(f"A{k}", base + 1 + k, base + 101 + k, BASE_HZ) for k in range(LONG - 1)] + \
-               [("T", base + LONG, base + 100 + LONG, BASE_HZ)]
+    elif case.layout in ("long", "seven"):  # noise seeds apart from the trajectories'
+        count = LONG if case.layout == "long" else SEVEN + 1
+        plan = [(f"A{k}", base + 1 + k, base + 101 + k, BASE_HZ) for k in range(count - 1)] + \
+               [("T", base + count, base + 100 + count, BASE_HZ)]
     else:
         plan = [(f"A{k}", base + 1 + k, base + 11 + k, BASE_HZ) for k in range(SEVERAL)] + \
                [("T", base + 1 + SEVERAL, base + 11 + SEVERAL, BASE_HZ)]

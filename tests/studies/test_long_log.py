@@ -26,6 +26,18 @@ def test_the_long_layout_is_LONG_trajectories_the_last_the_test(tmp_path, monkey
     assert len({tuple(np.round(s, 9)) for s in starts}) == sb.LONG  # each trajectory its own
 
 
+def test_the_seven_layout_is_seven_training_trajectories_of_2000_samples_and_a_test(tmp_path, monkeypatch):
+    from systems import get_system
+    from systems.measured_arm import register_measured
+
+    assert sb.SEVEN_SECONDS * sb.RATE_HZ == pytest.approx(2_000) and long_log.CASES["seven"].layout == "seven"
+    monkeypatch.setattr(sb, "SEVEN_SECONDS", 0.5)
+    system = get_system(register_measured(f"measured:{sb.make(sb.Case('ur5', 'seven', 'drive', 3), tmp_path)}"))
+    train, test = system.load("train"), system.load("test")
+    assert train.trajectories() == [f"A{k}" for k in range(sb.SEVEN)] and len(train) == sb.SEVEN * 50
+    assert test.trajectories() == ["T"] and len(test) == 50
+
+
 def test_the_page_says_what_finished_the_loops_rounds_and_the_regret():
     def entry(name, validation, test, status="ok", work=None):
         return {"name": name, "status": status, "model": f"{name}.npz", "validation_mse": validation,
@@ -44,7 +56,11 @@ def test_the_page_says_what_finished_the_loops_rounds_and_the_regret():
                           "seconds": 58.4, "rate_hz": 100.0, "samples": 70080, "select": "s", "select_seconds": 60.0,
                           "cpus": 2, "select_page": "p/select.md", "summary": s})
     assert "3 of 4 candidates finished" in text and "| loop | ok | [2, 2, 3, 2] → 2 |" in text
-    assert "regret 1.143" in text and "70,080 samples" in text
+    assert "regret 1.143" in text and "70,080 samples" in text and "kept busy" not in text
+    busy = long_log.page({"command": "c", "case": "x", "effects": ["a=1"], "noise": 0.02, "trajectories": 12,
+                          "seconds": 58.4, "rate_hz": 100.0, "samples": 70080, "select": "s", "select_seconds": 60.0,
+                          "cpus": 2, "busy": 1, "select_page": "p/select.md", "summary": s})
+    assert "on 2 cores, 1 of them kept busy beside it (`yes > /dev/null`)" in busy
 
 
 def test_a_select_that_fails_is_one_line_and_writes_no_page(tmp_path, monkeypatch):
@@ -54,9 +70,9 @@ def test_a_select_that_fails_is_one_line_and_writes_no_page(tmp_path, monkeypatc
     from bench.core.errors import UserError
 
     monkeypatch.setattr(sb, "LONG_SECONDS", 0.2)
-    monkeypatch.setattr(long_log, "CASE", sb.Case("ur5", "long", "drive", 1))
+    monkeypatch.setattr(long_log, "CASES", {"long": sb.Case("ur5", "long", "drive", 1)})
     monkeypatch.setattr(subprocess, "run", lambda command: SimpleNamespace(returncode=2))
     out = tmp_path / "long_log.md"
     with pytest.raises(UserError, match=r"python -m bench select --system measured:.* failed; its output is above"):
-        long_log.main(SimpleNamespace(out=out, invocation="python -m bench study long-log"))
+        long_log.main(SimpleNamespace(out=out, busy=0, layout="long", invocation="python -m bench study long-log"))
     assert not out.exists() and not out.with_suffix(".json").exists()
