@@ -242,6 +242,12 @@ class _Loop(Tidying, Choosing):
         train = self.train if train is None else train
         return heldout(self.strategy, model, train, sensor.factor(train))
 
+    def heldout_by_joint(self, model: LoopModel, train: Dataset | None = None, sensor: Sensor | None = None) -> np.ndarray:
+        """:func:`~bench.residual.checks.heldout_by_joint` in the measured torque's units, as :meth:`heldout`."""
+        sensor = self.sensor if sensor is None else sensor
+        train = self.train if train is None else train
+        return heldout_by_joint(self.strategy, model, train, sensor.factor(train))
+
     def pays_in_joint_units(self, model: LoopModel, proposed: LoopModel, proposed_held: float, held: float,
                             before_round: tuple) -> bool:
         """Whether a round whose held-out error falls by less than ``round_gain`` pooled still pays: it falls
@@ -251,9 +257,7 @@ class _Loop(Tidying, Choosing):
         and a fraction of a percent of the pooled one."""
         if not self.round_gain or not proposed_held < held:
             return False
-        train, sensor = before_round
-        before = heldout_by_joint(self.strategy, model, train, sensor.factor(train))
-        after = heldout_by_joint(self.strategy, proposed, self.train, self.sensor.factor(self.train))
+        before, after = self.heldout_by_joint(model, *before_round), self.heldout_by_joint(proposed)
         kept = before > 0
         return bool(kept.any()) and float(np.mean(after[kept] / before[kept])) < 1 - self.round_gain
 

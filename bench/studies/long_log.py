@@ -31,10 +31,7 @@ from bench.core.arguments import nonnegative_int
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, write_json
 from bench.runner.provenance import provenance
-from bench.studies.selection_benchmark import LONG, LONG_SECONDS, NOISE, RATE_HZ, SEVEN, SEVEN_SECONDS, Case, make, scores
-
-#: each layout's trajectories (the test among them) and the seconds of each
-TRAJECTORIES_OF, SECONDS_OF = {"long": LONG, "seven": SEVEN + 1}, {"long": LONG_SECONDS, "seven": SEVEN_SECONDS}
+from bench.studies.selection_benchmark import LOGS, NOISE, RATE_HZ, Case, make, scores
 
 HELP = ("bench select at its default on a generated long log (the Panda's 12 trajectories, 70,080 samples; or, with "
         "--layout seven, the KUKA's 7 training trajectories of 2,000): every candidate's status, the loop's rounds, "
@@ -45,6 +42,8 @@ HELP = ("bench select at its default on a generated long log (the Panda's 12 tra
 CASES = {"long": Case("panda", "long", "drive", 77), "seven": Case("kuka", "seven", "drive", 77)}
 #: the arms' names on the page
 ARM_NAMES = {"panda": "Panda", "kuka": "KUKA LWR4+"}
+#: each layout's page, by default
+PAGES = {"long": Path("results/selection/long_log.md"), "seven": Path("results/selection/seven_trajectories.md")}
 
 
 def add_arguments(parser) -> None:
@@ -111,11 +110,9 @@ def _rows(csv: Path) -> int:
 
 
 def main(args) -> int:
-    layout = getattr(args, "layout", "long")
-    case = CASES[layout]
-    if args.out is None:
-        args.out = Path("results/selection") / ("long_log.md" if layout == "long" else "seven_trajectories.md")
-    folder = args.out.with_suffix("")
+    layout = args.layout
+    case, page_path = CASES[layout], args.out or PAGES[layout]
+    folder = page_path.with_suffix("")
     declared = make(case, folder / "data")
     made = json.loads((folder / "data" / "case.json").read_text())
     out = folder / "select"
@@ -137,14 +134,13 @@ def main(args) -> int:
     samples = sum(_rows(p) for p in sorted((folder / "data").glob("rec*.csv")))
     report = {"command": args.invocation, "commit": provenance().get("commit"), "case": case.name,
               "layout": layout, "arm": ARM_NAMES.get(case.arm, case.arm),
-              "effects": made["effects"], "noise": NOISE, "trajectories": TRAJECTORIES_OF[layout],
-              "seconds": SECONDS_OF[layout],
+              "effects": made["effects"], "noise": NOISE, "trajectories": LOGS[layout][0], "seconds": LOGS[layout][1],
               "rate_hz": RATE_HZ, "samples": samples, "select": shown, "select_seconds": round(seconds, 1),
-              "cpus": os.cpu_count(), "busy": args.busy, "select_page": os.path.relpath(out / "select.md", args.out.parent),
+              "cpus": os.cpu_count(), "busy": args.busy, "select_page": os.path.relpath(out / "select.md", page_path.parent),
               "summary": summary(result)}
-    write_json(args.out.with_suffix(".json"), report)
+    write_json(page_path.with_suffix(".json"), report)
     text = page(report)
-    atomic_write(args.out, lambda f: f.write(text))
+    atomic_write(page_path, lambda f: f.write(text))
     print(text)
-    print(f"wrote {args.out}")
+    print(f"wrote {page_path}")
     return 0

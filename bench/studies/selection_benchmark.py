@@ -130,6 +130,8 @@ LONG, LONG_SECONDS = 12, 58.4
 #: the ``seven`` layout: seven training trajectories of 2,000 samples and a test (a lab's identification
 #: logs of a KUKA), for :mod:`bench.studies.long_log`
 SEVEN, SEVEN_SECONDS = 7, 20.0
+#: the layouts of one long log each: their trajectories (the test, the last, among them) and the seconds of each
+LOGS = {"long": (LONG, LONG_SECONDS), "seven": (SEVEN + 1, SEVEN_SECONDS)}
 #: seconds of each recording, and its rate
 SECONDS, RATE_HZ, BASE_HZ = 10.0, 100.0, 0.1
 #: the torque noise, a fraction of each joint's torque standard deviation
@@ -237,7 +239,7 @@ def make(case: Case, folder: Path) -> Path:
     effects = EFFECT_SETS[case.effects](system.dof, rng)
     noise = geared_arm.NOISE if case.arm == GEARED else NOISE
     base = 1000 * case.seed
-    seconds = {"long": LONG_SECONDS, "seven": SEVEN_SECONDS}.get(case.layout, SECONDS)
+    seconds = LOGS[case.layout][1] if case.layout in LOGS else SECONDS
     if case.layout == "one":
         plan = [("A", base + 1, base + 11, BASE_HZ), ("A", base + 1, base + 12, BASE_HZ),
                 ("T", base + 2, base + 13, FASTER * BASE_HZ)]
@@ -245,8 +247,8 @@ def make(case: Case, folder: Path) -> Path:
         n = RECORDED_TWICE[case.layout]
         plan = [(f"A{k}", base + 1 + k, base + 11 + 2 * k + r, BASE_HZ) for k in range(n) for r in range(2)] + \
                [("T", base + 1 + n, base + 11 + 2 * n, BASE_HZ)]
-    elif case.layout in ("long", "seven"):  # noise seeds apart from the trajectories'
-        count = LONG if case.layout == "long" else SEVEN + 1
+    elif case.layout in LOGS:  # noise seeds apart from the trajectories'
+        count = LOGS[case.layout][0]
         plan = [(f"A{k}", base + 1 + k, base + 101 + k, BASE_HZ) for k in range(count - 1)] + \
                [("T", base + count, base + 100 + count, BASE_HZ)]
     else:

@@ -15,7 +15,7 @@ def test_the_long_layout_is_LONG_trajectories_the_last_the_test(tmp_path, monkey
     from systems.measured_arm import register_measured
 
     assert sb.LONG * sb.LONG_SECONDS * sb.RATE_HZ == pytest.approx(70_080)
-    monkeypatch.setattr(sb, "LONG_SECONDS", 0.5)
+    monkeypatch.setitem(sb.LOGS, "long", (sb.LONG, 0.5))
     case = sb.Case("ur5", "long", "drive", 3)
     system = get_system(register_measured(f"measured:{sb.make(case, tmp_path)}"))
     train, test = system.load("train"), system.load("test")
@@ -31,7 +31,7 @@ def test_the_seven_layout_is_seven_training_trajectories_of_2000_samples_and_a_t
     from systems.measured_arm import register_measured
 
     assert sb.SEVEN_SECONDS * sb.RATE_HZ == pytest.approx(2_000) and long_log.CASES["seven"].layout == "seven"
-    monkeypatch.setattr(sb, "SEVEN_SECONDS", 0.5)
+    monkeypatch.setitem(sb.LOGS, "seven", (sb.SEVEN + 1, 0.5))
     system = get_system(register_measured(f"measured:{sb.make(sb.Case('ur5', 'seven', 'drive', 3), tmp_path)}"))
     train, test = system.load("train"), system.load("test")
     assert train.trajectories() == [f"A{k}" for k in range(sb.SEVEN)] and len(train) == sb.SEVEN * 50
@@ -69,7 +69,7 @@ def test_a_select_that_fails_is_one_line_and_writes_no_page(tmp_path, monkeypatc
 
     from bench.core.errors import UserError
 
-    monkeypatch.setattr(sb, "LONG_SECONDS", 0.2)
+    monkeypatch.setitem(sb.LOGS, "long", (sb.LONG, 0.2))
     monkeypatch.setattr(long_log, "CASES", {"long": sb.Case("ur5", "long", "drive", 1)})
     monkeypatch.setattr(subprocess, "run", lambda command: SimpleNamespace(returncode=2))
     out = tmp_path / "long_log.md"
