@@ -396,10 +396,11 @@ def _with_huge_cell(text: str) -> str:
 
 def _numeric_options():
     """(command, option, bad value) for every option typed as a count, a duration or a fraction."""
-    from bench.core.arguments import noise_level, nonnegative, positive, positive_int
+    from bench.core.arguments import noise_level, nonnegative, nonnegative_int, positive, positive_int
     from bench.runner.spec import seed_count
 
-    bad = {positive: "0", positive_int: "0", nonnegative: "-1", seed_count: "11", noise_level: "10"}
+    bad = {positive: "0", positive_int: "0", nonnegative: "-1", nonnegative_int: "-1", seed_count: "11",
+           noise_level: "10"}
     return [(name, action.option_strings[-1], bad[action.type])
             for name, parser in _subparsers().choices.items() for action in parser._actions
             if action.type in bad]

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from bench.core.arguments import noise_level, nonnegative, positive, positive_int
+from bench.core.arguments import noise_level, nonnegative, nonnegative_int, positive, positive_int
 
 _texts = st.one_of(
     st.text(max_size=12),
@@ -23,7 +23,8 @@ _texts = st.one_of(
 def test_each_type_returns_a_valid_value_or_refuses_the_text(text):
     for kind, ok in ((positive, lambda v: v > 0 and math.isfinite(v)),
                      (nonnegative, lambda v: v >= 0 and math.isfinite(v)),
-                     (positive_int, lambda v: isinstance(v, int) and v > 0)):
+                     (positive_int, lambda v: isinstance(v, int) and v > 0),
+                     (nonnegative_int, lambda v: isinstance(v, int) and v >= 0)):
         try:
             value = kind(text)
         except argparse.ArgumentTypeError as exc:
@@ -40,11 +41,11 @@ def test_each_type_returns_a_valid_value_or_refuses_the_text(text):
 
 @pytest.mark.parametrize("kind, text", [(positive, "0"), (positive, "nan"), (positive, "inf"), (nonnegative, "-1e-9"),
                                         (nonnegative, "nan"), (positive_int, "0"), (positive_int, "2.5"),
-                                        (positive_int, "-3")])
+                                        (positive_int, "-3"), (nonnegative_int, "-1"), (nonnegative_int, "0.5")])
 def test_the_edges_are_refused(kind, text):
     with pytest.raises(argparse.ArgumentTypeError, match="must be"):
         kind(text)
 
 
 def test_good_values_pass_through():
-    assert positive("2.5") == 2.5 and nonnegative("0") == 0.0 and positive_int("7") == 7
+    assert positive("2.5") == 2.5 and nonnegative("0") == 0.0 and positive_int("7") == 7 and nonnegative_int("0") == 0
