@@ -124,6 +124,12 @@ register_prior(Prior("feasible", "SysId's feasible configuration (the feasible r
 GATE_LENGTHS = (1.0, 3.0)
 #: priors kept for reuse: a tuned hybrid fits the same prior on each fold for every combination
 PRIOR_CACHE = 8
+#: prior torques kept for reuse: a tuned hybrid's fits of one combination go through every fold (at most four,
+#: :data:`bench.evaluation.tuning.MAX_FOLDS`) before the next combination's, and each asks for the prior's torque on
+#: three data sets of its fold (the fitted samples, the subset its training MSE is evaluated on, the scored samples),
+#: so that fewer kept than the folds' sets are made again for every combination; the whole training set's two and
+#: the test set's are kept beside them
+TORQUES_KEPT = 16
 
 
 def naming() -> str:
@@ -366,11 +372,11 @@ def fingerprint(data: Dataset, arrays: tuple[str, ...]) -> tuple:
 
 
 #: a prior's torques, each beside the prior, so that the prior's id in the key stays its own while kept
-_torques = Kept(PRIOR_CACHE)
+_torques = Kept(TORQUES_KEPT)
 
 
 def prior_torque(prior: FittedModel, data: Dataset) -> np.ndarray:
-    """``prior``'s torque at ``data``'s states, the last :data:`PRIOR_CACHE` kept and given again: a tuned
+    """``prior``'s torque at ``data``'s states, the last :data:`TORQUES_KEPT` kept and given again: a tuned
     hybrid's fold fits share their fold's prior (:func:`identified_prior`) and subtract it from the same
     training samples and add it on the same held-out samples, once for each combination and rung."""
     return _torques.get((id(prior), fingerprint(data, STATES)),

@@ -205,3 +205,24 @@ def test_a_prior_shared_through_a_folder_is_read_by_another_process_and_only_fro
     hybrid_module._priors.clear()
     assert hybrid_module.identified_prior("standard", train.subset(slice(0, 200)), system, 0) is not None
     assert identified == [1, 1, 1] and len(list(tmp_path.glob("standard-*.npz"))) == 2
+
+
+def test_a_tuned_hybrids_search_computes_its_priors_torque_on_each_of_its_folds_sets_once(panda, monkeypatch):
+    """The search fits every combination on every fold before the next combination (:mod:`bench.evaluation.tuning`),
+    and each fit asks for the prior's torque on its fold's fitted, evaluated and scored samples (three sets where the
+    training MSE is evaluated on a subset): all of them are kept through the search, so that no combination makes
+    them again."""
+    from bench.core.protocols import folds
+    from bench.evaluation.tuning import MAX_FOLDS, tune
+    from methods import hybrid as hybrid_module
+
+    system, train, _ = panda
+    train = train.replace(recording=np.repeat(np.arange(6), len(train) // 6))
+    assert len(folds(train, None, MAX_FOLDS)) == MAX_FOLDS
+    hybrid_module._torques.clear()
+    made, get = [], hybrid_module._torques.get
+    monkeypatch.setattr(hybrid_module._torques, "get", lambda key, make: get(key, lambda: made.append(key) or make()))
+    tuned = tune(METHODS["standard+mlp"], {**SMALL_MLP, "eval_samples": 128}, train, "indirect", 0, Budget(steps=3),
+                 system=system)
+    assert len(tuned.details["combinations"]) == 4
+    assert len(made) > 8 and len(made) == len(set(made))
