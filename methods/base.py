@@ -109,6 +109,10 @@ class Method(FittedModel):
     #: the values a tuned run tries per hyperparameter (``--tune``, :mod:`bench.evaluation.tuning`): at most
     #: 10 combinations in all; none by default
     search_space: ClassVar[dict[str, tuple]] = {}
+    #: the steps of its fit where a command bounds a run by work and is given none (``bench residual``'s
+    #: default, ``bench select``'s candidates): ``1`` for a fit that is one solve; ``None`` where the method has no
+    #: such count, and such a command bounds it by seconds
+    work: ClassVar[int | None] = None
     #: the experiments the method applies to
     experiments: ClassVar[tuple[str, ...]] = EXPERIMENTS
     #: why it does not apply to the others, for the tables' notes (``""``: that it does not)

@@ -420,7 +420,7 @@ def compose(name: str) -> type | None:
                       "standard deviations")
     return type(f"Hybrid_{prior}_{residual}", (Hybrid,), {
         "prior_name": prior, "residual_name": residual, "made_of": parsed.parts, "Config": config, "smoke": dict(base.smoke),
-        "uses_device": base.uses_device, "has_lagrangian": base.has_lagrangian,
+        "uses_device": base.uses_device, "has_lagrangian": base.has_lagrangian, "work": base.work,
         "configurations": dict(base.configurations), "tags": frozenset({"hybrid"}),
         "search_space": {**base.search_space, **({} if base.falls_back_to_zero else {"gate_length": GATE_LENGTHS})},
         "__doc__": f"{prior} prior plus a {residual} residual (see methods.hybrid)",

@@ -65,6 +65,7 @@ class Operon(ExpressionMethod):
     not_applicable = NOT_APPLICABLE
     search_space = {"max_length": (25, 50), "population_size": (500, 1000)}
     smoke = {"population_size": 50, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}
+    work = 1  # one solve
 
     @classmethod
     def unavailable_reason(cls):

@@ -106,6 +106,7 @@ class PySR(ExpressionMethod):
     Config = PySRConfig
     search_space = {"maxsize": (20, 40)}
     smoke = {"populations": 2, "population_size": 20, "fit_samples": 128, "max_steps": 1, "eval_samples": 128}
+    work = 1  # one solve
 
     @classmethod
     def unavailable_reason(cls):

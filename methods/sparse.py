@@ -74,6 +74,7 @@ class SparseLagrangian(ExpressionMethod):
                "for even that is not applicable")
     Config = SparseConfig
     smoke = {"samples": 64, "max_steps": 1, "eval_samples": 128}
+    work = 1  # one solve
 
     @classmethod
     def not_applicable_reason(cls, experiment, system=None):

@@ -68,6 +68,7 @@ class SparseTorque(Method):
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "a sparse regression of the torque learns torques: the direct experiment has none"
     smoke = {"max_steps": 1, "eval_samples": 128}
+    work = 1  # one solve
     has_lagrangian: ClassVar[bool] = False
 
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:

@@ -259,6 +259,7 @@ class SysId(TorchLagrangianMethod):
                "at the URDF's values")
     Config = SysIdConfig
     search_space = {"feasible": (True, False), "friction": (False, True)}
+    work = 1  # one solve
     smoke = {"max_steps": 20, "eval_samples": 256}
     stackable = False  # an arm's linear form is solved, not trained; one seed's solve is the work
     configurations = {

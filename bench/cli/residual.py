@@ -13,6 +13,7 @@ from bench.residual.job import ResidualJob, run_residual
 from bench.residual.loop import FIT_SHARE, MAX_ROUNDS
 from bench.residual.report import summary_lines
 from bench.runner.job import KILL_FACTOR
+from methods import METHODS
 
 HELP = "fit, trace the torque residual to missing effects, add them, refit; report the error before and after"
 
@@ -23,16 +24,20 @@ def add_arguments(res) -> None:
     res.add_argument("--train", type=Path, default=None, help="training CSV (default: a measured system's own split)")
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
     res.add_argument("--budget", type=positive, default=None,
-                     help=f"seconds for the fit and the rounds (default 60): the method's fit has {FIT_SHARE:.0%}% of "
+                     help=f"seconds for the fit and the rounds, where the method has no work of its own "
+                          f"(default 60) or where given without --steps: the method's fit has {FIT_SHARE:.0%}% of "
                           f"it, no round starts that would end past it, a round still running at its end is undone, "
                           f"and the result keeps the rounds before it; the driven rollouts after the rounds are not "
                           f"charged to it. The loop's process is killed only at {KILL_FACTOR} x it (the rounds "
-                          f"that finished are kept); with --steps, only a ceiling past which the loop is killed "
+                          f"that finished are kept); bound by work, only a ceiling past which the loop is killed "
                           f"(default: none)")
     res.add_argument("--steps", type=positive_int, default=None,
-                     help="bound the loop by work instead of time: the method's fit (and each cross-fit) does N steps "
-                          "of its work, the polish all its starts, the trace until nothing is significant, and at most "
-                          f"{MAX_ROUNDS} rounds; the same command then gives the same effects and numbers on any machine")
+                     help="bound the loop by work: the method's fit (and each cross-fit) does N steps of its work, "
+                          "the polish all its starts, the trace until nothing is significant, and at most "
+                          f"{MAX_ROUNDS} rounds; the same command then gives the same effects and numbers on any "
+                          "machine. Default: the method's own work (1 for a fit that is one solve, as SysId's and "
+                          "sparse regression's; a learner's its fixed steps), unless --budget is given; a method "
+                          "without one (MGGP, SyReNets) is bound by --budget's seconds")
     add_split(res)
     res.add_argument("--seed", type=seed, default=0, help="the method's seed (default 0)")
     add_config(res)
@@ -51,8 +56,9 @@ def main(args) -> int:
     (name,), plugins = load_plugins(args, [args.system])
     check_names(args, [name], [args.method])
     check_split(args.split, [name])
+    budget_s, steps = work(args)
     job = ResidualJob.of(
-        name, args.method, budget_s=budget(args)[0], steps=args.steps, seed=args.seed,
+        name, args.method, budget_s=budget_s, steps=steps, seed=args.seed,
         train_path=None if args.train is None else str(args.train), test_path=None if args.test is None else str(args.test),
         profile=configurations(args, [args.method])[args.method],
         hyperparameters=hyperparameters(args.overrides, args.method, [args.method]),
@@ -73,6 +79,17 @@ def main(args) -> int:
     for line in summary_lines(result):
         print("  " + line)
     return 0
+
+
+def work(args) -> tuple[float | None, int | None]:
+    """``(budget_s, steps)``: those given; where neither is, the method's own work (:attr:`methods.base.Method.work`)
+    with no ceiling, so that the loop's rounds are not decided by the machine's speed; a method without any gets
+    the default seconds."""
+    if args.steps is None and args.budget is None:
+        own = METHODS[args.method].work
+        if own is not None:
+            return None, own
+    return budget(args)[0], args.steps
 
 
 def effect_line(entry: dict) -> str:

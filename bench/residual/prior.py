@@ -108,6 +108,7 @@ class Loop(Method):
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "the residual loop traces torques: the direct experiment has none"
     smoke = {"max_steps": 1, "eval_samples": 128}
+    work = MAX_ROUNDS  # a step is a round
 
     @classmethod
     def not_applicable_reason(cls, experiment: str, system=None) -> str | None:

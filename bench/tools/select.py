@@ -57,7 +57,6 @@ from bench.core.protocols import folds as fold_data
 from bench.evaluation import stacking
 from bench.evaluation.domain import domain, sentences
 from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL, SCORE_RULE
-from bench.residual.loop import MAX_ROUNDS
 from bench.runner import matrix
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
@@ -98,11 +97,9 @@ class Candidate:
         return max(self.work, math.ceil(self.epochs * samples / batch))
 
 
-#: the learned residuals' steps at least: a GP's (:mod:`methods.gp`) and a network's (the MLP's, DeLaN's). They
-#: are the steps the final fits did when select's default was 180 s a candidate, on 2 cores (the records of
-#: results/measured/select_default at 88b40e8: 30 and 32 for the GP residuals, 405 and 406 for the networks),
-#: rounded down, and fixed so that a candidate does the same work on any machine; no score chose them
-GP_STEPS, NETWORK_STEPS = 30, 400
+#: the learned residuals' steps at least: a GP's (:mod:`methods.gp`) and a network's (the MLP's, DeLaN's), the
+#: work each method declares (:attr:`methods.base.Method.work`)
+GP_STEPS, NETWORK_STEPS = METHODS["gp"].work, METHODS["mlp"].work
 #: the passes over the training samples the GP's steps make of the KUKA's 4,926 (in its batches of 512),
 #: rounded down: on a longer log its fits make as many passes, and so more steps. The networks keep their
 #: steps: as many passes (5,019 steps on 64,240 samples) put the MLP's and DeLaN's searches past select's
@@ -118,8 +115,8 @@ CANDIDATES = (
     Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=2),
     Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=3),
     Candidate("feasible+sparse_torque", "feasible+sparse_torque", start=7),
-    Candidate("loop", "loop", work=MAX_ROUNDS, start=0),
-    Candidate("loop_feasible", "loop", "feasible", work=MAX_ROUNDS, start=1),
+    Candidate("loop", "loop", work=METHODS["loop"].work, start=0),
+    Candidate("loop_feasible", "loop", "feasible", work=METHODS["loop"].work, start=1),
     Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=6, epochs=GP_EPOCHS, learner="gp"),
 )
 

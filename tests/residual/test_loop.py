@@ -134,9 +134,11 @@ def test_cli_data_with_effects_then_residual_writes_json_and_report(tmp_path):
                 "--out", str(tmp_path / f"{name}.csv"), "--effects", "viscous_friction=0.8,0.5", "coulomb_friction=1.5,0.7")
         assert r.returncode == 0, r.stderr
     r = cli("residual", "--system", "double_pendulum", "--method", "sparse", "--train", str(tmp_path / "train.csv"),
-            "--test", str(tmp_path / "test.csv"), "--steps", "1", "--json", str(tmp_path / "out.json"),
+            "--test", str(tmp_path / "test.csv"), "--json", str(tmp_path / "out.json"),
             "--report", str(tmp_path / "report.md"), "--set", "samples=4000")
     assert r.returncode == 0, r.stderr
+    # without --steps or --budget the loop is bound by the method's own work (sparse regression: one solve)
+    assert read_record(tmp_path / "out.json").describe_budget() == "1 steps"
     # the loop runs in its own process; its progress lines reach the terminal as they are printed
     assert "round 0: fitting sparse" in r.stdout and "round 1: adding" in r.stdout
     out = residual_fields(read_record(tmp_path / "out.json"))
@@ -468,3 +470,24 @@ def test_a_model_of_a_structure_of_its_own_gets_the_strategy_registered_for_it(m
     assert type(strategies.strategy_for(SimpleNamespace(structure=lambda: "unheard of"))) is strategies.KeptFit
     with pytest.raises(ValueError, match="'linear' already has a refit strategy, Linear"):
         strategies.refits("linear")(Mine)
+
+
+def test_the_residual_commands_default_is_the_methods_own_work_and_seconds_only_where_it_has_none():
+    from argparse import Namespace
+
+    from bench.cli.options import DEFAULT_BUDGET_S
+    from bench.cli.residual import work
+    from methods import METHODS
+
+    def given(method, steps=None, budget=None):
+        return work(Namespace(method=method, steps=steps, budget=budget))
+
+    assert given("sysid") == (None, 1) and given("sparse_torque") == (None, 1)
+    assert given("feasible+gp") == (None, METHODS["gp"].work) == (None, 30)
+    assert given("standard+mlp") == (None, METHODS["mlp"].work)
+    assert given("mggp") == (DEFAULT_BUDGET_S, None)  # no work of its own: the default seconds
+    assert given("sysid", budget=5.0) == (5.0, None) and given("sysid", steps=3) == (None, 3)
+    assert given("sysid", steps=3, budget=9.0) == (9.0, 3)
+    for name in METHODS:
+        own = METHODS[name].work
+        assert own is None or (isinstance(own, int) and own >= 1), name
