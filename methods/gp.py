@@ -7,7 +7,11 @@ inducing points (Hensman, Matthews & Ghahramani, 2015: the stochastic
 variational GP, GPyTorch's ``VariationalStrategy`` with a Cholesky
 variational distribution and learned inducing locations). One step is one
 Adam step on the ELBO of a mini-batch, so a fit is bounded by work or time
-like every method and its steps replay. It trains in float64 on the CPU:
+like every method and its steps replay. It trains in single precision
+(:data:`TRAIN_DTYPE`, as GPyTorch's own examples of the stochastic variational
+GP do: a step of 256 inducing points a joint takes about two thirds of its
+time in double, and a long log's fits make many steps) and predicts in
+double, from the fitted GP turned to double. It trains on the CPU:
 GPyTorch's variational strategy has no implementation on the ``meta`` device
 the suite's device check runs methods on, so a run's ``--device`` leaves it on
 the CPU, as it does SysId and MGGP.
@@ -62,6 +66,8 @@ from methods.config import POSITIVE, MethodConfig, Range
 from methods.progress import Progress
 from methods.torch_method import Feed, fused_adam_ok
 
+#: the precision the GP trains in (its predictions are in double)
+TRAIN_DTYPE = torch.float32
 #: samples predicted at once
 CHUNK = 4096
 
@@ -164,21 +170,21 @@ class GaussianProcess(Method):
         self.x_scale = np.maximum(x.std(axis=1, keepdims=True), 1e-12)
         self.y_scale = np.maximum(np.sqrt(np.mean(train.tau ** 2, axis=0)), 1e-12)
         device = torch.device(self.train_device)
-        X = torch.as_tensor(x / self.x_scale, dtype=torch.float64, device=device)
-        Y = torch.as_tensor((train.tau / self.y_scale).T.copy(), dtype=torch.float64, device=device)
+        X = torch.as_tensor(x / self.x_scale, dtype=TRAIN_DTYPE, device=device)
+        Y = torch.as_tensor((train.tau / self.y_scale).T.copy(), dtype=TRAIN_DTYPE, device=device)
         rng = np.random.default_rng(self.seed)
         m = min(self.config.inducing, len(train))
         pick = torch.as_tensor(np.sort(rng.choice(len(train), m, replace=False)), device=device)
-        self.model = _model(X[:, pick].clone()).to(device, torch.float64)
-        self.likelihood = gpytorch.likelihoods.GaussianLikelihood(batch_shape=X.shape[:1]).to(device, torch.float64)
+        self.model = _model(X[:, pick].clone()).to(device, TRAIN_DTYPE)
+        self.likelihood = gpytorch.likelihoods.GaussianLikelihood(batch_shape=X.shape[:1]).to(device, TRAIN_DTYPE)
         n = len(train)
         self.n_effective = (effective_samples(train, train.tau) if self.config.samples == "effective"
                             else np.full(train.dof, float(n)))
-        beta = torch.as_tensor(n / self.n_effective, dtype=torch.float64, device=device)
+        beta = torch.as_tensor(n / self.n_effective, dtype=TRAIN_DTYPE, device=device)
         elbo = gpytorch.mlls.VariationalELBO(self.likelihood, self.model, num_data=n, beta=beta)
         parameters = list(self.model.parameters()) + list(self.likelihood.parameters())
         optimizer = torch.optim.Adam(parameters, lr=self.config.lr,
-                                     **({"fused": True} if fused_adam_ok(torch.float64, device) else {}))
+                                     **({"fused": True} if fused_adam_ok(TRAIN_DTYPE, device) else {}))
         feed = Feed.start(len(train), min(self.config.batch_size, len(train)), self.seed)
         self._weights = None
         self.model.train(), self.likelihood.train()
@@ -191,7 +197,7 @@ class GaussianProcess(Method):
                 optimizer.step()
 
     def _post_fit(self, train, experiment, seconds_left):
-        self.model.to("cpu"), self.likelihood.to("cpu")
+        self.model.to("cpu", torch.float64), self.likelihood.to("cpu", torch.float64)
         self._weights = self._mean_weights()
 
     def _mean_weights(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -208,7 +214,8 @@ class GaussianProcess(Method):
             L = torch.linalg.cholesky(K)
             m = strategy._variational_distribution.variational_mean.detach().unsqueeze(-1)
             alpha = torch.linalg.solve_triangular(L.mT, m, upper=True)
-            return Z, kernel.base_kernel.lengthscale.detach(), kernel.outputscale.detach(), alpha
+            return tuple(v.to(torch.float64) for v in (Z, kernel.base_kernel.lengthscale.detach(),
+                                                       kernel.outputscale.detach(), alpha))
 
     def _get_state(self):
         return ({k: v.detach().clone() for k, v in self.model.state_dict().items()},
@@ -243,15 +250,15 @@ class GaussianProcess(Method):
     def _predict_through_gpytorch(self, data: Dataset) -> np.ndarray:
         gpytorch = _gpytorch()
         model = self.model
-        device = next(model.parameters()).device
-        x = torch.as_tensor(features(data, self.config.inputs) / self.x_scale, dtype=torch.float64, device=device)
+        device, dtype = next(model.parameters()).device, next(model.parameters()).dtype
+        x = torch.as_tensor(features(data, self.config.inputs) / self.x_scale, dtype=dtype, device=device)
         model.eval()
         try:
             with torch.no_grad(), gpytorch.settings.cholesky_max_tries(6):
                 out = torch.cat([model(chunk).mean for chunk in x.split(CHUNK, dim=1)], dim=1)
         finally:
             model.train()
-        return out.T.cpu().numpy() * self.y_scale
+        return out.T.cpu().double().numpy() * self.y_scale
 
     def saved(self, packer: Packer) -> dict:
         """What its predictive mean needs (:meth:`_mean_weights`): the inducing
