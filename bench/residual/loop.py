@@ -477,6 +477,16 @@ class _Loop(Tidying, Choosing):
                                 simplified=simplified or None, seconds=self.elapsed(), equivalent=equivalent))
             report(f"round {k}: every law it found is a finding, not offered again; the next round traces without them")
             return model, held, mass, findings, False
+        if set(removed) == set(accepted) and not simplified:
+            # the joint refit dropped every law it found, and nothing else: the model is the one before the round,
+            # and there is nothing to score on held-out data
+            self.use(*before_round)
+            rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed, seconds=self.elapsed(),
+                                equivalent=equivalent))
+            report(f"round {k}: every effect it added became redundant in the joint refit; stopping")
+            self.ending = {"reason": "redundant", "round": k,
+                           "detail": f"every effect round {k} added became redundant in the joint refit", **self.pending}
+            return model, held, mass, findings, True
         proposed_held = self.timed(self.heldout, proposed)
         self.pending["heldout_mse"] = {"before": held, "with_them": proposed_held}
         proposed_mass = self.timed(smallest_mass_eigenvalue, proposed, train)

@@ -362,3 +362,34 @@ def test_the_trace_weighs_each_joint_by_its_own_residual():
     flat = np.column_stack([rng.normal(0, 1.0, 10), np.zeros(10)]).ravel()
     w = joint_weights(flat, np.zeros((flat.size, 0)), 2)
     assert w[1] / w[0] == pytest.approx(MAX_WEIGHT_RATIO)
+
+
+def test_a_round_whose_every_law_the_joint_refit_drops_ends_the_loop_unscored(monkeypatch):
+    # the model is then the one before the round: nothing is scored on held-out data, and the loop says why it ends
+    from bench.residual import loop as loop_module
+    from bench.residual.library import label as term_label
+
+    parts = []
+    from bench.tools.robot_log import simulate
+
+    for k in range(2):
+        time, d = simulate("double_pendulum", 6.0, 100.0, 0.2, ["viscous_friction=0.8,0.5"], 0.01, k)
+        name = np.asarray([f"r{k}"] * len(d))
+        parts.append(d.replace(recording=name, trajectory=name, time=time))
+    join = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+    train = parts[0].replace(**{k: join(k) for k in ("q", "qd", "qdd", "tau", "L", "recording", "trajectory", "time")})
+    scored = []
+    real_heldout = loop_module._Loop.heldout
+
+    def heldout(self, model, train=None, sensor=None):
+        scored.append(model)
+        return real_heldout(self, model, train, sensor)
+
+    def tidy(self, proposed, findings):
+        return proposed, [term_label(e) for e in proposed.effects], {}
+
+    monkeypatch.setattr(loop_module._Loop, "heldout", heldout)
+    monkeypatch.setattr(loop_module._Loop, "tidy", tidy)
+    out = residual_loop("sysid", train, None, budget=Budget(steps=SOLVED), report=quiet, open_ended=False)
+    assert out.ending["reason"] == "redundant" and out.ending["round"] == 1
+    assert out.effects == [] and len(scored) == 1  # round 0's model only
