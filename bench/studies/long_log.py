@@ -31,6 +31,7 @@ from bench.core.arguments import nonnegative_int
 from bench.core.errors import UserError
 from bench.core.fileio import atomic_write, write_json
 from bench.runner.provenance import provenance
+from bench.runner.records import read_record, record_path
 from bench.studies.selection_benchmark import LOGS, NOISE, RATE_HZ, Case, make, scores
 
 HELP = ("bench select at its default on a generated long log (the Panda's 12 trajectories, 70,080 samples; or, with "
@@ -59,12 +60,14 @@ def add_arguments(parser) -> None:
                              "its data/ (not kept in the repository)")
 
 
-def summary(result: dict) -> dict:
-    """What the page reports of ``bench select``'s ``select.json``: each candidate's status and steps
-    (the loop's are its rounds), the choice and its regret (:func:`~bench.studies.selection_benchmark.scores`)."""
+def summary(result: dict, runs: Path | None = None) -> dict:
+    """What the page reports of ``bench select``'s ``select.json``: each candidate's status, steps (the loop's
+    are its rounds), budget and seconds (its search and its final fit, from its record in ``runs``), the choice and
+    its regret (:func:`~bench.studies.selection_benchmark.scores`)."""
     entries = result.get("candidates") or []
     status = {e["name"]: e.get("status") for e in entries}
-    work = {e["name"]: {"folds": (e.get("work") or {}).get("fold_steps"), "final": (e.get("work") or {}).get("final_steps")}
+    work = {e["name"]: {"folds": (e.get("work") or {}).get("fold_steps"), "final": (e.get("work") or {}).get("final_steps"),
+                        "budget": e.get("budget"), "seconds": None if runs is None else _seconds(runs, e)}
             for e in entries}
     scored = scores(result)
     chosen = (result.get("chosen") or {}).get("name")
@@ -90,10 +93,13 @@ def page(report: dict) -> str:
              + (f", {report['busy']} of them kept busy beside it (`yes > /dev/null`)" if report.get("busy") else "")
              + "; "
              f"its page: [{report['select_page']}]({report['select_page']}).", "",
-             "| candidate | status | steps: each fold fit → the final fit |", "|---|---|---|"]
+             "| candidate | status | steps: each fold fit → the final fit | its budget | seconds: the search and "
+             "the final fit |", "|---|---|---|---|---|"]
     for name, status in s["status"].items():
         w = s["work"].get(name) or {}
-        lines.append(f"| {name} | {status} | {w.get('folds')} → {w.get('final')} |")
+        taken = w.get("seconds")
+        lines.append(f"| {name} | {status} | {w.get('folds')} → {w.get('final')} | {w.get('budget') or '—'} | "
+                     f"{'—' if taken is None else format(taken, 'g')} |")
     over = s["chosen_over_standard"]
     ratio = "" if over is None else f"{over:.3f}x the standard model on the test, "
     lines += ["", f"{ok} of {len(s['status'])} candidates finished. Chosen: **{s['chosen']}**, {ratio}"
@@ -101,6 +107,16 @@ def page(report: dict) -> str:
               "score. A step of the loop is a round; `loop+gp`'s are its GP's, on the loop's final fit as its "
               "prior.", ""]
     return "\n".join(lines)
+
+
+def _seconds(runs: Path, entry: dict) -> float | None:
+    """A candidate's seconds: its search's and its final fit's (``None`` where it has no record or did not finish)."""
+    path = record_path(runs, entry["run_id"])
+    if entry.get("status") != "ok" or not path.exists():
+        return None
+    record = read_record(path)
+    search = ((record.details or {}).get("tuning") or {}).get("search_seconds") or 0.0
+    return round(search + (record.fit_seconds or 0.0), 1)
 
 
 def _rows(csv: Path) -> int:
@@ -137,7 +153,7 @@ def main(args) -> int:
               "effects": made["effects"], "noise": NOISE, "trajectories": LOGS[layout][0], "seconds": LOGS[layout][1],
               "rate_hz": RATE_HZ, "samples": samples, "select": shown, "select_seconds": round(seconds, 1),
               "cpus": os.cpu_count(), "busy": args.busy, "select_page": os.path.relpath(out / "select.md", page_path.parent),
-              "summary": summary(result)}
+              "summary": summary(result, out / "runs")}
     write_json(page_path.with_suffix(".json"), report)
     text = page(report)
     atomic_write(page_path, lambda f: f.write(text))

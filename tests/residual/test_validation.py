@@ -319,10 +319,9 @@ def test_on_trajectories_a_round_must_save_one_percent_of_the_held_out_error(tra
         assert first.get("stop") is None and any(e["name"] == "viscous_friction" for e in out.effects)
 
 
-def test_a_round_that_pays_on_one_joint_in_its_own_units_is_kept(monkeypatch):
-    # pooled, the held-out error falls by 0.5 %; the small joint's own error by a third: the round stays
+def _two_friction_trajectories():
+    """Two recordings of the double pendulum with viscous friction, each its own trajectory, as one training set."""
     from bench.tools.robot_log import simulate
-    from bench.residual import loop as loop_module
 
     parts = []
     for k in range(2):
@@ -330,7 +329,14 @@ def test_a_round_that_pays_on_one_joint_in_its_own_units_is_kept(monkeypatch):
         label = np.asarray([f"r{k}"] * len(d))
         parts.append(d.replace(recording=label, trajectory=label, time=time))
     join = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
-    train = parts[0].replace(**{k: join(k) for k in ("q", "qd", "qdd", "tau", "L", "recording", "trajectory", "time")})
+    return parts[0].replace(**{k: join(k) for k in ("q", "qd", "qdd", "tau", "L", "recording", "trajectory", "time")})
+
+
+def test_a_round_that_pays_on_one_joint_in_its_own_units_is_kept(monkeypatch):
+    # pooled, the held-out error falls by 0.5 %; the small joint's own error by a third: the round stays
+    from bench.residual import loop as loop_module
+
+    train = _two_friction_trajectories()
     calls = []
 
     def heldout(self, model, train=None, sensor=None):
@@ -369,15 +375,7 @@ def test_a_round_whose_every_law_the_joint_refit_drops_ends_the_loop_unscored(mo
     from bench.residual import loop as loop_module
     from bench.residual.library import label as term_label
 
-    parts = []
-    from bench.tools.robot_log import simulate
-
-    for k in range(2):
-        time, d = simulate("double_pendulum", 6.0, 100.0, 0.2, ["viscous_friction=0.8,0.5"], 0.01, k)
-        name = np.asarray([f"r{k}"] * len(d))
-        parts.append(d.replace(recording=name, trajectory=name, time=time))
-    join = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
-    train = parts[0].replace(**{k: join(k) for k in ("q", "qd", "qdd", "tau", "L", "recording", "trajectory", "time")})
+    train = _two_friction_trajectories()
     scored = []
     real_heldout = loop_module._Loop.heldout
 

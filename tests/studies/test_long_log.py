@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench.runner.records import Record, record_path, write_record
+from bench.runner.spec import RunSpec
 from bench.studies import long_log, selection_benchmark as sb
 
 
@@ -38,7 +40,7 @@ def test_the_seven_layout_is_seven_training_trajectories_of_2000_samples_and_a_t
     assert test.trajectories() == ["T"] and len(test) == 50
 
 
-def test_the_page_says_what_finished_the_loops_rounds_and_the_regret():
+def test_the_page_says_what_finished_the_loops_rounds_the_seconds_and_the_regret(tmp_path):
     def entry(name, validation, test, status="ok", work=None):
         return {"name": name, "status": status, "model": f"{name}.npz", "validation_mse": validation,
                 "test_mse": test, "test_over_standard": None if test is None else test / 0.05, "work": work or {}}
@@ -48,14 +50,23 @@ def test_the_page_says_what_finished_the_loops_rounds_and_the_regret():
                                                                                            "final_steps": 2}),
                              entry("loop+gp", 0.3, 0.007, work={"fold_steps": [2, 2, 2, 2], "final_steps": 2}),
                              entry("feasible+delan", None, None, status="timeout")]}
-    s = long_log.summary(result)
+    for e in result["candidates"]:
+        e.update(run_id=f"arm__{e['name']}__indirect__seed0__tuned", budget="2 steps, at most 900 s")
+    runs = tmp_path / "runs"
+    loop_spec = RunSpec(system="arm", method="loop", experiment="indirect", seed=0, steps=2, budget_s=900.0, tune=True)
+    record = Record.new(loop_spec, "ok", train_mse=0.1, test_mse=0.008, fit_seconds=30.25, details={"tuning": {"search_seconds": 100.0}})
+    runs_record = record_path(runs, result["candidates"][1]["run_id"])
+    runs_record.parent.mkdir(parents=True)
+    write_record(runs_record, record)
+    s = long_log.summary(result, runs)
     assert s["status"]["feasible+delan"] == "timeout" and not s["all_ok"]
-    assert s["work"]["loop"] == {"folds": [2, 2, 3, 2], "final": 2}
+    assert s["work"]["loop"] == {"folds": [2, 2, 3, 2], "final": 2, "budget": "2 steps, at most 900 s", "seconds": 130.2}
+    assert s["work"]["standard"]["seconds"] is None  # no record
     assert s["chosen"] == "loop" and s["best"] == "loop+gp" and s["regret"] == pytest.approx(0.008 / 0.007)
     text = long_log.page({"command": "c", "case": "x", "effects": ["a=1"], "noise": 0.02, "trajectories": 12,
                           "seconds": 58.4, "rate_hz": 100.0, "samples": 70080, "select": "s", "select_seconds": 60.0,
                           "cpus": 2, "select_page": "p/select.md", "summary": s})
-    assert "3 of 4 candidates finished" in text and "| loop | ok | [2, 2, 3, 2] → 2 |" in text
+    assert "3 of 4 candidates finished" in text and "| loop | ok | [2, 2, 3, 2] → 2 | 2 steps, at most 900 s | 130.2 |" in text
     assert "regret 1.143" in text and "70,080 samples" in text and "kept busy" not in text
     busy = long_log.page({"command": "c", "case": "x", "effects": ["a=1"], "noise": 0.02, "trajectories": 12,
                           "seconds": 58.4, "rate_hz": 100.0, "samples": 70080, "select": "s", "select_seconds": 60.0,
