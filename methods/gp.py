@@ -145,8 +145,8 @@ class GaussianProcess(Method):
     experiments: ClassVar[tuple[str, ...]] = (INDIRECT,)
     not_applicable: ClassVar[str] = "a GP of the torque learns torques: the direct experiment has no torques, and the GP no L"
     #: ``samples`` is not searched: it weighs the KL term, which moves little in the first steps, so successive
-    #: halving's first rung scores its two values alike (to four figures on the long-log and seven-trajectory
-    #: studies' logs, results/selection/) and keeps one of them by order, not by score, at twice the rung's work
+    #: halving's first rung scores its two values alike and they part only at the later rungs, while the axis adds
+    #: a third to the search's work; the default decides, and it is test-informed (docs/choices.md)
     search_space = {"inducing": (128, 256), "inputs": ("joint", "all")}
     smoke = {"max_steps": 5, "inducing": 16, "batch_size": 64, "eval_samples": 128}
     #: the steps its final fit did when select's default was 180 s a candidate, on 2 cores (the records of
