@@ -250,8 +250,8 @@ class GaussianProcess(Method):
     def _predict_through_gpytorch(self, data: Dataset) -> np.ndarray:
         gpytorch = _gpytorch()
         model = self.model
-        device, dtype = next(model.parameters()).device, next(model.parameters()).dtype
-        x = torch.as_tensor(features(data, self.config.inputs) / self.x_scale, dtype=dtype, device=device)
+        first = next(model.parameters())
+        x = torch.as_tensor(features(data, self.config.inputs) / self.x_scale, dtype=first.dtype, device=first.device)
         model.eval()
         try:
             with torch.no_grad(), gpytorch.settings.cholesky_max_tries(6):

@@ -69,7 +69,7 @@ from systems import SYSTEMS
 @dataclass(frozen=True)
 class Candidate:
     """A candidate: its name on the page, the method, its configuration and the hyperparameters it fixes.
-    ``work`` is the steps its final fit does where ``--steps`` is not given (its fold fits do the same,
+    :attr:`work` is the steps its final fit does where ``--steps`` is not given (its fold fits do the same,
     :mod:`bench.evaluation.tuning`); select's seconds are then only a ceiling, past which it is killed.
     ``start`` is when its run starts among the others, the lowest first (:func:`run`): the longest runs first
     (the loop's rounds on every fold; then the searches of the learned residuals; the records of
@@ -81,12 +81,16 @@ class Candidate:
     method: str
     profile: str = "default"
     fixed: tuple[tuple[str, object], ...] = ()
-    work: int = 1
     start: int = 0
     #: passes over the training samples its fits make at least (0: its ``work`` alone), in the batches of the
     #: learned residual ``learner`` (a method's name: its default ``batch_size`` samples a step)
     epochs: float = 0.0
     learner: str | None = None
+
+    @property
+    def work(self) -> int:
+        """The work its method declares (:attr:`methods.base.Method.work`)."""
+        return METHODS[self.method].work
 
     def steps(self, samples: int | None) -> int:
         """The steps of its fits on ``samples`` training samples: ``work``, or more where ``epochs`` passes over
@@ -110,14 +114,14 @@ GP_EPOCHS = 3.0
 CANDIDATES = (
     Candidate("standard", "sysid", "standard", start=9),
     Candidate("feasible", "sysid", "feasible", start=8),
-    Candidate("standard+gp", "standard+gp", work=GP_STEPS, start=5, epochs=GP_EPOCHS, learner="gp"),
-    Candidate("feasible+gp", "feasible+gp", work=GP_STEPS, start=4, epochs=GP_EPOCHS, learner="gp"),
-    Candidate("standard+mlp", "standard+mlp", work=NETWORK_STEPS, start=2),
-    Candidate("feasible+delan", "feasible+delan", work=NETWORK_STEPS, start=3),
+    Candidate("standard+gp", "standard+gp", start=5, epochs=GP_EPOCHS, learner="gp"),
+    Candidate("feasible+gp", "feasible+gp", start=4, epochs=GP_EPOCHS, learner="gp"),
+    Candidate("standard+mlp", "standard+mlp", start=2),
+    Candidate("feasible+delan", "feasible+delan", start=3),
     Candidate("feasible+sparse_torque", "feasible+sparse_torque", start=7),
-    Candidate("loop", "loop", work=METHODS["loop"].work, start=0),
-    Candidate("loop_feasible", "loop", "feasible", work=METHODS["loop"].work, start=1),
-    Candidate("loop+gp", "loop+gp", work=GP_STEPS, start=6, epochs=GP_EPOCHS, learner="gp"),
+    Candidate("loop", "loop", start=0),
+    Candidate("loop_feasible", "loop", "feasible", start=1),
+    Candidate("loop+gp", "loop+gp", start=6, epochs=GP_EPOCHS, learner="gp"),
 )
 
 
