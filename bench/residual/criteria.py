@@ -2,7 +2,8 @@
 (:mod:`bench.residual.tracing`).
 
 A term is accepted only if all hold, each joint's rows weighted by the inverse
-of its residual's scale (:func:`joint_weights`):
+of its residual's scale where the data are independent samples or several
+trajectories (:func:`joint_weights`):
 
 * the Bayesian information criterion of the residual fit, over all training
   rows, falls by more than :data:`MIN_BIC_DROP` (strong evidence on Kass &
@@ -44,6 +45,7 @@ import math
 
 import numpy as np
 
+from bench.core.data import Dataset
 from bench.physics.terms import Term
 from bench.residual.library import label
 
@@ -60,15 +62,26 @@ MAX_WEIGHT_RATIO = 1000.0
 AS_WELL = 0.9
 
 
-def joint_weights(y: np.ndarray, basis: np.ndarray, dof: int) -> np.ndarray:
-    """One weight a row of ``y`` (``tau.ravel()``: ``dof`` rows a sample): the inverse
+def joint_weights(y: np.ndarray, basis: np.ndarray, data: Dataset) -> np.ndarray:
+    """One weight a row of ``y`` (``tau.ravel()`` of ``data``: a row a joint and sample): the inverse
     of its joint's root mean square residual off the orthonormal ``basis``, the
     weighted least squares of robot identification (Gautier & Poignet 2001; Khalil &
     Dombre 2002, the identification chapters), each joint's equations scaled by
     its error's standard deviation, so that the BIC, the significance and the
     held-out error see each joint's residual in its own units. A joint's error
     is taken at least :data:`MAX_WEIGHT_RATIO` times smaller than the largest,
-    so that one fitted to round-off is not magnified without bound."""
+    so that one fitted to round-off is not magnified without bound.
+
+    On data that hold one trajectory every weight is 1: the weights, read off
+    the residual, let a joint with small torques carry laws the pooled fit would
+    not, and on independent samples each row is a sample of its own, on several
+    trajectories a held-out trajectory confirms such a law on motion it was not
+    fitted on; one trajectory's rows are neither, and the loop's other laws that
+    no held-out trajectory can confirm (:func:`~bench.residual.beyond_data.held_out_verdict`)
+    are not kept there either."""
+    if len(data.trajectories()) == 1:
+        return np.ones_like(y)
+    dof = data.dof
     r = (y - basis @ (basis.T @ y)).reshape(-1, dof) if basis.shape[1] else y.reshape(-1, dof)
     sigma = np.sqrt(np.mean(r**2, axis=0))
     top = float(sigma.max())

@@ -36,7 +36,7 @@ def prune(strategy: Strategy, model: LoopModel, train: Dataset, report: Report) 
         target, F = strategy.problem(model, train)
         y = target.ravel()
         n, k = len(y), F.shape[1]
-        w = joint_weights(y, orthonormal_basis(F), train.dof)  # each joint in its own units, as the trace sees it
+        w = joint_weights(y, orthonormal_basis(F), train)  # each joint in its own units, as the trace sees it
         y, F = y * w, F * w[:, None]
         first = k - len(model.effects)  # the effects' columns come last
         # residual sums below round-off are equal: their ratios are floating-point noise

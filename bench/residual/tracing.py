@@ -127,7 +127,7 @@ class Tracer:
             min(MIN_HELDOUT_GAIN, MIN_HELDOUT_CHI2 / self.n_rows)
         fixed = np.zeros((self.n_rows, 0)) if self.fixed is None else self.fixed
         # every row in its joint's units (joint_weights): the target, the design and each term's column
-        self.w = joint_weights(y, orthonormal_basis(fixed), data.dof)
+        self.w = joint_weights(y, orthonormal_basis(fixed), data)
         self.y, self.fixed = y * self.w, fixed * self.w[:, None]
         self.floor = ROUNDOFF * float(np.mean((self.data.tau.ravel() * self.w) ** 2))
         self.F_all = {c: self.column(c) for c in self.pool if c not in self.exclude}

@@ -363,11 +363,15 @@ def test_the_trace_weighs_each_joint_by_its_own_residual():
     residual += column / np.sqrt(np.mean(column[:, 1] ** 2))
     traced = trace(residual, data, TermLibrary([EFFECTS["armature"].term(0), armature]))
     assert traced.accepted == [armature] and traced.weights[1] / traced.weights[0] == pytest.approx(100 / np.sqrt(2), rel=0.05)
-    assert joint_weights(residual.ravel(), np.zeros((residual.size, 0)), 2)[1] == pytest.approx(traced.weights[1])
+    assert joint_weights(residual.ravel(), np.zeros((residual.size, 0)), data)[1] == pytest.approx(traced.weights[1])
     # a joint fitted to round-off is weighed at most MAX_WEIGHT_RATIO times the largest
     flat = np.column_stack([rng.normal(0, 1.0, 10), np.zeros(10)]).ravel()
-    w = joint_weights(flat, np.zeros((flat.size, 0)), 2)
+    w = joint_weights(flat, np.zeros((flat.size, 0)), data.subset(np.arange(10)))
     assert w[1] / w[0] == pytest.approx(MAX_WEIGHT_RATIO)
+    # one trajectory's rows are pooled as measured: the same residual, as one recording, is weighed 1 a row
+    one = data.replace(recording=np.array(["A"] * len(data)), trajectory=np.array(["A"] * len(data)))
+    assert np.all(joint_weights(residual.ravel(), np.zeros((residual.size, 0)), one) == 1.0)
+    assert np.all(trace(residual, one, TermLibrary([EFFECTS["armature"].term(0), armature])).weights == 1.0)
 
 
 def test_a_round_whose_every_law_the_joint_refit_drops_ends_the_loop_unscored(monkeypatch):
