@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -170,6 +171,7 @@ def read_spec(path: str | Path) -> MeasuredSpec:
                         f"follow {', '.join(named)}")
     if set(test) == set(named):
         raise DataError(f"{path}: test holds every trajectory ({', '.join(named)}); leave at least one to train on")
+    _no_log_twice(path, recordings, test)
     settings = raw.get("filter", {})
     if not isinstance(settings, dict):
         raise DataError(f"{path}: [filter] must be a table (its keys: "
@@ -205,6 +207,34 @@ def read_spec(path: str | Path) -> MeasuredSpec:
     return MeasuredSpec(path, columns, tuple(recordings), test, spec, time_unit, degrees, as_recorded, urdf,
                         None if rate is None else float(rate), root, tip, joints, locked_at,
                         tuple(dict.fromkeys(map(str, chosen_on))))
+
+
+def _no_log_twice(path: Path, recordings: list[RecordingFile], test: tuple[str, ...]) -> None:
+    """A :class:`DataError` where one log (a file, or a file's rows picked by one value) is named by two
+    recordings, or where a test recording's file holds the same bytes as a training one's: its test would be a
+    repeat of its training data."""
+    seen: dict[tuple, RecordingFile] = {}
+    for r in recordings:
+        key = (r.path, r.column, r.name if r.column else None)
+        if key in seen:
+            raise DataError(f"{path}: recordings {seen[key].name!r} and {r.name!r} both read {r.path}: "
+                            f"one log is one recording")
+        seen[key] = r
+    files = {r.path for r in recordings if r.column is None}
+    sizes = {f: f.stat().st_size for f in files if f.is_file()}
+    trained = [r for r in recordings if r.column is None and r.trajectory not in test and r.path in sizes]
+    for r in recordings:
+        if r.column is not None or r.trajectory not in test or r.path not in sizes:
+            continue
+        for other in trained:
+            if sizes[other.path] == sizes[r.path] and _digest(other.path) == _digest(r.path):  # sizes first: cheap
+                raise DataError(f"{path}: test recording {r.name!r} ({r.path.name}) holds the same log as training "
+                                f"recording {other.name!r} ({other.path.name}): its test would repeat its training data")
+
+
+def _digest(file: Path) -> str:
+    """The SHA-256 of a file's bytes."""
+    return hashlib.sha256(file.read_bytes()).hexdigest()
 
 
 def _chain_keys(path: Path, raw: dict):

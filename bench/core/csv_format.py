@@ -42,6 +42,7 @@ measured data.
 from __future__ import annotations
 
 import os
+from collections import Counter
 import re
 from pathlib import Path
 
@@ -132,7 +133,7 @@ def read_frame(path: Path, nrows: int | None = None):
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise DataError(f"{path}: not a readable CSV file ({first})") from None
     names = [str(v).strip() for v in header.iloc[0]] if len(header) else []
-    repeated = sorted({n for n in names if names.count(n) > 1})
+    repeated = sorted(n for n, k in Counter(names).items() if k > 1)
     if repeated:
         raise DataError(f"{path}: column name(s) {', '.join(map(repr, repeated))} appear more than once")
     if len(frame) == 0:

@@ -22,7 +22,10 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO], Any], *, binary:
 
     On any error the temporary file is removed and ``path`` is left as it
     was. The temporary file's name carries the writer's process id, so that
-    the next write of ``path`` removes what a killed writer left.
+    the next write of ``path`` removes what a killed writer left. The file's
+    bytes are synced to disk before the rename and the folder's entry after
+    it, so that a power loss leaves the old file or the whole new one, never
+    an empty one.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -32,13 +35,30 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO], Any], *, binary:
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
         with os.fdopen(fd, "wb" if binary else "w", **({} if binary else {"newline": ""})) as f:
             write(f)
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(tmp, path)
+        _sync_folder(path.parent)
     except BaseException:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
         raise
+
+
+def _sync_folder(folder: Path) -> None:
+    """Sync ``folder``'s entries to disk, where the system lets a folder be opened for it."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def remove_leftovers(path: Path) -> None:

@@ -38,6 +38,7 @@ dataset's source and ``meta["resampled"]`` carry and ``fit`` prints.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,14 +72,24 @@ class FilterSpec:
     decimate: int = 1
 
     def __post_init__(self):
-        if self.dt is not None and not self.dt > 0:
+        def number(name: str) -> float:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+                raise ConfigError(f"{name} must be a finite number, got {value!r}")
+            return float(value)
+
+        for name in ("order", "decimate"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+                raise ConfigError(f"{name} must be a whole number >= 1, got {value!r}")
+        if self.dt is not None and not number("dt") > 0:
             raise ConfigError(f"dt must be positive, got {self.dt}")
         nyquist = math.inf if self.dt is None else 0.5 / self.dt
-        if not 0 < self.cutoff_hz < nyquist:
+        if not 0 < number("cutoff_hz") < nyquist:
             bound = "be positive" if self.dt is None else f"lie in (0, {nyquist:g}) for dt = {self.dt:g}"
             raise ConfigError(f"cutoff_hz must {bound}, got {self.cutoff_hz}")
-        if self.order < 1 or self.decimate < 1 or self.trim_s < 0:
-            raise ConfigError("order and decimate must be >= 1 and trim_s >= 0")
+        if not number("trim_s") >= 0:
+            raise ConfigError(f"trim_s must be >= 0, got {self.trim_s}")
 
     def describe(self) -> str:
         step = "at the log's own step" if self.dt is None else f"resampled to {self.dt * 1000:g} ms"

@@ -122,6 +122,28 @@ def test_write_is_atomic(small_data, tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == ["out.csv"]
 
 
+def test_a_write_syncs_its_bytes_before_the_rename_and_its_folder_after(tmp_path, monkeypatch):
+    from bench.core import fileio
+
+    events, real_fsync, real_replace = [], os.fsync, os.replace
+
+    def fsync(fd):
+        events.append(("fsync", os.path.isdir(f"/proc/self/fd/{fd}") if os.path.exists("/proc/self/fd") else None))
+        real_fsync(fd)
+
+    def replace(a, b):
+        events.append(("replace", None))
+        real_replace(a, b)
+
+    monkeypatch.setattr(fileio.os, "fsync", fsync)
+    monkeypatch.setattr(fileio.os, "replace", replace)
+    fileio.atomic_write(tmp_path / "record.json", lambda f: f.write("{}"))
+    assert [e for e, _ in events] == ["fsync", "replace", "fsync"]
+    if events[0][1] is not None:  # the first sync is the file's, the last the folder's
+        assert events[0][1] is False and events[2][1] is True
+    assert (tmp_path / "record.json").read_text() == "{}"
+
+
 def test_dataset_checks_shapes():
     z = np.zeros((3, 2))
     with pytest.raises(DataError, match="share one"):

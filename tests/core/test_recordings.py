@@ -102,9 +102,11 @@ def test_a_measured_systems_file_states_the_rate_of_logs_without_time(log_at_100
     from systems.measured import read_spec
 
     folder, mapping = log_at_100hz
+    lines = (folder / "timeless.csv").read_text().splitlines(keepends=True)
+    (folder / "timeless_b.csv").write_text("".join(lines[:-1]))  # another log: one log is one recording
     body = (f'columns = "{mapping}"\ntest = ["b"]\n[recordings]\n'
             f'a = {{ file = "{folder / "timeless.csv"}", trajectory = "a" }}\n'
-            f'b = {{ file = "{folder / "timeless.csv"}", trajectory = "b" }}\n')
+            f'b = {{ file = "{folder / "timeless_b.csv"}", trajectory = "b" }}\n')
     path = tmp_path / "arm.toml"
     path.write_text(body)
     with pytest.raises(DataError, match="columns name no time column: name it .* or give the logs' rate .rate_hz."):

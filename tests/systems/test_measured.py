@@ -89,11 +89,33 @@ def test_a_declaration_says_which_trajectories_chose_its_filter_and_so_which_tes
      'recordings_in = { file = "all.csv", column = "run" }\n[filter]\nchosen_on = 3\n', r"\[filter\] chosen_on"),
     ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\nfilter = 6\n'
      'recordings_in = { file = "all.csv", column = "run" }\n', r"\[filter\] must be a table"),
+    # a filter's numbers of the wrong kind: one line each, never a traceback from the filter
+    *[('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\n'
+       f'recordings_in = {{ file = "all.csv", column = "run" }}\n[filter]\n{setting}\n', message)
+      for setting, message in [("decimate = 1.5", r"\[filter\]: decimate must be a whole number >= 1, got 1.5"),
+                               ("order = true", r"\[filter\]: order must be a whole number >= 1, got True"),
+                               ("trim_s = nan", r"\[filter\]: trim_s must be a finite number, got nan"),
+                               ("cutoff_hz = inf", r"\[filter\]: cutoff_hz must be a finite number"),
+                               ('cutoff_hz = "6"', r"\[filter\]: cutoff_hz must be a finite number, got '6'")]],
+    # one log as the training and the test trajectory
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["c"]\n[recordings]\n'
+     'r1 = { file = "all.csv", trajectory = "a" }\nr2 = { file = "all.csv", trajectory = "c" }\n',
+     r"recordings 'r1' and 'r2' both read .*all.csv: one log is one recording"),
 ])
 def test_a_bad_declaration_is_refused_in_one_line_naming_the_file(tmp_path, text, message):
     with pytest.raises(DataError, match=message) as caught:
         read_spec(write(tmp_path, text))
     assert "\n" not in str(caught.value) and ("system.toml" in str(caught.value) or "all.csv" in str(caught.value))
+
+
+def test_a_test_log_that_is_a_copy_of_a_training_log_is_refused(tmp_path):
+    path = write(tmp_path, 'columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["c"]\n[recordings]\n'
+                           'r1 = { file = "all.csv", trajectory = "a" }\nr2 = { file = "copy.csv", trajectory = "c" }\n')
+    (tmp_path / "copy.csv").write_bytes((tmp_path / "all.csv").read_bytes())
+    with pytest.raises(DataError, match="test recording 'r2' \\(copy.csv\\) holds the same log as training recording 'r1'"):
+        read_spec(path)
+    (tmp_path / "copy.csv").write_text((tmp_path / "all.csv").read_text().replace("0.010", "0.011"))  # same size
+    assert [r.name for r in read_spec(path).recordings] == ["r1", "r2"]
 
 
 def test_a_residual_file_published_under_the_old_key_still_reads():
