@@ -4,6 +4,7 @@ on the training data alone (:mod:`bench.tools.select`)."""
 from __future__ import annotations
 
 import argparse
+import math
 
 from pathlib import Path
 
@@ -18,9 +19,21 @@ from bench.runner.plugins import file_prefix
 from bench.tools.select import CANDIDATES, select
 from systems import SYSTEMS
 
-#: the seconds past which a candidate is killed (``--budget``): a ceiling, not its work, which is steps
-#: (bench.tools.select.Candidate.work); five times the 180 s a candidate had when its work was seconds
+#: the seconds past which a candidate is killed (``--budget``) on up to :data:`CEILING_SAMPLES` training samples:
+#: a ceiling, not its work, which is steps (bench.tools.select.Candidate.work); five times the 180 s a candidate
+#: had when its work was seconds
 SELECT_CEILING_S = 900.0
+#: the training samples past which the default ceiling grows in proportion to them, as the candidates' work does
+#: (a GP's steps, the regressors, the loop's rounds): on the long-log study's two logs with one core busy beside
+#: them, the longest candidate then takes 642 s of 5,782 (64,240 samples) and 391 s of 1,260 (14,000), so a machine
+#: three times slower still finishes within it (results/selection/long_log.md, seven_trajectories.md)
+CEILING_SAMPLES = 10_000
+
+
+def ceiling(samples: int) -> float:
+    """select's default ceiling a candidate on ``samples`` training samples: :data:`SELECT_CEILING_S`, and in
+    proportion to the samples past :data:`CEILING_SAMPLES`, rounded up to a whole second."""
+    return float(math.ceil(SELECT_CEILING_S * max(1.0, samples / CEILING_SAMPLES)))
 
 HELP = "choose a model of a measured arm by validation on its training data; write it, and a page of every candidate"
 
@@ -33,9 +46,10 @@ def add_arguments(p) -> None:
                    help="give every candidate N steps of its method's work (gradient steps, GP steps, solves, the "
                         "loop's rounds) instead of its own (default: each candidate's own steps, the page's work "
                         "column); either way the same numbers on any machine")
-    p.add_argument("--budget", type=positive, default=SELECT_CEILING_S, metavar="SECONDS",
-                   help="a candidate still running after SECONDS is killed and recorded as timeout "
-                        f"(default {SELECT_CEILING_S:g}); a ceiling only, the candidates' work being steps")
+    p.add_argument("--budget", type=positive, default=None, metavar="SECONDS",
+                   help="a candidate still running after SECONDS is killed and recorded as timeout (default "
+                        f"{SELECT_CEILING_S:g}, and in proportion to the training samples past "
+                        f"{CEILING_SAMPLES:,}); a ceiling only, the candidates' work being steps")
     add_split(p)
     p.add_argument("--seed", type=seed, default=0, help="the candidates' seed (default 0)")
     add_workers(p, "candidates", None)
@@ -85,7 +99,8 @@ def main(args) -> int:
     elif protocol == "knndm" and len(data[0].trajectories()) < 2:
         raise UsageError("--folds knndm: the training data hold one trajectory; name the states the model will be "
                          "asked with --target-states LOG")
-    result = select(name, args.out, split=args.split, budget_s=args.budget, steps=args.steps, seed=args.seed,
+    budget = args.budget if args.budget is not None else ceiling(len(data[0]))
+    result = select(name, args.out, split=args.split, budget_s=budget, steps=args.steps, seed=args.seed,
                     workers=args.workers, cluster=args.cluster, plugins=plugins, command=args.invocation,
                     candidates=candidates,
                     rollout=args.rollout, data=data, target=target, protocol=protocol,

@@ -187,6 +187,21 @@ def test_every_candidate_is_bounded_by_work_whatever_selects_seconds(tmp_path):
     assert not any(spec.rollout for _, spec in specs("kuka_lwr4", None, 900.0, None, 0, tmp_path, ()))
 
 
+def test_selects_default_ceiling_grows_with_the_training_samples_as_the_work_does(tmp_path, monkeypatch):
+    """900 s a candidate up to 10,000 training samples, then in proportion: on a longer log the work grows (a
+    GP's steps), and the ceiling with it, so that a slower machine finishes it; --budget sets it as given."""
+    from bench.cli import select as command
+
+    assert command.ceiling(4926) == command.ceiling(10_000) == 900.0
+    assert command.ceiling(64_240) == 5782.0 and command.ceiling(20_001) == 1801.0
+    seen = []
+    monkeypatch.setattr(command, "select", lambda *a, **k: seen.append(k["budget_s"]) or {"chosen": None})
+    train = len(SYSTEMS["kuka_lwr4"]().load("train"))
+    assert cli("select", "--system", "kuka_lwr4", "--out", tmp_path / "a").returncode == 1
+    assert cli("select", "--system", "kuka_lwr4", "--out", tmp_path / "b", "--budget", "30").returncode == 1
+    assert seen == [command.ceiling(train), 30.0]
+
+
 def test_the_candidates_runs_start_the_longest_first_each_at_its_own_place():
     starts = sorted(CANDIDATES, key=lambda c: c.start)
     assert len({c.start for c in CANDIDATES}) == len(CANDIDATES)  # one place each
