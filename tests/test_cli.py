@@ -65,6 +65,29 @@ def test_help_lists_the_users_verbs_and_one_verb_for_the_studies():
     assert "--train" in fit_help and "--json" in fit_help
 
 
+#: what a command's modules bring in, which the top-level help and a study's list need none of
+HEAVY = ("torch", "sympy", "pinocchio", "pandas", "scipy", "methods", "systems")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["study", "--help"], ["fit", "--help"]])
+def test_help_imports_only_the_command_it_names(argv):
+    """A command's modules are imported when it is parsed: ``--help`` and ``study --help`` import none of the
+    heavy libraries, ``fit --help`` only what fit's options need, and no study."""
+    code = ("import sys\nfrom bench.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+            "print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in "
+            f"{HEAVY!r} or m.startswith('bench.studies.') or m.startswith('bench.cli.'))), file=sys.stderr)")
+    r = subprocess.run([sys.executable, "-c", code, *argv], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    loaded = set(r.stderr.split())
+    assert "usage: python -m bench" in r.stdout and r.returncode == 0, r.stderr[-2000:]
+    if argv[0] == "fit":
+        assert "bench.cli.fit" in loaded and "torch" in loaded  # the methods' options
+        assert not {m for m in loaded if m.startswith("bench.studies.")} and "bench.cli.select" not in loaded
+    else:
+        assert not {m for m in loaded if m.split(".")[0] in HEAVY}, loaded
+        assert not {m for m in loaded if m.startswith("bench.studies.")}, loaded
+        assert loaded <= {"bench.cli.parser", "bench.cli.study"}, loaded
+
+
 @pytest.mark.parametrize("command", [None, *COMMANDS, *(f"study {s}" for s in STUDIES)])
 def test_every_help_renders(command, capsys):
     # argparse formats help texts with %: a stray "%" in one raises only when that help is printed

@@ -8,7 +8,8 @@ import json
 
 import pytest
 
-from bench.cli.options import UsageError, configurations
+from bench.cli.parser import UsageError
+from bench.cli.options import configurations
 from bench.core.errors import ConfigError
 from methods import METHODS
 from tests.commandline import cli

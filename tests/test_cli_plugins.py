@@ -13,7 +13,8 @@ import pytest
 
 import tests.test_extension  # noqa: F401  (registers toy_mass_spring and toy_quadratic here, as --plugin does)
 from bench.cli import build_parser
-from bench.cli.options import UsageError, hyperparameters
+from bench.cli.parser import UsageError
+from bench.cli.options import hyperparameters
 from bench.core.csv_format import read_csv
 from tests.commandline import cli
 

@@ -7,7 +7,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from bench.cli.options import UsageError
+from bench.cli.parser import UsageError
 from bench.core.arguments import nonnegative, positive, positive_int
 from bench.core.data import Dataset
 from bench.core.csv_format import write_csv
@@ -15,8 +15,6 @@ from bench.core.fileio import check_output, file_digest, settings_path, write_js
 from bench.core.recordings import (DEFAULT_FILTER, TIME_UNITS, ColumnMap, FilterSpec, Recording, beyond_a_turn, joined,
                                    preprocess, read_log, resampling)
 from systems.dfki_double_pendulum import layout_of
-
-HELP = "turn a robot's log into the suite's CSV format: resample, low-pass, differentiate"
 
 
 def add_arguments(cv) -> None:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.cli.options import UsageError, add_plugin, check_names, load_plugins
+from bench.cli.parser import UsageError
+from bench.cli.options import add_plugin, check_names, load_plugins
 from bench.core.arguments import noise_level, positive, positive_int, seed
 from bench.core.data import add_noise, generate
 from bench.core.csv_format import write_csv
@@ -13,8 +14,6 @@ from bench.physics.effects import EFFECTS
 from bench.core.fileio import check_output
 from bench.physics.undeclared import GENERATOR_LAWS, add_effects, parse_effects
 from systems import SYSTEMS
-
-HELP = "generate data in the suite's CSV format"
 
 
 def add_arguments(d) -> None:

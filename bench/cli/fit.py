@@ -8,8 +8,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bench.cli.options import (add_ignore_limits, UsageError, add_budget, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget, check_names,
-                               check_split, configurations, device, hyperparameters, load_plugins, resampled)
+from bench.cli.parser import UsageError
+from bench.cli.options import (add_ignore_limits, add_budget, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget,
+    check_names, check_split, configurations, device, hyperparameters, load_plugins, resampled)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import atomic_write, check_output
 from bench.evaluation.per_joint import per_joint_lines
@@ -18,8 +19,6 @@ from bench.runner.run import given_data, make_system, method_config, preflight
 from bench.runner.records import Record, record_path
 from bench.runner.spec import N_TEST, N_TRAIN, RunSpec
 from methods import METHODS
-
-HELP = "one run on your own CSV data or on generated data; prints a one-line summary"
 
 
 def add_arguments(f) -> None:

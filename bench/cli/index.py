@@ -8,8 +8,6 @@ from pathlib import Path
 
 from bench.reporting.index import write_index
 
-HELP = "write results/index.md from results/manifest.toml and the records, and refresh the pages' marked figures"
-
 
 def add_arguments(parser) -> None:
     parser.add_argument("root", type=Path, nargs="?", default=Path("results"),

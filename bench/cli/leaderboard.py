@@ -9,8 +9,6 @@ from pathlib import Path
 from bench.core.fileio import check_output
 from bench.reporting.leaderboard import write_leaderboard
 
-HELP = "write a run folder's leaderboard: its tables and the methods' ranks across them"
-
 
 def add_arguments(parser) -> None:
     parser.add_argument("run_dir", type=Path, help="the run folder, with records/")

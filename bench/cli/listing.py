@@ -8,8 +8,6 @@ from methods import METHODS
 from methods.hybrid import naming
 from systems import SYSTEMS
 
-HELP = "list systems and methods, with availability"
-
 
 def add_arguments(parser) -> None:
     add_plugin(parser)

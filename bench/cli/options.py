@@ -1,4 +1,4 @@
-"""What the commands share: their parser, their one-line usage error, and the
+"""What the commands share: the
 options several of them take (``--set``, ``--plugin``, ``--budget`` with
 ``--steps``), with what the commands do with them.
 
@@ -8,15 +8,14 @@ The option values' types (seeds, counts, fractions, ``NAME=VALUE``) are in
 
 from __future__ import annotations
 
-import argparse
 import re
 from pathlib import Path
 
 from bench.core.arguments import assignment, positive, positive_int
 from bench.core.experiment import Experiment
 from bench.core.devices import CHOICES, resolve as resolve_device
-from bench.core.errors import UserError
 from bench.core.registry import RegistryError, UnknownName
+from bench.cli.parser import UsageError
 from bench.runner.plugins import import_plugins, system_plugins
 from methods import METHODS
 from systems import SYSTEMS
@@ -26,17 +25,6 @@ DEFAULT_BUDGET_S = 60.0
 STEPS_HELP = ("bound each run by N steps of its method's work (gradient steps, GP generations, solves) instead of by "
               "time: the run is then a pure function of its seed and gives the same numbers on any machine")
 PLUGIN_HELP = "a .py file or module that registers extra methods or systems (repeatable)"
-
-
-class UsageError(UserError):
-    """A bad command line; reported in one line with exit code 2."""
-
-
-class Parser(argparse.ArgumentParser):
-    """Argument errors in one line (``--help`` still shows the usage)."""
-
-    def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def add_set(parser, what: str = "the method") -> None:

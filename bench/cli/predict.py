@@ -7,15 +7,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bench.cli.options import UsageError, add_plugin, load_plugins
+from bench.cli.parser import UsageError
+from bench.cli.options import add_plugin, load_plugins
 from bench.core.csv_format import read_csv
 from bench.core.data import mse
 from bench.core.fileio import atomic_write, check_output
 from bench.core.modelfile import ModelFileError, read
 from methods.saving import load_model
 from systems import SYSTEMS
-
-HELP = "a saved model's torques on a log in the suite's format; prints their MSE where the log has torques"
 
 
 def add_arguments(p) -> None:

@@ -14,8 +14,6 @@ from bench.runner.plugins import import_plugins
 from bench.runner.records import read_record
 from bench.runner.replay import compare, replay_spec, tolerance
 
-HELP = "replay a recorded run with the work it did and compare its train and test MSE"
-
 
 def add_arguments(rr) -> None:
     rr.add_argument("record", type=Path, help="a run's record (OUT/records/<run id>.json, or a fit's --json)")

@@ -15,8 +15,6 @@ from bench.residual.report import summary_lines
 from bench.runner.job import KILL_FACTOR
 from methods import METHODS
 
-HELP = "fit, trace the torque residual to missing effects, add them, refit; report the error before and after"
-
 
 def add_arguments(res) -> None:
     res.add_argument("--system", required=True, help="the system whose declared model the method fits")

@@ -7,8 +7,9 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from bench.cli.options import (UsageError, add_budget, add_ignore_limits, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget, check_names,
-                               check_split, configurations, device, hyperparameters, load_plugins, resampled)
+from bench.cli.parser import UsageError
+from bench.cli.options import (add_budget, add_ignore_limits, add_config, add_tune, add_device, add_plugin, add_set, add_split, budget,
+    check_names, check_split, configurations, device, hyperparameters, load_plugins, resampled)
 from bench.core.arguments import add_workers, csv_list, noise_level, positive, positive_int, seed_list
 from bench.core.fileio import check_output
 from bench.reporting.tables import write_tables
@@ -17,8 +18,6 @@ from bench.runner.run import given_data, log_path, make_system, method_config, r
 from bench.runner.spec import N_TEST, N_TRAIN, SEEDS, build_specs, seed_count
 from methods import METHODS
 from systems import SYSTEMS
-
-HELP = "run a matrix of systems x methods x experiments x seeds and write tables"
 
 
 def add_arguments(r) -> None:

@@ -8,7 +8,8 @@ import math
 
 from pathlib import Path
 
-from bench.cli.options import UsageError, add_plugin, add_split, check_names, check_split, load_plugins
+from bench.cli.parser import UsageError
+from bench.cli.options import add_plugin, add_split, check_names, check_split, load_plugins
 from bench.core.arguments import add_workers, csv_list, positive, positive_int, seed
 from bench.core.csv_format import read_csv
 from bench.core.protocols import NAMES
@@ -34,8 +35,6 @@ def ceiling(samples: int) -> float:
     """select's default ceiling a candidate on ``samples`` training samples: :data:`SELECT_CEILING_S`, and in
     proportion to the samples past :data:`CEILING_SAMPLES`, rounded up to a whole second."""
     return float(math.ceil(SELECT_CEILING_S * max(1.0, samples / CEILING_SAMPLES)))
-
-HELP = "choose a model of a measured arm by validation on its training data; write it, and a page of every candidate"
 
 
 def add_arguments(p) -> None:

@@ -4,11 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.cli.options import UsageError
+from bench.cli.parser import UsageError
 from bench.reporting.per_joint import write_per_joint
 from bench.reporting.tables import write_tables
-
-HELP = "write DIR/tables.md from DIR's records and print it"
 
 
 def add_arguments(parser) -> None:

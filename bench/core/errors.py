@@ -1,4 +1,5 @@
-"""Errors caused by the user's input, reported in one line by the CLI (exit code 2)."""
+"""The errors the command line reports in one line: those of the user's input
+(exit code 2), and a job whose process did not return (exit code 1)."""
 
 
 class UserError(Exception):
@@ -11,6 +12,10 @@ class DataError(UserError, ValueError):
 
 class ConfigError(UserError, TypeError):
     """A bad hyperparameter or option."""
+
+
+class CallFailed(RuntimeError):
+    """A job whose process did not return: killed at its limit, or it died."""
 
 
 def first_line(exc: BaseException, limit: int = 200) -> str:

@@ -22,7 +22,8 @@ from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.runner.run import given_data, make_system, method_config, preflight
-from bench.runner.job import CallFailed, Job, Outcome, evaluation_limit, fit_limit, fit_limit_words, run_isolated
+from bench.core.errors import CallFailed
+from bench.runner.job import Job, Outcome, evaluation_limit, fit_limit, fit_limit_words, run_isolated
 from bench.runner.plugins import import_plugins
 from bench.runner.progress import Report, print_now
 from bench.runner.spec import RunSpec

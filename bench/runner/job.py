@@ -46,6 +46,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from bench.core.budget import SECONDS, Budget
+from bench.core.errors import CallFailed
 from bench.core.fileio import write_json
 from bench.runner.isolation import Child
 from bench.runner.ledger import suite_code
@@ -86,10 +87,6 @@ def evaluation_limit(budget_s: float | None, factor: float = 1.0) -> float:
     """Seconds a job may take after its fit: ``max(EVALUATION_MIN_S, factor *
     budget_s)``, none for a work budget without a ceiling (``budget_s`` ``None``)."""
     return math.inf if budget_s is None else max(EVALUATION_MIN_S, factor * budget_s)
-
-
-class CallFailed(RuntimeError):
-    """A job whose process did not return: killed at its limit, or it died."""
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,8 @@ from typing import Any, Callable, Iterator, Mapping
 
 from bench.runner.cluster import run_on_cluster
 from bench.runner.isolation import kill_children
-from bench.runner.job import CallFailed, Job, run_isolated
+from bench.core.errors import CallFailed
+from bench.runner.job import Job, run_isolated
 from bench.runner.ledger import Ledger
 
 
@@ -45,7 +46,7 @@ def run_jobs(jobs: Mapping[str, Job], workers: int, describe: Callable[[Any], st
     as each starts, or is handed to the cluster (it may raise to stop the rest). Each finished job is
     reported in one line, ``[k/n, t s] name: describe(result)``, or handed to ``on_done(name, result)``
     instead; jobs that did not finish raise
-    :class:`~bench.runner.job.CallFailed`, named, once all have ended. A job's call, phases and output
+    :class:`~bench.core.errors.CallFailed`, named, once all have ended. A job's call, phases and output
     go to its :meth:`Job.folder`, else to a scratch folder. With a ``ledger``, each job that finishes is kept
     in it as it finishes, and a job it already holds is not run again where its result stands
     (:func:`~bench.runner.ledger.rerun_reason`): the studies' cases resume so; a matrix resumes

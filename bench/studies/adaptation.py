@@ -245,7 +245,6 @@ def write(results: list[dict], setup: Setup, seeds: list[int], out: Path, comman
 
 
 #: the subcommand's one-line help
-HELP = "measure how learners adapt when the system gains an undeclared effect (results/residual/adaptation)"
 
 
 def add_arguments(parser) -> None:

@@ -173,7 +173,6 @@ def report(rows: list[dict], spec: FilterSpec) -> str:
 
 
 #: the subcommand's one-line help
-HELP = "measure how the DFKI filter's cut-off changes the identified model (results/measured/dfki_filter.md)"
 
 
 def add_arguments(parser) -> None:

@@ -105,7 +105,6 @@ class Case(CaseJob):
 
 
 #: the subcommand's one-line help
-HELP = "where each learner stops generalising on a measured arm: test MSE against distance from the training states"
 
 
 def add_arguments(parser) -> None:

@@ -66,8 +66,6 @@ from methods import METHODS
 from methods.stacking import fit_stacked
 from bench.core.budget import Budget
 
-HELP = "the GPU figures of stacked seeds, with ratios, in one run (runs on a bare GPU machine; --dry-run, --prepare)"
-
 ROOT = Path(__file__).resolve().parents[2]
 #: the public code's training speed on the paper's GPU, steps/s (results/syrenets/speed.md)
 PUBLIC_STEPS_PER_S = 1.25

@@ -34,10 +34,6 @@ from bench.runner.provenance import provenance
 from bench.runner.records import read_record, record_path
 from bench.studies.selection_benchmark import LOGS, NOISE, RATE_HZ, Case, make, scores
 
-HELP = ("bench select at its default on a generated long log (the Panda's 12 trajectories, 70,080 samples; or, with "
-        "--layout seven, the KUKA's 7 training trajectories of 2,000): every candidate's status, the loop's rounds, "
-        "the regret and the time (results/selection/long_log.md)")
-
 #: the case whose log is made, by layout: the Panda's 12 trajectories of 5,840 samples (``long``) or the
 #: KUKA's 7 training trajectories of 2,000 (``seven``: each held out in turn in the final fit), a drive's laws, seed 77
 CASES = {"long": Case("panda", "long", "drive", 77), "seven": Case("kuka", "seven", "drive", 77)}

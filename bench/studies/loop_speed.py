@@ -34,9 +34,6 @@ from bench.residual.loop import MAX_ROUNDS
 from bench.studies.selection_benchmark import LONG, make
 from bench.studies.trees import ROOT, export
 
-HELP = ("time a round of the residual loop on the long log in this tree and in an earlier commit, in turn "
-        "(results/residual/loop_speed.md)")
-
 #: run in the tree being timed: round 0's and round 1's seconds on the arm ``job["arm"]`` declares
 WORKER = r"""
 import json, sys

@@ -48,7 +48,6 @@ def measure(method: str, system: str, experiment: str, runs: int, budget: float,
 
 
 #: the subcommand's one-line help
-HELP = "measure the harness's overhead and its speed-up from 1 to more workers (results/harness/overhead.md)"
 
 
 def add_arguments(parser) -> None:

@@ -230,7 +230,6 @@ class Case(CaseJob):
 
 
 #: the subcommand's one-line help
-HELP = "the residual loop's benchmark of undeclared effects: recall, precision, confusion (results/residual/acceptance.md)"
 
 
 #: the loop's rules of acceptance, and the data each was chosen on: every one before the evaluation set existed

@@ -127,7 +127,6 @@ def summary(rows: list[dict], methods: list[str]) -> str:
 
 
 #: the subcommand's one-line help
-HELP = "measure the residual loop on the DFKI recordings: the suite's split and leave one recording out (results/residual/dfki.md)"
 
 
 def add_arguments(parser) -> None:

@@ -166,8 +166,6 @@ def plots(rows: list[dict], out: Path) -> list[Path]:
     return made
 
 
-HELP = "measure how each method's time per step, memory and error grow with the degrees of freedom (results/scaling)"
-
 
 def add_arguments(parser) -> None:
     parser.add_argument("--budget", type=positive, default=5.0, help="seconds per run (default 5)")

@@ -485,8 +485,6 @@ def _rows(table: list[dict], rules: list[str]) -> list[str]:
     return lines
 
 
-HELP = "how well each validation protocol and rule chooses a model, on simulated arms whose truth is known"
-
 
 def add_arguments(parser) -> None:
     parser.add_argument("--set", choices=SETS, default=DEVELOPMENT,

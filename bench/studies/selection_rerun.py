@@ -48,8 +48,6 @@ def _said(s: dict) -> str:
                                        else f"{n} failed" for n, f in s["candidates"].items())
 
 
-HELP = "the selection benchmark's page with only some candidates run again, the others' figures kept"
-
 
 def add_arguments(parser) -> None:
     parser.add_argument("--candidates", type=csv_list, required=True,

@@ -65,7 +65,6 @@ def measure(method: str, system_name: str, seeds: int, steps: int, n_train: int,
 
 
 #: the subcommand's one-line help
-HELP = "measure seeds trained stacked against one by one: steps/s per seed and seed-steps/s, on a device"
 
 
 def parse_case(case: str, n_seeds: list[int]) -> tuple[str, str, list[int]]:

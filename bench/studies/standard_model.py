@@ -142,8 +142,6 @@ def _values(values: list[float]) -> str:
 
 
 #: the subcommand's one-line help
-HELP = ("the measured arms' standard model, the field's beside friction alone, and the factor for every page read "
-        "against friction alone (results/measured/standard_model.md)")
 
 
 def add_arguments(parser) -> None:

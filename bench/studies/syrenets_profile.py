@@ -81,9 +81,6 @@ from methods.base import gc_frozen
 from methods.syrenets.network import HeadsOutput
 from systems import get_system
 
-HELP = ("where SyReNets' training step spends its time, and its heads' product with and without torch.profiler "
-        "(results/syrenets/speed/syrenets_profile.md)")
-
 #: the authors' public configuration, as bench study syrenets-speed times it
 CONFIG = syrenets_speed.CONFIGS["public"]
 MODES = ("plain", "profiler", "timers")

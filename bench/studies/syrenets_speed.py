@@ -45,8 +45,6 @@ from bench.runner.provenance import machine, made_at, provenance
 from bench.studies.trees import ROOT, export
 from methods import METHODS
 
-HELP = "time SyReNets' training step in this tree and in an earlier commit, in turn (results/syrenets/speed/syrenets_speed.md)"
-
 CONFIGS = {
     "public": {"hyperparameters": METHODS["syrenets"].configuration("public"), "batch": 48},
     "default": {"hyperparameters": {}, "batch": 32},

@@ -38,8 +38,6 @@ from bench.studies.generalisation import split_data
 from bench.studies.selection_benchmark import DEVELOPMENT, EVALUATION, cases, make
 from systems import SYSTEMS
 
-HELP = "how far a measured arm's test trajectory and its validation folds lie from the states they were fitted on"
-
 
 #: states drawn over the arm's joint ranges (:func:`joint_ranges`), from this seed
 RANGE_SAMPLES, RANGE_SEED = 4000, 0

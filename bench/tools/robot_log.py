@@ -111,7 +111,6 @@ def write_log(path: Path, time: np.ndarray, data: Dataset) -> None:
 
 
 #: the subcommand's one-line help
-HELP = "write a simulated robot's logs (time, positions, velocities, torques) for bench convert --columns"
 
 
 def add_arguments(parser) -> None:

@@ -22,7 +22,7 @@ from bench.core.csv_format import write_csv
 from bench.residual import residual_loop
 from bench.residual.job import ResidualJob, run_residual
 from bench.residual.model import Fitter
-from bench.runner.job import CallFailed
+from bench.core.errors import CallFailed
 from bench.runner.records import read_record, residual_fields
 from tests.residual.test_loop import SYSID, data_with, quiet
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from bench.runner.isolation import stop_fork_server
-from bench.runner.job import CallFailed, run_isolated, run_watched
+from bench.core.errors import CallFailed
+from bench.runner.job import run_isolated, run_watched
 from bench.runner.schedule import run_jobs
 from tests.runner.jobs import Echo, Sleep
 

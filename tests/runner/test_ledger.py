@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from bench.runner.job import CallFailed
+from bench.core.errors import CallFailed
 from bench.runner.schedule import run_jobs
 from bench.runner.ledger import Ledger, suite_code
 from tests.runner.jobs import Forked, Sleep, Tally
