@@ -32,6 +32,13 @@ def pytest_terminal_summary(terminalreporter, config):
             info = bench.extra_info
             terminalreporter.write_line(f"round 1: before {info['round1_before_s']:.1f} s, after "
                                         f"{info['round1_after_s']:.1f} s: {info['ratio']:.2f}x cheaper")
+    started = {b.extra_info["startup"]: b.stats.mean for b in session.benchmarks
+               if b.extra_info.get("startup") and b.stats is not None}
+    if "python -c pass" in started:
+        terminalreporter.write_sep("-", "the command line's start-up: seconds more than python -c pass, in this run")
+        for name, mean in started.items():
+            if name != "python -c pass":
+                terminalreporter.write_line(f"{name:<50} {mean - started['python -c pass']:+7.2f} s")
     for group, means in sorted(groups.items()):
         ours = [v for k, v in means.items() if "[ours" in k or k.endswith("ours")]
         if not ours:
