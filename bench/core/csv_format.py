@@ -98,9 +98,25 @@ OTHER_SEPARATORS = (";", "\t", r"\s+")
 SEPARATOR_NAMES = {",": "comma", ";": "semicolon", "\t": "tab", r"\s+": "whitespace"}
 
 
+#: the most columns a log's header may have: a robot's logger writes a few per joint and signal, and a header
+#: far wider is not a log (it is read before the rows, in time linear in its width, and refused)
+MAX_COLUMNS = 10_000
+
+
+def header_width(path: Path, limit: int = 1 << 22) -> int:
+    """The most fields the first line of ``path`` (its first ``limit`` bytes, decompressed as pandas would by
+    its name's suffix) splits into under any of the separators a log may use: read as bytes, in time linear in
+    its length, before pandas parses it (which takes seconds on a header of 300,000 names)."""
+    import pandas as pd
+
+    with pd.io.common.get_handle(path, "rb", compression="infer", is_text=False) as handle:
+        line = handle.handle.readline(limit)
+    return max(line.count(b",") + 1, line.count(b";") + 1, line.count(b"\t") + 1, len(line.split()))
+
+
 def read_frame(path: Path, nrows: int | None = None):
     """A CSV file (optionally compressed) as a DataFrame with at least one row,
-    two columns or more and distinct column names (its first ``nrows`` rows
+    two columns or more (at most :data:`MAX_COLUMNS`) and distinct column names (its first ``nrows`` rows
     only, where given); :class:`DataError` naming the file otherwise. A file
     whose header is one name holding semicolons, tabs or spaces is read with
     that separator (a spreadsheet's export in a locale whose decimal mark is
@@ -113,6 +129,9 @@ def read_frame(path: Path, nrows: int | None = None):
         raise DataError(f"{path}: is a folder, not a file")
     if not path.is_file():
         raise DataError(f"{path}: no such file")
+    width = header_width(path)
+    if width > MAX_COLUMNS:
+        raise DataError(f"{path}: its header has {width:,} columns or more, more than the {MAX_COLUMNS:,} a log may have")
     try:
         header = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False)
         sep = ","

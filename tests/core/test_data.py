@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import gzip
 import os
 
 import numpy as np
 import pytest
 
 from bench.core.data import DataError, Dataset, add_noise, generate
-from bench.core.csv_format import read_csv, write_csv
+from bench.core.csv_format import MAX_COLUMNS, read_csv, write_csv
 
 
 def test_generation_is_a_pure_cached_function(double_pendulum, tmp_path, monkeypatch):
@@ -90,6 +91,19 @@ def test_bad_csv_gets_one_line_error_naming_file_and_problem(tmp_path, text, mes
         read_csv(path, dof=2, system="double_pendulum")
     assert str(path) in str(info.value)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("separator", [",", ";", "\t", " "])
+def test_a_header_wider_than_a_logs_is_refused_before_its_rows_are_read(tmp_path, separator, monkeypatch):
+    import pandas as pd
+
+    header = separator.join(["q_1", "qd_1", "qdd_1", "tau_1", *(f"x{k}" for k in range(MAX_COLUMNS))])
+    path = tmp_path / "wide.csv.gz"
+    with gzip.open(path, "wt") as f:
+        f.write(header + "\n" + separator.join(["0"] * (MAX_COLUMNS + 4)) + "\n")
+    monkeypatch.setattr(pd, "read_csv", lambda *a, **k: pytest.fail("pandas read the header"))
+    with pytest.raises(DataError, match=f"{path}: its header has 10,004 columns or more, more than the 10,000"):
+        read_csv(path, dof=1)
 
 
 def test_missing_file_and_a_folder_given_as_a_file(tmp_path):
