@@ -311,7 +311,9 @@ class _Loop(Tidying, Choosing):
                         else self.scores(started["method_model"]), cross_fit=started.get("cross_fit"),
                         seconds=self.elapsed())]
         split = describe_validation(train)
-        report(f"round 0: torque MSE train {before['train']:.4g}, test {_fmt(before['test'])}; "
+        # the progress lines give the figures the loop chooses by; the test MSE of each round is the report's,
+        # once the loop has ended
+        report(f"round 0: torque MSE train {before['train']:.4g}; "
                f"held out ({split}; it holds out {strategy.holds_out()}) {held:.4g}")
         self.first, self.before, self.mass_before = first, before, mass_before
         self.feasible_before = strategy.feasibility(model, train)
@@ -523,13 +525,5 @@ class _Loop(Tidying, Choosing):
             self.ending = {"reason": "redundant", "round": k,
                            "detail": f"every effect round {k} added became redundant in the joint refit"}
             return proposed, proposed_held, proposed_mass, findings, True
-        report(f"round {k}: torque MSE train {s['train']:.4g}, test {_fmt(s['test'])}, held out {proposed_held:.4g}")
+        report(f"round {k}: torque MSE train {s['train']:.4g}, held out {proposed_held:.4g}")
         return proposed, proposed_held, proposed_mass, findings, False
-
-
-def _fmt(x) -> str:
-    if x is None:
-        return "—"
-    if np.ndim(x):
-        return ", ".join(f"{v:.4g}" for v in x)
-    return f"{x:.4g}"

@@ -7,6 +7,7 @@ control the clocks rather than rely on the machine's speed."""
 from __future__ import annotations
 
 from bench.core.budget import Budget
+import re
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -63,6 +64,18 @@ def test_a_round_the_budget_ends_in_is_undone_and_the_rounds_before_it_are_kept(
     # a checkpoint after round 0, and one when the rounds ended, each the result as it stood
     assert [len(c.rounds) for c in saved] == [1, 2] and saved[-1].stopped == out.stopped
     assert all(c.rollout is None for c in saved)
+
+
+def test_the_loops_progress_lines_give_no_test_figure_and_its_report_gives_each_rounds():
+    """The loop chooses by its training and held-out figures; the test MSE of each round is the report's, once
+    the loop has ended, and never a progress line's."""
+    train, test = data_with(FRICTION, n=1000)
+    lines = []
+    out = residual_loop("sysid", train, test, budget=Budget(steps=SYSID), report=lines.append)
+    tests = [r["mse"]["test"] for r in out.rounds]
+    assert len(tests) >= 2 and all(t is not None for t in tests)
+    assert lines and not [line for line in lines if re.search(r"\btest\s+[-\d.]", line)]
+    assert not [line for line in lines for t in tests if f"{t:.4g}" in line]
 
 
 def _jump_when_hanging(monkeypatch, folder: Path) -> None:
