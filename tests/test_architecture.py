@@ -92,6 +92,41 @@ def test_only_the_scoring_module_opens_the_sealed_gate():
     assert touching == ["bench/core/scoring.py", "bench/core/sealed.py"]
 
 
+def _scorers() -> set[str]:
+    import tomllib
+
+    contracts = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+    (gate,) = [c for c in contracts if c["name"] == "Only the scorers open the test split"]
+    return set(gate["allowed_importers"])
+
+
+def test_the_gate_has_one_import_path_checked_by_identity():
+    """Only the scorers the contract names hold the gate (``scoring``, ``opened``, the scoring module or the
+    gate itself) among their names: a module that took it from a scorer (``from bench.residual.rollouts import
+    scoring``), past the contract, holds the same object and is found."""
+    import importlib
+    import pkgutil
+
+    from bench.core import scoring, sealed
+
+    gate = {id(scoring): "bench.core.scoring", id(scoring.scoring): "scoring", id(scoring.opened): "opened",
+            id(sealed._GATE): "_GATE"}
+    allowed = _scorers() | {"bench.core.scoring", "bench.core.sealed"}
+    holders = {}
+    for package in architecture.PACKAGES:
+        root = importlib.import_module(package.replace("/", "."))
+        for info in pkgutil.walk_packages(root.__path__, root.__name__ + "."):
+            if info.name.endswith(".__main__"):  # running it is its import
+                continue
+            module = importlib.import_module(info.name)
+            held = sorted(gate[id(v)] for k, v in vars(module).items()
+                          if id(v) in gate and getattr(v, "__name__", None) != f"{info.name}.{k}")  # a package's own
+            if held:
+                holders[info.name] = held
+    assert {m for m in holders if m not in allowed} == set(), holders
+    assert {"bench.residual.rollouts", "bench.tools.stack_score"} <= set(holders)  # the check sees the scorers
+
+
 #: what a run leaves beside its records, which the repository does not keep (.gitignore)
 DEBRIS = re.compile(r"(^results/.*/logs/|(^|/)\.lock$|\.phase$|\.call\.json$)")
 

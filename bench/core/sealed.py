@@ -23,6 +23,7 @@ split, it raises, and its tests fail; and a new module that imports
 from __future__ import annotations
 
 import dataclasses
+import weakref
 
 from bench.core.data import STATES, Dataset
 
@@ -44,16 +45,50 @@ class SealedRead(RuntimeError):
     """A test split's targets were read outside :func:`bench.core.scoring.scoring`."""
 
 
+class _Held:
+    """What a sealed split holds in place of a target it has: the values are kept apart (:data:`_HELD`)."""
+
+    def __repr__(self) -> str:
+        return "<sealed: read only to score>"
+
+
+HELD = _Held()
+#: each sealed split's targets, by the split's id, kept apart from the split itself so that no reading of its
+#: attributes (``vars``, ``__dict__``, ``object.__getattribute__``, a copy of its fields) finds them; dropped
+#: with the split
+_HELD: dict[int, dict] = {}
+
+
 class SealedSplit(Dataset):
     """A :class:`~bench.core.data.Dataset` whose :data:`SEALED` fields are read only inside
-    :func:`bench.core.scoring.scoring`."""
+    :func:`bench.core.scoring.scoring`: the split itself holds :data:`HELD` in their place (``None`` where it has
+    none), and the values are kept apart."""
+
+    def __post_init__(self):
+        super().__post_init__()
+        _HELD[id(self)] = {name: object.__getattribute__(self, name) for name in SEALED}
+        weakref.finalize(self, _HELD.pop, id(self), None)
+        for name in SEALED:
+            if object.__getattribute__(self, name) is not None:
+                object.__setattr__(self, name, HELD)
 
     def __getattribute__(self, name):
-        if name in SEALED and not _GATE.depth:
-            source = object.__getattribute__(self, "source")
-            raise SealedRead(f"{source}: the test split's {name} is read only to score (bench.core.sealed); "
-                             f"a choice must be made on the training data")
+        if name in SEALED:
+            if not _GATE.depth:
+                source = object.__getattribute__(self, "source")
+                raise SealedRead(f"{source}: the test split's {name} is read only to score (bench.core.sealed); "
+                                 f"a choice must be made on the training data")
+            held = _HELD.get(id(self))  # none yet while its construction checks them
+            return object.__getattribute__(self, name) if held is None else held[name]
         return object.__getattribute__(self, name)
+
+    def __reduce__(self):
+        """Pickled and copied sealed, with its targets (another process scores it too)."""
+        _GATE.depth += 1
+        try:
+            return seal, (Dataset(**fields(self)),)
+        finally:
+            _GATE.depth -= 1
 
     def replace(self, **changes) -> "SealedSplit":
         """A copy with ``changes`` (states moved along the recording, a time shift's), sealed as this one

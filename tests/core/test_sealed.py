@@ -41,6 +41,42 @@ def test_a_test_splits_targets_are_read_only_to_score():
         test.tau
 
 
+def _holds(value, targets) -> bool:
+    """Whether ``value`` is, or holds, one of ``targets``' arrays or a copy of its values."""
+    if isinstance(value, np.ndarray):
+        return any(value.shape == t.shape and np.array_equal(value, t) for t in targets)
+    if isinstance(value, dict):
+        return any(_holds(v, targets) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return any(_holds(v, targets) for v in value)
+    return False
+
+
+def test_no_reading_of_a_test_splits_attributes_finds_its_targets():
+    """The split holds a marker in place of each target, the values kept apart: vars, __dict__,
+    object.__getattribute__ and a plain Dataset built from its fields find no torque; pickled or copied it is
+    sealed still, and scores as the original."""
+    import copy
+    import pickle
+
+    plain = _data()
+    test = seal(plain)
+    targets = (plain.tau, plain.L)
+    assert not _holds(vars(test), targets) and not _holds(test.__dict__, targets)
+    assert not any(_holds(object.__getattribute__(test, name), targets) for name in ("tau", "L"))
+    assert not _holds([getattr(test, f, None) for f in vars(test) if f not in ("tau", "L")], targets)
+    with pytest.raises(Exception) as built:
+        Dataset(**vars(test))
+    assert not isinstance(built.value, SealedRead)  # it fails on the marker, not on a torque it read
+    test.check_target("indirect")  # it has torques, though none can be read
+    for again in (pickle.loads(pickle.dumps(test)), copy.deepcopy(test), copy.copy(test)):
+        assert isinstance(again, SealedSplit) and not _holds(vars(again), targets)
+        with pytest.raises(SealedRead):
+            again.tau
+        with scoring():
+            np.testing.assert_array_equal(again.tau, plain.tau)
+
+
 def test_a_fit_or_a_search_handed_a_test_split_raises():
     test = seal(_data())
     sysid = METHODS["sysid"]
