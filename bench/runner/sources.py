@@ -15,9 +15,11 @@ A run's code is
   registries' package modules (``methods/__init__.py``, ``systems/__init__.py``)
   are hashed but not followed: they import every method and every system,
   and a run's own are named above;
-* a plugin's file where it defines one of the classes, and the robot
-  description or measured-arm file a plugin gives the run's system
-  (:meth:`~bench.physics.system.System.source_files`).
+* a plugin's file where it defines one of the classes, and the files that
+  define the run's system outside the code, whether shipped or given by a
+  plugin: its robot description, and a measured arm's file and every
+  recording it names (:meth:`~bench.physics.system.System.source_files`), so
+  that an edited recording, filter or URDF redoes the runs that read it.
 
 A resumed matrix redoes a run whose record was made by other code
 (:func:`bench.runner.matrix.run_matrix`): an edited method, data format,
@@ -37,7 +39,7 @@ from pathlib import Path
 
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest
-from bench.runner.plugins import file_prefix, import_plugins
+from bench.runner.plugins import import_plugins
 from bench.runner.provenance import PROJECT_ROOT
 from methods import METHODS
 from systems import SYSTEMS
@@ -173,10 +175,9 @@ def code_files(method: str, system: str, plugins: tuple[str, ...] = (),
     for obj in (*METHODS[method].code_objects(), SYSTEMS[system]):
         roots += [p for p in object_files(obj) if p not in roots]
     paths = closure(roots + [f for f in map(module_file, runs_in) if f is not None])
-    sources = [Path(p).resolve() for p in SYSTEMS[system].source_files() if p]
-    given = {Path(p[len(file_prefix(p)):]).expanduser().resolve() for p in plugins if file_prefix(p)}
-    if given & set(sources):  # a system given by a plugin's file: that file and the files it names
-        paths += [p for p in sources if p.is_file()]
+    # the files that define the system outside the code: its robot description, a measured arm's file and its
+    # recordings
+    paths += [p for p in (Path(f).resolve() for f in SYSTEMS[system].source_files() if f) if p.is_file()]
     out = {}
     for path in paths:
         out.setdefault(_name(path), _digest(path, *_stamp(path)))

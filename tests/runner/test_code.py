@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from bench.runner.sources import code_files
 
 
@@ -87,6 +89,17 @@ def test_a_robot_description_given_as_a_plugin_is_its_systems_code(tmp_path):
     (name,), plugins = system_plugins([f"urdf:{urdf}"])
     assert str(urdf.resolve()) in code_files("sysid", name, plugins)
     assert str(urdf.resolve()) not in code_files("sysid", "double_pendulum", plugins)
+
+
+def test_a_shipped_measured_arms_file_recordings_and_urdf_are_its_runs_code():
+    from systems import SYSTEMS
+
+    files = code_files("sysid", "kuka_lwr4")
+    sources = SYSTEMS["kuka_lwr4"].source_files()
+    assert len(sources) >= 3 and any(s.endswith(".toml") for s in sources) and any("urdf" in s for s in sources)
+    named = {str(Path(s).resolve().relative_to(Path(__file__).resolve().parents[2])) for s in sources}
+    assert named <= set(files)
+    assert not named & set(code_files("sysid", "double_pendulum"))
 
 
 PLUGIN = '''

@@ -16,6 +16,7 @@ from bench.runner.progress import print_now, quiet
 from bench.runner.spec import RunSpec, build_specs
 from bench.runner.records import SCHEMA, Record, read_record, read_records, record_path
 from methods.saving import load_model
+from tests.commandline import cli
 
 PLUGIN = str(Path(__file__).resolve().parents[1] / "plugins" / "faulty.py")
 
@@ -50,7 +51,6 @@ def test_statuses_for_every_way_a_run_can_end(tmp_path):
 
 
 def test_a_matrix_exits_1_and_names_the_runs_that_raised_after_writing_its_tables(tmp_path):
-    from tests.commandline import cli
 
     plugin = str(Path(__file__).resolve().parents[1] / "plugins" / "faulty.py")
     common = ("--experiments", "indirect", "--seeds", "0,1", "--n-train", "64", "--n-test", "32", "--no-rollout",
@@ -370,7 +370,6 @@ def test_seeds_trained_stacked_give_the_records_they_give_one_by_one(tmp_path):
     again = matrix.run_matrix(specs, tmp_path / "stacked", workers=2, report=quiet, stack=True)
     assert [r.to_json() for r in again] == [r.to_json() for r in stacked]
     # a stacked record replays alone (bench rerun), the same up to the stated tolerance
-    from tests.commandline import cli
 
     delan = tmp_path / "stacked" / "records" / "double_pendulum__delan__indirect__seed1.json"
     r = cli("rerun", delan)
@@ -441,3 +440,43 @@ def test_a_tuned_runs_progress_line_gives_its_validation_not_its_test():
     line = matrix._describe(tuned)
     assert line == "kuka_lwr4 sysid indirect seed=0: ok train 0.5 validation 0.75"
     assert "0.25" not in line and "test" not in line
+
+
+def test_an_edited_recording_redoes_the_runs_that_read_it_and_no_other(tmp_path):
+    """A run's code holds its measured arm's file, each recording and the URDF: a recording edited between two
+    runs of one matrix into one folder redoes the arm's run; the pendulum's, which reads none of them, is kept."""
+    import gzip
+    import shutil
+
+    from systems.urdf_arm import DATA_DIR
+
+    arm = tmp_path / "arm"
+    arm.mkdir()
+    text = (DATA_DIR / "dfki_double_pendulum_arm.toml").read_text()
+    text = text.split("[recordings]")[0].replace('test = ["03", "05"]', 'test = ["03"]').replace(
+        'chosen_on = ["00", "01", "02", "04"]', 'chosen_on = ["00", "01"]')
+    text += "[recordings]\n" + "".join(f'{k} = {{ file = "dfki_trajectory_{k}.csv.gz", trajectory = "{k}" }}\n'
+                                       for k in ("00", "01", "03"))
+    (arm / "arm.toml").write_text(text)
+    for name in ("dfki_double_pendulum.urdf.gz", *(f"dfki_trajectory_{k}.csv.gz" for k in ("00", "01", "03"))):
+        shutil.copy(DATA_DIR / name, arm / name)
+    argv = ["run", "--systems", f"measured:{arm / 'arm.toml'},double_pendulum", "--methods", "sysid",
+            "--experiments", "indirect", "--seeds", "0", "--steps", "1", "--n-train", "64", "--n-test", "32",
+            "--no-rollout", "--workers", "1", "--out", str(tmp_path / "out")]
+    first = cli(*argv)
+    assert first.returncode == 0, first.stderr
+    records = {p.name: json.loads(p.read_text()) for p in (tmp_path / "out" / "records").glob("*.json")}
+    assert len(records) == 2
+    (arm_record,) = [r for r in records.values() if r["system"] != "double_pendulum"]
+    assert str((arm / "dfki_trajectory_00.csv.gz").resolve()) in arm_record["code"]["files"]  # the record names it
+    log = arm / "dfki_trajectory_00.csv.gz"
+    rows = gzip.decompress(log.read_bytes()).decode().splitlines()
+    rows[5] = rows[5].replace(rows[5].split(",")[-1], "0.125")  # one value of one row
+    log.write_bytes(gzip.compress(("\n".join(rows) + "\n").encode()))
+    again = cli(*argv)
+    assert again.returncode == 0, again.stderr
+    assert "redoing 1 run(s) whose record was made by other code" in again.stdout, again.stdout
+    after = {p.name: json.loads(p.read_text()) for p in (tmp_path / "out" / "records").glob("*.json")}
+    for name, record in after.items():
+        changed = record["code"]["hash"] != records[name]["code"]["hash"]
+        assert changed == (record["system"] != "double_pendulum"), name
