@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from bench.cli import build_parser, main
-from bench.core.fileio import write_json
+from bench.core.fileio import file_digest, write_json
 from bench.runner import job
 from bench.runner.records import Record
 from bench.runner.spec import RunSpec
@@ -167,6 +167,35 @@ def test_a_failed_fit_names_the_log_that_holds_its_traceback(tmp_path, monkeypat
     log = Path(r.stdout.strip().rsplit("traceback in ", 1)[1].rstrip(")"))
     assert log.is_relative_to(tmp_path)  # kept for the user to read: a scratch folder of bench fit's, not removed
     assert "Traceback (most recent call last)" in log.read_text() and "the toy fell over" in log.read_text()
+
+
+def test_rerun_imports_a_records_plugins_only_where_the_user_names_the_same_files(tmp_path):
+    """A record is data: the plugins its run imported run again only where --plugin names each, the same file
+    by its sha256; a record edited to name another file, or a plugin edited since, is refused in one line."""
+    plugin = tmp_path / "toys.py"
+    plugin.write_text((ROOT / "tests" / "plugins" / "faulty.py").read_text())
+    record = tmp_path / "run.json"
+    made = cli("fit", "--system", "double_pendulum", "--method", "toy_constant", "--plugin", plugin, "--experiment",
+               "indirect", "--n-train", "64", "--n-test", "32", "--steps", "1", "--json", record)
+    assert made.returncode == 0, made.stderr
+    assert json.loads(record.read_text())["code"]["plugins"] == {str(plugin.resolve()): file_digest(plugin)}
+    refused = cli("rerun", record)
+    assert refused.returncode == 2 and refused.stdout == "" and refused.stderr.count("\n") == 1
+    assert f"its run imported the plugin(s) {plugin.resolve()}, which run code" in refused.stderr
+    assert f"--plugin {plugin.resolve()}" in refused.stderr
+    assert cli("rerun", record, "--plugin", tmp_path / "other.py").returncode == 2
+    again = cli("rerun", record, "--plugin", plugin)
+    assert again.returncode == 0 and "the same up to" in again.stdout, (again.stdout, again.stderr)
+    plugin.write_text(plugin.read_text() + "\n# edited\n")
+    edited = cli("rerun", record, "--plugin", plugin)
+    assert edited.returncode == 2 and f"plugin {plugin.resolve()} is not the file its run imported" in edited.stderr
+    # a record edited to import another file than its run did: that file is never run unless named
+    hostile = tmp_path / "hostile.py"
+    hostile.write_text(f"open({str(tmp_path / 'ran')!r}, 'w').close()\n")
+    data = json.loads(record.read_text())
+    data["spec"]["plugins"] = [str(hostile)]
+    write_json(record, data)
+    assert cli("rerun", record).returncode == 2 and not (tmp_path / "ran").exists()
 
 
 def test_rerun_refuses_in_one_line_what_it_cannot_replay(tmp_path, capsys):

@@ -12,7 +12,7 @@ from bench.core.arguments import positive
 from bench.core.fileio import check_output, write_json
 from bench.runner.plugins import import_plugins
 from bench.runner.records import read_record
-from bench.runner.replay import compare, replay_spec, tolerance
+from bench.runner.replay import check_plugins, compare, replay_spec, tolerance
 
 
 def add_arguments(rr) -> None:
@@ -22,6 +22,9 @@ def add_arguments(rr) -> None:
                          "takes longer than the recorded budget to do the same work)")
     rr.add_argument("--json", type=Path, default=None, help="write the replay's record here")
     add_device(rr, default=None)
+    rr.add_argument("--plugin", action="append", default=[],
+                    help="a plugin the record's run imported (repeatable): a rerun imports the record's plugins that "
+                         "run code only where --plugin names each, the same file as the run's (its sha256)")
 
 
 def main(args) -> int:
@@ -29,6 +32,7 @@ def main(args) -> int:
         check_output(args.json)
     recorded = read_record(args.record)
     spec = replay_spec(recorded, str(args.record), ceiling_s=args.budget)
+    check_plugins(recorded, args.plugin, str(args.record))
     import_plugins(spec.plugins)
     # the recorded run's device unless another is asked for; numbers computed on another device
     # differ in their rounding, which the comparison below shows

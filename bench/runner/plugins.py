@@ -15,6 +15,7 @@ from typing import Iterable
 
 import systems
 from bench.core.errors import UserError
+from bench.core.fileio import file_digest
 
 #: a system given by its robot description: ``urdf:PATH``
 URDF = "urdf:"
@@ -37,6 +38,31 @@ def import_plugins(plugins: Iterable[str]) -> None:
             raise
         except Exception as exc:
             raise UserError(f"plugin {plugin}: {type(exc).__name__}: {exc}") from exc
+
+
+def code_plugins(plugins: Iterable[str]) -> list[str]:
+    """The plugins among ``plugins`` that run code when imported: a ``.py`` file or a module (a ``urdf:`` or
+    ``measured:`` file is read, not run)."""
+    return [p for p in plugins if not file_prefix(p)]
+
+
+def plugin_key(plugin: str) -> str:
+    """What names one code plugin however it was written: a file's resolved path, a module's name."""
+    return str(Path(plugin).expanduser().resolve()) if plugin.endswith(".py") else plugin
+
+
+def plugin_digest(plugin: str) -> str | None:
+    """The sha256 of a code plugin's file (a module's where its spec names one); ``None`` where it has none.
+    A module is found, not imported (its parent packages are)."""
+    if plugin.endswith(".py"):
+        path = Path(plugin).expanduser()
+    else:
+        try:
+            spec = importlib.util.find_spec(plugin)
+        except (ImportError, ValueError):
+            return None
+        path = Path(spec.origin) if spec is not None and spec.has_location and spec.origin else None
+    return file_digest(path) if path is not None and path.is_file() else None
 
 
 def _import_plugin(plugin: str) -> None:

@@ -17,6 +17,7 @@ import math
 
 from bench.core.budget import STEPS, Schedule
 from bench.core.errors import UserError
+from bench.runner.plugins import code_plugins, plugin_digest, plugin_key
 from bench.runner.records import Record
 from bench.runner.spec import RunSpec
 
@@ -54,6 +55,29 @@ def replay_spec(record: Record, source: str = "record", ceiling_s: float | None 
         chosen = (record.details.get("tuning") or {}).get("chosen", {})
         spec = dataclasses.replace(spec, tune=False, hyperparameters={**spec.hyperparameters, **chosen})
     return dataclasses.replace(spec, budget_s=ceiling_s, steps=schedule.steps, schedule=schedule.to_json())
+
+
+def check_plugins(record: Record, given: list[str], source: str = "record") -> None:
+    """A :class:`UserError` naming ``source`` unless ``given`` (the user's ``--plugin``) names every plugin the
+    record's run imported that runs code, each the same file as the run's (its sha256, where the record holds it;
+    a record made before records held it is taken on the user's naming): a record is data, and the code it names
+    runs only where the user names it too."""
+    spec = record.spec or {}
+    needed = code_plugins(spec.get("plugins") or ())
+    if not needed:
+        return
+    named = {plugin_key(p) for p in given}
+    missing = [p for p in needed if plugin_key(p) not in named]
+    if missing:
+        raise UserError(f"{source}: its run imported the plugin(s) {', '.join(missing)}, which run code; a rerun "
+                        f"imports them only where you name them too: "
+                        + " ".join(f"--plugin {p}" for p in missing))
+    recorded = (record.code or {}).get("plugins") or {}
+    for plugin in needed:
+        want, now = recorded.get(plugin), plugin_digest(plugin)
+        if want is not None and now != want:
+            raise UserError(f"{source}: plugin {plugin} is not the file its run imported (sha256 "
+                            f"{(now or 'none')[:12]}, the record's {want[:12]}); the replay would run other code")
 
 
 def relative_difference(a: float | None, b: float | None) -> float:

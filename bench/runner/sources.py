@@ -39,7 +39,7 @@ from pathlib import Path
 
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest
-from bench.runner.plugins import import_plugins
+from bench.runner.plugins import code_plugins, import_plugins, plugin_digest
 from bench.runner.provenance import PROJECT_ROOT
 from methods import METHODS
 from systems import SYSTEMS
@@ -186,12 +186,18 @@ def code_files(method: str, system: str, plugins: tuple[str, ...] = (),
 
 def code_hash(method: str, system: str, plugins: tuple[str, ...] = (),
               runs_in: tuple[str, ...] = RUNS_IN) -> dict | None:
-    """The record's ``code`` entry: ``{"hash": ..., "files": {file: digest}}``, with the plugins imported first;
-    ``None`` where a name does not resolve (the run's own process then records why)."""
+    """The record's ``code`` entry: ``{"hash": ..., "files": {file: digest}}``, with the plugins imported first,
+    and where the run imported plugins that run code, ``"plugins": {plugin: sha256}``, each whole (what ``bench
+    rerun`` checks before it imports them again: :func:`bench.runner.replay.check_plugins`); ``None`` where a name
+    does not resolve (the run's own process then records why)."""
     try:
         import_plugins(plugins)
         files = code_files(method, system, plugins, runs_in)
     except (UserError, OSError, SyntaxError):
         return None
     joined = "\n".join(f"{k} {v}" for k, v in files.items())
-    return {"hash": hashlib.sha256(joined.encode()).hexdigest()[:16], "files": files}
+    out = {"hash": hashlib.sha256(joined.encode()).hexdigest()[:16], "files": files}
+    run = code_plugins(plugins)
+    if run:
+        out["plugins"] = {p: plugin_digest(p) for p in run}
+    return out
