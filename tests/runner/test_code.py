@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bench.core.fileio import file_digest
 from bench.runner.sources import code_files
 
 
@@ -72,10 +73,12 @@ def test_a_plugin_is_the_code_of_the_runs_of_what_it_defines_only(tmp_path):
     plugin.write_text(PLUGIN.format(value=1.0))
     mine, sysid = code_hash("toy_code_mine", "double_pendulum", (str(plugin),)), code_hash("sysid", "double_pendulum", (str(plugin),))
     assert str(plugin) in mine["files"] and str(plugin) not in sysid["files"]
-    assert sysid == code_hash("sysid", "double_pendulum")
+    bare = code_hash("sysid", "double_pendulum")
+    assert (sysid["hash"], sysid["files"]) == (bare["hash"], bare["files"]) and "plugins" not in bare
+    assert sysid["plugins"] == {str(plugin): file_digest(plugin)}  # what a rerun checks before importing it
     plugin.write_text(PLUGIN.format(value=2.0))
     assert code_files("toy_code_mine", "double_pendulum", (str(plugin),))[str(plugin)] != mine["files"][str(plugin)]
-    assert code_hash("sysid", "double_pendulum", (str(plugin),)) == sysid
+    assert code_hash("sysid", "double_pendulum", (str(plugin),))["hash"] == sysid["hash"]
 
 
 def test_a_robot_description_given_as_a_plugin_is_its_systems_code(tmp_path):
