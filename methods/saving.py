@@ -36,7 +36,7 @@ def save_model(model, path: str | Path, header: dict, check: Dataset, system: Sy
     packer = Packer()
     tree = model.saved(packer)
     path = Path(path)
-    header = {**header, "dof": int(check.dof), "kind": tree["kind"]}
+    header = {**header, "dof": int(check.dof), "kind": tree["kind"], **torque_bound(check)}
     if held_out:
         header["held_out"] = {name: packer.array(value) for name, value in held_out.items()}
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -58,6 +58,33 @@ def save_model(model, path: str | Path, header: dict, check: Dataset, system: Sy
         if os.path.exists(tmp):
             os.unlink(tmp)
     return {"checked_samples": len(part), "largest_relative_difference": difference}
+
+
+def torque_bound(data: Dataset) -> dict:
+    """The header's ``torque_bound`` for a model fitted on ``data``: :data:`~bench.core.modelfile.TORQUE_BOUND_FACTOR`
+    times each joint's largest torque there (none where a joint's torques are all zero)."""
+    largest = np.max(np.abs(data.tau), axis=0) if len(data) else np.zeros(0)
+    if not len(largest) or not (np.isfinite(largest).all() and (largest > 0).all()):
+        return {}
+    return {"torque_bound": [min(float(v), modelfile.MAX_COEFFICIENT) for v in modelfile.TORQUE_BOUND_FACTOR * largest]}
+
+
+def check_torques(tau: np.ndarray, header: dict, model: str, log: str) -> None:
+    """:class:`~bench.core.modelfile.ModelFileError` where ``tau``, a model's torques on ``log``, is not finite or
+    leaves the bound its file states (``torque_bound``), naming the first such sample and joint."""
+    if not np.isfinite(tau).all():
+        raise ModelFileError(f"{model}: predicts non-finite torques on {log}")
+    bound = header.get("torque_bound")
+    if bound is None:
+        return
+    if len(bound) != tau.shape[1]:
+        raise ModelFileError(f"{model}: its torque_bound names {len(bound)} joint(s), its model {tau.shape[1]}")
+    over = np.argwhere(np.abs(tau) > np.asarray(bound, dtype=np.float64))
+    if len(over):
+        row, joint = (int(v) for v in over[0])
+        raise ModelFileError(f"{model}: predicts {tau[row, joint]:.4g} on joint {joint + 1} at row {row + 1} of {log}, "
+                             f"past the bound of {bound[joint]:.4g} its file states ({modelfile.TORQUE_BOUND_FACTOR:g} "
+                             f"times the largest torque of the data it was fitted on)")
 
 
 def held_out(path: str | Path) -> dict[str, np.ndarray] | None:

@@ -13,7 +13,7 @@ from bench.core.csv_format import read_csv
 from bench.core.data import mse
 from bench.core.fileio import atomic_write, check_output
 from bench.core.modelfile import ModelFileError, read
-from methods.saving import load_model
+from methods.saving import check_torques, load_model
 from systems import SYSTEMS
 
 
@@ -53,8 +53,7 @@ def main(args) -> int:
     if tau.shape != (len(log), log.dof):
         raise ModelFileError(f"{args.model}: predicts torques of shape {tau.shape} on {len(log)} samples of "
                              f"{log.dof} joints")
-    if not np.isfinite(tau).all():
-        raise ModelFileError(f"{args.model}: predicts non-finite torques on {args.log}")
+    check_torques(tau, header, str(args.model), str(args.log))
     frame = pd.DataFrame(tau, columns=[f"tau_hat_{j + 1}" for j in range(tau.shape[1])])
     atomic_write(args.out, lambda f: frame.to_csv(f, index=False, float_format="%.17g"))
     what = f"{header.get('method')} on {name}" if name else str(header.get("method"))

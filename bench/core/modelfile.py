@@ -27,7 +27,15 @@ A model file may come from anyone, so it is data, checked before it is used:
   of numbers sympy would compute (:data:`EXPRESSION_LIMITS`);
 * the file names no path that is opened: a URDF's or a measured arm's file is
   named by the user (``--plugin``), and a linear model's regressor is compared
-  with the one it was fitted on at probe states.
+  with the one it was fitted on at probe states;
+* its header holds the sha256 of its contents (:func:`digest`: the header and
+  every array), so that a file edited or corrupted since it was saved is
+  refused, not read with other numbers;
+* every number of its arrays is finite and at most :data:`MAX_COEFFICIENT` in
+  magnitude, and the header states the bound its torques keep on any log
+  (``torque_bound``, :data:`TORQUE_BOUND_FACTOR` times the largest torque of
+  each joint in the data it was fitted on), which ``bench predict`` checks
+  before it writes anything.
 
 A file that is not such a model, is truncated, corrupt, too large or does not
 parse is refused in one line naming it (:class:`ModelFileError`).
@@ -35,6 +43,7 @@ parse is refused in one line naming it (:class:`ModelFileError`).
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import math
@@ -63,6 +72,12 @@ class ModelFileError(UserError):
 
 #: the most bytes a model file's header and all its arrays may take unpacked, and a file on disk
 MAX_HEADER_BYTES, MAX_ARRAY_BYTES, MAX_FILE_BYTES = 64 << 20, 4 << 30, 4 << 30
+#: the largest magnitude any number of a model file's arrays may have: a coefficient, a weight, a scale
+MAX_COEFFICIENT = 1e12
+#: a saved model's torques on any log stay within this many times the largest torque of each joint in the data
+#: it was fitted on (the header's ``torque_bound``): a model whose numbers were scaled by a thousand, or a log
+#: far from the fit, is refused rather than predicted
+TORQUE_BOUND_FACTOR = 100.0
 #: a name a system or a method may have in a header
 _NAME = {"type": "string", "minLength": 1, "maxLength": 200}
 #: what a model file's header holds, each field's type and range (JSON Schema); the model's own tree is its
@@ -87,6 +102,9 @@ HEADER_SCHEMA = {
         "n_train": {"type": "integer", "minimum": 0},
         "tuned": {"type": "boolean"},
         "provenance": {"type": "object"},
+        "digest": {"type": "string", "pattern": "^[0-9a-f]{64}$"},
+        "torque_bound": {"type": "array", "minItems": 1, "maxItems": 64,
+                         "items": {"type": "number", "exclusiveMinimum": 0, "maximum": MAX_COEFFICIENT}},
         "held_out": {"type": "object", "required": ["index", "fold", "prediction"],
                      "properties": {k: {"type": "object", "required": ["$array"]}
                                     for k in ("index", "fold", "prediction")}},
@@ -302,10 +320,41 @@ def loader(kind: str):
     return LOADERS.add(kind)
 
 
+def digest(header: dict, arrays: dict[str, np.ndarray]) -> str:
+    """The sha256 of a model file's contents: its header but its ``digest``, as JSON with sorted keys, and each
+    array's name, dtype, shape and bytes, in the order of their names."""
+    h = hashlib.sha256(json.dumps({k: v for k, v in header.items() if k != "digest"}, sort_keys=True,
+                                  separators=(",", ":")).encode())
+    for name in sorted(arrays):
+        array = np.ascontiguousarray(arrays[name])
+        h.update(f"\n{name} {array.dtype.str} {array.shape}\n".encode())
+        h.update(array.tobytes())
+    return h.hexdigest()
+
+
+def check_arrays(arrays: dict[str, np.ndarray], source: str) -> None:
+    """:class:`ModelFileError` naming the first array holding a number that is not finite or past
+    :data:`MAX_COEFFICIENT` in magnitude."""
+    for name in sorted(arrays):
+        array = arrays[name]
+        if array.dtype.kind not in "fc" or not array.size:
+            continue
+        if not np.isfinite(array).all():
+            raise ModelFileError(f"{source}: its array {name} holds a number that is not finite")
+        largest = float(np.max(np.abs(array)))
+        if largest > MAX_COEFFICIENT:
+            raise ModelFileError(f"{source}: its array {name} holds {largest:.3g}, past the {MAX_COEFFICIENT:g} a "
+                                 f"model's number may be")
+
+
 def save(path: str | Path, header: dict, model_tree: dict, packer: Packer) -> None:
     """Write a model file: ``header`` (what it was fitted with), the model's
-    tree (:meth:`~bench.physics.models.FittedModel.saved`) and its arrays, atomically."""
-    text = json.dumps({"format": FORMAT, **header, "model": model_tree}, indent=1, sort_keys=True)
+    tree (:meth:`~bench.physics.models.FittedModel.saved`) and its arrays, with their :func:`digest`,
+    atomically."""
+    check_arrays(packer.arrays, str(path))
+    whole = {"format": FORMAT, **header, "model": model_tree}
+    whole["digest"] = digest(whole, packer.arrays)
+    text = json.dumps(whole, indent=1, sort_keys=True)
 
     def write(f):
         with zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as z:
@@ -347,6 +396,10 @@ def read(path: str | Path) -> tuple[dict, Unpacker]:
             arrays = {}
             for name in others:
                 arrays[name[:-4]] = np.load(io.BytesIO(z.read(name)), allow_pickle=False)
+        if "digest" in header and header["digest"] != digest(header, arrays):
+            raise ModelFileError(f"{source}: its contents differ from the digest it was saved with (edited or "
+                                 f"corrupt since); not read")
+        check_arrays(arrays, source)
     except ModelFileError:
         raise
     except FileNotFoundError:

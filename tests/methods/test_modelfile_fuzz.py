@@ -20,6 +20,7 @@ import time
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
@@ -46,7 +47,26 @@ def saved(tmp_path_factory):
         r = cli("fit", "--system", "double_pendulum", "--method", method, "--experiment", "indirect", "--train",
                 folder / "train.csv", "--steps", 2, *extra, "--save", folder / f"{method}.npz")
         assert r.returncode == 0, r.stderr
+        r = cli("predict", "--model", folder / f"{method}.npz", "--log", folder / "test.csv", "--out",
+                folder / f"{method}.predicted.csv")
+        assert r.returncode == 0, r.stderr
     return folder
+
+
+def _torques(path: Path) -> np.ndarray:
+    return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+
+
+def _reseal(header, entries: dict) -> None:
+    """``header`` with the digest of its contents as they now are: a stranger who edits a file and seals it
+    again, so that the checks past the digest are reached."""
+    if isinstance(header, dict):
+        arrays = {n[:-4]: np.load(io.BytesIO(d), allow_pickle=False) for n, d in entries.items()
+                  if n != modelfile.HEADER}
+        try:
+            header["digest"] = modelfile.digest(header, arrays)
+        except (TypeError, ValueError, RecursionError):  # a header json cannot write: left as it is
+            pass
 
 
 @contextlib.contextmanager
@@ -73,8 +93,10 @@ def _slowest():
         print(f"\n{len(SECONDS)} files through predict; the slowest took {max(SECONDS):.3f} s")
 
 
-def _predict(path: Path, log: Path, out: Path) -> None:
-    """``bench predict`` on ``path``: it predicts, or says why not in one line with exit 2 and writes nothing."""
+def _predict(path: Path, log: Path, out: Path, same_as: Path | None = None, bound=None) -> None:
+    """``bench predict`` on ``path``: it predicts, or says why not in one line with exit 2 and writes nothing.
+    A prediction is finite, equals ``same_as``'s (the file before it was mutated) where given, and keeps
+    ``bound`` (the original file's ``torque_bound``) where given."""
     if out.exists():
         out.unlink()
     err = io.StringIO()
@@ -84,6 +106,12 @@ def _predict(path: Path, log: Path, out: Path) -> None:
     SECONDS.append(time.perf_counter() - start)
     if code == 0:
         assert out.exists()
+        predicted = _torques(out)
+        assert np.isfinite(predicted).all()
+        if same_as is not None:
+            np.testing.assert_array_equal(predicted, _torques(same_as))
+        if bound is not None:
+            assert (np.abs(predicted) <= np.asarray(bound)).all()
         _count("predicted")
         return
     _count("refused")
@@ -117,7 +145,7 @@ def test_a_flipped_bit_or_a_cut_file_predicts_or_is_refused_in_one_line(saved, t
         data[at] ^= 1 << bit
     path = tmp_path / "m.npz"
     path.write_bytes(bytes(data))
-    _predict(path, saved / "test.csv", tmp_path / "p.csv")
+    _predict(path, saved / "test.csv", tmp_path / "p.csv", same_as=saved / f"{which}.predicted.csv")
 
 
 #: JSON values a stranger might put anywhere: numbers out of range, wrong types, deep and wide containers
@@ -172,14 +200,21 @@ def _replace(node, path, value):
 
 
 @_fuzz()
-@given(which=st.sampled_from(["sparse", "mlp"]), where=st.floats(0, 1), value=st.one_of(_json, _trees))
-def test_a_mutated_header_or_expression_predicts_or_is_refused_in_one_line(saved, tmp_path, which, where, value):
+@given(which=st.sampled_from(["sparse", "mlp"]), where=st.floats(0, 1), value=st.one_of(_json, _trees),
+       sealed=st.booleans())
+def test_a_mutated_header_or_expression_predicts_or_is_refused_in_one_line(saved, tmp_path, which, where, value,
+                                                                             sealed):
+    """A mutated file is refused by its digest, or predicts what it did; sealed again by the stranger, it is
+    refused by the checks past the digest, or predicts finite torques within the original's bound."""
     source = saved / f"{which}.npz"
     with zipfile.ZipFile(source) as z:
         entries = {n: z.read(n) for n in z.namelist()}
     header = json.loads(entries[modelfile.HEADER])
+    bound = header["torque_bound"]
     places = list(_paths(header))
     header = _replace(header, places[min(int(where * len(places)), len(places) - 1)], value)
+    if sealed:
+        _reseal(header, entries)
     try:
         entries[modelfile.HEADER] = json.dumps(header).encode()
     except (ValueError, RecursionError):  # a value json cannot write is no file to read
@@ -188,7 +223,8 @@ def test_a_mutated_header_or_expression_predicts_or_is_refused_in_one_line(saved
     with zipfile.ZipFile(path, "w") as z:
         for name, data in entries.items():
             z.writestr(name, data)
-    _predict(path, saved / "test.csv", tmp_path / "p.csv")
+    same = None if sealed else saved / f"{which}.predicted.csv"
+    _predict(path, saved / "test.csv", tmp_path / "p.csv", same_as=same, bound=bound)
 
 
 def test_the_crafted_files_that_hung_or_crashed_predict_are_refused_in_one_line(saved, tmp_path):
@@ -199,6 +235,7 @@ def test_the_crafted_files_that_hung_or_crashed_predict_are_refused_in_one_line(
 
     def written(header: dict, name: str) -> Path:
         path = tmp_path / name
+        _reseal(header, entries)  # past the digest: the checks of what it holds refuse it
         text = json.dumps(header).replace(json.dumps(DEEP), _nest_text(3000))  # deeper than json.dumps writes
         with zipfile.ZipFile(path, "w") as z:
             for n, data in entries.items():

@@ -4,7 +4,9 @@ expressions in a file are read without eval."""
 
 from __future__ import annotations
 
+import io
 import json
+import re
 import subprocess
 import sys
 import zipfile
@@ -16,6 +18,7 @@ import sympy
 from hypothesis import given, settings, strategies as st
 
 from bench.core import modelfile
+from bench.core.csv_format import write_csv
 from bench.core.data import generate
 from bench.core.modelfile import ModelFileError, expression_from_json, expression_to_json
 from methods import METHODS
@@ -77,17 +80,68 @@ GOOD = {"index": np.arange(4), "fold": np.array([0, 0, 1, 1]), "prediction": np.
     ({"index": np.arange(4.0)}, "its held-out index is not a list of sample numbers"),
     ({"fold": np.zeros((2, 2), np.int64)}, "its held-out fold is not a list of sample numbers"),
     ({"fold": np.array(["a", "b", "c", "d"])}, "its held-out fold is not a list of sample numbers"),
-    ({"prediction": np.full((4, 7), np.nan)}, "its held-out predictions are not finite numbers a sample"),
+    ({"prediction": np.full((4, 7), np.nan)}, "its array a[0-9]+ holds a number that is not finite"),
     ({"prediction": np.zeros((4, 7, 1))}, "its held-out predictions are not finite numbers a sample"),
     ({"prediction": np.zeros((3, 7))}, "its held-out predictions' arrays differ in length"),
 ])
 def test_crafted_held_out_predictions_are_refused_in_one_line(tmp_path, kuka, crafted, why):
     system, train, _ = kuka
     fitted = METHODS["sysid"]().fit(train, "indirect", 0, budget=Budget(steps=1), system=system)
-    save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": "sysid"}, train, system,
-               {**GOOD, **crafted})
+    save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": "sysid"}, train, system, GOOD)
+    header, arrays = _contents(tmp_path / "m.npz")
+    for name, value in crafted.items():  # a stranger's arrays, the file sealed again
+        arrays[header["held_out"][name]["$array"]] = value
+    _write(tmp_path / "m.npz", header, arrays)
     with pytest.raises(ModelFileError, match=f"m.npz: {why}"):
         held_out(tmp_path / "m.npz")
+
+
+def _contents(path: Path) -> tuple[dict, dict]:
+    with zipfile.ZipFile(path) as z:
+        header = json.loads(z.read(modelfile.HEADER))
+        arrays = {n[:-4]: np.load(io.BytesIO(z.read(n)), allow_pickle=False) for n in z.namelist()
+                  if n != modelfile.HEADER}
+    return header, arrays
+
+
+def _write(path: Path, header: dict, arrays: dict, seal: bool = True) -> None:
+    """A model file of ``header`` and ``arrays``, its digest made again where ``seal`` (a stranger who edits a
+    file and seals it), left as it was otherwise."""
+    if seal:
+        header = {**header, "digest": modelfile.digest(header, arrays)}
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr(modelfile.HEADER, json.dumps(header))
+        for name, array in arrays.items():
+            buffer = io.BytesIO()
+            np.save(buffer, array, allow_pickle=False)
+            z.writestr(f"{name}.npy", buffer.getvalue())
+
+
+def test_a_model_file_edited_since_it_was_saved_or_with_absurd_numbers_predicts_nothing(tmp_path, kuka):
+    """An edit the file was not saved with is refused by its digest; sealed again, coefficients of 1e200 are
+    refused as past the bound a number may have, and coefficients times 1e3 by the torque bound the file
+    states; predict writes nothing and says which, in one line."""
+    system, train, test = kuka
+    fitted = METHODS["sysid"]().fit(train, "indirect", 0, budget=Budget(steps=1), system=system)
+    save_model(fitted, tmp_path / "m.npz", {"system": system.name, "method": "sysid"}, train, system)
+    log = tmp_path / "log.csv"
+    write_csv(test, log)
+    good = cli("predict", "--model", tmp_path / "m.npz", "--log", log, "--out", tmp_path / "p.csv")
+    assert good.returncode == 0, good.stderr
+    header, arrays = _contents(tmp_path / "m.npz")
+    assert len(header["torque_bound"]) == 7 and header["digest"] == modelfile.digest(header, arrays)
+    np.testing.assert_allclose(header["torque_bound"], 100 * np.max(np.abs(train.tau), axis=0))
+    largest = header["model"]["coef"]["$array"]  # the linear model's coefficients
+    for factor, seal, why in ((1e3, False, "its contents differ from the digest it was saved with"),
+                              (1e200, True, f"its array {largest} holds .*, past the 1e\\+12 a model's number may be"),
+                              (1e3, True, "predicts .* on joint [0-9] at row [0-9]+ of .*, past the bound of .* its "
+                                          "file states \\(100 times the largest torque")):
+        edited = tmp_path / f"edited_{factor:g}_{seal}.npz"
+        _write(edited, header, {**arrays, largest: arrays[largest] * factor}, seal=seal)
+        out = tmp_path / "q.csv"
+        r = cli("predict", "--model", edited, "--log", log, "--out", out)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1 and not out.exists(), (factor, seal, r.stderr)
+        assert re.search(why, r.stderr), r.stderr
 
 
 @pytest.mark.parametrize("name", ["sparse", "mggp", "mlp", "delan"])
@@ -184,14 +238,11 @@ def test_a_truncated_a_broken_and_a_foreign_file_are_each_refused_in_one_line(sa
     assert "not a model file" in _refused(foreign, saved / "test.csv", tmp_path)
     assert "not a model file" in _refused(saved / "test.csv", saved / "test.csv", tmp_path)
     hostile = tmp_path / "hostile.npz"  # an expression naming a function outside the fixed list
-    with zipfile.ZipFile(saved / "model.npz") as src, zipfile.ZipFile(hostile, "w") as dst:
-        for item in src.namelist():
-            data = src.read(item)
-            if item == modelfile.HEADER:
-                header = json.loads(data)
-                header["model"]["expression"] = {"op": "__import__", "args": [{"symbol": "os"}]}
-                data = json.dumps(header).encode()
-            dst.writestr(item, data)
+    header, arrays = _contents(saved / "model.npz")
+    header["model"]["expression"] = {"op": "__import__", "args": [{"symbol": "os"}]}
+    _write(hostile, header, arrays, seal=False)
+    assert "differ from the digest it was saved with" in _refused(hostile, saved / "test.csv", tmp_path)
+    _write(hostile, header, arrays)  # sealed again by whoever wrote it: the expression's own check refuses it
     assert "which is no operation a model file may hold" in _refused(hostile, saved / "test.csv", tmp_path)
 
 
