@@ -59,7 +59,7 @@ from bench.core.data import Dataset, DataError
 from bench.core.csv_format import read_frame
 from bench.core.errors import ConfigError
 from bench.core.sealed import seal
-from bench.core.recordings import TIME_UNITS, ColumnMap, FilterSpec, joined, preprocess, read_log, resampling
+from bench.core.recordings import TIME_UNITS, ColumnMap, FilterSpec, joined, preprocess_segments, read_log
 
 #: the splits of every measured system: its declared one, and train and test exchanged
 SPLITS = ("default", "swapped")
@@ -311,30 +311,34 @@ def _log(path: Path):
 
 
 def samples(spec: MeasuredSpec, r: RecordingFile, filter: FilterSpec,
-            filter_torque: bool = True) -> tuple[dict[str, np.ndarray], str | None]:
-    """Recording ``r``'s samples (:func:`~bench.core.recordings.read_log`):
-    filtered and differentiated (:func:`~bench.core.recordings.preprocess`),
-    or its rows as they are where the file says ``as_recorded``; and how its
-    rows were moved in time (:func:`~bench.core.recordings.resampling`;
-    ``None``: not at all)."""
+            filter_torque: bool = True) -> tuple[list[dict[str, np.ndarray]], str | None]:
+    """Recording ``r``'s samples (:func:`~bench.core.recordings.read_log`), one part a segment of it
+    (:func:`~bench.core.recordings.preprocess_segments`: a log with a gap is split there, never bridged):
+    filtered and differentiated, or its rows as they are where the file says ``as_recorded``; and in words how
+    its rows were split or moved in time (``None``: not at all)."""
     rows = where = None
     if r.column is not None:
         frame = _log(r.path)
         rows, where = frame[frame[r.column].astype(str) == r.name], f"{r.path} ({r.column} = {r.name})"
     rec = read_log(r.path, spec.columns, None if spec.as_recorded else filter, spec.time_unit, spec.degrees, rows, where,
                    spec.rate_hz)
-    if spec.as_recorded:
-        return {"q": rec.q, "qd": rec.qd, "qdd": rec.qdd, "tau": rec.tau, "time": rec.time - rec.time[0]}, None
-    return preprocess(rec, filter, filter_torque=filter_torque), resampling(rec, filter)
+    try:
+        return preprocess_segments(rec, None if spec.as_recorded else filter, filter_torque=filter_torque)
+    except DataError as exc:
+        raise DataError(f"{where or r.path}: {exc}") from None
 
 
 @functools.lru_cache(maxsize=16)
 def _samples(spec: MeasuredSpec, trajectories: tuple[str, ...], filter: FilterSpec,
              filter_torque: bool) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     chosen = [r for r in spec.recordings if r.trajectory in trajectories]
-    parts, moved = zip(*(samples(spec, r, filter, filter_torque) for r in chosen))
-    return (joined(list(parts), [r.name for r in chosen], [r.trajectory for r in chosen]),
-            {r.name: w for r, w in zip(chosen, moved) if w is not None})
+    done = [samples(spec, r, filter, filter_torque) for r in chosen]
+    parts, names, followed = [], [], []
+    for r, (pieces, _) in zip(chosen, done):  # a recording split at a gap: each segment a recording of its own
+        parts += pieces
+        names += [r.name] if len(pieces) == 1 else [f"{r.name}/{k + 1}" for k in range(len(pieces))]
+        followed += [r.trajectory] * len(pieces)
+    return joined(parts, names, followed), {r.name: w for r, (_, w) in zip(chosen, done) if w is not None}
 
 
 class Measured:

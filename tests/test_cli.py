@@ -173,9 +173,10 @@ def test_rerun_imports_a_records_plugins_only_where_the_user_names_the_same_file
     """A record is data: the plugins its run imported run again only where --plugin names each, the same file
     by its sha256; a record edited to name another file, or a plugin edited since, is refused in one line."""
     plugin = tmp_path / "toys.py"
-    plugin.write_text((ROOT / "tests" / "plugins" / "faulty.py").read_text())
+    # a name of its own: another test of this process may have registered faulty.py's
+    plugin.write_text((ROOT / "tests" / "plugins" / "faulty.py").read_text().replace('"toy_', '"toy_rerun_'))
     record = tmp_path / "run.json"
-    made = cli("fit", "--system", "double_pendulum", "--method", "toy_constant", "--plugin", plugin, "--experiment",
+    made = cli("fit", "--system", "double_pendulum", "--method", "toy_rerun_constant", "--plugin", plugin, "--experiment",
                "indirect", "--n-train", "64", "--n-test", "32", "--steps", "1", "--json", record)
     assert made.returncode == 0, made.stderr
     assert json.loads(record.read_text())["code"]["plugins"] == {str(plugin.resolve()): file_digest(plugin)}

@@ -13,7 +13,7 @@ from bench.core.data import Dataset
 from bench.core.csv_format import write_csv
 from bench.core.fileio import check_output, file_digest, settings_path, write_json
 from bench.core.recordings import (DEFAULT_FILTER, TIME_UNITS, ColumnMap, FilterSpec, Recording, beyond_a_turn, joined,
-                                   preprocess, read_log, resampling)
+                                   preprocess_segments, read_log)
 from systems.dfki_double_pendulum import layout_of
 
 
@@ -79,9 +79,15 @@ def main(args) -> int:
     system = None if columns else "dfki_double_pendulum"
     recordings, warnings = zip(*(log_with_warnings(path, columns, spec, args.time_unit, args.degrees, args.rate)
                                  for path in args.raw))
-    parts = [preprocess(r, spec) for r in recordings]
-    moved = {n: w for n, w in ((n, resampling(r, spec)) for n, r in zip(names, recordings)) if w is not None}
-    s = joined(parts, names, trajectories)
+    done = [preprocess_segments(r, spec) for r in recordings]  # a log with a gap: its segments, never bridged
+    parts, labels, followed = [], [], []
+    for name, trajectory, (pieces, _) in zip(names, trajectories or names, done):
+        parts += pieces
+        labels += [name] if len(pieces) == 1 else [f"{name}/{k + 1}" for k in range(len(pieces))]
+        followed += [trajectory] * len(pieces)
+    split = len(parts) > len(names)  # each segment a recording of its own, of its log's trajectory
+    moved = {n: words for n, (_, words) in zip(names, done) if words}
+    s = joined(parts, labels, followed if trajectories is not None or split else None)
     for line in (w for group in warnings for w in group):  # once every log is read: an error is the one line
         print(line, file=sys.stderr)
     source = ", ".join(map(str, args.raw))

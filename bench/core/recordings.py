@@ -27,6 +27,14 @@ friction column keeps a fitted viscous coefficient from absorbing it. The
 rest of a model's columns are smooth functions of the filtered state, which
 the low-pass passes as they are.
 
+A log with a gap (a step of :data:`GAP_STEPS` times its median step or more:
+rows lost, a logger paused) is split there into segments (:func:`segments`),
+each filtered on its own and labelled a recording of its own
+(``NAME/1``, ``NAME/2``, ...) of the same trajectory: a gap is never bridged
+by interpolation, a filter or a derivative. A segment too short for the
+filter is left out; :func:`preprocess_segments` says in words how many
+segments and samples were kept, which the data's source carries.
+
 The defaults (:data:`DEFAULT_FILTER`) keep the log's own step and every
 sample, with the cut-off measured for the DFKI double pendulum (``python -m
 bench study dfki-filter``); a robot of its own wants its own cut-off, chosen
@@ -50,6 +58,8 @@ from bench.core.errors import ConfigError
 
 #: the fewest rows a recording may have
 MIN_ROWS = 16
+#: a step between two rows this many times a log's median step or longer is a gap: the log is split there
+GAP_STEPS = 5.0
 #: the most samples a recording may span on the uniform grid (5.5 hours at 2 ms)
 MAX_GRID = 10_000_000
 #: seconds per unit of a log's time column (``convert --time-unit``)
@@ -317,11 +327,65 @@ def resampling(recording: Recording, spec: FilterSpec) -> str | None:
     return _grid(recording.time, spec)[2]
 
 
-def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True) -> dict[str, np.ndarray]:
+class TooShort(DataError):
+    """A recording (or a segment of one) too short for the filter."""
+
+
+def segments(recording: Recording) -> list[Recording]:
+    """``recording`` split at each gap: a step of :data:`GAP_STEPS` times its median step or longer."""
+    steps = np.diff(recording.time)
+    if not len(steps):
+        return [recording]
+    cuts = np.flatnonzero(steps >= GAP_STEPS * float(np.median(steps))) + 1
+    bounds = [0, *cuts.tolist(), len(recording.time)]
+    qdd = recording.qdd
+    return [Recording(recording.time[a:b], recording.q[a:b], recording.qd[a:b], recording.tau[a:b],
+                      None if qdd is None else qdd[a:b]) for a, b in zip(bounds, bounds[1:])]
+
+
+def preprocess_segments(recording: Recording, spec: FilterSpec | None = DEFAULT_FILTER, *,
+                        filter_torque: bool = True) -> tuple[list[dict[str, np.ndarray]], str | None]:
+    """:func:`preprocess` of each of ``recording``'s :func:`segments` (``spec`` ``None``: their rows as they are,
+    a log of samples as recorded), their times counted from the recording's first row; and in words how its rows
+    were split and moved in time (:func:`resampling` of each segment kept; ``None``: neither). A segment too
+    short for the filter is left out and counted; a :class:`DataError` where every one is."""
+    parts = segments(recording)
+    origin = float(recording.time[0])
+
+    def one(part: Recording) -> dict[str, np.ndarray]:
+        if len(part.time) < MIN_ROWS:
+            raise TooShort(f"a segment of {len(part.time)} row(s)")
+        if spec is None:
+            return {"q": part.q, "qd": part.qd, "qdd": part.qdd, "tau": part.tau, "time": part.time - origin}
+        return preprocess(part, spec, filter_torque=filter_torque, origin=origin)
+
+    if len(parts) == 1:
+        return [one(recording)], None if spec is None else resampling(recording, spec)
+    kept, moved, short = [], [], []
+    for part in parts:
+        try:
+            kept.append(one(part))
+        except TooShort:
+            short.append(len(part.time))
+            continue
+        moved.append(None if spec is None else resampling(part, spec))
+    if not kept:
+        raise DataError(f"its {len(parts) - 1} gap(s) split it into {len(parts)} segments, each too short for the "
+                        f"filter")
+    words = (f"split at {len(parts) - 1} gap(s) of {GAP_STEPS:g} steps or more into {len(parts)} segments, each "
+             f"filtered on its own and none bridged: {len(kept)} kept, {sum(len(p['q']) for p in kept):,} samples"
+             + (f"; {len(short)} too short for the filter left out ({sum(short):,} rows)" if short else ""))
+    return kept, "; ".join([words, *dict.fromkeys(w for w in moved if w)])
+
+
+def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filter_torque: bool = True,
+               origin: float | None = None) -> dict[str, np.ndarray]:
     """Samples ``q, qd, qdd, tau`` and ``sign_qd`` (each ``(n, dof)``) of one
     recording; see the module docstring for the steps. ``filter_torque=False``
     keeps the measured torque unfiltered (on the same grid), for judging
-    a filter; ``sign_qd`` is then ``sign(qd)``."""
+    a filter; ``sign_qd`` is then ``sign(qd)``. Times are counted from ``origin``
+    (default: the recording's first row). A recording with gaps is split by
+    :func:`preprocess_segments`, not here."""
     from scipy.signal import butter, sosfiltfilt  # 0.3 s to import: only conversions need it
 
     t = recording.time
@@ -333,7 +397,7 @@ def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filte
     sos = butter(spec.order, spec.cutoff_hz, fs=1.0 / dt, output="sos")
     padding = 3 * (2 * len(sos) + 1)  # what sosfiltfilt extends each end by
     if len(grid) <= max(2 * trim + 2, padding):
-        raise DataError(f"a recording of {t[-1] - t[0]:.3g} s is too short for the filter "
+        raise TooShort(f"a recording of {t[-1] - t[0]:.3g} s is too short for the filter "
                         f"(twice the trim of {spec.trim_s:g} s, and at least {padding} steps of {dt:.4g} s)")
 
     def resampled(values: np.ndarray) -> np.ndarray:
@@ -351,7 +415,7 @@ def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filte
     qdd = np.gradient(qd, grid, axis=0) if moved is None else np.gradient(qd, dt, axis=0)
     keep = slice(trim, len(grid) - trim, spec.decimate)
     return {"q": q[keep], "qd": qd[keep], "qdd": qdd[keep], "tau": tau[keep], "sign_qd": sign_qd[keep],
-            "time": grid[keep] - t[0]}
+            "time": grid[keep] - (t[0] if origin is None else origin)}
 
 
 def joined(parts: list[dict[str, np.ndarray]], names: list[str],

@@ -9,7 +9,7 @@ import pytest
 from bench.core.data import DataError
 from bench.core.errors import ConfigError
 from tests.commandline import cli
-from bench.core.recordings import ColumnMap, FilterSpec, Recording, preprocess, resampling
+from bench.core.recordings import ColumnMap, FilterSpec, Recording, preprocess, preprocess_segments, resampling
 
 
 def test_a_column_map_names_every_joints_columns():
@@ -134,6 +134,28 @@ def test_a_log_keeps_its_own_step_unless_asked_and_a_resampling_is_stated():
     assert resampling(rec, asked) == "resampled from the log's 10 ms (median step) to 2 ms"
     assert len(preprocess(rec, asked)["q"]) == pytest.approx(5 * len(kept["q"]), abs=10)
     assert resampling(rec, FilterSpec(dt=0.01)) is None  # asking for the log's own step moves nothing
+
+
+def test_a_log_with_a_gap_is_split_there_each_segment_filtered_on_its_own_and_none_bridged():
+    rec = _uniform_recording(0.01, seconds=12.0)
+    keep = (rec.time < 4.0) | (rec.time >= 8.0) & (rec.time < 11.6) | (rec.time >= 11.9)  # 4 s lost, then 0.3 s
+    gapped = Recording(rec.time[keep], rec.q[keep], rec.qd[keep], rec.tau[keep])
+    parts, words = preprocess_segments(gapped, FilterSpec())
+    assert len(parts) == 2  # the last 0.1 s is too short for the filter: left out, and counted
+    assert words == ("split at 2 gap(s) of 5 steps or more into 3 segments, each filtered on its own and none "
+                     "bridged: 2 kept, 660 samples; 1 too short for the filter left out (10 rows)")
+    times = np.concatenate([p["time"] for p in parts])
+    assert not ((times > 4.0) & (times < 8.0)).any() and not ((times > 11.6) & (times < 11.9)).any()
+    np.testing.assert_allclose(parts[1]["time"][0], 8.25)  # counted from the recording's first row, trimmed
+    # each segment is the intact log's filtered alone: the samples near its own ends are the filter's, not a bridge
+    alone = preprocess(Recording(*(v[(rec.time >= 8.0) & (rec.time < 11.6)] for v in (rec.time, rec.q, rec.qd,
+                                                                                     rec.tau))), FilterSpec())
+    np.testing.assert_allclose(parts[1]["q"], alone["q"])
+    whole, none = preprocess_segments(rec, FilterSpec())
+    assert none is None and len(whole) == 1
+    with pytest.raises(DataError, match="split it into 2 segments, each too short for the filter"):
+        preprocess_segments(Recording(*(v[(rec.time < 0.3) | (rec.time > 11.7)] for v in (rec.time, rec.q, rec.qd,
+                                                                                          rec.tau))), FilterSpec())
 
 
 def test_rows_whose_steps_vary_are_put_on_their_median_step_and_it_is_said():

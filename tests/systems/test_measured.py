@@ -137,3 +137,43 @@ def test_convert_refuses_logged_accelerations_it_would_not_use(tmp_path):
             "--out", str(tmp_path / "out.csv"))
     assert r.returncode == 2 and "as_recorded" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out.csv").exists() and path.exists()
+
+
+def test_a_log_with_a_gap_is_split_into_segments_of_its_trajectory_none_bridged(tmp_path):
+    """Six seconds of rows lost from a training recording of the DFKI pendulum: the recording is two segments of
+    its trajectory, each filtered on its own, no sample in the gap; the record says so, and the fit is as good on
+    the test trajectories as the intact log's (bridging the gap by interpolation fitted a line through it)."""
+    import json
+    import shutil
+
+    import pandas as pd
+
+    from bench.runner.plugins import system_plugins
+    from systems.urdf_arm import DATA_DIR
+    from tests.commandline import cli
+
+    for name in ("dfki_double_pendulum_arm.toml", "dfki_double_pendulum.urdf.gz",
+                 *(f"dfki_trajectory_0{k}.csv.gz" for k in range(6))):
+        shutil.copy(DATA_DIR / name, tmp_path / name)
+    frame = pd.read_csv(tmp_path / "dfki_trajectory_00.csv.gz")
+    lost = (frame["time"] > 2.0) & (frame["time"] < 8.0)
+    frame[~lost].to_csv(tmp_path / "dfki_trajectory_00.csv.gz", index=False)
+    declared = tmp_path / "gapped_arm.toml"  # its own name: the shipped file registers under the other
+    (tmp_path / "dfki_double_pendulum_arm.toml").rename(declared)
+    (name,), _ = system_plugins([f"measured:{declared}"])
+    train = SYSTEMS[name]().load("train")
+    segments = [r for r in train.recordings() if r.startswith("00")]
+    assert segments == ["00/1", "00/2"]
+    inside = np.isin(train.recording, segments)
+    assert set(train.trajectory[inside]) == {"00"}
+    assert not ((train.time[inside] > 2.0) & (train.time[inside] < 8.0)).any()
+    assert "00 split at 1 gap(s) of 5 steps or more into 2 segments" in train.source
+    records = {}
+    for which, arm in (("gapped", declared), ("intact", DATA_DIR / "dfki_double_pendulum_arm.toml")):
+        out = tmp_path / f"{which}.json"
+        r = cli("fit", "--system", f"measured:{arm}", "--method", "sysid", "--experiment", "indirect", "--steps", 1,
+                "--json", out)
+        assert r.returncode == 0, r.stderr
+        records[which] = json.loads(out.read_text())
+    assert "00 split at 1 gap(s) of 5 steps or more into 2 segments" in records["gapped"]["details"]["train_source"]
+    assert records["gapped"]["test_mse"] < 1.05 * records["intact"]["test_mse"]
