@@ -103,6 +103,10 @@ class MeasuredSpec:
     #: the trajectories whose torques chose the filter (``[filter] chosen_on``): a figure tested on any of them
     #: rests on a choice that read its test torques (:meth:`test_informed`)
     filter_chosen_on: tuple[str, ...] = ()
+    #: the trajectories whose test figures were read while a rule of the suite was chosen (``[informed]
+    #: trajectories``), and the rule in words (``[informed] rule``): a figure tested on any of them rests on it
+    informed_on: tuple[str, ...] = ()
+    informed_rule: str | None = None
 
     @property
     def trajectories(self) -> tuple[str, ...]:
@@ -125,8 +129,17 @@ class MeasuredSpec:
         return sorted(set(trajectories) & set(self.filter_chosen_on))
 
     def test_informed(self, split: str) -> list[str]:
-        """The test trajectories of ``split`` that chose the filter (:meth:`chose_filter`)."""
-        return self.chose_filter(self.parts(split)["test"])
+        """The test trajectories of ``split`` that chose the filter (:meth:`chose_filter`) or were read while a rule
+        was chosen (:attr:`informed_on`)."""
+        test = self.parts(split)["test"]
+        return sorted(set(self.chose_filter(test)) | (set(test) & set(self.informed_on)))
+
+    def informed_by(self, split: str) -> list[str]:
+        """What rests on ``split``'s test-informed trajectories (:meth:`test_informed`), in words."""
+        test = self.parts(split)["test"]
+        return ((["the cut-off of the filter that the system's file declares (`[filter] chosen_on`)"]
+                 if self.chose_filter(test) else [])
+                + ([self.informed_rule] if self.informed_rule and set(test) & set(self.informed_on) else []))
 
     def describe(self) -> str:
         """How the recordings become samples, in words."""
@@ -134,7 +147,7 @@ class MeasuredSpec:
 
 
 KNOWN_KEYS = ("urdf", "columns", "test", "filter", "recordings", "recordings_in", "time_unit", "degrees", "as_recorded",
-              "rate_hz", "root", "tip", "joints", "locked_at")
+              "rate_hz", "root", "tip", "joints", "locked_at", "informed")
 
 
 def read_spec(path: str | Path) -> MeasuredSpec:
@@ -204,9 +217,27 @@ def read_spec(path: str | Path) -> MeasuredSpec:
     if columns.time is not None and rate is not None:
         raise DataError(f"{path}: columns name a time column ({columns.time}) and rate_hz is {rate:g}: give one of them")
     root, tip, joints, locked_at = _chain_keys(path, raw)
+    informed_on, rule = _informed(path, raw, named)
     return MeasuredSpec(path, columns, tuple(recordings), test, spec, time_unit, degrees, as_recorded, urdf,
                         None if rate is None else float(rate), root, tip, joints, locked_at,
-                        tuple(dict.fromkeys(map(str, chosen_on))))
+                        tuple(dict.fromkeys(map(str, chosen_on))), informed_on, rule)
+
+
+def _informed(path: Path, raw: dict, named: list[str]) -> tuple[tuple[str, ...], str | None]:
+    """The ``[informed]`` table: the ``trajectories`` whose test figures were read while a ``rule`` was chosen."""
+    table = raw.get("informed")
+    if table is None:
+        return (), None
+    if not isinstance(table, dict) or set(table) != {"rule", "trajectories"}:
+        raise DataError(f"{path}: [informed] must be a table of rule (the rule, in words) and trajectories (those "
+                        f"read while it was chosen)")
+    rule, trajectories = table["rule"], table["trajectories"]
+    if not isinstance(rule, str) or not rule.strip() or len(rule) > 1000:
+        raise DataError(f"{path}: [informed] rule must say in words which rule the trajectories informed")
+    if not isinstance(trajectories, list) or not trajectories or any(str(t) not in named for t in trajectories):
+        raise DataError(f"{path}: [informed] trajectories must list trajectories of the recordings "
+                        f"({', '.join(named)}), got {trajectories!r}")
+    return tuple(dict.fromkeys(map(str, trajectories))), rule.strip()
 
 
 def _no_log_twice(path: Path, recordings: list[RecordingFile], test: tuple[str, ...]) -> None:

@@ -17,7 +17,7 @@ from bench.core.fileio import check_output
 from bench.evaluation.domain import sentences
 from bench.runner.run import given_data
 from bench.runner.plugins import file_prefix
-from bench.tools.select import CANDIDATES, select
+from bench.tools.select import CANDIDATES, repage, select
 from systems import SYSTEMS
 
 #: the seconds past which a candidate is killed (``--budget``) on up to :data:`CEILING_SAMPLES` training samples:
@@ -68,10 +68,18 @@ def add_arguments(p) -> None:
                         "regions whose held-out distances match the target's: --target-states, else the spread "
                         "between the training trajectories), or auto: whole trajectories where there are several, "
                         "regions where there is one (default auto)")
+    p.add_argument("--page-only", action="store_true",
+                   help="write select.md again from the select.json already in --out, its test-informed flags read "
+                        "again from the arm's declaration; nothing is run and no figure changes")
     add_plugin(p)
 
 
 def main(args) -> int:
+    if args.page_only:
+        load_plugins(args, [args.system])
+        repage(args.out, args.invocation)
+        print(f"wrote {args.out / 'select.md'} again from {args.out / 'select.json'}")
+        return 0
     check_output(args.out, folder=True)
     known = {c.name: c for c in CANDIDATES}
     unknown = [n for n in args.candidates or [] if n not in known]

@@ -464,9 +464,10 @@ def page(result: dict) -> str:
                   + (f" Read again by `{result['real_command']}`, at commit {result['real_commit']}; the cases above "
                      "are as their own command made them." if result.get("real_command") else ""), ""]
         lines += _rows(result["real"], rules)
-        lines += [f"\n**Test-informed:** {r['case']} tests on {', '.join(r['test_informed'])}, which the recordings' "
-                  f"{CUTOFF_HZ:g} Hz low-pass cut-off was chosen on (`python -m bench study dfki-filter`, docs/choices.md)."
-                  for r in result["real"] if r.get("test_informed")]
+        lines += [f"\n**Test-informed:** {r['case']} tests on {', '.join(r['test_informed'])}, "
+                  + (f"read while these were chosen: {'; '.join(r['test_informed_by'])}." if r.get("test_informed_by")
+                     else f"which the recordings' {CUTOFF_HZ:g} Hz low-pass cut-off was chosen on (`python -m bench "
+                          f"study dfki-filter`, docs/choices.md).") for r in result["real"] if r.get("test_informed")]
     return "\n".join(lines) + "\n"
 
 
@@ -521,7 +522,8 @@ def real_rows() -> list[dict]:
     """The shipped real cases' rows, scored from the ``select.json`` each split's ``bench select`` wrote."""
     pages = {name: (path, json.loads(Path(path).read_text())) for name, path in REAL.items() if Path(path).exists()}
     return [{"case": name, "protocol": "auto", "folds": page.get("folds_protocol"), "source": path,
-             "scores": scores(page), "test_informed": page.get("test_informed") or []}
+             "scores": scores(page), "test_informed": page.get("test_informed") or [],
+             "test_informed_by": page.get("test_informed_by") or []}
             for name, (path, page) in pages.items()]
 
 

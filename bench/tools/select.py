@@ -42,6 +42,7 @@ is one candidate's.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from dataclasses import dataclass
@@ -50,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.core.data import Dataset
+from bench.core.errors import UserError
 from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, write_json
 from bench.core.modelfile import ModelFileError
@@ -58,6 +60,7 @@ from bench.evaluation import stacking
 from bench.evaluation.domain import domain, sentences
 from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL, SCORE_RULE
 from bench.runner import matrix
+from bench.runner.provenance import provenance
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
 from bench.tools import stack_score
@@ -281,7 +284,10 @@ def page(result: dict) -> str:
     by_test = {e["name"]: i + 1 for i, e in enumerate(sorted(ok, key=lambda e: e["test_mse"]))}
     chosen = result["chosen"]
     lines = [f"# A model of {result['system']}, chosen by validation", "",
-             f"Command: `{result['command']}`", "",
+             f"Command: `{result['command']}`"
+             + (f"; this page written again from its select.json by `{result['page_only']['command']}` at commit "
+                f"{result['page_only']['commit']}, its test-informed flags read again from the arm's declaration "
+                f"(no figure changed)" if result.get("page_only") else ""), "",
              f"Split: {result['split'] or 'default'}; budget per candidate: {result['budget']}; "
              f"seed {result['seed']}. "
              f"Each candidate is {PROTOCOL} (validation folds: {result['folds'] or 'none'}) by successive halving over "
@@ -406,12 +412,15 @@ def applicability(train: Dataset, test: Dataset | None, target: Dataset | None, 
     return report
 
 
-def test_informed(system: str, split: str | None) -> list[str]:
+def test_informed(system: str, split: str | None) -> tuple[list[str], list[str]]:
     """The test trajectories of ``split`` whose torques chose a setting of the file that declares the system (its
-    filter's cut-off: ``[filter] chosen_on``), so that a test figure rests on a choice that read them; none for a
-    system that no such file declares."""
+    filter's cut-off: ``[filter] chosen_on``) or were read while a rule was chosen (``[informed]``), so that a test
+    figure rests on a choice that read them, and what rests on them in words; none for a system that no such file
+    declares."""
     declaration = getattr(SYSTEMS[system], "measured", None)
-    return declaration.test_informed(split or "default") if declaration is not None else []
+    if declaration is None:
+        return [], []
+    return declaration.test_informed(split or "default"), declaration.informed_by(split or "default")
 
 
 def informed_sentence(result: dict) -> str | None:
@@ -419,9 +428,11 @@ def informed_sentence(result: dict) -> str | None:
     informed = result.get("test_informed")
     if not informed:
         return None
-    return (f"**Test-informed:** the test trajectories {', '.join(informed)} chose the cut-off of the filter that "
-            f"the system's file declares (`[filter] chosen_on`), so every test figure below rests on a choice that "
-            f"read their torques. The choice of candidate read none of them.")
+    by = result.get("test_informed_by") or ["the cut-off of the filter that the system's file declares "
+                                            "(`[filter] chosen_on`)"]
+    return (f"**Test-informed:** the test trajectories {', '.join(informed)} were read while these were chosen: "
+            f"{'; '.join(by)}. Every test figure below rests on a choice that read their torques. The choice of "
+            f"candidate read none of them.")
 
 
 def predict_command(result: dict) -> str:
@@ -429,6 +440,24 @@ def predict_command(result: dict) -> str:
     built in (``declared``, the ``--system`` given: ``urdf:PATH`` or ``measured:PATH``)."""
     declared = f" --system {result['declared']}" if result.get("declared") else ""
     return f"python -m bench predict --model model.npz{declared} --log LOG.csv --out PRED.csv"
+
+
+def repage(out: Path, command: str) -> dict:
+    """``out``'s ``select.json`` with its test-informed flags read again from the system's declaration
+    (:func:`test_informed`), and ``select.md`` written again from it; nothing is run and no figure changes."""
+    made = Path(out) / "select.json"
+    if not made.is_file():
+        raise UserError(f"{made}: no select page to write again; run bench select into {out} first")
+    result = json.loads(made.read_text())
+    if result.get("system") not in SYSTEMS:
+        raise UserError(f"{made}: its system {result.get('system')!r} is not registered here; name its file with "
+                        f"--system")
+    result.update(zip(("test_informed", "test_informed_by"), test_informed(result["system"], result.get("split"))))
+    result["page_only"] = {"command": command, "commit": provenance().get("commit")}
+    write_json(made, result)
+    text = page(result)
+    atomic_write(Path(out) / "select.md", lambda f: f.write(text))
+    return result
 
 
 def select(system: str, out: Path, *, split: str | None, budget_s: float | None, steps: int | None, seed: int,
@@ -456,7 +485,7 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
               "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds,
               "training_trajectories": trajectories, "rule": rule(trajectories), "chosen": chosen, "candidates": entries,
               "domain": None if data is None else applicability(data[0], data[1], target, protocol),
-              "test_informed": test_informed(system, split),
+              **dict(zip(("test_informed", "test_informed_by"), test_informed(system, split))),
               "stack": score_stack(stacked(entries, out, None if data is None else data[0]), entries, out,
                                    None if data is None else data[1])}
     if chosen:

@@ -129,17 +129,22 @@ def test_the_cases_are_jobs_of_the_one_scheduler_and_a_second_run_resumes_from_t
     assert not (tmp_path / "cases_development").exists()
 
 
-def test_a_real_row_tested_on_recordings_its_filter_was_chosen_on_is_flagged_test_informed():
+def test_a_real_row_tested_on_recordings_a_choice_read_is_flagged_test_informed():
     """The DFKI pendulum's 6 Hz cut-off was chosen on 00, 01, 02 and 04: its swapped split tests on them, its
-    default split (03, 05) does not; the KUKA's filter was not chosen on a score."""
+    default split (03, 05) does not. The loop's round rule and the loop_feasible candidate were chosen while the
+    KUKA's test ranking on both its trajectories was known: both its rows are flagged, saying so."""
     rows = {r["case"]: r for r in sb.real_rows()}
     assert rows["dfki_double_pendulum (swapped split)"]["test_informed"] == ["00", "01", "02", "04"]
     assert rows["dfki_double_pendulum (default split)"]["test_informed"] == []
-    assert rows["kuka_lwr4 (default split)"]["test_informed"] == []
+    assert rows["kuka_lwr4 (default split)"]["test_informed"] == ["B"]
+    assert rows["kuka_lwr4 (swapped split)"]["test_informed"] == ["A"]
+    assert "round rule" in rows["kuka_lwr4 (default split)"]["test_informed_by"][0]
     made = json.loads(Path("results/selection/development.json").read_text())
     text = sb.page({**made, "real": list(rows.values())})
-    assert text.count("**Test-informed:**") == 1
+    assert text.count("**Test-informed:**") == 3
     assert "**Test-informed:** dfki_double_pendulum (swapped split) tests on 00, 01, 02, 04" in text
+    assert ("**Test-informed:** kuka_lwr4 (default split) tests on B, read while these were chosen: the residual "
+            "loop's round rule and bench select's loop_feasible candidate") in text
 
 
 @pytest.mark.parametrize("given, said", [(["standard", "nonsense"], "unknown candidate(s) nonsense"),

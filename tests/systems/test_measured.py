@@ -70,6 +70,13 @@ def test_a_declaration_says_which_trajectories_chose_its_filter_and_so_which_tes
     assert SYSTEMS["dfki_double_pendulum"].measured.test_informed("swapped") == ["00", "01", "02", "04"]
     assert SYSTEMS["dfki_double_pendulum"].measured.test_informed("default") == []
     assert SYSTEMS["kuka_lwr4"].measured.filter_chosen_on == ()
+    # a rule chosen while trajectories' test figures were read: a test on them is test-informed, and says by what
+    spec = read_spec(write(tmp_path, 'columns = "time=t,q_1=q_1,qd_1=qd_1,qdd_1=qdd_1,tau_1=tau_1"\ntest = ["b"]\n'
+                                     'recordings_in = { file = "all.csv", column = "run" }\n'
+                                     '[informed]\nrule = "a rule"\ntrajectories = ["b"]\n'))
+    assert spec.test_informed("default") == ["b"] and spec.informed_by("default") == ["a rule"]
+    assert spec.test_informed("swapped") == [] and spec.informed_by("swapped") == []
+    assert SYSTEMS["kuka_lwr4"].measured.test_informed("default") == ["B"]
 
 
 @pytest.mark.parametrize("text, message", [

@@ -216,15 +216,40 @@ def test_a_page_whose_test_trajectories_chose_the_filter_says_it_is_test_informe
     flagged, on the page itself; a split, or a system, whose tests chose nothing is not."""
     from bench.tools.select import test_informed
 
-    assert test_informed("dfki_double_pendulum", "swapped") == ["00", "01", "02", "04"]
-    assert test_informed("dfki_double_pendulum", None) == [] and test_informed("kuka_lwr4", "swapped") == []
-    assert test_informed("double_pendulum", None) == []  # no file declares a simulated system
+    assert test_informed("dfki_double_pendulum", "swapped")[0] == ["00", "01", "02", "04"]
+    assert test_informed("dfki_double_pendulum", None) == ([], [])
+    assert test_informed("double_pendulum", None) == ([], [])  # no file declares a simulated system
     published = Path("results/measured/select_dfki_swapped")
     result = json.loads((published / "select.json").read_text())
     assert result["test_informed"] == ["00", "01", "02", "04"]
-    flag = "**Test-informed:** the test trajectories 00, 01, 02, 04 chose the cut-off of the filter"
-    assert page(result).count(flag) == 1 and flag in (published / "select.md").read_text()
+    flag = ("**Test-informed:** the test trajectories 00, 01, 02, 04 were read while these were chosen: the cut-off "
+            "of the filter")
+    assert page(result).count(flag) == 1
     assert "Test-informed" not in page({**result, "test_informed": []})
+    # the KUKA's pages rest on the loop's round rule and the loop_feasible candidate, chosen while its test
+    # ranking on both trajectories was known: each says so, from the same field
+    for split, trajectory in (("default", "B"), ("swapped", "A")):
+        assert test_informed("kuka_lwr4", split)[0] == [trajectory]
+        kuka = json.loads(Path(f"results/measured/select_{split}/select.json").read_text())
+        assert kuka["test_informed"] == [trajectory] and "round rule" in kuka["test_informed_by"][0]
+        text = Path(f"results/measured/select_{split}/select.md").read_text()
+        assert f"**Test-informed:** the test trajectories {trajectory} were read while these were chosen: the " \
+               f"residual loop's round rule" in text
+
+
+def test_page_only_writes_a_select_page_again_from_its_json_running_nothing(tmp_path):
+    import shutil
+
+    shutil.copytree("results/measured/select_default", tmp_path / "s", ignore=shutil.ignore_patterns("*.npz"))
+    data = json.loads((tmp_path / "s" / "select.json").read_text())
+    write_json = __import__("bench.core.fileio", fromlist=["write_json"]).write_json
+    write_json(tmp_path / "s" / "select.json", {**data, "test_informed": [], "test_informed_by": []})
+    r = cli("select", "--system", "kuka_lwr4", "--out", tmp_path / "s", "--page-only")
+    assert r.returncode == 0, r.stderr
+    again = json.loads((tmp_path / "s" / "select.json").read_text())
+    assert again["test_informed"] == ["B"] and again["candidates"] == data["candidates"]
+    assert "written again from its select.json by" in (tmp_path / "s" / "select.md").read_text()
+    assert cli("select", "--system", "kuka_lwr4", "--out", tmp_path / "none", "--page-only").returncode == 2
 
 
 def test_a_stack_of_model_files_without_held_out_predictions_says_how_to_get_them(tmp_path):
