@@ -47,6 +47,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,7 +58,7 @@ import numpy as np
 from bench.core.experiment import INDIRECT
 from bench.core.data import Dataset, DataError
 from bench.core.csv_format import read_frame
-from bench.core.errors import ConfigError
+from bench.core.errors import ConfigError, UserError
 from bench.core.sealed import seal
 from bench.core.recordings import TIME_UNITS, ColumnMap, FilterSpec, joined, preprocess_segments, read_log
 
@@ -149,6 +150,60 @@ class MeasuredSpec:
 KNOWN_KEYS = ("urdf", "columns", "test", "filter", "recordings", "recordings_in", "time_unit", "degrees", "as_recorded",
               "rate_hz", "root", "tip", "joints", "locked_at", "informed")
 
+#: a name in a measured-system file: a trajectory, a recording, a column, a link or a joint
+_NAME = {"type": "string", "minLength": 1, "maxLength": 1000}
+_TEXT = {"type": "string", "minLength": 1, "maxLength": 100_000}
+_NAMES = {"anyOf": [_NAME, {"type": "array", "items": _NAME, "minItems": 1, "maxItems": 100_000}]}
+#: every field of a measured-system file, its type and range (JSON Schema, by ``jsonschema``), checked after the
+#: file's own checks (which say more of what each field means) and before anything is read of its logs; every
+#: number must also be finite (:func:`_finite`)
+SCHEMA = {
+    "type": "object",
+    "properties": {
+        "urdf": _TEXT, "columns": _TEXT, "test": _NAMES, "time_unit": {"enum": list(TIME_UNITS)},
+        "degrees": {"type": "boolean"}, "as_recorded": {"type": "boolean"},
+        "rate_hz": {"type": "number", "exclusiveMinimum": 0, "maximum": 1e7},
+        "root": _NAME, "tip": _NAME, "joints": {"type": "array", "items": _NAME, "minItems": 1, "maxItems": 64},
+        "locked_at": {"type": "object", "additionalProperties": {"type": "number", "minimum": -1e6, "maximum": 1e6}},
+        "filter": {"type": "object", "additionalProperties": False, "properties": {
+            "dt": {"type": "number", "exclusiveMinimum": 0, "maximum": 3600},
+            "cutoff_hz": {"type": "number", "exclusiveMinimum": 0, "maximum": 1e7},
+            "order": {"type": "integer", "minimum": 1, "maximum": 64},
+            "trim_s": {"type": "number", "minimum": 0, "maximum": 1e6},
+            "decimate": {"type": "integer", "minimum": 1, "maximum": 1_000_000}, "chosen_on": _NAMES}},
+        "recordings": {"type": "object", "minProperties": 1, "additionalProperties": {
+            "type": "object", "required": ["file", "trajectory"], "additionalProperties": False,
+            "properties": {"file": _TEXT, "trajectory": _NAME}}},
+        "recordings_in": {"type": "object", "required": ["file", "column"], "additionalProperties": False,
+                          "properties": {"file": _TEXT, "column": _NAME}},
+        "informed": {"type": "object", "required": ["rule", "trajectories"], "additionalProperties": False,
+                     "properties": {"rule": _TEXT, "trajectories": {"type": "array", "items": _NAME, "minItems": 1}}},
+    },
+}
+
+
+def _finite(value, path: Path, where: tuple = ()) -> None:
+    """A :class:`DataError` naming the first field of a measured-system file whose number is not finite (TOML
+    writes ``nan`` and ``inf``)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise DataError(f"{path}: {'.'.join(map(str, where)) or 'a value'} is {value!r}, not a finite number")
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _finite(v, path, (*where, k))
+    elif isinstance(value, list):
+        for k, v in enumerate(value):
+            _finite(v, path, (*where, k))
+
+
+def _check_schema(raw: dict, path: Path) -> None:
+    """:data:`SCHEMA` on ``raw``: a :class:`DataError` naming the file and the first field that is not as stated."""
+    import jsonschema  # a dependency of the project; imported where a file is checked
+
+    error = jsonschema.exceptions.best_match(jsonschema.Draft202012Validator(SCHEMA).iter_errors(raw))
+    if error is not None:
+        field = ".".join(map(str, error.absolute_path)) or "the file"
+        raise DataError(f"{path}: {field}: {error.message}"[:500])
+
 
 def read_spec(path: str | Path) -> MeasuredSpec:
     """The measured system's file at ``path``, checked; :class:`DataError` naming the file otherwise."""
@@ -162,6 +217,18 @@ def read_spec(path: str | Path) -> MeasuredSpec:
     unknown = sorted(set(raw) - set(KNOWN_KEYS))
     if unknown:
         raise DataError(f"{path}: unknown key(s) {', '.join(unknown)} (a measured-system file has {', '.join(sorted(KNOWN_KEYS))})")
+    _finite(raw, path)
+    try:
+        return _spec(path, raw)
+    except UserError:
+        raise
+    except (TypeError, AttributeError, ValueError, KeyError, IndexError) as exc:  # a field of another kind than
+        _check_schema(raw, path)  # the checks above expect: the schema names it
+        raise DataError(f"{path}: a field of the wrong kind ({type(exc).__name__}: {exc})"[:300]) from None
+
+
+def _spec(path: Path, raw: dict) -> MeasuredSpec:
+    """:func:`read_spec`'s checks of the parsed file ``raw``, field by field."""
     for key in ("columns", "test"):
         if key not in raw:
             raise DataError(f"{path}: missing {key!r} (see docs/extending.md, A measured arm)")
@@ -218,6 +285,7 @@ def read_spec(path: str | Path) -> MeasuredSpec:
         raise DataError(f"{path}: columns name a time column ({columns.time}) and rate_hz is {rate:g}: give one of them")
     root, tip, joints, locked_at = _chain_keys(path, raw)
     informed_on, rule = _informed(path, raw, named)
+    _check_schema(raw, path)
     return MeasuredSpec(path, columns, tuple(recordings), test, spec, time_unit, degrees, as_recorded, urdf,
                         None if rate is None else float(rate), root, tip, joints, locked_at,
                         tuple(dict.fromkeys(map(str, chosen_on))), informed_on, rule)
@@ -317,7 +385,10 @@ def _recordings(path: Path, raw: dict) -> list[RecordingFile]:
         if not trajectory:
             raise DataError(f"{path}: recording {name!r} ({entry['file']}) names no trajectory: say which excitation "
                             f"trajectory it follows (trajectory = \"...\"), so that a repeat of it is never its test")
-        out.append(RecordingFile(str(name), trajectory, (here / str(entry["file"])).resolve()))
+        log = (here / str(entry["file"])).resolve()
+        if not log.is_file():
+            raise DataError(f"{path}: recording {name!r}: its file {entry['file']} ({log}) does not exist")
+        out.append(RecordingFile(str(name), trajectory, log))
     return out
 
 

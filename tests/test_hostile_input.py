@@ -4,6 +4,7 @@ with nothing written and no traceback."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -231,3 +232,96 @@ def test_a_loop_result_written_before_it_was_a_record_reads_whole_or_is_refused_
         check_refusal(exc, path)
         return
     assert record.kind == "residual" and record.status == "ok" and math.isfinite(record.train_mse)
+
+
+#: mutated measured-arm files the test runs (``BENCH_FUZZ_EXAMPLES`` raises it: 2,000 with ``=2000``)
+ARM_EXAMPLES = int(__import__("os").environ.get("BENCH_FUZZ_EXAMPLES", "60"))
+
+
+def _toml(value) -> str:
+    """``value`` in TOML: strings, numbers, booleans, arrays and inline tables (every key quoted)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf") if math.isinf(value) else repr(value)
+    if isinstance(value, (int, str)):
+        return json.dumps(value) if isinstance(value, str) else str(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    return "{ " + ", ".join(f"{json.dumps(str(k))} = {_toml(v)}" for k, v in value.items()) + " }"
+
+
+def _arm_files(folder) -> dict:
+    """Two recordings of one joint, of trajectories a and b, and the declaration that reads them."""
+    t = np.arange(400) * 0.01
+    for name, phase in (("a.csv", 0.0), ("b.csv", 0.7)):
+        rows = ["t,p,v,f"] + [f"{x:.2f},{np.sin(x + phase):.6f},{np.cos(x + phase):.6f},{np.sin(2 * x):.6f}" for x in t]
+        (folder / name).write_text("\n".join(rows) + "\n")
+    return {"columns": "time=t,q_1=p,qd_1=v,tau_1=f", "test": ["b"], "filter": {"cutoff_hz": 8.0, "trim_s": 0.1},
+            "recordings": {"r1": {"file": "a.csv", "trajectory": "a"}, "r2": {"file": "b.csv", "trajectory": "b"}}}
+
+
+def _places(node, where=()):
+    yield where
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _places(v, (*where, k))
+    elif isinstance(node, list):
+        for k, v in enumerate(node):
+            yield from _places(v, (*where, k))
+
+
+_HOSTILE = st.recursive(
+    st.one_of(st.booleans(), st.integers(-2 ** 63, 2 ** 63 - 1), st.floats(allow_nan=True, allow_infinity=True),
+              st.text(max_size=12), st.sampled_from(["a", "b", "a.csv", "b.csv", "../b.csv", "/etc/passwd", "s", "ms",
+                                                     "time=t,q_1=p,qd_1=v,tau_1=f", "time=t,q_1=p", "r1"])),
+    lambda inner: st.one_of(st.lists(inner, max_size=3), st.dictionaries(st.text(max_size=6), inner, max_size=3)),
+    max_leaves=6)
+
+
+@settings(max_examples=ARM_EXAMPLES, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(where=st.floats(0, 1), action=st.sampled_from(["replace", "delete", "add"]), value=_HOSTILE,
+       key=st.text(min_size=1, max_size=8))
+def test_a_mutated_measured_arm_file_is_refused_in_one_line_or_reads_as_it_declares(tmp_path, where, action, value,
+                                                                                     key):
+    """A measured arm's file with a field replaced, deleted or added: refused in one line naming the file, or
+    read; read, its samples are those of the valid original wherever it declares the same, and finite
+    otherwise. Never a traceback, a hang or a sample read from outside what it declares."""
+    from systems.measured import _samples, read_spec
+
+    good = _arm_files(tmp_path)
+    original = tmp_path / "good.toml"
+    original.write_text("".join(f"{json.dumps(k)} = {_toml(v)}\n" for k, v in good.items()))
+    base = read_spec(original)
+    expected = _samples(base, base.parts("default")["train"], base.filter, True)[0]
+    mutated = json.loads(json.dumps(good))
+    places = [p for p in _places(mutated) if p]
+    place = places[min(int(where * len(places)), len(places) - 1)]
+    parent = mutated
+    for k in place[:-1]:
+        parent = parent[k]
+    if action == "replace":
+        parent[place[-1]] = value
+    elif action == "delete":
+        del parent[place[-1]]
+    elif isinstance(parent, dict):
+        parent.setdefault(key, value)
+    else:
+        parent.append(value)
+    path = tmp_path / "arm.toml"
+    path.write_text("".join(f"{json.dumps(k)} = {_toml(v)}\n" for k, v in mutated.items()))
+    try:
+        spec = read_spec(path)
+        got = _samples(spec, spec.parts("default")["train"], spec.filter, True)[0]
+    except UserError as exc:
+        assert str(path) in str(exc) or ".csv" in str(exc), str(exc)
+        assert "\n" not in str(exc) and "Traceback" not in str(exc)
+        event("refused")
+        return
+    event("read")
+    assert all(np.isfinite(got[k]).all() for k in ("q", "qd", "qdd", "tau"))
+    same = dataclasses.replace(spec, source=base.source) == base
+    if same:
+        for k in ("q", "qd", "qdd", "tau", "time"):
+            np.testing.assert_array_equal(got[k], expected[k])

@@ -101,9 +101,23 @@ def test_a_declaration_says_which_trajectories_chose_its_filter_and_so_which_tes
        f'recordings_in = {{ file = "all.csv", column = "run" }}\n[filter]\n{setting}\n', message)
       for setting, message in [("decimate = 1.5", r"\[filter\]: decimate must be a whole number >= 1, got 1.5"),
                                ("order = true", r"\[filter\]: order must be a whole number >= 1, got True"),
-                               ("trim_s = nan", r"\[filter\]: trim_s must be a finite number, got nan"),
-                               ("cutoff_hz = inf", r"\[filter\]: cutoff_hz must be a finite number"),
+                               ("trim_s = nan", r"filter.trim_s is nan, not a finite number"),
+                               ("cutoff_hz = inf", r"filter.cutoff_hz is inf, not a finite number"),
                                ('cutoff_hz = "6"', r"\[filter\]: cutoff_hz must be a finite number, got '6'")]],
+    # what the schema holds every field to: its type, its range, a finite number
+    *[('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\n'
+       f'recordings_in = {{ file = "all.csv", column = "run" }}\n{setting}\n', message)
+      for setting, message in [("rate_hz = inf", r"rate_hz is inf, not a finite number"),
+                               ("locked_at = { j = nan }", r"locked_at.j is nan, not a finite number"),
+                               ("root = 3", r"root must be a link's name"),
+                               ('time_unit = "h"', r"time_unit must be one of s, ms, us"),
+                               ("[filter]\norder = 100", r"filter.order: 100 is greater than the maximum of 64")]],
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["c"]\n[recordings]\n'
+     'r1 = { file = "all.csv", trajectory = "a", rows = 3 }\nr2 = { file = "system.toml", trajectory = "c" }\n',
+     r"recordings.r1: Additional properties are not allowed \('rows' was unexpected\)"),
+    ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["c"]\n[recordings]\n'
+     'r1 = { file = "all.csv", trajectory = { x = 1 } }\nr2 = { file = "system.toml", trajectory = "c" }\n',
+     r"recordings.r1.trajectory: \{'x': 1\} is not of type 'string'"),
     # one log as the training and the test trajectory
     ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["c"]\n[recordings]\n'
      'r1 = { file = "all.csv", trajectory = "a" }\nr2 = { file = "all.csv", trajectory = "c" }\n',
