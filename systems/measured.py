@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import hashlib
 import math
 import tomllib
 from dataclasses import dataclass
@@ -59,6 +58,7 @@ from bench.core.experiment import INDIRECT
 from bench.core.data import Dataset, DataError
 from bench.core.csv_format import read_frame
 from bench.core.errors import ConfigError, UserError
+from bench.core.fileio import file_digest
 from bench.core.sealed import seal
 from bench.core.recordings import TIME_UNITS, ColumnMap, FilterSpec, joined, preprocess_segments, read_log
 
@@ -326,14 +326,9 @@ def _no_log_twice(path: Path, recordings: list[RecordingFile], test: tuple[str, 
         if r.column is not None or r.trajectory not in test or r.path not in sizes:
             continue
         for other in trained:
-            if sizes[other.path] == sizes[r.path] and _digest(other.path) == _digest(r.path):  # sizes first: cheap
+            if sizes[other.path] == sizes[r.path] and file_digest(other.path) == file_digest(r.path):  # sizes first
                 raise DataError(f"{path}: test recording {r.name!r} ({r.path.name}) holds the same log as training "
                                 f"recording {other.name!r} ({other.path.name}): its test would repeat its training data")
-
-
-def _digest(file: Path) -> str:
-    """The SHA-256 of a file's bytes."""
-    return hashlib.sha256(file.read_bytes()).hexdigest()
 
 
 def _chain_keys(path: Path, raw: dict):
@@ -434,13 +429,9 @@ def samples(spec: MeasuredSpec, r: RecordingFile, filter: FilterSpec,
 def _samples(spec: MeasuredSpec, trajectories: tuple[str, ...], filter: FilterSpec,
              filter_torque: bool) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     chosen = [r for r in spec.recordings if r.trajectory in trajectories]
-    done = [samples(spec, r, filter, filter_torque) for r in chosen]
-    parts, names, followed = [], [], []
-    for r, (pieces, _) in zip(chosen, done):  # a recording split at a gap: each segment a recording of its own
-        parts += pieces
-        names += [r.name] if len(pieces) == 1 else [f"{r.name}/{k + 1}" for k in range(len(pieces))]
-        followed += [r.trajectory] * len(pieces)
-    return joined(parts, names, followed), {r.name: w for r, (_, w) in zip(chosen, done) if w is not None}
+    parts, moved = zip(*(samples(spec, r, filter, filter_torque) for r in chosen))
+    return (joined(list(parts), [r.name for r in chosen], [r.trajectory for r in chosen]),
+            {r.name: w for r, w in zip(chosen, moved) if w is not None})
 
 
 class Measured:

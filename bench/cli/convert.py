@@ -79,15 +79,10 @@ def main(args) -> int:
     system = None if columns else "dfki_double_pendulum"
     recordings, warnings = zip(*(log_with_warnings(path, columns, spec, args.time_unit, args.degrees, args.rate)
                                  for path in args.raw))
-    done = [preprocess_segments(r, spec) for r in recordings]  # a log with a gap: its segments, never bridged
-    parts, labels, followed = [], [], []
-    for name, trajectory, (pieces, _) in zip(names, trajectories or names, done):
-        parts += pieces
-        labels += [name] if len(pieces) == 1 else [f"{name}/{k + 1}" for k in range(len(pieces))]
-        followed += [trajectory] * len(pieces)
-    split = len(parts) > len(names)  # each segment a recording of its own, of its log's trajectory
-    moved = {n: words for n, (_, words) in zip(names, done) if words}
-    s = joined(parts, labels, followed if trajectories is not None or split else None)
+    parts, moved = zip(*(preprocess_segments(r, spec) for r in recordings))  # a log with a gap: its segments
+    split = any(len(pieces) > 1 for pieces in parts)  # each segment a recording of its own, of its log's trajectory
+    moved = {n: words for n, words in zip(names, moved) if words}
+    s = joined(list(parts), names, trajectories if trajectories is not None or not split else names)
     for line in (w for group in warnings for w in group):  # once every log is read: an error is the one line
         print(line, file=sys.stderr)
     source = ", ".join(map(str, args.raw))

@@ -418,14 +418,19 @@ def preprocess(recording: Recording, spec: FilterSpec = DEFAULT_FILTER, *, filte
             "time": grid[keep] - (t[0] if origin is None else origin)}
 
 
-def joined(parts: list[dict[str, np.ndarray]], names: list[str],
+def joined(recordings: list[list[dict[str, np.ndarray]]], names: list[str],
            trajectories: list[str] | None = None) -> dict[str, np.ndarray]:
-    """The samples of several recordings (:func:`preprocess` of each) one after
-    another, with ``recording``: each sample's recording name from ``names``;
-    and, given ``trajectories`` (one per recording), ``trajectory``: the
-    trajectory each sample's recording follows."""
+    """The samples of several recordings one after another, each given as its segments
+    (:func:`preprocess_segments`), with ``recording``: each sample's recording name from ``names``, ``NAME/k``
+    for the ``k``-th segment of a recording split at a gap; and, given ``trajectories`` (one per recording),
+    ``trajectory``: the trajectory each sample's recording follows, its segments' too."""
+    parts, labels, followed = [], [], []
+    for pieces, name, trajectory in zip(recordings, names, trajectories or names):
+        parts += pieces
+        labels += [name] if len(pieces) == 1 else [f"{name}/{k + 1}" for k in range(len(pieces))]
+        followed += [trajectory] * len(pieces)
     out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    out["recording"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(names, parts)])
+    out["recording"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(labels, parts)])
     if trajectories is not None:
-        out["trajectory"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(trajectories, parts)])
+        out["trajectory"] = np.concatenate([np.full(len(p["q"]), n) for n, p in zip(followed, parts)])
     return out

@@ -166,3 +166,18 @@ def test_rows_whose_steps_vary_are_put_on_their_median_step_and_it_is_said():
     words = resampling(moved, FilterSpec())
     assert words.startswith("rows 6 to 14 ms apart interpolated onto a uniform 10 ms")
     np.testing.assert_allclose(np.diff(preprocess(moved)["time"]), 0.01)
+
+
+def test_convert_writes_a_log_with_a_gap_as_segments_of_its_trajectory(tmp_path):
+    t = np.arange(0.0, 12.0, 0.01)
+    t = t[(t < 4.0) | (t >= 8.0)]
+    log = tmp_path / "lap.csv"
+    pd.DataFrame({"t": t, "p": np.sin(t), "v": np.cos(t), "f": np.sin(2 * t)}).to_csv(log, index=False)
+    out = tmp_path / "out.csv"
+    r = cli("convert", log, "--columns", "time=t,q_1=p,qd_1=v,tau_1=f", "--cutoff-hz", 10, "--trim", 0.1, "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "recording lap: split at 1 gap(s) of 5 steps or more into 2 segments" in r.stdout
+    frame = pd.read_csv(out)
+    assert frame.groupby("recording").size().to_dict() == {"lap/1": 380, "lap/2": 380}
+    assert set(frame["trajectory"]) == {"lap"}
+    assert not ((frame["time"] > 4.0) & (frame["time"] < 8.0)).any()

@@ -96,18 +96,16 @@ def test_a_declaration_says_which_trajectories_chose_its_filter_and_so_which_tes
      'recordings_in = { file = "all.csv", column = "run" }\n[filter]\nchosen_on = 3\n', r"\[filter\] chosen_on"),
     ('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\nfilter = 6\n'
      'recordings_in = { file = "all.csv", column = "run" }\n', r"\[filter\] must be a table"),
-    # a filter's numbers of the wrong kind: one line each, never a traceback from the filter
-    *[('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\n'
-       f'recordings_in = {{ file = "all.csv", column = "run" }}\n[filter]\n{setting}\n', message)
-      for setting, message in [("decimate = 1.5", r"\[filter\]: decimate must be a whole number >= 1, got 1.5"),
-                               ("order = true", r"\[filter\]: order must be a whole number >= 1, got True"),
-                               ("trim_s = nan", r"filter.trim_s is nan, not a finite number"),
-                               ("cutoff_hz = inf", r"filter.cutoff_hz is inf, not a finite number"),
-                               ('cutoff_hz = "6"', r"\[filter\]: cutoff_hz must be a finite number, got '6'")]],
-    # what the schema holds every field to: its type, its range, a finite number
+    # a filter's numbers of the wrong kind, and what the schema holds every field to (its type, its range, a
+    # finite number): one line each, never a traceback
     *[('columns = "time=t,q_1=q_1,qd_1=qd_1,tau_1=tau_1"\ntest = ["b"]\n'
        f'recordings_in = {{ file = "all.csv", column = "run" }}\n{setting}\n', message)
-      for setting, message in [("rate_hz = inf", r"rate_hz is inf, not a finite number"),
+      for setting, message in [("[filter]\ndecimate = 1.5", r"\[filter\]: decimate must be a whole number >= 1, got 1.5"),
+                               ("[filter]\norder = true", r"\[filter\]: order must be a whole number >= 1, got True"),
+                               ("[filter]\ntrim_s = nan", r"filter.trim_s is nan, not a finite number"),
+                               ("[filter]\ncutoff_hz = inf", r"filter.cutoff_hz is inf, not a finite number"),
+                               ('[filter]\ncutoff_hz = "6"', r"\[filter\]: cutoff_hz must be a finite number, got '6'"),
+                               ("rate_hz = inf", r"rate_hz is inf, not a finite number"),
                                ("locked_at = { j = nan }", r"locked_at.j is nan, not a finite number"),
                                ("root = 3", r"root must be a link's name"),
                                ('time_unit = "h"', r"time_unit must be one of s, ms, us"),
