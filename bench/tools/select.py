@@ -412,15 +412,16 @@ def applicability(train: Dataset, test: Dataset | None, target: Dataset | None, 
     return report
 
 
-def test_informed(system: str, split: str | None) -> tuple[list[str], list[str]]:
+def test_informed(system: str, split: str | None) -> dict:
     """The test trajectories of ``split`` whose torques chose a setting of the file that declares the system (its
     filter's cut-off: ``[filter] chosen_on``) or were read while a rule was chosen (``[informed]``), so that a test
-    figure rests on a choice that read them, and what rests on them in words; none for a system that no such file
-    declares."""
+    figure rests on a choice that read them, and what rests on them in words: the page's ``test_informed`` and
+    ``test_informed_by``; none for a system that no such file declares."""
     declaration = getattr(SYSTEMS[system], "measured", None)
     if declaration is None:
-        return [], []
-    return declaration.test_informed(split or "default"), declaration.informed_by(split or "default")
+        return {"test_informed": [], "test_informed_by": []}
+    return {"test_informed": declaration.test_informed(split or "default"),
+            "test_informed_by": declaration.informed_by(split or "default")}
 
 
 def informed_sentence(result: dict) -> str | None:
@@ -452,7 +453,7 @@ def repage(out: Path, command: str) -> dict:
     if result.get("system") not in SYSTEMS:
         raise UserError(f"{made}: its system {result.get('system')!r} is not registered here; name its file with "
                         f"--system")
-    result.update(zip(("test_informed", "test_informed_by"), test_informed(result["system"], result.get("split"))))
+    result.update(test_informed(result["system"], result.get("split")))
     result["page_only"] = {"command": command, "commit": provenance().get("commit")}
     write_json(made, result)
     text = page(result)
@@ -485,7 +486,7 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
               "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds,
               "training_trajectories": trajectories, "rule": rule(trajectories), "chosen": chosen, "candidates": entries,
               "domain": None if data is None else applicability(data[0], data[1], target, protocol),
-              **dict(zip(("test_informed", "test_informed_by"), test_informed(system, split))),
+              **test_informed(system, split),
               "stack": score_stack(stacked(entries, out, None if data is None else data[0]), entries, out,
                                    None if data is None else data[1])}
     if chosen:

@@ -216,9 +216,10 @@ def test_a_page_whose_test_trajectories_chose_the_filter_says_it_is_test_informe
     flagged, on the page itself; a split, or a system, whose tests chose nothing is not."""
     from bench.tools.select import test_informed
 
-    assert test_informed("dfki_double_pendulum", "swapped")[0] == ["00", "01", "02", "04"]
-    assert test_informed("dfki_double_pendulum", None) == ([], [])
-    assert test_informed("double_pendulum", None) == ([], [])  # no file declares a simulated system
+    assert test_informed("dfki_double_pendulum", "swapped")["test_informed"] == ["00", "01", "02", "04"]
+    assert test_informed("dfki_double_pendulum", None) == {"test_informed": [], "test_informed_by": []}
+    # no file declares a simulated system
+    assert test_informed("double_pendulum", None) == {"test_informed": [], "test_informed_by": []}
     published = Path("results/measured/select_dfki_swapped")
     result = json.loads((published / "select.json").read_text())
     assert result["test_informed"] == ["00", "01", "02", "04"]
@@ -229,7 +230,7 @@ def test_a_page_whose_test_trajectories_chose_the_filter_says_it_is_test_informe
     # the KUKA's pages rest on the loop's round rule and the loop_feasible candidate, chosen while its test
     # ranking on both trajectories was known: each says so, from the same field
     for split, trajectory in (("default", "B"), ("swapped", "A")):
-        assert test_informed("kuka_lwr4", split)[0] == [trajectory]
+        assert test_informed("kuka_lwr4", split)["test_informed"] == [trajectory]
         kuka = json.loads(Path(f"results/measured/select_{split}/select.json").read_text())
         assert kuka["test_informed"] == [trajectory] and "round rule" in kuka["test_informed_by"][0]
         text = Path(f"results/measured/select_{split}/select.md").read_text()
