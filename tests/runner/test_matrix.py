@@ -457,10 +457,10 @@ def test_an_edited_recording_redoes_the_runs_that_read_it_and_no_other(tmp_path)
         'chosen_on = ["00", "01", "02", "04"]', 'chosen_on = ["00", "01"]')
     text += "[recordings]\n" + "".join(f'{k} = {{ file = "dfki_trajectory_{k}.csv.gz", trajectory = "{k}" }}\n'
                                        for k in ("00", "01", "03"))
-    (arm / "arm.toml").write_text(text)
+    (arm / "edited_arm.toml").write_text(text)  # a name of its own: this process registers it
     for name in ("dfki_double_pendulum.urdf.gz", *(f"dfki_trajectory_{k}.csv.gz" for k in ("00", "01", "03"))):
         shutil.copy(DATA_DIR / name, arm / name)
-    argv = ["run", "--systems", f"measured:{arm / 'arm.toml'},double_pendulum", "--methods", "sysid",
+    argv = ["run", "--systems", f"measured:{arm / 'edited_arm.toml'},double_pendulum", "--methods", "sysid",
             "--experiments", "indirect", "--seeds", "0", "--steps", "1", "--n-train", "64", "--n-test", "32",
             "--no-rollout", "--workers", "1", "--out", str(tmp_path / "out")]
     first = cli(*argv)
