@@ -45,7 +45,8 @@ from bench.core import symbolic
 from bench.core.data import Dataset
 from bench.core.experiment import Experiment
 from bench.physics.dynamics import euler_lagrange_chunked
-from bench.core.modelfile import Packer, Unpacker, expression_from_json, expression_to_json, loader
+from bench.core.expressions import expression_from_json, expression_to_json
+from bench.core.modelfile import Packer, Unpacker, loader
 from bench.physics.terms import Term, TermLibrary
 
 #: rows per call when a model's Lagrangian is evaluated on a large data set
@@ -319,7 +320,7 @@ def separate(form) -> Separation | None:
 
 
 def term_to_json(term) -> dict:
-    """A :class:`~bench.physics.terms.Term` as JSON (its expression by :func:`~bench.core.modelfile.expression_to_json`)."""
+    """A :class:`~bench.physics.terms.Term` as JSON (its expression by :func:`~bench.core.expressions.expression_to_json`)."""
     return {"expr": expression_to_json(term.expr), "place": term.place, "name": term.name, "joint": term.joint,
             "shape": term.shape}
 

@@ -17,10 +17,11 @@ import pytest
 import sympy
 from hypothesis import given, settings, strategies as st
 
-from bench.core import modelfile
+from bench.core import expressions, modelfile
 from bench.core.csv_format import write_csv
 from bench.core.data import generate
-from bench.core.modelfile import ModelFileError, expression_from_json, expression_to_json
+from bench.core.expressions import expression_from_json, expression_to_json
+from bench.core.modelfile import ModelFileError
 from methods import METHODS
 from methods.saving import TOLERANCE, held_out, load_model, save_model
 from systems import SYSTEMS
@@ -252,7 +253,7 @@ _symbols = [sympy.Symbol(n, real=True) for n in ("q_1", "q_2", "qd_1", "qd_2")]
 def _apply(name: str, arg):
     """``name(arg)``, or ``arg`` where sympy refuses the value (Heaviside of a complex number)."""
     try:
-        return modelfile.FUNCTIONS[name](arg)
+        return expressions.FUNCTIONS[name](arg)
     except (ValueError, TypeError):
         return arg
 
@@ -262,7 +263,7 @@ _leaves = st.one_of(st.sampled_from(_symbols), st.floats(-1e6, 1e6, allow_nan=Fa
 _expressions = st.recursive(_leaves, lambda inner: st.one_of(
     st.tuples(inner, inner).map(lambda a: a[0] + a[1]), st.tuples(inner, inner).map(lambda a: a[0] * a[1]),
     st.tuples(inner, st.integers(-3, 3)).map(lambda a: a[0] ** a[1]),
-    st.tuples(st.sampled_from(sorted(modelfile.FUNCTIONS)), inner).map(lambda a: _apply(*a))),
+    st.tuples(st.sampled_from(sorted(expressions.FUNCTIONS)), inner).map(lambda a: _apply(*a))),
     max_leaves=8)
 
 
