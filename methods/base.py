@@ -39,6 +39,7 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 
+import methods
 from bench.core.budget import Budget
 from bench.core.data import Dataset, mse
 from bench.core.experiment import EXPERIMENTS, INDIRECT, Experiment
@@ -459,6 +460,7 @@ class FitStart:
 
 #: the methods, by name; methods registered outside this package are declared in the group's entry points
 METHODS: Registry[type[Method]] = Registry("method", group="syrenets_bench.methods")
+METHODS.built_in = methods.register_built_in
 
 
 def saved_hyperparameters(method) -> dict:

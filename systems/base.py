@@ -7,8 +7,11 @@ import re
 from pathlib import Path
 from typing import Callable
 
+import systems
 from bench.core.errors import DataError
 from bench.physics.system import HALF_PI, SYSTEMS, Domain, ParametricForm, System, get_system
+
+SYSTEMS.built_in = systems.register_built_in
 
 __all__ = ["HALF_PI", "SYSTEMS", "Domain", "ParametricForm", "System", "get_system", "register_file"]
 

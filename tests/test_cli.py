@@ -65,27 +65,57 @@ def test_help_lists_the_users_verbs_and_one_verb_for_the_studies():
     assert "--train" in fit_help and "--json" in fit_help
 
 
-#: what a command's modules bring in, which the top-level help and a study's list need none of
-HEAVY = ("torch", "sympy", "pinocchio", "pandas", "scipy", "methods", "systems")
+#: what reading and refusing a user's file needs none of: the libraries and the suite's modules that compute
+#: (the registries' packages, ``methods`` and ``systems``, cost nothing until a name is looked up)
+ENGINES = ("torch", "sympy", "pinocchio", "methods.base", "systems.base", "bench.physics", "bench.runner.run")
+#: what the help texts need none of besides (pandas reads a measured arm's logs)
+HEAVY = ENGINES + ("pandas", "scipy")
+
+
+def _among(module: str, names) -> bool:
+    return any(module == n or module.startswith(n + ".") for n in names)
+
+
+def _loaded(argv, cwd=ROOT):
+    """The heavy modules, studies and command modules that ``python -m bench ARGV`` imported, its exit code and
+    its output."""
+    code = ("import sys\nfrom bench.cli import main\ntry:\n    code = main(sys.argv[1:])\nexcept SystemExit as e:\n"
+            "    code = e.code\nprint(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in "
+            f"{HEAVY!r} or m in {HEAVY!r} or any(m.startswith(h + '.') for h in {HEAVY!r}) or "
+            "m.startswith('bench.studies.') or m.startswith('bench.cli.'))), file=sys.stderr)\n"
+            "sys.exit(code)")
+    r = subprocess.run([sys.executable, "-c", code, *argv], cwd=cwd, capture_output=True, text=True, timeout=300)
+    *lines, modules = r.stderr.splitlines() or [""]
+    return set(modules.split()), r.returncode, r.stdout, "\n".join(lines)
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["study", "--help"], ["fit", "--help"]])
 def test_help_imports_only_the_command_it_names(argv):
-    """A command's modules are imported when it is parsed: ``--help`` and ``study --help`` import none of the
-    heavy libraries, ``fit --help`` only what fit's options need, and no study."""
-    code = ("import sys\nfrom bench.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
-            "print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in "
-            f"{HEAVY!r} or m.startswith('bench.studies.') or m.startswith('bench.cli.'))), file=sys.stderr)")
-    r = subprocess.run([sys.executable, "-c", code, *argv], cwd=ROOT, capture_output=True, text=True, timeout=300)
-    loaded = set(r.stderr.split())
-    assert "usage: python -m bench" in r.stdout and r.returncode == 0, r.stderr[-2000:]
+    """A command's modules are imported when it is parsed: ``--help``, ``study --help`` and ``fit --help``
+    import none of the heavy libraries, the methods or the systems, and no study."""
+    loaded, code, out, _ = _loaded(argv)
+    assert "usage: python -m bench" in out and code == 0
+    assert not {m for m in loaded if _among(m, HEAVY)}, loaded
+    assert not {m for m in loaded if m.startswith("bench.studies.")}, loaded
     if argv[0] == "fit":
-        assert "bench.cli.fit" in loaded and "torch" in loaded  # the methods' options
-        assert not {m for m in loaded if m.startswith("bench.studies.")} and "bench.cli.select" not in loaded
+        assert "bench.cli.fit" in loaded and "bench.cli.select" not in loaded
     else:
-        assert not {m for m in loaded if m.split(".")[0] in HEAVY}, loaded
-        assert not {m for m in loaded if m.startswith("bench.studies.")}, loaded
         assert loaded <= {"bench.cli.parser", "bench.cli.study"}, loaded
+
+
+def test_a_refused_model_file_or_measured_arm_file_is_refused_before_the_engines_are_imported(tmp_path):
+    """A file that is no model, and a measured arm's file that does not parse, are refused in one line, exit 2,
+    before torch, sympy, Pinocchio or a method is imported."""
+    (tmp_path / "model.npz").write_bytes(b"not a model file")
+    (tmp_path / "log.csv").write_text("q_1,qd_1,qdd_1\n0,0,0\n")
+    (tmp_path / "arm.toml").write_text('urdf = "arm.urdf"\n[recordings\n')
+    for argv, what in ((["predict", "--model", "model.npz", "--log", "log.csv", "--out", "out.csv"], "model.npz"),
+                       (["fit", "--system", "measured:arm.toml", "--method", "sysid", "--experiment", "indirect"],
+                        "arm.toml")):
+        loaded, code, _, err = _loaded(argv, cwd=tmp_path)
+        assert code == 2 and err.startswith("error: ") and what in err and len(err.splitlines()) == 1, err
+        assert not {m for m in loaded if _among(m, ENGINES)}, loaded
+    assert not (tmp_path / "out.csv").exists()
 
 
 @pytest.mark.parametrize("command", [None, *COMMANDS, *(f"study {s}" for s in STUDIES)])

@@ -14,11 +14,8 @@ from bench.cli.options import (add_ignore_limits, add_budget, add_config, add_tu
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import atomic_write, check_output
 from bench.evaluation.per_joint import per_joint_lines
-from bench.runner import run
-from bench.runner.run import given_data, make_system, method_config, preflight
 from bench.runner.records import Record, record_path
 from bench.runner.spec import N_TEST, N_TRAIN, RunSpec
-from methods import METHODS
 
 
 def add_arguments(f) -> None:
@@ -51,7 +48,10 @@ def main(args) -> int:
     for path in (args.json, args.save):
         if path:
             check_output(path)
-    (name,), plugins = load_plugins(args, [args.system], [args.method])
+    (name,), plugins = load_plugins(args, [args.system], [args.method])  # a bad file: one line, nothing imported
+    from bench.runner.run import given_data, make_system, method_config, preflight
+    from methods import METHODS
+
     check_names(args, [name], [args.method], [args.experiment])
     check_split(args.split, [name])
     if args.test and not args.train:
@@ -100,6 +100,8 @@ def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None,
     ``data``: the ``(train, test)`` pair the caller read, handed to the run's
     process so that it does not read the files again; ``copy_to``: where the
     record's file, as the run wrote it, is copied (``--json``)."""
+    from bench.runner import run
+
     work = Path(tempfile.mkdtemp(prefix="bench-fit-"))
     record = run.run_one(spec, work, checked=checked, data=data)
     if copy_to is not None:

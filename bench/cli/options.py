@@ -4,6 +4,11 @@ options several of them take (``--set``, ``--plugin``, ``--budget`` with
 
 The option values' types (seeds, counts, fractions, ``NAME=VALUE``) are in
 :mod:`bench.core.arguments`, shared with the measurement scripts.
+
+The registries of methods and systems, and the plugins, are imported in the
+functions that need them, so that a command that refuses its input before it
+names a method or builds a system has not imported the methods (torch) or
+the physics (sympy, Pinocchio).
 """
 
 from __future__ import annotations
@@ -17,8 +22,6 @@ from bench.core.devices import CHOICES, resolve as resolve_device
 from bench.core.registry import RegistryError, UnknownName
 from bench.cli.parser import UsageError
 from bench.runner.plugins import import_plugins, system_plugins
-from methods import METHODS
-from systems import SYSTEMS
 
 #: seconds per run where neither --budget nor --steps is given
 DEFAULT_BUDGET_S = 60.0
@@ -59,6 +62,8 @@ def configurations(args, methods: list[str]) -> dict[str, str]:
     ``default`` (or ``smoke``), then every ``NAME`` given alone for the
     methods that offer it, then every ``METHOD=NAME``, which wins. A name
     that none of ``methods`` offers, or that its method does not, is an error."""
+    from methods import METHODS
+
     chosen = {m: "smoke" if args.smoke else "default" for m in methods}
     given = [(method.strip(), name.strip()) for method, _, name in (c.rpartition("=") for c in args.configs)]
     for method, name in sorted(given, key=lambda g: bool(g[0])):  # a method's own choice last
@@ -85,6 +90,8 @@ def add_split(parser) -> None:
 
 def check_split(split: str | None, systems: list[str]) -> None:
     """Every system offers ``split`` (``None``: each its default)."""
+    from systems import SYSTEMS
+
     if split is None:
         return
     lacking = [s for s in systems if split not in SYSTEMS[s].splits]
@@ -117,6 +124,8 @@ def device(name: str, methods: list[str]) -> str:
     which of ``methods`` do not train on it."""
     resolved = resolve_device(name)
     if resolved != "cpu":
+        from methods import METHODS
+
         ignoring = [m for m in methods if m in METHODS and not METHODS[m].uses_device]
         if ignoring:
             print(f"--device {name}: {', '.join(ignoring)} {'is not a torch method' if len(ignoring) == 1 else 'are not torch methods'} "
@@ -176,6 +185,7 @@ def hyperparameters(overrides: list[tuple[str, object]], method: str, methods: l
 def load_plugins(args, systems: list[str] = (), methods: list[str] = ()) -> tuple[list[str], tuple[str, ...]]:
     """Import ``--plugin`` files and register any ``urdf:PATH`` system; returns
     the systems' names and the plugins a run's own process needs."""
+
     import_plugins(args.plugin)
     names, arms = system_plugins(systems)
     return names, plugin_paths(args.plugin) + arms
@@ -195,6 +205,9 @@ def check_names(args, systems=(), methods=(), experiments=(), named: bool = True
     did not name (every registered method, the default of ``run``) is not: the
     matrix records its runs as not applicable. Returns why each such
     ``(method, system)`` pair does not apply."""
+    from methods import METHODS
+    from systems import SYSTEMS
+
     for registry, names in ((SYSTEMS, systems), (METHODS, methods)):
         for name in names:
             try:

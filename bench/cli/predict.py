@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from bench.cli.parser import UsageError
 from bench.cli.options import add_plugin, load_plugins
@@ -13,8 +12,6 @@ from bench.core.csv_format import read_csv
 from bench.core.data import mse
 from bench.core.fileio import atomic_write, check_output
 from bench.core.modelfile import ModelFileError, read
-from methods.saving import check_torques, load_model
-from systems import SYSTEMS
 
 
 def add_arguments(p) -> None:
@@ -32,7 +29,12 @@ def add_arguments(p) -> None:
 
 def main(args) -> int:
     check_output(args.out)
-    header, _ = read(args.model)  # a file that is no model: one line, before anything else is read
+    header, _ = read(args.model)  # a file that is no model: one line, before anything else is read or imported
+    import pandas as pd
+
+    from methods.saving import check_torques, load_model
+    from systems import SYSTEMS
+
     # the arm's URDF or declaration is the user's to name; a method's plugin (code) only where the command line
     # gives it
     names, _ = load_plugins(args, [args.system] if args.system else [])

@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from bench.core.errors import DataError
 from bench.core.experiment import Experiment
@@ -188,9 +187,12 @@ class Dataset:
         one trajectory count once); ``[]`` for independent samples."""
         return _in_order(self.trajectory_labels())
 
-    def tensors(self, dtype: torch.dtype = torch.float64, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
-        """``q, qd, qdd, tau`` (and ``L``) as tensors of ``dtype`` on ``device`` (the CPU by default): those of
-        :meth:`readable` (a sealed test split's states only, outside scoring)."""
+    def tensors(self, dtype: torch.dtype | None = None, device: torch.device | str | None = None) -> dict[str, torch.Tensor]:
+        """``q, qd, qdd, tau`` (and ``L``) as tensors of ``dtype`` (float64 by default) on ``device`` (the CPU by
+        default): those of :meth:`readable` (a sealed test split's states only, outside scoring)."""
+        import torch  # here: reading and checking a dataset needs no torch
+
+        dtype = torch.float64 if dtype is None else dtype
         return {k: torch.tensor(getattr(self, k), dtype=dtype, device=device) for k in self.readable()}
 
     def readable(self) -> tuple[str, ...]:
@@ -239,6 +241,8 @@ def generate(system, n: int, seed: int, *, cache: bool = True) -> Dataset:
     rng = np.random.default_rng(seed)
     dom = system.domain
     q, qd, qdd = (rng.uniform(*dom.bounds(k, system.dof), size=(n, system.dof)) for k in ("q", "qd", "qdd"))
+    import torch
+
     qt, qdt, qddt = (torch.from_numpy(a) for a in (q, qd, qdd))
     tau, L = system.torque(qt, qdt, qddt)
     data = Dataset(q, qd, qdd, tau.numpy(), L.numpy(), system.name, source)

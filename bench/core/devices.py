@@ -10,11 +10,13 @@ Only a torch method (:attr:`methods.base.Method.uses_device`) trains on the
 device; evaluation always runs on the CPU in float64, as it does for every
 method, so that the scores of a run trained on a GPU are computed exactly as
 a CPU run's are.
+
+torch is imported only where ``cuda`` or ``auto`` is asked for, so that a
+command that checks ``--device cpu`` and then refuses its input has not
+imported it.
 """
 
 from __future__ import annotations
-
-import torch
 
 from bench.core.errors import ConfigError
 
@@ -28,6 +30,10 @@ def resolve(name: str, option: str = "--device") -> str:
     torch sees none, or where ``name`` is not a device."""
     if name not in CHOICES:
         raise ConfigError(f"{option}: one of {', '.join(CHOICES)}, got {name!r}")
+    if name == "cpu":
+        return name
+    import torch
+
     if name == "auto":
         return "cuda" if torch.cuda.is_available() else "cpu"
     if name == "cuda" and not torch.cuda.is_available():
@@ -43,6 +49,8 @@ def describe(name: str) -> dict:
     is read where the record is made, :func:`bench.runner.provenance.device_entry`)."""
     if name != "cuda":
         return {"type": "cpu"}
+    import torch
+
     index = torch.cuda.current_device()
     return {"type": "cuda", "name": torch.cuda.get_device_name(index), "cuda": torch.version.cuda,
             "memory_gb": round(torch.cuda.get_device_properties(index).total_memory / 2**30, 1)}

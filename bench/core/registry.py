@@ -9,12 +9,15 @@ Entries are added with a decorator, never discovered by globbing files::
     class MLP(Method):
         ...
 
-Modules outside the registry's own package that register entries (the
-suite's residual loop, another installed package's methods) are declared as
-entry points of the registry's group in their package's metadata
-(``[project.entry-points."syrenets_bench.methods"]`` in ``pyproject.toml``),
-never registered by a side effect of some other import: the registry imports
-them, once, the first time it is asked for a name or a listing.
+The registry's own package names the modules that register its built-in
+entries (:attr:`Registry.built_in`), and the registry imports them, once, the
+first time it is asked for a name, a listing or a new entry, so that importing
+the package costs nothing until then. Modules outside the registry's own
+package that register entries (the suite's residual loop, another installed
+package's methods) are declared as entry points of the registry's group in
+their package's metadata (``[project.entry-points."syrenets_bench.methods"]``
+in ``pyproject.toml``), never registered by a side effect of some other
+import: the registry imports them, once, at the same moment, after its own.
 
 An entry may declare itself unavailable (a missing optional dependency, a
 runtime that cannot start) through a class method ``unavailable_reason()``
@@ -92,15 +95,24 @@ class Registry(Generic[T]):
         self._composed: dict[str, Entry[T]] = {}  # not listed by names(): made on demand
         #: the entry-point group whose modules register entries (see the module docstring)
         self.group = group
-        self._declared_loaded = group is None
+        #: what imports the modules of the registry's own package that register its entries: set by that package
+        self.built_in: Callable[[], None] | None = None
+        self._own_loaded = self._declared_loaded = False
+
+    def load_built_in(self) -> None:
+        """Import, once, the registry's own modules (:attr:`built_in`)."""
+        if not self._own_loaded and self.built_in is not None:
+            self._own_loaded = True
+            self.built_in()
 
     def load_declared(self) -> None:
-        """Import, once, the modules that installed packages declare in :attr:`group`; one that fails to import
-        is a :class:`RegistryError` naming it."""
+        """Import, once, the registry's own modules (:attr:`built_in`), then those that installed packages declare
+        in :attr:`group`; one of the latter that fails to import is a :class:`RegistryError` naming it."""
+        self.load_built_in()
         if self._declared_loaded:
             return
         self._declared_loaded = True
-        for point in entry_points(group=self.group):
+        for point in entry_points(group=self.group) if self.group else ():
             try:
                 point.load()
             except Exception as exc:

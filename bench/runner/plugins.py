@@ -16,6 +16,7 @@ from typing import Iterable
 import systems
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest
+from systems.measured import read_spec
 
 #: a system given by its robot description: ``urdf:PATH``
 URDF = "urdf:"
@@ -122,7 +123,11 @@ def system_plugins(names: Iterable[str]) -> tuple[list[str], tuple[str, ...]]:
 
 def register_by_file(plugin: str) -> str:
     """Register the system of ``urdf:PATH`` or ``measured:PATH``; returns its name. A
-    :class:`UserError` where the arms' engine is missing here."""
+    :class:`UserError` where the arms' engine is missing here. A measured arm's file is read and checked
+    (:func:`systems.measured.read_spec`) before the systems, their physics and Pinocchio are imported, so
+    that a bad one is refused at once."""
+    if file_prefix(plugin) == MEASURED:
+        read_spec(plugin[len(MEASURED):])
     if systems.WITHOUT_ARMS:
         raise UserError(f"{plugin}: {systems.WITHOUT_ARMS}")
     module, register = BY_FILE[file_prefix(plugin)]

@@ -41,8 +41,8 @@ from bench.core.errors import UserError
 from bench.core.fileio import file_digest
 from bench.runner.plugins import code_plugins, import_plugins, plugin_digest
 from bench.runner.provenance import PROJECT_ROOT
-from methods import METHODS
-from systems import SYSTEMS
+import methods
+import systems
 
 #: the suite's packages, whose modules a run's code follows
 PACKAGES = ("bench", "methods", "systems")
@@ -172,12 +172,12 @@ def code_files(method: str, system: str, plugins: tuple[str, ...] = (),
     """``{file: sha256 prefix}`` of a run's code (the module docstring); ``runs_in`` names the modules that run it
     (the residual loop's job names its own)."""
     roots: list[Path] = []
-    for obj in (*METHODS[method].code_objects(), SYSTEMS[system]):
+    for obj in (*methods.METHODS[method].code_objects(), systems.SYSTEMS[system]):
         roots += [p for p in object_files(obj) if p not in roots]
     paths = closure(roots + [f for f in map(module_file, runs_in) if f is not None])
     # the files that define the system outside the code: its robot description, a measured arm's file and its
     # recordings
-    paths += [p for p in (Path(f).resolve() for f in SYSTEMS[system].source_files() if f) if p.is_file()]
+    paths += [p for p in (Path(f).resolve() for f in systems.SYSTEMS[system].source_files() if f) if p.is_file()]
     out = {}
     for path in paths:
         out.setdefault(_name(path), _digest(path, *_stamp(path)))
