@@ -325,3 +325,95 @@ def test_a_mutated_measured_arm_file_is_refused_in_one_line_or_reads_as_it_decla
     if same:
         for k in ("q", "qd", "qdd", "tau", "time"):
             np.testing.assert_array_equal(got[k], expected[k])
+
+
+#: mutated CSV files the test runs (``BENCH_FUZZ_EXAMPLES`` raises it: 2,000 with ``=2000``)
+CSV_EXAMPLES = ARM_EXAMPLES
+
+
+def _valid_csv(rng_seed: int) -> list[list[str]]:
+    """A valid file of two joints and a column the suite ignores, six rows, as its header and rows of cells:
+    every digit of each float written (``repr``)."""
+    rng = np.random.default_rng(rng_seed)
+    return [REQUIRED + ["extra"]] + [[repr(float(v)) for v in rng.normal(scale=10.0, size=len(REQUIRED) + 1)]
+                                     for _ in range(6)]
+
+
+def _as_read_by_python(text: str) -> dict[str, list[float]] | None:
+    """What a file says, read by Python's own ``csv`` and ``float``: each of :data:`REQUIRED`'s columns, or
+    ``None`` where the file is not one the suite may read (a row of another width, a name twice, a column
+    missing, a cell that is not a finite number the suite computes with). The oracle the suite's reader is
+    held to."""
+    import csv
+    import io
+
+    rows = [r for r in csv.reader(io.StringIO(text)) if r]
+    if len(rows) < 2:
+        return None
+    header = [n.strip() for n in rows[0]]
+    if len(set(header)) != len(header) or any(len(r) != len(header) for r in rows[1:]):
+        return None
+    if any(n not in header for n in REQUIRED):
+        return None
+    out = {}
+    for name in REQUIRED:
+        values = []
+        for row in rows[1:]:
+            cell = row[header.index(name)].strip()
+            try:
+                value = float(cell)
+            except ValueError:
+                return None
+            if "_" in cell or not math.isfinite(value) or abs(value) > MAX_ABS_VALUE:
+                return None
+            values.append(value)
+        out[name] = values
+    return out
+
+
+@settings(max_examples=CSV_EXAMPLES, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(seed=st.integers(0, 3), action=st.sampled_from(["cell", "delete cell", "add cell", "name", "delete line",
+                                                       "repeat line", "blank line", "spaces"]),
+       row=st.integers(0, 6), col=st.integers(0, len(REQUIRED) + 1), cell=CELLS, name=st.sampled_from(COLUMNS))
+def test_a_mutated_csv_file_is_refused_in_one_line_or_reads_what_it_says(tmp_path, seed, action, row, col, cell,
+                                                                          name):
+    """A valid CSV with one change (a cell replaced, deleted or added, a column renamed, a line deleted,
+    repeated or left blank, spaces around a cell): refused in one line naming the file, or read; read, its
+    samples are exactly what Python's own ``csv`` and ``float`` read from it, to the bit, and a file that
+    they cannot read as the suite's format is refused. Never a traceback, and never a sample shifted into
+    another column or rounded."""
+    rows = _valid_csv(seed)
+    row, col = min(row, len(rows) - 1), min(col, len(rows[0]) - 1)
+    if action == "cell":
+        rows[max(row, 1)][col] = cell
+    elif action == "delete cell":
+        del rows[row][col]
+    elif action == "add cell":
+        rows[row].insert(col, cell)
+    elif action == "name":
+        rows[0][col] = name
+    elif action == "delete line":
+        del rows[max(row, 1)]
+    elif action == "repeat line":
+        rows.insert(row, list(rows[max(row, 1)]))
+    elif action == "blank line":
+        rows.insert(max(row, 1), [])
+    else:
+        rows[row][col] = f"  {rows[row][col]} "
+    text = "\n".join(",".join(r) for r in rows) + "\n"
+    path = tmp_path / "data.csv"
+    path.write_text(text)
+    expected = _as_read_by_python(text)
+    try:
+        data = read_csv(path, dof=2)
+    except DataError as exc:
+        check_refusal(exc, path)
+        event("refused")
+        return
+    event("read")
+    assert expected is not None, f"read a file Python's csv does not read as the format:\n{text}"
+    for name in REQUIRED:
+        kind, joint = name.rsplit("_", 1)
+        got = getattr(data, kind)[:, int(joint) - 1]
+        assert got.tolist() == expected[name], (name, text)
