@@ -116,6 +116,15 @@ def _imported(path: Path, mtime_ns: int, size: int) -> tuple[Path, ...]:
     return tuple(sorted(found))
 
 
+def read_all_imports() -> None:
+    """Read the imports of every file of the suite once (:func:`imported`, cached by each file's stamp): the
+    fork server does, so that each run forked from it hashes its code (:func:`code_files`) without parsing
+    the files again."""
+    for package in PACKAGES:
+        for path in sorted((PROJECT_ROOT / package).rglob("*.py")):
+            imported(path.resolve())
+
+
 def closure(roots: list[Path]) -> list[Path]:
     """``roots`` and every suite file they import, however deep (:func:`imported`; the :data:`REGISTRIES` are
     not followed)."""
