@@ -86,6 +86,45 @@ def to_torch(
     return f
 
 
+class SymbolicTangent:
+    """A Lagrangian term ``expr(q, qd)`` compiled to torch with its derivatives, a
+    :class:`~bench.physics.dynamics.TangentLagrangian`: the Euler–Lagrange transform then takes its
+    derivatives from here rather than from two reverse passes.
+
+    ``dL/dq``, ``dL/dqd`` and the derivative of ``dL/dqd`` along ``(dq, dqd)`` are derived by sympy once,
+    and compiled into one function with ``L`` (common subexpressions shared): for a term evaluated again and
+    again (:meth:`bench.physics.terms.Term.torque`'s ``often``), where autograd's two passes cost twice the
+    term's evaluation. ``tests/physics/test_terms.py`` holds its torques to the reverse passes'."""
+
+    def __init__(self, expr: sympy.Expr, dof: int):
+        q, qd = coordinate_symbols(dof)
+        dq = sympy.symbols(f"dq_1:{dof + 1}", real=True)
+        dqd = sympy.symbols(f"dqd_1:{dof + 1}", real=True)
+        self.expr = expr = numeric_subexpressions_to_floats(sympy.sympify(expr))
+        unknown = expr.free_symbols - set(q) - set(qd)
+        if unknown:
+            raise ValueError(f"expression has symbols outside q and qd: {', '.join(sorted(map(str, unknown)))}")
+        d_q = [sympy.diff(expr, s) for s in q]
+        d_qd = [sympy.diff(expr, s) for s in qd]
+        along = [sum((sympy.diff(p, a) * b for a, b in zip(q + qd, dq + dqd)), sympy.Integer(0)) for p in d_qd]
+        self.dof = dof
+        self._raw = sympy.lambdify(list(q) + list(qd) + list(dq) + list(dqd), [expr, *d_q, *d_qd, *along],
+                                   modules="torch", cse=True)
+
+    def _parts(self, q, qd, dq, dqd):
+        zero = q[..., 0] * 0
+        out = [zero + v for v in self._raw(*q.unbind(-1), *qd.unbind(-1), *dq.unbind(-1), *dqd.unbind(-1))]
+        n = self.dof
+        return out[0], torch.stack(out[1:1 + n], -1), torch.stack(out[1 + n:1 + 2 * n], -1), \
+            torch.stack(out[1 + 2 * n:], -1)
+
+    def __call__(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return self._parts(q, qd, torch.zeros_like(q), torch.zeros_like(qd))[0]
+
+    def tangent(self, q, qd, dq, dqd):
+        return self._parts(q, qd, dq, dqd)
+
+
 def to_numpy(expr: sympy.Expr, dof: int) -> Callable:
     """Compile ``expr(q, qd)`` into a numpy function of ``(batch, dof)`` arrays."""
     import numpy as np

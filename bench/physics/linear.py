@@ -231,7 +231,7 @@ class _Summed(FittedModel):
         self.terms = terms
 
     def predict_torque(self, data: Dataset) -> np.ndarray:
-        return sum((t.torque(data) for t in self.terms), np.zeros((len(data), data.dof)))
+        return sum((t.torque(data, often=True) for t in self.terms), np.zeros((len(data), data.dof)))
 
     def predict_lagrangian(self, data: Dataset) -> np.ndarray:
         return sum((t.value(data) for t in self.terms), np.zeros(len(data)))

@@ -124,7 +124,7 @@ def test_a_loop_models_mass_matrix_and_bias_are_those_of_its_torque(data, monkey
     coef = np.linspace(0.1, 0.5, len(terms))
     model = LoopModel(TrueModel(system), terms, coef, np.zeros(len(terms)))
     asked, torque = [], Term.torque
-    monkeypatch.setattr(Term, "torque", lambda self, d: asked.append((self.place, len(d))) or torque(self, d))
+    monkeypatch.setattr(Term, "torque", lambda self, d, often=False: asked.append((self.place, len(d))) or torque(self, d, often))
     M, c = model.mass_and_bias(data.q, data.qd)
     monkeypatch.undo()
     n = len(data)  # one transform of L for the effects of the state alone, one at dof + 1 accelerations for the rest
@@ -134,3 +134,20 @@ def test_a_loop_models_mass_matrix_and_bias_are_those_of_its_torque(data, monkey
     np.testing.assert_allclose(c, c_all, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(np.einsum("nij,nj->ni", M, data.qdd) + c, model.predict_torque(data), rtol=1e-10, atol=1e-10)
     assert not np.allclose(M, FittedModel.mass_and_bias(TrueModel(system), data.q, data.qd)[0])  # the armature's
+
+
+def test_a_term_asked_often_takes_its_derivatives_from_sympy_and_gives_autograds_torques():
+    """A model's summed terms of ``L`` (``often``: a driven rollout asks at each step) give, with the derivatives
+    sympy derived once, the torques of the transform's two reverse passes, for every term of a three-joint
+    library summed at random coefficients and one term alone (a constant, a term of ``q`` only)."""
+    from bench.physics.terms import lagrangian_library
+
+    library = lagrangian_library(3, ("angle", "angle", "linear"))
+    rng = np.random.default_rng(3)
+    data = Dataset(*(rng.normal(size=(64, 3)) for _ in range(3)), np.zeros((64, 3)))
+    (summed,) = [t for t in TermLibrary(library.terms).summed(rng.normal(size=len(library.terms))) if t.place == "L"]
+    q, _ = symbolic.coordinate_symbols(3)
+    for term in (summed, Term.lagrangian(sympy.Integer(2)), Term.lagrangian(sympy.cos(q[0]) * q[2])):
+        often, once = term.torque(data, often=True), term.torque(data)
+        np.testing.assert_allclose(often, once, rtol=1e-12, atol=1e-12 * max(1.0, np.abs(once).max()))
+    assert np.abs(summed.torque(data)).max() > 1.0  # not a vacuous match
