@@ -130,7 +130,9 @@ def one_system_per_kind(names: list[str]) -> list[str]:
     method does on its device depends on its code and on that kind (the data's
     shapes, times, trajectories), not on which system of a kind gave them, so
     the device check (:func:`check_device`, a whole fit with every op checked,
-    about fifteen times a plain fit's time) runs on these."""
+    about fifteen times a plain fit's time) runs on these, and so does the
+    check of a symbolic method's written-out expression (sympy builds SyReNets'
+    network term for term: seconds on a seven-joint arm, each time)."""
     kinds = {}
     for name in names:
         cls = SYSTEMS[name]
@@ -140,8 +142,10 @@ def one_system_per_kind(names: list[str]) -> list[str]:
 
 def check_method(cls, train: Dataset, test: Dataset, experiment: str, device: bool = True) -> None:
     """``cls`` on ``train`` and ``test``: it fits within its smoke configuration's
-    steps, replays, predicts finite values and, where symbolic, writes out its
-    model; with ``device``, its fit keeps to its device (:func:`check_device`)."""
+    steps, replays and predicts finite values; with ``device`` (on one system of
+    each kind, :func:`one_system_per_kind`), its fit keeps to its device
+    (:func:`check_device`) and, where symbolic, it writes out its model as the
+    expression it predicts with."""
     smoke = cls.smoke_config()
     assert smoke, f"{cls.name} declares no smoke configuration"
     assert smoke.get("max_steps"), "a smoke configuration must bound its steps, so that a seed is reproducible"
@@ -163,6 +167,8 @@ def check_method(cls, train: Dataset, test: Dataset, experiment: str, device: bo
         check_device(cls, train, experiment)
     if cls(**smoke).stacking_unavailable_reason() is None:
         check_stacked(cls, smoke, train, test, experiment, first=m)
+    if not device:
+        return
     expr = m.expression()
     engine = train.system in SYSTEMS and not SYSTEMS[train.system].symbolic
     if "symbolic" in cls.tags and not (engine and "parametric" in cls.tags):  # SysId fits an engine's regressor

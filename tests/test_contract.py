@@ -13,7 +13,7 @@ from tests.contract import check_method, check_system, one_system_per_kind, suit
 
 SUITE_METHODS = [n for n in suite_entries(METHODS, "methods") if METHODS.entry(n).available]
 SUITE_SYSTEMS = suite_entries(SYSTEMS, "systems")
-#: the systems a method's fit is checked on its device on (see one_system_per_kind)
+#: the systems a method's fit is checked on its device on, and its expression written out (see one_system_per_kind)
 DEVICE_SYSTEMS = one_system_per_kind(SUITE_SYSTEMS)
 
 
