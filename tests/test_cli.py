@@ -104,18 +104,20 @@ def test_help_imports_only_the_command_it_names(argv):
 
 
 def test_a_refused_model_file_or_measured_arm_file_is_refused_before_the_engines_are_imported(tmp_path):
-    """A file that is no model, and a measured arm's file that does not parse, are refused in one line, exit 2,
-    before torch, sympy, Pinocchio or a method is imported."""
+    """A file that is no model (predict), and a measured arm's file that does not parse (fit, select), are
+    refused in one line, exit 2, with nothing written, before torch, sympy, Pinocchio or a method is
+    imported."""
     (tmp_path / "model.npz").write_bytes(b"not a model file")
     (tmp_path / "log.csv").write_text("q_1,qd_1,qdd_1\n0,0,0\n")
     (tmp_path / "arm.toml").write_text('urdf = "arm.urdf"\n[recordings\n')
     for argv, what in ((["predict", "--model", "model.npz", "--log", "log.csv", "--out", "out.csv"], "model.npz"),
                        (["fit", "--system", "measured:arm.toml", "--method", "sysid", "--experiment", "indirect"],
-                        "arm.toml")):
+                        "arm.toml"),
+                       (["select", "--system", "measured:arm.toml", "--out", "chosen"], "arm.toml")):
         loaded, code, _, err = _loaded(argv, cwd=tmp_path)
         assert code == 2 and err.startswith("error: ") and what in err and len(err.splitlines()) == 1, err
         assert not {m for m in loaded if _among(m, ENGINES)}, loaded
-    assert not (tmp_path / "out.csv").exists()
+    assert not (tmp_path / "out.csv").exists() and not (tmp_path / "chosen").exists()
 
 
 @pytest.mark.parametrize("command", [None, *COMMANDS, *(f"study {s}" for s in STUDIES)])

@@ -45,7 +45,6 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -64,70 +63,15 @@ from bench.runner.provenance import provenance
 from bench.runner.records import Record, record_path
 from bench.runner.spec import RunSpec
 from bench.tools import stack_score
+from bench.tools.candidates import CANDIDATES, GP_EPOCHS, Candidate  # noqa: F401  (select's, by name)
 from methods import METHODS
 from methods.saving import held_out
 from systems import SYSTEMS
 
 
-@dataclass(frozen=True)
-class Candidate:
-    """A candidate: its name on the page, the method, its configuration and the hyperparameters it fixes.
-    :attr:`work` is the steps its final fit does where ``--steps`` is not given (its fold fits do the same,
-    :mod:`bench.evaluation.tuning`); select's seconds are then only a ceiling, past which it is killed.
-    ``start`` is when its run starts among the others, the lowest first (:func:`run`): the longest runs first
-    (the loop's rounds on every fold; then the searches of the learned residuals; the records of
-    results/measured/select_default say how long each took), so that two workers end close together. ``loop+gp``
-    starts after them: its prior is the loop's model on each fold, which the ``loop`` candidate's fits share
-    through the runs' folder (:func:`methods.hybrid.share_priors`), so that it does not run the rounds again."""
-
-    name: str
-    method: str
-    profile: str = "default"
-    fixed: tuple[tuple[str, object], ...] = ()
-    start: int = 0
-    #: passes over the training samples its fits make at least (0: its ``work`` alone), in the batches of the
-    #: learned residual ``learner`` (a method's name: its default ``batch_size`` samples a step)
-    epochs: float = 0.0
-    learner: str | None = None
-
-    @property
-    def work(self) -> int:
-        """The work its method declares (:attr:`methods.base.Method.work`)."""
-        return METHODS[self.method].work
-
-    def steps(self, samples: int | None) -> int:
-        """The steps of its fits on ``samples`` training samples: ``work``, or more where ``epochs`` passes over
-        them in the learner's batches take more (an iterative fit's work grows with the data)."""
-        if not self.epochs or not samples:
-            return self.work
-        batch = METHODS[self.learner].Config().batch_size
-        return max(self.work, math.ceil(self.epochs * samples / batch))
-
-
 #: the learned residuals' steps at least: a GP's (:mod:`methods.gp`) and a network's (the MLP's, DeLaN's), the
 #: work each method declares (:attr:`methods.base.Method.work`)
 GP_STEPS, NETWORK_STEPS = METHODS["gp"].work, METHODS["mlp"].work
-#: the passes over the training samples the GP's steps make of the KUKA's 4,926 (in its batches of 512),
-#: rounded down: on a longer log its fits make as many passes, and so more steps. The networks keep their
-#: steps: as many passes (5,019 steps on 64,240 samples) put the MLP's and DeLaN's searches past select's
-#: ceiling on the long-log study's log with one core busy beside them (bench select at bf81cac)
-GP_EPOCHS = 3.0
-
-#: the candidates, in the page's order; the closed-form fits (SysId, sparse regression) are one step
-CANDIDATES = (
-    Candidate("standard", "sysid", "standard", start=9),
-    Candidate("feasible", "sysid", "feasible", start=8),
-    Candidate("standard+gp", "standard+gp", start=5, epochs=GP_EPOCHS, learner="gp"),
-    Candidate("feasible+gp", "feasible+gp", start=4, epochs=GP_EPOCHS, learner="gp"),
-    Candidate("standard+mlp", "standard+mlp", start=2),
-    Candidate("feasible+delan", "feasible+delan", start=3),
-    Candidate("feasible+sparse_torque", "feasible+sparse_torque", start=7),
-    Candidate("loop", "loop", start=0),
-    Candidate("loop_feasible", "loop", "feasible", start=1),
-    Candidate("loop+gp", "loop+gp", start=6, epochs=GP_EPOCHS, learner="gp"),
-)
-
-
 def specs(system: str, split: str | None, budget_s: float | None, steps: int | None, seed: int, out: Path,
           plugins: tuple[str, ...], candidates=CANDIDATES, rollout: bool = False,
           protocol: str | None = None, samples: int | None = None) -> list[tuple[Candidate, RunSpec]]:

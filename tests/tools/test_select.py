@@ -195,7 +195,7 @@ def test_selects_default_ceiling_grows_with_the_training_samples_as_the_work_doe
     assert command.ceiling(4926) == command.ceiling(10_000) == 900.0
     assert command.ceiling(64_240) == 5782.0 and command.ceiling(20_001) == 1801.0
     seen = []
-    monkeypatch.setattr(command, "select", lambda *a, **k: seen.append(k["budget_s"]) or {"chosen": None})
+    monkeypatch.setattr("bench.tools.select.select", lambda *a, **k: seen.append(k["budget_s"]) or {"chosen": None})
     train = len(SYSTEMS["kuka_lwr4"]().load("train"))
     assert cli("select", "--system", "kuka_lwr4", "--out", tmp_path / "a").returncode == 1
     assert cli("select", "--system", "kuka_lwr4", "--out", tmp_path / "b", "--budget", "30").returncode == 1
