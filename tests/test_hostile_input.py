@@ -51,18 +51,27 @@ def check_refusal(exc: Exception, path) -> None:
     assert str(path) in message and "\n" not in message and "Traceback" not in message
 
 
-@SETTINGS
-@given(content=st.one_of(csv_texts().map(str.encode), st.binary(max_size=200)))
-def test_a_csv_file_loads_whole_or_is_refused_in_one_line(tmp_path, content):
-    path = tmp_path / "data.csv"
-    path.write_bytes(content)
+def _read_or_refused(path):
+    """The file read as the suite's format of two joints, or ``None`` where it was refused in one line naming
+    it."""
     try:
         data = read_csv(path, dof=2)
     except DataError as exc:
         check_refusal(exc, path)
         event("refused")
+        return None
+    event("read")
+    return data
+
+
+@SETTINGS
+@given(content=st.one_of(csv_texts().map(str.encode), st.binary(max_size=200)))
+def test_a_csv_file_loads_whole_or_is_refused_in_one_line(tmp_path, content):
+    path = tmp_path / "data.csv"
+    path.write_bytes(content)
+    data = _read_or_refused(path)
+    if data is None:
         return
-    event("loaded")
     for name in ("q", "qd", "qdd", "tau"):
         values = getattr(data, name)
         assert values.shape == (len(data), 2) and np.isfinite(values).all() and (np.abs(values) <= MAX_ABS_VALUE).all()
@@ -405,13 +414,9 @@ def test_a_mutated_csv_file_is_refused_in_one_line_or_reads_what_it_says(tmp_pat
     path = tmp_path / "data.csv"
     path.write_text(text)
     expected = _as_read_by_python(text)
-    try:
-        data = read_csv(path, dof=2)
-    except DataError as exc:
-        check_refusal(exc, path)
-        event("refused")
+    data = _read_or_refused(path)
+    if data is None:
         return
-    event("read")
     assert expected is not None, f"read a file Python's csv does not read as the format:\n{text}"
     for name in REQUIRED:
         kind, joint = name.rsplit("_", 1)
