@@ -422,3 +422,18 @@ def test_a_mutated_csv_file_is_refused_in_one_line_or_reads_what_it_says(tmp_pat
         kind, joint = name.rsplit("_", 1)
         got = getattr(data, kind)[:, int(joint) - 1]
         assert got.tolist() == expected[name], (name, text)
+
+
+def test_a_header_read_checks_the_rows_it_reads_and_the_whole_read_checks_every_row(tmp_path):
+    """``read_frame(path, nrows=1)`` (a log's columns) reads and checks its first row only, so a row that lost a
+    field further down is refused by the whole read, not by the header's."""
+    from bench.core.csv_format import read_frame
+
+    path = tmp_path / "log.csv.gz"
+    rows = [",".join(REQUIRED)] + [",".join(["1.0"] * len(REQUIRED))] * 5 + [",".join(["1.0"] * (len(REQUIRED) - 1))]
+    import gzip
+
+    path.write_bytes(gzip.compress(("\n\n".join(rows) + "\n").encode()))
+    assert list(read_frame(path, nrows=1).columns) == REQUIRED
+    with pytest.raises(DataError, match=r"data row 6 has 7 fields, where its header names 8 columns"):
+        read_frame(path)

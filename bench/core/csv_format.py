@@ -182,7 +182,7 @@ def _check_widths(path: Path, sep: str, width: int, nrows: int | None) -> None:
     import pandas as pd
 
     with pd.io.common.get_handle(path, "rb", compression="infer", is_text=False) as handle:
-        raw = handle.handle.read()
+        raw = handle.handle.read() if nrows is None else _first_lines(handle.handle, nrows + 1)
     if sep in (",", ";", "\t") and b'"' not in raw:
         counts = _separators_per_line(raw, ord(sep))
     else:
@@ -200,6 +200,17 @@ def _check_widths(path: Path, sep: str, width: int, nrows: int | None) -> None:
         row = int(short[0])
         raise DataError(f"{path}: data row {row + 1} has {int(counts[row]) + 1} fields, where its header names "
                         f"{width} columns (a field lost from the row would shift the ones after it)")
+
+
+def _first_lines(lines, count: int) -> bytes:
+    """The lines of a file up to its ``count``-th that is not blank (a header read, ``nrows``, reads no more)."""
+    kept, filled = [], 0
+    for line in lines:
+        kept.append(line)
+        filled += bool(line.strip())
+        if filled >= count:
+            break
+    return b"".join(kept)
 
 
 def _separators_per_line(raw: bytes, sep: int) -> np.ndarray:
