@@ -5,8 +5,8 @@ options several of them take (``--set``, ``--plugin``, ``--budget`` with
 The option values' types (seeds, counts, fractions, ``NAME=VALUE``) are in
 :mod:`bench.core.arguments`, shared with the measurement scripts.
 
-The registries of methods and systems, and the plugins, are imported in the
-functions that need them, so that a command that refuses its input before it
+The registries of methods and systems are imported in the functions that
+need them, so that a command that refuses its input before it
 names a method or builds a system has not imported the methods (torch) or
 the physics (sympy, Pinocchio).
 """
@@ -185,7 +185,6 @@ def hyperparameters(overrides: list[tuple[str, object]], method: str, methods: l
 def load_plugins(args, systems: list[str] = (), methods: list[str] = ()) -> tuple[list[str], tuple[str, ...]]:
     """Import ``--plugin`` files and register any ``urdf:PATH`` system; returns
     the systems' names and the plugins a run's own process needs."""
-
     import_plugins(args.plugin)
     names, arms = system_plugins(systems)
     return names, plugin_paths(args.plugin) + arms

@@ -11,8 +11,9 @@ Entries are added with a decorator, never discovered by globbing files::
 
 The registry's own package names the modules that register its built-in
 entries (:attr:`Registry.built_in`), and the registry imports them, once, the
-first time it is asked for a name, a listing or a new entry, so that importing
-the package costs nothing until then. Modules outside the registry's own
+first time it is asked for a name or a listing (the package's ``__getattr__``
+asks as it hands the registry out), so that importing the package costs
+nothing until then. Modules outside the registry's own
 package that register entries (the suite's residual loop, another installed
 package's methods) are declared as entry points of the registry's group in
 their package's metadata (``[project.entry-points."syrenets_bench.methods"]``
