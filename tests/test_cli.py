@@ -89,22 +89,24 @@ def _loaded(argv, cwd=ROOT):
     return set(modules.split()), r.returncode, r.stdout, "\n".join(lines)
 
 
-@pytest.mark.parametrize("argv", [["--help"], ["study", "--help"], ["fit", "--help"]])
+@pytest.mark.parametrize("argv", [["--help"], ["study", "--help"], ["fit", "--help"], ["run", "--help"],
+                                  ["residual", "--help"]])
 def test_help_imports_only_the_command_it_names(argv):
-    """A command's modules are imported when it is parsed: ``--help``, ``study --help`` and ``fit --help``
-    import none of the heavy libraries, the methods or the systems, and no study."""
+    """A command's modules are imported when it is parsed: ``--help``, ``study --help`` and a command's
+    ``--help`` import none of the heavy libraries, the methods or the systems, and no study."""
     loaded, code, out, _ = _loaded(argv)
     assert "usage: python -m bench" in out and code == 0
     assert not {m for m in loaded if _among(m, HEAVY)}, loaded
     assert not {m for m in loaded if m.startswith("bench.studies.")}, loaded
-    if argv[0] == "fit":
-        assert "bench.cli.fit" in loaded and "bench.cli.select" not in loaded
+    if argv[0] != "--help" and argv[0] != "study":
+        assert f"bench.cli.{argv[0]}" in loaded and not {f"bench.cli.{c}" for c in COMMANDS if c != argv[0]} & loaded
     else:
         assert loaded <= {"bench.cli.parser", "bench.cli.study"}, loaded
 
 
 def test_a_refused_model_file_or_measured_arm_file_is_refused_before_the_engines_are_imported(tmp_path):
-    """A file that is no model (predict), and a measured arm's file that does not parse (fit, select), are
+    """A file that is no model (predict), and a measured arm's file that does not parse (fit, run, select,
+    residual), are
     refused in one line, exit 2, with nothing written, before torch, sympy, Pinocchio or a method is
     imported."""
     (tmp_path / "model.npz").write_bytes(b"not a model file")
@@ -113,11 +115,14 @@ def test_a_refused_model_file_or_measured_arm_file_is_refused_before_the_engines
     for argv, what in ((["predict", "--model", "model.npz", "--log", "log.csv", "--out", "out.csv"], "model.npz"),
                        (["fit", "--system", "measured:arm.toml", "--method", "sysid", "--experiment", "indirect"],
                         "arm.toml"),
-                       (["select", "--system", "measured:arm.toml", "--out", "chosen"], "arm.toml")):
+                       (["run", "--systems", "measured:arm.toml", "--methods", "sysid", "--out", "ran"], "arm.toml"),
+                       (["select", "--system", "measured:arm.toml", "--out", "chosen"], "arm.toml"),
+                       (["residual", "--system", "measured:arm.toml", "--method", "sysid", "--json", "loop.json"],
+                        "arm.toml")):
         loaded, code, _, err = _loaded(argv, cwd=tmp_path)
         assert code == 2 and err.startswith("error: ") and what in err and len(err.splitlines()) == 1, err
         assert not {m for m in loaded if _among(m, ENGINES)}, loaded
-    assert not (tmp_path / "out.csv").exists() and not (tmp_path / "chosen").exists()
+    assert {p.name for p in tmp_path.iterdir()} == {"model.npz", "log.csv", "arm.toml"}  # nothing written
 
 
 @pytest.mark.parametrize("command", [None, *COMMANDS, *(f"study {s}" for s in STUDIES)])

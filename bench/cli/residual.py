@@ -9,11 +9,8 @@ from bench.cli.options import (add_ignore_limits, add_config, add_device, add_pl
                                check_split, configurations, device, hyperparameters, load_plugins, number)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
-from bench.residual.job import ResidualJob, run_residual
-from bench.residual.loop import FIT_SHARE, MAX_ROUNDS
-from bench.residual.report import summary_lines
+from bench.residual.limits import FIT_SHARE, MAX_ROUNDS
 from bench.runner.job import KILL_FACTOR
-from methods import METHODS
 
 
 def add_arguments(res) -> None:
@@ -51,7 +48,10 @@ def main(args) -> int:
     for path in (args.json, args.report):
         if path is not None:
             check_output(path)
-    (name,), plugins = load_plugins(args, [args.system])
+    (name,), plugins = load_plugins(args, [args.system])  # a bad file: one line, nothing imported
+    from bench.residual.job import ResidualJob, run_residual
+    from bench.residual.report import summary_lines
+
     check_names(args, [name], [args.method])
     check_split(args.split, [name])
     budget_s, steps = work(args)
@@ -84,6 +84,8 @@ def work(args) -> tuple[float | None, int | None]:
     with no ceiling, so that the loop's rounds are not decided by the machine's speed; a method without any gets
     the default seconds."""
     if args.steps is None and args.budget is None:
+        from methods import METHODS
+
         own = METHODS[args.method].work
         if own is not None:
             return None, own

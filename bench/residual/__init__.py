@@ -20,13 +20,23 @@ add them, refit, and report the error before and after.
 * :mod:`~bench.residual.job`: the loop through the runner (:func:`run_residual`);
 * :mod:`~bench.residual.result`, :mod:`~bench.residual.report`: its typed
   result and its outputs.
+
+The package imports none of them until one of its names is asked for (PEP 562's module ``__getattr__``), so
+that :mod:`bench.residual.limits` is read without the loop.
 """
 
-from bench.residual.library import loop_library
-from bench.residual.job import ResidualJob, run_residual
-from bench.residual.loop import residual_loop
-from bench.residual.report import write_outputs
-from bench.residual.result import ResidualResult
-from bench.residual.tracing import trace
+import importlib
 
-__all__ = ["ResidualJob", "ResidualResult", "loop_library", "residual_loop", "run_residual", "trace", "write_outputs"]
+_EXPORTS = {
+    "ResidualJob": "bench.residual.job", "ResidualResult": "bench.residual.result",
+    "loop_library": "bench.residual.library", "residual_loop": "bench.residual.loop",
+    "run_residual": "bench.residual.job", "trace": "bench.residual.tracing", "write_outputs": "bench.residual.report",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'bench.residual' has no attribute {name!r}")

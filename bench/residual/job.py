@@ -18,7 +18,8 @@ from bench.core.errors import UserError
 from bench.core.fileio import file_digest, read_settings, write_json
 from bench.core.scoring import scoring
 from bench.evaluation.per_joint import logged_test_torque, per_joint, per_joint_lines
-from bench.residual.loop import DEFAULT_BUDGET_S, residual_loop
+from bench.residual.limits import DEFAULT_BUDGET_S
+from bench.residual.loop import residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult
 from bench.runner.run import given_data, make_system, method_config, preflight

@@ -65,7 +65,7 @@ can undo a round) is the model's refit strategy, chosen once from the model
    as it was and is not undone: the findings are not offered again, and the
    next round traces without them.
 
-The budget's seconds bound the whole loop (under a work budget, its steps,
+The budget's seconds bound the whole loop (:mod:`bench.residual.limits`; under a work budget, its steps,
 nothing below depends on time: see :func:`residual_loop`): the method's fit has
 :data:`FIT_SHARE` of it, each cross-fit of a kept fit :data:`CROSS_FIT_SHARE`,
 the polish stops starting new starts at :data:`POLISH_SHARE`, a round starts
@@ -100,6 +100,8 @@ from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
 from bench.residual.rollouts import driven_rollouts, test_mse
 from bench.residual.criteria import MIN_HELDOUT_GAIN
+from bench.residual.limits import (CROSS_FIT_SHARE, DEFAULT_BUDGET_S, FIT_SHARE, MAX_ROUNDS, POLISH_SHARE,
+                                   TRACE_SHARE)
 from bench.residual.tracing import BUDGET_STOP, trace
 from bench.residual.sensors import Sensed, Sensor, column as sensor_column
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
@@ -108,20 +110,6 @@ from bench.residual.validation import describe as describe_validation
 from bench.runner.progress import Report
 from bench.runner.provenance import device_entry, provenance
 from systems import SYSTEMS
-
-MAX_ROUNDS = 6
-#: seconds for the whole loop where no budget is given
-DEFAULT_BUDGET_S = 60.0
-#: the share of the loop's budget its method's fit has
-FIT_SHARE = 0.5
-#: the polish starts no new start after this share of the loop's budget
-POLISH_SHARE = 0.75
-#: tracing starts no new step after this share of the loop's budget (the joint
-#: refit, pruning and the held-out check follow)
-TRACE_SHARE = 0.85
-#: the share of the loop's budget each of the two cross-fits of a kept fit has
-#: (see :func:`~bench.residual.strategies.cross_fit`)
-CROSS_FIT_SHARE = 0.15
 
 
 #: the training samples the loop works on at most: a longer log is thinned to every k-th sample of each

@@ -12,7 +12,7 @@ the same samples and seed give the same model on any machine:
 
 * as a hybrid's prior it runs as ``bench residual --steps 1`` runs it
   (SysId's one solve a fit) until a round accepts nothing, at most
-  :data:`~bench.residual.loop.MAX_ROUNDS` rounds, whatever the hybrid's
+  :data:`~bench.residual.limits.MAX_ROUNDS` rounds, whatever the hybrid's
   budget; being fixed work, it is identified before that budget starts
   (:meth:`methods.hybrid.Hybrid.prepare_samples`);
 * as the method ``loop`` a round is its step: under a work budget of ``N``
@@ -36,7 +36,8 @@ from bench.core.experiment import INDIRECT
 from bench.core.budget import Budget
 from bench.core.data import Dataset
 from bench.physics.models import FittedModel
-from bench.residual.loop import MAX_ROUNDS, not_started, residual_loop
+from bench.residual.limits import MAX_ROUNDS
+from bench.residual.loop import not_started, residual_loop
 from bench.residual.result import ResidualResult
 from methods.base import METHODS, Method
 from methods.config import MethodConfig, Named
@@ -59,13 +60,13 @@ class LoopConfig(MethodConfig):
 
 def identify(train: Dataset, system, seed: int) -> FittedModel:
     """The loop's final model on ``train``: SysId's one solve a fit, until a round accepts nothing (at most
-    :data:`~bench.residual.loop.MAX_ROUNDS` rounds), its progress printed line by line."""
+    :data:`~bench.residual.limits.MAX_ROUNDS` rounds), its progress printed line by line."""
     return run(train, seed, Budget(steps=1), MAX_ROUNDS).models[1]
 
 
 def run(train: Dataset, seed: int, budget: Budget, rounds: int | None = None, friction: bool = False) -> ResidualResult:
     """The loop on ``train`` within ``budget``, at most ``rounds`` rounds (default: under a work budget of ``N``
-    steps, ``N``; under a time budget, :data:`~bench.residual.loop.MAX_ROUNDS`), from the rigid body alone or,
+    steps, ``N``; under a time budget, :data:`~bench.residual.limits.MAX_ROUNDS`), from the rigid body alone or,
     with ``friction``, from SysId's feasible model with each joint's laws (:class:`LoopConfig`), its progress
     printed line by line."""
     if rounds is None:

@@ -30,7 +30,7 @@ from bench.core.fileio import atomic_write, check_output, write_json
 from bench.runner.provenance import machine, made_at, provenance
 from bench.runner.threads import THREAD_VARS
 from bench.studies import long_log
-from bench.residual.loop import MAX_ROUNDS
+from bench.residual.limits import MAX_ROUNDS
 from bench.studies.selection_benchmark import LONG, make
 from bench.studies.trees import ROOT, export
 

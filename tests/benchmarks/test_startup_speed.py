@@ -50,8 +50,13 @@ def test_startup_refused_model_file(benchmark, files):
                             str(files / "log.csv"), "--out", str(files / "out.csv"), code=2), rounds=3, iterations=1)
 
 
-def test_startup_refused_measured_arm_file(benchmark, files):
+@pytest.mark.parametrize("command", [
+    ("fit", "--system", "{arm}", "--method", "sysid", "--experiment", "indirect"),
+    ("run", "--systems", "{arm}", "--methods", "sysid", "--out", "{folder}/ran"),
+    ("residual", "--system", "{arm}", "--method", "sysid"),
+])
+def test_startup_refused_measured_arm_file(benchmark, files, command):
     benchmark.group = "startup"
-    benchmark.extra_info["startup"] = "a refused measured-arm file (bench fit)"
-    benchmark.pedantic(_run("-m", "bench", "fit", "--system", f"measured:{files / 'arm.toml'}", "--method", "sysid",
-                            "--experiment", "indirect", code=2), rounds=3, iterations=1)
+    benchmark.extra_info["startup"] = f"a refused measured-arm file (bench {command[0]})"
+    argv = [w.format(arm=f"measured:{files / 'arm.toml'}", folder=files) for w in command]
+    benchmark.pedantic(_run("-m", "bench", *argv, code=2), rounds=3, iterations=1)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from bench.core.budget import Budget
-from bench.residual.loop import MAX_ROUNDS
+from bench.residual.limits import MAX_ROUNDS
 from bench.tools import stack_score
 from bench.tools.select import CANDIDATES, FEW_RULE, GP_STEPS, LOWEST_RULE, NETWORK_STEPS, choose, page, specs
 from bench.tools.select import rule as select_rule
