@@ -106,9 +106,8 @@ def test_help_imports_only_the_command_it_names(argv):
 
 def test_a_refused_model_file_or_measured_arm_file_is_refused_before_the_engines_are_imported(tmp_path):
     """A file that is no model (predict), and a measured arm's file that does not parse (fit, run, select,
-    residual), are
-    refused in one line, exit 2, with nothing written, before torch, sympy, Pinocchio or a method is
-    imported."""
+    residual), are refused in one line, exit 2, with nothing written, before torch, sympy, Pinocchio or a
+    method is imported."""
     (tmp_path / "model.npz").write_bytes(b"not a model file")
     (tmp_path / "log.csv").write_text("q_1,qd_1,qdd_1\n0,0,0\n")
     (tmp_path / "arm.toml").write_text('urdf = "arm.urdf"\n[recordings\n')

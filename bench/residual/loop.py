@@ -65,8 +65,9 @@ can undo a round) is the model's refit strategy, chosen once from the model
    as it was and is not undone: the findings are not offered again, and the
    next round traces without them.
 
-The budget's seconds bound the whole loop (:mod:`bench.residual.limits`; under a work budget, its steps,
-nothing below depends on time: see :func:`residual_loop`): the method's fit has
+The budget's seconds bound the whole loop (under a work budget, its steps,
+nothing below depends on time: see :func:`residual_loop`), in the shares of
+:mod:`bench.residual.limits`: the method's fit has
 :data:`FIT_SHARE` of it, each cross-fit of a kept fit :data:`CROSS_FIT_SHARE`,
 the polish stops starting new starts at :data:`POLISH_SHARE`, a round starts
 only if the time it is expected to take (the longest round so far) still
