@@ -18,6 +18,15 @@ joint: the method's one step. Its result is one equation a joint, in those
 names (``record_details``). Its torque takes no accelerations: beside a prior
 the hybrid's mass matrix is the prior's. It has no Lagrangian: offsets and
 friction are generalized forces.
+
+**A joint's position terms hold past its training range.** Past the lowest
+or highest ``q_j`` the fit saw, the terms in ``q_j`` (a spring, a gravity or
+cogging term) take their value at that end of the range; the terms in
+``qd_j`` (the friction laws) go on. A sum such as ``-18 q + 19 sin q`` fits a
+cogging torque over the range it saw and is, past it, a cubic that grows
+without bound; the friction laws are laws of the velocity and hold past it.
+Each joint's range is kept in the model file (``q_range``); a file without
+one predicts as it was fitted, unheld.
 """
 
 from __future__ import annotations
@@ -71,8 +80,12 @@ class SparseTorque(Method):
     work = 1  # one solve
     has_lagrangian: ClassVar[bool] = False
 
+    #: each joint's training range of ``q``, shape ``(2, dof)`` (lowest, highest); ``None``: unheld
+    q_range: np.ndarray | None = None
+
     def _fit(self, train: Dataset, experiment: str, progress: Progress) -> None:
         self.coef = [np.zeros(len(terms_names(train.dof, j))) for j in range(train.dof)]
+        self.q_range = np.stack([train.q.min(axis=0), train.q.max(axis=0)])
         held = folds(train).indices() if train.trajectories() else None
         while progress.step():
             for j in range(train.dof):
@@ -87,7 +100,14 @@ class SparseTorque(Method):
     def _set_state(self, state) -> None:
         self.coef = [c.copy() for c in state]
 
+    def held(self, data: Dataset) -> Dataset:
+        """``data`` with each joint's position held in its training range (the module docstring)."""
+        if self.q_range is None:
+            return data
+        return data.replace(q=np.clip(data.q, self.q_range[0], self.q_range[1]))
+
     def predict_torque(self, data: Dataset) -> np.ndarray:
+        data = self.held(data)
         out = np.zeros((len(data), data.dof))
         for j, c in enumerate(self.coef):
             out[:, j] = terms(data, j)[1] @ c
@@ -103,7 +123,8 @@ class SparseTorque(Method):
     def saved(self, packer) -> dict:
         """Each joint's coefficients, with the hyperparameters."""
         return {"kind": "sparse_torque", "method": self.name, "hyperparameters": saved_hyperparameters(self),
-                "coef": [packer.array(c) for c in self.coef]}
+                "coef": [packer.array(c) for c in self.coef],
+                **({} if self.q_range is None else {"q_range": packer.array(self.q_range)})}
 
     def equations(self) -> list[str]:
         """Each joint's torque as the sum of its kept terms."""
@@ -131,6 +152,12 @@ def _load(tree: dict, unpacker, context: dict) -> SparseTorque:
     method.coef = [np.array(unpacker.array(c), dtype=np.float64) for c in tree["coef"]]
     if len(method.coef) != method.dof:
         raise ValueError(f"{len(method.coef)} joints' coefficients for {method.dof} joints")
+    if "q_range" in tree:
+        q_range = np.array(unpacker.array(tree["q_range"]), dtype=np.float64)
+        if q_range.shape != (2, method.dof) or np.any(q_range[0] > q_range[1]):
+            raise ValueError(f"q_range is not each joint's lowest and highest position (2 x {method.dof}, "
+                             "lowest first)")
+        method.q_range = q_range
     return method
 
 
