@@ -208,13 +208,23 @@ def test_rerun_runs_only_the_named_candidates_and_scores_the_rules_on_the_merged
     assert [r["candidates"] for r in result["reruns"]] == [["loop"], ["loop+gp"]]
 
 
-def test_the_former_evaluation_set_is_development_data_and_the_evaluation_set_is_new_and_of_every_layout():
-    former, development, evaluation = (sb.cases(s) for s in (sb.FORMER_EVALUATION, sb.DEVELOPMENT, sb.EVALUATION))
+def test_the_former_evaluation_sets_are_development_data_and_the_evaluation_set_is_new_and_of_every_layout():
+    former, second, development, evaluation = (sb.cases(s) for s in (sb.FORMER_EVALUATION, sb.SECOND_EVALUATION,
+                                                                      sb.DEVELOPMENT, sb.EVALUATION))
     assert {c.seed for c in former} == {5113, 6271} and {c.layout for c in former} == {"one", "several"}
-    assert not {c.seed for c in evaluation} & {c.seed for c in former + development}  # seeds no rule was tried on
-    assert {c.layout for c in evaluation} == {"one", "several", "two", "three"} and \
-        {c.arm for c in evaluation} == set(sb.ARMS) | {sb.GEARED}
-    assert not {c.name for c in evaluation} & {c.name for c in former + development}
+    assert {c.seed for c in second} == {7411, 9043}
+    tried = former + second + development
+    assert not {c.seed for c in evaluation} & {c.seed for c in tried}  # seeds no rule was tried on
+    for new in (second, evaluation):
+        assert {c.layout for c in new} == {"one", "several", "two", "three"} and \
+            {c.arm for c in new} == set(sb.ARMS) | {sb.GEARED}
+    assert not {c.name for c in evaluation} & {c.name for c in tried}
+    # the second evaluation set's page, made when it was named evaluation, says it is development data now
+    made = json.loads(Path("results/selection/second_evaluation/evaluation.json").read_text())
+    assert made["set"] == sb.EVALUATION and sb.set_of(made) == sb.SECOND_EVALUATION
+    text = Path("results/selection/second_evaluation/evaluation.md").read_text()
+    assert text == sb.page(made) and "which is `--set second_evaluation` now" in text
+    assert "Set: second_evaluation (development data: this set (seeds 7411 and 9043) was the evaluation set" in text
     # the published pages of the former evaluation set say that it is development data, and how to run it now
     for path in ("results/selection/benchmark.json", "results/selection/all_candidates/benchmark.json"):
         made = json.loads(Path(path).read_text())
