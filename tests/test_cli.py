@@ -90,7 +90,7 @@ def _loaded(argv, cwd=ROOT):
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["study", "--help"], ["fit", "--help"], ["run", "--help"],
-                                  ["residual", "--help"]])
+                                  ["residual", "--help"], ["select", "--help"]])
 def test_help_imports_only_the_command_it_names(argv):
     """A command's modules are imported when it is parsed: ``--help``, ``study --help`` and a command's
     ``--help`` import none of the heavy libraries, the methods or the systems, and no study."""

@@ -39,11 +39,9 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from bench.core.csv_format import read_csv
 from bench.core.data import Dataset
-from bench.core.distance import TrainingStates
 from bench.core.errors import ConfigError
 from bench.core.folds import MAX_SPANS, Fold, Folds, folds as time_folds, mask
 
@@ -98,6 +96,8 @@ class Regions:
 def fold_distances(x: np.ndarray, held: list[np.ndarray], seed: int = 0) -> np.ndarray:
     """Each fold's scored samples' distances to the nearest state it is fitted on, pooled
     (at most :data:`DISTANCE_SAMPLES` a fold, drawn with ``seed``)."""
+    from scipy.spatial import cKDTree  # here: the command line reads NAMES, and needs no scipy
+
     rng = np.random.default_rng(seed)
     out = []
     for mask in held:
@@ -217,6 +217,10 @@ def folds(data: Dataset, name: str | None, max_folds: int | None, target: Datase
 def target_distances(data: Dataset, target: Dataset | None) -> np.ndarray | None:
     """The target's distances to the nearest training state, in the training states' standard deviations:
     ``target``'s states, else each training trajectory's from the others' (``None`` for one trajectory)."""
+    from scipy.spatial import cKDTree
+
+    from bench.core.distance import TrainingStates
+
     if target is not None:
         return TrainingStates(data).distance(target)
     names = data.trajectories()

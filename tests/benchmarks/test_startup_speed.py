@@ -1,4 +1,4 @@
-"""The command line's start-up: ``python -m bench --help``, ``bench list``, a
+"""The command line's start-up: ``python -m bench --help``, ``select --help``, ``bench list``, a
 refused model file and a refused measured-arm file, each a fresh process, beside
 ``python -c pass`` in the same run. Run with ``make benchmark``; the table after
 it gives each one's seconds more than ``python -c pass``."""
@@ -35,6 +35,7 @@ def _run(*argv: str, code: int):
 @pytest.mark.parametrize("name,argv,code", [
     ("python -c pass", ("-c", "pass"), 0),
     ("bench --help", ("-m", "bench", "--help"), 0),
+    ("bench select --help", ("-m", "bench", "select", "--help"), 0),
     ("bench list", ("-m", "bench", "list"), 0),
 ])
 def test_startup(benchmark, name, argv, code):
