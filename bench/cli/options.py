@@ -17,14 +17,13 @@ import re
 from pathlib import Path
 
 from bench.core.arguments import assignment, positive, positive_int
+from bench.core.budget import DEFAULT_BUDGET_S
 from bench.core.experiment import Experiment
 from bench.core.devices import CHOICES, resolve as resolve_device
 from bench.core.registry import RegistryError, UnknownName
 from bench.cli.parser import UsageError
 from bench.runner.plugins import import_plugins, system_plugins
 
-#: seconds per run where neither --budget nor --steps is given
-DEFAULT_BUDGET_S = 60.0
 STEPS_HELP = ("bound each run by N steps of its method's work (gradient steps, GP generations, solves) instead of by "
               "time: the run is then a pure function of its seed and gives the same numbers on any machine")
 PLUGIN_HELP = "a .py file or module that registers extra methods or systems (repeatable)"

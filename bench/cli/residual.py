@@ -9,6 +9,7 @@ from bench.cli.options import (add_ignore_limits, add_config, add_device, add_pl
                                check_split, configurations, device, hyperparameters, load_plugins, number)
 from bench.core.arguments import positive, positive_int, seed
 from bench.core.fileio import check_output
+from bench.core.budget import DEFAULT_BUDGET_S
 from bench.residual.limits import FIT_SHARE, MAX_ROUNDS
 from bench.runner.job import KILL_FACTOR
 
@@ -20,7 +21,7 @@ def add_arguments(res) -> None:
     res.add_argument("--test", type=Path, default=None, help="test CSV (default: a measured system's own split)")
     res.add_argument("--budget", type=positive, default=None,
                      help=f"seconds for the fit and the rounds, where the method has no work of its own "
-                          f"(default 60) or where given without --steps: the method's fit has {FIT_SHARE:.0%}% of "
+                          f"(default {DEFAULT_BUDGET_S:g}) or where given without --steps: the method's fit has {FIT_SHARE:.0%}% of "
                           f"it, no round starts that would end past it, a round still running at its end is undone, "
                           f"and the result keeps the rounds before it; the driven rollouts after the rounds are not "
                           f"charged to it. The loop's process is killed only at {KILL_FACTOR} x it (the rounds "

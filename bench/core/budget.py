@@ -26,6 +26,9 @@ from dataclasses import dataclass
 
 from bench.core.errors import ConfigError
 
+#: seconds of a fit, a run or a residual loop where neither a budget nor a count of steps is given
+DEFAULT_BUDGET_S = 60.0
+
 #: the kinds of budget
 SECONDS, STEPS = "seconds", "steps"
 

@@ -11,14 +11,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from bench.core.budget import Budget
+from bench.core.budget import DEFAULT_BUDGET_S, Budget
 from bench.core.data import Dataset
 from bench.physics.system import System
 from bench.core.errors import UserError
 from bench.core.fileio import file_digest, read_settings, write_json
 from bench.core.scoring import scoring
 from bench.evaluation.per_joint import logged_test_torque, per_joint, per_joint_lines
-from bench.residual.limits import DEFAULT_BUDGET_S
 from bench.residual.loop import residual_loop
 from bench.residual.report import write_outputs
 from bench.residual.result import ResidualResult

@@ -1,12 +1,10 @@
-"""The residual loop's bounds: its rounds, its default seconds and the shares
-of its budget each phase has (:mod:`bench.residual.loop` spends them). A
-module of numbers alone, so that the command line's help states them without
-importing the loop."""
+"""The residual loop's bounds: its rounds and the shares of its budget each
+phase has (:mod:`bench.residual.loop` spends them; its default seconds are a
+run's, :data:`bench.core.budget.DEFAULT_BUDGET_S`). A module of numbers alone,
+so that the command line's help states them without importing the loop."""
 
 #: a loop runs at most this many rounds
 MAX_ROUNDS = 6
-#: seconds for the whole loop where no budget is given
-DEFAULT_BUDGET_S = 60.0
 #: the share of the loop's budget its method's fit has
 FIT_SHARE = 0.5
 #: the polish starts no new start after this share of the loop's budget

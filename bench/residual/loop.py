@@ -88,7 +88,7 @@ from typing import Callable
 
 import numpy as np
 
-from bench.core.budget import Budget, now
+from bench.core.budget import DEFAULT_BUDGET_S, Budget, now
 from bench.core.data import Dataset, mse
 from bench.core.errors import first_line
 from bench.physics.models import FittedModel
@@ -101,8 +101,7 @@ from bench.residual.pruning import shape_stderr
 from bench.residual.result import ResidualResult, Round
 from bench.residual.rollouts import driven_rollouts, test_mse
 from bench.residual.criteria import MIN_HELDOUT_GAIN
-from bench.residual.limits import (CROSS_FIT_SHARE, DEFAULT_BUDGET_S, FIT_SHARE, MAX_ROUNDS, POLISH_SHARE,
-                                   TRACE_SHARE)
+from bench.residual.limits import CROSS_FIT_SHARE, FIT_SHARE, MAX_ROUNDS, POLISH_SHARE, TRACE_SHARE
 from bench.residual.tracing import BUDGET_STOP, trace
 from bench.residual.sensors import Sensed, Sensor, column as sensor_column
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
