@@ -79,7 +79,7 @@ def main(args) -> int:
         print(line)
     if runs:
         print(starting_line(spec), flush=True)
-    record, log = run_one(spec, checked=runs, data=given, copy_to=args.json)
+    record, log = run_in_scratch(spec, checked=runs, data=given, copy_to=args.json)
     print(summary_line(record, log))
     for line in variant_lines(record) + per_joint_summary(record):
         print(line)
@@ -91,8 +91,8 @@ def main(args) -> int:
     return 0 if record.status in ("ok", "unavailable", "not_applicable") else 1
 
 
-def run_one(spec: RunSpec, checked: bool = False, data: tuple | None = None,
-            copy_to: Path | None = None) -> tuple[Record, Path | None]:
+def run_in_scratch(spec: RunSpec, checked: bool = False, data: tuple | None = None,
+                   copy_to: Path | None = None) -> tuple[Record, Path | None]:
     """One run in its own process (threads pinned, killed like any run of a
     matrix), in a scratch folder; returns its record and, where something
     failed, the log that holds the traceback (the folder is then kept).

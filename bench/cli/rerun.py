@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from bench.cli.fit import run_one, summary_line
+from bench.cli.fit import run_in_scratch, summary_line
 from bench.cli.options import add_device, device, number
 from bench.core.arguments import positive
 from bench.core.fileio import check_output, write_json
@@ -39,7 +39,7 @@ def main(args) -> int:
     spec = dataclasses.replace(spec, device=device(args.device or spec.device, [spec.method]))
     print(f"replaying {recorded.run_id}: {spec.budget.describe()} (recorded under {recorded.describe_budget()}, "
           f"stopped by {recorded.stop_reason})", flush=True)
-    replayed, log = run_one(spec)
+    replayed, log = run_in_scratch(spec)
     if args.json:
         write_json(args.json, replayed.to_json())
     if replayed.status != "ok":

@@ -15,7 +15,7 @@ from bench.core.csv_format import read_csv
 from bench.core.protocols import NAMES
 from bench.core.fileio import check_output
 from bench.runner.plugins import file_prefix
-from bench.tools.candidates import CANDIDATES
+from bench.tools.candidates import CANDIDATES, named_candidates
 
 #: the seconds past which a candidate is killed (``--budget``) on up to :data:`CEILING_SAMPLES` training samples:
 #: a ceiling, not its work, which is steps (bench.tools.select.Candidate.work); five times the 180 s a candidate
@@ -81,10 +81,7 @@ def main(args) -> int:
         return 0
     check_output(args.out, folder=True)
     known = {c.name: c for c in CANDIDATES}
-    unknown = [n for n in args.candidates or [] if n not in known]
-    if unknown:
-        raise UsageError(f"--candidates: unknown candidate(s) {', '.join(unknown)}; they are {', '.join(known)}")
-    candidates = [known[n] for n in args.candidates] if args.candidates else list(CANDIDATES)
+    candidates = [known[n] for n in named_candidates(args.candidates)] if args.candidates else list(CANDIDATES)
     names = sorted({c.method for c in candidates})
     (name,), plugins = load_plugins(args, [args.system], names)  # a bad file: one line, nothing imported
     from bench.evaluation.domain import sentences

@@ -95,6 +95,7 @@ from bench.runner.progress import print_now
 from bench.runner.provenance import provenance
 from bench.studies import geared_arm
 from bench.tools import select as selection
+from bench.tools.candidates import named_candidates
 from bench.tools.robot_log import simulate
 from systems import get_system
 from systems.dfki_double_pendulum import CUTOFF_HZ
@@ -539,25 +540,12 @@ def real_rows() -> list[dict]:
             for name, (path, page) in pages.items()]
 
 
-def _publish(out: Path, result: dict) -> None:
+def publish(out: Path, result: dict) -> None:
+    """Write ``result`` to the JSON beside ``out`` and its page to ``out``."""
     write_json(out.with_suffix(".json"), result)
     text = page(result)
     atomic_write(out, lambda f: f.write(text))
     print(f"wrote {out}")
-
-
-WORDS = {1: "one", 2: "two"}
-
-
-def named_candidates(names: list[str], at_least: int = 1) -> tuple[str, ...]:
-    """``names`` in select's order, each once; a :class:`UserError` in one line where one is not select's or
-    fewer than ``at_least`` are named."""
-    known = [c.name for c in selection.CANDIDATES]
-    unknown = [n for n in names if n not in known]
-    if unknown or len(set(names)) < at_least:
-        raise UserError(f"--candidates: {'unknown candidate(s) ' + ', '.join(unknown) if unknown else f'{WORDS[at_least]} at least'}; "
-                        f"select's are {', '.join(known)}")
-    return tuple(n for n in known if n in names)
 
 
 def rescore(args) -> int:
@@ -577,7 +565,7 @@ def rescore(args) -> int:
         table.append(dict(t, scores=scores(json.loads(page_json.read_text()), TRAJECTORIES[layouts[t["case"]]])))
     result.update(table=table, summary=summary(table), rescored={"command": args.invocation,
                                                                   "commit": provenance().get("commit")})
-    _publish(args.out, result)
+    publish(args.out, result)
     return 0
 
 
@@ -588,7 +576,7 @@ def main(args) -> int:
             raise UserError(f"{made}: no page to read the real arms into; run the study without --real-only first")
         result = json.loads(made.read_text())
         result.update(real=real_rows(), real_command=args.invocation, real_commit=provenance().get("commit"))
-        _publish(args.out, result)
+        publish(args.out, result)
         return 0
     if args.rescore:
         return rescore(args)
@@ -608,6 +596,6 @@ def main(args) -> int:
     result = {"command": args.invocation, "commit": provenance().get("commit"), "set": args.set,
               "cases": [c.name for c in chosen], "candidates": list(candidates), "steps": args.steps,
               "table": table, "summary": summary(table), "real": real_rows()}
-    _publish(args.out, result)
+    publish(args.out, result)
     ledger.close()
     return 0

@@ -25,7 +25,8 @@ from bench.runner.ledger import Ledger
 from bench.runner.progress import print_now
 from bench.runner.provenance import provenance
 from bench.runner.schedule import run_jobs
-from bench.studies.selection_benchmark import SelectCase, _publish, cases, named_candidates, scores, set_of, summary
+from bench.studies.selection_benchmark import SelectCase, cases, publish, scores, set_of, summary
+from bench.tools.candidates import named_candidates
 from bench.tools import select as selection
 
 
@@ -79,6 +80,6 @@ def main(args) -> int:
              if "rules" in t["scores"] else t for t in before["table"]]
     reruns = before.get("reruns", []) + [{"candidates": list(again), "command": args.invocation,
                                           "commit": provenance().get("commit")}]
-    _publish(args.out, {**before, "candidates": order, "table": table, "summary": summary(table), "reruns": reruns})
+    publish(args.out, {**before, "candidates": order, "table": table, "summary": summary(table), "reruns": reruns})
     ledger.close()
     return 0

@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass
 
 import methods
+from bench.core.errors import UserError
 
 
 @dataclass(frozen=True)
@@ -66,3 +67,17 @@ CANDIDATES = (
     Candidate("loop_feasible", "loop", "feasible", start=1),
     Candidate("loop+gp", "loop+gp", start=6, epochs=GP_EPOCHS, learner="gp"),
 )
+
+
+WORDS = {1: "one", 2: "two"}
+
+
+def named_candidates(names: list[str], at_least: int = 1) -> tuple[str, ...]:
+    """``names`` in :data:`CANDIDATES`' order, each once (``--candidates``); a :class:`UserError` in one line
+    where one is not a candidate or fewer than ``at_least`` are named."""
+    known = [c.name for c in CANDIDATES]
+    unknown = [n for n in names if n not in known]
+    if unknown or len(set(names)) < at_least:
+        said = "unknown candidate(s) " + ", ".join(unknown) if unknown else f"{WORDS[at_least]} at least"
+        raise UserError(f"--candidates: {said}; select's are {', '.join(known)}")
+    return tuple(n for n in known if n in names)
