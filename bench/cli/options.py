@@ -194,7 +194,8 @@ def plugin_paths(plugins: list[str]) -> tuple[str, ...]:
     return tuple(str(Path(p).resolve()) if p.endswith(".py") else p for p in plugins)
 
 
-def check_names(args, systems=(), methods=(), experiments=(), named: bool = True) -> dict[tuple[str, str], str]:
+def check_names(args, systems=(), methods=(), experiments=(), named: bool = True,
+                built: dict | None = None) -> dict[tuple[str, str], str]:
     """Every name known; an unknown one that a ``.py`` file in the working
     folder registers, while no ``--plugin`` gave it, says so.
 
@@ -202,7 +203,8 @@ def check_names(args, systems=(), methods=(), experiments=(), named: bool = True
     (:meth:`~methods.base.Method.refused_on`) is refused in one line. One they
     did not name (every registered method, the default of ``run``) is not: the
     matrix records its runs as not applicable. Returns why each such
-    ``(method, system)`` pair does not apply."""
+    ``(method, system)`` pair does not apply. ``built``: the systems the
+    command has built already, by name (the others are built here, once)."""
     from methods import METHODS
     from systems import SYSTEMS
 
@@ -217,7 +219,7 @@ def check_names(args, systems=(), methods=(), experiments=(), named: bool = True
     for name in experiments:
         Experiment.of(name)
     skipped = {}
-    built = {s: SYSTEMS[s]() for s in systems} if methods else {}  # each system once, for every method
+    built = {s: (built or {}).get(s) or SYSTEMS[s]() for s in systems} if methods else {}  # each once
     for method in methods:
         refused = {s: METHODS[method].refused_on(built[s]) for s in systems}
         reason = next((r for r in refused.values() if r), None)

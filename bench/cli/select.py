@@ -90,14 +90,13 @@ def main(args) -> int:
     from systems import SYSTEMS
 
     check_names(args, [name])
-    system = SYSTEMS[name]()
-    if system.simulated or system.linear_form() is None:
-        raise UsageError(f"{name}: bench select chooses among models of a measured arm (its recordings and its "
-                         f"URDF's rigid body); {name} is {'simulated' if system.simulated else 'not an arm'}"
-                         + (f" (as an arm: --system {system.as_arm})" if system.as_arm else ""))
-    check_names(args, [name], names)
     check_split(args.split, [name])
-    arm = SYSTEMS[name](split=args.split)
+    arm = SYSTEMS[name](split=args.split)  # the command's one build of it
+    if arm.simulated or arm.linear_form() is None:
+        raise UsageError(f"{name}: bench select chooses among models of a measured arm (its recordings and its "
+                         f"URDF's rigid body); {name} is {'simulated' if arm.simulated else 'not an arm'}"
+                         + (f" (as an arm: --system {arm.as_arm})" if arm.as_arm else ""))
+    check_names(args, [name], names, built={name: arm})
     data = given_data(arm, None, None)
     target = None if args.target_states is None else read_csv(args.target_states, dof=arm.dof, system=name,
                                                                states_only=True)

@@ -85,6 +85,31 @@ def test_select_refuses_in_one_line_what_it_cannot_choose_among(tmp_path):
     assert not (tmp_path / "s" / "select.json").exists()
 
 
+def test_select_builds_its_system_once_before_its_runs_start(tmp_path, monkeypatch):
+    """The command builds the arm once, from the split it was given, and hands it down: the checks of its names
+    and its candidates, and the data its runs are handed, are that one's."""
+    from bench.cli import main
+    from bench.physics.system import System
+    from bench.tools import select as select_module
+
+    built = []
+    own = System.__init__
+    monkeypatch.setattr(System, "__init__", lambda self, *a, **k: built.append((type(self).name, k.get("split")))
+                        or own(self, *a, **k))
+
+    class Started(Exception):
+        pass
+
+    def started(name, out, **kwargs):
+        raise Started(name, kwargs["split"], len(kwargs["data"][0]))
+
+    monkeypatch.setattr(select_module, "select", started)
+    with pytest.raises(Started) as ran:
+        main(["select", "--system", "kuka_lwr4", "--split", "swapped", "--out", str(tmp_path / "s")])
+    assert built == [("kuka_lwr4", "swapped")]
+    assert ran.value.args[:2] == ("kuka_lwr4", "swapped") and ran.value.args[2] > 0
+
+
 def test_a_candidate_that_failed_or_saved_nothing_is_not_chosen():
     entries = [{"name": "a", "status": "ok", "validation_mse": 0.1, "test_mse": 1.0, "model": None,
                 "hyperparameters": {}, "test_over_standard": None, "error": "save failed"},
