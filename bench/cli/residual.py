@@ -52,9 +52,12 @@ def main(args) -> int:
     (name,), plugins = load_plugins(args, [args.system])  # a bad file: one line, nothing imported
     from bench.residual.job import ResidualJob, run_residual
     from bench.residual.report import summary_lines
+    from systems import SYSTEMS
 
-    check_names(args, [name], [args.method])
+    check_names(args, [name])
     check_split(args.split, [name])
+    system = SYSTEMS[name](split=args.split)  # the command's one build of it
+    check_names(args, [name], [args.method], built={name: system})
     budget_s, steps = work(args)
     job = ResidualJob.of(
         name, args.method, budget_s=budget_s, steps=steps, seed=args.seed,
@@ -65,7 +68,7 @@ def main(args) -> int:
         plugins=plugins, split=args.split, device=device(args.device, [args.method]), check_limits=not args.ignore_limits,
         command=args.invocation,
     )
-    job.check()  # the method, its hyperparameters and the data given: one line, before the note below
+    job.check(system)  # the method, its hyperparameters and the data given: one line, before the note below
     if args.json is None and args.report is None:
         print("note: neither --json nor --report given; the result is only printed")
     result = run_residual(job, checked=True)

@@ -78,11 +78,12 @@ class ResidualJob(Job):
         (:func:`~bench.runner.run.method_config`)."""
         return method_config(self.run_spec)
 
-    def check(self) -> None:
+    def check(self, system: System | None = None) -> None:
         """The method can run here and fits torques (:func:`~bench.runner.run.preflight`), its
-        hyperparameters are valid, and a simulated system has data given; else one line."""
+        hyperparameters are valid, and a simulated system has data given; else one line. ``system``: the
+        spec's, where the caller has built it."""
         spec = self.run_spec
-        early = preflight(spec)
+        early = preflight(spec, system)
         if early is not None:
             raise UserError(f"method {spec.method} is unavailable: {early.error}" if early.status == "unavailable"
                             else f"method {spec.method} cannot run the loop, which fits torques: {early.error}")
