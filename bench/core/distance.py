@@ -12,7 +12,6 @@ samples by how far they are from what the model saw
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from bench.core.data import Dataset
 from bench.core.kept import Kept, digest, read_only
@@ -64,6 +63,8 @@ class NearestStates:
         return cls._built.get(digest(states), lambda: cls(states))
 
     def __init__(self, states: np.ndarray):
+        from scipy.spatial import cKDTree  # here: the command line reads modules that use this one, not scipy
+
         self.states = np.ascontiguousarray(states, dtype=np.float64)
         self._answers = Kept(KEPT_QUERIES)
         n = len(self.states)

@@ -42,6 +42,7 @@ import numpy as np
 
 from bench.core.csv_format import read_csv
 from bench.core.data import Dataset
+from bench.core.distance import TrainingStates
 from bench.core.errors import ConfigError
 from bench.core.folds import MAX_SPANS, Fold, Folds, folds as time_folds, mask
 
@@ -218,8 +219,6 @@ def target_distances(data: Dataset, target: Dataset | None) -> np.ndarray | None
     """The target's distances to the nearest training state, in the training states' standard deviations:
     ``target``'s states, else each training trajectory's from the others' (``None`` for one trajectory)."""
     from scipy.spatial import cKDTree
-
-    from bench.core.distance import TrainingStates
 
     if target is not None:
         return TrainingStates(data).distance(target)
