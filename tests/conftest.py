@@ -100,3 +100,20 @@ def dask_client():
 
     with client_for("local", 2) as client:
         yield client
+
+
+@pytest.fixture
+def system_builds(monkeypatch):
+    """Every system built in this process from now on, as ``(its name, the split it was asked for)``: for the
+    tests that count a command's builds."""
+    from bench.physics.system import System
+
+    built = []
+    own = System.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append((type(self).name, kwargs.get("split")))
+        own(self, *args, **kwargs)
+
+    monkeypatch.setattr(System, "__init__", counted)
+    return built

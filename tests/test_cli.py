@@ -550,16 +550,10 @@ def test_every_command_that_runs_jobs_takes_a_cluster_and_select_hands_it_to_its
     assert handed.value.args == ("tcp://scheduler:8786", 3, ["sysid"])
 
 
-def test_residual_builds_its_system_once_before_its_loop_starts(monkeypatch, tmp_path):
+def test_residual_builds_its_system_once_before_its_loop_starts(monkeypatch, tmp_path, system_builds):
     """``bench residual`` builds the system once, of the split it was given, for the checks of its names and of
     the method; the loop's own process builds its own."""
-    from bench.physics.system import System
     from bench.residual import job as job_module
-
-    built = []
-    own = System.__init__
-    monkeypatch.setattr(System, "__init__", lambda self, *a, **k: built.append((type(self).name, k.get("split")))
-                        or own(self, *a, **k))
 
     class Started(Exception):
         pass
@@ -571,4 +565,4 @@ def test_residual_builds_its_system_once_before_its_loop_starts(monkeypatch, tmp
     with pytest.raises(Started) as ran:
         main(["residual", "--system", "kuka_lwr4", "--split", "swapped", "--method", "sysid",
               "--json", str(tmp_path / "loop.json")])
-    assert built == [("kuka_lwr4", "swapped")] and ran.value.args == ("kuka_lwr4", "swapped", True)
+    assert system_builds == [("kuka_lwr4", "swapped")] and ran.value.args == ("kuka_lwr4", "swapped", True)

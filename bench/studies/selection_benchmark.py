@@ -429,9 +429,10 @@ def set_of(result: dict) -> str:
     """The page's set (:data:`SETS`); a page made when a former evaluation set (:data:`FORMER_SETS`) was named
     ``evaluation`` (its cases have that set's seeds) is that set's."""
     which = result["set"]
+    if which != EVALUATION:
+        return which
     for former, seeds in FORMER_SETS.items():
-        if which == EVALUATION and any(name.endswith(tuple(f"_{s}" for s in seeds))
-                                       for name in result.get("cases", [])):
+        if any(name.endswith(tuple(f"_{s}" for s in seeds)) for name in result.get("cases", [])):
             return former
     return which
 

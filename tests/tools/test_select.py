@@ -85,17 +85,11 @@ def test_select_refuses_in_one_line_what_it_cannot_choose_among(tmp_path):
     assert not (tmp_path / "s" / "select.json").exists()
 
 
-def test_select_builds_its_system_once_before_its_runs_start(tmp_path, monkeypatch):
+def test_select_builds_its_system_once_before_its_runs_start(tmp_path, monkeypatch, system_builds):
     """The command builds the arm once, from the split it was given, and hands it down: the checks of its names
     and its candidates, and the data its runs are handed, are that one's."""
     from bench.cli import main
-    from bench.physics.system import System
     from bench.tools import select as select_module
-
-    built = []
-    own = System.__init__
-    monkeypatch.setattr(System, "__init__", lambda self, *a, **k: built.append((type(self).name, k.get("split")))
-                        or own(self, *a, **k))
 
     class Started(Exception):
         pass
@@ -106,7 +100,7 @@ def test_select_builds_its_system_once_before_its_runs_start(tmp_path, monkeypat
     monkeypatch.setattr(select_module, "select", started)
     with pytest.raises(Started) as ran:
         main(["select", "--system", "kuka_lwr4", "--split", "swapped", "--out", str(tmp_path / "s")])
-    assert built == [("kuka_lwr4", "swapped")]
+    assert system_builds == [("kuka_lwr4", "swapped")]
     assert ran.value.args[:2] == ("kuka_lwr4", "swapped") and ran.value.args[2] > 0
 
 
