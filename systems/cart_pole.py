@@ -31,6 +31,8 @@ class CartPoleParams:
 
 @SYSTEMS.add("cart_pole", "simulated")
 class CartPole(System):
+    title = "a cart-pole"
+    summary = "a cart on a rail (linear coordinate) with a rod hinged on it"
     coordinates = ("x", "theta")
     coordinate_kinds = ("linear", "angle")
     Params = CartPoleParams

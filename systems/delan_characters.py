@@ -74,6 +74,12 @@ def _columns(frame, names: tuple[str, ...]) -> np.ndarray:
 
 @SYSTEMS.add("delan_characters", "measured", "external")
 class DelanCharacters(Measured, System):
+    title = "DeLaN's characters"
+    summary = ("measured: DeLaN's 2-DoF character trajectories (MIT), shipped in `systems/data` and declared by "
+               "`systems/data/delan_characters.toml` (each character a recording and a trajectory, its rows as logged "
+               "with their accelerations and time); published split (test characters e, q, v), `--split swapped` the "
+               "other way round; indirect experiment only; runs record driven rollouts of the test characters; SysId "
+               "fits a lumped rigid-body form")
     coordinates = ("q1", "q2_relative")
     Params = PlanarArmParams
     sysid_unknowns = ("a1", "a2", "a3", "a4", "b1", "b2", "b3", "b4")

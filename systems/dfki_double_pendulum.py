@@ -143,6 +143,14 @@ def trajectory_path(name: str) -> Path:
 
 @SYSTEMS.add("dfki_double_pendulum", "measured", "external")
 class DfkiDoublePendulum(Measured, System):
+    title = "the DFKI real double pendulum"
+    summary = ("measured: the DFKI real double pendulum (BSD-3), six excitation trajectories shipped in "
+               "`systems/data`; relative angles; accelerations by a documented zero-phase low-pass and central "
+               "differences (cut-off chosen by `python -m bench study dfki-filter`); declared by "
+               "`systems/data/dfki_double_pendulum.toml`; train 00, 01, 02, 04, test 03, 05 (`--split swapped` the "
+               "other way round); each sample keeps its time, so runs record driven rollouts of the test recordings "
+               "and the residual loop offers a time shift; indirect only; SysId fits the rigid-body form in masses, "
+               "centre-of-mass distances and inertias")
     coordinates = ("q1", "q2_relative")
     planar_chain = True  # its second link's length is not given: no tip payload
     as_arm = f"measured:{DATA_DIR / 'dfki_double_pendulum_arm.toml'}"

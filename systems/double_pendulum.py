@@ -36,6 +36,8 @@ class DoublePendulumParams:
 
 @SYSTEMS.add("double_pendulum", "simulated", "paper")
 class DoublePendulum(System):
+    title = "the paper's double pendulum"
+    summary = "the paper's double pendulum of two rods, absolute angles; m1 = 3, l1 = 2.67, m2 = 1, l2 = 1.67, g = 9.81"
     coordinates = ("theta1", "theta2")
     absolute_angles = True
     planar_chain = True

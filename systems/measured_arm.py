@@ -101,3 +101,11 @@ def register_measured(plugin: str) -> str:
 @SYSTEMS.add("kuka_lwr4", "measured", "arm")
 class KukaLwr4(measured_arm(DATA_DIR / "kuka_lwr4.toml", name="kuka_lwr4")):
     """A real KUKA LWR4+, 7 joints: runs 1 and 2 repeat excitation trajectory A, run 3 follows B (faster)."""
+
+    title = "a real KUKA LWR4+"
+    summary = ("measured: a real KUKA LWR4+, 7 joints (FloBaRoID's recordings and URDF, LGPL-3.0, shipped in "
+               "`systems/data`): three 25 s recordings at 200 Hz with the joint torque sensors' torques; runs 1 and 2 "
+               "repeat trajectory A, run 3 is trajectory B; the default split trains on A and tests on B, `--split "
+               "swapped` the other way round; low-passed at 10 Hz, 10 ms a sample; indirect only; the URDF gives the "
+               "kinematics (its inertias are placeholders nothing uses); every run records the standard model beside "
+               "it and the driven rollouts of the test recording ([systems/measured_arm.py](../systems/measured_arm.py))")

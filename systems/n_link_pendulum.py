@@ -62,3 +62,5 @@ def n_link_pendulum(n: int) -> type[System]:
 @SYSTEMS.add("triple_pendulum", "simulated")
 class TriplePendulum(n_link_pendulum(3)):
     """The n-link rod pendulum with n = 3."""
+    title = "a triple pendulum"
+    summary = "the n-link rod pendulum with n = 3; `systems.n_link_pendulum.n_link_pendulum(n)` builds any n"

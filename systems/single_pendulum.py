@@ -23,6 +23,8 @@ class SinglePendulumParams:
 
 @SYSTEMS.add("single_pendulum", "simulated")
 class SinglePendulum(System):
+    title = "a single pendulum"
+    summary = "a point mass on a massless rod"
     coordinates = ("theta",)
     planar_chain = True
     link_lengths = ("l",)

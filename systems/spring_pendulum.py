@@ -30,6 +30,8 @@ class SpringPendulumParams:
 
 @SYSTEMS.add("spring_pendulum", "simulated")
 class SpringPendulum(System):
+    title = "a spring pendulum"
+    summary = "a mass on a spring swinging in a plane (length r > 0 and angle)"
     coordinates = ("r", "theta")
     coordinate_kinds = ("linear", "angle")
     Params = SpringPendulumParams

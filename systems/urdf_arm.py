@@ -443,7 +443,16 @@ def register_urdf(spec: str) -> str:
 class Panda(urdf_arm(DATA_DIR / "panda.urdf.gz", locked=("panda_finger_joint1", "panda_finger_joint2"), name="panda")):
     """Franka Emika Panda, 7 joints, fingers locked."""
 
+    title = "the Panda arm"
+    summary = ("Franka Emika Panda, 7 joints (fingers locked), from its URDF through Pinocchio: τ by RNEA, L = T − V "
+               "from its energies, rollouts against its forward dynamics; q inside each joint's limits (less 5 % of "
+               "the range at each end), q̇ in ±½ the velocity limits, q̈ in ±π/2; no closed-form Lagrangian, so the "
+               "Exact row reads \"not judged\"")
+
 
 @SYSTEMS.add("ur5", "simulated", "arm")
 class UR5(urdf_arm(DATA_DIR / "ur5_robot.urdf.gz", name="ur5")):
     """Universal Robots UR5, 6 joints."""
+
+    title = "the UR5 arm"
+    summary = "Universal Robots UR5, 6 joints, from its URDF through Pinocchio as `panda` is"

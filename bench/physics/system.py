@@ -242,6 +242,10 @@ class System(abc.ABC):
     not_applicable: ClassVar[str] = ""
     #: a published figure to read the tables against (printed above them)
     reference: ClassVar[str] = ""
+    #: what the system is in a few words, for the README's list of systems, and in a sentence or a few, for its
+    #: row of docs/methods_and_systems.md: both generated from the registry (:mod:`bench.reporting.docs`)
+    title: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
     #: ``False`` for a system given by an engine: no sympy Lagrangian exists
     #: (see the module docstring), so no expression can be judged exact
     symbolic: ClassVar[bool] = True
