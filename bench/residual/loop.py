@@ -102,7 +102,7 @@ from bench.residual.result import ResidualResult, Round
 from bench.residual.rollouts import driven_rollouts, test_mse
 from bench.residual.criteria import MIN_HELDOUT_GAIN
 from bench.residual.limits import CROSS_FIT_SHARE, FIT_SHARE, MAX_ROUNDS, POLISH_SHARE, TRACE_SHARE
-from bench.residual.tracing import BUDGET_STOP, trace
+from bench.residual.tracing import BUDGET_STOP, Trace, trace
 from bench.residual.sensors import Sensed, Sensor, column as sensor_column
 from bench.residual.strategies import MAX_SYMBOLIC_TERMS, Start, strategy_for
 from bench.residual.tidying import Tidying
@@ -416,34 +416,10 @@ class _Loop(Tidying, Choosing):
         eigenvalue, the structural findings, and whether the loop ends here
         (nothing found, the round undone, or nothing it added kept). Raises
         :class:`_BudgetSpent` where the time budget ends before the round does."""
-        report, strategy = self.report, self.strategy
-        train, sensor = self.train, self.sensor
-        target, fixed = strategy.problem(model, train)
-        excluded = model.effects + [term for term, _ in self.beyond.values()]
-        laws = {t: sensor_column(t, model, train, sensor) for t in sensor.terms(train) if t not in excluded}
-        traced = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
-                               deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
-                               runner_up=not strategy.fixed_freedom)
-        findings = {}  # what is left unexplained where the loop ends
-        for term, c, se in traced.structural:
-            findings[label(term)] = structural(term, c, se)
-            report(f"round {k}: structural finding: {findings[label(term)]['finding']}")
+        traced, laws, findings = self.traced(k, model, pool)
         if not traced.accepted:
             rounds.append(Round(k, self.scores(model), held, trace=traced.steps, seconds=self.elapsed()))
-            if any(step.get("stop") == BUDGET_STOP for step in traced.steps):
-                self.stopped = (f"the budget of {self.budget.describe()} ran out in round {k}'s trace before it found "
-                                f"anything significant (no step of it starts after {TRACE_SHARE:.0%} of the budget); "
-                                f"a larger budget may find more")
-                report(f"round {k}: the loop's budget ran out before the trace found anything significant; "
-                       f"a larger budget may find more")
-                self.ending = {"reason": "budget", "round": k, "detail": self.stopped, "found": [],
-                               "budget_needed_s": self.needed(self.round_began)}
-            else:
-                left = self.unexplained(model)
-                report(f"round {k}: nothing significant left: no law passes every test, and the model leaves "
-                       f"{left['train']:.0%} of the training torques' variance")
-                self.ending = {"reason": "nothing_significant", "round": k,
-                               "detail": f"round {k}'s trace found no term that passes every test"}
+            self.nothing_found(k, model, traced)
             return model, held, mass, findings, True
         self.pending = {"found": [{"law": step["term"], **{key: step.get(key) for key in
                                                                ("coefficient", "bic_drop", "heldout_gain")}}
@@ -451,37 +427,90 @@ class _Loop(Tidying, Choosing):
                         "equivalent": [entry for _, _, entry in traced.equivalents]}
         self.in_budget("tracing")
         accepted = [label(c) for c in traced.accepted]
-        report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
-        before_round, refused_before = (train, sensor), set(self.beyond)
+        self.report(f"round {k}: adding {', '.join(accepted)}; refitting jointly")
+        before_round, refused_before = (self.train, self.sensor), set(self.beyond)
         proposed = self.choose(model, traced, laws, k)
         self.in_budget("refitting jointly")
         proposed, removed, simplified = self.tidy(proposed, findings)
-        train = self.train
-        equivalent = [entry for _, _, entry in traced.equivalents] or None
+        made = _Proposal(k, traced, accepted, removed, simplified, before_round)
+        ends = self.unchanged(made, refused_before)
+        if ends is not None:  # nothing of the round is left to score: the model is the one before it
+            self.use(*before_round)
+            rounds.append(made.round(self.scores(model), held, self.elapsed()))
+            return model, held, mass, findings, ends
+        proposed_held, proposed_mass, undo = self.judged(model, proposed, held, mass, before_round)
+        if undo is not None:
+            self.use(*before_round)
+            rounds.append(made.round(self.scores(model), held, self.elapsed(), f"undone: {undo[0]}", proposed_held))
+            self.report(f"round {k}: undone, {undo[1]}")
+            self.ending = {"reason": "undone", "round": k, "detail": f"round {k} was undone: {undo[0]}", **self.pending}
+            return model, held, mass, findings, True
+        return (proposed, proposed_held, proposed_mass, findings,
+                self.kept(made, self.scores(proposed), proposed_held, rounds))
+
+    def traced(self, k: int, model: LoopModel, pool: TermLibrary):
+        """Round ``k``'s trace of what ``model`` leaves (:func:`~bench.residual.tracing.trace`), the sensor's
+        laws offered beside the library's terms; returns the trace, those laws' columns and the structural
+        findings it made."""
+        strategy, train, sensor = self.strategy, self.train, self.sensor
+        target, fixed = strategy.problem(model, train)
+        excluded = model.effects + [term for term, _ in self.beyond.values()]
+        laws = {t: sensor_column(t, model, train, sensor) for t in sensor.terms(train) if t not in excluded}
+        traced = self.timed(trace, target, train, pool, fixed, exclude=excluded, max_steps=strategy.trace_steps,
+                            deadline=self.start + TRACE_SHARE * self.horizon, given=laws,
+                            runner_up=not strategy.fixed_freedom)
+        findings = {}  # what is left unexplained where the loop ends
+        for term, c, se in traced.structural:
+            findings[label(term)] = structural(term, c, se)
+            self.report(f"round {k}: structural finding: {findings[label(term)]['finding']}")
+        return traced, laws, findings
+
+    def nothing_found(self, k: int, model: LoopModel, traced: Trace) -> None:
+        """The loop's ending where round ``k``'s trace accepted nothing: its budget ran out in the trace, or no
+        law passed every test, said with the share of the torques' variance the model leaves."""
+        if any(step.get("stop") == BUDGET_STOP for step in traced.steps):
+            self.stopped = (f"the budget of {self.budget.describe()} ran out in round {k}'s trace before it found "
+                            f"anything significant (no step of it starts after {TRACE_SHARE:.0%} of the budget); "
+                            f"a larger budget may find more")
+            self.report(f"round {k}: the loop's budget ran out before the trace found anything significant; "
+                        f"a larger budget may find more")
+            self.ending = {"reason": "budget", "round": k, "detail": self.stopped, "found": [],
+                           "budget_needed_s": self.needed(self.round_began)}
+            return
+        left = self.unexplained(model)
+        self.report(f"round {k}: nothing significant left: no law passes every test, and the model leaves "
+                    f"{left['train']:.0%} of the training torques' variance")
+        self.ending = {"reason": "nothing_significant", "round": k,
+                       "detail": f"round {k}'s trace found no term that passes every test"}
+
+    def unchanged(self, made: "_Proposal", refused_before: set) -> bool | None:
+        """Whether the loop ends (``True``) or goes on (``False``) where the joint refit left nothing of the
+        round to score: every law it found became a finding, which the trace does not offer again (the next
+        round traces without them), or the refit dropped every law it found and simplified nothing; ``None``
+        where something is left."""
+        k, accepted, removed = made.k, made.accepted, made.removed
         refused = set(accepted) & (self.beyond.keys() - refused_before)
         if refused and not set(accepted) - set(removed):
-            # every law it found is a finding, which the trace does not offer again: the model is as it was
-            # (nothing to score), and the next round traces without them
-            self.use(*before_round)
-            rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed,
-                                simplified=simplified or None, seconds=self.elapsed(), equivalent=equivalent))
-            report(f"round {k}: every law it found is a finding, not offered again; the next round traces without them")
-            return model, held, mass, findings, False
-        if set(removed) == set(accepted) and not simplified:
-            # the joint refit dropped every law it found, and nothing else: the model is the one before the round,
-            # and there is nothing to score on held-out data
-            self.use(*before_round)
-            rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed, seconds=self.elapsed(),
-                                equivalent=equivalent))
-            report(f"round {k}: every effect it added became redundant in the joint refit; stopping")
+            self.report(f"round {k}: every law it found is a finding, not offered again; the next round traces "
+                        f"without them")
+            return False
+        if set(removed) == set(accepted) and not made.simplified:
+            self.report(f"round {k}: every effect it added became redundant in the joint refit; stopping")
             self.ending = {"reason": "redundant", "round": k,
                            "detail": f"every effect round {k} added became redundant in the joint refit", **self.pending}
-            return model, held, mass, findings, True
+            return True
+        return None
+
+    def judged(self, model: LoopModel, proposed: LoopModel, held: float, mass: float, before_round: tuple):
+        """The refitted model ``proposed`` scored on held-out data and its mass matrix, and why the round is
+        undone (the JSON's words, then the progress line's), or ``None``: a mass matrix no longer positive
+        definite, a held-out error that does not fall by :attr:`round_gain` (pooled, or in each joint's own
+        units: :meth:`pays_in_joint_units`), or the strategy's own check."""
+        train = self.train
         proposed_held = self.timed(self.heldout, proposed)
         self.pending["heldout_mse"] = {"before": held, "with_them": proposed_held}
         proposed_mass = self.timed(smallest_mass_eigenvalue, proposed, train)
         self.in_budget("scoring the refitted model on held-out data")
-        undo = None  # why the round is undone: the JSON's words, then the progress line's
         if mass > 0 and not proposed_mass > 0:
             undo = (f"with these effects the mass matrix is not positive definite on the training data "
                     f"(smallest eigenvalue {proposed_mass:.4g})",
@@ -492,26 +521,46 @@ class _Loop(Tidying, Choosing):
                     + (f" by {self.round_gain:.0%}, as each round must on trajectories" if self.round_gain else ""),
                     f"held-out MSE {proposed_held:.4g} is not below {(1 - self.round_gain) * held:.4g}")
         else:
-            undo = self.timed(strategy.check, proposed, model, train)
-        if undo is not None:
-            self.use(*before_round)
-            rounds.append(Round(k, self.scores(model), held, accepted, traced.steps, removed, f"undone: {undo[0]}",
-                                proposed_held, simplified=simplified or None, seconds=self.elapsed(),
-                                equivalent=equivalent))
-            report(f"round {k}: undone, {undo[1]}")
-            self.ending = {"reason": "undone", "round": k, "detail": f"round {k} was undone: {undo[0]}", **self.pending}
-            return model, held, mass, findings, True
-        s = self.scores(proposed)
-        rounds.append(Round(k, s, proposed_held, accepted, traced.steps, removed, simplified=simplified or None,
-                            seconds=self.elapsed(), equivalent=equivalent))
-        for entry in equivalent or ():
+            undo = self.timed(self.strategy.check, proposed, model, train)
+        return proposed_held, proposed_mass, undo
+
+    def kept(self, made: "_Proposal", s: dict, proposed_held: float, rounds: list[Round]) -> bool:
+        """Keep the round's model (its training and test MSEs ``s``, its held-out error ``proposed_held``):
+        append its :class:`Round` and its equivalent laws; whether the loop ends here, every effect it added
+        having become redundant."""
+        k = made.k
+        rounds.append(made.round(s, proposed_held, self.elapsed()))
+        for entry in made.equivalent or ():
             self.equivalent.append({"round": k, **entry})
-            report(f"round {k}: equivalent on these data: {' ≡ '.join([entry['kept'], *entry['equivalent']])}; "
-                   f"kept {entry['kept']} by {entry.get('chosen_by', entry['rule'])}")
-        if not set(accepted) - set(removed):
-            report(f"round {k}: every effect it added became redundant; stopping")
+            self.report(f"round {k}: equivalent on these data: {' ≡ '.join([entry['kept'], *entry['equivalent']])}; "
+                        f"kept {entry['kept']} by {entry.get('chosen_by', entry['rule'])}")
+        if not set(made.accepted) - set(made.removed):
+            self.report(f"round {k}: every effect it added became redundant; stopping")
             self.ending = {"reason": "redundant", "round": k,
                            "detail": f"every effect round {k} added became redundant in the joint refit"}
-            return proposed, proposed_held, proposed_mass, findings, True
-        report(f"round {k}: torque MSE train {s['train']:.4g}, held out {proposed_held:.4g}")
-        return proposed, proposed_held, proposed_mass, findings, False
+            return True
+        self.report(f"round {k}: torque MSE train {s['train']:.4g}, held out {proposed_held:.4g}")
+        return False
+
+
+@dataclasses.dataclass(frozen=True)
+class _Proposal:
+    """Round ``k``'s laws as its trace found them (``accepted``) and its joint refit left them (``removed``,
+    ``simplified``), with the training data and sensor before it (``before_round``)."""
+
+    k: int
+    traced: Trace
+    accepted: list
+    removed: list
+    simplified: list
+    before_round: tuple
+
+    @property
+    def equivalent(self) -> list | None:
+        return [entry for _, _, entry in self.traced.equivalents] or None
+
+    def round(self, s: dict, held: float, seconds: float, stop: str | None = None,
+              undone_heldout: float | None = None) -> Round:
+        """The :class:`Round` of this proposal, its MSEs ``s`` and held-out error ``held``."""
+        return Round(self.k, s, held, self.accepted, self.traced.steps, self.removed, stop, undone_heldout,
+                     simplified=self.simplified or None, seconds=seconds, equivalent=self.equivalent)
