@@ -402,107 +402,17 @@ class Tracer:
         """The steps, until one accepts nothing (or ``max_steps`` were taken, or the deadline passed)."""
         while self.max_steps is None or len(self.steps_taken) < self.max_steps:
             k_now = self.fixed.shape[1] + len(self.nuisance) + len(self.accepted)
-            new = [t for t in self.nuisance + self.accepted if t not in self.in_basis]
-            if new:
-                self.extend(np.column_stack([self.F_all[t] for t in new]))
-            self.in_basis.update(new)
-            self.r = self.y - self.Q @ (self.Q.T @ self.y)
-            self.rss_now = float(self.r @ self.r)
-            self.memo = {}
-            if self.rss_now / self.n_rows <= self.floor:
-                self.steps.append({"stop": "the residual is at round-off level",
-                                   "residual_mse": self.rss_now / self.n_rows})
+            if self._stops_before_step():
                 break
-            if now() > self.deadline:
-                self.steps.append({"stop": BUDGET_STOP})
-                break
-            chosen = inadmissible = self.before = None
-            for tier in self.tiers:
-                # a shaped term (a Stribeck velocity from a grid) stands for its best shape: the
-                # best of its slot (a physical one first) is refined, the others of that slot dropped
-                # all at once: one matrix product
-                self.project(t for c in tier if slot(c) not in self.taken for t in self.group(c))
-                ranked = sorted((self.stats(c, k_now, self.rss_now) for c in tier if slot(c) not in self.taken),
-                                key=lambda b: (self.physical(b) is not None, -b["bic_drop"]))
-                seen, unique = set(), []
-                for best in ranked:
-                    if slot(best["term"]) in seen:
-                        continue
-                    seen.add(slot(best["term"]))
-                    if refinable(best["term"]) and best["bic_drop"] > MIN_BIC_DROP:
-                        refined = self.refine(best["term"])
-                        if at_limit(refined.shape):  # there it is the simpler law it contains: that law stands instead
-                            best = self.limit(refined, k_now, self.rss_now)
-                            if best is None:
-                                continue
-                        else:
-                            best = self.stats(refined, k_now, self.rss_now)
-                    unique.append(best)
-                ranked = sorted(unique, key=lambda b: -b["bic_drop"])
-                tried = 0
-                for best in ranked:  # the best first; past an impossible coefficient, the next best that fits as well
-                    if inadmissible is not None and \
-                            self.rss_now - best["rss"] < AS_WELL * (self.rss_now - inadmissible["rss"]):
-                        break
-                    if self.before is None:
-                        self.held_fits = FoldFits(self.design(self.accepted), self.y, self.held)
-                        self.before = self.held_fits.cv()
-                    ok, info = passes(best, self.held_gain, self.min_gain)
-                    impossible = self.physical(best)
-                    if chosen is not None and not (ok and impossible is None):  # no runner-up
-                        tried += 1
-                        if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
-                            break
-                        continue
-                    if ok and impossible is None:
-                        if chosen is not None:  # the runner-up: the step's choice is made
-                            self.runners_up.append((chosen["group"], best["group"]))
-                            self.steps.append({**info, "runner_up_of": " + ".join(label(t) for t in chosen["group"])})
-                            break
-                        chosen_info = {**info, "accepted": True}
-                        self.steps.append(chosen_info)
-                        chosen = best
-                        if not self.runner_up or not is_named(best["term"]):
-                            break
-                        continue
-                    if ok:
-                        if inadmissible is None:
-                            self.steps.append({**info, "accepted": False, "inadmissible": label(impossible[0])})
-                            inadmissible = {**best, "impossible": impossible}
-                        continue
-                    if inadmissible is None and not tried:
-                        self.steps.append(info)  # the best term, rejected
-                    tried += 1
-                    if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
-                        break  # weaker terms explain less still
-                if chosen is not None or inadmissible is not None:
-                    break  # an impossible coefficient is not handed to the open-ended terms to mimic
+            chosen, chosen_info, inadmissible = self._step(k_now)
             if chosen is not None and now() <= self.deadline:
-                kept, kept_info, others, entry = self._equivalents(chosen, chosen_info, k_now, self.rss_now)
-                if entry is not None:
-                    if kept is not chosen:  # the rule keeps another: this step's choice and runner-up follow it
-                        chosen_info.update(accepted=False, equivalent_of=entry["kept"])
-                        self.steps.append({**kept_info, "accepted": True, "chosen_by": EQUIVALENCE_RULE})
-                        if self.runners_up and self.runners_up[-1][0] is chosen["group"]:
-                            runner = self.runners_up[-1][1]
-                            self.runners_up[-1] = (kept["group"],
-                                                   chosen["group"] if runner == kept["group"] else runner)
-                        chosen = kept
-                    self.equivalents.append((kept["group"], [b["group"] for b in others], entry))
+                chosen = self._equivalent_kept(chosen, chosen_info, k_now)
             if chosen is not None and is_named(chosen["term"]):
-                rival = self._rival(chosen)
-                if rival is not None:
-                    self.mismatched.append((chosen["group"], rival["term"], rival["bic_drop"] - chosen["bic_drop"],
-                                       self._size(rival), math.sqrt(self.rss_now / self.n_rows)))
+                self._note_rival(chosen)
             if chosen is None:
                 if inadmissible is None:
                     break
-                # the finding explains its share of the residual, so that no admissible term mimics it;
-                # the selection goes on for what else is there
-                self.structural.append(inadmissible["impossible"])
-                wrong = inadmissible["impossible"][0]
-                self.nuisance.append(wrong)  # its companions (a law's Coulomb part, say) stay in the library
-                self.taken.add(slot(wrong))
+                self._set_aside(inadmissible)
                 continue
             self.accepted.extend(chosen["group"])
             self.steps_taken.append(chosen)
@@ -511,6 +421,126 @@ class Tracer:
         return Trace(self.accepted, self.steps, self.structural, self.mismatched, self.runners_up, self.equivalents,
                      self.w[:self.data.dof])
 
+    def _stops_before_step(self) -> bool:
+        """Bring the basis up to the terms taken so far and the residual up to it; whether the trace stops
+        here, with its step saying why: the residual at round-off level, or the deadline passed."""
+        new = [t for t in self.nuisance + self.accepted if t not in self.in_basis]
+        if new:
+            self.extend(np.column_stack([self.F_all[t] for t in new]))
+        self.in_basis.update(new)
+        self.r = self.y - self.Q @ (self.Q.T @ self.y)
+        self.rss_now = float(self.r @ self.r)
+        self.memo = {}
+        if self.rss_now / self.n_rows <= self.floor:
+            self.steps.append({"stop": "the residual is at round-off level", "residual_mse": self.rss_now / self.n_rows})
+            return True
+        if now() > self.deadline:
+            self.steps.append({"stop": BUDGET_STOP})
+            return True
+        return False
+
+    def _step(self, k_now: int):
+        """One step over the tiers, the named terms first: the term it accepts and its step's entry, or the
+        best term whose coefficient is impossible (a structural finding), each ``None`` where there is none.
+        An impossible coefficient is not handed to a later tier's open-ended terms to mimic."""
+        self.before = None
+        for tier in self.tiers:
+            chosen, chosen_info, inadmissible = self._pick(self._ranked(tier, k_now))
+            if chosen is not None or inadmissible is not None:
+                return chosen, chosen_info, inadmissible
+        return None, None, None
+
+    def _ranked(self, tier, k_now: int) -> list[dict]:
+        """The statistics of the terms of ``tier`` whose slot is free, the best first, one a slot: a shaped
+        term (a Stribeck velocity from a grid) stands for its best shape, the best of its slot (a physical
+        one first) refined and the others of that slot dropped, all projected at once (one matrix product)."""
+        self.project(t for c in tier if slot(c) not in self.taken for t in self.group(c))
+        ranked = sorted((self.stats(c, k_now, self.rss_now) for c in tier if slot(c) not in self.taken),
+                        key=lambda b: (self.physical(b) is not None, -b["bic_drop"]))
+        seen, unique = set(), []
+        for best in ranked:
+            if slot(best["term"]) in seen:
+                continue
+            seen.add(slot(best["term"]))
+            if refinable(best["term"]) and best["bic_drop"] > MIN_BIC_DROP:
+                refined = self.refine(best["term"])
+                if at_limit(refined.shape):  # there it is the simpler law it contains: that law stands instead
+                    best = self.limit(refined, k_now, self.rss_now)
+                    if best is None:
+                        continue
+                else:
+                    best = self.stats(refined, k_now, self.rss_now)
+            unique.append(best)
+        return sorted(unique, key=lambda b: -b["bic_drop"])
+
+    def _pick(self, ranked: list[dict]):
+        """The step's choice among ``ranked``: the best that passes every test with a possible coefficient (and,
+        where it is named and runners-up are asked for, the next that does, as its runner-up), past an
+        impossible coefficient only a term that fits as well; returns the chosen term, its step's entry and
+        the first term whose coefficient is impossible, each ``None`` where there is none."""
+        chosen = chosen_info = inadmissible = None
+        tried = 0
+        for best in ranked:
+            if inadmissible is not None and self.rss_now - best["rss"] < AS_WELL * (self.rss_now - inadmissible["rss"]):
+                break
+            if self.before is None:
+                self.held_fits = FoldFits(self.design(self.accepted), self.y, self.held)
+                self.before = self.held_fits.cv()
+            ok, info = passes(best, self.held_gain, self.min_gain)
+            impossible = self.physical(best)
+            if ok and impossible is None:
+                if chosen is not None:  # the runner-up: the step's choice is made
+                    self.runners_up.append((chosen["group"], best["group"]))
+                    self.steps.append({**info, "runner_up_of": " + ".join(label(t) for t in chosen["group"])})
+                    break
+                chosen, chosen_info = best, {**info, "accepted": True}
+                self.steps.append(chosen_info)
+                if not self.runner_up or not is_named(best["term"]):
+                    break
+                continue
+            if ok and chosen is None:
+                if inadmissible is None:
+                    self.steps.append({**info, "accepted": False, "inadmissible": label(impossible[0])})
+                    inadmissible = {**best, "impossible": impossible}
+                continue
+            if chosen is None and inadmissible is None and not tried:
+                self.steps.append(info)  # the best term, rejected
+            tried += 1
+            if not best["bic_drop"] > MIN_BIC_DROP or tried >= MAX_TRIES:
+                break  # weaker terms explain less still
+        return chosen, chosen_info, inadmissible
+
+    def _equivalent_kept(self, chosen: dict, chosen_info: dict, k_now: int) -> dict:
+        """The term the step keeps where held-out data cannot tell the chosen one from others
+        (:meth:`_equivalents`, by :data:`EQUIVALENCE_RULE`): the step's choice and its runner-up follow it."""
+        kept, kept_info, others, entry = self._equivalents(chosen, chosen_info, k_now, self.rss_now)
+        if entry is None:
+            return chosen
+        if kept is not chosen:
+            chosen_info.update(accepted=False, equivalent_of=entry["kept"])
+            self.steps.append({**kept_info, "accepted": True, "chosen_by": EQUIVALENCE_RULE})
+            if self.runners_up and self.runners_up[-1][0] is chosen["group"]:
+                runner = self.runners_up[-1][1]
+                self.runners_up[-1] = (kept["group"], chosen["group"] if runner == kept["group"] else runner)
+            chosen = kept
+        self.equivalents.append((kept["group"], [b["group"] for b in others], entry))
+        return chosen
+
+    def _note_rival(self, chosen: dict) -> None:
+        """Note where an open-ended term explains the residual far better than the named law ``chosen``."""
+        rival = self._rival(chosen)
+        if rival is not None:
+            self.mismatched.append((chosen["group"], rival["term"], rival["bic_drop"] - chosen["bic_drop"],
+                                    self._size(rival), math.sqrt(self.rss_now / self.n_rows)))
+
+    def _set_aside(self, inadmissible: dict) -> None:
+        """A structural finding: the term with an impossible coefficient explains its share of the residual,
+        so that no admissible term mimics it, and the selection goes on for what else is there (its
+        companions, a law's Coulomb part say, stay in the library)."""
+        self.structural.append(inadmissible["impossible"])
+        wrong = inadmissible["impossible"][0]
+        self.nuisance.append(wrong)
+        self.taken.add(slot(wrong))
 
 def _fit_beside(r: np.ndarray, G: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, float]:
     """Coefficients, standard errors and residual sum of squares of columns
