@@ -59,12 +59,13 @@ def add_arguments(p) -> None:
                         "torque columns, if any, are not read): the page says whether validation reached as far "
                         "from the training states as they lie (default: the spread between the training "
                         "trajectories, where there are several)")
-    p.add_argument("--folds", choices=NAMES, default="auto",
+    p.add_argument("--folds", choices=NAMES, default="pooled",
                    help="the validation folds: time (whole trajectories, or spans in time of one), regions "
                         "(leave-region-out: k-means regions of the states), knndm (the folds of time or of "
                         "regions whose held-out distances match the target's: --target-states, else the spread "
-                        "between the training trajectories), or auto: whole trajectories where there are several, "
-                        "regions where there is one (default auto)")
+                        "between the training trajectories), auto (whole trajectories where there are several, "
+                        "regions where there is one) or pooled: auto, but the states of two or three trajectories "
+                        "pooled into regions, so that each fold is fitted on part of every one (default pooled)")
     p.add_argument("--page-only", action="store_true",
                    help="write select.md again from the select.json already in --out, its test-informed flags read "
                         "again from the arm's declaration; nothing is run and no figure changes")

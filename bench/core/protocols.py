@@ -31,6 +31,11 @@ training trajectories, :func:`bench.evaluation.domain.spread`'s distances) or
 folds of time where the data hold several trajectories (each held out whole
 reaches as far as the trajectories lie apart) or none (independent samples),
 and regions where they hold one, whose spans in time only interpolate.
+``pooled`` (``bench select``'s default) is ``auto`` but for two or three
+trajectories (at most :data:`POOLED_UP_TO`), whose states it pools into
+regions: left out whole, each of so few trajectories leaves a fold fitted on
+one or two of them, far less than the final fit on all of them sees, while a
+fold of regions is fitted on part of every one.
 """
 
 from __future__ import annotations
@@ -47,7 +52,9 @@ from bench.core.errors import ConfigError
 from bench.core.folds import MAX_SPANS, Fold, Folds, folds as time_folds, mask
 
 #: the protocols ``--folds`` names
-NAMES = ("time", "regions", "knndm", "auto")
+NAMES = ("time", "regions", "knndm", "auto", "pooled")
+#: the most training trajectories whose states ``pooled`` folds into regions (more are left out whole)
+POOLED_UP_TO = 3
 #: at most this many scored samples a fold's distances are measured on, drawn with a fixed seed
 DISTANCE_SAMPLES = 2000
 #: the region counts kNNDM tries: the folds' count times these
@@ -178,7 +185,10 @@ def parse(name: str | None) -> tuple[str, str | None]:
 
 def resolve(kind: str, trajectories: int) -> str:
     """The folds ``auto`` stands for on training data of ``trajectories`` trajectories: whole trajectories
-    (``time``) where there are several, ``regions`` where there is one; any other kind is itself."""
+    (``time``) where there are several, ``regions`` where there is one; ``pooled`` is ``regions`` up to
+    :data:`POOLED_UP_TO` trajectories too; any other kind is itself."""
+    if kind == "pooled":
+        return "regions" if 1 <= trajectories <= POOLED_UP_TO else "time"
     if kind != "auto":
         return kind
     return "regions" if trajectories == 1 else "time"

@@ -24,8 +24,8 @@ study long-log`` runs ``bench select`` at its default on it.)
 
 On each case ``bench select`` runs once per validation protocol
 (:mod:`bench.core.protocols`: ``time``, select's folds before it had others;
-``auto``, its default, :func:`resolve`; ``regions``; and ``knndm`` where the
-training data hold several trajectories), under a work budget (``--steps``),
+``auto``, its default until ``pooled``; ``pooled``, its default, :func:`resolve`;
+``regions``; and ``knndm`` where the training data hold several trajectories), under a work budget (``--steps``),
 so that the study gives the same numbers on any machine; a protocol that
 gives a case the folds of another shares its run. Each run is a job of the
 one scheduler (:class:`SelectCase`): the cases run one after another, each
@@ -62,7 +62,10 @@ The **former evaluation** set (seeds :data:`FORMER_EVALUATION_SEEDS`, the
 changed while its page was read; the **second evaluation** set (seeds
 :data:`SECOND_EVALUATION_SEEDS`, every layout and the geared arm) was the
 evaluation set until it had been run once and a method was then changed on
-one of its cases. Both are development data now, and their pages say so
+one of its cases; the **third evaluation** set (seeds
+:data:`THIRD_EVALUATION_SEEDS`, the same layouts) was the evaluation set until
+it had been run once and select's folds for few trajectories were then chosen
+on its cases. All three are development data now, and their pages say so
 (:data:`SET_TEXT`). The **evaluation** set (seeds :data:`EVALUATION_SEEDS`,
 every layout and the geared arm, effect values drawn per seed) is run once,
 when a rule is fixed; no test runs it, and no rule is tuned on it.
@@ -100,16 +103,18 @@ from bench.tools.robot_log import simulate
 from systems import get_system
 from systems.dfki_double_pendulum import CUTOFF_HZ
 
-DEVELOPMENT, FORMER_EVALUATION, SECOND_EVALUATION, EVALUATION = ("development", "former_evaluation",
-                                                                 "second_evaluation", "evaluation")
-SETS = (DEVELOPMENT, FORMER_EVALUATION, SECOND_EVALUATION, EVALUATION)
+DEVELOPMENT, FORMER_EVALUATION, SECOND_EVALUATION, THIRD_EVALUATION, EVALUATION = (
+    "development", "former_evaluation", "second_evaluation", "third_evaluation", "evaluation")
+SETS = (DEVELOPMENT, FORMER_EVALUATION, SECOND_EVALUATION, THIRD_EVALUATION, EVALUATION)
 #: each set's data seeds
 DEVELOPMENT_SEEDS = (0,)
 FORMER_EVALUATION_SEEDS = (5113, 6271)
 SECOND_EVALUATION_SEEDS = (7411, 9043)
-EVALUATION_SEEDS = (3187, 4729)
+THIRD_EVALUATION_SEEDS = (3187, 4729)
+EVALUATION_SEEDS = (2203, 5881)
 #: the sets that were the evaluation set, by their seeds: a page made while one was named ``evaluation`` is its
-FORMER_SETS = {FORMER_EVALUATION: FORMER_EVALUATION_SEEDS, SECOND_EVALUATION: SECOND_EVALUATION_SEEDS}
+FORMER_SETS = {FORMER_EVALUATION: FORMER_EVALUATION_SEEDS, SECOND_EVALUATION: SECOND_EVALUATION_SEEDS,
+               THIRD_EVALUATION: THIRD_EVALUATION_SEEDS}
 #: what each set is, as its page says it
 SET_TEXT = {DEVELOPMENT: "development data: the cases rules are tried on",
             FORMER_EVALUATION: "development data: this set (seeds 5113 and 6271) was the evaluation set until rules "
@@ -121,6 +126,11 @@ SET_TEXT = {DEVELOPMENT: "development data: the cases rules are tried on",
                                "torque terms' held position range was then developed on that case, so it counts as "
                                "development data from then on; the evaluation set is another (`--set evaluation`, "
                                "new seeds)",
+            THIRD_EVALUATION: "development data: this set (seeds 3187 and 4729) was the evaluation set; it was run "
+                              "once, with select's worst regret 1.844 on kuka_two_drive_3187 (two trajectories, each "
+                              "left out whole), and select's default folds for two or three trajectories (`pooled`) "
+                              "were then chosen on its two- and three-trajectory cases, so it counts as development "
+                              "data from then on; the evaluation set is another (`--set evaluation`, new seeds)",
             EVALUATION: "evaluation data: run once, with rules fixed before, on seeds and cases no rule was tried on"}
 #: the arms, by the name ``robot-log`` simulates (the KUKA by its shipped URDF)
 ARMS = ("panda", "ur5", "kuka")
@@ -148,9 +158,19 @@ LOGS = {"long": (LONG, LONG_SECONDS), "seven": (SEVEN + 1, SEVEN_SECONDS)}
 SECONDS, RATE_HZ, BASE_HZ = 10.0, 100.0, 0.1
 #: the torque noise, a fraction of each joint's torque standard deviation
 NOISE = 0.02
-#: the protocols compared: ``time`` is what select did before it had others, ``auto`` its default now
-#: (:func:`resolve`)
-PROTOCOLS = ("time", "auto", "regions", "knndm")
+#: the protocols compared: ``time`` is what select did before it had others, ``auto`` its default until
+#: ``pooled``, its default now (:func:`resolve`)
+PROTOCOLS = ("time", "auto", "pooled", "regions", "knndm")
+#: what each protocol's folds are, as a page says it
+PROTOCOL_TEXT = {"time": "spans in time of one trajectory, whole trajectories of several (select's folds before it "
+                         "had others)",
+                 "auto": "regions of the states on one trajectory, whole trajectories on several (select's default "
+                         "before `pooled`)",
+                 "pooled": "select's default: regions of the states of one, two or three trajectories pooled, "
+                           "whole trajectories of more",
+                 "regions": "regions of the states of every training trajectory pooled",
+                 "knndm": "of the folds of time and of regions, those whose held-out distances match the spread "
+                          "between the training trajectories"}
 #: the shipped real cases: ``bench select`` at its default on each split of the KUKA and of the DFKI pendulum
 #: (declared as an arm, ``systems/data/dfki_double_pendulum_arm.toml``), their pages' JSON
 REAL = {"kuka_lwr4 (default split)": "results/measured/select_default/select.json",
@@ -337,14 +357,15 @@ class SelectCase(CaseJob):
         return dataclasses.replace(self, where=str(scratch / Path(self.where).name))
 
 
-def choose(entries: list[dict], rule: str, stack: dict | None = None, trajectories: int | None = None) -> dict | None:
+def choose(entries: list[dict], rule: str, stack: dict | None = None, trajectories: int | None = None,
+           protocol: str | None = "time") -> dict | None:
     """The candidate ``rule`` chooses among those ``bench select`` may choose (:func:`bench.tools.select.usable`);
     ``lowest`` is ``bench select``'s own choice; ``farther`` falls back on it where no candidate has a figure on
     the farther half (a page made before they were kept); ``stack`` chooses the page's ``stack`` (named
     ``stack``) where its nested validation MSE is the lowest and it has a test figure."""
     best = selection.choose(entries)
     if rule == "select":
-        return selection.choose(entries, trajectories)
+        return selection.choose(entries, trajectories, protocol)
     if rule == "stack":
         stack = stack or {}
         nested = stack.get("validation_mse")
@@ -386,7 +407,7 @@ def scores(result: dict, trajectories: int | None = None) -> dict:
     for rule in RULES:
         if rule == "stack" and (stack is None or ("weights" in stack and stack.get("test_mse") is None)):
             continue  # a page made before select stacked its candidates, or a stack without a test figure
-        c = choose(entries, rule, stack, trajectories)
+        c = choose(entries, rule, stack, trajectories, result.get("folds_protocol") or "time")
         out["rules"][rule] = {"chosen": c["name"], "regret": c["test_mse"] / best["test_mse"]}
     return out
 
@@ -416,6 +437,12 @@ RULE_TEXT = {"lowest": "the lowest validation MSE (select's before it had a rule
              "stack": "the lowest validation MSE among the candidates and their stack (convex weights fitted "
                       "on the candidates' held-out predictions; its validation MSE nested, each fold scored with the "
                       "weights fitted on the others), which may beat the best candidate (a regret under 1)"}
+
+
+def _protocols(result: dict) -> list[str]:
+    """The protocols the page's case rows ran, in :data:`PROTOCOLS`' order."""
+    had = {t["protocol"] for t in result["table"]}
+    return [p for p in PROTOCOLS if p in had]
 
 
 def _rules(result: dict) -> list[str]:
@@ -459,19 +486,17 @@ def page(result: dict) -> str:
              f"recorded twice, tested on another; `several`: {SEVERAL} training trajectories, tested on another; "
              "the development set's `geared` arm is a large geared arm with rotor inertia, heavy friction and a "
              "shoulder counterbalance (bench/studies/geared_arm.py). "
-             f"Protocols: `time` spans in time of one trajectory, whole trajectories of several (select's folds "
-             "before it had others); `auto` select's default (regions of the states on one trajectory, whole "
-             "trajectories on several). Rules: " + "; ".join(f"`{r}` {RULE_TEXT[r]}" for r in rules) + ".", "",
+             "Protocols: " + "; ".join(f"`{p}` {PROTOCOL_TEXT[p]}" for p in _protocols(result)) + ". "
+             "Rules: " + "; ".join(f"`{r}` {RULE_TEXT[r]}" for r in rules) + ".", "",
              "| protocol | rule | cases | median regret | worst regret | chose the best |", "|---|---|---:|---:|---:|---:|"]
     for r in result["summary"]:
         lines.append(f"| {r['protocol']} | {r['rule']} | {r['cases']} | {r['median_regret']:.3f} | "
                      f"{r['worst_regret']:.3f} | {r['best_chosen']} of {r['cases']} |")
-    lines += ["", "Each case under each protocol: the candidate each rule chose (its regret). `auto` is select's "
-              "default, which is `regions` on one trajectory and `time` (whole trajectories) on several: the same run.",
-              ""] + _rows(result["table"], rules)
+    lines += ["", "Each case under each protocol: the candidate each rule chose (its regret). A protocol that gives "
+              "a case the folds of another (in brackets) shares its run.", ""] + _rows(result["table"], rules)
     if result.get("real"):
         lines += ["", "## The shipped real arms", "",
-                  "`bench select` at its default (each candidate its own steps, `--folds auto`) on each split of the KUKA "
+                  "`bench select` at its default (each candidate its own steps, its default folds) on each split of the KUKA "
                   "and of the DFKI pendulum (declared as an arm: `measured:systems/data/dfki_double_pendulum_arm.toml`), "
                   "read from the pages it wrote (`source`); they are not rerun here."
                   + (f" Read again by `{result['real_command']}`, at commit {result['real_commit']}; the cases above "
@@ -506,11 +531,12 @@ def add_arguments(parser) -> None:
                              "(development data now) or the evaluation set (run once, with the rules fixed) "
                              "(default development)")
     parser.add_argument("--cases", nargs="+", default=None, help="only the cases whose names start with these")
-    parser.add_argument("--protocols", nargs="+", choices=PROTOCOLS, default=["time", "auto"],
+    parser.add_argument("--protocols", nargs="+", choices=PROTOCOLS, default=["time", "pooled"],
                         help="the validation protocols to compare: time (spans in time of one trajectory, whole "
-                             "trajectories of several), auto (select's default: regions of one trajectory, whole "
-                             "trajectories of several), regions, knndm (only where there are several training "
-                             "trajectories) (default time auto)")
+                             "trajectories of several), auto (regions of one trajectory, whole trajectories of "
+                             "several), pooled (select's default: regions of the states of one, two or three "
+                             "trajectories, whole trajectories of more), regions, knndm (only where there are several "
+                             "training trajectories) (default time pooled)")
     parser.add_argument("--steps", type=positive_int, default=STEPS, help=f"steps a fit (default {STEPS})")
     parser.add_argument("--candidates", type=csv_list, default=list(CANDIDATES),
                         help=f"the candidates, any of select's ({', '.join(c.name for c in selection.CANDIDATES)}) "

@@ -18,11 +18,14 @@ that the same command gives the same page on any machine: its own steps
 samples) unless ``--steps`` gives them all one count, the seconds only a
 ceiling. ``loop`` runs its rounds until one accepts nothing,
 and ``loop+gp``'s prior does the same before its residual's steps start
-(:mod:`bench.residual.prior`). The candidate chosen is the one with the
-lowest validation MSE, or, where the training data hold two or three
-trajectories, the one whose fold scores agree best among those within one
-standard error of it (:func:`choose`); the test data are read by each run to
-score it, and nothing is chosen on them. The runs' records are kept, so that the same
+(:mod:`bench.residual.prior`). Its folds are by default ``pooled``
+(:mod:`bench.core.protocols`): regions of the states of one, two or three
+training trajectories pooled, so that each fold is fitted on part of every
+one, and whole trajectories of more. The candidate chosen is the one with the
+lowest validation MSE, or, where two or three trajectories are each left out
+whole (``--folds time`` or ``auto``), the one whose fold scores agree best
+among those within one standard error of it (:func:`choose`); the test data
+are read by each run to score it, and nothing is chosen on them. The runs' records are kept, so that the same
 command resumes where it stopped, as a matrix does.
 
 Writes ``DIR/select.json`` (``chosen`` and ``candidates``, each with its
@@ -54,7 +57,7 @@ from bench.core.errors import UserError
 from bench.core.distance import TrainingStates
 from bench.core.fileio import atomic_write, write_json
 from bench.core.modelfile import ModelFileError
-from bench.core.protocols import folds as fold_data
+from bench.core.protocols import folds as fold_data, parse as parse_protocol, resolve as resolve_protocol
 from bench.evaluation import stacking
 from bench.evaluation.domain import domain, sentences
 from bench.evaluation.tuning import MAX_FOLDS, PROTOCOL, SCORE_RULE
@@ -136,14 +139,14 @@ def usable(entries: list[dict]) -> list[dict]:
             and math.isfinite(e["validation_mse"]) and e["model"]]
 
 
-#: the training trajectories under which select chooses by :data:`FEW_RULE`: its folds, leave one trajectory
-#: out, each fit on one or two trajectories
+#: the training trajectories under which select chooses by :data:`FEW_RULE` where its folds leave one trajectory
+#: out (``--folds time``, or ``auto``), each fold then fitted on one or two trajectories
 FEW_TRAJECTORIES = (2, 3)
-FEW_RULE = ("where the training data hold two or three trajectories, the candidate whose fold scores agree best "
-            "(the least highest over lowest) among those whose validation MSE is within one standard error (over "
-            "the folds) of the lowest: each fold is then fitted on one or two trajectories, farther from the "
-            "final fit on all of them than the use will be, and the lowest mean of two or three such scores "
-            "does not tell the candidates apart")
+FEW_RULE = ("where the training data hold two or three trajectories and each is left out whole, the candidate "
+            "whose fold scores agree best (the least highest over lowest) among those whose validation MSE is "
+            "within one standard error (over the folds) of the lowest: each fold is then fitted on one or two "
+            "trajectories, farther from the final fit on all of them than the use will be, and the lowest mean of "
+            "two or three such scores does not tell the candidates apart")
 LOWEST_RULE = "the lowest validation MSE"
 
 
@@ -153,20 +156,29 @@ def spread(entry: dict) -> float:
     return max(folds) / min(folds) if len(folds) > 1 and min(folds) > 0 else math.inf
 
 
-def rule(trajectories: int | None) -> str:
-    """The rule select chooses by on training data of ``trajectories`` trajectories (``None``: unknown)."""
-    return FEW_RULE if trajectories in FEW_TRAJECTORIES else LOWEST_RULE
+def folds_kind(protocol: str | None, trajectories: int | None) -> str:
+    """The folds ``--folds protocol`` gives on training data of ``trajectories`` trajectories
+    (:func:`bench.core.protocols.resolve`; ``None``: ``time``, and unknown trajectories count as several)."""
+    kind = parse_protocol(protocol)[0]
+    return resolve_protocol(kind, 4 if trajectories is None else trajectories)
 
 
-def choose(entries: list[dict], trajectories: int | None = None) -> dict | None:
+def rule(trajectories: int | None, protocol: str | None = "time") -> str:
+    """The rule select chooses by on training data of ``trajectories`` trajectories (``None``: unknown) validated
+    by ``protocol``'s folds: :data:`FEW_RULE` where two or three trajectories are each left out whole."""
+    few = trajectories in FEW_TRAJECTORIES and folds_kind(protocol, trajectories) == "time"
+    return FEW_RULE if few else LOWEST_RULE
+
+
+def choose(entries: list[dict], trajectories: int | None = None, protocol: str | None = "time") -> dict | None:
     """The candidate :func:`rule` chooses among :func:`usable`'s: the lowest validation MSE, or with two or
-    three training ``trajectories``, among those within one standard error of it, the one whose fold scores
-    agree best (:func:`spread`; ties to the lower validation MSE), declared before the evaluation set ran."""
+    three training ``trajectories`` each left out whole, among those within one standard error of it, the one
+    whose fold scores agree best (:func:`spread`; ties to the lower validation MSE)."""
     candidates = usable(entries)
     if not candidates:
         return None
     lowest = min(candidates, key=lambda e: e["validation_mse"])
-    if rule(trajectories) != FEW_RULE:
+    if rule(trajectories, protocol) != FEW_RULE:
         return lowest
     bound = lowest["validation_mse"] + (lowest.get("validation_stderr") or 0.0)
     within = [e for e in candidates if e["validation_mse"] <= bound]
@@ -421,14 +433,14 @@ def select(system: str, out: Path, *, split: str | None, budget_s: float | None,
     done = run(rows, out, workers, report, cluster)
     entries = [entry(c, r, out) for c, r in done]
     trajectories = None if data is None else len(data[0].trajectories())
-    chosen = choose(entries, trajectories)
+    chosen = choose(entries, trajectories, protocol)
     folds = next(((r.details or {}).get("tuning", {}).get("folds", {}).get("description") for _, r in done
                   if (r.details or {}).get("tuning", {}).get("folds")), None)
     ceiling = f", at most {budget_s:g} s" if budget_s is not None else ""
     budget = f"{steps} steps{ceiling}" if steps is not None else f"each candidate's own steps (its work column){ceiling}"
     result = {"system": system, "declared": declared, "split": split, "seed": seed, "budget": budget, "command": command,
               "protocol": PROTOCOL, "folds_protocol": protocol or "time", "folds": folds,
-              "training_trajectories": trajectories, "rule": rule(trajectories), "chosen": chosen, "candidates": entries,
+              "training_trajectories": trajectories, "rule": rule(trajectories, protocol), "chosen": chosen, "candidates": entries,
               "domain": None if data is None else applicability(data[0], data[1], target, protocol),
               **test_informed(system, split),
               "stack": score_stack(stacked(entries, out, None if data is None else data[0]), entries, out,

@@ -1,7 +1,8 @@
 """Validation protocols in state space: leave-region-out folds hold out states
 far from what they fit, kNNDM picks the folds whose held-out distances match
 its target's (near target: near folds; far target: far folds), both serve as
-scikit-learn splitters, and a protocol that cannot work is refused in one line."""
+scikit-learn splitters, ``pooled`` folds the states of two or three trajectories into regions and leaves more
+out whole, and a protocol that cannot work is refused in one line."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from bench.core.errors import ConfigError
-from bench.core.protocols import KNNDM, Regions, folds, parse, states, target_distances
+from bench.core.protocols import KNNDM, POOLED_UP_TO, Regions, folds, parse, resolve, states, target_distances
 from bench.evaluation.domain import domain
 from tests.evaluation.test_domain import _joined, _trajectory
 
@@ -23,6 +24,18 @@ def test_leave_region_out_folds_reach_farther_than_spans_in_time():
     assert reached > 10 * by_time
     held = np.stack([f.held for f in by_region])
     assert (held.sum(axis=0) == 1).all()  # every sample held out by exactly one fold
+
+
+def test_pooled_folds_fit_every_one_of_few_trajectories_and_leave_more_out_whole():
+    few = _joined([_trajectory("slow", 0.5, 0.6), _trajectory("fast", 2.0, 1.4)])
+    pooled, auto = folds(few, "pooled", 4), folds(few, "auto", 4)
+    assert pooled.kind == "regions" and auto.kind != "regions" and len(pooled) == 4
+    labels = few.trajectory_labels()
+    for fold in pooled:  # each fold is fitted on part of both trajectories, where auto's fits one
+        assert set(labels[~fold.held]) == {"slow", "fast"}
+    assert [resolve("pooled", n) for n in (0, 1, 2, 3, 4, 7)] == \
+        ["time", "regions", "regions", "regions", "time", "time"] and POOLED_UP_TO == 3
+    assert [resolve("auto", n) for n in (1, 2, 4)] == ["regions", "time", "time"]
 
 
 def test_the_splitters_follow_scikit_learns_interface():

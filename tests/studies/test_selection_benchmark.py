@@ -209,13 +209,13 @@ def test_rerun_runs_only_the_named_candidates_and_scores_the_rules_on_the_merged
 
 
 def test_the_former_evaluation_sets_are_development_data_and_the_evaluation_set_is_new_and_of_every_layout():
-    former, second, development, evaluation = (sb.cases(s) for s in (sb.FORMER_EVALUATION, sb.SECOND_EVALUATION,
-                                                                      sb.DEVELOPMENT, sb.EVALUATION))
+    former, second, third, development, evaluation = (sb.cases(s) for s in (
+        sb.FORMER_EVALUATION, sb.SECOND_EVALUATION, sb.THIRD_EVALUATION, sb.DEVELOPMENT, sb.EVALUATION))
     assert {c.seed for c in former} == {5113, 6271} and {c.layout for c in former} == {"one", "several"}
-    assert {c.seed for c in second} == {7411, 9043}
-    tried = former + second + development
+    assert {c.seed for c in second} == {7411, 9043} and {c.seed for c in third} == {3187, 4729}
+    tried = former + second + third + development
     assert not {c.seed for c in evaluation} & {c.seed for c in tried}  # seeds no rule was tried on
-    for new in (second, evaluation):
+    for new in (second, third, evaluation):
         assert {c.layout for c in new} == {"one", "several", "two", "three"} and \
             {c.arm for c in new} == set(sb.ARMS) | {sb.GEARED}
     assert not {c.name for c in evaluation} & {c.name for c in tried}
@@ -225,6 +225,12 @@ def test_the_former_evaluation_sets_are_development_data_and_the_evaluation_set_
     text = Path("results/selection/second_evaluation/evaluation.md").read_text()
     assert text == sb.page(made) and "which is `--set second_evaluation` now" in text
     assert "Set: second_evaluation (development data: this set (seeds 7411 and 9043) was the evaluation set" in text
+    # and so does the third's, on which select's pooled folds were chosen
+    made = json.loads(Path("results/selection/third_evaluation/evaluation.json").read_text())
+    assert made["set"] == sb.EVALUATION and sb.set_of(made) == sb.THIRD_EVALUATION
+    text = Path("results/selection/third_evaluation/evaluation.md").read_text()
+    assert text == sb.page(made) and "which is `--set third_evaluation` now" in text
+    assert "Set: third_evaluation (development data: this set (seeds 3187 and 4729) was the evaluation set" in text
     # the published pages of the former evaluation set say that it is development data, and how to run it now
     for path in ("results/selection/benchmark.json", "results/selection/all_candidates/benchmark.json"):
         made = json.loads(Path(path).read_text())
