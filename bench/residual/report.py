@@ -41,17 +41,45 @@ def write_outputs(result: ResidualResult, train: Dataset, test: Dataset | None, 
         atomic_write(report_path, lambda f: f.write(text))
 
 
+def _cell(x) -> str:
+    return "—" if x is None else f"{x:.4g}"
+
+
+def _ratio(x, y) -> str:
+    return "—" if x is None or y is None or y == 0 else f"{x / y:.3g}"
+
+
 def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
     """The report: errors before and after, the effects, the rounds."""
     b, a = result.mse_before, result.mse_after
+    lines = _heading(result)
+    most = unexplained_line(result)
+    if most:
+        lines += [f"**{most}**", ""]
+    if result.stopped:
+        lines += [f"**Stopped early:** {result.stopped}.", ""]
+    lines += [
+        "| torque MSE | train | test |",
+        "|---|---:|---:|",
+        f"| before (declared model only) | {_cell(b['train'])} | {_cell(b['test'])} |",
+        f"| after (with the effects below) | {_cell(a['train'])} | {_cell(a['test'])} |",
+        f"| after ÷ before | {_ratio(a['train'], b['train'])} | {_ratio(a['test'], b['test'])} |",
+        "",
+    ]
+    lines += per_joint_table(result.per_joint) + _physics(result) + _effects(result)
+    lines += [""] + summary_lines(result)
+    lines += ["", "Rounds:", ""] + [_round_line(r) for r in result.rounds]
+    if plot_name:
+        lines += ["", f"![residuals before and after]({plot_name})"]
+    if result.lagrangian:
+        lines += ["", "Final Lagrangian:", "", f"    {result.lagrangian}"]
+    lines += _inputs(result.inputs, result.provenance)
+    return "\n".join(lines) + "\n"
 
-    def cell(x):
-        return "—" if x is None else f"{x:.4g}"
 
-    def ratio(x, y):
-        return "—" if x is None or y is None or y == 0 else f"{x / y:.3g}"
-
-    lines = [
+def _heading(result: ResidualResult) -> list[str]:
+    """The report's title and its data, budget, times and held-out protocol."""
+    return [
         f"# Residual loop: {result.system}, {result.method}",
         "",
         f"Training data: `{result.train_source}`; test data: `{result.test_source}`. "
@@ -64,20 +92,12 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         + (f"; what it holds out: {result.heldout_holds_out}" if result.heldout_holds_out else "") + ".",
         "",
     ]
-    most = unexplained_line(result)
-    if most:
-        lines += [f"**{most}**", ""]
-    if result.stopped:
-        lines += [f"**Stopped early:** {result.stopped}.", ""]
-    lines += [
-        "| torque MSE | train | test |",
-        "|---|---:|---:|",
-        f"| before (declared model only) | {cell(b['train'])} | {cell(b['test'])} |",
-        f"| after (with the effects below) | {cell(a['train'])} | {cell(a['test'])} |",
-        f"| after ÷ before | {ratio(a['train'], b['train'])} | {ratio(a['test'], b['test'])} |",
-        "",
-    ]
-    lines += per_joint_table(result.per_joint)
+
+
+def _physics(result: ResidualResult) -> list[str]:
+    """What the report says of the final model as physics: a mass matrix not positive definite, the rigid
+    bodies' feasibility, and the driven rollouts of the test recordings."""
+    lines = []
     mass = result.mass_matrix
     if mass and not mass["positive_definite"]:
         lines += [f"The final model's mass matrix is not positive definite at the {mass['states']} training states "
@@ -100,43 +120,45 @@ def markdown(result: ResidualResult, plot_name: str | None = None) -> str:
         lines += [f"Driven rollouts of the test recordings under their measured torques, median q RMSE over all "
                   f"windows (a diverged window counted as infinitely far): before {driven(result.rollout['before'])}; "
                   f"after {driven(result.rollout['after'])}.", ""]
-    if result.effects:
-        lines += ["| effect | kind | law | joints | parameters (± std. error) |", "|---|---|---|---|---|"]
-        for e in result.effects:
-            name = f"symbolic: `{e['expression']}`" if e.get("expression") else e["name"]
-            params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items()) \
-                or e.get("finding", "")
-            if e.get("reference_joint"):
-                params += f" (relative to joint {e['reference_joint']})"
-            if e.get("per_recording"):
-                params += "; each recording's own: " + ", ".join(f"{k} {p['value']:.4g} ± {p['stderr']:.2g}"
-                                                                 for k, p in e["per_recording"].items())
-            joints = ", ".join(map(str, e["joints"]))
-            lines.append(f"| {name} | {e['kind']} | `{e['law']}` | {joints} | {params} |")
-    lines += [""] + summary_lines(result)
-    lines += ["", "Rounds:", ""]
-    for r in result.rounds:
-        added = ", ".join(r["accepted"]) or "nothing"
-        removed = f"; dropped as redundant: {', '.join(r['removed'])}" if r.get("removed") else ""
-        stop = f" ({r['stop']})" if r.get("stop") else ""
-        last = next((t for t in reversed(r["trace"]) if "term" in t and not t["accepted"]), None)
-        why = ""
-        if last:
-            t, gain = last.get("t"), last.get("heldout_gain")
-            why = (f" (best rejected: {last['term']}, BIC drop {last['bic_drop']:.3g}"
-                   + ("" if "t" not in last else f", |t| {'∞' if t is None else format(t, '.3g')}")
-                   + ("" if gain is None else f", held-out gain {gain:.2%}") + ")")
-        held = f", held out {cell(r['heldout_mse'])}" if r.get("heldout_mse") is not None else ""
-        same = "".join(f"; equivalent on these data: {' ≡ '.join([e['kept'], *e['equivalent']])}"
-                       for e in r.get("equivalent") or ())
-        lines.append(f"- round {r['round']}: test MSE {cell(r['mse']['test'])}{held}; added {added}{removed}{stop}{why}"
-                     f"{same}")
-    if plot_name:
-        lines += ["", f"![residuals before and after]({plot_name})"]
-    if result.lagrangian:
-        lines += ["", "Final Lagrangian:", "", f"    {result.lagrangian}"]
-    lines += _inputs(result.inputs, result.provenance)
-    return "\n".join(lines) + "\n"
+    return lines
+
+
+def _effects(result: ResidualResult) -> list[str]:
+    """The table of the effects and findings, each law with its parameters and standard errors."""
+    if not result.effects:
+        return []
+    lines = ["| effect | kind | law | joints | parameters (± std. error) |", "|---|---|---|---|---|"]
+    for e in result.effects:
+        name = f"symbolic: `{e['expression']}`" if e.get("expression") else e["name"]
+        params = ", ".join(f"{k} = {p['value']:.6g} ± {p['stderr']:.2g}" for k, p in e["parameters"].items()) \
+            or e.get("finding", "")
+        if e.get("reference_joint"):
+            params += f" (relative to joint {e['reference_joint']})"
+        if e.get("per_recording"):
+            params += "; each recording's own: " + ", ".join(f"{k} {p['value']:.4g} ± {p['stderr']:.2g}"
+                                                             for k, p in e["per_recording"].items())
+        joints = ", ".join(map(str, e["joints"]))
+        lines.append(f"| {name} | {e['kind']} | `{e['law']}` | {joints} | {params} |")
+    return lines
+
+
+def _round_line(r: dict) -> str:
+    """One round of the report's list: its test and held-out MSEs, what it added and dropped, why it stopped,
+    the best term its trace rejected, and its laws the data could not tell apart."""
+    added = ", ".join(r["accepted"]) or "nothing"
+    removed = f"; dropped as redundant: {', '.join(r['removed'])}" if r.get("removed") else ""
+    stop = f" ({r['stop']})" if r.get("stop") else ""
+    last = next((t for t in reversed(r["trace"]) if "term" in t and not t["accepted"]), None)
+    why = ""
+    if last:
+        t, gain = last.get("t"), last.get("heldout_gain")
+        why = (f" (best rejected: {last['term']}, BIC drop {last['bic_drop']:.3g}"
+               + ("" if "t" not in last else f", |t| {'∞' if t is None else format(t, '.3g')}")
+               + ("" if gain is None else f", held-out gain {gain:.2%}") + ")")
+    held = f", held out {_cell(r['heldout_mse'])}" if r.get("heldout_mse") is not None else ""
+    same = "".join(f"; equivalent on these data: {' ≡ '.join([e['kept'], *e['equivalent']])}"
+                   for e in r.get("equivalent") or ())
+    return f"- round {r['round']}: test MSE {_cell(r['mse']['test'])}{held}; added {added}{removed}{stop}{why}{same}"
 
 
 #: a final model that leaves more than this share of the training torques' variance has left most of it

@@ -257,8 +257,13 @@ class Tracer:
                 found = [x for x in [rival(min(pairs, key=lambda p: p["rss"]))] if x is not None]
         if not found:
             return chosen, info, [], None
-        every = sorted([(chosen, info, cv_c, None)] + found,
-                       key=lambda e: (self.params(e[0]), self.declared(e[0]["term"])))
+        return self._kept_of_equals((chosen, info, cv_c, None), found)
+
+    def _kept_of_equals(self, chosen: tuple, found: list[tuple]):
+        """Of ``chosen`` and the ``found`` terms the held-out error cannot tell from it (each ``(statistics,
+        step's statistics, held-out error, standard error of the difference)``), the one kept by
+        :data:`EQUIVALENCE_RULE`: it, its step's statistics, the others, and the JSON's entry."""
+        every = sorted([chosen] + found, key=lambda e: (self.params(e[0]), self.declared(e[0]["term"])))
         kept = every[0][0]
         name = {id(b): " + ".join(label(t) for t in b["group"]) for b, *_ in every}
         entry = {"kept": name[id(kept)], "equivalent": [name[id(b)] for b, *_ in every if b is not kept],
