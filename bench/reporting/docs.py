@@ -6,6 +6,7 @@ being edited."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from bench.reporting.pages import block
@@ -24,7 +25,12 @@ FILE_SYSTEMS = {f"{MEASURED}FILE.toml": "any measured arm: a URDF and robot logs
 
 
 def _suite(registry) -> list[str]:
-    return [n for n in registry.names() if registry.entry(n).obj.__module__.split(".")[0] in SUITE]
+    """The names ``registry`` holds whose class the suite's packages declare, each at the top of its module
+    (a class a factory makes, a test's n-link pendulum or measured arm, is not one of the suite's)."""
+    def declared(obj) -> bool:
+        module = sys.modules.get(obj.__module__)
+        return obj.__module__.split(".")[0] in SUITE and getattr(module, obj.__qualname__, None) is obj
+    return [n for n in registry.names() if declared(registry.entry(n).obj)]
 
 
 def suite_methods() -> list[str]:
