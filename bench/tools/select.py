@@ -156,17 +156,10 @@ def spread(entry: dict) -> float:
     return max(folds) / min(folds) if len(folds) > 1 and min(folds) > 0 else math.inf
 
 
-def folds_kind(protocol: str | None, trajectories: int | None) -> str:
-    """The folds ``--folds protocol`` gives on training data of ``trajectories`` trajectories
-    (:func:`bench.core.protocols.resolve`; ``None``: ``time``, and unknown trajectories count as several)."""
-    kind = parse_protocol(protocol)[0]
-    return resolve_protocol(kind, 4 if trajectories is None else trajectories)
-
-
 def rule(trajectories: int | None, protocol: str | None = "time") -> str:
     """The rule select chooses by on training data of ``trajectories`` trajectories (``None``: unknown) validated
     by ``protocol``'s folds: :data:`FEW_RULE` where two or three trajectories are each left out whole."""
-    few = trajectories in FEW_TRAJECTORIES and folds_kind(protocol, trajectories) == "time"
+    few = trajectories in FEW_TRAJECTORIES and resolve_protocol(parse_protocol(protocol)[0], trajectories) == "time"
     return FEW_RULE if few else LOWEST_RULE
 
 
